@@ -1,0 +1,129 @@
+# vmac: one Makefile, meant to be read top to bottom.
+#
+#   make            build build/bin/{vmacd,vmac,vmac-board}
+#   make deps       install missing Debian packages (apt-get; sudo when not root)
+#   make run        deps + build + the demo kitchen (host and three mock boards)
+#   make test       deps + build + every test (unit, fuzz, integration, then again under ASan+UBSan)
+#   make clean
+
+BUILD   ?= build
+CC      ?= cc
+CFLAGS  ?= -O2 -g
+SAN     ?=
+SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+# Debian packages: compiler and pkg-config, the libraries the host links
+# (LuaJIT, libev, libmicrohttpd, jansson, libcurl), Check for unit tests,
+# clang + its runtime for the libFuzzer harness, python3 for integration tests.
+DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
+        libcurl4-openssl-dev check clang libclang-rt-dev python3 lua-check
+
+PKGS := luajit libmicrohttpd jansson libcurl
+PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lev -lpthread -lm
+
+# Strict warnings everywhere. -Wno-format-truncation: snprintf truncation
+# into fixed buffers is the intended behaviour (names and texts are capped).
+WARN := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wpointer-arith \
+        -Wwrite-strings -Wundef -Wvla -Wformat=2 -Wno-format-nonliteral -Wno-format-truncation
+# The board firmware and the wire codec are portable C99 (no heap, no OS headers).
+PORTABLE_CFLAGS = -std=c99 -pedantic $(WARN) $(CFLAGS) $(SAN)
+HOST_CFLAGS     = -std=c11 -D_GNU_SOURCE $(WARN) $(CFLAGS) $(SAN) $(PKG_CFLAGS)
+LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
+
+PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
+                firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
+HOST_SRC     := core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
+                core/host/events.c core/host/hist.c core/host/ring.c core/api/http.c
+OBJ = $(BUILD)/obj
+
+portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
+host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o)
+
+BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
+UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host
+
+.PHONY: all deps run test test-unit test-fuzz test-integration test-asan clean
+all: $(BINS)
+
+$(portable_obj): $(OBJ)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(PORTABLE_CFLAGS) -MMD -c $< -o $@
+
+$(OBJ)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(HOST_CFLAGS) -MMD -c $< -o $@
+
+$(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+
+$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+
+$(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/core/bus/transport_udp.o $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) -lm
+
+# ---- tests ----
+CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
+
+$(BUILD)/tests/test_proto: $(OBJ)/tests/unit/test_proto.o $(OBJ)/core/proto/proto.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
+
+$(BUILD)/tests/test_board: $(OBJ)/tests/unit/test_board.o $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
+
+$(BUILD)/tests/test_host: $(OBJ)/tests/unit/test_host.o $(host_obj) $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
+
+$(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
+	@mkdir -p $(dir $@)
+	clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
+
+FUZZ_SECONDS ?= 20
+
+deps:
+	@if ! command -v dpkg-query >/dev/null; then \
+		echo "not a Debian system: install by hand the equivalents of: $(DEBS)"; exit 0; fi; \
+	missing=$$(for p in $(DEBS); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		echo "make deps: installing" $$missing; \
+		$(SUDO) apt-get update -qq && \
+		$(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
+	else echo "make deps: all packages present"; fi
+
+run: deps
+	@$(MAKE) --no-print-directory all
+	@exec ./tests/integration/kitchen.sh $(BUILD)/bin
+
+test-unit: $(UNIT_TESTS)
+	@for t in $(UNIT_TESTS); do echo "== $$t"; CK_FORK=yes $$t || exit 1; done
+
+test-fuzz: $(BUILD)/fuzz/fuzz_proto
+	@mkdir -p $(BUILD)/fuzz/corpus
+	$(BUILD)/fuzz/fuzz_proto -max_total_time=$(FUZZ_SECONDS) -print_final_stats=0 \
+		$(BUILD)/fuzz/corpus tests/fuzz/corpus 2>&1 | tail -n 3
+
+test-integration: $(BINS)
+	python3 tests/integration/run.py --bin $(BUILD)/bin
+
+# The whole unit and integration suite again, built with AddressSanitizer
+# and UndefinedBehaviorSanitizer, any report fatal.
+test-asan:
+	@$(MAKE) --no-print-directory BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" \
+		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-integration
+
+test: deps
+	@$(MAKE) --no-print-directory all test-unit test-fuzz test-integration
+	@$(MAKE) --no-print-directory test-asan
+	@echo "make test: every suite passed"
+
+clean:
+	rm -rf $(BUILD)
+
+-include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

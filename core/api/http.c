@@ -1,0 +1,221 @@
+/* HTTP status API on libmicrohttpd (internal polling thread) with jansson
+ * for JSON: see http.h and docs/API.md. */
+#include "http.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <jansson.h>
+#include <microhttpd.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define VMAC_VERSION_STRING "0.1.0"
+#define STATUS_EVENTS 20
+
+struct vmac_http {
+	struct MHD_Daemon *daemon;
+	struct vmac_bus *bus;
+	struct vmac_event_log *log;
+	struct vmac_config cfg;
+	pthread_mutex_t status_lock; /* guards the status copy below */
+	struct vmac_status status;
+	unsigned port;
+};
+
+static json_t *bools(uint32_t bits, int n)
+{
+	json_t *a = json_array();
+	int i;
+	for (i = 0; i < n; i++)
+		json_array_append_new(a, json_boolean((bits >> i) & 1));
+	return a;
+}
+
+static json_t *device_json(const struct vmac_device_status *d)
+{
+	json_t *in = json_pack("{s:o, s:[i,i], s:I}", "digital", bools(d->inputs.digital, VMAC_DIGITAL_INPUTS),
+	                       "analog", (int)d->inputs.analog[0], (int)d->inputs.analog[1], "encoder",
+	                       (json_int_t)d->inputs.encoder);
+	json_t *out = json_pack("{s:o, s:i}", "digital", bools(d->outputs.digital, VMAC_DIGITAL_OUTPUTS), "pwm",
+	                        (int)d->outputs.pwm);
+	return json_pack("{s:s, s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:I, s:o, s:o}", "name", d->name, "driver",
+	                 d->driver, "state", d->state, "address", d->address, "id", (json_int_t)d->id, "major",
+	                 (json_int_t)d->major, "minor", (json_int_t)d->minor, "period_us", (json_int_t)d->period_us,
+	                 "misses", (json_int_t)d->misses, "served", (json_int_t)d->served, "inputs", in, "outputs",
+	                 out);
+}
+
+static json_t *status_json(struct vmac_http *h)
+{
+	struct vmac_status *s = &h->status;
+	struct vmac_event ev[STATUS_EVENTS];
+	json_t *root, *devices, *events, *reasons;
+	int i, n;
+
+	pthread_mutex_lock(&h->status_lock);
+	vmac_bus_status(h->bus, s);
+	devices = json_array();
+	for (i = 0; i < s->ndevices; i++)
+		json_array_append_new(devices, device_json(&s->devices[i]));
+	reasons = json_object();
+	for (i = 0; i < VMAC_BAD_REASONS; i++)
+		json_object_set_new(reasons, vmac_malformed_reason_names[i],
+		                    json_integer((json_int_t)s->counters.malformed_by_reason[i]));
+	root = json_pack(
+	    "{s:s, s:f, s:{s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:b}, s:o,"
+	    " s:{s:I, s:I, s:{s:I, s:I, s:I, s:I}},"
+	    " s:{s:I, s:o, s:I, s:I, s:I, s:I, s:I, s:I}}",
+	    "version", VMAC_VERSION_STRING, "uptime_s",
+	    s->started_ns ? (double)(s->time_ns - s->started_ns) / 1e9 : 0.0, "bus", "group", h->cfg.bus, "iface",
+	    h->cfg.iface, "host_addr", s->host_addr, "period_us", (json_int_t)h->cfg.period_us, "reply_deadline_us",
+	    (json_int_t)h->cfg.reply_deadline_us, "discovery_period_ms", (json_int_t)h->cfg.discovery_period_ms,
+	    "watchdog_ms", (json_int_t)h->cfg.watchdog_ms, "miss_limit", (json_int_t)h->cfg.miss_limit, "realtime",
+	    s->realtime, "devices", devices, "tick", "count", (json_int_t)s->counters.ticks, "skipped",
+	    (json_int_t)s->counters.ticks_skipped, "lateness_us", "p50",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.50), "p99", (json_int_t)vmac_hist_quantile(&s->lateness, 0.99),
+	    "p999", (json_int_t)vmac_hist_quantile(&s->lateness, 0.999), "max", (json_int_t)s->lateness.max_us,
+	    "counters", "malformed_frames", (json_int_t)s->counters.malformed_frames, "malformed_by_reason", reasons,
+	    "late_replies", (json_int_t)s->counters.late_replies, "misses", (json_int_t)s->counters.misses, "drops",
+	    (json_int_t)s->counters.drops, "discoveries", (json_int_t)s->counters.discoveries, "announces",
+	    (json_int_t)s->counters.announces, "events_lost", (json_int_t)s->counters.events_lost, "table_full",
+	    (json_int_t)s->counters.table_full);
+	pthread_mutex_unlock(&h->status_lock);
+
+	events = json_array();
+	n = vmac_event_log_latest(h->log, ev, STATUS_EVENTS);
+	for (i = 0; i < n; i++)
+		json_array_append_new(events, json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)ev[i].seq, "time",
+		                                        (double)ev[i].time_ns / 1e9, "kind", ev[i].kind, "device",
+		                                        ev[i].device, "text", ev[i].text));
+	if (root)
+		json_object_set_new(root, "events", events);
+	else
+		json_decref(events);
+	return root;
+}
+
+static enum MHD_Result reply(struct MHD_Connection *c, unsigned code, json_t *body)
+{
+	char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
+	struct MHD_Response *r;
+	enum MHD_Result ret;
+	json_decref(body);
+	if (!text) {
+		static char oom[] = "{\"error\":\"out of memory\"}";
+		r = MHD_create_response_from_buffer(sizeof(oom) - 1, oom, MHD_RESPMEM_PERSISTENT);
+		code = MHD_HTTP_INTERNAL_SERVER_ERROR;
+	} else {
+		r = MHD_create_response_from_buffer(strlen(text), text, MHD_RESPMEM_MUST_FREE);
+	}
+	if (!r)
+		return MHD_NO;
+	MHD_add_response_header(r, "Content-Type", "application/json");
+	MHD_add_response_header(r, "Cache-Control", "no-store");
+	ret = MHD_queue_response(c, code, r);
+	MHD_destroy_response(r);
+	return ret;
+}
+
+static json_t *error_body(const char *msg)
+{
+	return json_pack("{s:s}", "error", msg);
+}
+
+static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
+                                  const char *version, const char *upload_data, size_t *upload_size,
+                                  void **con_cls)
+{
+	struct vmac_http *h = cls;
+	(void)version;
+	(void)upload_data;
+	if (*con_cls == NULL) { /* first call: headers only */
+		*con_cls = h;
+		return MHD_YES;
+	}
+	if (*upload_size) { /* no endpoint here takes a body */
+		*upload_size = 0;
+		return MHD_YES;
+	}
+	if (strcmp(method, "GET") != 0 && strcmp(method, "HEAD") != 0)
+		return reply(c, MHD_HTTP_METHOD_NOT_ALLOWED, error_body("only GET is supported here"));
+	if (strcmp(url, "/api/status") == 0)
+		return reply(c, MHD_HTTP_OK, status_json(h));
+	if (strcmp(url, "/api/health") == 0)
+		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
+	if (strcmp(url, "/") == 0)
+		return reply(c, MHD_HTTP_OK,
+		             json_pack("{s:s, s:[s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		                       "/api/health"));
+	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
+}
+
+struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, struct vmac_event_log *log,
+                                  const struct vmac_config *cfg, char *err, size_t errlen)
+{
+	struct vmac_http *h;
+	struct sockaddr_in sin;
+	char host[64];
+	const char *colon = strrchr(listen, ':');
+	char *end;
+	long port;
+	const union MHD_DaemonInfo *info;
+
+	memset(&sin, 0, sizeof(sin));
+	sin.sin_family = AF_INET;
+	if (!colon || (size_t)(colon - listen) >= sizeof(host)) {
+		snprintf(err, errlen, "http '%s': expected ADDR:PORT, e.g. 127.0.0.1:8080", listen);
+		return NULL;
+	}
+	memcpy(host, listen, (size_t)(colon - listen));
+	host[colon - listen] = '\0';
+	port = strtol(colon + 1, &end, 10);
+	if (*end || end == colon + 1 || port < 0 || port > 65535 || inet_pton(AF_INET, host, &sin.sin_addr) != 1) {
+		snprintf(err, errlen, "http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:8080", listen);
+		return NULL;
+	}
+	sin.sin_port = htons((uint16_t)port);
+	h = calloc(1, sizeof(*h));
+	if (!h) {
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	h->bus = bus;
+	h->log = log;
+	h->cfg = *cfg;
+	pthread_mutex_init(&h->status_lock, NULL);
+	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
+	if (!h->status.devices) {
+		free(h);
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_USE_ERROR_LOG, 0, NULL,
+	                             NULL, on_request, h, MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin,
+	                             MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)30, MHD_OPTION_CONNECTION_LIMIT,
+	                             (unsigned)256, MHD_OPTION_END);
+	if (!h->daemon) {
+		snprintf(err, errlen, "cannot listen on %s (address in use, or not an address of this machine)",
+		         listen);
+		free(h->status.devices);
+		free(h);
+		return NULL;
+	}
+	info = MHD_get_daemon_info(h->daemon, MHD_DAEMON_INFO_BIND_PORT);
+	h->port = info ? info->port : (unsigned)port;
+	return h;
+}
+
+unsigned vmac_http_port(const struct vmac_http *h)
+{
+	return h->port;
+}
+
+void vmac_http_stop(struct vmac_http *h)
+{
+	if (!h)
+		return;
+	MHD_stop_daemon(h->daemon);
+	free(h->status.devices);
+	free(h);
+}

@@ -1,0 +1,260 @@
+/* UDP transport: discovery by multicast to GROUP:PORT, cyclic traffic by
+ * unicast. Works on loopback (IP_MULTICAST_IF 127.0.0.1) and on a LAN with
+ * the interface chosen. Receive times come from the kernel (SO_TIMESTAMPNS). */
+#include "transport.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#define BATCH_MAX 64
+
+int64_t vmac_now_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static int64_t realtime_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+void vmac_transport_clock_sync(struct vmac_transport *t)
+{
+	t->rt_minus_mono_ns = realtime_ns() - vmac_now_ns();
+}
+
+int vmac_bus_spec_parse(const char *text, struct vmac_bus_spec *spec)
+{
+	char host[64];
+	const char *colon = strrchr(text, ':');
+	char *end;
+	long port;
+	size_t n;
+
+	if (!colon || colon == text)
+		return -EINVAL;
+	n = (size_t)(colon - text);
+	if (n >= sizeof(host))
+		return -EINVAL;
+	memcpy(host, text, n);
+	host[n] = '\0';
+	errno = 0;
+	port = strtol(colon + 1, &end, 10);
+	if (errno || *end || end == colon + 1 || port < 1 || port > 65535)
+		return -EINVAL;
+	if (inet_pton(AF_INET, host, &spec->group) != 1 || !IN_MULTICAST(ntohl(spec->group.s_addr)))
+		return -EINVAL;
+	spec->port = (uint16_t)port;
+	return 0;
+}
+
+static int fail(char *err, size_t errlen, const char *what)
+{
+	int e = errno ? errno : EINVAL;
+	snprintf(err, errlen, "%s: %s", what, strerror(e));
+	return -e;
+}
+
+static void set_addr(struct vmac_addr *a, struct in_addr ip, uint16_t port)
+{
+	struct sockaddr_in *sin = (struct sockaddr_in *)&a->ss;
+	memset(a, 0, sizeof(*a));
+	sin->sin_family = AF_INET;
+	sin->sin_addr = ip;
+	sin->sin_port = htons(port);
+	a->len = sizeof(*sin);
+}
+
+static int open_unicast(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
+{
+	int on = 1, ttl = 1, rcvbuf = 4 << 20;
+	unsigned char loop = 1;
+	int fd = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+
+	memset(t, 0, sizeof(*t));
+	t->fd = -1;
+	if (fd < 0)
+		return fail(err, errlen, "socket");
+	set_addr(&t->local, spec->iface, 0);
+	if (bind(fd, (struct sockaddr *)&t->local.ss, t->local.len) < 0) {
+		int r = fail(err, errlen, "bind to interface address");
+		close(fd);
+		return r;
+	}
+	t->local.len = sizeof(t->local.ss);
+	getsockname(fd, (struct sockaddr *)&t->local.ss, &t->local.len);
+	/* A larger receive buffer rides out a burst (many replies in one slot, or
+	 * a flood of junk) without losing the replies we wait for. */
+	setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
+	setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
+	if (setsockopt(fd, IPPROTO_IP, IP_MULTICAST_IF, &spec->iface, sizeof(spec->iface)) < 0 ||
+	    setsockopt(fd, IPPROTO_IP, IP_MULTICAST_TTL, &ttl, sizeof(ttl)) < 0 ||
+	    setsockopt(fd, IPPROTO_IP, IP_MULTICAST_LOOP, &loop, sizeof(loop)) < 0) {
+		int r = fail(err, errlen, "multicast options");
+		close(fd);
+		return r;
+	}
+	set_addr(&t->group, spec->group, spec->port);
+	t->fd = fd;
+	vmac_transport_clock_sync(t);
+	return 0;
+}
+
+int vmac_transport_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err,
+                             size_t errlen)
+{
+	return open_unicast(t, spec, err, errlen);
+}
+
+int vmac_transport_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err,
+                              size_t errlen)
+{
+	return open_unicast(t, spec, err, errlen);
+}
+
+int vmac_transport_listen(const struct vmac_bus_spec *spec, char *err, size_t errlen)
+{
+	struct ip_mreq mreq;
+	struct vmac_addr a;
+	int on = 1;
+	int fd = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+
+	if (fd < 0)
+		return fail(err, errlen, "socket");
+	setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &on, sizeof(on));
+	setsockopt(fd, SOL_SOCKET, SO_REUSEPORT, &on, sizeof(on));
+	setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
+	/* Bound to the group address, so only this group's traffic arrives. */
+	set_addr(&a, spec->group, spec->port);
+	if (bind(fd, (struct sockaddr *)&a.ss, a.len) < 0) {
+		int r = fail(err, errlen, "bind to discovery group");
+		close(fd);
+		return r;
+	}
+	mreq.imr_multiaddr = spec->group;
+	mreq.imr_interface = spec->iface;
+	if (setsockopt(fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &mreq, sizeof(mreq)) < 0) {
+		int r = fail(err, errlen, "join discovery group");
+		close(fd);
+		return r;
+	}
+	return fd;
+}
+
+void vmac_transport_close(struct vmac_transport *t)
+{
+	if (t->fd >= 0)
+		close(t->fd);
+	t->fd = -1;
+}
+
+int vmac_transport_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
+{
+	struct mmsghdr msgs[BATCH_MAX];
+	struct iovec iov[BATCH_MAX];
+	int sent = 0;
+
+	while (sent < n) {
+		int i, chunk = n - sent > BATCH_MAX ? BATCH_MAX : n - sent, r;
+		for (i = 0; i < chunk; i++) {
+			struct vmac_packet *p = &pkts[sent + i];
+			iov[i].iov_base = p->data;
+			iov[i].iov_len = p->len;
+			memset(&msgs[i], 0, sizeof(msgs[i]));
+			msgs[i].msg_hdr.msg_name = &p->addr.ss;
+			msgs[i].msg_hdr.msg_namelen = p->addr.len;
+			msgs[i].msg_hdr.msg_iov = &iov[i];
+			msgs[i].msg_hdr.msg_iovlen = 1;
+		}
+		r = sendmmsg(t->fd, msgs, (unsigned)chunk, MSG_DONTWAIT);
+		if (r < 0) {
+			if (errno == EINTR)
+				continue;
+			if (sent > 0)
+				return sent;
+			/* A datagram the kernel refused (e.g. ECONNREFUSED left over
+			 * from an ICMP) is skipped, not retried forever. */
+			if (errno == ECONNREFUSED || errno == EHOSTUNREACH || errno == ENETUNREACH) {
+				sent++;
+				continue;
+			}
+			return -errno;
+		}
+		sent += r;
+		if (r < chunk && r == 0)
+			break;
+	}
+	return sent;
+}
+
+int vmac_transport_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max)
+{
+	struct mmsghdr msgs[BATCH_MAX];
+	struct iovec iov[BATCH_MAX];
+	char ctrl[BATCH_MAX][CMSG_SPACE(sizeof(struct timespec))];
+	int i, r, n = max > BATCH_MAX ? BATCH_MAX : max;
+	int64_t now = vmac_now_ns();
+
+	for (i = 0; i < n; i++) {
+		iov[i].iov_base = pkts[i].data;
+		iov[i].iov_len = sizeof(pkts[i].data);
+		memset(&msgs[i], 0, sizeof(msgs[i]));
+		msgs[i].msg_hdr.msg_name = &pkts[i].addr.ss;
+		msgs[i].msg_hdr.msg_namelen = sizeof(pkts[i].addr.ss);
+		msgs[i].msg_hdr.msg_iov = &iov[i];
+		msgs[i].msg_hdr.msg_iovlen = 1;
+		msgs[i].msg_hdr.msg_control = ctrl[i];
+		msgs[i].msg_hdr.msg_controllen = sizeof(ctrl[i]);
+	}
+	do {
+		r = recvmmsg(fd, msgs, (unsigned)n, MSG_DONTWAIT, NULL);
+	} while (r < 0 && errno == EINTR);
+	if (r < 0)
+		return (errno == EAGAIN || errno == EWOULDBLOCK || errno == ECONNREFUSED) ? 0 : -errno;
+	for (i = 0; i < r; i++) {
+		struct cmsghdr *c;
+		struct vmac_packet *p = &pkts[i];
+		p->len = msgs[i].msg_len;
+		if (msgs[i].msg_hdr.msg_flags & MSG_TRUNC)
+			p->len = sizeof(p->data); /* oversize: decoder rejects it */
+		p->addr.len = msgs[i].msg_hdr.msg_namelen;
+		p->rx_ns = now;
+		for (c = CMSG_FIRSTHDR(&msgs[i].msg_hdr); c; c = CMSG_NXTHDR(&msgs[i].msg_hdr, c)) {
+			if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+				struct timespec ts;
+				int64_t mono;
+				memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+				mono = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec - t->rt_minus_mono_ns;
+				/* Guard against a realtime step: never later than now. */
+				if (mono <= now)
+					p->rx_ns = mono;
+			}
+		}
+	}
+	return r;
+}
+
+int vmac_addr_equal(const struct vmac_addr *a, const struct vmac_addr *b)
+{
+	const struct sockaddr_in *x = (const struct sockaddr_in *)&a->ss, *y = (const struct sockaddr_in *)&b->ss;
+	return x->sin_family == y->sin_family && x->sin_port == y->sin_port && x->sin_addr.s_addr == y->sin_addr.s_addr;
+}
+
+char *vmac_addr_format(const struct vmac_addr *a, char *buf, size_t len)
+{
+	const struct sockaddr_in *sin = (const struct sockaddr_in *)&a->ss;
+	char ip[INET_ADDRSTRLEN] = "?";
+	inet_ntop(AF_INET, &sin->sin_addr, ip, sizeof(ip));
+	snprintf(buf, len, "%s:%u", ip, (unsigned)ntohs(sin->sin_port));
+	return buf;
+}

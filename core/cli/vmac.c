@@ -1,0 +1,209 @@
+/* vmac: the command line for a running host. `vmac status` fetches
+ * GET /api/status (libcurl) and prints it for people, or raw with --json.
+ * Subcommands and flags: docs/CLI.md. */
+#include <curl/curl.h>
+#include <getopt.h>
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+struct buffer {
+	char *data;
+	size_t len;
+};
+
+static size_t collect(char *ptr, size_t size, size_t nmemb, void *ud)
+{
+	struct buffer *b = ud;
+	size_t n = size * nmemb;
+	char *p;
+	if (b->len + n > (16u << 20))
+		return 0; /* refuse absurd answers */
+	p = realloc(b->data, b->len + n + 1);
+	if (!p)
+		return 0;
+	b->data = p;
+	memcpy(b->data + b->len, ptr, n);
+	b->len += n;
+	b->data[b->len] = '\0';
+	return n;
+}
+
+/* GET url into *out. Returns 0, or prints why and returns 1. */
+static int http_get(const char *url, struct buffer *out)
+{
+	CURL *c = curl_easy_init();
+	CURLcode rc;
+	long code = 0;
+	if (!c) {
+		fprintf(stderr, "vmac: cannot initialise libcurl\n");
+		return 1;
+	}
+	curl_easy_setopt(c, CURLOPT_URL, url);
+	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
+	curl_easy_setopt(c, CURLOPT_WRITEDATA, out);
+	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
+	curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, 10000L);
+	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+	rc = curl_easy_perform(c);
+	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &code);
+	curl_easy_cleanup(c);
+	if (rc != CURLE_OK) {
+		fprintf(stderr, "vmac: cannot reach the host at %s: %s\n(is vmacd running? pick it with --http ADDR:PORT)\n",
+		        url, curl_easy_strerror(rc));
+		return 1;
+	}
+	if (code != 200) {
+		fprintf(stderr, "vmac: %s answered HTTP %ld: %s\n", url, code, out->data ? out->data : "");
+		return 1;
+	}
+	return 0;
+}
+
+static void bits(json_t *array, char *out)
+{
+	size_t i;
+	json_t *v;
+	json_array_foreach(array, i, v) out[i] = json_is_true(v) ? '1' : '0';
+	out[json_array_size(array)] = '\0';
+}
+
+static void print_status(json_t *s)
+{
+	json_t *bus = json_object_get(s, "bus"), *tick = json_object_get(s, "tick"),
+	       *lat = json_object_get(tick, "lateness_us"), *cnt = json_object_get(s, "counters"),
+	       *devices = json_object_get(s, "devices"), *events = json_object_get(s, "events"), *d, *e;
+	size_t i;
+
+	printf("vmacd %s, up %.1f s, bus %s from %s, period %lld us, reply deadline %lld us%s\n",
+	       json_string_value(json_object_get(s, "version")), json_real_value(json_object_get(s, "uptime_s")),
+	       json_string_value(json_object_get(bus, "group")), json_string_value(json_object_get(bus, "host_addr")),
+	       json_integer_value(json_object_get(bus, "period_us")),
+	       json_integer_value(json_object_get(bus, "reply_deadline_us")),
+	       json_is_true(json_object_get(bus, "realtime")) ? ", real-time" : "");
+	printf("tick lateness: p50 %lld us, p99 %lld us, max %lld us over %lld ticks\n",
+	       json_integer_value(json_object_get(lat, "p50")), json_integer_value(json_object_get(lat, "p99")),
+	       json_integer_value(json_object_get(lat, "max")), json_integer_value(json_object_get(tick, "count")));
+	printf("malformed frames %lld, late replies %lld, misses %lld, drops %lld\n\n",
+	       json_integer_value(json_object_get(cnt, "malformed_frames")),
+	       json_integer_value(json_object_get(cnt, "late_replies")), json_integer_value(json_object_get(cnt, "misses")),
+	       json_integer_value(json_object_get(cnt, "drops")));
+	if (json_array_size(devices) == 0)
+		printf("no devices (start a board: vmac-board --plant lights)\n");
+	else
+		printf("%-16s %-12s %-10s %7s %9s  %-8s %-11s %-8s  %-7s %s\n", "DEVICE", "DRIVER", "STATE", "MISSES",
+		       "SERVED", "DIN", "ANALOG", "ENCODER", "DOUT", "PWM");
+	json_array_foreach(devices, i, d)
+	{
+		json_t *in = json_object_get(d, "inputs"), *out = json_object_get(d, "outputs"),
+		       *an = json_object_get(in, "analog");
+		char din[16], dout[16], analog[24];
+		bits(json_object_get(in, "digital"), din);
+		bits(json_object_get(out, "digital"), dout);
+		snprintf(analog, sizeof(analog), "%lld/%lld", json_integer_value(json_array_get(an, 0)),
+		         json_integer_value(json_array_get(an, 1)));
+		printf("%-16s %-12s %-10s %7lld %9lld  %-8s %-11s %-8lld  %-7s %lld\n",
+		       json_string_value(json_object_get(d, "name")), json_string_value(json_object_get(d, "driver")),
+		       json_string_value(json_object_get(d, "state")), json_integer_value(json_object_get(d, "misses")),
+		       json_integer_value(json_object_get(d, "served")), din, analog,
+		       json_integer_value(json_object_get(in, "encoder")), dout,
+		       json_integer_value(json_object_get(out, "pwm")));
+	}
+	if (json_array_size(events) > 0)
+		printf("\nrecent events:\n");
+	json_array_foreach(events, i, e)
+	{
+		time_t t = (time_t)json_real_value(json_object_get(e, "time"));
+		char when[16];
+		strftime(when, sizeof(when), "%H:%M:%S", localtime(&t));
+		printf("  %s %-14s %s\n", when, json_string_value(json_object_get(e, "kind")),
+		       json_string_value(json_object_get(e, "text")));
+	}
+}
+
+static int cmd_status(int argc, char **argv)
+{
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
+	                                     {"json", no_argument, 0, 'j'},
+	                                     {"help", no_argument, 0, 'h'},
+	                                     {0, 0, 0, 0}};
+	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080";
+	int raw = 0, opt, rc;
+	char url[256];
+	struct buffer b = {NULL, 0};
+	json_t *s;
+	json_error_t jerr;
+
+	optind = 1;
+	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
+		switch (opt) {
+		case 'H': http = optarg; break;
+		case 'j': raw = 1; break;
+		case 'h':
+			printf("usage: vmac status [--http ADDR:PORT] [--json]\n"
+			       "Show the devices, tick lateness, counters and recent events of a running vmacd.\n"
+			       "  --http ADDR:PORT  the host's HTTP address (default $VMAC_HTTP or 127.0.0.1:8080)\n"
+			       "  --json            print the raw JSON of GET /api/status\n");
+			return 0;
+		default: return 2;
+		}
+	}
+	if (optind < argc) {
+		fprintf(stderr, "vmac status: unexpected argument '%s'\n", argv[optind]);
+		return 2;
+	}
+	snprintf(url, sizeof(url), "http://%s/api/status", http);
+	curl_global_init(CURL_GLOBAL_DEFAULT);
+	rc = http_get(url, &b);
+	curl_global_cleanup();
+	if (rc) {
+		free(b.data);
+		return 1;
+	}
+	if (raw) {
+		printf("%s\n", b.data);
+		free(b.data);
+		return 0;
+	}
+	s = json_loads(b.data, 0, &jerr);
+	free(b.data);
+	if (!s) {
+		fprintf(stderr, "vmac: the host's answer is not JSON (%s)\n", jerr.text);
+		return 1;
+	}
+	print_status(s);
+	json_decref(s);
+	return 0;
+}
+
+static void usage(FILE *f)
+{
+	fprintf(f, "usage: vmac COMMAND [options]\n"
+	           "The command line for vmac hosts.\n\n"
+	           "  status    devices, tick lateness, counters and events of a running vmacd\n\n"
+	           "Planned, not in this version yet: test, reload, console, lint, bench.\n"
+	           "Run 'vmac COMMAND --help' for a command's options.\n");
+}
+
+int main(int argc, char **argv)
+{
+	if (argc < 2) {
+		usage(stderr);
+		return 2;
+	}
+	if (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "help") == 0) {
+		usage(stdout);
+		return 0;
+	}
+	if (strcmp(argv[1], "--version") == 0) {
+		printf("vmac 0.1.0\n");
+		return 0;
+	}
+	if (strcmp(argv[1], "status") == 0)
+		return cmd_status(argc - 1, argv + 1);
+	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
+	usage(stderr);
+	return 2;
+}

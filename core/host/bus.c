@@ -1,0 +1,868 @@
+/* The bus thread: see bus.h. One tick per period from an absolute timerfd:
+ * drain replies, judge deadlines, discover, send this period's requests.
+ * Replies are handled as they arrive; a reply's inputs go to the driver at
+ * once and its outputs leave with the next service (one period's delay, a
+ * phase-aligned transaction). */
+#include "bus.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <ev.h>
+#include <sched.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/timerfd.h>
+#include <unistd.h>
+
+#define RX_BATCH 64
+#define STATUS_EVERY_NS 100000000LL   /* publish status at most every 100 ms */
+#define MALFORMED_LOG_EVERY_NS 1000000000LL
+#define STOP_GRACE_PERIODS 3          /* wait this long for SHUTDOWN acks */
+
+const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS] = {
+    "short", "magic", "version", "length", "op", "payload", "name", "value",
+    "not_reply", "stale_seq", "unknown_sender"};
+
+enum dev_state {
+	DEV_FREE,
+	DEV_LOADING,     /* announce seen, driver being loaded on the main thread */
+	DEV_REGISTERING, /* REGISTER sent or to be sent */
+	DEV_RUNNING,
+	DEV_TO_SLEEP,    /* registered only to be told to SLEEP (no driver) */
+	DEV_SLEEPING,
+	DEV_ERRANT,      /* dropped; waits for the board to announce again */
+};
+
+struct device {
+	enum dev_state state;
+	uint16_t generation;
+	uint32_t id; /* generation << 16 | slot */
+	struct vmac_announce ann;
+	struct vmac_addr addr;
+	struct vmac_driver *drv;
+	int register_sent;
+	uint16_t seq;
+	int pending;       /* a request is out, no reply yet */
+	uint8_t pending_op;
+	int64_t sent_ns;
+	uint32_t consecutive_misses;
+	uint64_t misses, served;
+	struct vmac_inputs inputs;
+	struct vmac_outputs outputs; /* sent with the next UPDATE */
+	int64_t last_seen_ns;
+};
+
+struct vmac_bus {
+	struct vmac_config cfg;
+	struct vmac_transport tr;
+	struct ev_loop *loop;
+	ev_io timer_w, sock_w;
+	ev_async cmd_w;
+	pthread_t thread;
+	int tfd;
+	int64_t period_ns, deadline_ns, start_ns;
+	uint64_t tick_index;
+	struct device *dev;
+	uint32_t ndev;
+	uint16_t discover_seq;
+	int64_t next_discover_ns;
+	struct vmac_packet *tx;
+	int ntx;
+	struct vmac_packet rx[RX_BATCH];
+	struct vmac_hist lateness;
+	struct vmac_bus_counters counters;
+	int realtime;
+	int stopping;
+	int64_t stop_deadline_ns;
+	int64_t last_status_ns;
+	int64_t last_malformed_log_ns;
+	uint64_t malformed_suppressed;
+	struct vmac_ring to_main, to_bus;
+	void (*wakeup)(void *);
+	void *wakeup_ctx;
+	pthread_mutex_t status_lock;
+	struct vmac_status status;
+	char host_addr[48];
+};
+
+/* ---- messages to the main thread (no allocation: fixed ring slots) ---- */
+
+static void post(struct vmac_bus *bus, const struct vmac_bus_msg *m)
+{
+	if (vmac_ring_push(&bus->to_main, m) != 0) {
+		bus->counters.events_lost++;
+		return;
+	}
+	if (bus->wakeup)
+		bus->wakeup(bus->wakeup_ctx);
+}
+
+static void event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+
+static void event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
+{
+	struct vmac_bus_msg m;
+	va_list ap;
+	memset(&m, 0, sizeof(m));
+	m.kind = VMAC_MSG_EVENT;
+	m.time_ns = vmac_now_ns();
+	if (d) {
+		memcpy(m.device, d->ann.board, sizeof(m.device));
+		memcpy(m.driver, d->ann.driver, sizeof(m.driver));
+	}
+	snprintf(m.event_kind, sizeof(m.event_kind), "%s", kind);
+	va_start(ap, fmt);
+	vsnprintf(m.text, sizeof(m.text), fmt, ap);
+	va_end(ap);
+	post(bus, &m);
+}
+
+static void unload(struct vmac_bus *bus, struct device *d)
+{
+	struct vmac_bus_msg m;
+	if (!d->drv)
+		return;
+	memset(&m, 0, sizeof(m));
+	m.kind = VMAC_MSG_UNLOAD;
+	m.drv = d->drv;
+	d->drv = NULL;
+	if (vmac_ring_push(&bus->to_main, &m) != 0) {
+		/* The main thread is far behind; closing here is slow but safe. */
+		vmac_driver_free(m.drv);
+		return;
+	}
+	if (bus->wakeup)
+		bus->wakeup(bus->wakeup_ctx);
+}
+
+/* ---- sending ---- */
+
+static struct vmac_packet *tx_slot(struct vmac_bus *bus)
+{
+	if (bus->ntx >= (int)bus->ndev + 2)
+		return NULL; /* cannot happen: one request per device per tick */
+	return &bus->tx[bus->ntx++];
+}
+
+/* Queue a request for d. expect_reply: the deadline applies to it. */
+static void queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int expect_reply)
+{
+	struct vmac_packet *p = tx_slot(bus);
+	int n;
+	if (!p)
+		return;
+	m->seq = ++d->seq;
+	m->device_id = d->id;
+	m->channel = VMAC_CH_DEVICE;
+	n = vmac_proto_encode(m, p->data, sizeof(p->data));
+	if (n <= 0) {
+		bus->ntx--;
+		return;
+	}
+	p->len = (size_t)n;
+	p->addr = d->addr;
+	if (expect_reply) {
+		d->pending = 1;
+		d->pending_op = m->op;
+		d->sent_ns = 0; /* stamped when the batch has left */
+	}
+}
+
+static void flush(struct vmac_bus *bus)
+{
+	int64_t sent_ns;
+	uint32_t i;
+	if (bus->ntx == 0)
+		return;
+	vmac_transport_send(&bus->tr, bus->tx, bus->ntx);
+	/* The deadline runs from when the request actually left the host, so a
+	 * tick the machine delayed never counts against a board. */
+	sent_ns = vmac_now_ns();
+	for (i = 0; i < bus->ndev; i++)
+		if (bus->dev[i].pending && bus->dev[i].sent_ns == 0)
+			bus->dev[i].sent_ns = sent_ns;
+	bus->ntx = 0;
+}
+
+static void send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason, int expect_reply)
+{
+	struct vmac_msg m;
+	memset(&m, 0, sizeof(m));
+	m.op = VMAC_OP_SHUTDOWN;
+	m.u.shutdown_reason = reason;
+	queue(bus, d, &m, expect_reply);
+}
+
+/* ---- the error policy ---- */
+
+static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char *kind, const char *why)
+{
+	char addr[48];
+	event(bus, d, kind, "%s dropped: %s", d->ann.board, why);
+	unload(bus, d);
+	bus->counters.drops++;
+	/* Tell the board to go safe; it also does so on its own when its
+	 * watchdog runs out, so this is a courtesy, not awaited. */
+	d->pending = 0;
+	send_shutdown(bus, d, reason, 0);
+	d->state = DEV_ERRANT;
+	(void)addr;
+}
+
+static void miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)
+{
+	d->misses++;
+	d->consecutive_misses++;
+	bus->counters.misses++;
+	if (d->consecutive_misses >= bus->cfg.miss_limit || d->state != DEV_RUNNING)
+		drop(bus, d, VMAC_SHUT_DROPPED, "dropped", fmt_why);
+}
+
+static void check_deadlines(struct vmac_bus *bus, int64_t now)
+{
+	uint32_t i;
+	for (i = 0; i < bus->ndev; i++) {
+		struct device *d = &bus->dev[i];
+		char why[120];
+		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= bus->deadline_ns)
+			continue;
+		d->pending = 0;
+		if (bus->stopping)
+			continue;
+		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms",
+		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)d->seq,
+		         (double)bus->deadline_ns / 1e6);
+		miss(bus, d, why);
+	}
+}
+
+/* ---- receiving ---- */
+
+static void malformed(struct vmac_bus *bus, const struct vmac_packet *p, int reason)
+{
+	char addr[48];
+	int64_t now = p->rx_ns;
+	bus->counters.malformed_frames++;
+	bus->counters.malformed_by_reason[reason]++;
+	if (now - bus->last_malformed_log_ns < MALFORMED_LOG_EVERY_NS) {
+		bus->malformed_suppressed++;
+		return;
+	}
+	event(bus, NULL, "malformed", "malformed frame from %s: %s (%llu more since the last report)",
+	      vmac_addr_format(&p->addr, addr, sizeof(addr)), vmac_malformed_reason_names[reason],
+	      (unsigned long long)bus->malformed_suppressed);
+	bus->malformed_suppressed = 0;
+	bus->last_malformed_log_ns = now;
+}
+
+static int reason_of(int proto_err)
+{
+	switch (proto_err) {
+	case VMAC_EPROTO_SHORT: return VMAC_BAD_SHORT;
+	case VMAC_EPROTO_MAGIC: return VMAC_BAD_MAGIC;
+	case VMAC_EPROTO_VERSION: return VMAC_BAD_VERSION;
+	case VMAC_EPROTO_LENGTH: return VMAC_BAD_LENGTH;
+	case VMAC_EPROTO_PAYLOAD: return VMAC_BAD_PAYLOAD;
+	case VMAC_EPROTO_NAME: return VMAC_BAD_NAME;
+	case VMAC_EPROTO_VALUE: return VMAC_BAD_VALUE;
+	default: return VMAC_BAD_OP;
+	}
+}
+
+static struct device *find_by_identity(struct vmac_bus *bus, const struct vmac_announce *a)
+{
+	uint32_t i;
+	for (i = 0; i < bus->ndev; i++) {
+		struct device *d = &bus->dev[i];
+		if (d->state != DEV_FREE && d->ann.major == a->major && d->ann.minor == a->minor &&
+		    strcmp(d->ann.driver, a->driver) == 0)
+			return d;
+	}
+	return NULL;
+}
+
+static struct device *new_slot(struct vmac_bus *bus)
+{
+	uint32_t i;
+	struct device *oldest = NULL;
+	for (i = 0; i < bus->ndev; i++)
+		if (bus->dev[i].state == DEV_FREE)
+			return &bus->dev[i];
+	/* Full: reuse the errant device not heard of for the longest. */
+	for (i = 0; i < bus->ndev; i++) {
+		struct device *d = &bus->dev[i];
+		if (d->state == DEV_ERRANT && (!oldest || d->last_seen_ns < oldest->last_seen_ns))
+			oldest = d;
+	}
+	return oldest;
+}
+
+static void on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p)
+{
+	struct device *d = find_by_identity(bus, &m->u.announce);
+	struct vmac_bus_msg load;
+
+	bus->counters.announces++;
+	if (d) {
+		switch (d->state) {
+		case DEV_LOADING:
+			d->addr = p->addr;
+			return;
+		case DEV_REGISTERING:
+		case DEV_RUNNING:
+		case DEV_TO_SLEEP:
+			/* The board has lost our session (reset, or its watchdog ran out). */
+			drop(bus, d, VMAC_SHUT_DROPPED, "dropped", "board announced itself again (it lost its session)");
+			break;
+		default:
+			break;
+		}
+	} else {
+		d = new_slot(bus);
+		if (!d) {
+			bus->counters.table_full++;
+			return;
+		}
+	}
+	d->ann = m->u.announce;
+	d->addr = p->addr;
+	d->generation = (uint16_t)(d->generation + 1 ? d->generation + 1 : 1);
+	d->id = (uint32_t)d->generation << 16 | (uint32_t)(d - bus->dev);
+	d->state = DEV_LOADING;
+	d->pending = 0;
+	d->register_sent = 0;
+	d->consecutive_misses = 0;
+	d->last_seen_ns = p->rx_ns;
+	memset(&d->outputs, 0, sizeof(d->outputs));
+	memset(&d->inputs, 0, sizeof(d->inputs));
+
+	memset(&load, 0, sizeof(load));
+	load.kind = VMAC_MSG_LOAD;
+	load.slot = (uint32_t)(d - bus->dev);
+	load.generation = d->generation;
+	memcpy(load.device, d->ann.board, sizeof(load.device));
+	memcpy(load.driver, d->ann.driver, sizeof(load.driver));
+	post(bus, &load);
+}
+
+static void run_driver(struct vmac_bus *bus, struct device *d)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	double t = (double)(vmac_now_ns() - bus->start_ns) / 1e9;
+	if (vmac_driver_tick(d->drv, t, &d->inputs, &d->outputs, err, sizeof(err)) == 0)
+		return;
+	memset(&d->outputs, 0, sizeof(d->outputs));
+	event(bus, d, "driver_error", "%s: driver %s failed: %s", d->ann.board, d->ann.driver, err);
+	drop(bus, d, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+}
+
+static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m)
+{
+	char why[120];
+	d->consecutive_misses = 0;
+	d->served++;
+	if (m->op == VMAC_OP_ERROR) {
+		snprintf(why, sizeof(why), "board refused %s (error %u: %s)",
+		         vmac_proto_opname(VMAC_CH_DEVICE, m->u.error.op), (unsigned)m->u.error.code,
+		         m->u.error.code == VMAC_BERR_NOT_REGISTERED ? "session lost"
+		         : m->u.error.code == VMAC_BERR_IDENTITY    ? "identity mismatch"
+		                                                   : "bad request");
+		drop(bus, d, VMAC_SHUT_DROPPED, "dropped", why);
+		return;
+	}
+	switch (d->state) {
+	case DEV_REGISTERING:
+		if (m->op != VMAC_OP_REGISTER)
+			return;
+		d->state = DEV_RUNNING;
+		event(bus, d, "attached", "%s attached: driver %s, major %u minor %u, at %s", d->ann.board,
+		      d->ann.driver, (unsigned)d->ann.major, (unsigned)d->ann.minor,
+		      vmac_addr_format(&d->addr, why, sizeof(why)));
+		break;
+	case DEV_TO_SLEEP:
+		if (m->op == VMAC_OP_REGISTER) {
+			struct vmac_msg s;
+			memset(&s, 0, sizeof(s));
+			s.op = VMAC_OP_SLEEP;
+			s.u.sleep_s = (uint16_t)bus->cfg.sleep_s;
+			queue(bus, d, &s, 1);
+			flush(bus);
+		} else if (m->op == VMAC_OP_SLEEP) {
+			d->state = DEV_SLEEPING;
+		}
+		break;
+	case DEV_RUNNING:
+		if (m->op == VMAC_OP_UPDATE) {
+			d->inputs = m->u.inputs;
+			run_driver(bus, d);
+		}
+		break;
+	default:
+		break;
+	}
+}
+
+static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
+{
+	struct vmac_msg m;
+	struct device *d;
+	uint32_t slot;
+	int rc = vmac_proto_decode(p->data, p->len, &m);
+
+	if (rc != 0) {
+		malformed(bus, p, reason_of(rc));
+		return;
+	}
+	if (!(m.flags & VMAC_FLAG_REPLY)) {
+		malformed(bus, p, VMAC_BAD_NOT_REPLY);
+		return;
+	}
+	if (m.channel == VMAC_CH_SYSTEM) {
+		/* Only an answer to the latest discovery counts. */
+		if (m.seq != bus->discover_seq || bus->stopping) {
+			malformed(bus, p, VMAC_BAD_STALE_SEQ);
+			return;
+		}
+		on_announce(bus, &m, p);
+		return;
+	}
+	slot = m.device_id & 0xFFFF;
+	d = slot < bus->ndev ? &bus->dev[slot] : NULL;
+	if (!d || d->id != m.device_id || d->state == DEV_FREE || !vmac_addr_equal(&d->addr, &p->addr)) {
+		malformed(bus, p, VMAC_BAD_UNKNOWN_SENDER);
+		return;
+	}
+	d->last_seen_ns = p->rx_ns;
+	if (!d->pending || m.seq != d->seq) {
+		/* The answer to the last request of a dropped device, or to the
+		 * courtesy SHUTDOWN, is expected and harmless. */
+		if (m.seq == d->seq && (d->state == DEV_ERRANT || m.op == VMAC_OP_SHUTDOWN))
+			bus->counters.late_replies += d->state == DEV_ERRANT && m.op != VMAC_OP_SHUTDOWN;
+		else
+			malformed(bus, p, VMAC_BAD_STALE_SEQ);
+		return;
+	}
+	d->pending = 0;
+	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > bus->deadline_ns) {
+		char why[120];
+		bus->counters.late_replies++;
+		snprintf(why, sizeof(why), "reply to %s seq %u came %.3g ms after the request (deadline %.3g ms)",
+		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)m.seq,
+		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)bus->deadline_ns / 1e6);
+		if (!bus->stopping)
+			miss(bus, d, why);
+		return;
+	}
+	on_reply(bus, d, &m);
+}
+
+static void drain(struct vmac_bus *bus)
+{
+	for (;;) {
+		int i, n = vmac_transport_recv(&bus->tr, bus->tr.fd, bus->rx, RX_BATCH);
+		if (n <= 0)
+			break;
+		for (i = 0; i < n; i++)
+			handle_packet(bus, &bus->rx[i]);
+		flush(bus); /* anything a reply caused (SHUTDOWN, SLEEP) goes now */
+		if (n < RX_BATCH)
+			break;
+	}
+}
+
+/* ---- status ---- */
+
+static const char *state_name(enum dev_state s)
+{
+	switch (s) {
+	case DEV_LOADING:
+	case DEV_REGISTERING: return "attaching";
+	case DEV_RUNNING: return "running";
+	case DEV_TO_SLEEP:
+	case DEV_SLEEPING: return "sleeping";
+	case DEV_ERRANT: return "errant";
+	default: return "free";
+	}
+}
+
+static void publish(struct vmac_bus *bus, int64_t now)
+{
+	struct vmac_status *s = &bus->status;
+	uint32_t i;
+	int n = 0;
+	if (pthread_mutex_trylock(&bus->status_lock) != 0)
+		return; /* a reader holds it: try again next tick, never wait */
+	s->time_ns = now;
+	s->started_ns = bus->start_ns;
+	s->realtime = bus->realtime;
+	s->lateness = bus->lateness;
+	s->counters = bus->counters;
+	for (i = 0; i < bus->ndev; i++) {
+		const struct device *d = &bus->dev[i];
+		struct vmac_device_status *o = &s->devices[n];
+		if (d->state == DEV_FREE)
+			continue;
+		memcpy(o->name, d->ann.board, sizeof(o->name));
+		memcpy(o->driver, d->ann.driver, sizeof(o->driver));
+		o->state = state_name(d->state);
+		vmac_addr_format(&d->addr, o->address, sizeof(o->address));
+		o->id = d->id;
+		o->major = d->ann.major;
+		o->minor = d->ann.minor;
+		o->period_us = bus->cfg.period_us;
+		o->misses = d->misses;
+		o->served = d->served;
+		o->inputs = d->inputs;
+		o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
+		o->driver_memory = d->drv ? vmac_driver_memory(d->drv) : 0;
+		n++;
+	}
+	s->ndevices = n;
+	pthread_mutex_unlock(&bus->status_lock);
+	bus->last_status_ns = now;
+}
+
+/* ---- the tick ---- */
+
+static void send_discover(struct vmac_bus *bus)
+{
+	struct vmac_packet *p = tx_slot(bus);
+	struct vmac_msg m;
+	int n;
+	if (!p)
+		return;
+	memset(&m, 0, sizeof(m));
+	m.channel = VMAC_CH_SYSTEM;
+	m.op = VMAC_SYS_DISCOVER;
+	m.seq = ++bus->discover_seq;
+	n = vmac_proto_encode(&m, p->data, sizeof(p->data));
+	if (n <= 0) {
+		bus->ntx--;
+		return;
+	}
+	p->len = (size_t)n;
+	p->addr = bus->tr.group;
+	bus->counters.discoveries++;
+}
+
+static void service(struct vmac_bus *bus)
+{
+	uint32_t i;
+	for (i = 0; i < bus->ndev; i++) {
+		struct device *d = &bus->dev[i];
+		struct vmac_msg m;
+		if (d->pending)
+			continue;
+		memset(&m, 0, sizeof(m));
+		switch (d->state) {
+		case DEV_REGISTERING:
+		case DEV_TO_SLEEP:
+			if (d->register_sent)
+				break;
+			m.op = VMAC_OP_REGISTER;
+			m.u.reg.major = d->ann.major;
+			m.u.reg.minor = d->ann.minor;
+			m.u.reg.watchdog_ms = (uint16_t)bus->cfg.watchdog_ms;
+			d->register_sent = 1;
+			queue(bus, d, &m, 1);
+			break;
+		case DEV_RUNNING:
+			m.op = VMAC_OP_UPDATE;
+			m.u.outputs = d->outputs;
+			queue(bus, d, &m, 1);
+			break;
+		default:
+			break;
+		}
+	}
+}
+
+static void begin_stop(struct vmac_bus *bus, int64_t now)
+{
+	uint32_t i;
+	bus->stopping = 1;
+	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->period_ns;
+	for (i = 0; i < bus->ndev; i++) {
+		struct device *d = &bus->dev[i];
+		if (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP) {
+			d->pending = 0;
+			send_shutdown(bus, d, VMAC_SHUT_HOST_STOP, 1);
+			d->state = DEV_ERRANT;
+			unload(bus, d);
+		}
+	}
+	flush(bus);
+}
+
+static int stop_done(struct vmac_bus *bus, int64_t now)
+{
+	uint32_t i;
+	if (now >= bus->stop_deadline_ns)
+		return 1;
+	for (i = 0; i < bus->ndev; i++)
+		if (bus->dev[i].pending)
+			return 0;
+	return 1;
+}
+
+static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
+{
+	struct vmac_bus *bus = w->data;
+	uint64_t expirations = 0;
+	int64_t now, scheduled;
+	(void)revents;
+
+	if (read(bus->tfd, &expirations, sizeof(expirations)) != sizeof(expirations) || expirations == 0)
+		return;
+	now = vmac_now_ns();
+	bus->tick_index += expirations;
+	bus->counters.ticks++;
+	bus->counters.ticks_skipped += expirations - 1;
+	scheduled = bus->start_ns + (int64_t)bus->tick_index * bus->period_ns;
+	vmac_hist_add(&bus->lateness, (now - scheduled) / 1000);
+	vmac_transport_clock_sync(&bus->tr);
+
+	drain(bus);
+	check_deadlines(bus, now);
+	if (bus->stopping) {
+		if (stop_done(bus, now)) {
+			struct vmac_bus_msg m;
+			publish(bus, now);
+			memset(&m, 0, sizeof(m));
+			m.kind = VMAC_MSG_STOPPED;
+			while (vmac_ring_push(&bus->to_main, &m) != 0)
+				sched_yield(); /* last message: must get through */
+			if (bus->wakeup)
+				bus->wakeup(bus->wakeup_ctx);
+			ev_break(loop, EVBREAK_ALL);
+		}
+		return;
+	}
+	if (now >= bus->next_discover_ns) {
+		send_discover(bus);
+		bus->next_discover_ns = now + (int64_t)bus->cfg.discovery_period_ms * 1000000;
+	}
+	service(bus);
+	flush(bus);
+	if (now - bus->last_status_ns >= STATUS_EVERY_NS)
+		publish(bus, now);
+}
+
+static void on_socket(struct ev_loop *loop, ev_io *w, int revents)
+{
+	struct vmac_bus *bus = w->data;
+	(void)loop;
+	(void)revents;
+	drain(bus);
+}
+
+static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
+{
+	struct vmac_bus *bus = w->data;
+	struct vmac_host_cmd c;
+	(void)revents;
+	(void)loop;
+	while (vmac_ring_pop(&bus->to_bus, &c)) {
+		struct device *d;
+		if (c.kind == VMAC_CMD_STOP) {
+			if (!bus->stopping)
+				begin_stop(bus, vmac_now_ns());
+			continue;
+		}
+		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
+		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping) {
+			if (c.drv) { /* the device went away meanwhile */
+				struct device tmp;
+				memset(&tmp, 0, sizeof(tmp));
+				tmp.drv = c.drv;
+				unload(bus, &tmp);
+			}
+			continue;
+		}
+		if (c.drv) {
+			d->drv = c.drv;
+			d->state = DEV_REGISTERING;
+		} else {
+			event(bus, d, c.missing ? "driver_missing" : "driver_error", "%s", c.text);
+			event(bus, d, "sleeping", "%s told to sleep for %u s: no usable driver '%s'", d->ann.board,
+			      (unsigned)bus->cfg.sleep_s, d->ann.driver);
+			d->state = DEV_TO_SLEEP;
+		}
+	}
+}
+
+static void try_realtime(struct vmac_bus *bus)
+{
+	struct sched_param sp;
+	const char *what = NULL;
+	int rc;
+	if (!bus->cfg.realtime)
+		return;
+	memset(&sp, 0, sizeof(sp));
+	sp.sched_priority = 50;
+	rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+	if (rc != 0)
+		what = "SCHED_FIFO";
+	else
+		bus->realtime = 1;
+#if !defined(__SANITIZE_ADDRESS__)
+	if (!what && mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+		rc = errno;
+		what = "mlockall";
+	}
+#endif
+	if (what)
+		event(bus, NULL, "warning", "real-time setup refused (%s: %s); running with normal scheduling, "
+		      "tick lateness will be higher", what, strerror(rc));
+}
+
+static void *bus_main(void *arg)
+{
+	struct vmac_bus *bus = arg;
+	struct itimerspec its;
+	struct timespec start;
+
+	try_realtime(bus);
+	clock_gettime(CLOCK_MONOTONIC, &start);
+	bus->start_ns = (int64_t)start.tv_sec * 1000000000 + start.tv_nsec;
+	/* Absolute periodic timer: ticks fall on start + k * period however
+	 * late any one of them was handled. */
+	memset(&its, 0, sizeof(its));
+	its.it_value.tv_sec = (bus->start_ns + bus->period_ns) / 1000000000;
+	its.it_value.tv_nsec = (bus->start_ns + bus->period_ns) % 1000000000;
+	its.it_interval.tv_sec = bus->period_ns / 1000000000;
+	its.it_interval.tv_nsec = bus->period_ns % 1000000000;
+	bus->tick_index = 0;
+	timerfd_settime(bus->tfd, TFD_TIMER_ABSTIME, &its, NULL);
+	bus->next_discover_ns = bus->start_ns;
+	ev_run(bus->loop, 0);
+	return NULL;
+}
+
+struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t errlen)
+{
+	struct vmac_bus *bus = calloc(1, sizeof(*bus));
+	struct vmac_bus_spec spec;
+	if (!bus) {
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	bus->cfg = *cfg;
+	bus->tfd = -1;
+	bus->tr.fd = -1;
+	if (vmac_bus_spec_parse(cfg->bus, &spec) != 0) {
+		snprintf(err, errlen, "bus '%s': expected MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870", cfg->bus);
+		goto fail;
+	}
+	if (inet_pton(AF_INET, cfg->iface, &spec.iface) != 1) {
+		snprintf(err, errlen, "iface '%s': expected an IPv4 address", cfg->iface);
+		goto fail;
+	}
+	if (vmac_transport_open_host(&bus->tr, &spec, err, errlen) < 0)
+		goto fail;
+	vmac_addr_format(&bus->tr.local, bus->host_addr, sizeof(bus->host_addr));
+	bus->ndev = cfg->max_devices;
+	bus->period_ns = (int64_t)cfg->period_us * 1000;
+	bus->deadline_ns = (int64_t)cfg->reply_deadline_us * 1000;
+	bus->dev = calloc(bus->ndev, sizeof(*bus->dev));
+	bus->tx = calloc(bus->ndev + 2, sizeof(*bus->tx));
+	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
+	bus->tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+	if (!bus->dev || !bus->tx || !bus->status.devices || bus->tfd < 0 ||
+	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), 1024) ||
+	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024)) {
+		snprintf(err, errlen, "out of memory or timers");
+		goto fail;
+	}
+	pthread_mutex_init(&bus->status_lock, NULL);
+	bus->loop = ev_loop_new(EVFLAG_AUTO | EVFLAG_NOSIGMASK);
+	if (!bus->loop) {
+		snprintf(err, errlen, "cannot create the bus event loop");
+		goto fail;
+	}
+	ev_io_init(&bus->timer_w, on_tick, bus->tfd, EV_READ);
+	bus->timer_w.data = bus;
+	ev_io_init(&bus->sock_w, on_socket, bus->tr.fd, EV_READ);
+	bus->sock_w.data = bus;
+	ev_async_init(&bus->cmd_w, on_cmd);
+	bus->cmd_w.data = bus;
+	/* Ticks first: a flood on the socket must not starve the schedule. */
+	ev_set_priority(&bus->timer_w, EV_MAXPRI);
+	ev_io_start(bus->loop, &bus->timer_w);
+	ev_io_start(bus->loop, &bus->sock_w);
+	ev_async_start(bus->loop, &bus->cmd_w);
+	return bus;
+fail:
+	vmac_bus_free(bus);
+	return NULL;
+}
+
+void vmac_bus_free(struct vmac_bus *bus)
+{
+	uint32_t i;
+	if (!bus)
+		return;
+	if (bus->dev)
+		for (i = 0; i < bus->ndev; i++)
+			vmac_driver_free(bus->dev[i].drv);
+	if (bus->loop)
+		ev_loop_destroy(bus->loop);
+	vmac_transport_close(&bus->tr);
+	if (bus->tfd >= 0)
+		close(bus->tfd);
+	vmac_ring_fini(&bus->to_main);
+	vmac_ring_fini(&bus->to_bus);
+	free(bus->dev);
+	free(bus->tx);
+	free(bus->status.devices);
+	free(bus);
+}
+
+int vmac_bus_start(struct vmac_bus *bus)
+{
+	return -pthread_create(&bus->thread, NULL, bus_main, bus);
+}
+
+void vmac_bus_join(struct vmac_bus *bus)
+{
+	pthread_join(bus->thread, NULL);
+}
+
+void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx)
+{
+	bus->wakeup = wakeup;
+	bus->wakeup_ctx = ctx;
+}
+
+int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg)
+{
+	return vmac_ring_pop(&bus->to_main, msg);
+}
+
+int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
+{
+	if (vmac_ring_push(&bus->to_bus, cmd) != 0)
+		return -EAGAIN;
+	ev_async_send(bus->loop, &bus->cmd_w);
+	return 0;
+}
+
+void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out)
+{
+	struct vmac_device_status *devices = out->devices;
+	pthread_mutex_lock(&bus->status_lock);
+	*out = bus->status;
+	out->devices = devices;
+	memcpy(devices, bus->status.devices, (size_t)bus->status.ndevices * sizeof(*devices));
+	pthread_mutex_unlock(&bus->status_lock);
+	memcpy(out->host_addr, bus->host_addr, sizeof(out->host_addr));
+}
+
+const char *vmac_bus_host_addr(struct vmac_bus *bus)
+{
+	return bus->host_addr;
+}

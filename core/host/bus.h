@@ -1,0 +1,118 @@
+/* The bus thread: discovery, the periodic service of every device, the
+ * deadline policy, and the messages it exchanges with the main thread.
+ * Nothing on this thread allocates, logs to disk or blocks, except the bus
+ * socket itself; slow work (loading drivers, JSON, HTTP) is the main
+ * thread's, reached through two SPSC rings. */
+#ifndef VMAC_BUS_H
+#define VMAC_BUS_H
+
+#include <pthread.h>
+#include <stdint.h>
+
+#include "../bus/transport.h"
+#include "../driver/driver.h"
+#include "config.h"
+#include "hist.h"
+#include "ring.h"
+
+#define VMAC_EVENT_TEXT 640
+
+/* Bus thread -> main thread. */
+enum vmac_bus_msg_kind {
+	VMAC_MSG_EVENT,    /* something to record and show */
+	VMAC_MSG_LOAD,     /* please load driver `driver` for device slot/generation */
+	VMAC_MSG_UNLOAD,   /* free this driver (closing a Lua state is slow) */
+	VMAC_MSG_STOPPED,  /* every board told to go safe; the bus thread is done */
+};
+
+struct vmac_bus_msg {
+	enum vmac_bus_msg_kind kind;
+	int64_t time_ns;
+	uint32_t slot, generation;
+	struct vmac_driver *drv;
+	char device[VMAC_NAME_MAX + 1];
+	char driver[VMAC_NAME_MAX + 1];
+	char event_kind[24];          /* attached, dropped, driver_missing, ... */
+	char text[VMAC_EVENT_TEXT];
+};
+
+/* Main thread -> bus thread. */
+enum vmac_host_cmd_kind {
+	VMAC_CMD_LOADED, /* drv loaded (or NULL with text saying why not) */
+	VMAC_CMD_STOP,   /* put every board in its safe state and end */
+};
+
+struct vmac_host_cmd {
+	enum vmac_host_cmd_kind kind;
+	uint32_t slot, generation;
+	struct vmac_driver *drv;
+	int missing; /* no driver file at all (vs. a driver that failed to load) */
+	char text[VMAC_EVENT_TEXT];
+};
+
+/* A device as the status shows it (copied out of the bus thread). */
+struct vmac_device_status {
+	char name[VMAC_NAME_MAX + 1];
+	char driver[VMAC_NAME_MAX + 1];
+	const char *state; /* attaching, running, sleeping, errant */
+	char address[48];
+	uint32_t id, major, minor;
+	uint32_t period_us;
+	uint64_t misses, served;
+	struct vmac_inputs inputs;
+	struct vmac_outputs outputs;
+	size_t driver_memory;
+};
+
+struct vmac_bus_counters {
+	uint64_t malformed_frames; /* every datagram dropped as malformed, all reasons */
+	uint64_t malformed_by_reason[12];
+	uint64_t late_replies;     /* right sequence, but after the deadline (a miss) */
+	uint64_t misses, drops, discoveries, announces;
+	uint64_t ticks, ticks_skipped;
+	uint64_t events_lost;      /* event ring full */
+	uint64_t table_full;
+};
+
+/* Indexes of malformed_by_reason. */
+enum vmac_malformed_reason {
+	VMAC_BAD_SHORT, VMAC_BAD_MAGIC, VMAC_BAD_VERSION, VMAC_BAD_LENGTH, VMAC_BAD_OP, VMAC_BAD_PAYLOAD,
+	VMAC_BAD_NAME, VMAC_BAD_VALUE, VMAC_BAD_NOT_REPLY, VMAC_BAD_STALE_SEQ, VMAC_BAD_UNKNOWN_SENDER,
+	VMAC_BAD_REASONS
+};
+extern const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS];
+
+struct vmac_status {
+	int64_t time_ns;
+	int64_t started_ns;
+	char host_addr[48];
+	int realtime; /* SCHED_FIFO obtained */
+	int ndevices;
+	struct vmac_device_status *devices; /* max_devices entries */
+	struct vmac_hist lateness;
+	struct vmac_bus_counters counters;
+};
+
+struct vmac_bus; /* opaque */
+
+/* Create the bus (opens the transport, allocates every table it will ever
+ * use). Returns NULL with err set. */
+struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t errlen);
+void vmac_bus_free(struct vmac_bus *bus);
+/* Start the bus thread. Returns 0 or a negative errno. */
+int vmac_bus_start(struct vmac_bus *bus);
+/* Wait for the bus thread to end (after VMAC_MSG_STOPPED). */
+void vmac_bus_join(struct vmac_bus *bus);
+
+/* Main thread side of the rings. to_main_wakeup is called (from the bus
+ * thread) after pushing to the main ring; set it before start. */
+void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx);
+int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
+int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd);
+
+/* Copy the latest published status (taken at most 100 ms ago) into *out,
+ * whose devices array has room for max_devices. */
+void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out);
+const char *vmac_bus_host_addr(struct vmac_bus *bus);
+
+#endif

@@ -1,0 +1,178 @@
+/* Host configuration: defaults, Lua config file, key=value overrides. */
+#include "config.h"
+
+#include <errno.h>
+#include <lauxlib.h>
+#include <lua.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum kind { STR, U32, BOOL };
+
+struct key {
+	const char *name;
+	enum kind kind;
+	size_t offset, size;
+	uint32_t min, max;
+};
+
+#define S(f) #f, STR, offsetof(struct vmac_config, f), sizeof(((struct vmac_config *)0)->f), 0, 0
+#define U(f, lo, hi) #f, U32, offsetof(struct vmac_config, f), sizeof(uint32_t), lo, hi
+#define B(f) #f, BOOL, offsetof(struct vmac_config, f), sizeof(int), 0, 1
+
+static const struct key keys[] = {
+    {S(bus)},
+    {S(iface)},
+    {S(http)},
+    {S(drivers_dir)},
+    {S(scripts_dir)},
+    {S(state_dir)},
+    {U(period_us, 100, 10000000)},
+    {U(reply_deadline_us, 50, 10000000)},
+    {U(discovery_period_ms, 10, 600000)},
+    {U(watchdog_ms, 1, 60000)},
+    {U(miss_limit, 1, 1000)},
+    {U(sleep_s, 1, 3600)},
+    {U(max_devices, 1, 4096)},
+    {U(driver_memory_kib, 64, 1048576)},
+    {U(driver_instructions, 1000, 1000000000)},
+    {B(realtime)},
+};
+
+void vmac_config_defaults(struct vmac_config *c)
+{
+	memset(c, 0, sizeof(*c));
+	snprintf(c->bus, sizeof(c->bus), "239.255.86.77:5870");
+	snprintf(c->iface, sizeof(c->iface), "127.0.0.1");
+	snprintf(c->http, sizeof(c->http), "127.0.0.1:8080");
+	snprintf(c->state_dir, sizeof(c->state_dir), "/var/lib/vmac");
+	c->period_us = 10000;
+	c->reply_deadline_us = 4000;
+	c->discovery_period_ms = 1000;
+	c->watchdog_ms = 500;
+	c->miss_limit = 1;
+	c->sleep_s = 10;
+	c->max_devices = 1024;
+	c->driver_memory_kib = 4096;
+	c->driver_instructions = 2000000;
+	c->realtime = 1;
+}
+
+static const struct key *find_key(const char *name)
+{
+	size_t i;
+	for (i = 0; i < sizeof(keys) / sizeof(keys[0]); i++)
+		if (strcmp(keys[i].name, name) == 0)
+			return &keys[i];
+	return NULL;
+}
+
+int vmac_config_set(struct vmac_config *c, const char *name, const char *value, char *err, size_t errlen)
+{
+	const struct key *k = find_key(name);
+	char *field, *end;
+	unsigned long v;
+
+	if (!k) {
+		snprintf(err, errlen, "unknown setting '%s' (see docs/HOST.md)", name);
+		return -1;
+	}
+	field = (char *)c + k->offset;
+	switch (k->kind) {
+	case STR:
+		if (strlen(value) >= k->size) {
+			snprintf(err, errlen, "%s: value too long (at most %zu characters)", name, k->size - 1);
+			return -1;
+		}
+		memcpy(field, value, strlen(value) + 1);
+		return 0;
+	case BOOL:
+		if (strcmp(value, "true") == 0 || strcmp(value, "1") == 0)
+			*(int *)field = 1;
+		else if (strcmp(value, "false") == 0 || strcmp(value, "0") == 0)
+			*(int *)field = 0;
+		else {
+			snprintf(err, errlen, "%s: expected true or false, got '%s'", name, value);
+			return -1;
+		}
+		return 0;
+	case U32:
+		errno = 0;
+		v = strtoul(value, &end, 10);
+		if (errno || *end || end == value || value[0] == '-' || v < k->min || v > k->max) {
+			snprintf(err, errlen, "%s: expected a whole number %u..%u, got '%s'", name, k->min, k->max, value);
+			return -1;
+		}
+		*(uint32_t *)field = (uint32_t)v;
+		return 0;
+	}
+	return -1;
+}
+
+int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
+{
+	lua_State *L = luaL_newstate();
+	int rc = -1;
+
+	if (!L) {
+		snprintf(err, errlen, "%s: cannot create Lua state", path);
+		return -1;
+	}
+	/* The file runs with an empty environment: plain assignments only. */
+	if (luaL_loadfile(L, path) != 0) {
+		snprintf(err, errlen, "%s", lua_tostring(L, -1));
+		goto out;
+	}
+	lua_newtable(L);
+	lua_pushvalue(L, -1);
+	lua_insert(L, -3); /* env, chunk, env */
+	lua_setfenv(L, -2);
+	if (lua_pcall(L, 0, 0, 0) != 0) {
+		snprintf(err, errlen, "%s", lua_tostring(L, -1));
+		goto out;
+	}
+	lua_pushnil(L);
+	while (lua_next(L, -2)) {
+		char value[VMAC_PATH_MAX];
+		const char *key = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : NULL;
+		if (!key) {
+			snprintf(err, errlen, "%s: setting names must be strings", path);
+			goto out;
+		}
+		if (lua_type(L, -1) == LUA_TBOOLEAN)
+			snprintf(value, sizeof(value), "%s", lua_toboolean(L, -1) ? "true" : "false");
+		else if (lua_type(L, -1) == LUA_TNUMBER || lua_type(L, -1) == LUA_TSTRING)
+			snprintf(value, sizeof(value), "%s", lua_tostring(L, -1));
+		else {
+			snprintf(err, errlen, "%s: %s must be a string, number or boolean", path, key);
+			goto out;
+		}
+		if (vmac_config_set(c, key, value, err, errlen) != 0) {
+			char msg[256];
+			snprintf(msg, sizeof(msg), "%s", err);
+			snprintf(err, errlen, "%s: %s", path, msg);
+			goto out;
+		}
+		lua_pop(L, 1);
+	}
+	rc = 0;
+out:
+	lua_close(L);
+	return rc;
+}
+
+int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
+{
+	if (c->reply_deadline_us > c->period_us) {
+		snprintf(err, errlen, "reply_deadline_us (%u) must not exceed period_us (%u)", c->reply_deadline_us,
+		         c->period_us);
+		return -1;
+	}
+	if ((uint64_t)c->watchdog_ms * 1000 < 2ull * c->period_us) {
+		snprintf(err, errlen, "watchdog_ms (%u) must be at least two periods (%u us)", c->watchdog_ms,
+		         2 * c->period_us);
+		return -1;
+	}
+	return 0;
+}

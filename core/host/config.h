@@ -1,0 +1,38 @@
+/* Host configuration: embedded defaults, a Lua config file, command-line
+ * flags (in that order of precedence, flags last). Keys: docs/HOST.md. */
+#ifndef VMAC_CONFIG_H
+#define VMAC_CONFIG_H
+
+#define VMAC_PATH_MAX 1024
+#include <stddef.h>
+#include <stdint.h>
+
+struct vmac_config {
+	char bus[64];            /* "GROUP:PORT" */
+	char iface[64];          /* local interface address */
+	char http[64];           /* "ADDR:PORT" of the status/API server */
+	char drivers_dir[VMAC_PATH_MAX]; /* searched first for NAME.lua ("" = none) */
+	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ below it) */
+	char state_dir[VMAC_PATH_MAX];
+	uint32_t period_us;          /* service period of every device */
+	uint32_t reply_deadline_us;  /* a reply later than this after the send is a miss */
+	uint32_t discovery_period_ms;
+	uint32_t watchdog_ms;        /* board comm-loss period set at REGISTER */
+	uint32_t miss_limit;         /* consecutive misses that drop a device (1 = zero tolerance) */
+	uint32_t sleep_s;            /* how long a board without a driver sleeps */
+	uint32_t max_devices;
+	uint32_t driver_memory_kib;
+	uint32_t driver_instructions;
+	int realtime;                /* try SCHED_FIFO and mlockall */
+};
+
+void vmac_config_defaults(struct vmac_config *c);
+/* Apply a Lua config file (plain assignments, evaluated with no library at
+ * all). Returns 0, or -1 with err naming the file, line and key. */
+int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen);
+/* Apply one "key=value" (the same keys as the file). Returns 0 or -1. */
+int vmac_config_set(struct vmac_config *c, const char *key, const char *value, char *err, size_t errlen);
+/* Cross-field checks (deadline <= period, ...). Returns 0 or -1 with err. */
+int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen);
+
+#endif

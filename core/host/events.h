@@ -1,0 +1,33 @@
+/* The host's event log: the last events (attached, dropped, driver errors,
+ * missing drivers, malformed frames) kept in memory for the status API and
+ * printed to stderr. Written by the main thread, read by the HTTP thread. */
+#ifndef VMAC_EVENTS_H
+#define VMAC_EVENTS_H
+
+#include <pthread.h>
+#include <stdint.h>
+
+#include "bus.h"
+
+#define VMAC_EVENT_LOG_SIZE 100
+
+struct vmac_event {
+	uint64_t seq;        /* 1, 2, ... in order of recording */
+	int64_t time_ns;     /* CLOCK_REALTIME */
+	char kind[24];
+	char device[VMAC_NAME_MAX + 1];
+	char text[VMAC_EVENT_TEXT];
+};
+
+struct vmac_event_log {
+	pthread_mutex_t lock;
+	uint64_t next_seq;
+	struct vmac_event ring[VMAC_EVENT_LOG_SIZE];
+};
+
+void vmac_event_log_init(struct vmac_event_log *log);
+void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char *device, const char *text);
+/* Copy the newest events, oldest first, into out (room for max). Returns how many. */
+int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, int max);
+
+#endif

@@ -1,0 +1,286 @@
+/* vmacd: the vmac host. The main thread parses the configuration, starts
+ * the bus thread and the HTTP server, loads and unloads drivers when the bus
+ * thread asks, records events, and on SIGINT/SIGTERM has every board put in
+ * its safe state before exiting 0. */
+#include <errno.h>
+#include <ev.h>
+#include <getopt.h>
+#include <limits.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../api/http.h"
+#include "bus.h"
+#include "config.h"
+#include "events.h"
+
+struct host {
+	struct vmac_config cfg;
+	struct vmac_bus *bus;
+	struct vmac_http *http;
+	struct vmac_event_log log;
+	struct ev_loop *loop;
+	ev_async wake_w;
+	ev_signal int_w, term_w;
+	int stopping;
+	int exit_code;
+};
+
+static void usage(FILE *f)
+{
+	fprintf(f,
+	        "usage: vmacd [options]\n"
+	        "The vmac host: finds vmac boards on the bus, runs a Lua driver for each, serves\n"
+	        "GET /api/status. Runs on built-in defaults with no options at all.\n\n"
+	        "  --config FILE      Lua file of settings (docs/HOST.md lists every key)\n"
+	        "  --bus GROUP:PORT   discovery multicast group and port (default 239.255.86.77:5870)\n"
+	        "  --iface ADDR       local interface address for the bus (default 127.0.0.1)\n"
+	        "  --http ADDR:PORT   status/API server (default 127.0.0.1:8080; port 0 = any free)\n"
+	        "  --drivers DIR      look for NAME.lua here before the shipped scripts/drivers/\n"
+	        "  --scripts DIR      the shipped scripts folder (default: found beside the binary)\n"
+	        "  --state DIR        persistent state (default /var/lib/vmac; not written yet)\n"
+	        "  --set KEY=VALUE    any config key, e.g. --set period_us=20000 (repeatable)\n"
+	        "  --help, --version\n\n"
+	        "SIGINT or SIGTERM: every board is commanded to its safe state, then exit 0.\n");
+}
+
+static void wakeup(void *ctx)
+{
+	struct host *h = ctx;
+	ev_async_send(h->loop, &h->wake_w);
+}
+
+static int driver_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
+{
+	struct stat st;
+	if (cfg->drivers_dir[0]) {
+		snprintf(path, len, "%s/%s.lua", cfg->drivers_dir, name);
+		if (stat(path, &st) == 0)
+			return 0;
+	}
+	snprintf(path, len, "%s/drivers/%s.lua", cfg->scripts_dir, name);
+	return stat(path, &st) == 0 ? 0 : -ENOENT;
+}
+
+static void load_driver(struct host *h, const struct vmac_bus_msg *m)
+{
+	struct vmac_host_cmd c;
+	struct vmac_driver_limits limits;
+	char path[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+
+	memset(&c, 0, sizeof(c));
+	c.kind = VMAC_CMD_LOADED;
+	c.slot = m->slot;
+	c.generation = m->generation;
+	limits.memory_bytes = (size_t)h->cfg.driver_memory_kib * 1024;
+	limits.instructions = h->cfg.driver_instructions;
+	if (driver_path(&h->cfg, m->driver, path, sizeof(path)) != 0) {
+		c.missing = 1;
+		snprintf(c.text, sizeof(c.text), "no driver '%s' for %s (looked in %s%s%s/drivers)", m->driver, m->device,
+		         h->cfg.drivers_dir, h->cfg.drivers_dir[0] ? " and " : "", h->cfg.scripts_dir);
+	} else if (vmac_driver_load(path, &limits, &c.drv, err, sizeof(err)) != 0) {
+		snprintf(c.text, sizeof(c.text), "driver '%s' for %s failed to load: %s", m->driver, m->device, err);
+	}
+	if (vmac_bus_send_cmd(h->bus, &c) != 0) {
+		vmac_driver_free(c.drv);
+		vmac_event_log_add(&h->log, "warning", m->device, "command ring full; device will retry on discovery");
+	}
+}
+
+static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
+{
+	struct host *h = w->data;
+	struct vmac_bus_msg m;
+	(void)revents;
+	while (vmac_bus_poll_msg(h->bus, &m)) {
+		switch (m.kind) {
+		case VMAC_MSG_EVENT:
+			vmac_event_log_add(&h->log, m.event_kind, m.device, m.text);
+			break;
+		case VMAC_MSG_LOAD:
+			load_driver(h, &m);
+			break;
+		case VMAC_MSG_UNLOAD:
+			vmac_driver_free(m.drv);
+			break;
+		case VMAC_MSG_STOPPED:
+			ev_break(loop, EVBREAK_ALL);
+			break;
+		}
+	}
+}
+
+static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
+{
+	struct host *h = w->data;
+	struct vmac_host_cmd c;
+	(void)loop;
+	(void)revents;
+	if (h->stopping) {
+		fprintf(stderr, "vmacd: second signal, exiting now (boards go safe on their watchdog)\n");
+		_exit(1);
+	}
+	h->stopping = 1;
+	fprintf(stderr, "vmacd: signal %d: putting every board in its safe state\n", w->signum);
+	memset(&c, 0, sizeof(c));
+	c.kind = VMAC_CMD_STOP;
+	while (vmac_bus_send_cmd(h->bus, &c) != 0)
+		usleep(1000);
+}
+
+static void default_scripts_dir(char *out, size_t len)
+{
+	char exe[VMAC_PATH_MAX];
+	ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
+	struct stat st;
+	if (n > 0) {
+		char *slash;
+		int up;
+		exe[n] = '\0';
+		/* build/bin/vmacd -> ../../scripts */
+		for (up = 0; up < 3 && (slash = strrchr(exe, '/')); up++)
+			*slash = '\0';
+		snprintf(out, len, "%.900s/scripts", exe);
+		if (stat(out, &st) == 0 && S_ISDIR(st.st_mode))
+			return;
+	}
+	snprintf(out, len, "/usr/local/share/vmac/scripts");
+}
+
+static int parse_args(struct host *h, int argc, char **argv)
+{
+	static const struct option opts[] = {
+	    {"config", required_argument, 0, 'c'}, {"bus", required_argument, 0, 'b'},
+	    {"iface", required_argument, 0, 'i'}, {"http", required_argument, 0, 'H'},
+	    {"drivers", required_argument, 0, 'd'}, {"scripts", required_argument, 0, 'S'},
+	    {"state", required_argument, 0, 's'}, {"set", required_argument, 0, 'o'},
+	    {"help", no_argument, 0, 'h'}, {"version", no_argument, 0, 'V'}, {0, 0, 0, 0}};
+	char err[VMAC_PATH_MAX + 256];
+	int opt, i;
+
+	vmac_config_defaults(&h->cfg);
+	default_scripts_dir(h->cfg.scripts_dir, sizeof(h->cfg.scripts_dir));
+	/* The config file first, so flags given on the command line win. */
+	for (i = 1; i < argc; i++) {
+		const char *file = NULL;
+		if (strcmp(argv[i], "--config") == 0 && i + 1 < argc)
+			file = argv[i + 1];
+		else if (strncmp(argv[i], "--config=", 9) == 0)
+			file = argv[i] + 9;
+		if (file && vmac_config_load(&h->cfg, file, err, sizeof(err)) != 0) {
+			fprintf(stderr, "vmacd: config: %s\n", err);
+			return 2;
+		}
+	}
+	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
+		const char *key = NULL;
+		char kv[VMAC_PATH_MAX + 64], *eq;
+		switch (opt) {
+		case 'c': continue;
+		case 'b': key = "bus"; break;
+		case 'i': key = "iface"; break;
+		case 'H': key = "http"; break;
+		case 'd': key = "drivers_dir"; break;
+		case 'S': key = "scripts_dir"; break;
+		case 's': key = "state_dir"; break;
+		case 'o':
+			snprintf(kv, sizeof(kv), "%s", optarg);
+			eq = strchr(kv, '=');
+			if (!eq) {
+				fprintf(stderr, "vmacd: --set wants KEY=VALUE, got '%s'\n", optarg);
+				return 2;
+			}
+			*eq = '\0';
+			if (vmac_config_set(&h->cfg, kv, eq + 1, err, sizeof(err)) != 0) {
+				fprintf(stderr, "vmacd: --set: %s\n", err);
+				return 2;
+			}
+			continue;
+		case 'h': usage(stdout); return 1;
+		case 'V': printf("vmacd 0.1.0\n"); return 1;
+		default: usage(stderr); return 2;
+		}
+		if (vmac_config_set(&h->cfg, key, optarg, err, sizeof(err)) != 0) {
+			fprintf(stderr, "vmacd: %s\n", err);
+			return 2;
+		}
+	}
+	if (optind < argc) {
+		fprintf(stderr, "vmacd: unexpected argument '%s' (see --help)\n", argv[optind]);
+		return 2;
+	}
+	if (vmac_config_check(&h->cfg, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmacd: %s\n", err);
+		return 2;
+	}
+	return 0;
+}
+
+int main(int argc, char **argv)
+{
+	static struct host host;
+	struct host *h = &host;
+	char err[512];
+	int rc = parse_args(h, argc, argv);
+
+	if (rc)
+		return rc == 1 ? 0 : rc;
+	signal(SIGPIPE, SIG_IGN);
+	setvbuf(stderr, NULL, _IOLBF, 0);
+	vmac_event_log_init(&h->log);
+	h->loop = EV_DEFAULT;
+	h->bus = vmac_bus_new(&h->cfg, err, sizeof(err));
+	if (!h->bus) {
+		fprintf(stderr, "vmacd: bus: %s\n", err);
+		return 1;
+	}
+	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, &h->cfg, err, sizeof(err));
+	if (!h->http) {
+		fprintf(stderr, "vmacd: http: %s\n", err);
+		vmac_bus_free(h->bus);
+		return 1;
+	}
+	ev_async_init(&h->wake_w, on_wake);
+	h->wake_w.data = h;
+	ev_async_start(h->loop, &h->wake_w);
+	ev_signal_init(&h->int_w, on_signal, SIGINT);
+	h->int_w.data = h;
+	ev_signal_start(h->loop, &h->int_w);
+	ev_signal_init(&h->term_w, on_signal, SIGTERM);
+	h->term_w.data = h;
+	ev_signal_start(h->loop, &h->term_w);
+	vmac_bus_set_wakeup(h->bus, wakeup, h);
+
+	/* Block the stop signals in the bus thread: libev delivers them here. */
+	{
+		sigset_t set, old;
+		sigemptyset(&set);
+		sigaddset(&set, SIGINT);
+		sigaddset(&set, SIGTERM);
+		pthread_sigmask(SIG_BLOCK, &set, &old);
+		rc = vmac_bus_start(h->bus);
+		pthread_sigmask(SIG_SETMASK, &old, NULL);
+	}
+	if (rc != 0) {
+		fprintf(stderr, "vmacd: cannot start the bus thread: %s\n", strerror(-rc));
+		return 1;
+	}
+	fprintf(stderr,
+	        "vmacd: bus %s from %s, period %u us, reply deadline %u us\n"
+	        "vmacd: drivers from %s%s%s/drivers\n"
+	        "vmacd: status at http://%.*s:%u/api/status\n",
+	        h->cfg.bus, vmac_bus_host_addr(h->bus), h->cfg.period_us, h->cfg.reply_deadline_us, h->cfg.drivers_dir,
+	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, (int)(strrchr(h->cfg.http, ':') - h->cfg.http),
+	        h->cfg.http, vmac_http_port(h->http));
+	ev_run(h->loop, 0);
+	vmac_bus_join(h->bus);
+	on_wake(h->loop, &h->wake_w, 0); /* the last events */
+	vmac_http_stop(h->http);
+	vmac_bus_free(h->bus);
+	fprintf(stderr, "vmacd: stopped; every board was told to go safe\n");
+	return 0;
+}

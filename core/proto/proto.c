@@ -1,0 +1,344 @@
+/* vmac wire protocol codec: the one place that turns frames into messages and back.
+ * Used by the host's bus thread and by the board firmware; C99, no heap. */
+#include "proto.h"
+
+#include <string.h>
+
+static void put16(uint8_t *p, uint16_t v)
+{
+	p[0] = (uint8_t)(v >> 8);
+	p[1] = (uint8_t)v;
+}
+
+static void put32(uint8_t *p, uint32_t v)
+{
+	p[0] = (uint8_t)(v >> 24);
+	p[1] = (uint8_t)(v >> 16);
+	p[2] = (uint8_t)(v >> 8);
+	p[3] = (uint8_t)v;
+}
+
+static uint16_t get16(const uint8_t *p)
+{
+	return (uint16_t)((p[0] << 8) | p[1]);
+}
+
+static uint32_t get32(const uint8_t *p)
+{
+	return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | p[3];
+}
+
+/* Names (driver and board) are 1..31 bytes of [A-Za-z0-9_-]: a driver name
+ * becomes a file name and a board name a console prefix, so nothing else. */
+static int name_ok(const uint8_t *s, size_t len)
+{
+	size_t i;
+	if (len == 0 || len > VMAC_NAME_MAX)
+		return 0;
+	for (i = 0; i < len; i++) {
+		uint8_t c = s[i];
+		int ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+		         c == '_' || c == '-';
+		if (!ok)
+			return 0;
+	}
+	return 1;
+}
+
+static int outputs_ok(const struct vmac_outputs *o)
+{
+	return (o->digital & 0x80) == 0 && o->pwm >= -VMAC_PWM_MAX && o->pwm <= VMAC_PWM_MAX;
+}
+
+/* Expected data length of a request/reply, or -1 when the op is not valid in
+ * that direction. ANNOUNCE is variable and checked by its own decoder. */
+static int data_len_for(uint8_t channel, uint8_t op, int reply)
+{
+	if (channel == VMAC_CH_SYSTEM) {
+		if (op == VMAC_SYS_DISCOVER && !reply)
+			return 0;
+		if (op == VMAC_SYS_ANNOUNCE && reply)
+			return -2; /* variable */
+		return -1;
+	}
+	if (channel != VMAC_CH_DEVICE)
+		return -1;
+	switch (op) {
+	case VMAC_OP_REGISTER: return reply ? 0 : 10;
+	case VMAC_OP_SHUTDOWN: return reply ? 0 : 1;
+	case VMAC_OP_UPDATE: return reply ? 12 : 3;
+	case VMAC_OP_IDLE: return reply ? 12 : 0;
+	case VMAC_OP_ERROR: return reply ? 2 : -1;
+	case VMAC_OP_SLEEP: return reply ? 0 : 2;
+	case VMAC_OP_WATCHDOG: return reply ? 0 : 2;
+	default: return -1;
+	}
+}
+
+static int encode_announce(const struct vmac_announce *a, uint8_t *d, size_t cap)
+{
+	size_t dl = strlen(a->driver), bl = strlen(a->board), n = 17 + dl + bl;
+	if (!name_ok((const uint8_t *)a->driver, dl) || !name_ok((const uint8_t *)a->board, bl))
+		return VMAC_EPROTO_NAME;
+	if (n > cap)
+		return VMAC_EPROTO_SPACE;
+	*d++ = (uint8_t)dl;
+	memcpy(d, a->driver, dl);
+	d += dl;
+	put32(d, a->major);
+	put32(d + 4, a->minor);
+	d += 8;
+	*d++ = (uint8_t)bl;
+	memcpy(d, a->board, bl);
+	d += bl;
+	*d++ = a->firmware_major;
+	*d++ = a->firmware_minor;
+	*d++ = a->caps.digital_inputs;
+	*d++ = a->caps.digital_outputs;
+	*d++ = a->caps.analog_inputs;
+	*d++ = a->caps.pwm_outputs;
+	*d++ = a->caps.encoders;
+	return (int)n;
+}
+
+static int decode_announce(const uint8_t *d, size_t len, struct vmac_announce *a)
+{
+	size_t dl, bl;
+	if (len < 17)
+		return VMAC_EPROTO_PAYLOAD;
+	dl = d[0];
+	if (dl + 17 > len)
+		return VMAC_EPROTO_PAYLOAD;
+	bl = d[1 + dl + 8];
+	if (17 + dl + bl != len)
+		return VMAC_EPROTO_PAYLOAD;
+	if (!name_ok(d + 1, dl) || !name_ok(d + 1 + dl + 9, bl))
+		return VMAC_EPROTO_NAME;
+	memcpy(a->driver, d + 1, dl);
+	a->driver[dl] = '\0';
+	a->major = get32(d + 1 + dl);
+	a->minor = get32(d + 1 + dl + 4);
+	memcpy(a->board, d + 1 + dl + 9, bl);
+	a->board[bl] = '\0';
+	d += 1 + dl + 9 + bl;
+	a->firmware_major = d[0];
+	a->firmware_minor = d[1];
+	a->caps.digital_inputs = d[2];
+	a->caps.digital_outputs = d[3];
+	a->caps.analog_inputs = d[4];
+	a->caps.pwm_outputs = d[5];
+	a->caps.encoders = d[6];
+	if (a->caps.digital_inputs > VMAC_DIGITAL_INPUTS || a->caps.digital_outputs > VMAC_DIGITAL_OUTPUTS ||
+	    a->caps.analog_inputs > VMAC_ANALOG_INPUTS || a->caps.pwm_outputs > 1 || a->caps.encoders > 1)
+		return VMAC_EPROTO_VALUE;
+	return 0;
+}
+
+int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
+{
+	int reply = (m->flags & VMAC_FLAG_REPLY) != 0;
+	int want = data_len_for(m->channel, m->op, reply);
+	uint8_t *d = buf + VMAC_HDR_LEN;
+	int n;
+
+	if (want == -1 || (m->flags & ~VMAC_FLAG_REPLY) != 0)
+		return VMAC_EPROTO_OP;
+	if (cap < VMAC_HDR_LEN)
+		return VMAC_EPROTO_SPACE;
+	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
+		return VMAC_EPROTO_VALUE;
+	if (want >= 0 && (size_t)want > cap - VMAC_HDR_LEN)
+		return VMAC_EPROTO_SPACE;
+
+	n = want;
+	switch (m->channel == VMAC_CH_SYSTEM ? 0x100 | m->op : (reply << 8) | m->op) {
+	case 0x100 | VMAC_SYS_DISCOVER:
+		break;
+	case 0x100 | VMAC_SYS_ANNOUNCE: {
+		size_t room = cap - VMAC_HDR_LEN;
+		n = encode_announce(&m->u.announce, d, room > VMAC_DATA_MAX ? VMAC_DATA_MAX : room);
+		if (n < 0)
+			return n;
+		break;
+	}
+	case VMAC_OP_REGISTER:
+		if (m->u.reg.watchdog_ms < 1 || m->u.reg.watchdog_ms > 60000)
+			return VMAC_EPROTO_VALUE;
+		put32(d, m->u.reg.major);
+		put32(d + 4, m->u.reg.minor);
+		put16(d + 8, m->u.reg.watchdog_ms);
+		break;
+	case VMAC_OP_SHUTDOWN:
+		d[0] = m->u.shutdown_reason;
+		break;
+	case VMAC_OP_UPDATE:
+		if (!outputs_ok(&m->u.outputs))
+			return VMAC_EPROTO_VALUE;
+		d[0] = m->u.outputs.digital;
+		put16(d + 1, (uint16_t)m->u.outputs.pwm);
+		break;
+	case VMAC_OP_SLEEP:
+		if (m->u.sleep_s < 1 || m->u.sleep_s > 3600)
+			return VMAC_EPROTO_VALUE;
+		put16(d, m->u.sleep_s);
+		break;
+	case VMAC_OP_WATCHDOG:
+		if (m->u.watchdog_ms < 1 || m->u.watchdog_ms > 60000)
+			return VMAC_EPROTO_VALUE;
+		put16(d, m->u.watchdog_ms);
+		break;
+	case 0x100 | VMAC_OP_UPDATE:
+	case 0x100 | VMAC_OP_IDLE: {
+		const struct vmac_inputs *in = &m->u.inputs;
+		if (in->analog[0] > VMAC_ANALOG_MAX || in->analog[1] > VMAC_ANALOG_MAX || !outputs_ok(&in->applied))
+			return VMAC_EPROTO_VALUE;
+		d[0] = in->digital;
+		put16(d + 1, in->analog[0]);
+		put16(d + 3, in->analog[1]);
+		put32(d + 5, (uint32_t)in->encoder);
+		d[9] = in->applied.digital;
+		put16(d + 10, (uint16_t)in->applied.pwm);
+		break;
+	}
+	case 0x100 | VMAC_OP_ERROR:
+		d[0] = m->u.error.code;
+		d[1] = m->u.error.op;
+		break;
+	default: /* zero-length replies: REGISTER, SHUTDOWN, SLEEP, WATCHDOG acks; IDLE request */
+		break;
+	}
+
+	buf[0] = VMAC_MAGIC0;
+	buf[1] = VMAC_MAGIC1;
+	buf[2] = VMAC_PROTO_VERSION;
+	buf[3] = m->flags;
+	put16(buf + 4, m->seq);
+	put32(buf + 6, m->device_id);
+	buf[10] = m->channel;
+	buf[11] = m->op;
+	buf[12] = (uint8_t)n;
+	return VMAC_HDR_LEN + n;
+}
+
+int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
+{
+	const uint8_t *d = buf + VMAC_HDR_LEN;
+	int reply, want;
+	size_t n;
+
+	if (len < VMAC_HDR_LEN)
+		return VMAC_EPROTO_SHORT;
+	if (buf[0] != VMAC_MAGIC0 || buf[1] != VMAC_MAGIC1)
+		return VMAC_EPROTO_MAGIC;
+	if (buf[2] != VMAC_PROTO_VERSION)
+		return VMAC_EPROTO_VERSION;
+	n = buf[12];
+	if (n > VMAC_DATA_MAX || VMAC_HDR_LEN + n != len)
+		return VMAC_EPROTO_LENGTH;
+	if ((buf[3] & ~VMAC_FLAG_REPLY) != 0)
+		return VMAC_EPROTO_OP;
+
+	memset(m, 0, sizeof(*m));
+	m->flags = buf[3];
+	m->seq = get16(buf + 4);
+	m->device_id = get32(buf + 6);
+	m->channel = buf[10];
+	m->op = buf[11];
+	reply = (m->flags & VMAC_FLAG_REPLY) != 0;
+
+	want = data_len_for(m->channel, m->op, reply);
+	if (want == -1)
+		return VMAC_EPROTO_OP;
+	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
+		return VMAC_EPROTO_VALUE;
+	if (want >= 0 && (size_t)want != n)
+		return VMAC_EPROTO_PAYLOAD;
+
+	switch (m->channel == VMAC_CH_SYSTEM ? 0x100 | m->op : (reply << 8) | m->op) {
+	case 0x100 | VMAC_SYS_ANNOUNCE:
+		return decode_announce(d, n, &m->u.announce);
+	case VMAC_OP_REGISTER:
+		m->u.reg.major = get32(d);
+		m->u.reg.minor = get32(d + 4);
+		m->u.reg.watchdog_ms = get16(d + 8);
+		if (m->u.reg.watchdog_ms < 1 || m->u.reg.watchdog_ms > 60000)
+			return VMAC_EPROTO_VALUE;
+		break;
+	case VMAC_OP_SHUTDOWN:
+		m->u.shutdown_reason = d[0];
+		break;
+	case VMAC_OP_UPDATE:
+		m->u.outputs.digital = d[0];
+		m->u.outputs.pwm = (int16_t)get16(d + 1);
+		if (!outputs_ok(&m->u.outputs))
+			return VMAC_EPROTO_VALUE;
+		break;
+	case VMAC_OP_SLEEP:
+		m->u.sleep_s = get16(d);
+		if (m->u.sleep_s < 1 || m->u.sleep_s > 3600)
+			return VMAC_EPROTO_VALUE;
+		break;
+	case VMAC_OP_WATCHDOG:
+		m->u.watchdog_ms = get16(d);
+		if (m->u.watchdog_ms < 1 || m->u.watchdog_ms > 60000)
+			return VMAC_EPROTO_VALUE;
+		break;
+	case 0x100 | VMAC_OP_UPDATE:
+	case 0x100 | VMAC_OP_IDLE: {
+		struct vmac_inputs *in = &m->u.inputs;
+		in->digital = d[0];
+		in->analog[0] = get16(d + 1);
+		in->analog[1] = get16(d + 3);
+		in->encoder = (int32_t)get32(d + 5);
+		in->applied.digital = d[9];
+		in->applied.pwm = (int16_t)get16(d + 10);
+		if (in->analog[0] > VMAC_ANALOG_MAX || in->analog[1] > VMAC_ANALOG_MAX || !outputs_ok(&in->applied))
+			return VMAC_EPROTO_VALUE;
+		break;
+	}
+	case 0x100 | VMAC_OP_ERROR:
+		m->u.error.code = d[0];
+		m->u.error.op = d[1];
+		if (m->u.error.code < VMAC_BERR_NOT_REGISTERED || m->u.error.code > VMAC_BERR_IDENTITY)
+			return VMAC_EPROTO_VALUE;
+		break;
+	default:
+		break;
+	}
+	return 0;
+}
+
+const char *vmac_proto_strerror(int err)
+{
+	switch (err) {
+	case 0: return "ok";
+	case VMAC_EPROTO_SHORT: return "frame shorter than a header";
+	case VMAC_EPROTO_MAGIC: return "not a vmac frame (bad magic)";
+	case VMAC_EPROTO_VERSION: return "unsupported protocol version";
+	case VMAC_EPROTO_LENGTH: return "length byte disagrees with frame size";
+	case VMAC_EPROTO_OP: return "unknown op or op not valid in this direction";
+	case VMAC_EPROTO_PAYLOAD: return "data size wrong for op";
+	case VMAC_EPROTO_NAME: return "empty, oversize or invalid name";
+	case VMAC_EPROTO_VALUE: return "field out of range";
+	case VMAC_EPROTO_SPACE: return "buffer too small";
+	default: return "unknown protocol error";
+	}
+}
+
+const char *vmac_proto_opname(uint8_t channel, uint8_t op)
+{
+	if (channel == VMAC_CH_SYSTEM)
+		return op == VMAC_SYS_DISCOVER ? "DISCOVER" : op == VMAC_SYS_ANNOUNCE ? "ANNOUNCE" : "?";
+	if (channel != VMAC_CH_DEVICE)
+		return "?";
+	switch (op) {
+	case VMAC_OP_REGISTER: return "REGISTER";
+	case VMAC_OP_SHUTDOWN: return "SHUTDOWN";
+	case VMAC_OP_UPDATE: return "UPDATE";
+	case VMAC_OP_ERROR: return "ERROR";
+	case VMAC_OP_IDLE: return "IDLE";
+	case VMAC_OP_SLEEP: return "SLEEP";
+	case VMAC_OP_WATCHDOG: return "WATCHDOG";
+	default: return "?";
+	}
+}

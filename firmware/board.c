@@ -1,0 +1,180 @@
+/* Generic peripheral board logic: the state machine of docs/PROTOCOL.md
+ * ("Board behaviour"), independent of transport and clock. */
+#include "board.h"
+
+#include <string.h>
+
+static void drive(struct vmac_board *b, const struct vmac_outputs *out)
+{
+	b->outputs = *out;
+	b->io->write_outputs(b->io_ctx, out);
+}
+
+void vmac_board_safe(struct vmac_board *b)
+{
+	static const struct vmac_outputs off = {0, 0};
+	drive(b, &off);
+	b->state = VMAC_BOARD_UNKNOWN;
+	b->device_id = 0;
+}
+
+void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
+                     const struct vmac_board_io *io, void *io_ctx, uint64_t now_ms)
+{
+	memset(b, 0, sizeof(*b));
+	b->id = *id;
+	b->io = io;
+	b->io_ctx = io_ctx;
+	b->watchdog_ms = VMAC_BOARD_DEFAULT_WATCHDOG_MS;
+	b->last_valid_ms = now_ms;
+	vmac_board_safe(b);
+}
+
+int vmac_board_poll(struct vmac_board *b, uint64_t now_ms)
+{
+	if (b->state == VMAC_BOARD_KNOWN && now_ms - b->last_valid_ms >= b->watchdog_ms) {
+		vmac_board_safe(b);
+		b->counters.watchdog_trips++;
+		return 1;
+	}
+	if (b->state == VMAC_BOARD_SLEEPING && now_ms >= b->sleep_until_ms)
+		b->state = VMAC_BOARD_UNKNOWN;
+	return 0;
+}
+
+static int answer(struct vmac_msg *r, const struct vmac_msg *req, uint8_t *reply, size_t cap)
+{
+	int n;
+	r->flags = VMAC_FLAG_REPLY;
+	r->seq = req->seq;
+	r->channel = req->channel;
+	n = vmac_proto_encode(r, reply, cap);
+	return n > 0 ? n : 0;
+}
+
+static int answer_error(const struct vmac_msg *req, uint32_t device_id, uint8_t code, uint8_t *reply,
+                        size_t cap)
+{
+	struct vmac_msg r;
+	memset(&r, 0, sizeof(r));
+	r.device_id = device_id ? device_id : req->device_id;
+	r.op = VMAC_OP_ERROR;
+	r.u.error.code = code;
+	r.u.error.op = req->op;
+	return answer(&r, req, reply, cap);
+}
+
+static int answer_inputs(struct vmac_board *b, const struct vmac_msg *req, uint8_t *reply, size_t cap)
+{
+	struct vmac_msg r;
+	memset(&r, 0, sizeof(r));
+	r.device_id = b->device_id;
+	r.op = req->op;
+	b->io->read_inputs(b->io_ctx, &r.u.inputs);
+	r.u.inputs.applied = b->outputs;
+	return answer(&r, req, reply, cap);
+}
+
+static int answer_ack(const struct vmac_msg *req, uint32_t device_id, uint8_t *reply, size_t cap)
+{
+	struct vmac_msg r;
+	memset(&r, 0, sizeof(r));
+	r.device_id = device_id;
+	r.op = req->op;
+	return answer(&r, req, reply, cap);
+}
+
+static int on_discover(struct vmac_board *b, const struct vmac_msg *req, uint8_t *reply, size_t cap)
+{
+	struct vmac_msg r;
+	if (b->state != VMAC_BOARD_UNKNOWN)
+		return 0; /* only unknown boards answer (thesis, device discovery) */
+	memset(&r, 0, sizeof(r));
+	r.op = VMAC_SYS_ANNOUNCE;
+	memcpy(r.u.announce.driver, b->id.driver, sizeof(r.u.announce.driver));
+	memcpy(r.u.announce.board, b->id.board, sizeof(r.u.announce.board));
+	r.u.announce.major = b->id.major;
+	r.u.announce.minor = b->id.minor;
+	r.u.announce.firmware_major = VMAC_FIRMWARE_MAJOR;
+	r.u.announce.firmware_minor = VMAC_FIRMWARE_MINOR;
+	r.u.announce.caps = b->id.caps;
+	return answer(&r, req, reply, cap);
+}
+
+static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply,
+                       size_t cap)
+{
+	static const struct vmac_outputs off = {0, 0};
+	if (req->u.reg.major != b->id.major || req->u.reg.minor != b->id.minor)
+		return answer_error(req, 0, VMAC_BERR_IDENTITY, reply, cap);
+	/* A new session (or the host restarted): outputs stay off until the host
+	 * sends fresh values in an UPDATE. */
+	drive(b, &off);
+	b->state = VMAC_BOARD_KNOWN;
+	b->device_id = req->device_id;
+	b->watchdog_ms = req->u.reg.watchdog_ms;
+	b->last_valid_ms = now_ms;
+	b->counters.frames_ok++;
+	return answer_ack(req, b->device_id, reply, cap);
+}
+
+int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms,
+                       uint8_t *reply, size_t cap)
+{
+	struct vmac_msg req;
+	uint32_t id;
+
+	vmac_board_poll(b, now_ms);
+	if (vmac_proto_decode(frame, len, &req) != 0) {
+		b->counters.frames_malformed++;
+		return 0;
+	}
+	if (req.flags & VMAC_FLAG_REPLY) {
+		b->counters.frames_ignored++; /* another board's answer: not for us */
+		return 0;
+	}
+	if (b->state == VMAC_BOARD_SLEEPING) {
+		b->counters.frames_ignored++;
+		return 0;
+	}
+	if (req.channel == VMAC_CH_SYSTEM)
+		return on_discover(b, &req, reply, cap);
+	if (req.op == VMAC_OP_REGISTER)
+		return on_register(b, &req, now_ms, reply, cap);
+	if (b->state != VMAC_BOARD_KNOWN || req.device_id != b->device_id)
+		return answer_error(&req, 0, VMAC_BERR_NOT_REGISTERED, reply, cap);
+
+	b->last_valid_ms = now_ms;
+	b->counters.frames_ok++;
+	id = b->device_id;
+	switch (req.op) {
+	case VMAC_OP_UPDATE:
+		drive(b, &req.u.outputs);
+		return answer_inputs(b, &req, reply, cap);
+	case VMAC_OP_IDLE:
+		return answer_inputs(b, &req, reply, cap);
+	case VMAC_OP_SHUTDOWN:
+		vmac_board_safe(b);
+		return answer_ack(&req, id, reply, cap);
+	case VMAC_OP_SLEEP:
+		vmac_board_safe(b);
+		b->state = VMAC_BOARD_SLEEPING;
+		b->sleep_until_ms = now_ms + 1000u * req.u.sleep_s;
+		return answer_ack(&req, id, reply, cap);
+	case VMAC_OP_WATCHDOG:
+		b->watchdog_ms = req.u.watchdog_ms;
+		return answer_ack(&req, id, reply, cap);
+	default:
+		return answer_error(&req, id, VMAC_BERR_BAD_REQUEST, reply, cap);
+	}
+}
+
+const char *vmac_board_state_name(enum vmac_board_state s)
+{
+	switch (s) {
+	case VMAC_BOARD_UNKNOWN: return "unknown";
+	case VMAC_BOARD_KNOWN: return "known";
+	case VMAC_BOARD_SLEEPING: return "sleeping";
+	default: return "?";
+	}
+}

@@ -1,0 +1,77 @@
+/* Generic peripheral board logic (thesis 4.5): answers the host, drives the
+ * outputs, enforces the comm-loss watchdog. Portable C99: no heap, no OS
+ * headers, no clock of its own (the caller passes the time in), so the same
+ * code runs on a microcontroller, in vmac-board, and in virtual time. */
+#ifndef VMAC_BOARD_H
+#define VMAC_BOARD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../core/proto/proto.h"
+
+#define VMAC_FIRMWARE_MAJOR 1
+#define VMAC_FIRMWARE_MINOR 0
+#define VMAC_BOARD_DEFAULT_WATCHDOG_MS 500
+
+/* The board's I/O, provided by the HAL (real pins, or a simulated plant). */
+struct vmac_board_io {
+	/* Fill digital, analog and encoder; the board fills `applied` itself. */
+	void (*read_inputs)(void *ctx, struct vmac_inputs *in);
+	/* Drive the outputs. Called with all-zero outputs to make the board safe. */
+	void (*write_outputs)(void *ctx, const struct vmac_outputs *out);
+};
+
+enum vmac_board_state {
+	VMAC_BOARD_UNKNOWN,  /* outputs off; answers discovery */
+	VMAC_BOARD_KNOWN,    /* registered; serves its session; watchdog armed */
+	VMAC_BOARD_SLEEPING, /* outputs off; silent until sleep_until_ms */
+};
+
+struct vmac_board_identity {
+	char driver[VMAC_NAME_MAX + 1];
+	char board[VMAC_NAME_MAX + 1];
+	uint32_t major, minor;
+	struct vmac_caps caps;
+};
+
+struct vmac_board_counters {
+	uint32_t frames_ok, frames_malformed, frames_ignored, watchdog_trips;
+};
+
+struct vmac_board {
+	struct vmac_board_identity id;
+	enum vmac_board_state state;
+	uint32_t device_id;       /* session id from REGISTER; 0 when unknown */
+	uint16_t watchdog_ms;     /* comm-loss period while KNOWN */
+	uint64_t last_valid_ms;   /* time of the last valid frame of our session */
+	uint64_t sleep_until_ms;
+	struct vmac_outputs outputs; /* what we drive now */
+	struct vmac_board_counters counters;
+	const struct vmac_board_io *io;
+	void *io_ctx;
+};
+
+/* Start in UNKNOWN with outputs off. */
+void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
+                     const struct vmac_board_io *io, void *io_ctx, uint64_t now_ms);
+
+/* Enforce the watchdog and the end of sleep. Call before every receive and
+ * at least every few ms. Returns 1 when this call turned the outputs off
+ * because of comm loss, else 0. */
+int vmac_board_poll(struct vmac_board *b, uint64_t now_ms);
+
+/* Handle one received datagram. Writes the reply frame into reply (cap bytes,
+ * VMAC_FRAME_MAX is always enough) and returns its length, or 0 when the
+ * board stays silent (malformed frame, not addressed to it, or a discovery it
+ * need not answer). Never reads past frame + len. */
+int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms,
+                       uint8_t *reply, size_t cap);
+
+/* Outputs off, session forgotten: what SHUTDOWN, comm loss and a board
+ * process exiting all do. */
+void vmac_board_safe(struct vmac_board *b);
+
+const char *vmac_board_state_name(enum vmac_board_state s);
+
+#endif

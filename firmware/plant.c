@@ -1,0 +1,207 @@
+/* Plant dispatcher: names, capabilities and the I/O adapters of the simulated
+ * machines; each call is forwarded by kind to firmware/plants/<kind>.c. */
+#include "plant.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "plants/plants.h"
+
+/* A step longer than this is cut into pieces, so fill, drain and switches
+ * interact at no coarser a grain than the contract promises the plants. */
+#define PLANT_MAX_STEP_S 0.1
+
+static const struct {
+	enum vmac_plant_kind kind;
+	const char *name;
+} kinds[] = {
+	{VMAC_PLANT_GENERIC, "generic"},
+	{VMAC_PLANT_WASHER, "washer"},
+	{VMAC_PLANT_DISHWASHER, "dishwasher"},
+	{VMAC_PLANT_LIGHTS, "lights"},
+};
+
+#define KIND_COUNT (sizeof(kinds) / sizeof(kinds[0]))
+
+uint16_t vmac_plant_analog_counts(double counts)
+{
+	if (!(counts > 0.0))
+		return 0;
+	if (counts >= VMAC_ANALOG_MAX)
+		return VMAC_ANALOG_MAX;
+	return (uint16_t)floor(counts + 0.5);
+}
+
+int vmac_plant_is_bit(double value)
+{
+	return value == 0.0 || value == 1.0;
+}
+
+int vmac_plant_in_range(double value, double lo, double hi)
+{
+	return value >= lo && value <= hi;
+}
+
+int vmac_plant_kind_from_name(const char *name, enum vmac_plant_kind *kind)
+{
+	size_t i;
+	if (name == NULL)
+		return -1;
+	for (i = 0; i < KIND_COUNT; i++) {
+		if (strcmp(name, kinds[i].name) == 0) {
+			*kind = kinds[i].kind;
+			return 0;
+		}
+	}
+	return -1;
+}
+
+const char *vmac_plant_name(enum vmac_plant_kind kind)
+{
+	size_t i;
+	for (i = 0; i < KIND_COUNT; i++) {
+		if (kinds[i].kind == kind)
+			return kinds[i].name;
+	}
+	return "?";
+}
+
+/* Every plant's board announces the driver named like the plant. */
+const char *vmac_plant_default_driver(enum vmac_plant_kind kind)
+{
+	return vmac_plant_name(kind);
+}
+
+/* All plants sit on the same generic board (docs/BOARD.md). */
+struct vmac_caps vmac_plant_caps(enum vmac_plant_kind kind)
+{
+	struct vmac_caps caps;
+	(void)kind;
+	caps.digital_inputs = VMAC_DIGITAL_INPUTS;
+	caps.digital_outputs = VMAC_DIGITAL_OUTPUTS;
+	caps.analog_inputs = VMAC_ANALOG_INPUTS;
+	caps.pwm_outputs = 1;
+	caps.encoders = 1;
+	return caps;
+}
+
+/* An unknown kind becomes a generic plant, so p is always a valid plant. */
+void vmac_plant_init(struct vmac_plant *p, enum vmac_plant_kind kind)
+{
+	memset(p, 0, sizeof(*p));
+	switch (kind) {
+	case VMAC_PLANT_WASHER:
+		p->kind = kind;
+		vmac_washer_init(&p->s.washer);
+		break;
+	case VMAC_PLANT_DISHWASHER:
+		p->kind = kind;
+		vmac_dishwasher_init(&p->s.dishwasher);
+		break;
+	case VMAC_PLANT_LIGHTS:
+		p->kind = kind;
+		vmac_lights_init(&p->s.lights);
+		break;
+	case VMAC_PLANT_GENERIC:
+	default:
+		p->kind = VMAC_PLANT_GENERIC;
+		vmac_generic_init(&p->s.generic);
+		break;
+	}
+}
+
+static void step_once(struct vmac_plant *p, double dt_s)
+{
+	switch (p->kind) {
+	case VMAC_PLANT_WASHER:
+		vmac_washer_step(&p->s.washer, dt_s);
+		break;
+	case VMAC_PLANT_DISHWASHER:
+		vmac_dishwasher_step(&p->s.dishwasher, dt_s);
+		break;
+	case VMAC_PLANT_LIGHTS:
+		vmac_lights_step(&p->s.lights, dt_s);
+		break;
+	case VMAC_PLANT_GENERIC:
+	default:
+		vmac_generic_step(&p->s.generic, dt_s);
+		break;
+	}
+}
+
+/* dt_s <= 0 (or NaN) does nothing; a dt_s above 0.1 s is taken in 0.1 s
+ * pieces rather than refused, so a late real-time caller loses no time. */
+void vmac_plant_step(struct vmac_plant *p, double dt_s)
+{
+	while (dt_s > PLANT_MAX_STEP_S) {
+		step_once(p, PLANT_MAX_STEP_S);
+		dt_s -= PLANT_MAX_STEP_S;
+	}
+	if (dt_s > 0.0)
+		step_once(p, dt_s);
+}
+
+void vmac_plant_sense(const struct vmac_plant *p, struct vmac_inputs *in)
+{
+	switch (p->kind) {
+	case VMAC_PLANT_WASHER:
+		vmac_washer_sense(&p->s.washer, in);
+		break;
+	case VMAC_PLANT_DISHWASHER:
+		vmac_dishwasher_sense(&p->s.dishwasher, in);
+		break;
+	case VMAC_PLANT_LIGHTS:
+		vmac_lights_sense(&p->s.lights, in);
+		break;
+	case VMAC_PLANT_GENERIC:
+	default:
+		vmac_generic_sense(&p->s.generic, in);
+		break;
+	}
+}
+
+void vmac_plant_actuate(struct vmac_plant *p, const struct vmac_outputs *out)
+{
+	switch (p->kind) {
+	case VMAC_PLANT_WASHER:
+		vmac_washer_actuate(&p->s.washer, out);
+		break;
+	case VMAC_PLANT_DISHWASHER:
+		vmac_dishwasher_actuate(&p->s.dishwasher, out);
+		break;
+	case VMAC_PLANT_LIGHTS:
+		vmac_lights_actuate(&p->s.lights, out);
+		break;
+	case VMAC_PLANT_GENERIC:
+	default:
+		vmac_generic_actuate(&p->s.generic, out);
+		break;
+	}
+}
+
+int vmac_plant_set(struct vmac_plant *p, const char *name, double value)
+{
+	if (name == NULL)
+		return -1;
+	switch (p->kind) {
+	case VMAC_PLANT_WASHER:
+		return vmac_washer_set(&p->s.washer, name, value);
+	case VMAC_PLANT_DISHWASHER:
+		return vmac_dishwasher_set(&p->s.dishwasher, name, value);
+	case VMAC_PLANT_LIGHTS:
+		return vmac_lights_set(&p->s.lights, name, value);
+	case VMAC_PLANT_GENERIC:
+	default:
+		return vmac_generic_set(&p->s.generic, name, value);
+	}
+}
+
+void vmac_plant_io_read(void *ctx, struct vmac_inputs *in)
+{
+	vmac_plant_sense((const struct vmac_plant *)ctx, in);
+}
+
+void vmac_plant_io_write(void *ctx, const struct vmac_outputs *out)
+{
+	vmac_plant_actuate((struct vmac_plant *)ctx, out);
+}

@@ -1,0 +1,176 @@
+/* Simulated washing machine: tub with hot/cold fill and drain, a drum motor
+ * with inertia and an encoder, and a door with a lock solenoid. The I/O map
+ * is the contract of the "washer" Lua driver (docs/BOARD.md). */
+#include <math.h>
+#include <string.h>
+
+#include "plants.h"
+
+/* Outputs (bit numbers). */
+#define OUT_HOT_VALVE 0
+#define OUT_COLD_VALVE 1
+#define OUT_DRAIN_PUMP 2
+#define OUT_DOOR_LOCK 3
+#define OUT_MOTOR_ENABLE 4
+/* Inputs (bit numbers). */
+#define IN_DOOR_CLOSED 0
+#define IN_DOOR_LOCKED 1
+#define IN_TUB_EMPTY 2
+
+/* Water. */
+#define TUB_MAX_L 40.0            /* overflow: the level never rises above this */
+#define TUB_EMPTY_BELOW_L 0.5     /* "tub empty" input threshold */
+#define DEFAULT_FILL_LPS 0.5      /* per open valve */
+#define MAX_FILL_LPS 5.0
+#define DRAIN_LPS 1.0
+#define HOT_WATER_C 60.0
+#define COLD_WATER_C 15.0
+#define AMBIENT_C 20.0
+#define COOLING_TAU_S 600.0       /* tub water relaxes toward ambient */
+#define LEVEL_COUNTS_PER_L 100.0  /* analog0 */
+#define TEMP_COUNTS_PER_C 40.0    /* analog1 */
+
+/* Drum. The motor is first order: rpm moves toward drive / drag with time
+ * constant inertia / drag. Drag is 1 while the motor is enabled (the drive
+ * holds the drum), COAST_DRAG when disabled, plus a share per litre of water;
+ * inertia grows with laundry and water. Dry and empty: 1 RPM per pwm unit,
+ * tau 1.5 s. */
+#define RPM_PER_PWM 1.0
+#define DRUM_TAU_S 1.5            /* empty, dry, motor enabled */
+#define LOAD_TAU_S_PER_KG 0.25    /* 3 kg: 2.25 s */
+#define WATER_TAU_S_PER_L 0.05
+#define WATER_DRAG_PER_L 0.005    /* 15 l: steady rpm about 7 % lower */
+#define COAST_DRAG 0.3            /* mechanical friction alone, motor disabled */
+#define DEFAULT_LOAD_KG 3.0
+#define MAX_LOAD_KG 10.0
+#define STILL_RPM 1e-6            /* below this a coasting drum has stopped */
+#define COUNTS_PER_REV 360.0
+#define ENCODER_SPAN 4294967296.0 /* 2^32: the accumulator wraps like int32 */
+
+static int output_on(const struct vmac_washer *w, int bit)
+{
+	return (w->out.digital >> bit) & 1;
+}
+
+/* The lock engages and releases at once with the solenoid, only on a closed door. */
+static void update_lock(struct vmac_washer *w)
+{
+	w->door_locked = w->door_closed && output_on(w, OUT_DOOR_LOCK);
+}
+
+void vmac_washer_init(struct vmac_washer *w)
+{
+	memset(w, 0, sizeof(*w));
+	w->water_c = AMBIENT_C;
+	w->load_kg = DEFAULT_LOAD_KG;
+	w->fill_rate_lps = DEFAULT_FILL_LPS;
+	w->door_closed = 1;
+	w->door_locked = 0;
+}
+
+/* Fill (mixing temperature by volume), cool toward ambient, drain, clamp. */
+static void step_water(struct vmac_washer *w, double dt_s)
+{
+	double hot_l = output_on(w, OUT_HOT_VALVE) ? w->fill_rate_lps * dt_s : 0.0;
+	double cold_l = output_on(w, OUT_COLD_VALVE) ? w->fill_rate_lps * dt_s : 0.0;
+	double total_l = w->water_l + hot_l + cold_l;
+
+	if (total_l > 0.0 && hot_l + cold_l > 0.0)
+		w->water_c = (w->water_l * w->water_c + hot_l * HOT_WATER_C + cold_l * COLD_WATER_C) / total_l;
+	w->water_l = total_l;
+	w->water_c = AMBIENT_C + (w->water_c - AMBIENT_C) * exp(-dt_s / COOLING_TAU_S);
+	if (output_on(w, OUT_DRAIN_PUMP))
+		w->water_l -= DRAIN_LPS * dt_s;
+	if (w->water_l < 0.0)
+		w->water_l = 0.0;
+	if (w->water_l > TUB_MAX_L)
+		w->water_l = TUB_MAX_L;
+}
+
+/* Exact solution of the first-order drum over dt_s (stable for any dt_s),
+ * with the encoder advanced by the exact integral of the speed. */
+static void step_drum(struct vmac_washer *w, double dt_s)
+{
+	int enabled = output_on(w, OUT_MOTOR_ENABLE);
+	double pwm = w->out.pwm;
+	double drag, inertia_s, tau_s, target_rpm, approach, rpm_seconds;
+
+	if (pwm > VMAC_PWM_MAX)
+		pwm = VMAC_PWM_MAX;
+	if (pwm < -VMAC_PWM_MAX)
+		pwm = -VMAC_PWM_MAX;
+	drag = (enabled ? 1.0 : COAST_DRAG) + WATER_DRAG_PER_L * w->water_l;
+	inertia_s = DRUM_TAU_S + LOAD_TAU_S_PER_KG * w->load_kg + WATER_TAU_S_PER_L * w->water_l;
+	tau_s = inertia_s / drag;
+	target_rpm = enabled ? RPM_PER_PWM * pwm / drag : 0.0;
+	approach = -expm1(-dt_s / tau_s); /* share of the way to target_rpm covered in dt_s */
+
+	/* integral of rpm over dt_s, in rpm * seconds */
+	rpm_seconds = target_rpm * dt_s + (w->drum_rpm - target_rpm) * tau_s * approach;
+	w->encoder_pos += rpm_seconds / 60.0 * COUNTS_PER_REV;
+	if (w->encoder_pos >= ENCODER_SPAN / 2)
+		w->encoder_pos -= ENCODER_SPAN;
+	else if (w->encoder_pos < -ENCODER_SPAN / 2)
+		w->encoder_pos += ENCODER_SPAN;
+
+	w->drum_rpm += (target_rpm - w->drum_rpm) * approach;
+	if (target_rpm == 0.0 && fabs(w->drum_rpm) < STILL_RPM)
+		w->drum_rpm = 0.0;
+}
+
+void vmac_washer_step(struct vmac_washer *w, double dt_s)
+{
+	step_drum(w, dt_s);
+	step_water(w, dt_s);
+	update_lock(w);
+}
+
+void vmac_washer_sense(const struct vmac_washer *w, struct vmac_inputs *in)
+{
+	in->digital = (uint8_t)((w->door_closed ? 1u << IN_DOOR_CLOSED : 0u) |
+	                        (w->door_locked ? 1u << IN_DOOR_LOCKED : 0u) |
+	                        (w->water_l < TUB_EMPTY_BELOW_L ? 1u << IN_TUB_EMPTY : 0u));
+	in->analog[0] = vmac_plant_analog_counts(w->water_l * LEVEL_COUNTS_PER_L);
+	in->analog[1] = vmac_plant_analog_counts(w->water_c * TEMP_COUNTS_PER_C);
+	in->encoder = (int32_t)floor(w->encoder_pos);
+}
+
+void vmac_washer_actuate(struct vmac_washer *w, const struct vmac_outputs *out)
+{
+	w->out = *out;
+	update_lock(w);
+}
+
+/* "door" 0/1 (opening a locked door is refused), "load_kg" 0..10,
+ * "water_l" 0..40 (temperature unchanged), "fill_rate_lps" 0..5 per valve. */
+int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
+{
+	if (strcmp(name, "door") == 0) {
+		if (!vmac_plant_is_bit(value))
+			return -1;
+		if (value == 0.0 && w->door_locked)
+			return -1;
+		w->door_closed = value == 1.0;
+		update_lock(w);
+		return 0;
+	}
+	if (strcmp(name, "load_kg") == 0) {
+		if (!vmac_plant_in_range(value, 0.0, MAX_LOAD_KG))
+			return -1;
+		w->load_kg = value;
+		return 0;
+	}
+	if (strcmp(name, "water_l") == 0) {
+		if (!vmac_plant_in_range(value, 0.0, TUB_MAX_L))
+			return -1;
+		w->water_l = value;
+		return 0;
+	}
+	if (strcmp(name, "fill_rate_lps") == 0) {
+		if (!vmac_plant_in_range(value, 0.0, MAX_FILL_LPS))
+			return -1;
+		w->fill_rate_lps = value;
+		return 0;
+	}
+	return -1;
+}
