@@ -99,7 +99,7 @@ deps:
 
 run: deps
 	@$(MAKE) --no-print-directory all
-	@exec ./tests/integration/kitchen.sh $(BUILD)/bin
+	@exec ./scripts/run-kitchen.sh $(BUILD)/bin
 
 test-unit: $(UNIT_TESTS)
 	@for t in $(UNIT_TESTS); do echo "== $$t"; CK_FORK=yes $$t || exit 1; done

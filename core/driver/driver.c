@@ -109,6 +109,24 @@ static int safe_rep(lua_State *L)
 	return 1;
 }
 
+/* pcall and xpcall as drivers see them: the originals (upvalue 1), then,
+ * once the budget is spent, the budget error again. LuaJIT restarts the
+ * instruction count after every error, so in `while true do pcall(f) end`
+ * the hook would always fire inside f and be caught there; re-raising here
+ * makes the overrun reach the host whatever the driver wraps it in. */
+static int budget_checked_call(lua_State *L)
+{
+	struct vmac_driver *d;
+	int n = lua_gettop(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, n, LUA_MULTRET);
+	lua_getallocf(L, (void **)&d);
+	if (d->overrun)
+		return luaL_error(L, "time budget exceeded");
+	return lua_gettop(L);
+}
+
 /* Copy the listed fields of the table at idx into the table on top. */
 static void copy_fields(lua_State *L, int idx, const char *const *names)
 {
@@ -136,6 +154,12 @@ static void make_env(lua_State *L)
 
 	lua_newtable(L);
 	copy_fields(L, LUA_GLOBALSINDEX, base);
+	lua_getglobal(L, "pcall");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, -2, "pcall");
+	lua_getglobal(L, "xpcall");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, -2, "xpcall");
 	lua_newtable(L);
 	lua_getglobal(L, "string");
 	copy_fields(L, -1, str);

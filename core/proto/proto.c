@@ -75,11 +75,34 @@ static int data_len_for(uint8_t channel, uint8_t op, int reply)
 	}
 }
 
+/* strlen that never reads past max bytes (a name without its NUL). */
+static size_t bounded_len(const char *s, size_t max)
+{
+	size_t n = 0;
+	while (n < max && s[n])
+		n++;
+	return n;
+}
+
+static int caps_ok(const struct vmac_caps *c)
+{
+	return c->digital_inputs <= VMAC_DIGITAL_INPUTS && c->digital_outputs <= VMAC_DIGITAL_OUTPUTS &&
+	       c->analog_inputs <= VMAC_ANALOG_INPUTS && c->pwm_outputs <= 1 && c->encoders <= 1;
+}
+
+static int error_code_ok(uint8_t code)
+{
+	return code >= VMAC_BERR_NOT_REGISTERED && code <= VMAC_BERR_IDENTITY;
+}
+
 static int encode_announce(const struct vmac_announce *a, uint8_t *d, size_t cap)
 {
-	size_t dl = strlen(a->driver), bl = strlen(a->board), n = 17 + dl + bl;
+	size_t dl = bounded_len(a->driver, sizeof(a->driver)), bl = bounded_len(a->board, sizeof(a->board));
+	size_t n = 17 + dl + bl;
 	if (!name_ok((const uint8_t *)a->driver, dl) || !name_ok((const uint8_t *)a->board, bl))
 		return VMAC_EPROTO_NAME;
+	if (!caps_ok(&a->caps))
+		return VMAC_EPROTO_VALUE;
 	if (n > cap)
 		return VMAC_EPROTO_SPACE;
 	*d++ = (uint8_t)dl;
@@ -128,8 +151,7 @@ static int decode_announce(const uint8_t *d, size_t len, struct vmac_announce *a
 	a->caps.analog_inputs = d[4];
 	a->caps.pwm_outputs = d[5];
 	a->caps.encoders = d[6];
-	if (a->caps.digital_inputs > VMAC_DIGITAL_INPUTS || a->caps.digital_outputs > VMAC_DIGITAL_OUTPUTS ||
-	    a->caps.analog_inputs > VMAC_ANALOG_INPUTS || a->caps.pwm_outputs > 1 || a->caps.encoders > 1)
+	if (!caps_ok(&a->caps))
 		return VMAC_EPROTO_VALUE;
 	return 0;
 }
@@ -201,6 +223,8 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		break;
 	}
 	case 0x100 | VMAC_OP_ERROR:
+		if (!error_code_ok(m->u.error.code))
+			return VMAC_EPROTO_VALUE;
 		d[0] = m->u.error.code;
 		d[1] = m->u.error.op;
 		break;
@@ -299,7 +323,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	case 0x100 | VMAC_OP_ERROR:
 		m->u.error.code = d[0];
 		m->u.error.op = d[1];
-		if (m->u.error.code < VMAC_BERR_NOT_REGISTERED || m->u.error.code > VMAC_BERR_IDENTITY)
+		if (!error_code_ok(m->u.error.code))
 			return VMAC_EPROTO_VALUE;
 		break;
 	default:

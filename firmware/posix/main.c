@@ -221,6 +221,22 @@ int main(int argc, char **argv)
 		id.major = major >= 0 ? (uint32_t)major : fnv1a(id.board);
 		id.minor = (uint32_t)minor;
 		id.caps = vmac_plant_caps(kind);
+		{ /* refuse at start what the protocol would refuse on every announce */
+			struct vmac_msg probe;
+			uint8_t frame[VMAC_FRAME_MAX];
+			memset(&probe, 0, sizeof(probe));
+			probe.flags = VMAC_FLAG_REPLY;
+			probe.channel = VMAC_CH_SYSTEM;
+			probe.op = VMAC_SYS_ANNOUNCE;
+			memcpy(probe.u.announce.driver, id.driver, sizeof(id.driver));
+			memcpy(probe.u.announce.board, id.board, sizeof(id.board));
+			probe.u.announce.caps = id.caps;
+			if (vmac_proto_encode(&probe, frame, sizeof(frame)) < 0) {
+				fprintf(stderr, "vmac-board: invalid name '%s' or driver '%s': names are 1..%d characters of "
+				        "A-Z a-z 0-9 _ -\n", id.board, id.driver, VMAC_NAME_MAX);
+				return 2;
+			}
+		}
 		vmac_plant_init(&pb->plant, kind);
 		vmac_board_init(&pb->board, &id, &plant_io, &pb->plant, now_ms());
 		pb->reported_state = pb->board.state;

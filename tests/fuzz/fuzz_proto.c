@@ -1,0 +1,124 @@
+/* libFuzzer harness for the wire codec and the board state machine: any bytes
+ * that decode must re-encode to the same bytes, and a board fed any bytes must
+ * answer only with well-formed replies and never drive outputs outside a
+ * session. Build and run: see tests/fuzz/make_corpus.c. */
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../core/proto/proto.h"
+#include "../../firmware/board.h"
+#include "fuzz_session.h"
+
+struct fake_io {
+	struct vmac_outputs driven; /* the last write_outputs */
+};
+
+static void fake_read_inputs(void *ctx, struct vmac_inputs *in)
+{
+	(void)ctx;
+	in->digital = 0xA5;
+	in->analog[0] = 0;
+	in->analog[1] = VMAC_ANALOG_MAX;
+	in->encoder = -1;
+}
+
+static void fake_write_outputs(void *ctx, const struct vmac_outputs *out)
+{
+	struct fake_io *io = ctx;
+	io->driven = *out;
+}
+
+static const struct vmac_board_io fake_hal = {fake_read_inputs, fake_write_outputs};
+
+static void board_start(struct vmac_board *b, struct fake_io *io)
+{
+	struct vmac_board_identity id;
+	memset(&id, 0, sizeof(id));
+	strcpy(id.driver, "fuzz_motor");
+	strcpy(id.board, "fuzz-board");
+	id.major = FUZZ_BOARD_MAJOR;
+	id.minor = FUZZ_BOARD_MINOR;
+	id.caps.digital_inputs = VMAC_DIGITAL_INPUTS;
+	id.caps.digital_outputs = VMAC_DIGITAL_OUTPUTS;
+	id.caps.analog_inputs = VMAC_ANALOG_INPUTS;
+	id.caps.pwm_outputs = 1;
+	id.caps.encoders = 1;
+	memset(io, 0, sizeof(*io));
+	vmac_board_init(b, &id, &fake_hal, io, 0);
+}
+
+/* What must hold after every step, whatever the board was sent. */
+static void check_board(const struct vmac_board *b, const struct fake_io *io)
+{
+	if (b->outputs.digital != io->driven.digital || b->outputs.pwm != io->driven.pwm)
+		abort(); /* the board's idea of its outputs differs from the pins */
+	if (b->state != VMAC_BOARD_KNOWN && (b->outputs.digital != 0 || b->outputs.pwm != 0))
+		abort(); /* outputs on without a session */
+	if ((b->state == VMAC_BOARD_KNOWN) != (b->device_id != 0))
+		abort();
+}
+
+/* A decodable frame must re-encode byte for byte: one wire form per message. */
+static void check_codec(const uint8_t *data, size_t size)
+{
+	struct vmac_msg msg;
+	uint8_t again[VMAC_FRAME_MAX];
+	int n;
+
+	if (vmac_proto_decode(data, size, &msg) != 0)
+		return;
+	n = vmac_proto_encode(&msg, again, sizeof(again));
+	if (n < 0 || (size_t)n != size || memcmp(again, data, size) != 0)
+		abort();
+}
+
+static void deliver(struct vmac_board *b, struct fake_io *io, const uint8_t *frame, size_t len,
+                    uint64_t now_ms)
+{
+	uint8_t reply[VMAC_FRAME_MAX]; /* exactly the documented bound, so ASan sees overflow */
+	struct vmac_msg request, answer;
+	int request_ok = vmac_proto_decode(frame, len, &request) == 0;
+	int n = vmac_board_receive(b, frame, len, now_ms, reply, sizeof(reply));
+
+	if (n < 0 || n > VMAC_FRAME_MAX)
+		abort();
+	if (n > 0) {
+		if (!request_ok)
+			abort(); /* answered a frame it could not decode */
+		if (vmac_proto_decode(reply, (size_t)n, &answer) != 0)
+			abort();
+		if (!(answer.flags & VMAC_FLAG_REPLY) || answer.seq != request.seq)
+			abort();
+	}
+	check_board(b, io);
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+	struct vmac_board board;
+	struct fake_io io;
+	uint64_t now_ms = 0;
+	size_t at = 0;
+
+	check_codec(data, size);
+
+	/* The whole input as one datagram to a fresh board. */
+	board_start(&board, &io);
+	deliver(&board, &io, data, size, 0);
+
+	/* The input as a timed session of datagrams, see fuzz_session.h. */
+	board_start(&board, &io);
+	while (at + 2 <= size) {
+		size_t len = data[at + 1];
+		now_ms += (uint64_t)data[at] * FUZZ_STEP_MS;
+		at += 2;
+		if (len > size - at)
+			len = size - at;
+		vmac_board_poll(&board, now_ms);
+		check_board(&board, &io);
+		deliver(&board, &io, data + at, len, now_ms);
+		at += len;
+	}
+	return 0;
+}

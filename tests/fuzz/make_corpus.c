@@ -1,0 +1,165 @@
+/* Writes the seed corpus for fuzz_proto.c: one file per message kind, plus
+ * session inputs (fuzz_session.h) that register, drive and lose the watchdog.
+ * Run once after a wire-format change:
+ *   cc -std=c99 tests/fuzz/make_corpus.c core/proto/proto.c -o /tmp/make_corpus
+ *   /tmp/make_corpus tests/fuzz/corpus
+ * Fuzz (new finds go to the first directory, not the committed seeds):
+ *   clang -g -O1 -fsanitize=fuzzer,address,undefined tests/fuzz/fuzz_proto.c \
+ *     core/proto/proto.c firmware/board.c -o /tmp/fuzz_proto
+ *   mkdir -p /tmp/fuzz_work && /tmp/fuzz_proto -max_total_time=30 /tmp/fuzz_work tests/fuzz/corpus */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../core/proto/proto.h"
+#include "fuzz_session.h"
+
+#define SESSION_ID 0x00000101u
+
+static const char *out_dir;
+
+static void write_file(const char *name, const uint8_t *bytes, size_t len)
+{
+	char path[512];
+	FILE *f;
+	snprintf(path, sizeof(path), "%s/%s", out_dir, name);
+	f = fopen(path, "wb");
+	if (!f || fwrite(bytes, 1, len, f) != len || fclose(f) != 0) {
+		perror(path);
+		exit(1);
+	}
+}
+
+static struct vmac_msg msg(uint8_t flags, uint8_t channel, uint8_t op, uint16_t seq)
+{
+	struct vmac_msg m;
+	memset(&m, 0, sizeof(m));
+	m.flags = flags;
+	m.seq = seq;
+	m.channel = channel;
+	m.op = op;
+	m.device_id = channel == VMAC_CH_SYSTEM ? 0 : SESSION_ID;
+	return m;
+}
+
+static int encode(const struct vmac_msg *m, uint8_t *buf)
+{
+	int n = vmac_proto_encode(m, buf, VMAC_FRAME_MAX);
+	if (n <= 0) {
+		fprintf(stderr, "cannot encode op 0x%02x: %s\n", m->op, vmac_proto_strerror(n));
+		exit(1);
+	}
+	return n;
+}
+
+static void seed(const char *name, const struct vmac_msg *m)
+{
+	uint8_t buf[VMAC_FRAME_MAX];
+	write_file(name, buf, (size_t)encode(m, buf));
+}
+
+/* Session builder: appends [step][len][frame]. */
+struct session {
+	uint8_t bytes[1024];
+	size_t len;
+};
+
+static void append(struct session *s, uint8_t step, const struct vmac_msg *m)
+{
+	uint8_t buf[VMAC_FRAME_MAX];
+	int n = encode(m, buf);
+	if (s->len + 2 + (size_t)n > sizeof(s->bytes))
+		exit(1);
+	s->bytes[s->len++] = step;
+	s->bytes[s->len++] = (uint8_t)n;
+	memcpy(s->bytes + s->len, buf, (size_t)n);
+	s->len += (size_t)n;
+}
+
+int main(int argc, char **argv)
+{
+	struct vmac_msg m, reg, update, idle;
+	struct session s;
+
+	if (argc != 2) {
+		fprintf(stderr, "usage: %s OUT_DIR\n", argv[0]);
+		return 2;
+	}
+	out_dir = argv[1];
+
+	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 1);
+	seed("discover", &m);
+
+	m = msg(VMAC_FLAG_REPLY, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, 1);
+	strcpy(m.u.announce.driver, "fuzz_motor");
+	strcpy(m.u.announce.board, "fuzz-board");
+	m.u.announce.major = FUZZ_BOARD_MAJOR;
+	m.u.announce.minor = FUZZ_BOARD_MINOR;
+	m.u.announce.firmware_major = 1;
+	m.u.announce.caps.digital_inputs = VMAC_DIGITAL_INPUTS;
+	m.u.announce.caps.digital_outputs = VMAC_DIGITAL_OUTPUTS;
+	m.u.announce.caps.analog_inputs = VMAC_ANALOG_INPUTS;
+	m.u.announce.caps.pwm_outputs = 1;
+	m.u.announce.caps.encoders = 1;
+	seed("announce", &m);
+
+	reg = msg(0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 2);
+	reg.u.reg.major = FUZZ_BOARD_MAJOR;
+	reg.u.reg.minor = FUZZ_BOARD_MINOR;
+	reg.u.reg.watchdog_ms = 200;
+	seed("register", &reg);
+	m = msg(VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 2);
+	seed("register_ack", &m);
+
+	update = msg(0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 3);
+	update.u.outputs.digital = 0x55;
+	update.u.outputs.pwm = -500;
+	seed("update", &update);
+	m = msg(VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 3);
+	m.u.inputs.digital = 0xA5;
+	m.u.inputs.analog[1] = VMAC_ANALOG_MAX;
+	m.u.inputs.encoder = -1;
+	m.u.inputs.applied = update.u.outputs;
+	seed("update_reply", &m);
+
+	idle = msg(0, VMAC_CH_DEVICE, VMAC_OP_IDLE, 4);
+	seed("idle", &idle);
+	m = msg(VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_ERROR, 4);
+	m.u.error.code = VMAC_BERR_NOT_REGISTERED;
+	m.u.error.op = VMAC_OP_IDLE;
+	seed("error_reply", &m);
+
+	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, 5);
+	m.u.shutdown_reason = VMAC_SHUT_DROPPED;
+	seed("shutdown", &m);
+	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 6);
+	m.u.sleep_s = 1;
+	seed("sleep", &m);
+	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, 7);
+	m.u.watchdog_ms = 60000;
+	seed("watchdog", &m);
+
+	/* Register, drive, keep alive, then go quiet past the 200 ms watchdog
+	 * and send a stale UPDATE. */
+	memset(&s, 0, sizeof(s));
+	append(&s, 0, &reg);
+	append(&s, 10, &update);
+	append(&s, 10, &idle);
+	append(&s, 60, &update);
+	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 8);
+	append(&s, 1, &m);
+	write_file("session_watchdog", s.bytes, s.len);
+
+	/* Register, drive, sleep a second, wake and rediscover. */
+	memset(&s, 0, sizeof(s));
+	append(&s, 0, &reg);
+	append(&s, 5, &update);
+	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 9);
+	m.u.sleep_s = 1;
+	append(&s, 5, &m);
+	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 10);
+	append(&s, 255, &m);
+	append(&s, 0, &m);
+	write_file("session_sleep", s.bytes, s.len);
+	return 0;
+}
