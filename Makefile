@@ -104,10 +104,14 @@ run: deps
 test-unit: $(UNIT_TESTS)
 	@for t in $(UNIT_TESTS); do echo "== $$t"; CK_FORK=yes $$t || exit 1; done
 
+# New inputs go to the build folder; tests/fuzz/corpus holds only the seeds.
 test-fuzz: $(BUILD)/fuzz/fuzz_proto
 	@mkdir -p $(BUILD)/fuzz/corpus
-	$(BUILD)/fuzz/fuzz_proto -max_total_time=$(FUZZ_SECONDS) -print_final_stats=0 \
-		$(BUILD)/fuzz/corpus tests/fuzz/corpus 2>&1 | tail -n 3
+	@echo "== fuzzing the frame decoder and the board for $(FUZZ_SECONDS) s"
+	@if $(BUILD)/fuzz/fuzz_proto -max_total_time=$(FUZZ_SECONDS) -artifact_prefix=$(BUILD)/fuzz/ \
+		$(BUILD)/fuzz/corpus tests/fuzz/corpus > $(BUILD)/fuzz/log 2>&1; then \
+		grep -E '^Done' $(BUILD)/fuzz/log; \
+	else cat $(BUILD)/fuzz/log; echo "fuzzing found a failure; the input is in $(BUILD)/fuzz/"; exit 1; fi
 
 test-integration: $(BINS)
 	python3 tests/integration/run.py --bin $(BUILD)/bin

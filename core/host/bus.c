@@ -201,7 +201,6 @@ static void send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason
 
 static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char *kind, const char *why)
 {
-	char addr[48];
 	event(bus, d, kind, "%s dropped: %s", d->ann.board, why);
 	unload(bus, d);
 	bus->counters.drops++;
@@ -210,7 +209,6 @@ static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const c
 	d->pending = 0;
 	send_shutdown(bus, d, reason, 0);
 	d->state = DEV_ERRANT;
-	(void)addr;
 }
 
 static void miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)

@@ -132,21 +132,25 @@ static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
 		usleep(1000);
 }
 
+/* The shipped scripts: the nearest scripts/drivers above the binary
+ * (build/bin/vmacd, build/asan/bin/vmacd), else the installed location. */
 static void default_scripts_dir(char *out, size_t len)
 {
-	char exe[VMAC_PATH_MAX];
+	char exe[VMAC_PATH_MAX], probe[VMAC_PATH_MAX + 32];
 	ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
 	struct stat st;
+	char *slash;
+	int up;
 	if (n > 0) {
-		char *slash;
-		int up;
 		exe[n] = '\0';
-		/* build/bin/vmacd -> ../../scripts */
-		for (up = 0; up < 3 && (slash = strrchr(exe, '/')); up++)
+		for (up = 0; up < 5 && (slash = strrchr(exe, '/')) && slash != exe; up++) {
 			*slash = '\0';
-		snprintf(out, len, "%.900s/scripts", exe);
-		if (stat(out, &st) == 0 && S_ISDIR(st.st_mode))
-			return;
+			snprintf(probe, sizeof(probe), "%s/scripts/drivers", exe);
+			if (stat(probe, &st) == 0 && S_ISDIR(st.st_mode)) {
+				snprintf(out, len, "%s/scripts", exe);
+				return;
+			}
+		}
 	}
 	snprintf(out, len, "/usr/local/share/vmac/scripts");
 }
