@@ -56,9 +56,11 @@ static void budget_hook(lua_State *L, lua_Debug *ar)
 	(void)ar;
 	lua_getallocf(L, (void **)&d);
 	if (d->overrun || ++d->hooks > d->budget_hooks) {
+		char msg[80]; /* luaL_error knows no %llu */
 		d->overrun = 1;
-		luaL_error(L, "time budget exceeded (%llu instructions)",
-		           (unsigned long long)(d->budget_hooks * HOOK_EVERY));
+		snprintf(msg, sizeof(msg), "time budget exceeded (%llu instructions)",
+		         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
+		luaL_error(L, "%s", msg);
 	}
 }
 

@@ -45,6 +45,8 @@ struct device {
 	struct vmac_driver *drv;
 	int register_sent;
 	uint16_t seq;
+	uint16_t missed_seq;   /* the request whose deadline passed last (its late reply is no stranger) */
+	uint16_t courtesy_seq; /* the SHUTDOWN/SLEEP sent on dropping, whose answer nobody awaits */
 	int pending;       /* a request is out, no reply yet */
 	uint8_t pending_op;
 	int64_t sent_ns;
@@ -205,9 +207,20 @@ static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const c
 	unload(bus, d);
 	bus->counters.drops++;
 	/* Tell the board to go safe; it also does so on its own when its
-	 * watchdog runs out, so this is a courtesy, not awaited. */
+	 * watchdog runs out, so this is a courtesy, not awaited. After a driver
+	 * failure the board is told to sleep instead: the same safe state, and a
+	 * back-off of sleep_s before the driver is tried again. */
 	d->pending = 0;
-	send_shutdown(bus, d, reason, 0);
+	if (reason == VMAC_SHUT_DRIVER) {
+		struct vmac_msg m;
+		memset(&m, 0, sizeof(m));
+		m.op = VMAC_OP_SLEEP;
+		m.u.sleep_s = (uint16_t)bus->cfg.sleep_s;
+		queue(bus, d, &m, 0);
+	} else {
+		send_shutdown(bus, d, reason, 0);
+	}
+	d->courtesy_seq = d->seq;
 	d->state = DEV_ERRANT;
 }
 
@@ -229,6 +242,7 @@ static void check_deadlines(struct vmac_bus *bus, int64_t now)
 		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= bus->deadline_ns)
 			continue;
 		d->pending = 0;
+		d->missed_seq = d->seq;
 		if (bus->stopping)
 			continue;
 		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms",
@@ -436,11 +450,12 @@ static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 	}
 	d->last_seen_ns = p->rx_ns;
 	if (!d->pending || m.seq != d->seq) {
-		/* The answer to the last request of a dropped device, or to the
-		 * courtesy SHUTDOWN, is expected and harmless. */
-		if (m.seq == d->seq && (d->state == DEV_ERRANT || m.op == VMAC_OP_SHUTDOWN))
-			bus->counters.late_replies += d->state == DEV_ERRANT && m.op != VMAC_OP_SHUTDOWN;
-		else
+		/* Expected and harmless: the late answer to a request already
+		 * judged a miss, and the answer to the SHUTDOWN or SLEEP sent on
+		 * dropping the device. Anything else is stale. */
+		if (m.seq == d->missed_seq)
+			bus->counters.late_replies++;
+		else if (m.seq != d->courtesy_seq || d->state != DEV_ERRANT)
 			malformed(bus, p, VMAC_BAD_STALE_SEQ);
 		return;
 	}

@@ -1,6 +1,9 @@
 /* Host configuration: defaults, Lua config file, key=value overrides. */
 #include "config.h"
 
+#include "../bus/transport.h"
+
+#include <arpa/inet.h>
 #include <errno.h>
 #include <lauxlib.h>
 #include <lua.h>
@@ -162,8 +165,37 @@ out:
 	return rc;
 }
 
+/* "IPv4:PORT" with port 0..65535. */
+static int listen_ok(const char *text)
+{
+	char host[64], *end;
+	const char *colon = strrchr(text, ':');
+	struct in_addr a;
+	long port;
+	if (!colon || (size_t)(colon - text) >= sizeof(host))
+		return 0;
+	memcpy(host, text, (size_t)(colon - text));
+	host[colon - text] = '\0';
+	port = strtol(colon + 1, &end, 10);
+	return *end == '\0' && end != colon + 1 && port >= 0 && port <= 65535 && inet_pton(AF_INET, host, &a) == 1;
+}
+
 int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 {
+	struct vmac_bus_spec spec;
+	struct in_addr a;
+	if (vmac_bus_spec_parse(c->bus, &spec) != 0) {
+		snprintf(err, errlen, "bus '%s': expected MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870", c->bus);
+		return -1;
+	}
+	if (inet_pton(AF_INET, c->iface, &a) != 1) {
+		snprintf(err, errlen, "iface '%s': expected an IPv4 address of this machine, e.g. 127.0.0.1", c->iface);
+		return -1;
+	}
+	if (!listen_ok(c->http)) {
+		snprintf(err, errlen, "http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:8080", c->http);
+		return -1;
+	}
 	if (c->reply_deadline_us > c->period_us) {
 		snprintf(err, errlen, "reply_deadline_us (%u) must not exceed period_us (%u)", c->reply_deadline_us,
 		         c->period_us);

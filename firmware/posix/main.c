@@ -118,7 +118,7 @@ int main(int argc, char **argv)
 	enum vmac_plant_kind kind = VMAC_PLANT_GENERIC;
 	const char *name = NULL, *driver = NULL, *bus = "239.255.86.77:5870", *iface = "127.0.0.1";
 	long count = 1, major = -1, minor = 0;
-	int commands = 0, opt, i, listen_fd, nfds;
+	int commands = 0, opt, i, listen_fd = -1, nfds, rc = 0;
 	struct vmac_bus_spec spec;
 	struct posix_board *boards;
 	struct pollfd *pfds;
@@ -200,7 +200,8 @@ int main(int argc, char **argv)
 	listen_fd = vmac_transport_listen(&spec, err, sizeof(err));
 	if (listen_fd < 0) {
 		fprintf(stderr, "vmac-board: %s\n", err);
-		return 1;
+		rc = 1;
+		goto out;
 	}
 	for (i = 0; i < count; i++) {
 		struct vmac_board_identity id;
@@ -214,7 +215,8 @@ int main(int argc, char **argv)
 		if (strlen(full) > VMAC_NAME_MAX || strlen(driver) > VMAC_NAME_MAX) {
 			fprintf(stderr, "vmac-board: board and driver names are at most %d characters ('%s')\n",
 			        VMAC_NAME_MAX, full);
-			return 2;
+			rc = 2;
+			goto out;
 		}
 		memcpy(id.board, full, strlen(full) + 1);
 		memcpy(id.driver, driver, strlen(driver) + 1);
@@ -234,7 +236,8 @@ int main(int argc, char **argv)
 			if (vmac_proto_encode(&probe, frame, sizeof(frame)) < 0) {
 				fprintf(stderr, "vmac-board: invalid name '%s' or driver '%s': names are 1..%d characters of "
 				        "A-Z a-z 0-9 _ -\n", id.board, id.driver, VMAC_NAME_MAX);
-				return 2;
+				rc = 2;
+				goto out;
 			}
 		}
 		vmac_plant_init(&pb->plant, kind);
@@ -242,7 +245,8 @@ int main(int argc, char **argv)
 		pb->reported_state = pb->board.state;
 		if (vmac_transport_open_board(&pb->transport, &spec, err, sizeof(err)) < 0) {
 			fprintf(stderr, "vmac-board: %s: %s\n", id.board, err);
-			return 1;
+			rc = 1;
+			goto out;
 		}
 		pfds[i].fd = pb->transport.fd;
 		pfds[i].events = POLLIN;
@@ -336,10 +340,15 @@ int main(int argc, char **argv)
 	for (i = 0; i < count; i++) {
 		vmac_board_safe(&boards[i].board);
 		report(&boards[i]);
-		vmac_transport_close(&boards[i].transport);
 	}
 	printf("vmac-board: stopped by signal %d, all outputs off\n", (int)stop_signal);
+out:
+	for (i = 0; i < count; i++)
+		if (boards[i].transport.fd > 0)
+			vmac_transport_close(&boards[i].transport);
+	if (listen_fd >= 0)
+		close(listen_fd);
 	free(boards);
 	free(pfds);
-	return 0;
+	return rc;
 }

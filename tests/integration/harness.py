@@ -1,0 +1,353 @@
+"""Integration test harness: starts the real vmacd, vmac-board and vmac
+programs for one test, watches their output and status, and kills them all
+afterwards. Used by run.py and every tests/integration/test_*.py.
+
+Synchronisation is always on an observed event (a line a program printed, a
+condition in GET /api/status), never on elapsed time; timeouts only bound how
+long an event may take to come, and are generous because the suite also runs
+under AddressSanitizer on a small shared machine."""
+
+import json
+import os
+import random
+import re
+import signal
+import subprocess
+import threading
+import time
+import urllib.request
+
+# Relaxed timing: a slow machine must never drop a healthy board. Tests check
+# behaviour, never speed.
+TIMING = {
+    "period_us": 40000,
+    "reply_deadline_us": 30000,
+    "watchdog_ms": 1000,
+    "discovery_period_ms": 300,
+}
+
+POLL_S = 0.05  # between two looks at a condition that has not come yet
+SANITIZER_MARKS = ("AddressSanitizer", "LeakSanitizer", "UndefinedBehaviorSanitizer", "runtime error:")
+
+
+class Line:
+    """One line a program printed: its text, stream, index in that stream
+    and when the harness read it (time.monotonic)."""
+
+    def __init__(self, text, stream, index, time_s):
+        self.text, self.stream, self.index, self.time_s = text, stream, index, time_s
+
+    def __repr__(self):
+        return "%s[%d] %r" % (self.stream, self.index, self.text)
+
+
+class Proc:
+    """A started program in its own process group. Reader threads collect its
+    stdout and stderr line by line (also copied to files in the test's log
+    directory); wait_line() waits for a line to appear."""
+
+    def __init__(self, name, argv, logdir, stdin=False, env=None):
+        self.name = name
+        self.argv = argv
+        self.lines = {"stdout": [], "stderr": []}
+        self.cond = threading.Condition()
+        self.logs = {s: open(os.path.join(logdir, "%s.%s" % (name, s)), "w") for s in self.lines}
+        self.popen = subprocess.Popen(
+            argv,
+            stdin=subprocess.PIPE if stdin else subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=True,  # own process group: killpg reaches everything it started
+            env=env,
+        )
+        self.pid = self.popen.pid
+        self.readers = [
+            threading.Thread(target=self._read, args=(s, getattr(self.popen, s)), daemon=True) for s in self.lines
+        ]
+        for r in self.readers:
+            r.start()
+
+    def _read(self, stream, pipe):
+        for raw in iter(pipe.readline, b""):
+            text = raw.decode("utf-8", "replace").rstrip("\n")
+            with self.cond:
+                line = Line(text, stream, len(self.lines[stream]), time.monotonic())
+                self.lines[stream].append(line)
+                self.logs[stream].write(text + "\n")
+                self.logs[stream].flush()
+                self.cond.notify_all()
+        pipe.close()
+        with self.cond:
+            self.cond.notify_all()
+
+    def mark(self, stream="stdout"):
+        """Index of the next line of stream: wait_line(..., since=mark) sees
+        only what is printed from now on."""
+        with self.cond:
+            return len(self.lines[stream])
+
+    def wait_line(self, pattern, timeout_s, since=0, stream="stdout", what=None):
+        """The first line of stream at index >= since that matches the regex
+        pattern; AssertionError when none comes within timeout_s."""
+        regex = re.compile(pattern)
+        deadline = time.monotonic() + timeout_s
+        with self.cond:
+            while True:
+                for line in self.lines[stream][since:]:
+                    if regex.search(line.text):
+                        return line
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self.cond.wait(min(left, 0.5))
+            tail = "; ".join(l.text for l in self.lines[stream][since:][-6:])
+        raise AssertionError(
+            "%s: no %s line %s within %.0f s (last lines: %s)"
+            % (self.name, stream, what or repr(pattern), timeout_s, tail or "none")
+        )
+
+    def find_lines(self, pattern, since=0, stream="stdout"):
+        regex = re.compile(pattern)
+        with self.cond:
+            return [l for l in self.lines[stream][since:] if regex.search(l.text)]
+
+    def text(self, stream="stderr"):
+        with self.cond:
+            return "\n".join(l.text for l in self.lines[stream])
+
+    def send(self, line):
+        """Write one line to the program's stdin (started with stdin=True)."""
+        self.popen.stdin.write((line + "\n").encode())
+        self.popen.stdin.flush()
+
+    def alive(self):
+        return self.popen.poll() is None
+
+    def signal(self, sig):
+        os.kill(self.pid, sig)
+
+    def wait_exit(self, timeout_s):
+        """The exit code (negative: killed by that signal); AssertionError when
+        the program is still running after timeout_s."""
+        try:
+            rc = self.popen.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            raise AssertionError("%s did not exit within %.0f s" % (self.name, timeout_s))
+        for r in self.readers:
+            r.join(5)
+        return rc
+
+    def kill(self):
+        """Kill the whole process group, reap it, close the logs. Idempotent."""
+        try:
+            os.killpg(self.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        try:
+            self.popen.wait(10)
+        except subprocess.TimeoutExpired:
+            pass
+        for r in self.readers:
+            r.join(5)
+        if self.popen.stdin:
+            try:
+                self.popen.stdin.close()
+            except OSError:
+                pass
+        for f in self.logs.values():
+            f.close()
+
+    def sanitizer_report(self):
+        """The first sanitizer report line this program printed, or None."""
+        for stream in ("stderr", "stdout"):
+            for line in self.lines[stream]:
+                if any(m in line.text for m in SANITIZER_MARKS):
+                    return line.text
+        return None
+
+
+class Host(Proc):
+    """vmacd, with its status API at self.http ("127.0.0.1:PORT"). Every
+    status fetched is remembered in self.last, and its events are merged into
+    self.events (by seq) so that none of the last-20 window is missed."""
+
+    def __init__(self, ctx, name, argv, logdir):
+        super().__init__(name, argv, logdir)
+        self.ctx = ctx
+        self.events = {}
+        self.last = None
+        self.http = None
+
+    def ready(self):
+        """Wait for the status server to be up; sets self.http."""
+        line = self.wait_line(r"status at http://(\S+)/api/status", 30, stream="stderr", what="'status at ...'")
+        self.http = re.search(r"status at http://(\S+)/api/status", line.text).group(1)
+
+    def status(self):
+        with urllib.request.urlopen("http://%s/api/status" % self.http, timeout=10) as r:
+            body = r.read()
+        s = json.loads(body)
+        for e in s.get("events", []):
+            self.events[e["seq"]] = e
+        self.last = s
+        return s
+
+    def device(self, name, status=None):
+        """The device called name in status (the latest by default), or None."""
+        s = status or self.last or self.status()
+        for d in s["devices"]:
+            if d["name"] == name:
+                return d
+        return None
+
+    def wait_status(self, predicate, timeout_s, what, invariant=None):
+        """Poll the status until predicate(status) is true, returning that
+        status. invariant(status), when given, is checked on every poll and
+        may raise AssertionError: something that must hold all the while."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if not self.alive():
+                raise AssertionError("vmacd exited (code %s) while waiting for %s" % (self.popen.poll(), what))
+            s = self.status()
+            if invariant:
+                invariant(s)
+            if predicate(s):
+                return s
+            if time.monotonic() > deadline:
+                raise AssertionError("%s not seen within %.0f s; devices: %s" % (what, timeout_s, describe(s)))
+            time.sleep(POLL_S)
+
+    def wait_running(self, names, timeout_s=30, invariant=None):
+        """Every device of names running; returns the status."""
+        return self.wait_status(
+            lambda s: all((self.device(n, s) or {}).get("state") == "running" for n in names),
+            timeout_s,
+            "%s running" % ", ".join(names),
+            invariant,
+        )
+
+    def find_events(self, kind, device=None, text=None, after_seq=0):
+        """Recorded events of kind (for device, containing text), oldest first."""
+        return [
+            e
+            for seq, e in sorted(self.events.items())
+            if seq > after_seq
+            and e["kind"] == kind
+            and (device is None or e["device"] == device)
+            and (text is None or text in e["text"])
+        ]
+
+    def wait_event(self, kind, device=None, text=None, after_seq=0, timeout_s=30, invariant=None):
+        """The first event of kind (for device, containing text) with seq
+        greater than after_seq; waits for it while polling the status."""
+        what = "event %s%s%s" % (kind, " for " + device if device else "", " with %r" % text if text else "")
+        self.wait_status(lambda s: self.find_events(kind, device, text, after_seq), timeout_s, what, invariant)
+        return self.find_events(kind, device, text, after_seq)[0]
+
+    def last_event_seq(self):
+        self.status()
+        return max(self.events) if self.events else 0
+
+
+def describe(status):
+    return ", ".join(
+        "%s %s misses %d served %d" % (d["name"], d["state"], d["misses"], d["served"]) for d in status["devices"]
+    ) or "none"
+
+
+def undisturbed(names):
+    """An invariant for wait_status: every device of names is running and
+    has never missed a reply."""
+
+    def check(s):
+        for n in names:
+            d = next((d for d in s["devices"] if d["name"] == n), None)
+            assert d is not None, "%s vanished from the status" % n
+            assert d["state"] == "running", "%s left running: now %s" % (n, d["state"])
+            assert d["misses"] == 0, "%s missed %d replies though it is healthy" % (n, d["misses"])
+
+    return check
+
+
+KITCHEN = (("washer", "washer-1"), ("dishwasher", "dish-1"), ("lights", "lights-1"))
+KITCHEN_NAMES = [name for _, name in KITCHEN]
+
+
+class Context:
+    """What a test gets: its own bus (random multicast group and port), a log
+    directory, and starters for the programs. cleanup() kills everything."""
+
+    def __init__(self, bindir, logdir):
+        self.bindir = bindir
+        self.logdir = logdir
+        rnd = random.SystemRandom()
+        self.bus = "239.255.%d.%d:%d" % (rnd.randint(1, 254), rnd.randint(1, 254), rnd.randint(20000, 60000))
+        self.procs = []
+        self.counter = 0
+
+    def path(self, program):
+        return os.path.join(self.bindir, program)
+
+    def _name(self, base):
+        self.counter += 1
+        return "%02d-%s" % (self.counter, base)
+
+    def host(self, drivers=None, settings=None, extra=()):
+        """Start vmacd on this test's bus with relaxed timing; returns once its
+        status server is up. The HTTP port is chosen by the kernel."""
+        values = dict(TIMING, realtime="false")
+        values.update(settings or {})
+        argv = [self.path("vmacd"), "--bus", self.bus, "--http", "127.0.0.1:0", "--state", self.logdir]
+        if drivers:
+            argv += ["--drivers", drivers]
+        for k, v in values.items():
+            argv += ["--set", "%s=%s" % (k, v)]
+        argv += list(extra)
+        h = Host(self, self._name("vmacd"), argv, self.logdir)
+        self.procs.append(h)
+        h.ready()
+        return h
+
+    def board(self, plant, name, driver=None, count=None, commands=False):
+        argv = [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", self.bus]
+        if driver:
+            argv += ["--driver", driver]
+        if count:
+            argv += ["--count", str(count)]
+        if commands:
+            argv.append("--commands")
+        p = Proc(self._name(name), argv, self.logdir, stdin=commands)
+        self.procs.append(p)
+        p.wait_line(r"^vmac-board: \d+ \S+ boards? on bus", 30, what="start-up banner")
+        return p
+
+    def kitchen(self, host, commands=False):
+        """washer-1, dish-1 and lights-1 on this bus, all running; returns
+        {name: board}."""
+        boards = {name: self.board(plant, name, commands=commands) for plant, name in KITCHEN}
+        host.wait_running(KITCHEN_NAMES)
+        return boards
+
+    def start(self, argv, base):
+        """Start any program (for failure-path checks); killed at cleanup."""
+        p = Proc(self._name(base), argv, self.logdir)
+        self.procs.append(p)
+        return p
+
+    def run(self, argv, base, timeout_s=60):
+        """Run a program to its end: (exit code, stdout, stderr)."""
+        p = self.start(argv, base)
+        rc = p.wait_exit(timeout_s)
+        return rc, p.text("stdout"), p.text("stderr")
+
+    def cleanup(self):
+        """Kill every process this test started, even stopped ones; returns
+        the first sanitizer report any of them printed, or None."""
+        report = None
+        for p in reversed(self.procs):
+            p.kill()
+        for p in self.procs:
+            r = p.sanitizer_report()
+            if r and not report:
+                report = "%s: %s" % (p.name, r)
+        return report

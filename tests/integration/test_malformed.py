@@ -1,0 +1,212 @@
+"""Junk on the host's own bus address: every datagram is counted as
+malformed under the right reason, and the host and its boards carry on."""
+
+import random
+import socket
+import struct
+import time
+
+from harness import KITCHEN_NAMES, undisturbed
+
+TOTAL = 10000
+BATCH = 500
+
+SYS, DEV = 0xFF, 0x00
+DISCOVER, ANNOUNCE = 0x01, 0x10
+REGISTER, SHUTDOWN, UPDATE, ERROR, IDLE, SLEEP, WATCHDOG = range(7)
+REPLY = 0x01
+
+
+def frame(op, data=b"", channel=DEV, device_id=0x00010000, seq=1, flags=REPLY, version=1, magic=b"VM",
+          length=None):
+    """A frame laid out as core/proto/proto.h says; length overrides the len byte."""
+    n = len(data) if length is None else length
+    return magic + struct.pack(">BBHIBBB", version, flags, seq, device_id, channel, op, n) + data
+
+
+def inputs(digital=0, analog=(0, 0), encoder=0, applied_digital=0, pwm=0):
+    """UPDATE/IDLE reply data (12 bytes)."""
+    return struct.pack(">BHHiBh", digital, analog[0], analog[1], encoder, applied_digital, pwm)
+
+
+def announce_data(driver=b"washer", board=b"junk-1", major=1, minor=0, caps=(8, 7, 2, 1, 1)):
+    return (bytes([len(driver)]) + driver + struct.pack(">II", major, minor) + bytes([len(board)]) + board +
+            bytes([1, 0]) + bytes(caps))
+
+
+class Junk:
+    """Makes datagrams the host must reject, each with the reason it must
+    count it under (core/host/bus.h, vmac_malformed_reason_names)."""
+
+    def __init__(self, rnd, stale_announce_seq):
+        self.rnd = rnd
+        self.stale_seq = stale_announce_seq
+        self.kinds = [getattr(self, k) for k in sorted(dir(self)) if k.startswith("k_")]
+
+    def make(self):
+        return self.rnd.choice(self.kinds)()
+
+    def unknown_id(self):
+        # Never a device this host gave out (ids are generation << 16 | slot,
+        # slots < max_devices); the sender address would not match anyway.
+        return self.rnd.randint(0x40000000, 0xFFFFFFFF)
+
+    def k_random_bytes(self):
+        data = bytearray(self.rnd.getrandbits(8) for _ in range(self.rnd.randint(0, 200)))
+        if data and data[0] == ord("V"):
+            data[0] = 0
+        return bytes(data), "short" if len(data) < 13 else "magic"
+
+    def k_truncated(self):
+        whole = frame(UPDATE, inputs(), device_id=self.unknown_id())
+        cut = self.rnd.randint(0, len(whole) - 1)
+        return whole[:cut], "short" if cut < 13 else "length"
+
+    def k_bad_magic(self):
+        magic = self.rnd.choice([b"MV", b"VN", b"\0\0", b"vm"])
+        return frame(UPDATE, inputs(), magic=magic), "magic"
+
+    def k_wrong_version(self):
+        return frame(UPDATE, inputs(), version=self.rnd.choice([0, 2, 3, 0x7F, 0xFF])), "version"
+
+    def k_length_mismatch(self):
+        good = frame(UPDATE, inputs(), device_id=self.unknown_id())
+        choice = self.rnd.randint(0, 3)
+        if choice == 0:
+            return frame(UPDATE, inputs(), length=self.rnd.choice([0, 11, 13, 96])), "length"
+        if choice == 1:
+            return frame(UPDATE, inputs(), length=self.rnd.randint(97, 255)), "length"
+        if choice == 2:
+            return good + b"\0", "length"
+        return good[:-1], "length"
+
+    def k_oversize(self):
+        data = bytes(self.rnd.getrandbits(8) for _ in range(self.rnd.randint(97, 187)))
+        return frame(UPDATE, data, length=96), "length"
+
+    def k_unknown_op(self):
+        choice = self.rnd.randint(0, 3)
+        if choice == 0:
+            return frame(self.rnd.randint(0x07, 0xFF), b""), "op"
+        if choice == 1:  # a channel that does not exist
+            return frame(UPDATE, inputs(), channel=self.rnd.randint(0x01, 0xFE)), "op"
+        if choice == 2:  # DISCOVER is never a reply; no other system op exists
+            return frame(self.rnd.choice([DISCOVER, 0x02, 0x11, 0x7F]), b"", channel=SYS, device_id=0), "op"
+        return frame(UPDATE, inputs(), flags=self.rnd.choice([0x02, 0x03, 0x80, 0xFF])), "op"
+
+    def k_request(self):
+        choice = self.rnd.randint(0, 3)
+        if choice == 0:
+            return frame(DISCOVER, b"", channel=SYS, device_id=0, flags=0), "not_reply"
+        if choice == 1:
+            return frame(UPDATE, struct.pack(">Bh", 0x01, 0), flags=0), "not_reply"
+        if choice == 2:
+            return frame(REGISTER, struct.pack(">IIH", 1, 0, 500), flags=0), "not_reply"
+        return frame(IDLE, b"", flags=0), "not_reply"
+
+    def k_unknown_device(self):
+        dev = self.unknown_id()
+        choice = self.rnd.randint(0, 3)
+        if choice == 0:
+            return frame(UPDATE, inputs(digital=0xFF, analog=(4095, 0)), device_id=dev), "unknown_sender"
+        if choice == 1:
+            return frame(IDLE, inputs(), device_id=dev), "unknown_sender"
+        if choice == 2:
+            return frame(REGISTER, b"", device_id=dev), "unknown_sender"
+        return frame(ERROR, bytes([1, UPDATE]), device_id=dev), "unknown_sender"
+
+    def k_stale_announce(self):
+        return frame(ANNOUNCE, announce_data(), channel=SYS, device_id=0, seq=self.stale_seq), "stale_seq"
+
+    def k_bad_name(self):
+        choice = self.rnd.randint(0, 4)
+        if choice == 0:
+            data = announce_data(driver=b"../etc/passwd")
+        elif choice == 1:
+            data = announce_data(board=b"bo\x07rd")
+        elif choice == 2:
+            data = announce_data(driver=b"wa sher")
+        elif choice == 3:
+            data = announce_data(board=b"")
+        else:
+            data = announce_data(driver=b"d" * 32)
+        return frame(ANNOUNCE, data, channel=SYS, device_id=0, seq=self.stale_seq), "name"
+
+    def k_bad_value(self):
+        choice = self.rnd.randint(0, 4)
+        if choice == 0:
+            return frame(UPDATE, inputs(analog=(4096, 0))), "value"
+        if choice == 1:
+            return frame(UPDATE, inputs(applied_digital=0x80)), "value"
+        if choice == 2:
+            return frame(ERROR, bytes([self.rnd.choice([0, 4, 0xFF]), UPDATE])), "value"
+        if choice == 3:  # system frame with a device id
+            return frame(ANNOUNCE, announce_data(), channel=SYS, device_id=7, seq=self.stale_seq), "value"
+        return frame(ANNOUNCE, announce_data(caps=(9, 7, 2, 1, 1)), channel=SYS, device_id=0,
+                     seq=self.stale_seq), "value"
+
+    def k_bad_payload(self):
+        choice = self.rnd.randint(0, 2)
+        if choice == 0:
+            return frame(UPDATE, inputs()[:11]), "payload"
+        if choice == 1:
+            return frame(REGISTER, b"\0"), "payload"
+        return frame(ANNOUNCE, announce_data()[:-1], channel=SYS, device_id=0, seq=self.stale_seq), "payload"
+
+
+def test_malformed_flood(t):
+    host = t.host()
+    t.kitchen(host)
+    before = host.status()
+    host_ip, host_port = before["bus"]["host_addr"].rsplit(":", 1)
+    target = (host_ip, int(host_port))
+    # ANNOUNCE replies must answer the latest DISCOVER; one discovery every
+    # 300 ms would take hours to reach this sequence number.
+    seed = random.SystemRandom().randrange(1 << 32)
+    rnd = random.Random(seed)
+    junk = Junk(rnd, (before["counters"]["discoveries"] + 30000) & 0xFFFF)
+    base = before["counters"]["malformed_frames"]
+    base_reasons = dict(before["counters"]["malformed_by_reason"])
+    expected = {}
+    started = time.monotonic()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sent = 0
+        while sent < TOTAL:
+            for _ in range(min(BATCH, TOTAL - sent)):
+                data, reason = junk.make()
+                expected[reason] = expected.get(reason, 0) + 1
+                sock.sendto(data, target)
+                sent += 1
+
+            def counted(s, want=base + sent):
+                got = s["counters"]["malformed_frames"]
+                assert got <= want, "malformed_frames grew by %d after %d junk datagrams (seed %d)" % (
+                    got - base, sent, seed)
+                return got == want
+
+            host.wait_status(counted, 60, "malformed_frames grown by %d (seed %d)" % (sent, seed),
+                             undisturbed(KITCHEN_NAMES))
+    finally:
+        sock.close()
+    elapsed_s = time.monotonic() - started
+
+    after = host.status()
+    assert host.alive(), "vmacd died under the flood"
+    assert after["counters"]["malformed_frames"] - base == TOTAL, "malformed_frames grew by %d, expected %d" % (
+        after["counters"]["malformed_frames"] - base, TOTAL)
+    got = {r: after["counters"]["malformed_by_reason"][r] - base_reasons[r] for r in base_reasons}
+    for reason in sorted(set(got) | set(expected)):
+        assert got.get(reason, 0) == expected.get(reason, 0), (
+            "malformed_by_reason.%s grew by %d, expected %d (seed %d; all: got %s, sent %s)"
+            % (reason, got.get(reason, 0), expected.get(reason, 0), seed, got, expected))
+    undisturbed(KITCHEN_NAMES)(after)
+    assert after["counters"]["announces"] == before["counters"]["announces"], "a junk ANNOUNCE was accepted"
+    assert len(after["devices"]) == 3, "junk created devices: %s" % [d["name"] for d in after["devices"]]
+    # Reported at most once a second, not once a datagram.
+    reports = host.find_lines(r"\[malformed\]", stream="stderr")
+    assert len(reports) <= elapsed_s + 2, "%d malformed-frame reports in %.1f s" % (len(reports), elapsed_s)
+    # And the bus still serves.
+    served = {n: host.device(n, after)["served"] for n in KITCHEN_NAMES}
+    host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 5 for n in KITCHEN_NAMES), 30,
+                     "every device served after the flood", undisturbed(KITCHEN_NAMES))
