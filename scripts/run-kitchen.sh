@@ -9,16 +9,22 @@ bus=${VMAC_BUS:-239.255.86.77:5870}
 http=${VMAC_HTTP:-127.0.0.1:8080}
 pids=()
 
+# Ctrl-C in the terminal reaches every process of the kitchen at once, so
+# then we only wait; a TERM (or a process ending) must be passed on.
 stop() {
 	trap - INT TERM
 	echo
 	echo "run-kitchen: stopping the host and the boards"
-	kill -TERM "${pids[@]}" 2>/dev/null
+	[ "$1" = INT ] || kill -TERM "${pids[@]}" 2>/dev/null
 	wait
 	echo "run-kitchen: stopped"
 	exit 0
 }
-trap stop INT TERM
+trap 'stop INT' INT
+trap 'stop TERM' TERM
+# Background jobs get /dev/null as stdin unless told otherwise; the lights
+# board reads this terminal, so keep a handle on it.
+exec 3<&0
 
 "$bin/vmacd" --bus "$bus" --http "$http" &
 pids+=($!)
@@ -27,7 +33,7 @@ pids+=($!)
 "$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --quiet </dev/null &
 pids+=($!)
 # The lights board reads operator actions from this terminal.
-"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --quiet --commands &
+"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --quiet --commands <&3 &
 pids+=($!)
 
 cat <<EOT
@@ -41,4 +47,4 @@ The demo kitchen is running.
 EOT
 wait -n "${pids[@]}"
 echo "run-kitchen: a process ended on its own; stopping the rest"
-stop
+stop TERM
