@@ -138,6 +138,17 @@ static void copy_fields(lua_State *L, int idx, const char *const *names)
 	}
 }
 
+/* env.lib = a new table with the listed fields of the global library lib:
+ * [-0, +0], env on top. */
+static void copy_lib(lua_State *L, const char *lib, const char *const *names)
+{
+	lua_newtable(L);
+	lua_getglobal(L, lib);
+	copy_fields(L, -1, names);
+	lua_pop(L, 1);
+	lua_setfield(L, -2, lib);
+}
+
 /* Build the driver's global table from nothing: [-0, +1]. */
 static void make_env(lua_State *L)
 {
@@ -170,21 +181,9 @@ static void make_env(lua_State *L)
 	lua_setfield(L, -3, "rep");
 	lua_pop(L, 1);
 	lua_setfield(L, -2, "string");
-	lua_newtable(L);
-	lua_getglobal(L, "table");
-	copy_fields(L, -1, tab);
-	lua_pop(L, 1);
-	lua_setfield(L, -2, "table");
-	lua_newtable(L);
-	lua_getglobal(L, "math");
-	copy_fields(L, -1, math);
-	lua_pop(L, 1);
-	lua_setfield(L, -2, "math");
-	lua_newtable(L);
-	lua_getglobal(L, "bit");
-	copy_fields(L, -1, bit);
-	lua_pop(L, 1);
-	lua_setfield(L, -2, "bit");
+	copy_lib(L, "table", tab);
+	copy_lib(L, "math", math);
+	copy_lib(L, "bit", bit);
 	lua_pushvalue(L, -1);
 	lua_setfield(L, -2, "_G");
 }

@@ -85,6 +85,19 @@ static void report(struct posix_board *pb)
 	}
 }
 
+/* Hand one datagram to a board and send its answer, if any, back to the
+ * sender from the board's own socket. */
+static void serve(struct posix_board *pb, const struct vmac_packet *in)
+{
+	struct vmac_packet out;
+	int len = vmac_board_receive(&pb->board, in->data, in->len, now_ms(), out.data, sizeof(out.data));
+	if (len > 0) {
+		out.len = (size_t)len;
+		out.addr = in->addr;
+		vmac_transport_send(&pb->transport, &out, 1);
+	}
+}
+
 static void operator_command(struct posix_board *boards, int count, char *line)
 {
 	char name[64], action[64];
@@ -289,31 +302,14 @@ int main(int argc, char **argv)
 				if (!(pfds[i].revents & POLLIN))
 					continue;
 				n = vmac_transport_recv(&pb->transport, pb->transport.fd, pkt, 16);
-				for (k = 0; k < n; k++) {
-					struct vmac_packet out;
-					int len = vmac_board_receive(&pb->board, pkt[k].data, pkt[k].len, now_ms(), out.data,
-					                             sizeof(out.data));
-					if (len > 0) {
-						out.len = (size_t)len;
-						out.addr = pkt[k].addr;
-						vmac_transport_send(&pb->transport, &out, 1);
-					}
-				}
+				for (k = 0; k < n; k++)
+					serve(pb, &pkt[k]);
 			}
 			if (pfds[count].revents & POLLIN) {
 				int n = vmac_transport_recv(&boards[0].transport, listen_fd, pkt, 16), k;
-				for (k = 0; k < n; k++) {
-					for (i = 0; i < count; i++) {
-						struct vmac_packet out;
-						int len = vmac_board_receive(&boards[i].board, pkt[k].data, pkt[k].len, now_ms(),
-						                             out.data, sizeof(out.data));
-						if (len > 0) {
-							out.len = (size_t)len;
-							out.addr = pkt[k].addr;
-							vmac_transport_send(&boards[i].transport, &out, 1);
-						}
-					}
-				}
+				for (k = 0; k < n; k++)
+					for (i = 0; i < count; i++)
+						serve(&boards[i], &pkt[k]);
 			}
 			if (commands && (pfds[count + 1].revents & (POLLIN | POLLHUP))) {
 				char line[256];
