@@ -7,10 +7,8 @@ from harness import undisturbed
 
 COUNT = 20
 
-# The shipped scripts/drivers/ has no generic.lua yet, although docs/BOARD.md
-# promises driver "generic" for the generic plant; a stand-in keeps this test
-# about the board count. It drives what the board reads back, as a generic
-# driver might.
+# A driver of the user's own in --drivers, which takes precedence over the
+# shipped scripts/drivers/generic.lua: it echoes the inputs to the outputs.
 GENERIC_LUA = """-- generic stand-in: echo digital inputs 0..6 to the outputs
 local driver = {}
 function driver.tick(inputs)
