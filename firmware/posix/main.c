@@ -282,7 +282,9 @@ int main(int argc, char **argv)
 	last_step_ms = now_ms();
 	while (!stop_signal) {
 		uint64_t t;
-		int ready = poll(pfds, (nfds_t)nfds, 1);
+		/* Frames wake us at once; otherwise every 5 ms for the watchdog and the
+		 * plant physics, which is resolution enough for both. */
+		int ready = poll(pfds, (nfds_t)nfds, 5);
 		if (ready < 0 && errno != EINTR) {
 			perror("vmac-board: poll");
 			break;
