@@ -10,11 +10,12 @@ from harness import undisturbed
 def test_realtime_refused_falls_back_with_one_warning(t):
     wrapper = ()
     if os.geteuid() == 0:
-        # As root SCHED_FIFO would be granted: run the host as nobody, whose
-        # RLIMIT_RTPRIO is 0, so the refusal path is the one under test.
+        # As root SCHED_FIFO would be granted: run the host without
+        # CAP_SYS_NICE (still root, so it can read the build wherever it
+        # is), which with RLIMIT_RTPRIO 0 makes the kernel refuse it.
         setpriv = shutil.which("setpriv")
-        assert setpriv, "setpriv (util-linux) is needed to drop privileges for this test"
-        wrapper = (setpriv, "--reuid=nobody", "--regid=nogroup", "--clear-groups", "--")
+        assert setpriv, "setpriv (util-linux) is needed to drop CAP_SYS_NICE for this test"
+        wrapper = (setpriv, "--bounding-set=-sys_nice", "--inh-caps=-sys_nice", "--")
     host = t.host(settings={"realtime": "true"}, wrapper=wrapper)
     t.board("lights", "lights-1")
     status = host.wait_running(["lights-1"])
