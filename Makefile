@@ -4,6 +4,7 @@
 #   make deps       install missing Debian packages (apt-get; sudo when not root)
 #   make run        deps + build + the demo kitchen (host and three mock boards)
 #   make test       deps + build + every test (unit, fuzz, integration, then again under ASan+UBSan)
+#   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
 #   make clean
 
 BUILD   ?= build
@@ -17,6 +18,9 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # clang + its runtime for the libFuzzer harness, python3 for integration tests.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev check clang libclang-rt-dev python3 lua-check
+
+# make bench also needs cyclictest, its lateness baseline.
+BENCH_DEBS := rt-tests
 
 PKGS := luajit libmicrohttpd jansson libcurl
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
@@ -43,7 +47,7 @@ host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o)
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host
 
-.PHONY: all deps run test test-unit test-fuzz test-integration test-asan clean
+.PHONY: all deps run test test-unit test-fuzz test-integration test-asan bench clean
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
@@ -89,8 +93,8 @@ FUZZ_SECONDS ?= 20
 
 deps:
 	@if ! command -v dpkg-query >/dev/null; then \
-		echo "not a Debian system: install by hand the equivalents of: $(DEBS)"; exit 0; fi; \
-	missing=$$(for p in $(DEBS); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
+		echo "not a Debian system: install by hand the equivalents of: $(DEBS) $(EXTRA_DEBS)"; exit 0; fi; \
+	missing=$$(for p in $(DEBS) $(EXTRA_DEBS); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 		echo "make deps: installing" $$missing; \
 		$(SUDO) apt-get update -qq && \
@@ -126,6 +130,17 @@ test: deps
 	@$(MAKE) --no-print-directory all test-unit test-fuzz test-integration
 	@$(MAKE) --no-print-directory test-asan
 	@echo "make test: every suite passed"
+
+$(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/bus/transport_udp.o $(OBJ)/core/proto/proto.o
+	@mkdir -p $(dir $@)
+	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL)
+
+BENCH_SECONDS ?= 60
+bench:
+	@$(MAKE) --no-print-directory deps EXTRA_DEBS="$(BENCH_DEBS)"
+	@$(MAKE) --no-print-directory all $(BUILD)/bench/bare_loop
+	python3 tests/bench/bench.py --bin $(BUILD)/bin --bare $(BUILD)/bench/bare_loop --seconds $(BENCH_SECONDS) \
+		--out $(BUILD)/bench/results.json
 
 clean:
 	rm -rf $(BUILD)

@@ -1,0 +1,244 @@
+#!/usr/bin/env python3
+"""make bench: vmac's timing figures, each next to a baseline measured in the
+same run on the same machine, reported as ratios.
+
+  lateness  tick lateness of vmacd with 10 boards at 1 kHz, next to cyclictest
+            (rt-tests) at the same period and priority
+  capacity  the most boards (one vmac-board --count N) served at 1 kHz, 100 Hz
+            and 10 Hz with zero missed deadlines, next to the thesis's Table 3
+  cost      host CPU microseconds per device per tick, next to bare_loop (the
+            same sendmmsg/recvmmsg exchange with no drivers and no policy)
+
+usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost]
+Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "integration"))
+from harness import Context  # noqa: E402  (the integration tests' process handling)
+
+PRIORITY = 50  # vmacd's bus thread asks for SCHED_FIFO 50; cyclictest gets the same
+THESIS_TABLE3 = {1000: 10, 100: 100, 10: 1000}
+
+
+def cpu_seconds(pid):
+    """utime + stime of a process, from /proc."""
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def start_kitchen(ctx, boards, period_us, deadline_us):
+    host = ctx.host(settings={"period_us": period_us, "reply_deadline_us": deadline_us, "realtime": "true",
+                              "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
+                              "max_devices": max(1024, boards + 8)})
+    ctx.board("generic", "b", count=boards)
+    names = ["b-%d" % i for i in range(1, boards + 1)] if boards > 1 else ["b"]
+    host.wait_running(names, timeout_s=120)
+    return host, names
+
+
+def run_host(ctx, boards, period_us, seconds, deadline_us=None):
+    """vmacd serving `boards` boards for `seconds` of steady state; returns the
+    figures of that window."""
+    host, names = start_kitchen(ctx, boards, period_us, deadline_us or period_us)
+    before = host.status()
+    cpu0 = cpu_seconds(host.pid)
+    time.sleep(seconds)  # the measurement window itself, not a synchronisation
+    cpu1 = cpu_seconds(host.pid)
+    after = host.status()
+    ticks = after["tick"]["count"] - before["tick"]["count"]
+    running = sum(1 for d in after["devices"] if d["state"] == "running")
+    return {
+        "boards": boards,
+        "period_us": period_us,
+        "seconds": seconds,
+        "ticks": ticks,
+        "misses": after["counters"]["misses"] - before["counters"]["misses"],
+        "drops": after["counters"]["drops"] - before["counters"]["drops"],
+        "running_at_end": running,
+        "realtime": after["bus"]["realtime"],
+        "lateness_us": after["tick"]["lateness_us"],
+        "cpu_us_per_device_tick": (cpu1 - cpu0) * 1e6 / max(1, ticks * boards),
+    }
+
+
+def cyclictest(period_us, seconds):
+    """cyclictest at the same period and priority; percentiles from its histogram."""
+    exe = shutil.which("cyclictest")
+    if not exe:
+        return {"error": "cyclictest not installed (Debian package rt-tests)"}
+    out = subprocess.run([exe, "-q", "-m", "-p", str(PRIORITY), "-i", str(period_us), "-D", str(seconds),
+                          "-h", "20000", "-t", "1"], capture_output=True, text=True).stdout
+    hist, maxv = [], 0
+    for line in out.splitlines():
+        m = re.match(r"^(\d+)\s+(\d+)$", line)
+        if m:
+            hist.append((int(m.group(1)), int(m.group(2))))
+        m = re.match(r"^# Max Latencies:\s+(\d+)", line)
+        if m:
+            maxv = int(m.group(1))
+    total = sum(c for _, c in hist)
+    if not total:
+        return {"error": "cyclictest printed no histogram", "output": out[-500:]}
+
+    def q(frac):
+        want, seen = frac * total, 0
+        for us, c in hist:
+            seen += c
+            if seen >= want:
+                return us
+        return maxv
+
+    return {"p50": q(0.5), "p99": q(0.99), "p999": q(0.999), "max": maxv, "samples": total}
+
+
+def bare(ctx, bare_exe, boards, period_us, seconds):
+    ctx.board("generic", "b", count=boards)
+    rc, out, err = ctx.run([bare_exe, "--bus", ctx.bus, "--boards", str(boards), "--period-us", str(period_us),
+                            "--seconds", str(seconds)], "bare_loop", timeout_s=seconds + 60)
+    if rc != 0:
+        return {"error": "bare_loop exited %d: %s" % (rc, err.strip())}
+    r = json.loads(out)
+    r["cpu_us_per_device_tick"] = r["cpu_s"] * 1e6 / max(1, r["ticks"] * boards)
+    return r
+
+
+def fresh(args, name):
+    logdir = tempfile.mkdtemp(prefix="vmac-bench-%s-" % name, dir=args.logs)
+    return Context(args.bin, logdir)
+
+
+def with_ctx(args, name, fn):
+    ctx = fresh(args, name)
+    try:
+        return fn(ctx)
+    finally:
+        ctx.cleanup()
+
+
+def capacity(args, rate_hz):
+    """Largest N (doubling, then bisecting) served for args.seconds with no miss."""
+    period_us = 1000000 // rate_hz
+
+    def ok(n):
+        try:
+            r = with_ctx(args, "cap%d-%d" % (rate_hz, n), lambda c: run_host(c, n, period_us, args.seconds))
+        except AssertionError as e:  # could not even attach them all
+            print("    %5d boards at %4d Hz: did not attach (%s)" % (n, rate_hz, str(e)[:80]), flush=True)
+            return False
+        good = r["misses"] == 0 and r["drops"] == 0 and r["running_at_end"] == n
+        print("    %5d boards at %4d Hz: %d misses, %d drops, lateness p99 %d us" % (
+            n, rate_hz, r["misses"], r["drops"], r["lateness_us"]["p99"]), flush=True)
+        return good
+
+    lo, hi, n = 0, None, 10
+    while n <= args.max_boards:
+        if ok(n):
+            lo, n = n, n * 2
+        else:
+            hi = n
+            break
+    if hi is None:
+        return {"rate_hz": rate_hz, "max_boards": lo, "limit": "not reached (--max-boards %d)" % args.max_boards}
+    for _ in range(args.bisect):
+        if hi - lo <= max(1, lo // 10):
+            break
+        mid = (lo + hi) // 2
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return {"rate_hz": rate_hz, "max_boards": lo, "first_failing": hi}
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--bin", default="build/bin")
+    p.add_argument("--bare", default="build/bench/bare_loop")
+    p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
+    p.add_argument("--only", default="lateness,cost,capacity")
+    p.add_argument("--max-boards", type=int, default=2000)
+    p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
+    p.add_argument("--out", default="build/bench/results.json")
+    args = p.parse_args()
+    args.logs = os.path.join(os.path.dirname(args.out) or ".", "logs")
+    os.makedirs(args.logs, exist_ok=True)
+    only = set(args.only.split(","))
+    results = {"machine": {"cpus": os.cpu_count(), "kernel": os.uname().release}, "seconds": args.seconds}
+
+    if "lateness" in only or "cost" in only:
+        print("lateness and cost: vmacd, 10 boards at 1 kHz, %d s" % args.seconds, flush=True)
+        host = with_ctx(args, "lateness", lambda c: run_host(c, 10, 1000, args.seconds))
+        results["vmacd_10_at_1khz"] = host
+        if "lateness" in only:
+            print("lateness: cyclictest -p %d -i 1000, %d s" % (PRIORITY, args.seconds), flush=True)
+            ct = cyclictest(1000, args.seconds)
+            results["cyclictest_1khz"] = ct
+            if "error" not in ct:
+                lat = host["lateness_us"]
+                results["lateness_ratio"] = {
+                    "p99": lat["p99"] / max(1, ct["p99"]),
+                    "max": lat["max"] / max(1, ct["max"]),
+                }
+        if "cost" in only:
+            print("cost: bare_loop, 10 boards at 1 kHz, %d s" % args.seconds, flush=True)
+            b = with_ctx(args, "bare", lambda c: bare(c, args.bare, 10, 1000, args.seconds))
+            results["bare_loop_10_at_1khz"] = b
+            if "error" not in b:
+                results["cost_ratio"] = host["cpu_us_per_device_tick"] / max(1e-9, b["cpu_us_per_device_tick"])
+
+    if "capacity" in only:
+        results["capacity"] = []
+        for rate in (1000, 100, 10):
+            print("capacity at %d Hz (%d s per probe)" % (rate, args.seconds), flush=True)
+            c = capacity(args, rate)
+            c["thesis_table3"] = THESIS_TABLE3[rate]
+            results["capacity"].append(c)
+
+    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
+    with open(args.out, "w") as f:
+        json.dump(results, f, indent=2)
+    report(results)
+    print("\nresults: %s" % args.out)
+
+
+def report(r):
+    print("\n== vmac bench (%d cpus, kernel %s, %d s windows)" % (r["machine"]["cpus"], r["machine"]["kernel"],
+                                                                   r["seconds"]))
+    h = r.get("vmacd_10_at_1khz")
+    if h:
+        lat = h["lateness_us"]
+        print("vmacd tick lateness, 10 boards at 1 kHz: p50 %d us, p99 %d us, p99.9 %d us, max %d us "
+              "(%s; %d misses)" % (lat["p50"], lat["p99"], lat["p999"], lat["max"],
+                                   "SCHED_FIFO" if h["realtime"] else "normal scheduling", h["misses"]))
+    ct = r.get("cyclictest_1khz")
+    if ct:
+        if "error" in ct:
+            print("cyclictest: %s" % ct["error"])
+        else:
+            print("cyclictest at 1 kHz:                  p50 %d us, p99 %d us, p99.9 %d us, max %d us" % (
+                ct["p50"], ct["p99"], ct["p999"], ct["max"]))
+    if "lateness_ratio" in r:
+        print("ratio vmacd / cyclictest: p99 %.2f, max %.2f" % (r["lateness_ratio"]["p99"],
+                                                                  r["lateness_ratio"]["max"]))
+    b = r.get("bare_loop_10_at_1khz")
+    if h and b and "error" not in b:
+        print("host CPU per device per tick: vmacd %.2f us, bare loop %.2f us, ratio %.2f" % (
+            h["cpu_us_per_device_tick"], b["cpu_us_per_device_tick"], r["cost_ratio"]))
+    for c in r.get("capacity", []):
+        print("capacity at %4d Hz: %5d boards with zero misses (thesis Table 3: %d)%s" % (
+            c["rate_hz"], c["max_boards"], c["thesis_table3"],
+            "; %d failed" % c["first_failing"] if c.get("first_failing") else " " + c.get("limit", "")))
+
+
+if __name__ == "__main__":
+    main()
