@@ -17,6 +17,8 @@
 
 struct vmac_driver {
 	lua_State *L;
+	char stdlib_dir[512];
+	int loading;             /* require() may read files only while loading */
 	size_t used, cap;        /* heap accounting of the counting allocator */
 	uint64_t budget_hooks;   /* hook calls allowed per guarded call */
 	uint64_t hooks;          /* hook calls so far in this call */
@@ -129,11 +131,64 @@ static int budget_checked_call(lua_State *L)
 	return lua_gettop(L);
 }
 
-/* Copy the listed fields of the table at idx into the table on top. */
-static void copy_fields(lua_State *L, int idx, const char *const *names)
+static char *read_file(const char *path, size_t *len, char *err, size_t errlen, int *code);
+
+/* require(name) for drivers: loads stdlib/NAME.lua once, as text, into the
+ * driver's own environment (upvalue 1), and caches it. Only while the driver
+ * file itself is loading (main thread): a tick must never read a file. */
+static int sandbox_require(lua_State *L)
+{
+	struct vmac_driver *d;
+	const char *name = luaL_checkstring(L, 1);
+	char path[600], chunk[80], err[300];
+	size_t i, len = 0;
+	int code = 0;
+	char *src;
+
+	lua_getallocf(L, (void **)&d);
+	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
+	lua_getfield(L, -1, name);
+	if (!lua_isnil(L, -1))
+		return 1;
+	lua_pop(L, 1);
+	for (i = 0; name[i]; i++)
+		if (!((name[i] >= 'a' && name[i] <= 'z') || (name[i] >= '0' && name[i] <= '9') || name[i] == '_'))
+			return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_])", name);
+	if (i == 0 || i > 40)
+		return luaL_error(L, "require: bad module name");
+	if (!d->loading)
+		return luaL_error(L, "require '%s': modules can only be required when the driver loads (top of the file)",
+		                  name);
+	if (!d->stdlib_dir[0])
+		return luaL_error(L, "require '%s': no standard library configured", name);
+	snprintf(path, sizeof(path), "%s/%s.lua", d->stdlib_dir, name);
+	src = read_file(path, &len, err, sizeof(err), &code);
+	if (!src)
+		return luaL_error(L, "require '%s': no such stdlib module (%s)", name, err);
+	snprintf(chunk, sizeof(chunk), "@stdlib/%s.lua", name);
+	code = luaL_loadbufferx(L, src, len, chunk, "t");
+	free(src);
+	if (code != 0)
+		return lua_error(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_setfenv(L, -2);
+	lua_pushstring(L, name);
+	lua_call(L, 1, 1);
+	if (lua_isnil(L, -1)) {
+		lua_pop(L, 1);
+		lua_pushboolean(L, 1);
+	}
+	lua_pushvalue(L, -1);
+	lua_setfield(L, -3, name);
+	return 1;
+}
+
+/* Copy the listed fields of the table at src (an absolute or pseudo index)
+ * into the table on top of the stack: [-0, +0]. */
+static void copy_fields(lua_State *L, int src, const char *const *names)
 {
 	for (; *names; names++) {
-		lua_getfield(L, idx, *names);
+		lua_getfield(L, src, *names);
 		lua_setfield(L, -2, *names);
 	}
 }
@@ -142,11 +197,11 @@ static void copy_fields(lua_State *L, int idx, const char *const *names)
  * [-0, +0], env on top. */
 static void copy_lib(lua_State *L, const char *lib, const char *const *names)
 {
-	lua_newtable(L);
-	lua_getglobal(L, lib);
-	copy_fields(L, -1, names);
+	lua_getglobal(L, lib); /* env, src */
+	lua_newtable(L);       /* env, src, dst */
+	copy_fields(L, lua_gettop(L) - 1, names);
+	lua_setfield(L, -3, lib);
 	lua_pop(L, 1);
-	lua_setfield(L, -2, lib);
 }
 
 /* Build the driver's global table from nothing: [-0, +1]. */
@@ -164,6 +219,9 @@ static void make_env(lua_State *L)
 	                                   "cosh", "tanh", "deg", "rad", NULL};
 	static const char *const bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
 	                                  "arshift", "rol", "ror", "bswap", NULL};
+	/* resume is replaced below: like pcall it catches errors, so it must
+	 * re-raise a budget overrun. wrap re-raises on its own. */
+	static const char *const co[] = {"create", "yield", "status", "wrap", "running", NULL};
 
 	lua_newtable(L);
 	copy_fields(L, LUA_GLOBALSINDEX, base);
@@ -173,17 +231,25 @@ static void make_env(lua_State *L)
 	lua_getglobal(L, "xpcall");
 	lua_pushcclosure(L, budget_checked_call, 1);
 	lua_setfield(L, -2, "xpcall");
-	lua_newtable(L);
+	copy_lib(L, "string", str);
+	lua_getfield(L, -1, "string");
 	lua_getglobal(L, "string");
-	copy_fields(L, -1, str);
-	lua_pushvalue(L, -1);
 	lua_pushcclosure(L, safe_rep, 1);
-	lua_setfield(L, -3, "rep");
+	lua_setfield(L, -2, "rep");
 	lua_pop(L, 1);
-	lua_setfield(L, -2, "string");
 	copy_lib(L, "table", tab);
 	copy_lib(L, "math", math);
 	copy_lib(L, "bit", bit);
+	copy_lib(L, "coroutine", co);
+	lua_getfield(L, -1, "coroutine");
+	lua_getglobal(L, "coroutine");
+	lua_getfield(L, -1, "resume");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, -3, "resume");
+	lua_pop(L, 2);
+	lua_pushvalue(L, -1);
+	lua_pushcclosure(L, sandbox_require, 1);
+	lua_setfield(L, -2, "require");
 	lua_pushvalue(L, -1);
 	lua_setfield(L, -2, "_G");
 }
@@ -230,7 +296,7 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	const char *base = strrchr(path, '/');
 	char chunkname[80];
 	size_t len = 0;
-	int code = 0;
+	int code = 0, rc;
 	char *src = read_file(path, &len, err, errlen, &code);
 	lua_State *L;
 
@@ -244,6 +310,8 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 		return -ENOMEM;
 	}
 	d->cap = limits->memory_bytes;
+	if (limits->stdlib_dir)
+		snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir);
 	d->budget_hooks = limits->instructions / HOOK_EVERY + 1;
 	snprintf(d->name, sizeof(d->name), "%s", base ? base + 1 : path);
 	L = d->L = lua_newstate(counting_alloc, d);
@@ -267,7 +335,16 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	lua_pushnil(L);
 	lua_setfield(L, -2, "dump");
 	lua_pop(L, 1);
+	/* Lock the string metatable: getmetatable("") must not hand out the
+	 * unrestricted string library (string.rep without its bound). */
+	lua_pushliteral(L, "");
+	lua_getmetatable(L, -1);
+	lua_pushliteral(L, "locked");
+	lua_setfield(L, -2, "__metatable");
+	lua_pop(L, 2);
 
+	lua_newtable(L);
+	lua_setfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
 	snprintf(chunkname, sizeof(chunkname), "@%s", d->name);
 	if (luaL_loadbufferx(L, src, len, chunkname, "t") != 0) {
 		snprintf(err, errlen, "%s", lua_tostring(L, -1));
@@ -277,7 +354,10 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	src = NULL;
 	make_env(L);
 	lua_setfenv(L, -2);
-	if (guarded_call(d, 0, 1, err, errlen) != 0)
+	d->loading = 1;
+	rc = guarded_call(d, 0, 1, err, errlen);
+	d->loading = 0;
+	if (rc != 0)
 		goto fail;
 	if (!lua_istable(L, -1)) {
 		snprintf(err, errlen, "%s: the file must return a table (the driver), got %s", d->name,

@@ -15,6 +15,7 @@
 struct vmac_driver_limits {
 	size_t memory_bytes;        /* cap on the state's heap (default 4 MiB) */
 	uint64_t instructions;      /* VM instructions per call (default 2,000,000) */
+	const char *stdlib_dir;     /* where the driver's require() looks; NULL: no require */
 };
 
 struct vmac_driver; /* opaque */

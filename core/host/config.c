@@ -30,6 +30,7 @@ static const struct key keys[] = {
     {S(http)},
     {S(drivers_dir)},
     {S(scripts_dir)},
+    {S(stdlib_dir)},
     {S(state_dir)},
     {U(period_us, 100, 10000000)},
     {U(reply_deadline_us, 50, 10000000)},

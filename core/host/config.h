@@ -13,6 +13,7 @@ struct vmac_config {
 	char http[64];           /* "ADDR:PORT" of the status/API server */
 	char drivers_dir[VMAC_PATH_MAX]; /* searched first for NAME.lua ("" = none) */
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ below it) */
+	char stdlib_dir[VMAC_PATH_MAX];  /* the Lua standard library drivers require() from */
 	char state_dir[VMAC_PATH_MAX];
 	uint32_t period_us;          /* service period of every device */
 	uint32_t reply_deadline_us;  /* a reply later than this after the send is a miss */

@@ -78,6 +78,7 @@ static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 	c.generation = m->generation;
 	limits.memory_bytes = (size_t)h->cfg.driver_memory_kib * 1024;
 	limits.instructions = h->cfg.driver_instructions;
+	limits.stdlib_dir = h->cfg.stdlib_dir;
 	if (driver_path(&h->cfg, m->driver, path, sizeof(path)) != 0) {
 		c.missing = 1;
 		snprintf(c.text, sizeof(c.text), "no driver '%s' for %s (looked in %s%s%s/drivers)", m->driver, m->device,
@@ -132,9 +133,10 @@ static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
 		usleep(1000);
 }
 
-/* The shipped scripts: the nearest scripts/drivers above the binary
- * (build/bin/vmacd, build/asan/bin/vmacd), else the installed location. */
-static void default_scripts_dir(char *out, size_t len)
+/* The shipped scripts and stdlib: the nearest scripts/drivers above the
+ * binary (build/bin/vmacd, build/asan/bin/vmacd), else the installed
+ * location. out gets the folder holding scripts/ and stdlib/. */
+static void default_root_dir(char *out, size_t len)
 {
 	char exe[VMAC_PATH_MAX], probe[VMAC_PATH_MAX + 32];
 	ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
@@ -147,12 +149,12 @@ static void default_scripts_dir(char *out, size_t len)
 			*slash = '\0';
 			snprintf(probe, sizeof(probe), "%s/scripts/drivers", exe);
 			if (stat(probe, &st) == 0 && S_ISDIR(st.st_mode)) {
-				snprintf(out, len, "%s/scripts", exe);
+				snprintf(out, len, "%s", exe);
 				return;
 			}
 		}
 	}
-	snprintf(out, len, "/usr/local/share/vmac/scripts");
+	snprintf(out, len, "/usr/local/share/vmac");
 }
 
 static int parse_args(struct host *h, int argc, char **argv)
@@ -163,11 +165,13 @@ static int parse_args(struct host *h, int argc, char **argv)
 	    {"drivers", required_argument, 0, 'd'}, {"scripts", required_argument, 0, 'S'},
 	    {"state", required_argument, 0, 's'}, {"set", required_argument, 0, 'o'},
 	    {"help", no_argument, 0, 'h'}, {"version", no_argument, 0, 'V'}, {0, 0, 0, 0}};
-	char err[VMAC_PATH_MAX + 256];
+	char err[VMAC_PATH_MAX + 256], root[VMAC_PATH_MAX];
 	int opt, i;
 
 	vmac_config_defaults(&h->cfg);
-	default_scripts_dir(h->cfg.scripts_dir, sizeof(h->cfg.scripts_dir));
+	default_root_dir(root, sizeof(root));
+	snprintf(h->cfg.scripts_dir, sizeof(h->cfg.scripts_dir), "%.900s/scripts", root);
+	snprintf(h->cfg.stdlib_dir, sizeof(h->cfg.stdlib_dir), "%.900s/stdlib", root);
 	/* The config file first, so flags given on the command line win. */
 	for (i = 1; i < argc; i++) {
 		const char *file = NULL;

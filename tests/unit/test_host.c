@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../../core/driver/driver.h"
@@ -131,7 +132,7 @@ END_TEST
 
 /* ---- driver sandbox ---- */
 
-static struct vmac_driver_limits limits = {1 << 20, 200000};
+static struct vmac_driver_limits limits = {1 << 20, 200000, "/tmp/vmac-test-stdlib"};
 
 static int load_text(const char *text, struct vmac_driver **d, char *err, size_t errlen)
 {
@@ -220,13 +221,33 @@ START_TEST(driver_memory_cap)
 }
 END_TEST
 
+START_TEST(driver_sandbox_offers_its_libraries)
+{
+	struct vmac_driver *d;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	ck_assert_msg(load_text("return { tick = function()\n"
+	                        "  assert(string.format('%d', 7) == '7' and ('ab'):upper() == 'AB')\n"
+	                        "  assert(table.concat({1, 2}, ',') == '1,2' and math.floor(2.5) == 2)\n"
+	                        "  assert(bit.band(6, 3) == 2 and string.rep('x', 3) == 'xxx')\n"
+	                        "  assert(type(coroutine.create) == 'function' and select('#', 1, 2) == 2)\n"
+	                        "  assert(string.dump == nil and ('').dump == nil)\n"
+	                        "end }\n",
+	                        &d, err, sizeof(err)) == 0,
+	              "load failed: %s", err);
+	ck_assert_msg(tick_once(d, &out, err, sizeof(err)) == 0, "allowed library missing: %s", err);
+	vmac_driver_free(d);
+}
+END_TEST
+
 START_TEST(driver_sandbox_hides_host)
 {
 	static const char *const escapes[] = {
 	    "io.open('/etc/passwd')", "os.execute('true')", "require('ffi')", "debug.getregistry()",
 	    "loadstring('return 1')()", "load('return 1')()", "dofile('/etc/passwd')", "getfenv(0)",
 	    "string.dump(print)", "(''):dump()", "collectgarbage()", "jit.on()", "package.loadlib('x','y')",
-	    "newproxy(true)", "setfenv(1, {})", "string.rep('x', 1e9)"};
+	    "newproxy(true)", "setfenv(1, {})", "string.rep('x', 1e9)",
+	    "getmetatable('').__index.rep('x', 1e9)", "setmetatable('', {})"};
 	size_t i;
 	for (i = 0; i < sizeof(escapes) / sizeof(escapes[0]); i++) {
 		struct vmac_driver *d;
@@ -260,6 +281,67 @@ START_TEST(driver_rejects_bad_outputs)
 }
 END_TEST
 
+static void write_file(const char *path, const char *text)
+{
+	FILE *f = fopen(path, "w");
+	ck_assert_msg(f != NULL, "cannot write %s", path);
+	fputs(text, f);
+	fclose(f);
+}
+
+START_TEST(driver_require_loads_stdlib_at_load_time_only)
+{
+	struct vmac_driver *d;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	mkdir("/tmp/vmac-test-stdlib", 0755);
+	write_file("/tmp/vmac-test-stdlib/twice.lua", "return { f = function(x) return 2 * x end }\n");
+	ck_assert_msg(load_text("local t = require 'twice'\nassert(require('twice') == t)\n"
+	                        "return { tick = function() return { pwm = t.f(21) } end }\n",
+	                        &d, err, sizeof(err)) == 0,
+	              "require at load failed: %s", err);
+	ck_assert_msg(tick_once(d, &out, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_int_eq(out.pwm, 42);
+	vmac_driver_free(d);
+
+	ck_assert_int_eq(load_text("return { tick = function() require 'twice' end }\n", &d, err, sizeof(err)), 0);
+	ck_assert_msg(tick_once(d, &out, err, sizeof(err)) != 0, "require inside tick (file I/O on the bus) allowed");
+	ck_assert_msg(strstr(err, "when the driver loads") != NULL, "unclear message: %s", err);
+	vmac_driver_free(d);
+
+	ck_assert_int_ne(load_text("require '../../etc/passwd'\nreturn {tick=function() end}\n", &d, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "not a stdlib module name") != NULL, "path in require not refused: %s", err);
+	ck_assert_int_ne(load_text("require 'nosuch'\nreturn {tick=function() end}\n", &d, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "no such stdlib module") != NULL, "missing module unclear: %s", err);
+}
+END_TEST
+
+START_TEST(driver_coroutines_keep_the_budget)
+{
+	struct vmac_driver *d;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	ck_assert_int_eq(load_text("local co = coroutine.wrap(function() for i = 1, 3 do coroutine.yield(i) end end)\n"
+	                           "return { tick = function() return { pwm = co() } end }\n",
+	                           &d, err, sizeof(err)),
+	                 0);
+	ck_assert_msg(tick_once(d, &out, err, sizeof(err)) == 0, "coroutine tick failed: %s", err);
+	ck_assert_int_eq(out.pwm, 1);
+	ck_assert_int_eq(tick_once(d, &out, err, sizeof(err)), 0);
+	ck_assert_int_eq(out.pwm, 2);
+	vmac_driver_free(d);
+
+	ck_assert_int_eq(load_text("return { tick = function()\n"
+	                           "  while true do coroutine.resume(coroutine.create(function() while true do end end)) end\n"
+	                           "end }\n",
+	                           &d, err, sizeof(err)),
+	                 0);
+	ck_assert_int_ne(tick_once(d, &out, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "time budget") != NULL, "resume swallowed the budget: %s", err);
+	vmac_driver_free(d);
+}
+END_TEST
+
 int main(void)
 {
 	Suite *s = suite_create("host");
@@ -277,8 +359,11 @@ int main(void)
 	tcase_add_test(tc, driver_errors_carry_file_and_line);
 	tcase_add_test(tc, driver_budget_cannot_be_swallowed);
 	tcase_add_test(tc, driver_memory_cap);
+	tcase_add_test(tc, driver_sandbox_offers_its_libraries);
 	tcase_add_test(tc, driver_sandbox_hides_host);
 	tcase_add_test(tc, driver_rejects_bad_outputs);
+	tcase_add_test(tc, driver_require_loads_stdlib_at_load_time_only);
+	tcase_add_test(tc, driver_coroutines_keep_the_budget);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);
