@@ -37,7 +37,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
-HOST_SRC     := core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
+HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
                 core/host/events.c core/host/hist.c core/host/ring.c core/api/http.c
 OBJ = $(BUILD)/obj
 
@@ -62,7 +62,7 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
-$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o
+$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/common/paths.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 

@@ -2,12 +2,16 @@
  * GET /api/status (libcurl) and prints it for people, or raw with --json.
  * Subcommands and flags: docs/CLI.md. */
 #include <curl/curl.h>
+#include <errno.h>
 #include <getopt.h>
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
+
+#include "../common/paths.h"
 
 struct buffer {
 	char *data;
@@ -178,12 +182,50 @@ static int cmd_status(int argc, char **argv)
 	return 0;
 }
 
+/* vmac lint FILE...: luacheck with the sandbox's globals (scripts/luacheckrc). */
+static int cmd_lint(int argc, char **argv)
+{
+	static char luacheck[] = "luacheck", config_flag[] = "--config", no_color[] = "--no-color";
+	char root[1024], config[1100];
+	char **args;
+	int i, n = 0;
+	if (argc < 2 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
+		printf("usage: vmac lint FILE.lua...\n"
+		       "Check driver and stdlib scripts with luacheck, knowing exactly the globals the driver\n"
+		       "sandbox provides: anything else (os, io, debug, load, ...) is reported.\n"
+		       "Exit 0 when clean, 1 on warnings or errors, 2 when luacheck is missing.\n");
+		return argc < 2 ? 2 : 0;
+	}
+	vmac_root_dir(root, sizeof(root));
+	snprintf(config, sizeof(config), "%s/scripts/luacheckrc", root);
+	if (access(config, R_OK) != 0) {
+		fprintf(stderr, "vmac lint: cannot read %s\n", config);
+		return 2;
+	}
+	args = calloc((size_t)argc + 6, sizeof(*args));
+	if (!args)
+		return 2;
+	args[n++] = luacheck;
+	args[n++] = config_flag;
+	args[n++] = config;
+	if (!isatty(STDOUT_FILENO))
+		args[n++] = no_color;
+	for (i = 1; i < argc; i++)
+		args[n++] = argv[i];
+	execvp("luacheck", args);
+	fprintf(stderr, "vmac lint: cannot run luacheck (%s); install Debian's lua-check (make deps)\n",
+	        strerror(errno));
+	free(args);
+	return 2;
+}
+
 static void usage(FILE *f)
 {
 	fprintf(f, "usage: vmac COMMAND [options]\n"
 	           "The command line for vmac hosts.\n\n"
-	           "  status    devices, tick lateness, counters and events of a running vmacd\n\n"
-	           "Planned, not in this version yet: test, reload, console, lint, bench.\n"
+	           "  status    devices, tick lateness, counters and events of a running vmacd\n"
+	           "  lint      check driver scripts with luacheck and the sandbox's globals\n\n"
+	           "Planned, not in this version yet: test, reload, console, bench (make bench exists).\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
 
@@ -203,6 +245,8 @@ int main(int argc, char **argv)
 	}
 	if (strcmp(argv[1], "status") == 0)
 		return cmd_status(argc - 1, argv + 1);
+	if (strcmp(argv[1], "lint") == 0)
+		return cmd_lint(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

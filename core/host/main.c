@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "../api/http.h"
+#include "../common/paths.h"
 #include "bus.h"
 #include "config.h"
 #include "events.h"
@@ -133,30 +134,6 @@ static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
 		usleep(1000);
 }
 
-/* The shipped scripts and stdlib: the nearest scripts/drivers above the
- * binary (build/bin/vmacd, build/asan/bin/vmacd), else the installed
- * location. out gets the folder holding scripts/ and stdlib/. */
-static void default_root_dir(char *out, size_t len)
-{
-	char exe[VMAC_PATH_MAX], probe[VMAC_PATH_MAX + 32];
-	ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-	struct stat st;
-	char *slash;
-	int up;
-	if (n > 0) {
-		exe[n] = '\0';
-		for (up = 0; up < 5 && (slash = strrchr(exe, '/')) && slash != exe; up++) {
-			*slash = '\0';
-			snprintf(probe, sizeof(probe), "%s/scripts/drivers", exe);
-			if (stat(probe, &st) == 0 && S_ISDIR(st.st_mode)) {
-				snprintf(out, len, "%s", exe);
-				return;
-			}
-		}
-	}
-	snprintf(out, len, "/usr/local/share/vmac");
-}
-
 static int parse_args(struct host *h, int argc, char **argv)
 {
 	static const struct option opts[] = {
@@ -169,7 +146,7 @@ static int parse_args(struct host *h, int argc, char **argv)
 	int opt, i;
 
 	vmac_config_defaults(&h->cfg);
-	default_root_dir(root, sizeof(root));
+	vmac_root_dir(root, sizeof(root));
 	snprintf(h->cfg.scripts_dir, sizeof(h->cfg.scripts_dir), "%.900s/scripts", root);
 	snprintf(h->cfg.stdlib_dir, sizeof(h->cfg.stdlib_dir), "%.900s/stdlib", root);
 	/* The config file first, so flags given on the command line win. */

@@ -1,6 +1,9 @@
 """Command lines: bad flags are refused with a clear message and the
 documented exit code (never a crash), and every program's --help works."""
 
+import glob
+import os
+import re
 import socket
 
 EXIT_S = 30  # a refused flag should end the program at once; this is the bound
@@ -101,3 +104,22 @@ def test_help_and_version(t):
         rc, out, err = t.run([t.path(program), "--version"], program + "-version", EXIT_S)
         assert rc == 0 and out.startswith(program + " "), "'%s --version' exited %d, printed %r" % (
             program, rc, out)
+
+
+def test_lint_knows_the_sandbox(t):
+    """vmac lint passes every shipped driver and flags what the sandbox lacks."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    shipped = sorted(glob.glob(os.path.join(root, "scripts", "drivers", "*.lua")))
+    assert shipped, "no shipped drivers found under scripts/drivers"
+    rc, out, err = t.run([t.path("vmac"), "lint"] + shipped, "lint-shipped")
+    assert rc == 0, "vmac lint fails the shipped drivers (exit %d):\n%s%s" % (rc, out, err)
+
+    bad = os.path.join(t.logdir, "escape.lua")
+    with open(bad, "w") as f:
+        f.write("local d = {}\nfunction d.tick()\n  os.execute('true')\n  return io.open('/etc/passwd')\nend\n"
+                "return d\n")
+    rc, out, err = t.run([t.path("vmac"), "lint", bad], "lint-bad")
+    assert rc == 1, "vmac lint exit %d for a driver using os and io, expected 1:\n%s%s" % (rc, out, err)
+    for name in ("os", "io"):
+        assert re.search(r"escape\.lua:\d+:\d+: accessing undefined variable '?%s'?" % name, out), (
+            "vmac lint did not report %s:\n%s" % (name, out))
