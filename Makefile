@@ -15,9 +15,10 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 # Debian packages: compiler and pkg-config, the libraries the host links
 # (LuaJIT, libev, libmicrohttpd, jansson, libcurl), Check for unit tests,
-# clang + its runtime for the libFuzzer harness, python3 for integration tests.
+# clang + its runtime for the libFuzzer harness, python3 for integration tests,
+# luajit for the stdlib's Lua tests, lua-check for vmac lint.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
-        libcurl4-openssl-dev check clang libclang-rt-dev python3 lua-check
+        libcurl4-openssl-dev check clang libclang-rt-dev python3 lua-check luajit
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
@@ -38,16 +39,16 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
-                core/host/events.c core/host/hist.c core/host/ring.c core/api/http.c
+                core/host/events.c core/host/hist.c core/host/ring.c core/api/http.c core/sched/sched.c
 OBJ = $(BUILD)/obj
 
 portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
 host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
-UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host
+UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_sched
 
-.PHONY: all deps run test test-unit test-fuzz test-integration test-asan bench clean
+.PHONY: all deps run test test-unit test-lua test-fuzz test-integration test-asan bench clean
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
@@ -85,6 +86,10 @@ $(BUILD)/tests/test_host: $(OBJ)/tests/unit/test_host.o $(host_obj) $(portable_o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
+$(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sched.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
+
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
 	@mkdir -p $(dir $@)
 	clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
@@ -108,6 +113,14 @@ run: deps
 test-unit: $(UNIT_TESTS)
 	@for t in $(UNIT_TESTS); do echo "== $$t"; CK_FORK=yes $$t || exit 1; done
 
+# The stdlib's own tests (plain LuaJIT, the sandbox emulated) and luacheck
+# over every shipped script.
+test-lua: $(BUILD)/bin/vmac
+	@echo "== Lua tests of stdlib/"
+	@luajit tests/lua/run.lua
+	@echo "== vmac lint over stdlib/ and scripts/"
+	@$(BUILD)/bin/vmac lint stdlib/*.lua $$(find scripts -name '*.lua')
+
 # New inputs go to the build folder; tests/fuzz/corpus holds only the seeds.
 test-fuzz: $(BUILD)/fuzz/fuzz_proto
 	@mkdir -p $(BUILD)/fuzz/corpus
@@ -127,8 +140,8 @@ test-asan:
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-integration
 
 test: deps
-	@$(MAKE) --no-print-directory all test-unit test-fuzz test-integration
-	@$(MAKE) --no-print-directory test-asan
+	@$(MAKE) --no-print-directory all test-unit test-lua test-fuzz test-integration
+	@$(MAKE) --no-print-directory VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
 	@echo "make test: every suite passed"
 
 $(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/bus/transport_udp.o $(OBJ)/core/proto/proto.o
