@@ -205,3 +205,8 @@ void vmac_plant_io_write(void *ctx, const struct vmac_outputs *out)
 {
 	vmac_plant_actuate((struct vmac_plant *)ctx, out);
 }
+
+void vmac_plant_button_step(double *left_s, double dt_s)
+{
+	*left_s = *left_s > dt_s ? *left_s - dt_s : 0.0;
+}

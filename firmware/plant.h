@@ -19,6 +19,8 @@ struct vmac_washer {
 	double fill_rate_lps;   /* flow of each open valve, litres/second */
 	int door_closed;        /* 1 = closed (operator action) */
 	int door_locked;        /* follows the lock solenoid output, only when closed */
+	double start_left_s;    /* start button held down for this much longer */
+	double cancel_left_s;   /* cancel button held down for this much longer */
 	struct vmac_outputs out;
 };
 
@@ -27,6 +29,8 @@ struct vmac_dishwasher {
 	double wash_time_s;     /* how long the wash motor has run with water */
 	double fill_rate_lps;   /* flow of the open fill valve, litres/second */
 	int door_closed;
+	double start_left_s;    /* start button held down for this much longer */
+	double cancel_left_s;   /* cancel button held down for this much longer */
 	struct vmac_outputs out;
 };
 
@@ -76,6 +80,12 @@ void vmac_plant_actuate(struct vmac_plant *p, const struct vmac_outputs *out);
  * ("switch1", 1), ("load_kg", 3.5). Returns 0, or -1 for an unknown name or
  * a value out of range. The names are listed in docs/BOARD.md. */
 int vmac_plant_set(struct vmac_plant *p, const char *name, double value);
+
+/* A momentary button pressed by an operator action stays down this long (of
+ * plant time), long enough for any service period to see it. */
+#define VMAC_PLANT_BUTTON_S 0.5
+/* Let a held button's time run: *left_s counts down to 0. */
+void vmac_plant_button_step(double *left_s, double dt_s);
 
 /* struct vmac_board_io adapters: ctx is a struct vmac_plant *. */
 void vmac_plant_io_read(void *ctx, struct vmac_inputs *in);

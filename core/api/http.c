@@ -32,18 +32,41 @@ static json_t *bools(uint32_t bits, int n)
 	return a;
 }
 
+static json_t *value_json(const struct vmac_value *v)
+{
+	switch (v->type) {
+	case VMAC_VALUE_NUMBER: return json_real(v->number);
+	case VMAC_VALUE_BOOL: return json_boolean(v->number != 0);
+	case VMAC_VALUE_STRING: return json_string(v->str);
+	default: return json_null();
+	}
+}
+
 static json_t *device_json(const struct vmac_device_status *d)
 {
+	json_t *o, *vars = json_object();
+	int i;
+	for (i = 0; i < d->nvars; i++)
+		json_object_set_new(vars, d->vars[i].name, value_json(&d->vars[i].value));
 	json_t *in = json_pack("{s:o, s:[i,i], s:I}", "digital", bools(d->inputs.digital, VMAC_DIGITAL_INPUTS),
 	                       "analog", (int)d->inputs.analog[0], (int)d->inputs.analog[1], "encoder",
 	                       (json_int_t)d->inputs.encoder);
 	json_t *out = json_pack("{s:o, s:i}", "digital", bools(d->outputs.digital, VMAC_DIGITAL_OUTPUTS), "pwm",
 	                        (int)d->outputs.pwm);
-	return json_pack("{s:s, s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:I, s:o, s:o}", "name", d->name, "driver",
-	                 d->driver, "state", d->state, "address", d->address, "id", (json_int_t)d->id, "major",
-	                 (json_int_t)d->major, "minor", (json_int_t)d->minor, "period_us", (json_int_t)d->period_us,
-	                 "misses", (json_int_t)d->misses, "served", (json_int_t)d->served, "inputs", in, "outputs",
-	                 out);
+	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:I, s:o, s:o, s:o, s:I}", "name", d->name,
+	              "driver", d->driver, "driver_version", d->driver_version, "state", d->state, "address",
+	              d->address, "id", (json_int_t)d->id, "major", (json_int_t)d->major, "minor",
+	              (json_int_t)d->minor, "period_us", (json_int_t)d->period_us, "misses", (json_int_t)d->misses,
+	              "served", (json_int_t)d->served, "inputs", in, "outputs", out, "variables", vars,
+	              "driver_memory", (json_int_t)d->driver_memory);
+	if (!o)
+		return NULL;
+	json_object_set_new(o, "level", d->scheduled || d->level ? json_integer(d->level) : json_null());
+	json_object_set_new(o, "slot", d->scheduled ? json_integer(d->slot) : json_null());
+	json_object_set_new(o, "slice", d->scheduled ? json_integer(d->slice) : json_null());
+	json_object_set_new(o, "machine", d->machine[0] ? json_string(d->machine) : json_null());
+	json_object_set_new(o, "note", d->note[0] ? json_string(d->note) : json_null());
+	return o;
 }
 
 static json_t *status_json(struct vmac_http *h)
@@ -68,7 +91,7 @@ static json_t *status_json(struct vmac_http *h)
 	    " s:{s:I, s:o, s:I, s:I, s:I, s:I, s:I, s:I}}",
 	    "version", VMAC_VERSION_STRING, "uptime_s",
 	    s->started_ns ? (double)(s->time_ns - s->started_ns) / 1e9 : 0.0, "bus", "group", h->cfg.bus, "iface",
-	    h->cfg.iface, "host_addr", s->host_addr, "period_us", (json_int_t)h->cfg.period_us, "reply_deadline_us",
+	    h->cfg.iface, "host_addr", s->host_addr, "slot_us", (json_int_t)vmac_config_slot_us(&h->cfg), "reply_deadline_us",
 	    (json_int_t)h->cfg.reply_deadline_us, "discovery_period_ms", (json_int_t)h->cfg.discovery_period_ms,
 	    "watchdog_ms", (json_int_t)h->cfg.watchdog_ms, "miss_limit", (json_int_t)h->cfg.miss_limit, "realtime",
 	    s->realtime, "devices", devices, "tick", "count", (json_int_t)s->counters.ticks, "skipped",
@@ -80,6 +103,20 @@ static json_t *status_json(struct vmac_http *h)
 	    (json_int_t)s->counters.drops, "discoveries", (json_int_t)s->counters.discoveries, "announces",
 	    (json_int_t)s->counters.announces, "events_lost", (json_int_t)s->counters.events_lost, "table_full",
 	    (json_int_t)s->counters.table_full);
+	if (root) {
+		json_t *load = json_array();
+		for (i = 0; i < (int)s->slots_per_block; i++)
+			json_array_append_new(load, json_integer(s->slot_load[i]));
+		json_object_set_new(json_object_get(root, "counters"), "schedule_full",
+		                    json_integer((json_int_t)s->counters.schedule_full));
+		json_object_set_new(root, "schedule",
+		                    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",
+		                              (json_int_t)s->slices_per_slot, "slots_per_block",
+		                              (json_int_t)s->slots_per_block, "slot_us", (json_int_t)s->slot_us, "slice_us",
+		                              (json_int_t)h->cfg.slice_us, "max_level", (json_int_t)h->cfg.max_level,
+		                              "capacity_used", (json_int_t)s->capacity_used, "capacity_total",
+		                              (json_int_t)s->capacity_total, "slot_load", load));
+	}
 	pthread_mutex_unlock(&h->status_lock);
 
 	events = json_array();
@@ -185,7 +222,10 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->cfg = *cfg;
 	pthread_mutex_init(&h->status_lock, NULL);
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
-	if (!h->status.devices) {
+	h->status.slot_load = calloc(1u << cfg->max_level, sizeof(*h->status.slot_load));
+	if (!h->status.devices || !h->status.slot_load) {
+		free(h->status.slot_load);
+		free(h->status.devices);
 		free(h);
 		snprintf(err, errlen, "out of memory");
 		return NULL;
@@ -217,5 +257,6 @@ void vmac_http_stop(struct vmac_http *h)
 		return;
 	MHD_stop_daemon(h->daemon);
 	free(h->status.devices);
+	free(h->status.slot_load);
 	free(h);
 }

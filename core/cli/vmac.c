@@ -81,12 +81,27 @@ static void print_status(json_t *s)
 	       *devices = json_object_get(s, "devices"), *events = json_object_get(s, "events"), *d, *e;
 	size_t i;
 
-	printf("vmacd %s, up %.1f s, bus %s from %s, period %lld us, reply deadline %lld us%s\n",
+	json_t *sched = json_object_get(s, "schedule"), *load = json_object_get(sched, "slot_load"), *x;
+	long long lo = -1, hi = 0;
+	json_array_foreach(load, i, x)
+	{
+		long long n = json_integer_value(x);
+		lo = lo < 0 || n < lo ? n : lo;
+		hi = n > hi ? n : hi;
+	}
+	printf("vmacd %s, up %.1f s, bus %s from %s, slot %lld us, reply deadline %lld us%s\n",
 	       json_string_value(json_object_get(s, "version")), json_real_value(json_object_get(s, "uptime_s")),
 	       json_string_value(json_object_get(bus, "group")), json_string_value(json_object_get(bus, "host_addr")),
-	       json_integer_value(json_object_get(bus, "period_us")),
+	       json_integer_value(json_object_get(bus, "slot_us")),
 	       json_integer_value(json_object_get(bus, "reply_deadline_us")),
 	       json_is_true(json_object_get(bus, "realtime")) ? ", real-time" : "");
+	printf("schedule: %lld slices of %lld us per slot, %lld slots per block, %lld of %lld slice-slots used, "
+	       "devices per slot %lld..%lld\n",
+	       json_integer_value(json_object_get(sched, "slices_per_slot")),
+	       json_integer_value(json_object_get(sched, "slice_us")),
+	       json_integer_value(json_object_get(sched, "slots_per_block")),
+	       json_integer_value(json_object_get(sched, "capacity_used")),
+	       json_integer_value(json_object_get(sched, "capacity_total")), lo < 0 ? 0 : lo, hi);
 	printf("tick lateness: p50 %lld us, p99 %lld us, max %lld us over %lld ticks\n",
 	       json_integer_value(json_object_get(lat, "p50")), json_integer_value(json_object_get(lat, "p99")),
 	       json_integer_value(json_object_get(lat, "max")), json_integer_value(json_object_get(tick, "count")));
@@ -97,23 +112,49 @@ static void print_status(json_t *s)
 	if (json_array_size(devices) == 0)
 		printf("no devices (start a board: vmac-board --plant lights)\n");
 	else
-		printf("%-16s %-12s %-10s %7s %9s  %-8s %-11s %-8s  %-7s %s\n", "DEVICE", "DRIVER", "STATE", "MISSES",
-		       "SERVED", "DIN", "ANALOG", "ENCODER", "DOUT", "PWM");
+		printf("%-16s %-18s %-10s %-10s %7s %9s  %-8s %-11s %-8s  %-7s %s\n", "DEVICE", "DRIVER", "STATE",
+		       "LEVEL/SLOT", "MISSES", "SERVED", "DIN", "ANALOG", "ENCODER", "DOUT", "PWM");
 	json_array_foreach(devices, i, d)
 	{
 		json_t *in = json_object_get(d, "inputs"), *out = json_object_get(d, "outputs"),
 		       *an = json_object_get(in, "analog");
-		char din[16], dout[16], analog[24];
+		char din[16], dout[16], analog[24], drv[64], where[32];
+		const char *ver = json_string_value(json_object_get(d, "driver_version")), *key;
+		json_t *vars = json_object_get(d, "variables"), *v;
 		bits(json_object_get(in, "digital"), din);
 		bits(json_object_get(out, "digital"), dout);
 		snprintf(analog, sizeof(analog), "%lld/%lld", json_integer_value(json_array_get(an, 0)),
 		         json_integer_value(json_array_get(an, 1)));
-		printf("%-16s %-12s %-10s %7lld %9lld  %-8s %-11s %-8lld  %-7s %lld\n",
-		       json_string_value(json_object_get(d, "name")), json_string_value(json_object_get(d, "driver")),
-		       json_string_value(json_object_get(d, "state")), json_integer_value(json_object_get(d, "misses")),
+		snprintf(drv, sizeof(drv), "%s%s%s", json_string_value(json_object_get(d, "driver")),
+		         ver && ver[0] ? " " : "", ver ? ver : "");
+		if (json_is_integer(json_object_get(d, "slot")))
+			snprintf(where, sizeof(where), "%lld/%lld.%lld", json_integer_value(json_object_get(d, "level")),
+			         json_integer_value(json_object_get(d, "slot")), json_integer_value(json_object_get(d, "slice")));
+		else
+			snprintf(where, sizeof(where), "-");
+		printf("%-16s %-18s %-10s %-10s %7lld %9lld  %-8s %-11s %-8lld  %-7s %lld\n",
+		       json_string_value(json_object_get(d, "name")), drv, json_string_value(json_object_get(d, "state")),
+		       where, json_integer_value(json_object_get(d, "misses")),
 		       json_integer_value(json_object_get(d, "served")), din, analog,
 		       json_integer_value(json_object_get(in, "encoder")), dout,
 		       json_integer_value(json_object_get(out, "pwm")));
+		if (json_is_string(json_object_get(d, "note")))
+			printf("    %s\n", json_string_value(json_object_get(d, "note")));
+		if (json_object_size(vars) > 0) {
+			printf("   ");
+			json_object_foreach(vars, key, v)
+			{
+				if (json_is_string(v))
+					printf(" %s=%s", key, json_string_value(v));
+				else if (json_is_boolean(v))
+					printf(" %s=%s", key, json_is_true(v) ? "true" : "false");
+				else if (json_is_number(v))
+					printf(" %s=%.4g", key, json_number_value(v));
+				else
+					printf(" %s=-", key);
+			}
+			printf("\n");
+		}
 	}
 	if (json_array_size(events) > 0)
 		printf("\nrecent events:\n");
@@ -219,13 +260,59 @@ static int cmd_lint(int argc, char **argv)
 	return 2;
 }
 
+/* vmac bench [bench.py options]: the timing benchmark (tests/bench/bench.py)
+ * against the programs beside this vmac. */
+static int cmd_bench(int argc, char **argv)
+{
+	static char python[] = "python3", bin_flag[] = "--bin", bare_flag[] = "--bare";
+	char root[1024], script[1100], bindir[1100], bare[1200], self[1024];
+	char **args;
+	ssize_t len;
+	int i, n = 0;
+	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
+		printf("usage: vmac bench [--seconds N] [--only lateness,cost,capacity] [--max-boards N] [--out FILE]\n"
+		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, and host\n"
+		       "CPU per device per tick (next to a bare sendmmsg loop). Figures are ratios to baselines run\n"
+		       "in the same run on the same machine. Needs cyclictest (Debian rt-tests) and the bare loop\n"
+		       "built by 'make bench' (build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
+		return 0;
+	}
+	vmac_root_dir(root, sizeof(root));
+	snprintf(script, sizeof(script), "%s/tests/bench/bench.py", root);
+	len = readlink("/proc/self/exe", self, sizeof(self) - 1);
+	if (len <= 0 || access(script, R_OK) != 0) {
+		fprintf(stderr, "vmac bench: cannot find %s (run it from a source tree, or use make bench)\n", script);
+		return 2;
+	}
+	self[len] = 0;
+	*strrchr(self, '/') = 0;
+	snprintf(bindir, sizeof(bindir), "%s", self);
+	snprintf(bare, sizeof(bare), "%s/../bench/bare_loop", self);
+	args = calloc((size_t)argc + 8, sizeof(*args));
+	if (!args)
+		return 2;
+	args[n++] = python;
+	args[n++] = script;
+	args[n++] = bin_flag;
+	args[n++] = bindir;
+	args[n++] = bare_flag;
+	args[n++] = bare;
+	for (i = 1; i < argc; i++)
+		args[n++] = argv[i];
+	execvp("python3", args);
+	fprintf(stderr, "vmac bench: cannot run python3 (%s)\n", strerror(errno));
+	free(args);
+	return 2;
+}
+
 static void usage(FILE *f)
 {
 	fprintf(f, "usage: vmac COMMAND [options]\n"
 	           "The command line for vmac hosts.\n\n"
 	           "  status    devices, tick lateness, counters and events of a running vmacd\n"
-	           "  lint      check driver scripts with luacheck and the sandbox's globals\n\n"
-	           "Planned, not in this version yet: test, reload, console, bench (make bench exists).\n"
+	           "  lint      check driver scripts with luacheck and the sandbox's globals\n"
+	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
+	           "Planned, not in this version yet: test, reload, console.\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
 
@@ -247,6 +334,8 @@ int main(int argc, char **argv)
 		return cmd_status(argc - 1, argv + 1);
 	if (strcmp(argv[1], "lint") == 0)
 		return cmd_lint(argc - 1, argv + 1);
+	if (strcmp(argv[1], "bench") == 0)
+		return cmd_bench(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

@@ -1,32 +1,91 @@
-/* Lua driver instances: sandbox construction, loading and the guarded call.
- * Stack contracts are stated per function; everything a driver can reach is
- * built up from nothing in make_env(). */
+/* Lua driver instances: sandbox construction, loading, the manifest, and
+ * the guarded call. Stack contracts are stated per function; everything a
+ * driver can reach is built up from nothing in make_env(). The driver API
+ * is docs/DRIVERS.md. */
 #include "driver.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <lauxlib.h>
 #include <lua.h>
 #include <lualib.h>
 #include <luajit.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #define HOOK_EVERY 1000 /* instructions between budget checks */
 #define FILE_MAX (1 << 20)
+#define REP_MAX 65536              /* bytes string.rep may build */
+#define PATTERN_STEPS_MAX (1 << 24) /* worst-case steps of one pattern call */
+#define EVENTS_PER_S 10
+
+enum io_kind { IO_DI, IO_AI, IO_ENCODER, IO_DO, IO_PWM };
+
+struct io {
+	char name[VMAC_DRIVER_NAME_MAX + 1];
+	enum io_kind kind;
+	unsigned channel;
+	uint32_t minor;  /* board of the machine; has_minor = 0: the primary */
+	int has_minor;
+	int board;       /* index into boards, -1 when that board is not attached */
+	double scale, offset;
+};
+
+struct var {
+	struct vmac_variable pub;
+	double every_s;  /* timer:N; 0 = auto */
+	int group;       /* index of the group's first variable + 1; 0 = none */
+	int settable;    /* set = true: an operator may set it */
+	int due;
+};
 
 struct vmac_driver {
 	lua_State *L;
-	char stdlib_dir[512];
-	int loading;             /* require() may read files only while loading */
+	char stdlib_dir[512], cycles_dir[600];
+	int loading;             /* require() and vmac.cycles() read files only while loading */
 	size_t used, cap;        /* heap accounting of the counting allocator */
 	uint64_t budget_hooks;   /* hook calls allowed per guarded call */
 	uint64_t hooks;          /* hook calls so far in this call */
+	int64_t budget_ns, deadline_ns; /* wall-clock budget per call; 0 = none */
 	int overrun;             /* budget exceeded: keep raising until the call unwinds */
-	int ref_tick;            /* registry refs */
-	int ref_inputs, ref_outputs;
-	char name[64];
+	char overrun_msg[96];
+	int ref_tick, ref_attach, ref_input, ref_detach, ref_migrate; /* registry refs, LUA_NOREF if absent */
+	int ref_manifest, ref_dev, ref_inputs, ref_out, ref_vars, ref_params;
+	char file[64];           /* file name, for messages */
+	char name[VMAC_NAME_MAX + 1];
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	unsigned level, max_level;
+	int jit;
+	struct io io[VMAC_DRIVER_MAX_IO];
+	int nio;
+	struct var vars[VMAC_DRIVER_MAX_VARS];
+	int nvars;
+	uint32_t board_minor[VMAC_DRIVER_MAX_BOARDS];
+	int nboards;
+	struct vmac_driver_host host;
+	double (*clock)(void *ctx);
+	void *clock_ctx;
+	double now_s;            /* bus time of the current call */
+	double event_window_s;   /* dev:event rate limit */
+	int events_in_window;
 };
+
+static int64_t mono_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static struct vmac_driver *driver_of(lua_State *L)
+{
+	struct vmac_driver *d;
+	lua_getallocf(L, (void **)&d);
+	return d;
+}
 
 /* Counting allocator: refuses to grow past the cap, so a greedy driver gets
  * a Lua "not enough memory" error in its own state. */
@@ -50,20 +109,26 @@ static void *counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 	return p;
 }
 
-/* Count hook. Once over budget it raises on every later hook too, so a
+/* Count hook, every HOOK_EVERY instructions: the instruction budget and the
+ * wall-clock budget. Once over, it raises on every later hook too, so a
  * driver's pcall cannot swallow the error and carry on. */
 static void budget_hook(lua_State *L, lua_Debug *ar)
 {
-	struct vmac_driver *d;
+	struct vmac_driver *d = driver_of(L);
 	(void)ar;
-	lua_getallocf(L, (void **)&d);
-	if (d->overrun || ++d->hooks > d->budget_hooks) {
-		char msg[80]; /* luaL_error knows no %llu */
-		d->overrun = 1;
-		snprintf(msg, sizeof(msg), "time budget exceeded (%llu instructions)",
-		         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
-		luaL_error(L, "%s", msg);
+	if (!d->overrun) {
+		if (++d->hooks > d->budget_hooks) {
+			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%llu instructions)",
+			         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
+			d->overrun = 1;
+		} else if (d->deadline_ns && mono_ns() > d->deadline_ns) {
+			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%lld us)",
+			         (long long)(d->budget_ns / 1000));
+			d->overrun = 1;
+		}
 	}
+	if (d->overrun)
+		luaL_error(L, "%s", d->overrun_msg);
 }
 
 static int traceback(lua_State *L)
@@ -74,23 +139,27 @@ static int traceback(lua_State *L)
 }
 
 /* The one guarded call: [-(nargs+1), +nresults]. Calls the function below
- * nargs arguments with a fresh budget; on failure leaves nothing on the
- * stack and writes the message with traceback into err. */
-static int guarded_call(struct vmac_driver *d, int nargs, int nresults, char *err, size_t errlen)
+ * nargs arguments with a fresh budget (times factor); on failure leaves
+ * nothing on the stack and writes the message with traceback into err. */
+static int guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned factor, char *err, size_t errlen)
 {
 	lua_State *L = d->L;
 	int base = lua_gettop(L) - nargs, rc;
+	uint64_t hooks = d->budget_hooks;
 	lua_pushcfunction(L, traceback);
 	lua_insert(L, base);
 	d->hooks = 0;
 	d->overrun = 0;
+	d->budget_hooks = hooks * factor;
+	d->deadline_ns = d->budget_ns ? mono_ns() + d->budget_ns * factor : 0;
 	lua_sethook(L, budget_hook, LUA_MASKCOUNT, HOOK_EVERY);
 	rc = lua_pcall(L, nargs, nresults, base);
 	lua_sethook(L, NULL, 0, 0);
+	d->budget_hooks = hooks;
 	if (rc != 0 || d->overrun) {
-		const char *msg = rc != 0 ? lua_tostring(L, -1) : "time budget exceeded";
+		const char *msg = rc != 0 ? lua_tostring(L, -1) : d->overrun_msg;
 		if (rc == LUA_ERRMEM)
-			msg = "memory cap exceeded";
+			msg = "memory cap exceeded (not enough memory)";
 		snprintf(err, errlen, "%s", msg ? msg : "unknown error");
 		lua_settop(L, base - 1);
 		return -1;
@@ -99,166 +168,148 @@ static int guarded_call(struct vmac_driver *d, int nargs, int nresults, char *er
 	return 0;
 }
 
+/* ---- the sandbox ---- */
+
 /* string.rep bounded: one C call must not stall the bus. */
 static int safe_rep(lua_State *L)
 {
 	size_t len;
+	lua_Integer n;
 	luaL_checklstring(L, 1, &len);
-	lua_Integer n = luaL_checkinteger(L, 2);
-	if (n > 0 && (double)len * (double)n > 65536)
-		return luaL_error(L, "string.rep result too large (limit 65536 bytes)");
-	lua_getfield(L, lua_upvalueindex(1), "rep");
+	n = luaL_checkinteger(L, 2);
+	if (n > 0 && (double)(len + 1) * (double)n > REP_MAX)
+		return luaL_error(L, "string.rep result too large (limit %d bytes)", REP_MAX);
+	lua_pushvalue(L, lua_upvalueindex(1));
 	lua_insert(L, 1);
 	lua_call(L, lua_gettop(L) - 1, 1);
 	return 1;
 }
 
-/* pcall and xpcall as drivers see them: the originals (upvalue 1), then,
- * once the budget is spent, the budget error again. LuaJIT restarts the
- * instruction count after every error, so in `while true do pcall(f) end`
- * the hook would always fire inside f and be caught there; re-raising here
- * makes the overrun reach the host whatever the driver wraps it in. */
+/* Worst-case steps of matching pattern p against a subject of n bytes: Lua
+ * patterns backtrack, so each unbounded quantifier (*, +, -) can multiply
+ * the work by n, each ? by 2, and an unanchored search tries n starts. One
+ * pass over the items of the pattern: %x, %bxy, %f[set], [set], or one
+ * character, each maybe followed by a quantifier. */
+static double pattern_cost(const char *p, size_t plen, size_t n)
+{
+	double cost = 1, nn = (double)n + 1;
+	size_t i = 0;
+	if (plen > 0 && p[0] == '^')
+		i = 1;
+	else
+		cost = nn;
+	while (i < plen) {
+		char c = p[i];
+		if (c == '(' || c == ')') { /* captures: no item of their own */
+			i++;
+			continue;
+		}
+		if (c == '%' && i + 1 < plen && p[i + 1] == 'b') {
+			i += 4; /* %bxy: balanced match, linear */
+			continue;
+		}
+		if (c == '%' && i + 1 < plen && p[i + 1] == 'f') {
+			i += 2; /* %f[set]: a frontier, zero width */
+			if (i < plen && p[i] == '[') {
+				i++;
+				if (i < plen && p[i] == '^')
+					i++;
+				if (i < plen && p[i] == ']')
+					i++;
+				while (i < plen && p[i] != ']')
+					i += p[i] == '%' ? 2 : 1;
+				i++;
+			}
+			continue;
+		}
+		if (c == '%') {
+			i += 2;
+		} else if (c == '[') {
+			i++;
+			if (i < plen && p[i] == '^')
+				i++;
+			if (i < plen && p[i] == ']')
+				i++;
+			while (i < plen && p[i] != ']')
+				i += p[i] == '%' ? 2 : 1;
+			i++;
+		} else {
+			i++;
+		}
+		if (i < plen && (p[i] == '*' || p[i] == '+' || p[i] == '-')) {
+			cost *= nn;
+			i++;
+		} else if (i < plen && p[i] == '?') {
+			cost *= 2;
+			i++;
+		}
+	}
+	return cost;
+}
+
+/* string.find/match/gmatch/gsub bounded (upvalue 1: the original). */
+static int safe_pattern(lua_State *L)
+{
+	size_t n, plen;
+	const char *p;
+	luaL_checklstring(L, 1, &n);
+	p = luaL_checklstring(L, 2, &plen);
+	if (!(lua_gettop(L) >= 4 && lua_toboolean(L, 4) && lua_tocfunction(L, lua_upvalueindex(2)) != NULL) &&
+	    pattern_cost(p, plen, n) > PATTERN_STEPS_MAX)
+		return luaL_error(L, "pattern too costly for a %d-byte subject (worst case over %d steps): "
+		                     "use fewer '*', '+', '-' or a shorter string",
+		                  (int)n, PATTERN_STEPS_MAX);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, lua_gettop(L) - 1, LUA_MULTRET);
+	return lua_gettop(L);
+}
+
+/* pcall, xpcall and coroutine.resume as drivers see them: the originals
+ * (upvalue 1), then, once the budget is spent, the budget error again.
+ * LuaJIT restarts the instruction count after every error, so in
+ * `while true do pcall(f) end` the hook would always fire inside f and be
+ * caught there; re-raising here makes the overrun reach the host whatever
+ * the driver wraps it in. */
 static int budget_checked_call(lua_State *L)
 {
-	struct vmac_driver *d;
+	struct vmac_driver *d = driver_of(L);
 	int n = lua_gettop(L);
 	lua_pushvalue(L, lua_upvalueindex(1));
 	lua_insert(L, 1);
 	lua_call(L, n, LUA_MULTRET);
-	lua_getallocf(L, (void **)&d);
 	if (d->overrun)
-		return luaL_error(L, "time budget exceeded");
+		return luaL_error(L, "%s", d->overrun_msg);
 	return lua_gettop(L);
 }
 
-static char *read_file(const char *path, size_t *len, char *err, size_t errlen, int *code);
-
-/* require(name) for drivers: loads stdlib/NAME.lua once, as text, into the
- * driver's own environment (upvalue 1), and caches it. Only while the driver
- * file itself is loading (main thread): a tick must never read a file. */
-static int sandbox_require(lua_State *L)
+/* rawset refuses the read-only library tables (their metatable is locked). */
+static int safe_rawset(lua_State *L)
 {
-	struct vmac_driver *d;
-	const char *name = luaL_checkstring(L, 1);
-	char path[600], chunk[80], err[300];
-	size_t i, len = 0;
-	int code = 0;
-	char *src;
-
-	lua_getallocf(L, (void **)&d);
-	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
-	lua_getfield(L, -1, name);
-	if (!lua_isnil(L, -1))
-		return 1;
-	lua_pop(L, 1);
-	for (i = 0; name[i]; i++)
-		if (!((name[i] >= 'a' && name[i] <= 'z') || (name[i] >= '0' && name[i] <= '9') || name[i] == '_'))
-			return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_])", name);
-	if (i == 0 || i > 40)
-		return luaL_error(L, "require: bad module name");
-	if (!d->loading)
-		return luaL_error(L, "require '%s': modules can only be required when the driver loads (top of the file)",
-		                  name);
-	if (!d->stdlib_dir[0])
-		return luaL_error(L, "require '%s': no standard library configured", name);
-	snprintf(path, sizeof(path), "%s/%s.lua", d->stdlib_dir, name);
-	src = read_file(path, &len, err, sizeof(err), &code);
-	if (!src)
-		return luaL_error(L, "require '%s': no such stdlib module (%s)", name, err);
-	snprintf(chunk, sizeof(chunk), "@stdlib/%s.lua", name);
-	code = luaL_loadbufferx(L, src, len, chunk, "t");
-	free(src);
-	if (code != 0)
-		return lua_error(L);
-	lua_pushvalue(L, lua_upvalueindex(1));
-	lua_setfenv(L, -2);
-	lua_pushstring(L, name);
-	lua_call(L, 1, 1);
-	if (lua_isnil(L, -1)) {
-		lua_pop(L, 1);
-		lua_pushboolean(L, 1);
+	luaL_checktype(L, 1, LUA_TTABLE);
+	if (lua_getmetatable(L, 1)) {
+		lua_getfield(L, -1, "__metatable");
+		if (lua_isstring(L, -1))
+			return luaL_error(L, "rawset: this table is read-only");
+		lua_pop(L, 2);
 	}
-	lua_pushvalue(L, -1);
-	lua_setfield(L, -3, name);
+	luaL_checkany(L, 3);
+	lua_settop(L, 3);
+	lua_rawset(L, 1);
 	return 1;
 }
 
-/* Copy the listed fields of the table at src (an absolute or pseudo index)
- * into the table on top of the stack: [-0, +0]. */
-static void copy_fields(lua_State *L, int src, const char *const *names)
+static int read_only(lua_State *L)
 {
-	for (; *names; names++) {
-		lua_getfield(L, src, *names);
-		lua_setfield(L, -2, *names);
-	}
+	return luaL_error(L, "library tables are read-only (tried to set '%s')", lua_tostring(L, 2));
 }
 
-/* env.lib = a new table with the listed fields of the global library lib:
- * [-0, +0], env on top. */
-static void copy_lib(lua_State *L, const char *lib, const char *const *names)
+/* os.clock(): bus time in seconds (the clock of inputs.time). */
+static int bus_clock(lua_State *L)
 {
-	lua_getglobal(L, lib); /* env, src */
-	lua_newtable(L);       /* env, src, dst */
-	copy_fields(L, lua_gettop(L) - 1, names);
-	lua_setfield(L, -3, lib);
-	lua_pop(L, 1);
-}
-
-/* Build the driver's global table from nothing: [-0, +1]. */
-static void make_env(lua_State *L)
-{
-	static const char *const base[] = {"assert", "error", "ipairs", "pairs", "next", "select", "tonumber",
-	                                   "tostring", "type", "unpack", "pcall", "xpcall", "rawequal", "rawget",
-	                                   "rawset", "rawlen", "setmetatable", "getmetatable", NULL};
-	static const char *const str[] = {"byte", "char", "find", "format", "gmatch", "gsub", "len", "lower",
-	                                  "match", "reverse", "sub", "upper", NULL};
-	static const char *const tab[] = {"concat", "insert", "remove", "sort", "maxn", NULL};
-	static const char *const math[] = {"abs", "ceil", "floor", "max", "min", "sqrt", "exp", "log", "log10",
-	                                   "pow", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "fmod",
-	                                   "modf", "huge", "pi", "random", "randomseed", "frexp", "ldexp", "sinh",
-	                                   "cosh", "tanh", "deg", "rad", NULL};
-	static const char *const bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
-	                                  "arshift", "rol", "ror", "bswap", NULL};
-	/* resume is replaced below: like pcall it catches errors, so it must
-	 * re-raise a budget overrun. wrap re-raises on its own. */
-	static const char *const co[] = {"create", "yield", "status", "wrap", "running", NULL};
-
-	lua_newtable(L);
-	copy_fields(L, LUA_GLOBALSINDEX, base);
-	lua_getglobal(L, "pcall");
-	lua_pushcclosure(L, budget_checked_call, 1);
-	lua_setfield(L, -2, "pcall");
-	lua_getglobal(L, "xpcall");
-	lua_pushcclosure(L, budget_checked_call, 1);
-	lua_setfield(L, -2, "xpcall");
-	copy_lib(L, "string", str);
-	lua_getfield(L, -1, "string");
-	lua_getglobal(L, "string");
-	lua_pushcclosure(L, safe_rep, 1);
-	lua_setfield(L, -2, "rep");
-	lua_pop(L, 1);
-	copy_lib(L, "table", tab);
-	copy_lib(L, "math", math);
-	copy_lib(L, "bit", bit);
-	copy_lib(L, "coroutine", co);
-	lua_getfield(L, -1, "coroutine");
-	lua_getglobal(L, "coroutine");
-	lua_getfield(L, -1, "resume");
-	lua_pushcclosure(L, budget_checked_call, 1);
-	lua_setfield(L, -3, "resume");
-	lua_pop(L, 2);
-	lua_pushvalue(L, -1);
-	lua_pushcclosure(L, sandbox_require, 1);
-	lua_setfield(L, -2, "require");
-	lua_pushvalue(L, -1);
-	lua_setfield(L, -2, "_G");
-}
-
-static int open_lib(lua_State *L, lua_CFunction f, const char *name)
-{
-	lua_pushcfunction(L, f);
-	lua_pushstring(L, name);
-	return lua_pcall(L, 1, 0, 0);
+	struct vmac_driver *d = driver_of(L);
+	lua_pushnumber(L, d->loading ? 0 : d->now_s);
+	return 1;
 }
 
 static char *read_file(const char *path, size_t *len, char *err, size_t errlen, int *code)
@@ -289,6 +340,809 @@ static char *read_file(const char *path, size_t *len, char *err, size_t errlen, 
 	return buf;
 }
 
+/* Load a file as text into the driver's environment (upvalue 1 of the
+ * calling C closure) and call it with arg: [-0, +1] the result, or raises. */
+static void run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg)
+{
+	char err[300];
+	size_t len = 0;
+	int code = 0;
+	char *src = read_file(path, &len, err, sizeof(err), &code);
+	if (!src)
+		luaL_error(L, "%s", err);
+	code = luaL_loadbufferx(L, src, len, chunk, "t");
+	free(src);
+	if (code != 0)
+		lua_error(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_setfenv(L, -2);
+	lua_pushstring(L, arg);
+	lua_call(L, 1, 1);
+}
+
+static int valid_module_name(const char *name, size_t maxlen)
+{
+	size_t i;
+	for (i = 0; name[i]; i++)
+		if (!((name[i] >= 'a' && name[i] <= 'z') || (name[i] >= '0' && name[i] <= '9') || name[i] == '_'))
+			return 0;
+	return i > 0 && i <= maxlen;
+}
+
+/* require(name) for drivers: loads stdlib/NAME.lua once, as text, into the
+ * driver's own environment (upvalue 1), and caches it. Only while the driver
+ * file itself is loading (main thread): a callback must never read a file. */
+static int sandbox_require(lua_State *L)
+{
+	struct vmac_driver *d = driver_of(L);
+	size_t nlen;
+	const char *name = luaL_checklstring(L, 1, &nlen);
+	char path[600], chunk[80];
+
+	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
+	lua_getfield(L, -1, name);
+	if (!lua_isnil(L, -1))
+		return 1;
+	lua_pop(L, 1);
+	if (strlen(name) != nlen || !valid_module_name(name, 40))
+		return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_], at most 40)", name);
+	if (!d->loading)
+		return luaL_error(L, "require '%s': modules can only be required when the driver loads (top of the file)",
+		                  name);
+	if (!d->stdlib_dir[0])
+		return luaL_error(L, "require '%s': no standard library configured", name);
+	snprintf(path, sizeof(path), "%s/%s.lua", d->stdlib_dir, name);
+	snprintf(chunk, sizeof(chunk), "@stdlib/%s.lua", name);
+	run_sandboxed(L, path, chunk, name);
+	if (lua_isnil(L, -1)) {
+		lua_pop(L, 1);
+		lua_pushboolean(L, 1);
+	}
+	lua_pushvalue(L, -1);
+	lua_setfield(L, -3, name);
+	return 1;
+}
+
+/* vmac.cycles(): every CYCLES_DIR/NAME.lua, run in the driver's sandbox, as
+ * a table NAME -> what the file returned, in name order. Load time only.
+ * The names live on the C stack, so a file that raises leaks nothing. */
+static int sandbox_cycles(lua_State *L)
+{
+	struct vmac_driver *d = driver_of(L);
+	char names[64][48], path[900], chunk[120];
+	int n = 0, i, j;
+	DIR *dir;
+	struct dirent *e;
+
+	if (!d->loading)
+		return luaL_error(L, "vmac.cycles: call it when the driver loads (top of the file)");
+	lua_newtable(L);
+	if (!d->cycles_dir[0] || !(dir = opendir(d->cycles_dir)))
+		return 1;
+	while ((e = readdir(dir)) && n < 64) {
+		size_t len = strlen(e->d_name);
+		if (len < 5 || len - 4 >= sizeof(names[0]) || strcmp(e->d_name + len - 4, ".lua") != 0)
+			continue;
+		memcpy(names[n], e->d_name, len - 4);
+		names[n][len - 4] = 0;
+		if (valid_module_name(names[n], 40))
+			n++;
+	}
+	closedir(dir);
+	for (i = 1; i < n; i++) /* insertion sort: a handful of names */
+		for (j = i; j > 0 && strcmp(names[j - 1], names[j]) > 0; j--) {
+			char t[48];
+			memcpy(t, names[j], sizeof(t));
+			memcpy(names[j], names[j - 1], sizeof(t));
+			memcpy(names[j - 1], t, sizeof(t));
+		}
+	for (i = 0; i < n; i++) {
+		snprintf(path, sizeof(path), "%s/%s.lua", d->cycles_dir, names[i]);
+		snprintf(chunk, sizeof(chunk), "@cycles/%s/%s.lua", d->name, names[i]);
+		run_sandboxed(L, path, chunk, names[i]);
+		lua_setfield(L, -2, names[i]);
+	}
+	return 1;
+}
+
+/* Copy the listed fields of the table at src (an absolute or pseudo index)
+ * into the table on top of the stack: [-0, +0]. */
+static void copy_fields(lua_State *L, int src, const char *const *names)
+{
+	for (; *names; names++) {
+		lua_getfield(L, src, *names);
+		lua_setfield(L, -2, *names);
+	}
+}
+
+/* Replace the table on top with a read-only view of it: [-1, +1]. */
+static void make_read_only(lua_State *L)
+{
+	lua_newtable(L);                 /* lib, proxy */
+	lua_createtable(L, 0, 3);        /* lib, proxy, mt */
+	lua_pushvalue(L, -3);
+	lua_setfield(L, -2, "__index");
+	lua_pushcfunction(L, read_only);
+	lua_setfield(L, -2, "__newindex");
+	lua_pushliteral(L, "locked");
+	lua_setfield(L, -2, "__metatable");
+	lua_setmetatable(L, -2);
+	lua_remove(L, -2);
+}
+
+/* Push a new table with the listed fields of the global library lib:
+ * [-0, +1]. */
+static void copy_lib(lua_State *L, const char *lib, const char *const *names)
+{
+	lua_getglobal(L, lib);
+	lua_newtable(L);
+	copy_fields(L, lua_gettop(L) - 1, names);
+	lua_remove(L, -2);
+}
+
+/* t[name] = closure(t_orig[name] [, marker]) on the table on top: [-0, +0]. */
+static void wrap_field(lua_State *L, const char *lib, const char *name, lua_CFunction f, int marker)
+{
+	lua_getglobal(L, lib);
+	lua_getfield(L, -1, name);
+	lua_remove(L, -2);
+	if (marker)
+		lua_pushcfunction(L, read_only);
+	else
+		lua_pushnil(L);
+	lua_pushcclosure(L, f, 2);
+	lua_setfield(L, -2, name);
+}
+
+/* Build the driver's global table from nothing: [-0, +1]. */
+static void make_env(lua_State *L)
+{
+	static const char *const base[] = {"assert", "error", "ipairs", "pairs", "next", "select", "tonumber",
+	                                   "tostring", "type", "unpack", "rawequal", "rawget", "rawlen",
+	                                   "setmetatable", "getmetatable", NULL};
+	static const char *const str[] = {"byte", "char", "format", "len", "lower", "reverse", "sub", "upper", NULL};
+	static const char *const tab[] = {"concat", "insert", "remove", "sort", "maxn", NULL};
+	static const char *const math[] = {"abs", "ceil", "floor", "max", "min", "sqrt", "exp", "log", "log10",
+	                                   "pow", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "fmod",
+	                                   "modf", "huge", "pi", "random", "randomseed", "frexp", "ldexp", "sinh",
+	                                   "cosh", "tanh", "deg", "rad", NULL};
+	static const char *const bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
+	                                  "arshift", "rol", "ror", "bswap", NULL};
+	/* resume is replaced below: like pcall it catches errors, so it must
+	 * re-raise a budget overrun. wrap re-raises every error by itself. */
+	static const char *const co[] = {"create", "yield", "status", "wrap", "running", NULL};
+	int env;
+
+	lua_newtable(L);
+	env = lua_gettop(L);
+	copy_fields(L, LUA_GLOBALSINDEX, base);
+	lua_getglobal(L, "pcall");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, env, "pcall");
+	lua_getglobal(L, "xpcall");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, env, "xpcall");
+	lua_pushcfunction(L, safe_rawset);
+	lua_setfield(L, env, "rawset");
+
+	copy_lib(L, "string", str);
+	wrap_field(L, "string", "rep", safe_rep, 0);
+	wrap_field(L, "string", "find", safe_pattern, 1);
+	wrap_field(L, "string", "match", safe_pattern, 0);
+	wrap_field(L, "string", "gmatch", safe_pattern, 0);
+	wrap_field(L, "string", "gsub", safe_pattern, 0);
+	make_read_only(L);
+	/* Methods on strings ("x"):rep(n) must reach the bounded functions too,
+	 * and getmetatable("") must not hand out anything. */
+	lua_pushliteral(L, "");
+	lua_getmetatable(L, -1);
+	lua_pushvalue(L, -3);
+	lua_setfield(L, -2, "__index");
+	lua_pushliteral(L, "locked");
+	lua_setfield(L, -2, "__metatable");
+	lua_pop(L, 2);
+	lua_setfield(L, env, "string");
+
+	copy_lib(L, "table", tab);
+	make_read_only(L);
+	lua_setfield(L, env, "table");
+	copy_lib(L, "math", math);
+	make_read_only(L);
+	lua_setfield(L, env, "math");
+	copy_lib(L, "bit", bit);
+	make_read_only(L);
+	lua_setfield(L, env, "bit");
+	copy_lib(L, "coroutine", co);
+	lua_getglobal(L, "coroutine");
+	lua_getfield(L, -1, "resume");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, -3, "resume");
+	lua_pop(L, 1);
+	make_read_only(L);
+	lua_setfield(L, env, "coroutine");
+
+	lua_createtable(L, 0, 1);
+	lua_pushcfunction(L, bus_clock);
+	lua_setfield(L, -2, "clock");
+	make_read_only(L);
+	lua_setfield(L, env, "os");
+
+	lua_createtable(L, 0, 2);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, sandbox_cycles, 1);
+	lua_setfield(L, -2, "cycles");
+	lua_pushliteral(L, "0.2");
+	lua_setfield(L, -2, "version");
+	make_read_only(L);
+	lua_setfield(L, env, "vmac");
+
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, sandbox_require, 1);
+	lua_setfield(L, env, "require");
+	lua_pushvalue(L, env);
+	lua_setfield(L, env, "_G");
+}
+
+static int open_lib(lua_State *L, lua_CFunction f, const char *name)
+{
+	lua_pushcfunction(L, f);
+	lua_pushstring(L, name);
+	return lua_pcall(L, 1, 0, 0);
+}
+
+/* ---- the manifest ---- */
+
+#define BAD(...)                                                                                                       \
+	do {                                                                                                           \
+		char what_[300];                                                                                       \
+		snprintf(what_, sizeof(what_), __VA_ARGS__);                                                           \
+		snprintf(err, errlen, "%s: manifest: %s", d->file, what_);                                             \
+		return -1;                                                                                             \
+	} while (0)
+
+static int valid_name(const char *s)
+{
+	size_t i;
+	if (!(s[0] >= 'a' && s[0] <= 'z'))
+		return 0;
+	for (i = 0; s[i]; i++)
+		if (!((s[i] >= 'a' && s[i] <= 'z') || (s[i] >= '0' && s[i] <= '9') || s[i] == '_'))
+			return 0;
+	return i <= VMAC_DRIVER_NAME_MAX;
+}
+
+static const char *const CHANNELS_TEXT = "do0..do6, di0..di7, ai0, ai1, pwm, encoder";
+
+static int parse_channel(const char *s, struct io *io)
+{
+	unsigned n;
+	char c;
+	if (strcmp(s, "pwm") == 0) {
+		io->kind = IO_PWM;
+		io->channel = 0;
+		return 0;
+	}
+	if (strcmp(s, "encoder") == 0) {
+		io->kind = IO_ENCODER;
+		io->channel = 0;
+		return 0;
+	}
+	if (strlen(s) != 3 || sscanf(s + 2, "%1u%c", &n, &c) != 1)
+		return -1;
+	io->channel = n;
+	if (strncmp(s, "di", 2) == 0 && n < VMAC_DIGITAL_INPUTS)
+		io->kind = IO_DI;
+	else if (strncmp(s, "do", 2) == 0 && n < VMAC_DIGITAL_OUTPUTS)
+		io->kind = IO_DO;
+	else if (strncmp(s, "ai", 2) == 0 && n < VMAC_ANALOG_INPUTS)
+		io->kind = IO_AI;
+	else
+		return -1;
+	return 0;
+}
+
+/* Optional field of the table at t: number (or absent: dflt). */
+static int opt_number(lua_State *L, int t, const char *field, double dflt, double *out)
+{
+	int ok;
+	lua_getfield(L, t, field);
+	ok = lua_isnil(L, -1) || lua_type(L, -1) == LUA_TNUMBER;
+	*out = lua_isnil(L, -1) ? dflt : lua_tonumber(L, -1);
+	lua_pop(L, 1);
+	return ok && *out == *out ? 0 : -1;
+}
+
+/* Optional string field copied into out (absent: ""). */
+static int opt_string(lua_State *L, int t, const char *field, char *out, size_t len)
+{
+	size_t n = 0;
+	const char *s;
+	lua_getfield(L, t, field);
+	if (lua_isnil(L, -1)) {
+		out[0] = 0;
+		lua_pop(L, 1);
+		return 0;
+	}
+	if (lua_type(L, -1) != LUA_TSTRING || (s = lua_tolstring(L, -1, &n), n >= len) || strlen(s) != n) {
+		lua_pop(L, 1);
+		return -1;
+	}
+	memcpy(out, s, n + 1);
+	lua_pop(L, 1);
+	return 0;
+}
+
+static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	int i, j;
+	lua_getfield(L, t, "io");
+	if (!lua_istable(L, -1))
+		BAD("io must be a table of name = channel (%s)", CHANNELS_TEXT);
+	lua_pushnil(L);
+	while (lua_next(L, -2)) {
+		struct io *io;
+		const char *chan;
+		int spec = lua_gettop(L);
+		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+			BAD("io: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
+		if (d->nio == VMAC_DRIVER_MAX_IO)
+			BAD("io: more than %d names", VMAC_DRIVER_MAX_IO);
+		io = &d->io[d->nio];
+		memset(io, 0, sizeof(*io));
+		snprintf(io->name, sizeof(io->name), "%s", lua_tostring(L, -2));
+		io->scale = 1;
+		io->board = 0;
+		if (lua_type(L, spec) == LUA_TSTRING) {
+			chan = lua_tostring(L, spec);
+		} else if (lua_istable(L, spec)) {
+			double minor;
+			lua_rawgeti(L, spec, 1);
+			chan = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
+			lua_pop(L, 1); /* the string stays alive in the spec table */
+			if (!chan)
+				BAD("io.%s: the first element must be the channel (%s)", io->name, CHANNELS_TEXT);
+			if (opt_number(L, spec, "scale", 1, &io->scale) || opt_number(L, spec, "offset", 0, &io->offset))
+				BAD("io.%s: scale and offset must be numbers", io->name);
+			if (opt_number(L, spec, "board", -1, &minor) || (minor != -1 && (minor < 0 || minor > 4294967295.0 ||
+			                                                                  minor != floor(minor))))
+				BAD("io.%s: board must be the minor id of a board of this machine", io->name);
+			if (minor >= 0) {
+				io->has_minor = 1;
+				io->minor = (uint32_t)minor;
+				io->board = -1;
+			}
+		} else {
+			BAD("io.%s: must be a channel name or {channel, scale = , offset = , board = }", io->name);
+		}
+		if (parse_channel(chan, io) != 0)
+			BAD("io.%s: unknown channel '%s' (%s)", io->name, chan, CHANNELS_TEXT);
+		if ((io->kind == IO_DO || io->kind == IO_PWM) && (io->scale != 1 || io->offset != 0))
+			BAD("io.%s: outputs take no scale or offset", io->name);
+		for (j = 0; j < d->nio; j++) {
+			struct io *o = &d->io[j];
+			if ((io->kind == IO_DO || io->kind == IO_PWM) && o->kind == io->kind && o->channel == io->channel &&
+			    o->has_minor == io->has_minor && o->minor == io->minor)
+				BAD("io.%s: output %s is already io.%s", io->name, chan, o->name);
+		}
+		d->nio++;
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 1);
+	for (i = 0; i < d->nio; i++) /* deterministic order for the tick loops */
+		for (j = i; j > 0 && strcmp(d->io[j - 1].name, d->io[j].name) > 0; j--) {
+			struct io tmp = d->io[j];
+			d->io[j] = d->io[j - 1];
+			d->io[j - 1] = tmp;
+		}
+	return 0;
+}
+
+/* Value of the host's setting driver.NAME.<key>, or NULL. */
+static const char *setting(const struct vmac_driver_limits *lim, const char *key)
+{
+	int i;
+	for (i = 0; i < lim->nsettings; i++)
+		if (strcmp(lim->settings[i].key, key) == 0)
+			return lim->settings[i].value;
+	return NULL;
+}
+
+/* Check v (on top) against spec (at s: min, max, values); text in why. */
+static int check_value(lua_State *L, int s, char *why, size_t len)
+{
+	double lo, hi, x;
+	if (opt_number(L, s, "min", -HUGE_VAL, &lo) || opt_number(L, s, "max", HUGE_VAL, &hi)) {
+		snprintf(why, len, "min and max must be numbers");
+		return -1;
+	}
+	if (lua_type(L, -1) == LUA_TNUMBER) {
+		x = lua_tonumber(L, -1);
+		if (!(x >= lo && x <= hi)) {
+			snprintf(why, len, "%.14g is out of range %.14g..%.14g", x, lo, hi);
+			return -1;
+		}
+	}
+	lua_getfield(L, s, "values");
+	if (lua_istable(L, -1)) {
+		int i, found = 0;
+		for (i = 1;; i++) {
+			lua_rawgeti(L, -1, i);
+			if (lua_isnil(L, -1)) {
+				lua_pop(L, 1);
+				break;
+			}
+			found |= lua_rawequal(L, -1, -3);
+			lua_pop(L, 1);
+		}
+		if (!found) {
+			snprintf(why, len, "'%s' is not one of the allowed values", lua_tostring(L, -2));
+			lua_pop(L, 1);
+			return -1;
+		}
+	} else if (!lua_isnil(L, -1)) {
+		snprintf(why, len, "values must be a list");
+		lua_pop(L, 1);
+		return -1;
+	}
+	lua_pop(L, 1);
+	return 0;
+}
+
+/* params -> the dev.params table (on top on success): defaults, then the
+ * host's overrides, each checked against its range. */
+static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_limits *lim, char *err,
+                        size_t errlen)
+{
+	lua_State *L = d->L;
+	int values, n = 0;
+	lua_newtable(L);
+	values = lua_gettop(L);
+	lua_getfield(L, t, "params");
+	if (lua_isnil(L, -1)) {
+		lua_pop(L, 1);
+		goto overrides;
+	}
+	if (!lua_istable(L, -1))
+		BAD("params must be a table of name = {default = , min = , max = , unit = , persist = }");
+	lua_pushnil(L);
+	while (lua_next(L, -2)) {
+		int s = lua_gettop(L);
+		char name[VMAC_DRIVER_NAME_MAX + 1], why[160], key[64];
+		const char *over;
+		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+			BAD("params: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
+		snprintf(name, sizeof(name), "%s", lua_tostring(L, -2));
+		if (++n > VMAC_DRIVER_MAX_PARAMS)
+			BAD("params: more than %d", VMAC_DRIVER_MAX_PARAMS);
+		if (!lua_istable(L, s))
+			BAD("params.%s must be a table {default = , ...}", name);
+		lua_getfield(L, s, "default");
+		if (lua_type(L, -1) != LUA_TNUMBER && lua_type(L, -1) != LUA_TBOOLEAN && lua_type(L, -1) != LUA_TSTRING)
+			BAD("params.%s: default (a number, boolean or string) is required", name);
+		snprintf(key, sizeof(key), "param.%s", name);
+		if ((over = setting(lim, key)) != NULL) {
+			int type = lua_type(L, -1);
+			char *end;
+			double x;
+			lua_pop(L, 1);
+			if (type == LUA_TNUMBER) {
+				x = strtod(over, &end);
+				if (end == over || *end || x != x)
+					BAD("params.%s: host setting driver.%s.%s = '%s' is not a number", name, d->name, key, over);
+				lua_pushnumber(L, x);
+			} else if (type == LUA_TBOOLEAN) {
+				if (strcmp(over, "true") && strcmp(over, "false"))
+					BAD("params.%s: host setting driver.%s.%s = '%s' is not true or false", name, d->name, key,
+					    over);
+				lua_pushboolean(L, over[0] == 't');
+			} else {
+				lua_pushstring(L, over);
+			}
+		}
+		if (check_value(L, s, why, sizeof(why)) != 0)
+			BAD("params.%s: %s%s", name, why, over ? " (host setting)" : "");
+		lua_setfield(L, values, name);
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 1);
+overrides:
+	{
+		int i;
+		for (i = 0; i < lim->nsettings; i++)
+			if (strncmp(lim->settings[i].key, "param.", 6) == 0) {
+				lua_getfield(L, values, lim->settings[i].key + 6);
+				if (lua_isnil(L, -1))
+					BAD("host setting driver.%s.%s: the driver has no param '%s'", d->name,
+					    lim->settings[i].key, lim->settings[i].key + 6);
+				lua_pop(L, 1);
+			}
+	}
+	return 0;
+}
+
+static int parse_variables(struct vmac_driver *d, int t, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	int i, j;
+	lua_getfield(L, t, "variables");
+	if (lua_isnil(L, -1)) {
+		lua_pop(L, 1);
+		return 0;
+	}
+	if (!lua_istable(L, -1))
+		BAD("variables must be a table of name = {unit = , update = , group = , set = }");
+	lua_pushnil(L);
+	while (lua_next(L, -2)) {
+		int s = lua_gettop(L);
+		struct var *v;
+		char update[32], group[VMAC_DRIVER_NAME_MAX + 1];
+		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+			BAD("variables: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
+		if (d->nvars == VMAC_DRIVER_MAX_VARS)
+			BAD("variables: more than %d", VMAC_DRIVER_MAX_VARS);
+		v = &d->vars[d->nvars];
+		memset(v, 0, sizeof(*v));
+		snprintf(v->pub.name, sizeof(v->pub.name), "%s", lua_tostring(L, -2));
+		if (!lua_istable(L, s))
+			BAD("variables.%s must be a table (may be empty)", v->pub.name);
+		if (opt_string(L, s, "unit", v->pub.unit, sizeof(v->pub.unit)))
+			BAD("variables.%s: unit must be a string of at most %d bytes", v->pub.name,
+			    (int)sizeof(v->pub.unit) - 1);
+		if (opt_string(L, s, "update", update, sizeof(update)))
+			BAD("variables.%s: update must be \"auto\" or \"timer:N\" (seconds)", v->pub.name);
+		if (update[0] && strcmp(update, "auto") != 0) {
+			char *end;
+			if (strncmp(update, "timer:", 6) != 0 || (v->every_s = strtod(update + 6, &end), *end) ||
+			    !(v->every_s > 0 && v->every_s <= 86400))
+				BAD("variables.%s: update must be \"auto\" or \"timer:N\" with 0 < N <= 86400 seconds, not '%s'",
+				    v->pub.name, update);
+		}
+		if (opt_string(L, s, "group", group, sizeof(group)) || (group[0] && !valid_name(group)))
+			BAD("variables.%s: group must be a name", v->pub.name);
+		lua_getfield(L, s, "set");
+		v->settable = lua_toboolean(L, -1);
+		lua_pop(L, 2);
+		d->nvars++;
+	}
+	lua_pop(L, 1);
+	/* Sort by name, then resolve groups: a variable's group is the index+1
+	 * of the first variable with the same group name. */
+	for (i = 0; i < d->nvars; i++)
+		for (j = i; j > 0 && strcmp(d->vars[j - 1].pub.name, d->vars[j].pub.name) > 0; j--) {
+			struct var tmp = d->vars[j];
+			d->vars[j] = d->vars[j - 1];
+			d->vars[j - 1] = tmp;
+		}
+	lua_getfield(L, t, "variables");
+	for (i = 0; i < d->nvars; i++) {
+		char gi[VMAC_DRIVER_NAME_MAX + 1], gj[VMAC_DRIVER_NAME_MAX + 1];
+		lua_getfield(L, -1, d->vars[i].pub.name);
+		opt_string(L, lua_gettop(L), "group", gi, sizeof(gi));
+		lua_pop(L, 1);
+		if (!gi[0])
+			continue;
+		for (j = 0; j <= i; j++) {
+			lua_getfield(L, -1, d->vars[j].pub.name);
+			opt_string(L, lua_gettop(L), "group", gj, sizeof(gj));
+			lua_pop(L, 1);
+			if (strcmp(gi, gj) == 0) {
+				d->vars[i].group = j + 1;
+				break;
+			}
+		}
+	}
+	lua_pop(L, 1);
+	return 0;
+}
+
+/* Names shared between params, variables and commands; commands' arg. */
+static int check_names(struct vmac_driver *d, int t, int params, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	int i;
+	for (i = 0; i < d->nvars; i++) {
+		lua_getfield(L, params, d->vars[i].pub.name);
+		if (!lua_isnil(L, -1))
+			BAD("'%s' is both a variable and a param", d->vars[i].pub.name);
+		lua_pop(L, 1);
+	}
+	lua_getfield(L, t, "commands");
+	if (lua_isnil(L, -1)) {
+		lua_pop(L, 1);
+		return 0;
+	}
+	if (!lua_istable(L, -1))
+		BAD("commands must be a table of name = {label = , arg = }");
+	lua_pushnil(L);
+	while (lua_next(L, -2)) {
+		const char *name;
+		char arg[VMAC_DRIVER_NAME_MAX + 1];
+		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+			BAD("commands: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
+		name = lua_tostring(L, -2);
+		if (!lua_istable(L, -1))
+			BAD("commands.%s must be a table (may be empty)", name);
+		lua_getfield(L, params, name);
+		if (!lua_isnil(L, -1))
+			BAD("'%s' is both a command and a param", name);
+		lua_pop(L, 1);
+		for (i = 0; i < d->nvars; i++)
+			if (strcmp(d->vars[i].pub.name, name) == 0)
+				BAD("'%s' is both a command and a variable", name);
+		if (opt_string(L, lua_gettop(L), "arg", arg, sizeof(arg)))
+			BAD("commands.%s: arg must name a variable or param", name);
+		if (arg[0]) {
+			int found = 0;
+			lua_getfield(L, params, arg);
+			found = !lua_isnil(L, -1);
+			lua_pop(L, 1);
+			for (i = 0; i < d->nvars; i++)
+				found |= strcmp(d->vars[i].pub.name, arg) == 0;
+			if (!found)
+				BAD("commands.%s: arg '%s' is neither a variable nor a param", name, arg);
+		}
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 1);
+	return 0;
+}
+
+static int callback_ref(struct vmac_driver *d, int t, const char *name, int required, char *err, size_t errlen,
+                        int *ref)
+{
+	lua_State *L = d->L;
+	lua_getfield(L, t, name);
+	if (lua_isnil(L, -1) && !required) {
+		lua_pop(L, 1);
+		*ref = LUA_NOREF;
+		return 0;
+	}
+	if (!lua_isfunction(L, -1))
+		BAD("%s must be a function%s", name, required ? " (it is required)" : "");
+	*ref = luaL_ref(L, LUA_REGISTRYINDEX);
+	return 0;
+}
+
+static int parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *lim, char *err, size_t errlen)
+{
+	static const char *const known[] = {"name", "version", "level", "description", "io", "params", "variables",
+	                                    "commands", "ui", "jit", NULL};
+	lua_State *L = d->L;
+	int t = lua_gettop(L), params;
+	double level;
+
+	if (opt_string(L, t, "name", d->name, sizeof(d->name)) || !d->name[0])
+		BAD("name (the driver's name, a string) is required");
+	if (lim->expect_name && strcmp(d->name, lim->expect_name) != 0)
+		BAD("name is '%s' but the board announced driver '%s'", d->name, lim->expect_name);
+	if (opt_string(L, t, "version", d->version, sizeof(d->version)) || !d->version[0])
+		BAD("version (a string of at most %d bytes) is required", VMAC_DRIVER_VERSION_MAX);
+	if (opt_number(L, t, "level", lim->default_level, &level) || level != floor(level) || level < 0 ||
+	    level > lim->max_level)
+		BAD("level must be a whole number 0..%u (the host's max_level)", lim->max_level);
+	d->level = (unsigned)level;
+	d->max_level = lim->max_level;
+	lua_getfield(L, t, "jit");
+	if (!lua_isnil(L, -1) && !lua_isboolean(L, -1))
+		BAD("jit must be true or false");
+	d->jit = lua_toboolean(L, -1) && lim->allow_jit;
+	lua_pop(L, 1);
+	lua_getfield(L, t, "ui");
+	if (!lua_isnil(L, -1) && !lua_istable(L, -1))
+		BAD("ui must be a table");
+	lua_pop(L, 1);
+	lua_getfield(L, t, "description");
+	if (!lua_isnil(L, -1) && !lua_isstring(L, -1))
+		BAD("description must be a string");
+	lua_pop(L, 1);
+	lua_pushnil(L);
+	while (lua_next(L, t)) {
+		const char *const *k;
+		int ok = lua_isfunction(L, -1);
+		if (lua_type(L, -2) == LUA_TSTRING)
+			for (k = known; *k && !ok; k++)
+				ok = strcmp(*k, lua_tostring(L, -2)) == 0;
+		if (!ok)
+			BAD("unknown field '%s' (manifest fields: name, version, level, description, io, params, variables, "
+			    "commands, ui, jit; and functions)",
+			    lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : luaL_typename(L, -2));
+		lua_pop(L, 1);
+	}
+	if (parse_io(d, t, err, errlen) || parse_variables(d, t, err, errlen) ||
+	    parse_params(d, t, lim, err, errlen))
+		return -1;
+	params = lua_gettop(L);
+	if (check_names(d, t, params, err, errlen) || callback_ref(d, t, "tick", 1, err, errlen, &d->ref_tick) ||
+	    callback_ref(d, t, "attach", 0, err, errlen, &d->ref_attach) ||
+	    callback_ref(d, t, "input", 0, err, errlen, &d->ref_input) ||
+	    callback_ref(d, t, "detach", 0, err, errlen, &d->ref_detach) ||
+	    callback_ref(d, t, "migrate", 0, err, errlen, &d->ref_migrate))
+		return -1;
+	return 0; /* leaves the params table on top */
+}
+#undef BAD
+
+/* ---- dev methods ---- */
+
+/* dev:set_level(n) -> true | nil, message */
+static int dev_set_level(lua_State *L)
+{
+	struct vmac_driver *d = driver_of(L);
+	char why[200];
+	lua_Number n = luaL_checknumber(L, 2);
+	if (n != floor(n) || n < 0 || n > d->max_level)
+		return luaL_error(L, "set_level: level must be a whole number 0..%d", (int)d->max_level);
+	if (!d->host.set_level) {
+		lua_pushnil(L);
+		lua_pushliteral(L, "set_level: not attached to a bus");
+		return 2;
+	}
+	if (d->host.set_level(d->host.ctx, (unsigned)n, why, sizeof(why)) != 0) {
+		lua_pushnil(L);
+		lua_pushstring(L, why);
+		return 2;
+	}
+	lua_pushboolean(L, 1);
+	return 1;
+}
+
+/* dev:event(text): at most EVENTS_PER_S per second of bus time. */
+static int dev_event(lua_State *L)
+{
+	struct vmac_driver *d = driver_of(L);
+	const char *text = luaL_checkstring(L, 2);
+	if (d->now_s - d->event_window_s >= 1) {
+		d->event_window_s = d->now_s;
+		d->events_in_window = 0;
+	}
+	if (++d->events_in_window <= EVENTS_PER_S && d->host.event)
+		d->host.event(d->host.ctx, text);
+	return 0;
+}
+
+/* The dev table, with params (on top) moved into it: [-1, +0]. */
+static void make_dev(struct vmac_driver *d)
+{
+	lua_State *L = d->L;
+	int params = lua_gettop(L);
+	lua_createtable(L, 0, 12);
+	lua_pushstring(L, d->name);
+	lua_setfield(L, -2, "name");
+	lua_pushstring(L, d->name);
+	lua_setfield(L, -2, "driver");
+	lua_pushstring(L, d->version);
+	lua_setfield(L, -2, "version");
+	lua_pushinteger(L, (lua_Integer)d->level);
+	lua_setfield(L, -2, "level");
+	lua_newtable(L);
+	lua_pushvalue(L, -1);
+	d->ref_out = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_setfield(L, -2, "out");
+	lua_newtable(L);
+	lua_pushvalue(L, -1);
+	d->ref_vars = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_setfield(L, -2, "vars");
+	lua_pushvalue(L, params);
+	lua_pushvalue(L, -1);
+	d->ref_params = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_setfield(L, -2, "params");
+	lua_newtable(L);
+	lua_setfield(L, -2, "state");
+	lua_newtable(L);
+	lua_setfield(L, -2, "boards");
+	lua_pushcfunction(L, dev_set_level);
+	lua_setfield(L, -2, "set_level");
+	lua_pushcfunction(L, dev_event);
+	lua_setfield(L, -2, "event");
+	d->ref_dev = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_settop(L, params - 1);
+	/* The inputs table, reused every tick: every name present from the
+	 * start, so a tick allocates nothing for it. */
+	lua_createtable(L, 0, d->nio + 1);
+	d->ref_inputs = luaL_ref(L, LUA_REGISTRYINDEX);
+}
+
 int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
                      char *err, size_t errlen)
 {
@@ -296,7 +1150,7 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	const char *base = strrchr(path, '/');
 	char chunkname[80];
 	size_t len = 0;
-	int code = 0, rc;
+	int code = 0, i;
 	char *src = read_file(path, &len, err, errlen, &code);
 	lua_State *L;
 
@@ -310,10 +1164,35 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 		return -ENOMEM;
 	}
 	d->cap = limits->memory_bytes;
+	d->budget_hooks = limits->instructions / HOOK_EVERY + 1;
+	d->budget_ns = (int64_t)limits->budget_us * 1000;
+	d->clock = limits->clock;
+	d->clock_ctx = limits->clock_ctx;
+	d->ref_tick = d->ref_attach = d->ref_input = d->ref_detach = d->ref_migrate = LUA_NOREF;
+	for (i = 0; i < limits->nsettings; i++) {
+		const char *k = limits->settings[i].key, *v = limits->settings[i].value;
+		char *end;
+		double x = strtod(v, &end);
+		if (strcmp(k, "memory_kib") == 0 && *end == 0 && x >= 64 && x <= 1048576)
+			d->cap = (size_t)x * 1024;
+		else if (strcmp(k, "instructions") == 0 && *end == 0 && x >= 1000 && x <= 1e9)
+			d->budget_hooks = (uint64_t)x / HOOK_EVERY + 1;
+		else if (strcmp(k, "budget_us") == 0 && *end == 0 && x >= 0 && x <= 1e7)
+			d->budget_ns = (int64_t)x * 1000;
+		else if (strncmp(k, "param.", 6) != 0) {
+			snprintf(err, errlen, "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
+			         "instructions, budget_us, param.NAME)", limits->expect_name ? limits->expect_name : "?", k, v);
+			free(src);
+			free(d);
+			return -EINVAL;
+		}
+	}
 	if (limits->stdlib_dir)
 		snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir);
-	d->budget_hooks = limits->instructions / HOOK_EVERY + 1;
-	snprintf(d->name, sizeof(d->name), "%s", base ? base + 1 : path);
+	if (limits->cycles_dir)
+		snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir);
+	snprintf(d->file, sizeof(d->file), "%s", base ? base + 1 : path);
+	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");
 	L = d->L = lua_newstate(counting_alloc, d);
 	if (!L) {
 		free(src);
@@ -330,22 +1209,13 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 		snprintf(err, errlen, "cannot open libraries: %s", lua_tostring(L, -1));
 		goto fail;
 	}
-	/* ("").dump would reach string.dump through the string metatable. */
 	lua_getglobal(L, "string");
 	lua_pushnil(L);
 	lua_setfield(L, -2, "dump");
 	lua_pop(L, 1);
-	/* Lock the string metatable: getmetatable("") must not hand out the
-	 * unrestricted string library (string.rep without its bound). */
-	lua_pushliteral(L, "");
-	lua_getmetatable(L, -1);
-	lua_pushliteral(L, "locked");
-	lua_setfield(L, -2, "__metatable");
-	lua_pop(L, 2);
-
 	lua_newtable(L);
 	lua_setfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
-	snprintf(chunkname, sizeof(chunkname), "@%s", d->name);
+	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
 	if (luaL_loadbufferx(L, src, len, chunkname, "t") != 0) {
 		snprintf(err, errlen, "%s", lua_tostring(L, -1));
 		goto fail;
@@ -355,29 +1225,23 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	make_env(L);
 	lua_setfenv(L, -2);
 	d->loading = 1;
-	rc = guarded_call(d, 0, 1, err, errlen);
+	code = guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen);
 	d->loading = 0;
-	if (rc != 0)
+	if (code != 0)
 		goto fail;
 	if (!lua_istable(L, -1)) {
-		snprintf(err, errlen, "%s: the file must return a table (the driver), got %s", d->name,
+		snprintf(err, errlen, "%s: the file must return a table (the driver), got %s", d->file,
 		         luaL_typename(L, -1));
 		goto fail;
 	}
-	lua_getfield(L, -1, "tick");
-	if (!lua_isfunction(L, -1)) {
-		snprintf(err, errlen, "%s: the driver table has no tick function", d->name);
+	if (parse_manifest(d, limits, err, errlen) != 0)
 		goto fail;
-	}
-	d->ref_tick = luaL_ref(L, LUA_REGISTRYINDEX);
-	lua_pop(L, 1);
-	/* Reused every tick, so a service allocates nothing for its arguments. */
-	lua_createtable(L, 0, 4);
-	lua_createtable(L, VMAC_DIGITAL_INPUTS, 0);
-	lua_setfield(L, -2, "digital");
-	lua_createtable(L, VMAC_ANALOG_INPUTS, 0);
-	lua_setfield(L, -2, "analog");
-	d->ref_inputs = luaL_ref(L, LUA_REGISTRYINDEX);
+	make_dev(d);                                     /* consumes params */
+	d->ref_manifest = luaL_ref(L, LUA_REGISTRYINDEX); /* the driver table */
+	if (d->jit)
+		luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_ON);
+	lua_settop(L, 0);
+	lua_gc(L, LUA_GCCOLLECT, 0);
 	*out = d;
 	return 0;
 fail:
@@ -387,87 +1251,369 @@ fail:
 	return -EINVAL;
 }
 
-static int read_outputs(lua_State *L, struct vmac_driver *d, struct vmac_outputs *out, char *err,
-                        size_t errlen)
+const char *vmac_driver_name(const struct vmac_driver *d)
 {
-	int i;
-	memset(out, 0, sizeof(*out));
-	if (lua_isnil(L, -1))
-		return 0; /* nothing returned: everything off */
-	if (!lua_istable(L, -1)) {
-		snprintf(err, errlen, "%s: tick must return a table of outputs or nil, got %s", d->name,
-		         luaL_typename(L, -1));
-		return -1;
-	}
-	lua_getfield(L, -1, "digital");
-	if (lua_istable(L, -1)) {
-		for (i = 0; i < VMAC_DIGITAL_OUTPUTS; i++) {
-			lua_rawgeti(L, -1, i + 1);
-			if (lua_toboolean(L, -1))
-				out->digital |= (uint8_t)(1u << i);
-			lua_pop(L, 1);
-		}
-	} else if (!lua_isnil(L, -1)) {
-		snprintf(err, errlen, "%s: outputs.digital must be a table of booleans", d->name);
-		return -1;
-	}
-	lua_pop(L, 1);
-	lua_getfield(L, -1, "pwm");
-	if (!lua_isnil(L, -1)) {
-		double pwm = lua_tonumber(L, -1);
-		if (!lua_isnumber(L, -1) || pwm != pwm || pwm < -VMAC_PWM_MAX || pwm > VMAC_PWM_MAX) {
-			snprintf(err, errlen, "%s: outputs.pwm must be a number in -1000..1000, got %s", d->name,
-			         lua_isnumber(L, -1) ? lua_tostring(L, -1) : luaL_typename(L, -1));
+	return d->name;
+}
+
+const char *vmac_driver_version(const struct vmac_driver *d)
+{
+	return d->version;
+}
+
+unsigned vmac_driver_level(const struct vmac_driver *d)
+{
+	return d->level;
+}
+
+void vmac_driver_bind(struct vmac_driver *d, const struct vmac_driver_host *host)
+{
+	d->host = *host;
+}
+
+int vmac_driver_boards(const struct vmac_driver *d)
+{
+	return d->nboards;
+}
+
+int vmac_driver_add_board(struct vmac_driver *d, uint32_t minor, const char *name)
+{
+	lua_State *L = d->L;
+	int i, b;
+	for (i = 0; i < d->nboards; i++)
+		if (d->board_minor[i] == minor)
 			return -1;
-		}
-		out->pwm = (int16_t)pwm;
+	if (d->nboards == VMAC_DRIVER_MAX_BOARDS)
+		return -1;
+	b = d->nboards++;
+	d->board_minor[b] = minor;
+	for (i = 0; i < d->nio; i++)
+		if (d->io[i].has_minor && d->io[i].minor == minor)
+			d->io[i].board = b;
+	/* dev.boards[#+1] = {name = , minor = }; the primary names the machine */
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	if (b == 0) {
+		lua_pushstring(L, name);
+		lua_setfield(L, -2, "name");
 	}
-	lua_pop(L, 1);
+	lua_getfield(L, -1, "boards");
+	if (lua_istable(L, -1)) {
+		lua_createtable(L, 0, 2);
+		lua_pushstring(L, name);
+		lua_setfield(L, -2, "name");
+		lua_pushnumber(L, minor);
+		lua_setfield(L, -2, "minor");
+		lua_rawseti(L, -2, b + 1);
+	}
+	lua_pop(L, 2);
 	return 0;
 }
 
-/* Push inputs[name], recreating it when the driver replaced it with
- * something else: [-0, +1], inputs table on top on entry. */
-static void subtable(lua_State *L, const char *name, int size)
-{
-	lua_getfield(L, -1, name);
-	if (lua_istable(L, -1))
-		return;
-	lua_pop(L, 1);
-	lua_createtable(L, size, 0);
-	lua_pushvalue(L, -1);
-	lua_setfield(L, -3, name);
-}
-
-int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *in,
-                     struct vmac_outputs *out, char *err, size_t errlen)
+void vmac_driver_set_level_now(struct vmac_driver *d, unsigned level)
 {
 	lua_State *L = d->L;
-	int i, rc;
+	d->level = level;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	lua_pushinteger(L, (lua_Integer)level);
+	lua_setfield(L, -2, "level");
+	lua_pop(L, 1);
+}
 
-	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_tick);
-	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_inputs);
-	subtable(L, "digital", VMAC_DIGITAL_INPUTS);
-	for (i = 0; i < VMAC_DIGITAL_INPUTS; i++) {
-		lua_pushboolean(L, (in->digital >> i) & 1);
-		lua_rawseti(L, -2, i + 1);
+static int call_ref(struct vmac_driver *d, int ref, double time_s, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	if (ref == LUA_NOREF)
+		return 0;
+	d->now_s = time_s;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, ref);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	return guarded_call(d, 1, 0, 1, err, errlen);
+}
+
+int vmac_driver_attach(struct vmac_driver *d, double time_s, char *err, size_t errlen)
+{
+	return call_ref(d, d->ref_attach, time_s, err, errlen);
+}
+
+void vmac_driver_detach(struct vmac_driver *d, const char *reason)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	lua_State *L = d->L;
+	if (d->ref_detach == LUA_NOREF)
+		return;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_detach);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	lua_pushstring(L, reason);
+	guarded_call(d, 2, 0, 1, err, sizeof(err));
+}
+
+/* ---- the tick ---- */
+
+static void fill_inputs(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[])
+{
+	lua_State *L = d->L;
+	int i;
+	for (i = 0; i < d->nio; i++) {
+		const struct io *io = &d->io[i];
+		const struct vmac_inputs *x = io->board >= 0 ? in[io->board] : NULL;
+		if (io->kind == IO_DO || io->kind == IO_PWM)
+			continue;
+		if (!x)
+			lua_pushnil(L);
+		else if (io->kind == IO_DI)
+			lua_pushboolean(L, (x->digital >> io->channel) & 1);
+		else if (io->kind == IO_AI)
+			lua_pushnumber(L, x->analog[io->channel] * io->scale + io->offset);
+		else
+			lua_pushinteger(L, x->encoder);
+		lua_setfield(L, -2, io->name);
 	}
-	lua_pop(L, 1);
-	subtable(L, "analog", VMAC_ANALOG_INPUTS);
-	for (i = 0; i < VMAC_ANALOG_INPUTS; i++) {
-		lua_pushinteger(L, in->analog[i]);
-		lua_rawseti(L, -2, i + 1);
-	}
-	lua_pop(L, 1);
-	lua_pushinteger(L, in->encoder);
-	lua_setfield(L, -2, "encoder");
 	lua_pushnumber(L, time_s);
 	lua_setfield(L, -2, "time");
-	if (guarded_call(d, 1, 1, err, errlen) != 0)
+}
+
+/* dev.out -> out[]: [-0, +0]. */
+static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[], char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	int i, rc = 0;
+	for (i = 0; i < d->nboards; i++)
+		memset(out[i], 0, sizeof(*out[i]));
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	lua_getfield(L, -1, "out");
+	if (!lua_istable(L, -1)) {
+		snprintf(err, errlen, "%s: dev.out must stay a table, got %s", d->file, luaL_typename(L, -1));
+		lua_pop(L, 2);
 		return -1;
-	rc = read_outputs(L, d, out, err, errlen);
-	lua_pop(L, 1);
+	}
+	for (i = 0; i < d->nio && rc == 0; i++) {
+		const struct io *io = &d->io[i];
+		struct vmac_outputs *o = io->board >= 0 && io->board < d->nboards ? out[io->board] : NULL;
+		if (io->kind != IO_DO && io->kind != IO_PWM)
+			continue;
+		lua_getfield(L, -1, io->name);
+		if (io->kind == IO_DO) {
+			if (lua_isboolean(L, -1)) {
+				if (o && lua_toboolean(L, -1))
+					o->digital |= (uint8_t)(1u << io->channel);
+			} else if (!lua_isnil(L, -1)) {
+				snprintf(err, errlen, "%s: dev.out.%s must be true, false or nil, got %s", d->file, io->name,
+				         luaL_typename(L, -1));
+				rc = -1;
+			}
+		} else if (!lua_isnil(L, -1)) {
+			double pwm = lua_tonumber(L, -1);
+			if (lua_type(L, -1) != LUA_TNUMBER || !(pwm >= -VMAC_PWM_MAX && pwm <= VMAC_PWM_MAX)) {
+				snprintf(err, errlen, "%s: dev.out.%s must be a number in -1000..1000, got %s", d->file,
+				         io->name, lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1) : luaL_typename(L, -1));
+				rc = -1;
+			} else if (o) {
+				o->pwm = (int16_t)pwm;
+			}
+		}
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 2);
+	if (rc != 0)
+		for (i = 0; i < d->nboards; i++)
+			memset(out[i], 0, sizeof(*out[i]));
 	return rc;
+}
+
+/* The value on top as a vmac_value; -1 if it has a type a variable cannot. */
+static int to_value(lua_State *L, struct vmac_value *v)
+{
+	size_t n;
+	const char *s;
+	switch (lua_type(L, -1)) {
+	case LUA_TNIL:
+		v->type = VMAC_VALUE_NONE;
+		return 0;
+	case LUA_TNUMBER:
+		v->type = VMAC_VALUE_NUMBER;
+		v->number = lua_tonumber(L, -1);
+		return 0;
+	case LUA_TBOOLEAN:
+		v->type = VMAC_VALUE_BOOL;
+		v->number = lua_toboolean(L, -1);
+		return 0;
+	case LUA_TSTRING:
+		s = lua_tolstring(L, -1, &n);
+		if (n > VMAC_DRIVER_STR_MAX)
+			n = VMAC_DRIVER_STR_MAX;
+		v->type = VMAC_VALUE_STRING;
+		memcpy(v->str, s, n);
+		v->str[n] = 0;
+		return 0;
+	default:
+		return -1;
+	}
+}
+
+static int value_equal(const struct vmac_value *a, const struct vmac_value *b)
+{
+	if (a->type != b->type)
+		return 0;
+	if (a->type == VMAC_VALUE_STRING)
+		return strcmp(a->str, b->str) == 0;
+	return a->type == VMAC_VALUE_NONE || a->number == b->number ||
+	       (a->number != a->number && b->number != b->number);
+}
+
+/* dev.vars -> the published values: what is due now, groups whole. */
+static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	struct vmac_value now[VMAC_DRIVER_MAX_VARS];
+	int i, j;
+	if (d->nvars == 0)
+		return 0;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	lua_getfield(L, -1, "vars");
+	if (!lua_istable(L, -1)) {
+		snprintf(err, errlen, "%s: dev.vars must stay a table, got %s", d->file, luaL_typename(L, -1));
+		lua_pop(L, 2);
+		return -1;
+	}
+	for (i = 0; i < d->nvars; i++) {
+		struct var *v = &d->vars[i];
+		lua_getfield(L, -1, v->pub.name);
+		if (to_value(L, &now[i]) != 0) {
+			snprintf(err, errlen, "%s: dev.vars.%s must be a number, boolean, string or nil, got %s", d->file,
+			         v->pub.name, luaL_typename(L, -1));
+			lua_pop(L, 3);
+			return -1;
+		}
+		lua_pop(L, 1);
+		v->due = !value_equal(&now[i], &v->pub.value) &&
+		         (v->every_s == 0 || time_s - v->pub.published_s >= v->every_s || v->pub.published_s == 0);
+	}
+	lua_pop(L, 2);
+	for (i = 0; i < d->nvars; i++) /* a group is due as a whole */
+		if (d->vars[i].due && d->vars[i].group)
+			for (j = 0; j < d->nvars; j++)
+				if (d->vars[j].group == d->vars[i].group)
+					d->vars[j].due = 1;
+	for (i = 0; i < d->nvars; i++)
+		if (d->vars[i].due) {
+			d->vars[i].pub.value = now[i];
+			d->vars[i].pub.published_s = time_s;
+		}
+	return 0;
+}
+
+int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
+                     struct vmac_outputs *const out[], char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	d->now_s = time_s;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_tick);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_inputs);
+	fill_inputs(d, time_s, in);
+	if (guarded_call(d, 2, 0, 1, err, errlen) != 0)
+		return -1;
+	if (read_outputs(d, out, err, errlen) != 0)
+		return -1;
+	return publish_vars(d, time_s, err, errlen);
+}
+
+int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,
+                      char *reply, size_t replylen, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	int i, top = lua_gettop(L), kind = 0; /* 1 variable, 2 param, 3 command */
+	char why[160];
+
+	reply[0] = 0;
+	for (i = 0; i < d->nvars; i++)
+		if (strcmp(d->vars[i].pub.name, name) == 0) {
+			if (!d->vars[i].settable) {
+				snprintf(reply, replylen, "%s is read-only", name);
+				return 1;
+			}
+			kind = 1;
+		}
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
+	if (!kind) {
+		lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+		lua_getfield(L, -1, name);
+		kind = lua_isnil(L, -1) ? 0 : 2;
+		lua_pop(L, 2);
+	}
+	if (!kind) {
+		lua_getfield(L, -1, "commands");
+		if (lua_istable(L, -1)) {
+			lua_getfield(L, -1, name);
+			kind = lua_istable(L, -1) ? 3 : 0;
+			lua_pop(L, 1);
+		}
+		lua_pop(L, 1);
+	}
+	if (!kind) {
+		snprintf(reply, replylen, "%s: no such variable, param or command", name);
+		lua_settop(L, top);
+		return 1;
+	}
+	/* Push the value, then check it against the declaration. */
+	if (value->type == VMAC_VALUE_NUMBER)
+		lua_pushnumber(L, value->number);
+	else if (value->type == VMAC_VALUE_BOOL)
+		lua_pushboolean(L, value->number != 0);
+	else if (value->type == VMAC_VALUE_STRING)
+		lua_pushstring(L, value->str);
+	else
+		lua_pushboolean(L, 1);
+	if (kind != 3) {
+		lua_getfield(L, -2, kind == 1 ? "variables" : "params");
+		lua_getfield(L, -1, name);
+		lua_pushvalue(L, -3);
+		if (check_value(L, lua_gettop(L) - 1, why, sizeof(why)) != 0) {
+			snprintf(reply, replylen, "%s: %s", name, why);
+			lua_settop(L, top);
+			return 1;
+		}
+		lua_pop(L, 3);
+		if (kind == 2) {
+			lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+			lua_pushvalue(L, -2);
+			lua_setfield(L, -2, name);
+			lua_pop(L, 1);
+		}
+	}
+	if (d->ref_input == LUA_NOREF) {
+		lua_settop(L, top);
+		if (kind == 2)
+			return 0;
+		snprintf(reply, replylen, "%s: the driver takes no input", name);
+		return 1;
+	}
+	d->now_s = time_s;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_input);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	lua_pushstring(L, name);
+	lua_pushvalue(L, -4);
+	if (guarded_call(d, 3, 2, 1, err, errlen) != 0) {
+		lua_settop(L, top);
+		return -1;
+	}
+	if (lua_toboolean(L, -2)) {
+		lua_settop(L, top);
+		return 0;
+	}
+	snprintf(reply, replylen, "%s", lua_isstring(L, -1) ? lua_tostring(L, -1) : "refused by the driver");
+	lua_settop(L, top);
+	return 1;
+}
+
+int vmac_driver_nvars(const struct vmac_driver *d)
+{
+	return d->nvars;
+}
+
+const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, int i)
+{
+	return &d->vars[i].pub;
 }
 
 size_t vmac_driver_memory(const struct vmac_driver *d)

@@ -1,7 +1,11 @@
-/* Lua driver instances: one sandboxed LuaJIT state per device. Every call
- * from C into driver code goes through driver.c's one guarded call (budget,
- * memory cap, traceback); a failure marks the driver, never the host.
- * The driver API is in docs/DRIVERS.md. */
+/* Lua driver instances: one sandboxed LuaJIT state per machine (one or more
+ * boards). Every call from C into driver code goes through driver.c's one
+ * guarded call (budget, memory cap, traceback); a failure marks the driver,
+ * never the host. The driver API is in docs/DRIVERS.md.
+ *
+ * Threads: vmac_driver_load runs on the main thread (it reads files); every
+ * other call is the bus thread's once the driver is handed over, and
+ * allocates only inside the driver's own capped heap. */
 #ifndef VMAC_DRIVER_H
 #define VMAC_DRIVER_H
 
@@ -11,29 +15,113 @@
 #include "../proto/proto.h"
 
 #define VMAC_DRIVER_ERR_MAX 512
+#define VMAC_DRIVER_MAX_BOARDS 8
+#define VMAC_DRIVER_MAX_VARS 24
+#define VMAC_DRIVER_MAX_IO 32
+#define VMAC_DRIVER_MAX_PARAMS 32
+#define VMAC_DRIVER_NAME_MAX 31  /* names of io, params, variables, commands */
+#define VMAC_DRIVER_STR_MAX 63   /* a string variable's value */
+#define VMAC_DRIVER_VERSION_MAX 31
+#define VMAC_DRIVER_LOAD_FACTOR 50 /* loading the file gets this many budgets */
+
+/* Per-driver overrides from the host's settings (driver.NAME.KEY). */
+struct vmac_driver_setting {
+	char key[48];   /* "memory_kib", "instructions", "budget_us", "param.fill_l" */
+	char value[64];
+};
 
 struct vmac_driver_limits {
 	size_t memory_bytes;        /* cap on the state's heap (default 4 MiB) */
-	uint64_t instructions;      /* VM instructions per call (default 2,000,000) */
+	uint64_t instructions;      /* VM instructions per call (default 200,000) */
+	uint32_t budget_us;         /* wall-clock microseconds per call; 0 = no wall-clock limit */
+	unsigned default_level;     /* level when the manifest names none */
+	unsigned max_level;         /* highest level the scheduler has */
+	int allow_jit;              /* honour a manifest's jit = true */
 	const char *stdlib_dir;     /* where the driver's require() looks; NULL: no require */
+	const char *cycles_dir;     /* vmac.cycles() reads the .lua files here; NULL: none */
+	const char *expect_name;    /* the driver name the board announced; NULL: any */
+	const struct vmac_driver_setting *settings; /* overrides for this driver */
+	int nsettings;
+	/* Bus time in seconds, for os.clock(); NULL: 0. */
+	double (*clock)(void *ctx);
+	void *clock_ctx;
+};
+
+/* What the host offers a running driver (dev:set_level, dev:event). Set by
+ * the bus thread with vmac_driver_bind; the calls come from inside a guarded
+ * call, on the bus thread. */
+struct vmac_driver_host {
+	/* Ask for another level; 0, or -1 with err ("schedule full: ..."). */
+	int (*set_level)(void *ctx, unsigned level, char *err, size_t errlen);
+	void (*event)(void *ctx, const char *text);
+	void *ctx;
+};
+
+/* A published variable's value as the status shows it. */
+enum vmac_value_type { VMAC_VALUE_NONE, VMAC_VALUE_NUMBER, VMAC_VALUE_BOOL, VMAC_VALUE_STRING };
+struct vmac_value {
+	enum vmac_value_type type;
+	double number; /* also the boolean (0/1) */
+	char str[VMAC_DRIVER_STR_MAX + 1];
+};
+struct vmac_variable {
+	char name[VMAC_DRIVER_NAME_MAX + 1];
+	char unit[16];
+	struct vmac_value value;
+	double published_s; /* bus time of the last publication */
 };
 
 struct vmac_driver; /* opaque */
 
-/* Load the driver file at path into a fresh sandboxed state and check it
- * returns a table with a tick function. Slow (reads a file, compiles): call
- * off the bus thread. Returns 0 and *out, or a negative errno with err set
- * ("washer.lua:12: unexpected symbol near 'x'"). -ENOENT when no file. */
+/* Load the driver file at path into a fresh sandboxed state, run it, and
+ * check its manifest. Slow (reads files, compiles): call off the bus thread.
+ * Returns 0 and *out, or a negative errno with err set
+ * ("washer.lua:12: unexpected symbol near 'x'",
+ *  "washer.lua: manifest: io.lamp: unknown channel 'do9' ..."). */
 int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
                      char *err, size_t errlen);
 
-/* One service: hand the board's inputs to tick() and take the outputs for
- * the next service. time_s is bus time in seconds. Returns 0, or -1 with err
- * holding the driver's error, file, line and traceback; after a failure the
- * driver must not be called again. Allocates only inside the driver's own
- * capped heap. */
-int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *in,
-                     struct vmac_outputs *out, char *err, size_t errlen);
+/* What the manifest says. */
+const char *vmac_driver_name(const struct vmac_driver *d);
+const char *vmac_driver_version(const struct vmac_driver *d);
+unsigned vmac_driver_level(const struct vmac_driver *d);
+
+/* Bus thread from here on. */
+void vmac_driver_bind(struct vmac_driver *d, const struct vmac_driver_host *host);
+
+/* Boards of the machine: index 0 is the primary. Adding a board that is
+ * already there, or past VMAC_DRIVER_MAX_BOARDS, fails (-1). */
+int vmac_driver_add_board(struct vmac_driver *d, uint32_t minor, const char *name);
+int vmac_driver_boards(const struct vmac_driver *d);
+
+/* The level the machine runs at now (the bus thread tells the driver). */
+void vmac_driver_set_level_now(struct vmac_driver *d, unsigned level);
+
+/* Call attach(dev) if the driver has one. 0, or -1 with err. */
+int vmac_driver_attach(struct vmac_driver *d, double time_s, char *err, size_t errlen);
+
+/* One service of the machine: in[i] / out[i] are the inputs and outputs of
+ * board i (as added). Runs tick(dev, inputs), then reads dev.out into out[]
+ * and publishes due variables. 0, or -1 with err holding the driver's error,
+ * file, line and traceback; after a failure the driver must not be called
+ * again. */
+int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
+                     struct vmac_outputs *const out[], char *err, size_t errlen);
+
+/* Operator input: input(dev, name, value) with value a number, boolean or
+ * string as given. Returns 0 (accepted), 1 (refused: reply holds the
+ * driver's message), -1 (driver failure: err). */
+int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,
+                      char *reply, size_t replylen, char *err, size_t errlen);
+
+/* detach(dev, reason) if the driver has one; errors are ignored (the
+ * machine is going away). */
+void vmac_driver_detach(struct vmac_driver *d, const char *reason);
+
+/* Published variables: how many the driver declares, and the i-th (in name
+ * order) with its latest published value. */
+int vmac_driver_nvars(const struct vmac_driver *d);
+const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, int i);
 
 /* Bytes the driver's heap holds now. */
 size_t vmac_driver_memory(const struct vmac_driver *d);

@@ -1,8 +1,9 @@
-/* The bus thread: see bus.h. One tick per period from an absolute timerfd:
- * drain replies, judge deadlines, discover, send this period's requests.
- * Replies are handled as they arrive; a reply's inputs go to the driver at
- * once and its outputs leave with the next service (one period's delay, a
- * phase-aligned transaction). */
+/* The bus thread: see bus.h. One tick per slot from an absolute timerfd:
+ * drain replies, judge deadlines, discover, send the requests the schedule
+ * (core/sched, docs/SCHEDULER.md) puts in this slot. Replies are handled as
+ * they arrive; the primary board's reply runs its machine's driver at once,
+ * and the outputs leave with each board's next service (one period's delay,
+ * a phase-aligned transaction). */
 #include "bus.h"
 
 #include <arpa/inet.h>
@@ -16,6 +17,8 @@
 #include <sys/mman.h>
 #include <sys/timerfd.h>
 #include <unistd.h>
+
+#include "../sched/sched.h"
 
 #define RX_BATCH 64
 #define STATUS_EVERY_NS 100000000LL   /* publish status at most every 100 ms */
@@ -36,8 +39,30 @@ enum dev_state {
 	DEV_ERRANT,      /* dropped; waits for the board to announce again */
 };
 
+/* A machine: the boards that share a driver name and major id, run by one
+ * driver instance. Board 0 is the primary: its reply runs the tick. */
+struct machine {
+	int used;
+	struct vmac_driver *drv; /* NULL while loading */
+	char driver[VMAC_NAME_MAX + 1];
+	uint32_t major;
+	uint32_t primary;        /* device slot of the primary board */
+	uint32_t board[VMAC_DRIVER_MAX_BOARDS]; /* device slots, in the driver's board order */
+	int nboards;
+	unsigned level;
+	int attached;            /* attach() has run */
+	struct vmac_bus *bus;
+};
+
 struct device {
 	enum dev_state state;
+	int mach;          /* index into bus->mach, -1 when none */
+	int scheduled;     /* admitted to the schedule */
+	int64_t deadline_ns;    /* reply deadline at the device's level */
+	uint16_t aside_seq;     /* a request sent without awaiting its answer (WATCHDOG) */
+	uint16_t watchdog_ms;   /* what the board was told */
+	uint16_t want_watchdog; /* a longer one to send before the next UPDATE (slower level) */
+	char note[200];         /* why it is not running ("schedule full: ...") */
 	uint16_t generation;
 	uint32_t id; /* generation << 16 | slot */
 	struct vmac_announce ann;
@@ -65,10 +90,15 @@ struct vmac_bus {
 	ev_async cmd_w;
 	pthread_t thread;
 	int tfd;
-	int64_t period_ns, deadline_ns, start_ns;
+	int64_t period_ns, deadline_ns, start_ns; /* period_ns: one slot */
 	uint64_t tick_index;
 	struct device *dev;
 	uint32_t ndev;
+	struct machine *mach;
+	struct vmac_sched *sched;
+	struct vmac_sched_entry *slot_entries;
+	int64_t slot_ns;
+	uint64_t slots_done;    /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;
 	struct vmac_packet *tx;
@@ -123,15 +153,20 @@ static void event(struct vmac_bus *bus, const struct device *d, const char *kind
 	post(bus, &m);
 }
 
-static void unload(struct vmac_bus *bus, struct device *d)
+static double bus_time(const struct vmac_bus *bus)
+{
+	return (double)(vmac_now_ns() - bus->start_ns) / 1e9;
+}
+
+/* Hand a driver to the main thread to close (closing a Lua state is slow). */
+static void unload(struct vmac_bus *bus, struct vmac_driver *drv)
 {
 	struct vmac_bus_msg m;
-	if (!d->drv)
+	if (!drv)
 		return;
 	memset(&m, 0, sizeof(m));
 	m.kind = VMAC_MSG_UNLOAD;
-	m.drv = d->drv;
-	d->drv = NULL;
+	m.drv = drv;
 	if (vmac_ring_push(&bus->to_main, &m) != 0) {
 		/* The main thread is far behind; closing here is slow but safe. */
 		vmac_driver_free(m.drv);
@@ -143,10 +178,12 @@ static void unload(struct vmac_bus *bus, struct device *d)
 
 /* ---- sending ---- */
 
+static void flush(struct vmac_bus *bus);
+
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
 {
-	if (bus->ntx >= (int)bus->ndev + 2)
-		return NULL; /* cannot happen: one request per device per tick */
+	if (bus->ntx >= 2 * (int)bus->ndev + 2)
+		flush(bus); /* cannot happen: see the size in vmac_bus_new */
 	return &bus->tx[bus->ntx++];
 }
 
@@ -201,16 +238,26 @@ static void send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason
 
 /* ---- the error policy ---- */
 
-static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char *kind, const char *why)
+static uint32_t slot_of(const struct vmac_bus *bus, const struct device *d)
 {
-	event(bus, d, kind, "%s dropped: %s", d->ann.board, why);
-	unload(bus, d);
-	bus->counters.drops++;
-	/* Tell the board to go safe; it also does so on its own when its
-	 * watchdog runs out, so this is a courtesy, not awaited. After a driver
-	 * failure the board is told to sleep instead: the same safe state, and a
-	 * back-off of sleep_s before the driver is tried again. */
+	return (uint32_t)(d - bus->dev);
+}
+
+static void unschedule(struct vmac_bus *bus, struct device *d)
+{
+	if (d->scheduled)
+		vmac_sched_remove(bus->sched, slot_of(bus, d));
+	d->scheduled = 0;
+}
+
+/* One board out of service: told to go safe (SLEEP after a driver failure:
+ * the same safe state plus a back-off before the driver is tried again),
+ * taken off the schedule, errant until it announces itself again. The
+ * command is a courtesy, not awaited: the board's watchdog does the same. */
+static void set_aside(struct vmac_bus *bus, struct device *d, uint8_t reason)
+{
 	d->pending = 0;
+	unschedule(bus, d);
 	if (reason == VMAC_SHUT_DRIVER) {
 		struct vmac_msg m;
 		memset(&m, 0, sizeof(m));
@@ -222,6 +269,41 @@ static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const c
 	}
 	d->courtesy_seq = d->seq;
 	d->state = DEV_ERRANT;
+	d->mach = -1;
+}
+
+static void free_machine(struct vmac_bus *bus, struct machine *m)
+{
+	unload(bus, m->drv);
+	memset(m, 0, sizeof(*m));
+}
+
+/* Drop d, and with it every other board of its machine: a machine with a
+ * board missing is not safe to run. */
+static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char *kind, const char *why)
+{
+	event(bus, d, kind, "%s dropped: %s", d->ann.board, why);
+	bus->counters.drops++;
+	if (d->mach >= 0) {
+		int mi = d->mach;
+		uint32_t i;
+		for (i = 0; i < bus->ndev; i++) {
+			struct device *o = &bus->dev[i];
+			if (o == d || o->mach != mi || o->state == DEV_FREE)
+				continue;
+			if (o->state == DEV_LOADING) {
+				o->state = DEV_ERRANT;
+				o->mach = -1;
+				continue;
+			}
+			event(bus, o, kind, "%s dropped: %s, a board of the same machine, was dropped", o->ann.board,
+			      d->ann.board);
+			bus->counters.drops++;
+			set_aside(bus, o, reason);
+		}
+		free_machine(bus, &bus->mach[mi]);
+	}
+	set_aside(bus, d, reason);
 }
 
 static void miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)
@@ -239,7 +321,7 @@ static void check_deadlines(struct vmac_bus *bus, int64_t now)
 	for (i = 0; i < bus->ndev; i++) {
 		struct device *d = &bus->dev[i];
 		char why[120];
-		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= bus->deadline_ns)
+		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->deadline_ns)
 			continue;
 		d->pending = 0;
 		d->missed_seq = d->seq;
@@ -247,7 +329,7 @@ static void check_deadlines(struct vmac_bus *bus, int64_t now)
 			continue;
 		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)d->seq,
-		         (double)bus->deadline_ns / 1e6);
+		         (double)d->deadline_ns / 1e6);
 		miss(bus, d, why);
 	}
 }
@@ -313,10 +395,106 @@ static struct device *new_slot(struct vmac_bus *bus)
 	return oldest;
 }
 
+/* The comm-loss period a board at this level is given: the configured one,
+ * or three service periods when that is longer. */
+static uint16_t watchdog_for(const struct vmac_bus *bus, unsigned level)
+{
+	int64_t ms = (bus->slot_ns << level) * 3 / 1000000;
+	if (ms < bus->cfg.watchdog_ms)
+		ms = bus->cfg.watchdog_ms;
+	return (uint16_t)(ms > 60000 ? 60000 : ms);
+}
+
+/* Admit board d of machine m to the schedule and to the driver. */
+static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
+{
+	char why[200];
+	if (m->nboards == VMAC_DRIVER_MAX_BOARDS || vmac_driver_add_board(m->drv, d->ann.minor, d->ann.board) != 0) {
+		snprintf(d->note, sizeof(d->note), "machine full: at most %d boards per machine", VMAC_DRIVER_MAX_BOARDS);
+		event(bus, d, "machine_full", "%s not attached: %s", d->ann.board, d->note);
+		return -1;
+	}
+	if (vmac_sched_add(bus->sched, slot_of(bus, d), m->level, why, sizeof(why)) != 0) {
+		snprintf(d->note, sizeof(d->note), "%s", why);
+		bus->counters.schedule_full++;
+		event(bus, d, "schedule_full", "%s not attached: %s", d->ann.board, why);
+		return -1;
+	}
+	d->scheduled = 1;
+	m->board[m->nboards++] = slot_of(bus, d);
+	d->state = DEV_REGISTERING;
+	d->register_sent = 0;
+	d->watchdog_ms = watchdog_for(bus, m->level);
+	d->want_watchdog = 0;
+	d->note[0] = 0;
+	return 0;
+}
+
+/* No driver, or no room: every board of machine mi is told to sleep. */
+static void machine_to_sleep(struct vmac_bus *bus, int mi)
+{
+	uint32_t i;
+	for (i = 0; i < bus->ndev; i++) {
+		struct device *d = &bus->dev[i];
+		if (d->mach != mi)
+			continue;
+		unschedule(bus, d);
+		d->mach = -1;
+		d->pending = 0;
+		d->register_sent = 0;
+		d->state = DEV_TO_SLEEP;
+	}
+	free_machine(bus, &bus->mach[mi]);
+}
+
+static int find_machine(const struct vmac_bus *bus, const char *driver, uint32_t major)
+{
+	uint32_t i;
+	for (i = 0; i < bus->ndev; i++)
+		if (bus->mach[i].used && bus->mach[i].major == major && strcmp(bus->mach[i].driver, driver) == 0)
+			return (int)i;
+	return -1;
+}
+
+/* A new board: join its machine if there is one, else start a machine and
+ * ask the main thread for the driver. */
+static void join_or_load(struct vmac_bus *bus, struct device *d)
+{
+	struct vmac_bus_msg load;
+	int mi = find_machine(bus, d->ann.driver, d->ann.major);
+	struct machine *m;
+	if (mi >= 0) {
+		m = &bus->mach[mi];
+		d->mach = mi;
+		if (m->drv && admit(bus, m, d) != 0) { /* else joins when the driver arrives */
+			d->mach = -1;
+			d->state = DEV_TO_SLEEP;
+		}
+		return;
+	}
+	for (mi = 0; mi < (int)bus->ndev && bus->mach[mi].used; mi++)
+		;
+	m = &bus->mach[mi]; /* never full: at most one machine per device */
+	memset(m, 0, sizeof(*m));
+	m->used = 1;
+	m->bus = bus;
+	memcpy(m->driver, d->ann.driver, sizeof(m->driver));
+	m->major = d->ann.major;
+	m->primary = slot_of(bus, d);
+	d->mach = mi;
+
+	memset(&load, 0, sizeof(load));
+	load.kind = VMAC_MSG_LOAD;
+	load.slot = slot_of(bus, d);
+	load.generation = d->generation;
+	memcpy(load.device, d->ann.board, sizeof(load.device));
+	memcpy(load.driver, d->ann.driver, sizeof(load.driver));
+	post(bus, &load);
+}
+
 static void on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p)
 {
 	struct device *d = find_by_identity(bus, &m->u.announce);
-	struct vmac_bus_msg load;
 
 	bus->counters.announces++;
 	if (d) {
@@ -343,33 +521,69 @@ static void on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const st
 	d->ann = m->u.announce;
 	d->addr = p->addr;
 	d->generation = (uint16_t)(d->generation + 1 ? d->generation + 1 : 1);
-	d->id = (uint32_t)d->generation << 16 | (uint32_t)(d - bus->dev);
+	d->id = (uint32_t)d->generation << 16 | slot_of(bus, d);
 	d->state = DEV_LOADING;
 	d->pending = 0;
 	d->register_sent = 0;
 	d->consecutive_misses = 0;
 	d->last_seen_ns = p->rx_ns;
+	d->mach = -1;
+	d->note[0] = 0;
 	memset(&d->outputs, 0, sizeof(d->outputs));
 	memset(&d->inputs, 0, sizeof(d->inputs));
-
-	memset(&load, 0, sizeof(load));
-	load.kind = VMAC_MSG_LOAD;
-	load.slot = (uint32_t)(d - bus->dev);
-	load.generation = d->generation;
-	memcpy(load.device, d->ann.board, sizeof(load.device));
-	memcpy(load.driver, d->ann.driver, sizeof(load.driver));
-	post(bus, &load);
+	join_or_load(bus, d);
 }
 
-static void run_driver(struct vmac_bus *bus, struct device *d)
+/* The machine's tick, on its primary board's reply. */
+static void run_machine(struct vmac_bus *bus, struct machine *m)
 {
 	char err[VMAC_DRIVER_ERR_MAX];
-	double t = (double)(vmac_now_ns() - bus->start_ns) / 1e9;
-	if (vmac_driver_tick(d->drv, t, &d->inputs, &d->outputs, err, sizeof(err)) == 0)
+	const struct vmac_inputs *in[VMAC_DRIVER_MAX_BOARDS];
+	struct vmac_outputs *out[VMAC_DRIVER_MAX_BOARDS];
+	struct device *primary = &bus->dev[m->primary];
+	int i;
+	for (i = 0; i < m->nboards; i++) {
+		in[i] = &bus->dev[m->board[i]].inputs;
+		out[i] = &bus->dev[m->board[i]].outputs;
+	}
+	if (vmac_driver_tick(m->drv, bus_time(bus), in, out, err, sizeof(err)) == 0)
 		return;
-	memset(&d->outputs, 0, sizeof(d->outputs));
-	event(bus, d, "driver_error", "%s: driver %s failed: %s", d->ann.board, d->ann.driver, err);
-	drop(bus, d, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+	event(bus, primary, "driver_error", "%s: driver %s failed: %s", primary->ann.board, m->driver, err);
+	drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+}
+
+/* The bus's side of dev:set_level and dev:event (struct vmac_driver_host). */
+static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen)
+{
+	struct machine *m = ctx;
+	struct vmac_bus *bus = m->bus;
+	unsigned old = m->level;
+	int i, j;
+	if (level == old)
+		return 0;
+	for (i = 0; i < m->nboards; i++)
+		if (vmac_sched_set_level(bus->sched, m->board[i], level, err, errlen) != 0) {
+			for (j = 0; j < i; j++)
+				vmac_sched_set_level(bus->sched, m->board[j], old, NULL, 0);
+			return -1;
+		}
+	m->level = level;
+	vmac_driver_set_level_now(m->drv, level);
+	for (i = 0; i < m->nboards; i++) {
+		struct device *d = &bus->dev[m->board[i]];
+		uint16_t wd = watchdog_for(bus, level);
+		if (wd > d->watchdog_ms)
+			d->want_watchdog = wd; /* sent before its next UPDATE */
+	}
+	event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u (period %.6g ms)", m->driver, old, level,
+	      (double)(bus->slot_ns << level) / 1e6);
+	return 0;
+}
+
+static void hook_event(void *ctx, const char *text)
+{
+	struct machine *m = ctx;
+	event(m->bus, &m->bus->dev[m->primary], "driver", "%s", text);
 }
 
 static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m)
@@ -391,9 +605,18 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 		if (m->op != VMAC_OP_REGISTER)
 			return;
 		d->state = DEV_RUNNING;
-		event(bus, d, "attached", "%s attached: driver %s, major %u minor %u, at %s", d->ann.board,
-		      d->ann.driver, (unsigned)d->ann.major, (unsigned)d->ann.minor,
-		      vmac_addr_format(&d->addr, why, sizeof(why)));
+		event(bus, d, "attached", "%s attached: driver %s %s, major %u minor %u, level %u, at %s", d->ann.board,
+		      d->ann.driver, vmac_driver_version(bus->mach[d->mach].drv), (unsigned)d->ann.major,
+		      (unsigned)d->ann.minor, bus->mach[d->mach].level, vmac_addr_format(&d->addr, why, sizeof(why)));
+		if (slot_of(bus, d) == bus->mach[d->mach].primary && !bus->mach[d->mach].attached) {
+			struct machine *mm = &bus->mach[d->mach];
+			char err[VMAC_DRIVER_ERR_MAX];
+			mm->attached = 1;
+			if (vmac_driver_attach(mm->drv, bus_time(bus), err, sizeof(err)) != 0) {
+				event(bus, d, "driver_error", "%s: driver %s failed in attach: %s", d->ann.board, mm->driver, err);
+				drop(bus, d, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+			}
+		}
 		break;
 	case DEV_TO_SLEEP:
 		if (m->op == VMAC_OP_REGISTER) {
@@ -410,7 +633,8 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 	case DEV_RUNNING:
 		if (m->op == VMAC_OP_UPDATE) {
 			d->inputs = m->u.inputs;
-			run_driver(bus, d);
+			if (d->mach >= 0 && bus->mach[d->mach].primary == slot_of(bus, d) && bus->mach[d->mach].attached)
+				run_machine(bus, &bus->mach[d->mach]);
 		}
 		break;
 	default:
@@ -455,17 +679,19 @@ static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 		 * dropping the device. Anything else is stale. */
 		if (m.seq == d->missed_seq)
 			bus->counters.late_replies++;
+		else if (m.seq == d->aside_seq && d->aside_seq != 0)
+			; /* the answer to a WATCHDOG sent alongside an UPDATE */
 		else if (m.seq != d->courtesy_seq || d->state != DEV_ERRANT)
 			malformed(bus, p, VMAC_BAD_STALE_SEQ);
 		return;
 	}
 	d->pending = 0;
-	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > bus->deadline_ns) {
+	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > d->deadline_ns) {
 		char why[120];
 		bus->counters.late_replies++;
 		snprintf(why, sizeof(why), "reply to %s seq %u came %.3g ms after the request (deadline %.3g ms)",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)m.seq,
-		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)bus->deadline_ns / 1e6);
+		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)d->deadline_ns / 1e6);
 		if (!bus->stopping)
 			miss(bus, d, why);
 		return;
@@ -506,7 +732,7 @@ static void publish(struct vmac_bus *bus, int64_t now)
 {
 	struct vmac_status *s = &bus->status;
 	uint32_t i;
-	int n = 0;
+	int n = 0, v;
 	if (pthread_mutex_trylock(&bus->status_lock) != 0)
 		return; /* a reader holds it: try again next tick, never wait */
 	s->time_ns = now;
@@ -514,24 +740,45 @@ static void publish(struct vmac_bus *bus, int64_t now)
 	s->realtime = bus->realtime;
 	s->lateness = bus->lateness;
 	s->counters = bus->counters;
+	s->slices_per_slot = bus->cfg.slices_per_slot;
+	s->slots_per_block = 1u << bus->cfg.max_level;
+	s->slot_us = (unsigned)(bus->slot_ns / 1000);
+	vmac_sched_capacity(bus->sched, &s->capacity_used, &s->capacity_total);
+	for (i = 0; i < s->slots_per_block; i++)
+		s->slot_load[i] = (uint16_t)vmac_sched_load(bus->sched, i);
 	for (i = 0; i < bus->ndev; i++) {
 		const struct device *d = &bus->dev[i];
+		const struct machine *m = d->mach >= 0 ? &bus->mach[d->mach] : NULL;
 		struct vmac_device_status *o = &s->devices[n];
+		struct vmac_sched_device sd;
 		if (d->state == DEV_FREE)
 			continue;
 		memcpy(o->name, d->ann.board, sizeof(o->name));
 		memcpy(o->driver, d->ann.driver, sizeof(o->driver));
+		snprintf(o->driver_version, sizeof(o->driver_version), "%s", m && m->drv ? vmac_driver_version(m->drv) : "");
+		snprintf(o->machine, sizeof(o->machine), "%s", m ? bus->dev[m->primary].ann.board : "");
+		snprintf(o->note, sizeof(o->note), "%s", d->note);
 		o->state = state_name(d->state);
 		vmac_addr_format(&d->addr, o->address, sizeof(o->address));
 		o->id = d->id;
 		o->major = d->ann.major;
 		o->minor = d->ann.minor;
-		o->period_us = bus->cfg.period_us;
+		o->scheduled = d->scheduled && vmac_sched_device(bus->sched, i, &sd) == 0 && sd.state == VMAC_SCHED_RUNNING;
+		o->level = o->scheduled ? sd.level : (m ? m->level : 0);
+		o->slot = o->scheduled ? sd.offset : 0;
+		o->slice = o->scheduled ? sd.slice : 0;
+		o->period_us = (uint32_t)((bus->slot_ns << o->level) / 1000);
 		o->misses = d->misses;
 		o->served = d->served;
 		o->inputs = d->inputs;
 		o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
-		o->driver_memory = d->drv ? vmac_driver_memory(d->drv) : 0;
+		o->driver_memory = m && m->drv && m->primary == i ? vmac_driver_memory(m->drv) : 0;
+		o->nvars = 0;
+		if (m && m->drv && m->primary == i) {
+			o->nvars = vmac_driver_nvars(m->drv);
+			for (v = 0; v < o->nvars; v++)
+				o->vars[v] = *vmac_driver_variable(m->drv, v);
+		}
 		n++;
 	}
 	s->ndevices = n;
@@ -562,35 +809,52 @@ static void send_discover(struct vmac_bus *bus)
 	bus->counters.discoveries++;
 }
 
-static void service(struct vmac_bus *bus)
+/* REGISTER goes out at once, whatever the slot: a board is not in the
+ * schedule's service until it has a session. */
+static void service_registration(struct vmac_bus *bus)
 {
 	uint32_t i;
 	for (i = 0; i < bus->ndev; i++) {
 		struct device *d = &bus->dev[i];
 		struct vmac_msg m;
-		if (d->pending)
+		if (d->pending || d->register_sent || (d->state != DEV_REGISTERING && d->state != DEV_TO_SLEEP))
 			continue;
 		memset(&m, 0, sizeof(m));
-		switch (d->state) {
-		case DEV_REGISTERING:
-		case DEV_TO_SLEEP:
-			if (d->register_sent)
-				break;
-			m.op = VMAC_OP_REGISTER;
-			m.u.reg.major = d->ann.major;
-			m.u.reg.minor = d->ann.minor;
-			m.u.reg.watchdog_ms = (uint16_t)bus->cfg.watchdog_ms;
-			d->register_sent = 1;
-			queue(bus, d, &m, 1);
-			break;
-		case DEV_RUNNING:
-			m.op = VMAC_OP_UPDATE;
-			m.u.outputs = d->outputs;
-			queue(bus, d, &m, 1);
-			break;
-		default:
-			break;
+		m.op = VMAC_OP_REGISTER;
+		m.u.reg.major = d->ann.major;
+		m.u.reg.minor = d->ann.minor;
+		m.u.reg.watchdog_ms = d->state == DEV_REGISTERING ? d->watchdog_ms : (uint16_t)bus->cfg.watchdog_ms;
+		d->register_sent = 1;
+		d->deadline_ns = bus->deadline_ns;
+		queue(bus, d, &m, 1);
+	}
+}
+
+/* The UPDATEs the schedule puts in this slot, in slice order. */
+static void service_slot(struct vmac_bus *bus, uint64_t slot)
+{
+	int i, n = vmac_sched_slot(bus->sched, slot, bus->slot_entries, (int)bus->cfg.slices_per_slot);
+	for (i = 0; i < n; i++) {
+		const struct vmac_sched_entry *e = &bus->slot_entries[i];
+		struct device *d = &bus->dev[e->device];
+		int64_t period = bus->slot_ns << e->level;
+		struct vmac_msg m;
+		if (d->state != DEV_RUNNING || d->pending)
+			continue;
+		d->deadline_ns = bus->deadline_ns < period ? bus->deadline_ns : period;
+		if (d->want_watchdog) {
+			memset(&m, 0, sizeof(m));
+			m.op = VMAC_OP_WATCHDOG;
+			m.u.watchdog_ms = d->want_watchdog;
+			queue(bus, d, &m, 0);
+			d->aside_seq = d->seq;
+			d->watchdog_ms = d->want_watchdog;
+			d->want_watchdog = 0;
 		}
+		memset(&m, 0, sizeof(m));
+		m.op = VMAC_OP_UPDATE;
+		m.u.outputs = d->outputs;
+		queue(bus, d, &m, 1);
 	}
 }
 
@@ -599,15 +863,25 @@ static void begin_stop(struct vmac_bus *bus, int64_t now)
 	uint32_t i;
 	bus->stopping = 1;
 	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->period_ns;
+	if (bus->stop_deadline_ns < now + 100000000)
+		bus->stop_deadline_ns = now + 100000000; /* at least 100 ms for the acks */
+	for (i = 0; i < bus->ndev; i++)
+		if (bus->mach[i].used && bus->mach[i].drv && bus->mach[i].attached)
+			vmac_driver_detach(bus->mach[i].drv, "host stopping");
 	for (i = 0; i < bus->ndev; i++) {
 		struct device *d = &bus->dev[i];
 		if (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP) {
 			d->pending = 0;
 			send_shutdown(bus, d, VMAC_SHUT_HOST_STOP, 1);
+			d->deadline_ns = bus->stop_deadline_ns - now;
 			d->state = DEV_ERRANT;
-			unload(bus, d);
 		}
+		unschedule(bus, d);
+		d->mach = -1;
 	}
+	for (i = 0; i < bus->ndev; i++)
+		if (bus->mach[i].used)
+			free_machine(bus, &bus->mach[i]);
 	flush(bus);
 }
 
@@ -659,7 +933,13 @@ static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
 		send_discover(bus);
 		bus->next_discover_ns = now + (int64_t)bus->cfg.discovery_period_ms * 1000000;
 	}
-	service(bus);
+	service_registration(bus);
+	/* Every slot in order, late ones included: the schedule's guarantees
+	 * (docs/SCHEDULER.md) hold only if no slot is skipped. */
+	while (bus->slots_done < bus->tick_index) {
+		bus->slots_done++;
+		service_slot(bus, bus->slots_done);
+	}
 	flush(bus);
 	if (now - bus->last_status_ns >= STATUS_EVERY_NS)
 		publish(bus, now);
@@ -671,6 +951,45 @@ static void on_socket(struct ev_loop *loop, ev_io *w, int revents)
 	(void)loop;
 	(void)revents;
 	drain(bus);
+}
+
+/* The main thread has loaded (or failed to load) the driver of the machine
+ * whose primary is d. */
+static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_host_cmd *c)
+{
+	int mi = d->mach;
+	struct machine *m = &bus->mach[mi];
+	struct vmac_driver_host host;
+	uint32_t i;
+	if (!c->drv) {
+		event(bus, d, c->missing ? "driver_missing" : "driver_error", "%s", c->text);
+		event(bus, d, "sleeping", "%s told to sleep for %u s: no usable driver '%s'", d->ann.board,
+		      (unsigned)bus->cfg.sleep_s, d->ann.driver);
+		snprintf(d->note, sizeof(d->note), "%s", c->text);
+		machine_to_sleep(bus, mi);
+		return;
+	}
+	m->drv = c->drv;
+	m->level = vmac_driver_level(c->drv);
+	host.set_level = hook_set_level;
+	host.event = hook_event;
+	host.ctx = m;
+	vmac_driver_bind(m->drv, &host);
+	if (admit(bus, m, d) != 0) {
+		char note[sizeof(d->note)];
+		memcpy(note, d->note, sizeof(note));
+		event(bus, d, "sleeping", "%s told to sleep for %u s: %s", d->ann.board, (unsigned)bus->cfg.sleep_s, note);
+		machine_to_sleep(bus, mi);
+		memcpy(d->note, note, sizeof(note));
+		return;
+	}
+	for (i = 0; i < bus->ndev; i++) { /* boards that announced while the driver loaded */
+		struct device *o = &bus->dev[i];
+		if (o != d && o->mach == mi && o->state == DEV_LOADING && admit(bus, m, o) != 0) {
+			o->mach = -1;
+			o->state = DEV_TO_SLEEP;
+		}
+	}
 }
 
 static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
@@ -687,24 +1006,12 @@ static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
 			continue;
 		}
 		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
-		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping) {
-			if (c.drv) { /* the device went away meanwhile */
-				struct device tmp;
-				memset(&tmp, 0, sizeof(tmp));
-				tmp.drv = c.drv;
-				unload(bus, &tmp);
-			}
+		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping || d->mach < 0 ||
+		    bus->mach[d->mach].primary != c.slot || bus->mach[d->mach].drv) {
+			unload(bus, c.drv); /* the device went away meanwhile */
 			continue;
 		}
-		if (c.drv) {
-			d->drv = c.drv;
-			d->state = DEV_REGISTERING;
-		} else {
-			event(bus, d, c.missing ? "driver_missing" : "driver_error", "%s", c.text);
-			event(bus, d, "sleeping", "%s told to sleep for %u s: no usable driver '%s'", d->ann.board,
-			      (unsigned)bus->cfg.sleep_s, d->ann.driver);
-			d->state = DEV_TO_SLEEP;
-		}
+		on_loaded(bus, d, &c);
 	}
 }
 
@@ -759,6 +1066,7 @@ static void *bus_main(void *arg)
 struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t errlen)
 {
 	struct vmac_bus *bus = calloc(1, sizeof(*bus));
+	uint32_t i;
 	struct vmac_bus_spec spec;
 	if (!bus) {
 		snprintf(err, errlen, "out of memory");
@@ -779,18 +1087,27 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 		goto fail;
 	vmac_addr_format(&bus->tr.local, bus->host_addr, sizeof(bus->host_addr));
 	bus->ndev = cfg->max_devices;
-	bus->period_ns = (int64_t)cfg->period_us * 1000;
+	bus->slot_ns = (int64_t)vmac_config_slot_us(cfg) * 1000;
+	bus->period_ns = bus->slot_ns;
 	bus->deadline_ns = (int64_t)cfg->reply_deadline_us * 1000;
 	bus->dev = calloc(bus->ndev, sizeof(*bus->dev));
-	bus->tx = calloc(bus->ndev + 2, sizeof(*bus->tx));
+	bus->mach = calloc(bus->ndev, sizeof(*bus->mach));
+	/* Per flush at most: one request per device, a WATCHDOG beside it, a DISCOVER. */
+	bus->tx = calloc(2 * bus->ndev + 2, sizeof(*bus->tx));
 	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
+	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
+	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
+	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
 	bus->tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
-	if (!bus->dev || !bus->tx || !bus->status.devices || bus->tfd < 0 ||
+	if (!bus->dev || !bus->mach || !bus->tx || !bus->status.devices || !bus->status.slot_load ||
+	    !bus->slot_entries || !bus->sched || bus->tfd < 0 ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), 1024) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024)) {
 		snprintf(err, errlen, "out of memory or timers");
 		goto fail;
 	}
+	for (i = 0; i < bus->ndev; i++)
+		bus->dev[i].mach = -1;
 	pthread_mutex_init(&bus->status_lock, NULL);
 	bus->loop = ev_loop_new(EVFLAG_AUTO | EVFLAG_NOSIGMASK);
 	if (!bus->loop) {
@@ -819,9 +1136,9 @@ void vmac_bus_free(struct vmac_bus *bus)
 	uint32_t i;
 	if (!bus)
 		return;
-	if (bus->dev)
+	if (bus->mach)
 		for (i = 0; i < bus->ndev; i++)
-			vmac_driver_free(bus->dev[i].drv);
+			vmac_driver_free(bus->mach[i].drv);
 	if (bus->loop)
 		ev_loop_destroy(bus->loop);
 	vmac_transport_close(&bus->tr);
@@ -830,8 +1147,12 @@ void vmac_bus_free(struct vmac_bus *bus)
 	vmac_ring_fini(&bus->to_main);
 	vmac_ring_fini(&bus->to_bus);
 	free(bus->dev);
+	free(bus->mach);
 	free(bus->tx);
 	free(bus->status.devices);
+	free(bus->status.slot_load);
+	free(bus->slot_entries);
+	vmac_sched_free(bus->sched);
 	free(bus);
 }
 
@@ -867,10 +1188,13 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
 void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out)
 {
 	struct vmac_device_status *devices = out->devices;
+	uint16_t *load = out->slot_load;
 	pthread_mutex_lock(&bus->status_lock);
 	*out = bus->status;
 	out->devices = devices;
+	out->slot_load = load;
 	memcpy(devices, bus->status.devices, (size_t)bus->status.ndevices * sizeof(*devices));
+	memcpy(load, bus->status.slot_load, (size_t)bus->status.slots_per_block * sizeof(*load));
 	pthread_mutex_unlock(&bus->status_lock);
 	memcpy(out->host_addr, bus->host_addr, sizeof(out->host_addr));
 }

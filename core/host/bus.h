@@ -54,7 +54,14 @@ struct vmac_host_cmd {
 struct vmac_device_status {
 	char name[VMAC_NAME_MAX + 1];
 	char driver[VMAC_NAME_MAX + 1];
+	char driver_version[VMAC_DRIVER_VERSION_MAX + 1]; /* "" when no driver runs it */
+	char machine[VMAC_NAME_MAX + 1]; /* the primary board's name ("" when none) */
+	char note[200];    /* why it is not running, e.g. "schedule full: ..." */
 	const char *state; /* attaching, running, sleeping, errant */
+	int scheduled;     /* level, slot, slice are valid */
+	unsigned level, slot, slice;
+	int nvars;         /* published variables (primary board only) */
+	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
 	char address[48];
 	uint32_t id, major, minor;
 	uint32_t period_us;
@@ -72,6 +79,7 @@ struct vmac_bus_counters {
 	uint64_t ticks, ticks_skipped;
 	uint64_t events_lost;      /* event ring full */
 	uint64_t table_full;
+	uint64_t schedule_full; /* devices refused by admission control */
 };
 
 /* Indexes of malformed_by_reason. */
@@ -91,6 +99,10 @@ struct vmac_status {
 	struct vmac_device_status *devices; /* max_devices entries */
 	struct vmac_hist lateness;
 	struct vmac_bus_counters counters;
+	/* The schedule (docs/SCHEDULER.md). */
+	unsigned slices_per_slot, slots_per_block, slot_us;
+	unsigned capacity_used, capacity_total; /* slice-slots per block */
+	uint16_t *slot_load; /* slots_per_block entries: devices serviced in each slot */
 };
 
 struct vmac_bus; /* opaque */
@@ -111,7 +123,8 @@ int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
 int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd);
 
 /* Copy the latest published status (taken at most 100 ms ago) into *out,
- * whose devices array has room for max_devices. */
+ * whose devices array has room for max_devices and slot_load for
+ * 1 << max_level entries. */
 void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out);
 const char *vmac_bus_host_addr(struct vmac_bus *bus);
 

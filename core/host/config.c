@@ -32,7 +32,10 @@ static const struct key keys[] = {
     {S(scripts_dir)},
     {S(stdlib_dir)},
     {S(state_dir)},
-    {U(period_us, 100, 10000000)},
+    {U(slice_us, 1, 1000000)},
+    {U(slices_per_slot, 1, 256)},
+    {U(max_level, 0, 12)},
+    {U(default_level, 0, 12)},
     {U(reply_deadline_us, 50, 10000000)},
     {U(discovery_period_ms, 10, 600000)},
     {U(watchdog_ms, 1, 60000)},
@@ -41,6 +44,8 @@ static const struct key keys[] = {
     {U(max_devices, 1, 4096)},
     {U(driver_memory_kib, 64, 1048576)},
     {U(driver_instructions, 1000, 1000000000)},
+    {U(driver_budget_us, 0, 10000000)},
+    {B(allow_jit)},
     {B(realtime)},
 };
 
@@ -51,7 +56,10 @@ void vmac_config_defaults(struct vmac_config *c)
 	snprintf(c->iface, sizeof(c->iface), "127.0.0.1");
 	snprintf(c->http, sizeof(c->http), "127.0.0.1:8080");
 	snprintf(c->state_dir, sizeof(c->state_dir), "/var/lib/vmac");
-	c->period_us = 10000;
+	c->slice_us = 100;
+	c->slices_per_slot = 10;
+	c->max_level = 10;
+	c->default_level = 4;
 	c->reply_deadline_us = 4000;
 	c->discovery_period_ms = 1000;
 	c->watchdog_ms = 500;
@@ -59,7 +67,8 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->sleep_s = 10;
 	c->max_devices = 1024;
 	c->driver_memory_kib = 4096;
-	c->driver_instructions = 2000000;
+	c->driver_instructions = 200000;
+	c->driver_budget_us = 2000;
 	c->realtime = 1;
 }
 
@@ -72,12 +81,61 @@ static const struct key *find_key(const char *name)
 	return NULL;
 }
 
+/* driver.NAME.KEY = VALUE: kept as text; the driver's loader checks KEY
+ * and VALUE against the driver (docs/HOST.md). */
+static int set_driver(struct vmac_config *c, const char *name, const char *value, char *err, size_t errlen)
+{
+	const char *drv = name + 7, *dot = strchr(drv, '.');
+	struct vmac_config_driver_setting *x;
+	size_t dlen = dot ? (size_t)(dot - drv) : 0;
+	int i;
+	if (!dot || dlen == 0 || dlen > VMAC_NAME_MAX || !dot[1] || strlen(dot + 1) >= sizeof(x->s.key)) {
+		snprintf(err, errlen, "'%s': expected driver.NAME.KEY (KEY: memory_kib, instructions, budget_us, "
+		         "param.NAME)", name);
+		return -1;
+	}
+	if (strlen(value) >= sizeof(x->s.value)) {
+		snprintf(err, errlen, "%s: value too long", name);
+		return -1;
+	}
+	for (i = 0; i < c->ndriver; i++) {
+		x = &c->driver[i];
+		if (strlen(x->driver) == dlen && strncmp(x->driver, drv, dlen) == 0 && strcmp(x->s.key, dot + 1) == 0)
+			break;
+	}
+	if (i == c->ndriver) {
+		if (c->ndriver == VMAC_CONFIG_DRIVER_SETTINGS) {
+			snprintf(err, errlen, "%s: more than %d driver settings", name, VMAC_CONFIG_DRIVER_SETTINGS);
+			return -1;
+		}
+		c->ndriver++;
+	}
+	x = &c->driver[i];
+	memcpy(x->driver, drv, dlen);
+	x->driver[dlen] = 0;
+	snprintf(x->s.key, sizeof(x->s.key), "%s", dot + 1);
+	snprintf(x->s.value, sizeof(x->s.value), "%s", value);
+	return 0;
+}
+
+int vmac_config_driver_settings(const struct vmac_config *c, const char *driver, struct vmac_driver_setting *out,
+                                int max)
+{
+	int i, n = 0;
+	for (i = 0; i < c->ndriver && n < max; i++)
+		if (strcmp(c->driver[i].driver, driver) == 0)
+			out[n++] = c->driver[i].s;
+	return n;
+}
+
 int vmac_config_set(struct vmac_config *c, const char *name, const char *value, char *err, size_t errlen)
 {
 	const struct key *k = find_key(name);
 	char *field, *end;
 	unsigned long v;
 
+	if (strncmp(name, "driver.", 7) == 0)
+		return set_driver(c, name, value, err, errlen);
 	if (!k) {
 		snprintf(err, errlen, "unknown setting '%s' (see docs/HOST.md)", name);
 		return -1;
@@ -114,6 +172,46 @@ int vmac_config_set(struct vmac_config *c, const char *name, const char *value, 
 	return -1;
 }
 
+/* Apply the settings in the table on top; nested tables (only under
+ * driver = {...}) become dotted keys: driver.washer.param.fill_l. */
+static int apply_table(struct vmac_config *c, lua_State *L, const char *path, const char *prefix, int depth,
+                       char *err, size_t errlen)
+{
+	lua_pushnil(L);
+	while (lua_next(L, -2)) {
+		char value[VMAC_PATH_MAX], key[200];
+		const char *name = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : NULL;
+		if (!name) {
+			snprintf(err, errlen, "%s: setting names must be strings", path);
+			return -1;
+		}
+		snprintf(key, sizeof(key), "%s%s", prefix, name);
+		if (lua_type(L, -1) == LUA_TBOOLEAN)
+			snprintf(value, sizeof(value), "%s", lua_toboolean(L, -1) ? "true" : "false");
+		else if (lua_type(L, -1) == LUA_TNUMBER || lua_type(L, -1) == LUA_TSTRING)
+			snprintf(value, sizeof(value), "%s", lua_tostring(L, -1));
+		else if (lua_istable(L, -1) && depth < 3 && strncmp(key, "driver", 6) == 0) {
+			char sub[200];
+			snprintf(sub, sizeof(sub), "%s.", key);
+			if (apply_table(c, L, path, sub, depth + 1, err, errlen) != 0)
+				return -1;
+			lua_pop(L, 1);
+			continue;
+		} else {
+			snprintf(err, errlen, "%s: %s must be a string, number or boolean", path, key);
+			return -1;
+		}
+		if (vmac_config_set(c, key, value, err, errlen) != 0) {
+			char msg[256];
+			snprintf(msg, sizeof(msg), "%s", err);
+			snprintf(err, errlen, "%s: %s", path, msg);
+			return -1;
+		}
+		lua_pop(L, 1);
+	}
+	return 0;
+}
+
 int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
 {
 	lua_State *L = luaL_newstate();
@@ -136,31 +234,7 @@ int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t 
 		snprintf(err, errlen, "%s", lua_tostring(L, -1));
 		goto out;
 	}
-	lua_pushnil(L);
-	while (lua_next(L, -2)) {
-		char value[VMAC_PATH_MAX];
-		const char *key = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : NULL;
-		if (!key) {
-			snprintf(err, errlen, "%s: setting names must be strings", path);
-			goto out;
-		}
-		if (lua_type(L, -1) == LUA_TBOOLEAN)
-			snprintf(value, sizeof(value), "%s", lua_toboolean(L, -1) ? "true" : "false");
-		else if (lua_type(L, -1) == LUA_TNUMBER || lua_type(L, -1) == LUA_TSTRING)
-			snprintf(value, sizeof(value), "%s", lua_tostring(L, -1));
-		else {
-			snprintf(err, errlen, "%s: %s must be a string, number or boolean", path, key);
-			goto out;
-		}
-		if (vmac_config_set(c, key, value, err, errlen) != 0) {
-			char msg[256];
-			snprintf(msg, sizeof(msg), "%s", err);
-			snprintf(err, errlen, "%s: %s", path, msg);
-			goto out;
-		}
-		lua_pop(L, 1);
-	}
-	rc = 0;
+	rc = apply_table(c, L, path, "", 0, err, errlen);
 out:
 	lua_close(L);
 	return rc;
@@ -197,14 +271,18 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 		snprintf(err, errlen, "http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:8080", c->http);
 		return -1;
 	}
-	if (c->reply_deadline_us > c->period_us) {
-		snprintf(err, errlen, "reply_deadline_us (%u) must not exceed period_us (%u)", c->reply_deadline_us,
-		         c->period_us);
+	if (c->default_level > c->max_level) {
+		snprintf(err, errlen, "default_level (%u) must not exceed max_level (%u)", c->default_level, c->max_level);
 		return -1;
 	}
-	if ((uint64_t)c->watchdog_ms * 1000 < 2ull * c->period_us) {
-		snprintf(err, errlen, "watchdog_ms (%u) must be at least two periods (%u us)", c->watchdog_ms,
-		         2 * c->period_us);
+	if ((uint64_t)c->slice_us * c->slices_per_slot > 10000000) {
+		snprintf(err, errlen, "a slot (slice_us x slices_per_slot = %llu us) must not exceed 10 s",
+		         (unsigned long long)c->slice_us * c->slices_per_slot);
+		return -1;
+	}
+	if ((uint64_t)c->watchdog_ms * 1000 < 2ull * vmac_config_slot_us(c)) {
+		snprintf(err, errlen, "watchdog_ms (%u) must be at least two slots (%u us)", c->watchdog_ms,
+		         2 * vmac_config_slot_us(c));
 		return -1;
 	}
 	return 0;

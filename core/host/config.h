@@ -4,8 +4,17 @@
 #define VMAC_CONFIG_H
 
 #define VMAC_PATH_MAX 1024
+#define VMAC_CONFIG_DRIVER_SETTINGS 64
 #include <stddef.h>
 #include <stdint.h>
+
+#include "../driver/driver.h"
+
+/* One driver.NAME.KEY setting. */
+struct vmac_config_driver_setting {
+	char driver[VMAC_NAME_MAX + 1];
+	struct vmac_driver_setting s;
+};
 
 struct vmac_config {
 	char bus[64];            /* "GROUP:PORT" */
@@ -15,8 +24,11 @@ struct vmac_config {
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ below it) */
 	char stdlib_dir[VMAC_PATH_MAX];  /* the Lua standard library drivers require() from */
 	char state_dir[VMAC_PATH_MAX];
-	uint32_t period_us;          /* service period of every device */
-	uint32_t reply_deadline_us;  /* a reply later than this after the send is a miss */
+	uint32_t slice_us;           /* one time slice; a slot is slices_per_slot of them */
+	uint32_t slices_per_slot;    /* S: devices one slot can serve */
+	uint32_t max_level;          /* K: a block is 2^K slots; levels are 0..K */
+	uint32_t default_level;      /* a driver's level when its manifest names none */
+	uint32_t reply_deadline_us;  /* a reply later than this after the send is a miss (capped at the device's period) */
 	uint32_t discovery_period_ms;
 	uint32_t watchdog_ms;        /* board comm-loss period set at REGISTER */
 	uint32_t miss_limit;         /* consecutive misses that drop a device (1 = zero tolerance) */
@@ -24,8 +36,18 @@ struct vmac_config {
 	uint32_t max_devices;
 	uint32_t driver_memory_kib;
 	uint32_t driver_instructions;
+	uint32_t driver_budget_us;   /* wall-clock per driver call; 0 = none */
+	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
+	struct vmac_config_driver_setting driver[VMAC_CONFIG_DRIVER_SETTINGS];
+	int ndriver;
 };
+
+/* Length of one slot in microseconds. */
+static inline uint32_t vmac_config_slot_us(const struct vmac_config *c)
+{
+	return c->slice_us * c->slices_per_slot;
+}
 
 void vmac_config_defaults(struct vmac_config *c);
 /* Apply a Lua config file (plain assignments, evaluated with no library at
@@ -33,6 +55,10 @@ void vmac_config_defaults(struct vmac_config *c);
 int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen);
 /* Apply one "key=value" (the same keys as the file). Returns 0 or -1. */
 int vmac_config_set(struct vmac_config *c, const char *key, const char *value, char *err, size_t errlen);
+/* The driver.NAME.KEY settings of one driver, copied to out (at most max);
+ * returns how many. */
+int vmac_config_driver_settings(const struct vmac_config *c, const char *driver, struct vmac_driver_setting *out,
+                                int max);
 /* Cross-field checks (deadline <= period, ...). Returns 0 or -1 with err. */
 int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen);
 

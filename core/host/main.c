@@ -44,7 +44,8 @@ static void usage(FILE *f)
 	        "  --drivers DIR      look for NAME.lua here before the shipped scripts/drivers/\n"
 	        "  --scripts DIR      the shipped scripts folder (default: found beside the binary)\n"
 	        "  --state DIR        persistent state (default /var/lib/vmac; not written yet)\n"
-	        "  --set KEY=VALUE    any config key, e.g. --set period_us=20000 (repeatable)\n"
+	        "  --set KEY=VALUE    any config key, e.g. --set slice_us=200 (repeatable);\n"
+	        "                     driver.NAME.KEY for one driver, e.g. --set driver.washer.param.time_scale=0.01\n"
 	        "  --help, --version\n\n"
 	        "SIGINT or SIGTERM: every board is commanded to its safe state, then exit 0.\n");
 }
@@ -67,19 +68,43 @@ static int driver_path(const struct vmac_config *cfg, const char *name, char *pa
 	return stat(path, &st) == 0 ? 0 : -ENOENT;
 }
 
+/* cycles/NAME/ beside a --drivers folder if there is one, else the
+ * shipped scripts/cycles/NAME/. */
+static void cycles_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
+{
+	struct stat st;
+	if (cfg->drivers_dir[0]) {
+		snprintf(path, len, "%s/cycles/%s", cfg->drivers_dir, name);
+		if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+			return;
+	}
+	snprintf(path, len, "%s/cycles/%s", cfg->scripts_dir, name);
+}
+
 static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 {
 	struct vmac_host_cmd c;
 	struct vmac_driver_limits limits;
-	char path[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];
+	char path[VMAC_PATH_MAX + 64], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
 
 	memset(&c, 0, sizeof(c));
 	c.kind = VMAC_CMD_LOADED;
 	c.slot = m->slot;
 	c.generation = m->generation;
+	memset(&limits, 0, sizeof(limits));
 	limits.memory_bytes = (size_t)h->cfg.driver_memory_kib * 1024;
 	limits.instructions = h->cfg.driver_instructions;
+	limits.budget_us = h->cfg.driver_budget_us;
+	limits.default_level = h->cfg.default_level;
+	limits.max_level = h->cfg.max_level;
+	limits.allow_jit = h->cfg.allow_jit;
 	limits.stdlib_dir = h->cfg.stdlib_dir;
+	cycles_path(&h->cfg, m->driver, cycles, sizeof(cycles));
+	limits.cycles_dir = cycles;
+	limits.expect_name = m->driver;
+	limits.settings = settings;
+	limits.nsettings = vmac_config_driver_settings(&h->cfg, m->driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
 	if (driver_path(&h->cfg, m->driver, path, sizeof(path)) != 0) {
 		c.missing = 1;
 		snprintf(c.text, sizeof(c.text), "no driver '%s' for %s (looked in %s%s%s/drivers)", m->driver, m->device,
@@ -255,10 +280,11 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	fprintf(stderr,
-	        "vmacd: bus %s from %s, period %u us, reply deadline %u us\n"
+	        "vmacd: bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us\n"
 	        "vmacd: drivers from %s%s%s/drivers\n"
 	        "vmacd: status at http://%.*s:%u/api/status\n",
-	        h->cfg.bus, vmac_bus_host_addr(h->bus), h->cfg.period_us, h->cfg.reply_deadline_us, h->cfg.drivers_dir,
+	        h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
+	        h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us, h->cfg.drivers_dir,
 	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, (int)(strrchr(h->cfg.http, ':') - h->cfg.http),
 	        h->cfg.http, vmac_http_port(h->http));
 	ev_run(h->loop, 0);

@@ -12,6 +12,8 @@
 /* Inputs (bit numbers). */
 #define IN_DOOR_CLOSED 0
 #define IN_LEVEL_SWITCH 1
+#define IN_START_BUTTON 2
+#define IN_CANCEL_BUTTON 3
 
 #define TANK_MAX_L 6.0           /* overflow: the level never rises above this */
 #define LEVEL_SWITCH_L 3.0       /* level switch made at or above this */
@@ -45,12 +47,16 @@ void vmac_dishwasher_step(struct vmac_dishwasher *d, double dt_s)
 		d->water_l = 0.0;
 	if (d->water_l > TANK_MAX_L)
 		d->water_l = TANK_MAX_L;
+	vmac_plant_button_step(&d->start_left_s, dt_s);
+	vmac_plant_button_step(&d->cancel_left_s, dt_s);
 }
 
 void vmac_dishwasher_sense(const struct vmac_dishwasher *d, struct vmac_inputs *in)
 {
 	in->digital = (uint8_t)((d->door_closed ? 1u << IN_DOOR_CLOSED : 0u) |
-	                        (d->water_l >= LEVEL_SWITCH_L ? 1u << IN_LEVEL_SWITCH : 0u));
+	                        (d->water_l >= LEVEL_SWITCH_L ? 1u << IN_LEVEL_SWITCH : 0u) |
+	                        (d->start_left_s > 0.0 ? 1u << IN_START_BUTTON : 0u) |
+	                        (d->cancel_left_s > 0.0 ? 1u << IN_CANCEL_BUTTON : 0u));
 	in->analog[0] = vmac_plant_analog_counts(d->water_l * LEVEL_COUNTS_PER_L);
 	in->analog[1] = 0;
 	in->encoder = 0;
@@ -61,9 +67,14 @@ void vmac_dishwasher_actuate(struct vmac_dishwasher *d, const struct vmac_output
 	d->out = *out;
 }
 
-/* "door" 0/1, "water_l" 0..6, "fill_rate_lps" 0..5. */
+/* "door" 0/1, "water_l" 0..6, "fill_rate_lps" 0..5, "start" and "cancel"
+ * (any value) press a button for VMAC_PLANT_BUTTON_S. */
 int vmac_dishwasher_set(struct vmac_dishwasher *d, const char *name, double value)
 {
+	if (strcmp(name, "start") == 0 || strcmp(name, "cancel") == 0) {
+		*(name[0] == 's' ? &d->start_left_s : &d->cancel_left_s) = VMAC_PLANT_BUTTON_S;
+		return 0;
+	}
 	if (strcmp(name, "door") == 0) {
 		if (!vmac_plant_is_bit(value))
 			return -1;

@@ -16,6 +16,8 @@
 #define IN_DOOR_CLOSED 0
 #define IN_DOOR_LOCKED 1
 #define IN_TUB_EMPTY 2
+#define IN_START_BUTTON 3
+#define IN_CANCEL_BUTTON 4
 
 /* Water. */
 #define TUB_MAX_L 40.0            /* overflow: the level never rises above this */
@@ -123,13 +125,17 @@ void vmac_washer_step(struct vmac_washer *w, double dt_s)
 	step_drum(w, dt_s);
 	step_water(w, dt_s);
 	update_lock(w);
+	vmac_plant_button_step(&w->start_left_s, dt_s);
+	vmac_plant_button_step(&w->cancel_left_s, dt_s);
 }
 
 void vmac_washer_sense(const struct vmac_washer *w, struct vmac_inputs *in)
 {
 	in->digital = (uint8_t)((w->door_closed ? 1u << IN_DOOR_CLOSED : 0u) |
 	                        (w->door_locked ? 1u << IN_DOOR_LOCKED : 0u) |
-	                        (w->water_l < TUB_EMPTY_BELOW_L ? 1u << IN_TUB_EMPTY : 0u));
+	                        (w->water_l < TUB_EMPTY_BELOW_L ? 1u << IN_TUB_EMPTY : 0u) |
+	                        (w->start_left_s > 0.0 ? 1u << IN_START_BUTTON : 0u) |
+	                        (w->cancel_left_s > 0.0 ? 1u << IN_CANCEL_BUTTON : 0u));
 	in->analog[0] = vmac_plant_analog_counts(w->water_l * LEVEL_COUNTS_PER_L);
 	in->analog[1] = vmac_plant_analog_counts(w->water_c * TEMP_COUNTS_PER_C);
 	in->encoder = (int32_t)floor(w->encoder_pos);
@@ -142,9 +148,14 @@ void vmac_washer_actuate(struct vmac_washer *w, const struct vmac_outputs *out)
 }
 
 /* "door" 0/1 (opening a locked door is refused), "load_kg" 0..10,
- * "water_l" 0..40 (temperature unchanged), "fill_rate_lps" 0..5 per valve. */
+ * "water_l" 0..40 (temperature unchanged), "fill_rate_lps" 0..5 per valve,
+ * "start" and "cancel" (any value) press a button for VMAC_PLANT_BUTTON_S. */
 int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
 {
+	if (strcmp(name, "start") == 0 || strcmp(name, "cancel") == 0) {
+		*(name[0] == 's' ? &w->start_left_s : &w->cancel_left_s) = VMAC_PLANT_BUTTON_S;
+		return 0;
+	}
 	if (strcmp(name, "door") == 0) {
 		if (!vmac_plant_is_bit(value))
 			return -1;

@@ -1,12 +1,302 @@
--- Washer driver (walking skeleton): keeps the machine idle and safe, every
--- valve, pump, lock and the drum motor off. The wash cycle comes with the
--- driver API and standard library (scripts/cycles/).
--- Board I/O: docs/BOARD.md, "washer".
+-- Washer: the thesis washer (chapter 6.6) on the generic board with the
+-- washer plant (docs/BOARD.md, "Washer"). Programmes are separate files in
+-- scripts/cycles/washer/, written with the steps this driver offers (`w`
+-- below): lock, fill, wash, drain, spin, unlock. The drum runs on a PID
+-- velocity loop behind a ramp; the door interlock stops everything when the
+-- door opens and resumes after it is closed and locked again; cancel stops
+-- the drum and drains. The door is never unlocked while the drum turns or
+-- the water is above the door.
 
-local driver = {}
+local cycle = require "cycle"
+local interlock = require "interlock"
+local pid = require "pid"
+local ramp = require "ramp"
 
-function driver.tick(inputs)
-	return { digital = {}, pwm = 0 }
+local programs = vmac.cycles() -- scripts/cycles/washer/*.lua: name -> function(w)
+local program_names = {}
+for name in pairs(programs) do
+	program_names[#program_names + 1] = name
+end
+table.sort(program_names)
+
+local IDLE_LEVEL, RUN_LEVEL = 5, 3 -- 32 ms idle, 8 ms running (with 1 ms slots)
+local COUNTS_PER_REV = 360
+local STILL_RPM = 2 -- below this the drum counts as stopped
+local TEMPS = { hot = { true, false }, warm = { true, true }, cold = { false, true } }
+
+local driver = {
+	name = "washer",
+	version = "1.0.0",
+	level = IDLE_LEVEL,
+	description = "washing machine: fill, wash, rinse, spin; door interlock",
+	io = {
+		hot_valve = "do0",
+		cold_valve = "do1",
+		drain_pump = "do2",
+		door_lock = "do3",
+		motor_on = "do4",
+		drum_drive = "pwm",
+		door_closed = "di0",
+		door_locked = "di1",
+		tub_empty = "di2",
+		start_button = "di3",
+		cancel_button = "di4",
+		level_l = { "ai0", scale = 0.01, unit = "l" },
+		temp_c = { "ai1", scale = 0.025, unit = "degC" },
+		drum = "encoder",
+	},
+	params = {
+		program = { default = "normal", values = program_names, persist = true, label = "Programme" },
+		time_scale = { default = 1, min = 0.001, max = 10, label = "Time scale (tests and demos)" },
+		door_level_l = { default = 5, min = 0, max = 40, unit = "l", label = "Water level of the door" },
+		fill_timeout_s = { default = 300, min = 10, max = 3600, unit = "s", label = "Longest fill" },
+	},
+	variables = {
+		state = { group = "cycle", label = "State" },
+		cycle = { group = "cycle", label = "Programme running" },
+		step = { group = "cycle", label = "Step" },
+		running = { group = "cycle" },
+		paused_by = { group = "cycle", label = "Paused by" },
+		error = { group = "cycle", label = "Error" },
+		time_left_s = { unit = "s", update = "timer:1", label = "Time left in step" },
+		drum_rpm = { unit = "rpm", update = "timer:0.2", label = "Drum" },
+		drum_setpoint_rpm = { unit = "rpm", update = "timer:0.2", label = "Drum set point" },
+		level_l = { unit = "l", update = "timer:0.5", label = "Water" },
+		temp_c = { unit = "degC", update = "timer:1", label = "Temperature" },
+		door = { label = "Door" },
+	},
+	commands = {
+		start = { label = "Start", arg = "program" },
+		pause = { label = "Pause" },
+		resume = { label = "Resume" },
+		cancel = { label = "Cancel" },
+	},
+	ui = {
+		title = "Washer",
+		icon = "washer",
+		plots = { { "drum_rpm", "drum_setpoint_rpm" }, { "level_l" } },
+	},
+}
+
+-- What the cycle and the interlock ask for; mapped to the board each tick.
+local want = { hot_valve = false, cold_valve = false, drain_pump = false, door_lock = false,
+	motor_on = false, motor_rpm = 0 }
+-- Named inputs plus the measured drum speed, for the steps.
+local inp = { drum_rpm = 0 }
+local params -- dev.params, for the steps
+
+local function all_off(o)
+	o.hot_valve, o.cold_valve, o.drain_pump = false, false, false
+	o.motor_on, o.motor_rpm, o.door_lock = false, 0, false
+end
+
+local function safe_to_open()
+	return math.abs(inp.drum_rpm) < STILL_RPM and (inp.level_l or 0) <= params.door_level_l
+end
+
+-- Paused: all off; the door stays locked until it is safe to open (the
+-- guard in tick() holds it too).
+local function hold(o)
+	all_off(o)
+	o.door_lock = not safe_to_open()
+end
+
+local door = interlock.new {
+	name = "door open",
+	trip = function(i) return not i.door_closed end,
+	safe = all_off,
+	rearm = function(o, i)
+		o.door_lock = true
+		return i.door_locked
+	end,
+	rearm_timeout = 5,
+}
+
+-- The steps a programme is written with: w.fill{temp = , litres = }, ...
+local function steps_for(c)
+	local w = {}
+	local function scaled(minutes) return minutes * 60 * params.time_scale end
+	local function stop_drum()
+		c.out.motor_on, c.out.motor_rpm = true, 0 -- the ramp brakes it
+		c:wait_until(function() return math.abs(c.inp.drum_rpm) < STILL_RPM end, 120, "the drum to stop")
+		c.out.motor_on = false
+	end
+	function w.lock()
+		c:step("lock", function()
+			c.out.door_lock = true
+			c:wait_until(function() return c.inp.door_locked end, 5, "the door lock")
+		end)
+	end
+	function w.fill(spec)
+		local valves = TEMPS[spec.temp or "cold"]
+		assert(valves, "fill: temp must be hot, warm or cold")
+		local litres = assert(tonumber(spec.litres), "fill: litres must be a number")
+		c:step("fill", function()
+			c.out.door_lock = true
+			c.out.hot_valve, c.out.cold_valve = valves[1], valves[2]
+			c:wait_until(function() return c.inp.level_l >= litres end, params.fill_timeout_s,
+				litres .. " l of water")
+			c.out.hot_valve, c.out.cold_valve = false, false
+		end)
+	end
+	function w.wash(spec)
+		c:step(spec.name or "wash", function()
+			c.out.motor_on, c.out.motor_rpm = true, spec.rpm or 45
+			c:wait(scaled(spec.minutes or 8))
+			stop_drum()
+		end)
+	end
+	function w.drain()
+		c:step("drain", function()
+			c.out.drain_pump = true
+			c:wait_until(function() return c.inp.tub_empty end, 180, "an empty tub")
+			c:wait(scaled(0.1)) -- the last of the water
+			c.out.drain_pump = false
+		end)
+	end
+	function w.spin(spec)
+		c:step("spin", function()
+			c.out.drain_pump = true
+			c.out.motor_on, c.out.motor_rpm = true, spec.rpm or 400
+			c:wait(scaled(spec.minutes or 5))
+			stop_drum()
+			c.out.drain_pump = false
+		end)
+	end
+	function w.unlock()
+		c:step("unlock", function()
+			c:wait_until(safe_to_open, 120, "a still drum and the water below the door")
+			c.out.door_lock = false
+		end)
+	end
+	w.stop_drum = stop_drum
+	return w
+end
+
+local chosen = "normal"
+
+local wash = cycle.new(function(c)
+	local w = steps_for(c)
+	w.lock()
+	programs[chosen](w)
+	w.unlock()
+end, {
+	hold = hold,
+	interlocks = { door },
+	outputs = want,
+	cleanup = function(c) -- after cancel or a failed step: stop, drain, unlock
+		local w = steps_for(c)
+		c.out.door_lock = true
+		c:step("stop", w.stop_drum)
+		w.drain()
+		w.unlock()
+	end,
+})
+
+-- The drum: a ramp shapes the requested speed, a PID follows it.
+local drum_ramp = ramp.new { accel = 100, max_rate = 50 } -- RPM/s^2, RPM/s
+local drum_pid = pid.new { kp = 2, ki = 0.8, out_min = -1000, out_max = 1000 }
+local setpoint = 0
+
+local function drive_drum(dt)
+	if not want.motor_on then
+		drum_pid:reset()
+		drum_ramp:reset(inp.drum_rpm)
+		setpoint = 0
+		return 0
+	end
+	setpoint = drum_ramp:update(want.motor_rpm, dt)
+	return drum_pid:update(setpoint, inp.drum_rpm, dt)
+end
+
+local last_encoder, last_time, last_start, last_cancel
+
+local function read_board(inputs)
+	for k, v in pairs(inputs) do
+		inp[k] = v
+	end
+	local dt = last_time and inputs.time - last_time or 0
+	if dt > 0 then
+		-- counts since the last tick, across the int32 wrap; 0.1 s filter
+		local rpm = bit.tobit(inputs.drum - last_encoder) / COUNTS_PER_REV / dt * 60
+		inp.drum_rpm = inp.drum_rpm + (rpm - inp.drum_rpm) * dt / (0.1 + dt)
+	end
+	last_encoder, last_time = inputs.drum, inputs.time
+	return dt
+end
+
+local function start(dev, program)
+	program = program or dev.params.program
+	if not programs[program] then
+		return nil, "no programme '" .. tostring(program) .. "'"
+	end
+	if not inp.door_closed then
+		return nil, "close the door first"
+	end
+	chosen = program
+	local ok, why = wash:start()
+	if ok then
+		dev:set_level(RUN_LEVEL)
+		dev.vars.cycle = program
+	end
+	return ok, why
+end
+
+function driver.attach(dev)
+	params = dev.params
+	dev.state.runs = 0
+end
+
+function driver.tick(dev, inputs)
+	local dt = read_board(inputs)
+	if inputs.start_button and last_start == false then
+		start(dev)
+	end
+	if inputs.cancel_button and last_cancel == false then
+		wash:cancel()
+	end
+	last_start, last_cancel = inputs.start_button, inputs.cancel_button
+
+	local was_active = wash:active()
+	wash:tick(inputs.time, inp, want)
+	if was_active and not wash:active() then
+		dev:set_level(IDLE_LEVEL)
+		dev.state.runs = dev.state.runs + 1
+	end
+	-- The guard: never unlock a door on a turning drum or on water above it.
+	if not safe_to_open() and inp.door_closed then
+		want.door_lock = true
+	end
+
+	local o = dev.out
+	o.hot_valve, o.cold_valve, o.drain_pump = want.hot_valve, want.cold_valve, want.drain_pump
+	o.door_lock, o.motor_on = want.door_lock, want.motor_on
+	o.drum_drive = drive_drum(dt)
+
+	local v = dev.vars
+	v.state, v.step, v.running = wash.state, wash.step_name or "-", wash:active()
+	v.paused_by, v.error = wash.pause_reasons[1] or "", wash.error or ""
+	v.time_left_s = wash:wait_left() or 0
+	v.drum_rpm, v.drum_setpoint_rpm = inp.drum_rpm, setpoint
+	v.level_l, v.temp_c = inp.level_l, inp.temp_c
+	v.door = inputs.door_locked and "locked" or inputs.door_closed and "closed" or "open"
+end
+
+function driver.input(dev, name, value)
+	if name == "start" then
+		return start(dev, value ~= true and value or nil)
+	elseif name == "pause" then
+		return wash:pause()
+	elseif name == "resume" then
+		return wash:resume()
+	elseif name == "cancel" then
+		return wash:cancel()
+	end
+	return true -- params: dev.params already holds the new value
+end
+
+function driver.detach()
+	all_off(want)
 end
 
 return driver

@@ -36,11 +36,47 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def schedule_for(boards, period_us):
+    """Host settings that serve `boards` boards every `period_us`: the lowest
+    level L with room (at most 256 slices per slot), slots of period / 2^L,
+    and a slice count that divides the slot evenly (docs/SCHEDULER.md)."""
+    level = 0
+    while -(-boards // (1 << level)) > 256:
+        level += 1
+    slot_us = period_us >> level
+    need = -(-boards // (1 << level))
+    slices = next(s for s in range(need, 257) if slot_us % s == 0) if need <= 256 else 256
+    return {"slice_us": slot_us // slices, "slices_per_slot": slices, "max_level": max(level, 1),
+            "default_level": level}
+
+
+# The driver every bench board runs: reads a switch, drives a lamp, publishes
+# one variable. A small real driver, so the cost includes a Lua call per tick.
+BENCH_LUA = """local driver = { name = "benchprobe", version = "1", io = { switch = "di0", lamp = "do0" },
+	variables = { lamp = {} } }
+function driver.tick(dev, inputs)
+	dev.out.lamp = inputs.switch
+	dev.vars.lamp = inputs.switch
+end
+return driver
+"""
+
+
+def bench_drivers(ctx):
+    path = os.path.join(ctx.logdir, "drivers")
+    os.makedirs(path, exist_ok=True)
+    with open(os.path.join(path, "benchprobe.lua"), "w") as f:
+        f.write(BENCH_LUA)
+    return path
+
+
 def start_kitchen(ctx, boards, period_us, deadline_us):
-    host = ctx.host(settings={"period_us": period_us, "reply_deadline_us": deadline_us, "realtime": "true",
-                              "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
-                              "max_devices": max(1024, boards + 8)})
-    ctx.board("generic", "b", count=boards)
+    settings = {"reply_deadline_us": deadline_us, "realtime": "true",
+                "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
+                "max_devices": max(1024, boards + 8)}
+    settings.update(schedule_for(boards, period_us))
+    host = ctx.host(drivers=bench_drivers(ctx), settings=settings)
+    ctx.board("generic", "b", count=boards, driver="benchprobe")
     names = ["b-%d" % i for i in range(1, boards + 1)] if boards > 1 else ["b"]
     host.wait_running(names, timeout_s=120)
     return host, names

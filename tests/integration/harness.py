@@ -18,10 +18,13 @@ import time
 import urllib.request
 
 # Relaxed timing: a slow machine must never drop a healthy board. Tests check
-# behaviour, never speed. The deadline allows a board process 80 ms without
-# the CPU (seen: >30 ms with two suites and a CPU hog on two cores).
+# behaviour, never speed. Slots of 12.5 ms and drivers at level 3 by default:
+# a device is served every 100 ms. The deadline allows a board process 80 ms
+# without the CPU (seen: >30 ms with two suites and a CPU hog on two cores).
 TIMING = {
-    "period_us": 100000,
+    "slice_us": 3125,
+    "slices_per_slot": 4,
+    "default_level": 3,
     "reply_deadline_us": 80000,
     "watchdog_ms": 1500,
     "discovery_period_ms": 300,
@@ -310,10 +313,14 @@ class Context:
         h.ready()
         return h
 
-    def board(self, plant, name, driver=None, count=None, commands=False):
+    def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None):
         argv = [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", self.bus]
         if driver:
             argv += ["--driver", driver]
+        if major is not None:
+            argv += ["--major", str(major)]
+        if minor is not None:
+            argv += ["--minor", str(minor)]
         if count:
             argv += ["--count", str(count)]
         if commands:

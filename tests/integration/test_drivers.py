@@ -8,9 +8,8 @@ import re
 from harness import KITCHEN_NAMES, undisturbed
 
 BROKEN_LUA = """-- broken: a syntax error on line 3
-local driver = {}
-function driver.tick(inputs
-	return nil
+local driver = { name = "broken", version = "1", io = {} }
+function driver.tick(dev, inputs
 end
 return driver
 """
@@ -20,24 +19,24 @@ return driver
 # again when it answers discovery) and the status poll sees it errant.
 CRASHY_LUA = """-- crashy: drives output 0 for a few ticks, then fails
 local ticks = 0
-local driver = {}
-function driver.tick(inputs)
+local driver = { name = "crashy", version = "1", io = { lamp = "do0" } }
+function driver.tick(dev, inputs)
 	ticks = ticks + 1
 	if ticks > 2 then error("boom") end
-	return { digital = { true } }
+	dev.out.lamp = true
 end
 return driver
 """
 
 RUNAWAY_LUA = """-- runaway: drives output 0 once, then never returns from tick
 local ticks = 0
-local driver = {}
-function driver.tick(inputs)
+local driver = { name = "runaway", version = "1", io = { lamp = "do0" } }
+function driver.tick(dev, inputs)
 	ticks = ticks + 1
 	if ticks > 2 then
 		while true do end
 	end
-	return { digital = { true } }
+	dev.out.lamp = true
 end
 return driver
 """

@@ -2,6 +2,7 @@
 a board that stops answering, and the two ways the host can go away."""
 
 import json
+import re
 import signal
 import time
 
@@ -35,7 +36,9 @@ def test_kitchen_attaches(t):
     for name, driver in EXPECTED_DRIVER.items():
         row = [l for l in out.splitlines() if l.split()[:1] == [name]]
         assert row, "vmac status lists no row for %s:\n%s" % (name, out)
-        assert row[0].split()[1:3] == [driver, "running"], "vmac status row for %s is %r" % (name, row[0])
+        fields = row[0].split()
+        assert fields[1] == driver and fields[3] == "running", "vmac status row for %s is %r" % (name, row[0])
+        assert re.match(r"^\d+\.\d+\.\d+$", fields[2]), "no driver version in the row for %s: %r" % (name, row[0])
 
     rc, out, err = t.run([t.path("vmac"), "status", "--http", host.http, "--json"], "vmac-status-json")
     assert rc == 0, "vmac status --json exited %d: %s" % (rc, err)

@@ -10,11 +10,13 @@ COUNT = 20
 # A driver of the user's own in --drivers, which takes precedence over the
 # shipped scripts/drivers/generic.lua: it echoes the inputs to the outputs.
 GENERIC_LUA = """-- generic stand-in: echo digital inputs 0..6 to the outputs
-local driver = {}
-function driver.tick(inputs)
-	local out = {}
-	for i = 1, 7 do out[i] = inputs.digital[i] end
-	return { digital = out }
+local driver = { name = "generic", version = "echo-1", io = {} }
+for i = 0, 6 do
+	driver.io["in" .. i] = "di" .. i
+	driver.io["out" .. i] = "do" .. i
+end
+function driver.tick(dev, inputs)
+	for i = 0, 6 do dev.out["out" .. i] = inputs["in" .. i] end
 end
 return driver
 """

@@ -1,0 +1,177 @@
+"""The schedule in a running host (docs/SCHEDULER.md, docs/HOST.md): the
+table the status shows is even and never puts two devices in one slice;
+admission control turns away a board that does not fit and disturbs no one;
+boards of one machine share a driver and are dropped together; a driver can
+change its level while running."""
+
+import os
+
+from harness import undisturbed
+
+# A driver that drives nothing and reports how many boards it sees.
+PROBE_LUA = """-- probe: no outputs; publishes the number of boards and its level
+local driver = { name = "probe", version = "1.0", io = { x = "di0", lamp = "do0" },
+	variables = { boards = {}, level = {} } }
+function driver.tick(dev, inputs)
+	dev.vars.boards = #dev.boards
+	dev.vars.level = dev.level
+end
+return driver
+"""
+
+# Two boards, one machine: the switch on the board with minor id 1 lights the
+# lamp on the primary board (minor 0).
+PAIR_LUA = """-- pair: a switch on one board, a lamp on the other
+local driver = { name = "pair", version = "2.1",
+	io = { lamp = "do0", switch = { "di0", board = 1 } },
+	variables = { boards = {}, switch = {} } }
+function driver.tick(dev, inputs)
+	dev.vars.boards = #dev.boards
+	dev.vars.switch = inputs.switch
+	dev.out.lamp = inputs.switch == true
+end
+return driver
+"""
+
+# Starts at level 1 and asks for level 2 after ten ticks (slower: a longer
+# watchdog goes to the board first).
+SHIFTER_LUA = """-- shifter: changes its own level at run time
+local driver = { name = "shifter", version = "1", level = 1, io = {}, variables = { answer = {} } }
+local ticks = 0
+function driver.tick(dev, inputs)
+	ticks = ticks + 1
+	if ticks == 10 then
+		local ok, why = dev:set_level(2)
+		dev.vars.answer = ok and "ok" or why
+	end
+end
+return driver
+"""
+
+
+def drivers_dir(t, **drivers):
+    path = os.path.join(t.logdir, "drivers")
+    os.makedirs(path, exist_ok=True)
+    for name, source in drivers.items():
+        with open(os.path.join(path, name + ".lua"), "w") as f:
+            f.write(source)
+    return path
+
+
+def served_rows(d, slots_per_block):
+    """The (slot of the block, slice) pairs a device is served in."""
+    period = 1 << d["level"]
+    return {(row, d["slice"]) for row in range(d["slot"], slots_per_block, period)}
+
+
+def check_table(s):
+    """The invariants of docs/SCHEDULER.md on one status."""
+    sched = s["schedule"]
+    load = sched["slot_load"]
+    assert len(load) == sched["slots_per_block"], "slot_load has %d entries for %d slots" % (
+        len(load), sched["slots_per_block"])
+    assert max(load) - min(load) <= 1, "uneven table: slot loads %d..%d" % (min(load), max(load))
+    taken = {}
+    for d in s["devices"]:
+        if d["slot"] is None:
+            continue
+        assert 0 <= d["slice"] < sched["slices_per_slot"], "%s in slice %d of %d" % (
+            d["name"], d["slice"], sched["slices_per_slot"])
+        assert d["slot"] < (1 << d["level"]), "%s at level %d in slot %d" % (d["name"], d["level"], d["slot"])
+        for cell in served_rows(d, sched["slots_per_block"]):
+            assert cell not in taken, "%s and %s share slot %d slice %d" % (taken[cell], d["name"], *cell)
+            taken[cell] = d["name"]
+    per_slot = [0] * sched["slots_per_block"]
+    for row, _ in taken:
+        per_slot[row] += 1
+    assert per_slot == load, "slot_load %s does not match the devices' places %s" % (load, per_slot)
+
+
+def test_status_shows_an_even_table(t):
+    host = t.host(drivers=drivers_dir(t, probe=PROBE_LUA), settings={"max_level": 4})
+    t.board("generic", "p", driver="probe", count=7)
+    names = ["p-%d" % i for i in range(1, 8)]
+    s = host.wait_running(names)
+    s = host.wait_status(lambda s: all(host.device(n, s)["slot"] is not None for n in names), 30,
+                         "every probe in the table")
+    check_table(s)
+    sched = s["schedule"]
+    assert sched["slots_per_block"] == 16 and sched["slices_per_slot"] == 4, "schedule %r" % sched
+    assert sched["slot_us"] == sched["slice_us"] * sched["slices_per_slot"], "slot_us %r" % sched
+    assert sched["capacity_used"] == 7 * 2, "7 devices at level 3 use 14 slice-slots, status says %d" % (
+        sched["capacity_used"])
+    for n in names:
+        d = host.device(n, s)
+        assert d["level"] == 3 and d["period_us"] == 8 * sched["slot_us"], "%s level %r period %r" % (
+            n, d["level"], d["period_us"])
+        assert d["driver_version"] == "1.0", "%s driver_version %r" % (n, d["driver_version"])
+    # Still even after devices come and go.
+    t.board("generic", "q", driver="probe", count=3)
+    s = host.wait_running(names + ["q-1", "q-2", "q-3"], invariant=undisturbed(names))
+    check_table(s)
+
+
+def test_admission_turns_away_what_does_not_fit(t):
+    # One slice per slot, 4 slots per block, devices at level 1: room for two.
+    settings = {"slice_us": 50000, "slices_per_slot": 1, "max_level": 2, "default_level": 1}
+    host = t.host(drivers=drivers_dir(t, probe=PROBE_LUA), settings=settings)
+    t.board("generic", "a", driver="probe")
+    t.board("generic", "b", driver="probe")
+    host.wait_running(["a", "b"])
+    since = host.last_event_seq()
+    late = t.board("generic", "c", driver="probe")
+    event = host.wait_event("schedule_full", "c", after_seq=since, invariant=undisturbed(["a", "b"]))
+    assert "schedule full: need level 1" in event["text"] and "free capacity 0 of 4" in event["text"], (
+        "schedule_full event unclear: %r" % event["text"])
+    s = host.wait_status(lambda s: (host.device("c", s) or {}).get("state") == "sleeping", 30, "c sleeping",
+                         undisturbed(["a", "b"]))
+    assert "schedule full" in (host.device("c", s)["note"] or ""), "status note: %r" % host.device("c", s)["note"]
+    assert s["counters"]["schedule_full"] >= 1, "counters.schedule_full not counted"
+    late.wait_line(r"^c: state sleeping ", 30, what="'state sleeping' on the refused board")
+    assert not late.find_lines(r"outputs digital=0x(?!00)"), "a refused board switched an output on"
+    check_table(s)
+
+
+def test_boards_of_one_machine_share_a_driver_and_fall_together(t):
+    host = t.host(drivers=drivers_dir(t, pair=PAIR_LUA))
+    main = t.board("generic", "pair-a", driver="pair", major=77, minor=0)
+    aux = t.board("generic", "pair-b", driver="pair", major=77, minor=1, commands=True)
+    s = host.wait_running(["pair-a", "pair-b"])
+    s = host.wait_status(lambda s: host.device("pair-a", s)["variables"].get("boards") == 2, 30,
+                         "the driver seeing two boards")
+    assert host.device("pair-b", s)["machine"] == "pair-a", "pair-b not in pair-a's machine: %r" % (
+        host.device("pair-b", s)["machine"])
+    assert host.device("pair-b", s)["variables"] == {}, "variables shown on a board that is not the primary"
+    assert host.device("pair-a", s)["level"] == host.device("pair-b", s)["level"], "boards of one machine at two levels"
+    mark = len(main.lines["stdout"])
+    aux.send("pair-b di0 1")
+    main.wait_line(r"^pair-a: outputs digital=0x01 ", 30, since=mark, what="the lamp on pair-a lit by pair-b's switch")
+    since = host.last_event_seq()
+    mark = len(main.lines["stdout"])
+    aux.kill()
+    host.wait_event("dropped", "pair-b", after_seq=since)
+    event = host.wait_event("dropped", "pair-a", after_seq=since)
+    assert "pair-b, a board of the same machine" in event["text"], "pair-a's drop says %r" % event["text"]
+    main.wait_line(r"^pair-a: outputs digital=0x00 pwm=0", 30, since=mark,
+                   what="pair-a's outputs off when its partner board went away")
+    # The remaining board comes back alone; the driver sees one board.
+    s = host.wait_status(lambda s: host.device("pair-a", s)["state"] == "running"
+                         and host.device("pair-a", s)["variables"].get("boards") == 1, 30,
+                         "pair-a running again as a machine of one board")
+
+
+def test_driver_changes_its_level(t):
+    host = t.host(drivers=drivers_dir(t, shifter=SHIFTER_LUA))
+    t.board("generic", "shift", driver="shifter")
+    host.wait_running(["shift"])
+    event = host.wait_event("level", "shift")
+    assert "level 1 -> 2" in event["text"], "level event says %r" % event["text"]
+    s = host.wait_status(lambda s: host.device("shift", s)["level"] == 2
+                         and host.device("shift", s)["slot"] is not None, 30, "shift at level 2",
+                         undisturbed(["shift"]))
+    assert host.device("shift", s)["variables"]["answer"] == "ok", "set_level answered %r" % (
+        host.device("shift", s)["variables"]["answer"])
+    served = host.device("shift", s)["served"]
+    host.wait_status(lambda s: host.device("shift", s)["served"] > served + 20, 60,
+                     "shift served at its new level", undisturbed(["shift"]))
+    check_table(host.last)
