@@ -149,11 +149,17 @@ void vmac_washer_actuate(struct vmac_washer *w, const struct vmac_outputs *out)
 
 /* "door" 0/1 (opening a locked door is refused), "load_kg" 0..10,
  * "water_l" 0..40 (temperature unchanged), "fill_rate_lps" 0..5 per valve,
- * "start" and "cancel" (any value) press a button for VMAC_PLANT_BUTTON_S. */
+ * "start" and "cancel" (any value) press a button for VMAC_PLANT_BUTTON_S,
+ * "door_release" (any value) opens the door even when locked. */
 int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
 {
 	if (strcmp(name, "start") == 0 || strcmp(name, "cancel") == 0) {
 		*(name[0] == 's' ? &w->start_left_s : &w->cancel_left_s) = VMAC_PLANT_BUTTON_S;
+		return 0;
+	}
+	if (strcmp(name, "door_release") == 0) { /* the emergency release: opens even a locked door */
+		w->door_closed = 0;
+		update_lock(w);
 		return 0;
 	}
 	if (strcmp(name, "door") == 0) {

@@ -110,7 +110,7 @@ end, {
 	cleanup = function(c) steps_for(c).drain() end,
 })
 
-local last_start, last_cancel
+local last_start, last_cancel = false, false -- a button held as the machine attaches counts as a press
 
 local function start(dev, program)
 	program = program or dev.params.program

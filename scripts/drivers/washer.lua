@@ -209,7 +209,8 @@ local function drive_drum(dt)
 	return drum_pid:update(setpoint, inp.drum_rpm, dt)
 end
 
-local last_encoder, last_time, last_start, last_cancel
+local last_encoder, last_time
+local last_start, last_cancel = false, false -- a button held as the machine attaches counts as a press
 
 local function read_board(inputs)
 	for k, v in pairs(inputs) do

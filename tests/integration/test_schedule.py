@@ -33,15 +33,15 @@ end
 return driver
 """
 
-# Starts at level 1 and asks for level 2 after ten ticks (slower: a longer
+# Starts at level 4 and asks for level 5 after ten ticks (slower: a longer
 # watchdog goes to the board first).
 SHIFTER_LUA = """-- shifter: changes its own level at run time
-local driver = { name = "shifter", version = "1", level = 1, io = {}, variables = { answer = {} } }
+local driver = { name = "shifter", version = "1", level = 4, io = {}, variables = { answer = {} } }
 local ticks = 0
 function driver.tick(dev, inputs)
 	ticks = ticks + 1
 	if ticks == 10 then
-		local ok, why = dev:set_level(2)
+		local ok, why = dev:set_level(5)
 		dev.vars.answer = ok and "ok" or why
 	end
 end
@@ -88,7 +88,7 @@ def check_table(s):
 
 
 def test_status_shows_an_even_table(t):
-    host = t.host(drivers=drivers_dir(t, probe=PROBE_LUA), settings={"max_level": 4})
+    host = t.host(drivers=drivers_dir(t, probe=PROBE_LUA), settings={"max_level": 5})
     t.board("generic", "p", driver="probe", count=7)
     names = ["p-%d" % i for i in range(1, 8)]
     s = host.wait_running(names)
@@ -96,13 +96,13 @@ def test_status_shows_an_even_table(t):
                          "every probe in the table")
     check_table(s)
     sched = s["schedule"]
-    assert sched["slots_per_block"] == 16 and sched["slices_per_slot"] == 4, "schedule %r" % sched
+    assert sched["slots_per_block"] == 32 and sched["slices_per_slot"] == 5, "schedule %r" % sched
     assert sched["slot_us"] == sched["slice_us"] * sched["slices_per_slot"], "slot_us %r" % sched
-    assert sched["capacity_used"] == 7 * 2, "7 devices at level 3 use 14 slice-slots, status says %d" % (
+    assert sched["capacity_used"] == 7 * 2, "7 devices at level 4 of 5 use 14 slice-slots, status says %d" % (
         sched["capacity_used"])
     for n in names:
         d = host.device(n, s)
-        assert d["level"] == 3 and d["period_us"] == 8 * sched["slot_us"], "%s level %r period %r" % (
+        assert d["level"] == 4 and d["period_us"] == 16 * sched["slot_us"], "%s level %r period %r" % (
             n, d["level"], d["period_us"])
         assert d["driver_version"] == "1.0", "%s driver_version %r" % (n, d["driver_version"])
     # Still even after devices come and go.
@@ -165,9 +165,9 @@ def test_driver_changes_its_level(t):
     t.board("generic", "shift", driver="shifter")
     host.wait_running(["shift"])
     event = host.wait_event("level", "shift")
-    assert "level 1 -> 2" in event["text"], "level event says %r" % event["text"]
-    s = host.wait_status(lambda s: host.device("shift", s)["level"] == 2
-                         and host.device("shift", s)["slot"] is not None, 30, "shift at level 2",
+    assert "level 4 -> 5" in event["text"], "level event says %r" % event["text"]
+    s = host.wait_status(lambda s: host.device("shift", s)["level"] == 5
+                         and host.device("shift", s)["slot"] is not None, 30, "shift at level 5",
                          undisturbed(["shift"]))
     assert host.device("shift", s)["variables"]["answer"] == "ok", "set_level answered %r" % (
         host.device("shift", s)["variables"]["answer"])
