@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #define HOOK_EVERY 1000 /* instructions between budget checks */
 #define FILE_MAX (1 << 20)
@@ -393,6 +394,8 @@ static int sandbox_require(lua_State *L)
 		return luaL_error(L, "require '%s': no standard library configured", name);
 	snprintf(path, sizeof(path), "%s/%s.lua", d->stdlib_dir, name);
 	snprintf(chunk, sizeof(chunk), "@stdlib/%s.lua", name);
+	if (access(path, R_OK) != 0)
+		return luaL_error(L, "require '%s': no such stdlib module (stdlib/%s.lua)", name, name);
 	run_sandboxed(L, path, chunk, name);
 	if (lua_isnil(L, -1)) {
 		lua_pop(L, 1);
