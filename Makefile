@@ -46,7 +46,8 @@ portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
 host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
-UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_sched
+UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver \
+              $(BUILD)/tests/test_sched
 
 .PHONY: all deps run test test-unit test-lua test-fuzz test-integration test-asan bench clean
 all: $(BINS)
@@ -83,6 +84,10 @@ $(BUILD)/tests/test_board: $(OBJ)/tests/unit/test_board.o $(portable_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
 
 $(BUILD)/tests/test_host: $(OBJ)/tests/unit/test_host.o $(host_obj) $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
+
+$(BUILD)/tests/test_driver: $(OBJ)/tests/unit/test_driver.o $(OBJ)/core/driver/driver.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 

@@ -174,11 +174,12 @@ static int guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned
 /* string.rep bounded: one C call must not stall the bus. */
 static int safe_rep(lua_State *L)
 {
-	size_t len;
+	size_t len, seplen = 0;
 	lua_Integer n;
 	luaL_checklstring(L, 1, &len);
 	n = luaL_checkinteger(L, 2);
-	if (n > 0 && (double)(len + 1) * (double)n > REP_MAX)
+	luaL_optlstring(L, 3, "", &seplen);
+	if (n > 0 && ((double)(len + seplen) * (double)n > REP_MAX || n > REP_MAX))
 		return luaL_error(L, "string.rep result too large (limit %d bytes)", REP_MAX);
 	lua_pushvalue(L, lua_upvalueindex(1));
 	lua_insert(L, 1);

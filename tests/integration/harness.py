@@ -314,8 +314,8 @@ class Context:
         h.ready()
         return h
 
-    def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None):
-        argv = [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", self.bus]
+    def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None, wrapper=()):
+        argv = list(wrapper) + [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", self.bus]
         if driver:
             argv += ["--driver", driver]
         if major is not None:

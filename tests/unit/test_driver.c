@@ -1,0 +1,405 @@
+/* Unit tests of the driver module (core/driver) through its C API: the
+ * manifest and its errors, named I/O, machines of several boards, published
+ * variables, operator input, the host hooks, and the sandbox's bounds. The
+ * escape corpus runs end to end in tests/integration/test_escape.py. */
+#include <check.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../../core/driver/driver.h"
+
+#define STDLIB_DIR "/tmp/vmac-test-driver-stdlib"
+#define CYCLES_DIR "/tmp/vmac-test-driver-cycles"
+
+static struct vmac_driver_limits limits;
+
+static void setup(void)
+{
+	memset(&limits, 0, sizeof(limits));
+	limits.memory_bytes = 1 << 20;
+	limits.instructions = 200000;
+	limits.max_level = 10;
+	limits.default_level = 4;
+	limits.stdlib_dir = STDLIB_DIR;
+	limits.cycles_dir = CYCLES_DIR;
+}
+
+static void write_file(const char *path, const char *text)
+{
+	FILE *f = fopen(path, "w");
+	ck_assert_msg(f != NULL, "cannot write %s", path);
+	fputs(text, f);
+	fclose(f);
+}
+
+/* Load text as driver "t" (file t.lua). */
+static int load(const char *text, struct vmac_driver **d, char *err, size_t errlen)
+{
+	char path[] = "/tmp/vmac-test-driver-XXXXXX/t.lua";
+	char dir[] = "/tmp/vmac-test-driver-XXXXXX";
+	int rc;
+	ck_assert_msg(mkdtemp(dir) != NULL, "mkdtemp failed");
+	snprintf(path, sizeof(path), "%s/t.lua", dir);
+	write_file(path, text);
+	limits.expect_name = "t";
+	rc = vmac_driver_load(path, &limits, d, err, errlen);
+	unlink(path);
+	rmdir(dir);
+	return rc;
+}
+
+static struct vmac_driver *load_ok(const char *text)
+{
+	struct vmac_driver *d = NULL;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	ck_assert_msg(load(text, &d, err, sizeof(err)) == 0, "load failed: %s", err);
+	return d;
+}
+
+static void load_fails(const char *text, const char *want)
+{
+	struct vmac_driver *d = NULL;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	ck_assert_msg(load(text, &d, err, sizeof(err)) != 0, "load of a bad driver succeeded (wanted '%s')", want);
+	ck_assert_msg(strstr(err, want) != NULL, "load error '%s' does not say '%s'", err, want);
+}
+
+/* One board, one tick with the given inputs. */
+static int tick1(struct vmac_driver *d, double t, const struct vmac_inputs *in, struct vmac_outputs *out, char *err,
+                 size_t errlen)
+{
+	const struct vmac_inputs *ins[1] = {in};
+	struct vmac_outputs *outs[1] = {out};
+	return vmac_driver_tick(d, t, ins, outs, err, errlen);
+}
+
+static const struct vmac_variable *var(const struct vmac_driver *d, const char *name)
+{
+	int i;
+	for (i = 0; i < vmac_driver_nvars(d); i++)
+		if (strcmp(vmac_driver_variable(d, i)->name, name) == 0)
+			return vmac_driver_variable(d, i);
+	ck_abort_msg("no variable %s", name);
+	return NULL;
+}
+
+START_TEST(manifest_errors_name_the_field)
+{
+	load_fails("return 42\n", "must return a table");
+	load_fails("return { version = '1', io = {}, tick = function() end }\n", "name");
+	load_fails("return { name = 'other', version = '1', io = {}, tick = function() end }\n",
+	           "board announced driver 't'");
+	load_fails("return { name = 't', io = {}, tick = function() end }\n", "version");
+	load_fails("return { name = 't', version = '1', tick = function() end }\n", "io must be a table");
+	load_fails("return { name = 't', version = '1', io = {} }\n", "tick must be a function");
+	load_fails("return { name = 't', version = '1', level = 11, io = {}, tick = function() end }\n",
+	           "level must be a whole number 0..10");
+	load_fails("return { name = 't', version = '1', level = 1.5, io = {}, tick = function() end }\n", "level");
+	load_fails("return { name = 't', version = '1', io = { lamp = 'do9' }, tick = function() end }\n",
+	           "io.lamp: unknown channel 'do9'");
+	load_fails("return { name = 't', version = '1', io = { a = 'do1', b = 'do1' }, tick = function() end }\n",
+	           "is already io.");
+	load_fails("return { name = 't', version = '1', io = { a = { 'do1', scale = 2 } }, tick = function() end }\n",
+	           "outputs take no scale");
+	load_fails("return { name = 't', version = '1', io = {}, varaibles = {}, tick = function() end }\n",
+	           "unknown field 'varaibles'");
+	load_fails("return { name = 't', version = '1', io = {}, params = { p = {} }, tick = function() end }\n",
+	           "params.p: default");
+	load_fails("return { name = 't', version = '1', io = {}, params = { p = { default = 9, max = 5 } },"
+	           " tick = function() end }\n",
+	           "params.p: 9 is out of range");
+	load_fails("return { name = 't', version = '1', io = {}, params = { x = { default = 1 } },"
+	           " variables = { x = {} }, tick = function() end }\n",
+	           "'x' is both a variable and a param");
+	load_fails("return { name = 't', version = '1', io = {}, commands = { go = { arg = 'nothing' } },"
+	           " tick = function() end }\n",
+	           "arg 'nothing' is neither");
+	load_fails("return { name = 't', version = '1', io = {}, variables = { v = { update = 'timer:0' } },"
+	           " tick = function() end }\n",
+	           "timer:N");
+	load_fails("return { name = 't', version = '1', io = {}, tick = function( end }\n", "t.lua:1:");
+}
+END_TEST
+
+START_TEST(named_io_in_and_out)
+{
+	struct vmac_driver *d = load_ok("return { name = 't', version = '2.0', level = 3,\n"
+	                                "  io = { door = 'di1', level_l = { 'ai0', scale = 0.01, offset = 1 },\n"
+	                                "         drum = 'encoder', valve = 'do2', motor = 'pwm' },\n"
+	                                "  tick = function(dev, i)\n"
+	                                "    assert(i.door == true and i.level_l == 13.34 and i.drum == -7, 'inputs')\n"
+	                                "    assert(i.time == 1.5, 'time')\n"
+	                                "    if not dev.out.valve then dev.out.valve = true; dev.out.motor = -250 end\n"
+	                                "  end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	ck_assert_str_eq(vmac_driver_version(d), "2.0");
+	ck_assert_uint_eq(vmac_driver_level(d), 3);
+	ck_assert_int_eq(vmac_driver_add_board(d, 0, "b0"), 0);
+	memset(&in, 0, sizeof(in));
+	in.digital = 0x02;
+	in.analog[0] = 1234;
+	in.encoder = -7;
+	ck_assert_msg(tick1(d, 1.5, &in, &out, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_msg(out.digital == 0x04 && out.pwm == -250, "outputs 0x%02x pwm %d", out.digital, out.pwm);
+	/* Outputs keep their values across ticks. */
+	ck_assert_msg(tick1(d, 1.5, &in, &out, err, sizeof(err)) == 0, "second tick failed: %s", err);
+	ck_assert_msg(out.digital == 0x04 && out.pwm == -250, "outputs not kept: 0x%02x pwm %d", out.digital, out.pwm);
+	vmac_driver_free(d);
+}
+END_TEST
+
+START_TEST(bad_outputs_fail_and_turn_everything_off)
+{
+	struct vmac_driver *d = load_ok("return { name = 't', version = '1', io = { a = 'do0', m = 'pwm' },\n"
+	                                "  tick = function(dev) dev.out.a = true; dev.out.m = 5000 end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	vmac_driver_add_board(d, 0, "b0");
+	memset(&in, 0, sizeof(in));
+	ck_assert_int_ne(tick1(d, 0, &in, &out, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "dev.out.m") != NULL, "error does not name the output: %s", err);
+	ck_assert_msg(out.digital == 0 && out.pwm == 0, "outputs left on after a bad output");
+	vmac_driver_free(d);
+}
+END_TEST
+
+START_TEST(two_boards_one_machine)
+{
+	struct vmac_driver *d = load_ok("return { name = 't', version = '1',\n"
+	                                "  io = { lamp = 'do0', switch = { 'di0', board = 2 }, far = { 'do1', board = 9 } },\n"
+	                                "  variables = { n = {}, who = {} },\n"
+	                                "  tick = function(dev, i)\n"
+	                                "    dev.vars.n = #dev.boards; dev.vars.who = dev.name\n"
+	                                "    dev.out.lamp = i.switch == true; dev.out.far = true\n"
+	                                "  end }\n");
+	struct vmac_inputs in0, in1;
+	struct vmac_outputs out0, out1;
+	const struct vmac_inputs *ins[2] = {&in0, &in1};
+	struct vmac_outputs *outs[2] = {&out0, &out1};
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	memset(&in0, 0, sizeof(in0));
+	memset(&in1, 0, sizeof(in1));
+	ck_assert_int_eq(vmac_driver_add_board(d, 0, "main"), 0);
+	ck_assert_int_eq(vmac_driver_add_board(d, 2, "aux"), 0);
+	ck_assert_msg(vmac_driver_add_board(d, 2, "aux-again") != 0, "the same minor added twice");
+	in1.digital = 0x01;
+	ck_assert_msg(vmac_driver_tick(d, 0, ins, outs, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_msg(out0.digital == 0x01, "the switch on board 2 did not light the lamp on board 0: 0x%02x",
+	              out0.digital);
+	ck_assert_msg(out1.digital == 0, "output of an absent board landed on board 2: 0x%02x", out1.digital);
+	ck_assert_msg(var(d, "n")->value.number == 2, "dev.boards has %g boards", var(d, "n")->value.number);
+	ck_assert_str_eq(var(d, "who")->value.str, "main");
+	vmac_driver_free(d);
+}
+END_TEST
+
+START_TEST(variables_publish_by_their_rules)
+{
+	struct vmac_driver *d = load_ok("return { name = 't', version = '1', io = {},\n"
+	                                "  variables = { a = {}, slow = { update = 'timer:1' }, g1 = { group = 'g' },\n"
+	                                "                g2 = { group = 'g' }, s = {} },\n"
+	                                "  tick = function(dev, i)\n"
+	                                "    dev.vars.a = math.floor(i.time); dev.vars.slow = i.time\n"
+	                                "    dev.vars.g1 = i.time < 2 and 1 or 2; dev.vars.g2 = i.time\n"
+	                                "    dev.vars.s = string.rep('x', 100)\n"
+	                                "  end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	double published_a;
+	vmac_driver_add_board(d, 0, "b0");
+	memset(&in, 0, sizeof(in));
+	ck_assert_msg(tick1(d, 0.5, &in, &out, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_msg(var(d, "slow")->value.number == 0.5, "timer variable not published at first");
+	published_a = var(d, "a")->published_s;
+	ck_assert_int_eq(tick1(d, 0.9, &in, &out, err, sizeof(err)), 0);
+	ck_assert_msg(var(d, "a")->published_s == published_a, "an unchanged auto variable was published again");
+	ck_assert_msg(var(d, "slow")->value.number == 0.5, "timer:1 published again after 0.4 s");
+	ck_assert_msg(var(d, "g1")->published_s == 0.9 && var(d, "g2")->published_s == 0.9,
+	              "a group not published whole when one member changed: g1 at %g, g2 at %g",
+	              var(d, "g1")->published_s, var(d, "g2")->published_s);
+	ck_assert_int_eq(tick1(d, 2.0, &in, &out, err, sizeof(err)), 0);
+	ck_assert_msg(var(d, "slow")->value.number == 2.0, "timer:1 not published after 1.5 s");
+	ck_assert_msg(var(d, "g1")->value.number == 2 && var(d, "g2")->value.number == 2.0,
+	              "group not published whole: g1 %g g2 %g", var(d, "g1")->value.number, var(d, "g2")->value.number);
+	ck_assert_msg(strlen(var(d, "s")->value.str) == VMAC_DRIVER_STR_MAX, "string not cut at %d bytes",
+	              VMAC_DRIVER_STR_MAX);
+	vmac_driver_free(d);
+}
+END_TEST
+
+static int levels_asked;
+static int fake_set_level(void *ctx, unsigned level, char *err, size_t errlen)
+{
+	(void)ctx;
+	levels_asked++;
+	if (level > 6) {
+		snprintf(err, errlen, "schedule full: test");
+		return -1;
+	}
+	return 0;
+}
+static int events_seen;
+static void fake_event(void *ctx, const char *text)
+{
+	(void)ctx;
+	(void)text;
+	events_seen++;
+}
+
+START_TEST(input_and_host_hooks)
+{
+	struct vmac_driver *d = load_ok(
+	    "return { name = 't', version = '1', io = {},\n"
+	    "  params = { speed = { default = 10, min = 0, max = 100 } },\n"
+	    "  variables = { lamp = { set = true }, ro = {}, answer = {} },\n"
+	    "  commands = { go = { arg = 'speed' }, fail = {} },\n"
+	    "  tick = function(dev)\n"
+	    "    local ok, why = dev:set_level(9); dev.vars.answer = why\n"
+	    "    for n = 1, 20 do dev:event('hello ' .. n) end\n"
+	    "  end,\n"
+	    "  input = function(dev, name, value)\n"
+	    "    if name == 'fail' then error('input boom') end\n"
+	    "    if name == 'go' and value > dev.params.speed then return nil, 'too fast' end\n"
+	    "    dev.vars[name] = value; return true\n"
+	    "  end }\n");
+	struct vmac_driver_host host = {fake_set_level, fake_event, NULL};
+	struct vmac_value v;
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char reply[200], err[VMAC_DRIVER_ERR_MAX] = "";
+	vmac_driver_bind(d, &host);
+	vmac_driver_add_board(d, 0, "b0");
+	memset(&v, 0, sizeof(v));
+	v.type = VMAC_VALUE_BOOL;
+	v.number = 1;
+	ck_assert_msg(vmac_driver_input(d, 0, "lamp", &v, reply, sizeof(reply), err, sizeof(err)) == 0,
+	              "settable variable refused: %s %s", reply, err);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "ro", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_msg(strstr(reply, "read-only") != NULL, "read-only variable reply: %s", reply);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "nosuch", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	v.type = VMAC_VALUE_NUMBER;
+	v.number = 500;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_msg(strstr(reply, "out of range 0..100") != NULL, "range reply: %s", reply);
+	v.number = 50;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), 0);
+	v.number = 40;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), 0);
+	v.number = 60;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_msg(strcmp(reply, "too fast") == 0, "the driver's refusal not passed on: %s", reply);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "fail", &v, reply, sizeof(reply), err, sizeof(err)), -1);
+	ck_assert_msg(strstr(err, "input boom") != NULL && strstr(err, "traceback") != NULL, "input error: %s", err);
+	memset(&in, 0, sizeof(in));
+	ck_assert_msg(tick1(d, 1, &in, &out, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_int_eq(levels_asked, 1);
+	ck_assert_str_eq(var(d, "answer")->value.str, "schedule full: test");
+	ck_assert_msg(events_seen == 10, "dev:event let %d of 20 through in one second, expected 10", events_seen);
+	vmac_driver_free(d);
+}
+END_TEST
+
+START_TEST(sandbox_bounds)
+{
+	static const char *const refused[] = {
+	    "string.format = nil", "rawset(string, 'x', 1)", "setmetatable(math, {})", "('x'):rep(1e9)",
+	    "string.find(string.rep('a', 5000), '.-.-.-.-b')", "getfenv(0)", "os.execute('true')", "io.open('x')",
+	    "require('pid')", "vmac.cycles()", "while true do pcall(function() while true do end end) end",
+	    "local t = {} for i = 1, 1e7 do t[i] = {} end"};
+	static const char *const allowed[] = {
+	    "assert(('x 12 y'):match('%d+') == '12')",
+	    "assert(('  hi  '):match('^%s*(.-)%s*$') == 'hi')",
+	    "assert(string.find(string.rep('a', 60000) .. 'b', 'ab', 1, true) == 60000)",
+	    "assert(select(2, string.gsub('abc', '%a', function(c) return c:upper() end)) == 3)",
+	    "assert(os.clock() == 7.25)",
+	    "assert(string.gsub(string.rep('word ', 500), '[a-z]+', 'w') ~= nil)"};
+	size_t i;
+	for (i = 0; i < sizeof(refused) / sizeof(refused[0]); i++) {
+		char src[400], err[VMAC_DRIVER_ERR_MAX] = "";
+		struct vmac_inputs in;
+		struct vmac_outputs out;
+		struct vmac_driver *d;
+		snprintf(src, sizeof(src), "return { name = 't', version = '1', io = {}, tick = function() %s end }\n",
+		         refused[i]);
+		d = load_ok(src);
+		vmac_driver_add_board(d, 0, "b0");
+		memset(&in, 0, sizeof(in));
+		ck_assert_msg(tick1(d, 7.25, &in, &out, err, sizeof(err)) != 0, "sandbox let this through: %s", refused[i]);
+		vmac_driver_free(d);
+	}
+	for (i = 0; i < sizeof(allowed) / sizeof(allowed[0]); i++) {
+		char src[400], err[VMAC_DRIVER_ERR_MAX] = "";
+		struct vmac_inputs in;
+		struct vmac_outputs out;
+		struct vmac_driver *d;
+		snprintf(src, sizeof(src), "return { name = 't', version = '1', io = {}, tick = function() %s end }\n",
+		         allowed[i]);
+		d = load_ok(src);
+		vmac_driver_add_board(d, 0, "b0");
+		memset(&in, 0, sizeof(in));
+		ck_assert_msg(tick1(d, 7.25, &in, &out, err, sizeof(err)) == 0, "sandbox refused '%s': %s", allowed[i], err);
+		vmac_driver_free(d);
+	}
+}
+END_TEST
+
+START_TEST(load_gets_a_larger_budget_and_stdlib)
+{
+	struct vmac_driver *d;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	mkdir(STDLIB_DIR, 0755);
+	mkdir(CYCLES_DIR, 0755);
+	write_file(STDLIB_DIR "/twice.lua", "return { f = function(x) return 2 * x end }\n");
+	write_file(CYCLES_DIR "/b.lua", "return 'second'\n");
+	write_file(CYCLES_DIR "/a.lua", "return 'first'\n");
+	/* About 3 budgets of work at load: allowed (50 budgets); in tick: refused. */
+	d = load_ok("local n = 0 for i = 1, 150000 do n = n + i end\n"
+	            "local t = require 'twice'\nlocal c = vmac.cycles()\n"
+	            "assert(t.f(21) == 42 and c.a == 'first' and c.b == 'second')\n"
+	            "return { name = 't', version = '1', io = {}, tick = function()\n"
+	            "  local n = 0 for i = 1, 150000 do n = n + i end end }\n");
+	vmac_driver_add_board(d, 0, "b0");
+	memset(&in, 0, sizeof(in));
+	ck_assert_int_ne(tick1(d, 0, &in, &out, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "time budget exceeded") != NULL, "tick-time overrun: %s", err);
+	vmac_driver_free(d);
+	write_file(CYCLES_DIR "/c.lua", "return (\n");
+	load_fails("vmac.cycles()\nreturn { name = 't', version = '1', io = {}, tick = function() end }\n",
+	           "cycles/t/c.lua:");
+	unlink(CYCLES_DIR "/c.lua");
+	load_fails("require 'nosuch'\nreturn {}\n", "no such stdlib module");
+}
+END_TEST
+
+int main(void)
+{
+	Suite *s = suite_create("driver");
+	TCase *tc = tcase_create("driver");
+	SRunner *sr;
+	int failed;
+	tcase_add_checked_fixture(tc, setup, NULL);
+	tcase_set_timeout(tc, 60);
+	tcase_add_test(tc, manifest_errors_name_the_field);
+	tcase_add_test(tc, named_io_in_and_out);
+	tcase_add_test(tc, bad_outputs_fail_and_turn_everything_off);
+	tcase_add_test(tc, two_boards_one_machine);
+	tcase_add_test(tc, variables_publish_by_their_rules);
+	tcase_add_test(tc, input_and_host_hooks);
+	tcase_add_test(tc, sandbox_bounds);
+	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
+	suite_add_tcase(s, tc);
+	sr = srunner_create(s);
+	srunner_run_all(sr, CK_NORMAL);
+	failed = srunner_ntests_failed(sr);
+	srunner_free(sr);
+	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+}
