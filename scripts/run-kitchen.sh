@@ -2,12 +2,21 @@
 # The demo kitchen: vmacd plus three mock boards (washer, dishwasher, lights)
 # in the foreground. Ctrl-C stops everything; every board ends with its
 # outputs off. Usage: scripts/run-kitchen.sh [BIN_DIR] (default build/bin).
-# Environment: VMAC_BUS (GROUP:PORT), VMAC_HTTP (ADDR:PORT).
+# Environment: VMAC_BUS (GROUP:PORT), VMAC_HTTP (ADDR:PORT), VMAC_TIME_SCALE
+# (how fast the washer and dishwasher programmes run; default 0.1, ten times
+# faster than real, so a demonstration wash takes minutes, not an hour).
 set -u
 bin=${1:-build/bin}
 bus=${VMAC_BUS:-239.255.86.77:5870}
 http=${VMAC_HTTP:-127.0.0.1:8080}
+scale=${VMAC_TIME_SCALE:-0.1}
 pids=()
+fifos=$(mktemp -d)
+
+# Background jobs get /dev/null as stdin unless told otherwise; the line
+# reader below reads this terminal, so keep a handle on it.
+exec 3<&0
+reader=
 
 # Ctrl-C in the terminal reaches every process of the kitchen at once, so
 # then we only wait; a TERM (or a process ending) must be passed on.
@@ -16,35 +25,60 @@ stop() {
 	echo
 	echo "run-kitchen: stopping the host and the boards"
 	[ "$1" = INT ] || kill -TERM "${pids[@]}" 2>/dev/null
+	[ -n "$reader" ] && kill "$reader" 2>/dev/null
+	exec 4>&- 5>&- 6>&-
 	wait
+	rm -rf "$fifos"
 	echo "run-kitchen: stopped"
 	exit 0
 }
 trap 'stop INT' INT
 trap 'stop TERM' TERM
-# Background jobs get /dev/null as stdin unless told otherwise; the lights
-# board reads this terminal, so keep a handle on it.
-exec 3<&0
-
-"$bin/vmacd" --bus "$bus" --http "$http" &
+"$bin/vmacd" --bus "$bus" --http "$http" --set "driver.washer.param.time_scale=$scale" \
+	--set "driver.dishwasher.param.time_scale=$scale" &
 pids+=($!)
-"$bin/vmac-board" --plant washer --name washer-1 --bus "$bus" --quiet </dev/null &
+# Each board reads operator actions from a FIFO; the loop at the end hands
+# each line typed here to the board it names.
+for b in washer-1 dishwasher-1 lights-1; do mkfifo "$fifos/$b"; done
+"$bin/vmac-board" --plant washer --name washer-1 --bus "$bus" --quiet --commands <"$fifos/washer-1" &
 pids+=($!)
-"$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --quiet </dev/null &
+"$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --quiet --commands <"$fifos/dishwasher-1" &
 pids+=($!)
-# The lights board reads operator actions from this terminal.
-"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --quiet --commands <&3 &
+"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --quiet --commands <"$fifos/lights-1" &
 pids+=($!)
+exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1"
 
 cat <<EOT
 
 The demo kitchen is running.
   status page:   http://$http/api/status
   in a shell:    $bin/vmac status --http $http
-  flip a wall switch (type here, then Enter):   lights-1 toggle1 1
+  type here, then Enter (docs/KITCHEN.md lists more):
+    lights-1 toggle1 1        flip the kitchen wall switch
+    washer-1 start 1          press the washer's start button (programme: normal)
+    washer-1 door_release 1   open the washer door mid-wash (emergency release)
+    washer-1 door 1           close it again
+    washer-1 cancel 1         press cancel: the drum stops, the tub drains
+    dishwasher-1 start 1      start the dishwasher
+  programmes run at time scale $scale (VMAC_TIME_SCALE)
   Ctrl-C stops the host and the boards (all outputs off).
 
 EOT
+# Hand each typed line to the board it names (in the background, reading
+# this terminal), while the script waits for a process of the kitchen to end.
+dispatch() {
+	while read -r line; do
+		case "$line" in
+		washer-1\ *) echo "$line" >&4 ;;
+		dishwasher-1\ *) echo "$line" >&5 ;;
+		lights-1\ *) echo "$line" >&6 ;;
+		"") ;;
+		*) echo "run-kitchen: start the line with a board's name: washer-1, dishwasher-1 or lights-1" ;;
+		esac
+	done
+}
+dispatch <&3 &
+reader=$!
 wait -n "${pids[@]}"
 echo "run-kitchen: a process ended on its own; stopping the rest"
 stop TERM

@@ -134,7 +134,9 @@ def test_admission_turns_away_what_does_not_fit(t):
 
 def test_boards_of_one_machine_share_a_driver_and_fall_together(t):
     host = t.host(drivers=drivers_dir(t, pair=PAIR_LUA))
+    # The first board of a machine to attach is its primary (DRIVERS.md).
     main = t.board("generic", "pair-a", driver="pair", major=77, minor=0)
+    host.wait_running(["pair-a"])
     aux = t.board("generic", "pair-b", driver="pair", major=77, minor=1, commands=True)
     s = host.wait_running(["pair-a", "pair-b"])
     s = host.wait_status(lambda s: host.device("pair-a", s)["variables"].get("boards") == 2, 30,
