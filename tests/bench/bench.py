@@ -73,20 +73,12 @@ return driver
 """
 
 
-def bench_drivers(ctx):
-    path = os.path.join(ctx.logdir, "drivers")
-    os.makedirs(path, exist_ok=True)
-    with open(os.path.join(path, "benchprobe.lua"), "w") as f:
-        f.write(BENCH_LUA)
-    return path
-
-
 def start_kitchen(ctx, boards, period_us, deadline_us):
     settings = {"reply_deadline_us": deadline_us, "realtime": "true",
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": max(1024, boards + 8)}
     settings.update(schedule_for(boards, period_us))
-    host = ctx.host(drivers=bench_drivers(ctx), settings=settings)
+    host = ctx.host(drivers=ctx.drivers(benchprobe=BENCH_LUA), settings=settings)
     ctx.board("generic", "b", count=boards, driver="benchprobe", wrapper=board_wrapper())
     names = ["b-%d" % i for i in range(1, boards + 1)] if boards > 1 else ["b"]
     host.wait_running(names, timeout_s=120)

@@ -1,5 +1,5 @@
 -- unbounded recursion
--- expect: stack overflow
+-- expect: stack overflow|time budget exceeded
 local driver = { name = "recursion", version = "1", io = { lamp = "do0" } }
 function driver.tick(dev, inputs)
 	local function f() return 1 + f() end

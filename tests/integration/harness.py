@@ -338,6 +338,16 @@ class Context:
         host.wait_running(KITCHEN_NAMES)
         return boards
 
+    def drivers(self, **files):
+        """A --drivers folder in the log directory holding NAME.lua for every
+        NAME=source given; returns its path."""
+        path = os.path.join(self.logdir, "drivers")
+        os.makedirs(path, exist_ok=True)
+        for name, source in files.items():
+            with open(os.path.join(path, name + ".lua"), "w") as f:
+                f.write(source)
+        return path
+
     def start(self, argv, base):
         """Start any program (for failure-path checks); killed at cleanup."""
         p = Proc(self._name(base), argv, self.logdir)

@@ -2,7 +2,6 @@
 returns: each such device is put aside (sleeping or errant, outputs off) and
 the rest of the kitchen runs on undisturbed."""
 
-import os
 import re
 
 from harness import KITCHEN_NAMES, undisturbed
@@ -47,16 +46,6 @@ def line_of(source, text):
     return next(i for i, l in enumerate(source.splitlines(), 1) if text in l)
 
 
-def drivers_dir(t, **files):
-    """A --drivers folder holding NAME.lua for every NAME=source given."""
-    path = os.path.join(t.logdir, "drivers")
-    os.makedirs(path, exist_ok=True)
-    for name, source in files.items():
-        with open(os.path.join(path, name + ".lua"), "w") as f:
-            f.write(source)
-    return path
-
-
 def test_missing_driver_sleeps(t):
     host = t.host()
     t.kitchen(host)
@@ -76,7 +65,7 @@ def test_missing_driver_sleeps(t):
 
 
 def test_broken_driver_sleeps(t):
-    host = t.host(drivers=drivers_dir(t, broken=BROKEN_LUA))
+    host = t.host(drivers=t.drivers(broken=BROKEN_LUA))
     t.kitchen(host)
     since = host.last_event_seq()
     board = t.board("generic", "broken-1", driver="broken")
@@ -91,7 +80,7 @@ def test_broken_driver_sleeps(t):
 
 
 def test_crashy_driver_is_dropped(t):
-    host = t.host(drivers=drivers_dir(t, crashy=CRASHY_LUA))
+    host = t.host(drivers=t.drivers(crashy=CRASHY_LUA))
     t.kitchen(host)
     since = host.last_event_seq()
     board = t.board("generic", "crashy-1", driver="crashy")
@@ -113,7 +102,7 @@ def test_crashy_driver_is_dropped(t):
 
 
 def test_runaway_driver_is_dropped(t):
-    host = t.host(drivers=drivers_dir(t, runaway=RUNAWAY_LUA))
+    host = t.host(drivers=t.drivers(runaway=RUNAWAY_LUA))
     t.kitchen(host)
     since = host.last_event_seq()
     board = t.board("generic", "runaway-1", driver="runaway")

@@ -1,7 +1,6 @@
 """Many boards at once: one vmac-board process running --count boards, each
 its own device on the host."""
 
-import os
 
 from harness import undisturbed
 
@@ -23,11 +22,7 @@ return driver
 
 
 def test_board_count(t):
-    drivers = os.path.join(t.logdir, "drivers")
-    os.makedirs(drivers)
-    with open(os.path.join(drivers, "generic.lua"), "w") as f:
-        f.write(GENERIC_LUA)
-    host = t.host(drivers=drivers)
+    host = t.host(drivers=t.drivers(generic=GENERIC_LUA))
     t.board("generic", "g", count=COUNT)
     names = ["g-%d" % i for i in range(1, COUNT + 1)]
     status = host.wait_running(names, timeout_s=60)

@@ -4,8 +4,6 @@ admission control turns away a board that does not fit and disturbs no one;
 boards of one machine share a driver and are dropped together; a driver can
 change its level while running."""
 
-import os
-
 from harness import undisturbed
 
 # A driver that drives nothing and reports how many boards it sees.
@@ -49,15 +47,6 @@ return driver
 """
 
 
-def drivers_dir(t, **drivers):
-    path = os.path.join(t.logdir, "drivers")
-    os.makedirs(path, exist_ok=True)
-    for name, source in drivers.items():
-        with open(os.path.join(path, name + ".lua"), "w") as f:
-            f.write(source)
-    return path
-
-
 def served_rows(d, slots_per_block):
     """The (slot of the block, slice) pairs a device is served in."""
     period = 1 << d["level"]
@@ -88,7 +77,7 @@ def check_table(s):
 
 
 def test_status_shows_an_even_table(t):
-    host = t.host(drivers=drivers_dir(t, probe=PROBE_LUA), settings={"max_level": 5})
+    host = t.host(drivers=t.drivers(probe=PROBE_LUA), settings={"max_level": 5})
     t.board("generic", "p", driver="probe", count=7)
     names = ["p-%d" % i for i in range(1, 8)]
     s = host.wait_running(names)
@@ -114,7 +103,7 @@ def test_status_shows_an_even_table(t):
 def test_admission_turns_away_what_does_not_fit(t):
     # One slice per slot, 4 slots per block, devices at level 1: room for two.
     settings = {"slice_us": 50000, "slices_per_slot": 1, "max_level": 2, "default_level": 1}
-    host = t.host(drivers=drivers_dir(t, probe=PROBE_LUA), settings=settings)
+    host = t.host(drivers=t.drivers(probe=PROBE_LUA), settings=settings)
     t.board("generic", "a", driver="probe")
     t.board("generic", "b", driver="probe")
     host.wait_running(["a", "b"])
@@ -133,7 +122,7 @@ def test_admission_turns_away_what_does_not_fit(t):
 
 
 def test_boards_of_one_machine_share_a_driver_and_fall_together(t):
-    host = t.host(drivers=drivers_dir(t, pair=PAIR_LUA))
+    host = t.host(drivers=t.drivers(pair=PAIR_LUA))
     # The first board of a machine to attach is its primary (DRIVERS.md).
     main = t.board("generic", "pair-a", driver="pair", major=77, minor=0)
     host.wait_running(["pair-a"])
@@ -163,7 +152,7 @@ def test_boards_of_one_machine_share_a_driver_and_fall_together(t):
 
 
 def test_driver_changes_its_level(t):
-    host = t.host(drivers=drivers_dir(t, shifter=SHIFTER_LUA))
+    host = t.host(drivers=t.drivers(shifter=SHIFTER_LUA))
     t.board("generic", "shift", driver="shifter")
     host.wait_running(["shift"])
     event = host.wait_event("level", "shift")
