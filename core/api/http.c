@@ -237,8 +237,8 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	if (!h->daemon) {
 		snprintf(err, errlen, "cannot listen on %s (address in use, or not an address of this machine)",
 		         listen);
-		free(h->status.devices);
-		free(h);
+		h->daemon = NULL;
+		vmac_http_stop(h);
 		return NULL;
 	}
 	info = MHD_get_daemon_info(h->daemon, MHD_DAEMON_INFO_BIND_PORT);
@@ -255,7 +255,9 @@ void vmac_http_stop(struct vmac_http *h)
 {
 	if (!h)
 		return;
-	MHD_stop_daemon(h->daemon);
+	if (h->daemon)
+		MHD_stop_daemon(h->daemon);
+	pthread_mutex_destroy(&h->status_lock);
 	free(h->status.devices);
 	free(h->status.slot_load);
 	free(h);
