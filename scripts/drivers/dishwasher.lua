@@ -4,6 +4,7 @@
 -- (`d` below): fill, wash, drain, dry. The door has no lock: opening it
 -- stops everything and pauses the programme until it is closed again.
 
+local appliance = require "appliance"
 local cycle = require "cycle"
 local interlock = require "interlock"
 
@@ -99,10 +100,10 @@ local function steps_for(c)
 	return d
 end
 
-local chosen = "normal"
+local control -- the appliance: programmes, buttons, commands (below)
 
 local run = cycle.new(function(c)
-	programs[chosen](steps_for(c))
+	control:programme()(steps_for(c))
 end, {
 	interlocks = { door },
 	outputs = want,
@@ -110,61 +111,25 @@ end, {
 	cleanup = function(c) steps_for(c).drain() end,
 })
 
-local last_start, last_cancel = false, false -- a button held as the machine attaches counts as a press
-
-local function start(dev, program)
-	program = program or dev.params.program
-	if not programs[program] then
-		return nil, "no programme '" .. tostring(program) .. "'"
-	end
-	chosen = program
-	local ok, why = run:start()
-	if ok then
-		dev:set_level(RUN_LEVEL)
-		dev.vars.cycle = program
-	end
-	return ok, why
-end
+control = appliance.new { cycle = run, programs = programs, idle_level = IDLE_LEVEL, run_level = RUN_LEVEL }
 
 function driver.attach(dev)
 	params = dev.params
 end
 
 function driver.tick(dev, inputs)
-	if inputs.start_button and last_start == false then
-		start(dev)
-	end
-	if inputs.cancel_button and last_cancel == false then
-		run:cancel()
-	end
-	last_start, last_cancel = inputs.start_button, inputs.cancel_button
-
-	local was_active = run:active()
+	control:buttons(dev, inputs.start_button, inputs.cancel_button)
 	run:tick(inputs.time, inputs, want)
-	if was_active and not run:active() then
-		dev:set_level(IDLE_LEVEL)
-	end
+	control:publish(dev)
 	dev.out.fill_valve, dev.out.wash_motor, dev.out.drain_pump = want.fill_valve, want.wash_motor, want.drain_pump
 
 	local v = dev.vars
-	v.state, v.step, v.running = run.state, run.step_name or "-", run:active()
-	v.paused_by, v.error = run.pause_reasons[1] or "", run.error or ""
-	v.time_left_s = run:wait_left() or 0
 	v.level_l = inputs.level_l
 	v.door = inputs.door_closed and "closed" or "open"
 end
 
 function driver.input(dev, name, value)
-	if name == "start" then
-		return start(dev, value ~= true and value or nil)
-	elseif name == "pause" then
-		return run:pause()
-	elseif name == "resume" then
-		return run:resume()
-	elseif name == "cancel" then
-		return run:cancel()
-	end
-	return true
+	return control:input(dev, name, value)
 end
 
 return driver

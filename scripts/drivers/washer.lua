@@ -7,6 +7,7 @@
 -- the drum and drains. The door is never unlocked while the drum turns or
 -- the water is above the door.
 
+local appliance = require "appliance"
 local cycle = require "cycle"
 local interlock = require "interlock"
 local pid = require "pid"
@@ -173,12 +174,12 @@ local function steps_for(c)
 	return w
 end
 
-local chosen = "normal"
+local control -- the appliance: programmes, buttons, commands (below)
 
 local wash = cycle.new(function(c)
 	local w = steps_for(c)
 	w.lock()
-	programs[chosen](w)
+	control:programme()(w)
 	w.unlock()
 end, {
 	hold = hold,
@@ -209,8 +210,17 @@ local function drive_drum(dt)
 	return drum_pid:update(setpoint, inp.drum_rpm, dt)
 end
 
+control = appliance.new {
+	cycle = wash,
+	programs = programs,
+	idle_level = IDLE_LEVEL,
+	run_level = RUN_LEVEL,
+	can_start = function()
+		if not inp.door_closed then return "close the door first" end
+	end,
+}
+
 local last_encoder, last_time
-local last_start, last_cancel = false, false -- a button held as the machine attaches counts as a press
 
 local function read_board(inputs)
 	for k, v in pairs(inputs) do
@@ -226,44 +236,15 @@ local function read_board(inputs)
 	return dt
 end
 
-local function start(dev, program)
-	program = program or dev.params.program
-	if not programs[program] then
-		return nil, "no programme '" .. tostring(program) .. "'"
-	end
-	if not inp.door_closed then
-		return nil, "close the door first"
-	end
-	chosen = program
-	local ok, why = wash:start()
-	if ok then
-		dev:set_level(RUN_LEVEL)
-		dev.vars.cycle = program
-	end
-	return ok, why
-end
-
 function driver.attach(dev)
 	params = dev.params
-	dev.state.runs = 0
 end
 
 function driver.tick(dev, inputs)
 	local dt = read_board(inputs)
-	if inputs.start_button and last_start == false then
-		start(dev)
-	end
-	if inputs.cancel_button and last_cancel == false then
-		wash:cancel()
-	end
-	last_start, last_cancel = inputs.start_button, inputs.cancel_button
-
-	local was_active = wash:active()
+	control:buttons(dev, inputs.start_button, inputs.cancel_button)
 	wash:tick(inputs.time, inp, want)
-	if was_active and not wash:active() then
-		dev:set_level(IDLE_LEVEL)
-		dev.state.runs = dev.state.runs + 1
-	end
+	control:publish(dev)
 	-- The guard: never unlock a door on a turning drum or on water above it.
 	if not safe_to_open() and inp.door_closed then
 		want.door_lock = true
@@ -275,25 +256,13 @@ function driver.tick(dev, inputs)
 	o.drum_drive = drive_drum(dt)
 
 	local v = dev.vars
-	v.state, v.step, v.running = wash.state, wash.step_name or "-", wash:active()
-	v.paused_by, v.error = wash.pause_reasons[1] or "", wash.error or ""
-	v.time_left_s = wash:wait_left() or 0
 	v.drum_rpm, v.drum_setpoint_rpm = inp.drum_rpm, setpoint
 	v.level_l, v.temp_c = inp.level_l, inp.temp_c
 	v.door = inputs.door_locked and "locked" or inputs.door_closed and "closed" or "open"
 end
 
 function driver.input(dev, name, value)
-	if name == "start" then
-		return start(dev, value ~= true and value or nil)
-	elseif name == "pause" then
-		return wash:pause()
-	elseif name == "resume" then
-		return wash:resume()
-	elseif name == "cancel" then
-		return wash:cancel()
-	end
-	return true -- params: dev.params already holds the new value
+	return control:input(dev, name, value)
 end
 
 function driver.detach()

@@ -1,0 +1,119 @@
+-- appliance: the operator's side of an appliance that runs programmes
+-- (docs/STDLIB.md "appliance"): start a programme by name, pause, resume and
+-- cancel, the machine's start and cancel buttons, a faster service level
+-- while a programme runs, and the programme's status as published variables.
+-- The programme itself is a `cycle`; the driver keeps its outputs and its
+-- safety (interlocks, guards).
+
+local type, error, tostring = type, error, tostring
+
+local appliance = {}
+
+local Appliance = {}
+Appliance.__index = Appliance
+
+-- appliance.new{cycle = , programs = , idle_level = , run_level = , can_start = ?}
+--   cycle: the cycle.new object that runs the chosen programme
+--   programs: name -> programme (what vmac.cycles() returned)
+--   idle_level, run_level: service levels when idle and while running
+--   can_start(): nil to allow a start, or a message saying why not
+function appliance.new(spec)
+	if type(spec) ~= "table" then
+		error("appliance.new: expects a table {cycle=, programs=, idle_level=, run_level=}", 2)
+	end
+	if type(spec.cycle) ~= "table" or type(spec.cycle.start) ~= "function" then
+		error("appliance.new: cycle must be a cycle (cycle.new)", 2)
+	end
+	if type(spec.programs) ~= "table" then
+		error("appliance.new: programs must be a table name -> programme", 2)
+	end
+	for _, k in ipairs({ "idle_level", "run_level" }) do
+		local v = spec[k]
+		if type(v) ~= "number" or v ~= v or v < 0 or v % 1 ~= 0 then
+			error("appliance.new: " .. k .. " must be a whole number >= 0", 2)
+		end
+	end
+	if spec.can_start ~= nil and type(spec.can_start) ~= "function" then
+		error("appliance.new: can_start must be a function returning nil or a message", 2)
+	end
+	return setmetatable({
+		cycle = spec.cycle, programs = spec.programs,
+		idle_level = spec.idle_level, run_level = spec.run_level, can_start = spec.can_start,
+		chosen = nil,          -- name of the programme started last
+		last_start = false,    -- button states at the previous tick: a button
+		last_cancel = false,   -- held as the machine attaches counts as a press
+		was_active = false,
+	}, Appliance)
+end
+
+-- Start programme `name` (nil: dev.params.program). Returns true, or nil and
+-- a message for the operator (no such programme, can_start's reason, or the
+-- cycle's own refusal: "cycle is already running").
+function Appliance:start(dev, name)
+	name = name or dev.params.program
+	if self.programs[name] == nil then
+		return nil, "no programme '" .. tostring(name) .. "'"
+	end
+	local why = self.can_start and self.can_start()
+	if why then
+		return nil, why
+	end
+	self.chosen = name
+	local ok, err = self.cycle:start()
+	if ok then
+		dev:set_level(self.run_level)
+		dev.vars.cycle = name
+	end
+	return ok, err
+end
+
+-- The programme chosen by the last start (for the cycle's body).
+function Appliance:programme()
+	return self.programs[self.chosen]
+end
+
+-- Once per tick, before the cycle's tick: rising edges of the buttons.
+function Appliance:buttons(dev, start_pressed, cancel_pressed)
+	if start_pressed and not self.last_start then
+		self:start(dev)
+	end
+	if cancel_pressed and not self.last_cancel then
+		self.cycle:cancel()
+	end
+	self.last_start, self.last_cancel = start_pressed == true, cancel_pressed == true
+end
+
+-- Once per tick, after the cycle's tick: back to the idle level when the
+-- programme has ended, and the status variables (state, step, running,
+-- paused_by, error, time_left_s).
+function Appliance:publish(dev)
+	local c, v = self.cycle, dev.vars
+	local active = c:active()
+	if self.was_active and not active then
+		dev:set_level(self.idle_level)
+	end
+	self.was_active = active
+	v.state, v.step, v.running = c.state, c.step_name or "-", active
+	v.paused_by, v.error = c.pause_reasons[1] or "", c.error or ""
+	v.time_left_s = c:wait_left() or 0
+end
+
+-- The operator commands start (value: a programme name, or true for the
+-- default), pause, resume and cancel, as the driver's input() returns them:
+-- true, or nil and a message. Any other name is taken as accepted (true):
+-- the host has already set a param in dev.params; a driver with commands of
+-- its own handles them before calling this.
+function Appliance:input(dev, name, value)
+	if name == "start" then
+		return self:start(dev, value ~= true and value or nil)
+	elseif name == "pause" then
+		return self.cycle:pause()
+	elseif name == "resume" then
+		return self.cycle:resume()
+	elseif name == "cancel" then
+		return self.cycle:cancel()
+	end
+	return true
+end
+
+return appliance

@@ -1,0 +1,111 @@
+-- Tests of stdlib/appliance.lua: starting programmes by name or button,
+-- the service level while running, the published status, and commands.
+
+local T = require "testing"
+local appliance = require "appliance"
+local cycle = require "cycle"
+local test = T.test
+
+-- A fake dev: records set_level calls; vars and params as a driver has them.
+local function fake_dev()
+	local dev = { vars = {}, params = { program = "short" }, levels = {} }
+	function dev:set_level(n) self.levels[#self.levels + 1] = n; return true end
+	return dev
+end
+
+-- A machine with two programmes ("short": one 1 s step; "long": one 10 s
+-- step) and a door that may forbid starting.
+local function machine()
+	local m = { door_closed = true, out = {} }
+	m.programs = {
+		short = function(c) c:step("short step", function() c:wait(1) end) end,
+		long = function(c) c:step("long step", function() c:wait(10) end) end,
+	}
+	m.cycle = cycle.new(function(c) m.ctl:programme()(c) end)
+	m.ctl = appliance.new {
+		cycle = m.cycle, programs = m.programs, idle_level = 5, run_level = 3,
+		can_start = function() if not m.door_closed then return "close the door first" end end,
+	}
+	m.dev = fake_dev()
+	m.t = 0
+	function m.tick(start, cancel)
+		m.t = m.t + 0.1
+		m.ctl:buttons(m.dev, start or false, cancel or false)
+		m.cycle:tick(m.t, {}, m.out)
+		m.ctl:publish(m.dev)
+	end
+	return m
+end
+
+test("start by name runs that programme at the running level, then goes back to idle", function()
+	local m = machine()
+	T.equal(m.ctl:start(m.dev, "long"), true, "start long")
+	T.equal(m.dev.vars.cycle, "long", "cycle variable")
+	T.equal(m.dev.levels[1], 3, "level asked for on start")
+	m.tick()
+	T.equal(m.dev.vars.step, "long step", "step published")
+	T.equal(m.dev.vars.running, true, "running published")
+	T.near(m.dev.vars.time_left_s, 10, 0.11, "time left published")
+	for _ = 1, 120 do m.tick() end
+	T.equal(m.dev.vars.state, "done", "state after 12 s")
+	T.equal(m.dev.levels[#m.dev.levels], 5, "level asked for when done")
+	T.equal(#m.dev.levels, 2, "set_level calls (start, end)")
+end)
+
+test("the start button starts the default programme once per press", function()
+	local m = machine()
+	m.tick(true)
+	T.equal(m.dev.vars.cycle, "short", "the param's programme started by the button")
+	T.equal(m.dev.vars.state, "running", "state after the press")
+	m.tick(true) -- still held: no second start
+	T.equal(#m.dev.levels, 1, "a held button started the programme twice")
+	for _ = 1, 20 do m.tick() end
+	T.equal(m.dev.vars.state, "done", "short programme done after 2 s")
+	m.tick(true)
+	T.equal(m.dev.vars.state, "running", "a new press starts it again")
+end)
+
+test("refusals: unknown programme, can_start, already running", function()
+	local m = machine()
+	local ok, why = m.ctl:start(m.dev, "nosuch")
+	T.equal(ok, nil, "unknown programme accepted")
+	T.check(why:find("no programme 'nosuch'", 1, true), "message %q", why)
+	m.door_closed = false
+	ok, why = m.ctl:start(m.dev)
+	T.equal(why, "close the door first", "can_start's reason")
+	m.door_closed = true
+	T.equal(m.ctl:start(m.dev), true, "start with the door closed")
+	ok, why = m.ctl:start(m.dev, "long")
+	T.equal(ok, nil, "a second start while running accepted")
+	T.check(why:find("already running", 1, true), "message %q", why)
+end)
+
+test("commands and the cancel button", function()
+	local m = machine()
+	T.equal(m.ctl:input(m.dev, "start", "long"), true, "start command")
+	m.tick()
+	T.equal(m.ctl:input(m.dev, "pause", true), true, "pause command")
+	m.tick()
+	T.equal(m.dev.vars.state, "paused", "state after pause")
+	T.equal(m.dev.vars.paused_by, "user", "paused_by")
+	T.equal(m.ctl:input(m.dev, "resume", true), true, "resume command")
+	m.tick()
+	T.equal(m.dev.vars.state, "running", "state after resume")
+	m.tick(false, true)
+	m.tick()
+	T.equal(m.dev.vars.state, "cancelled", "state after the cancel button")
+	T.equal(m.ctl:input(m.dev, "fill_l", 12), true, "a param name is accepted as is")
+	local ok = m.ctl:input(m.dev, "pause", true)
+	T.equal(ok, nil, "pause with nothing running accepted")
+end)
+
+test("bad arguments raise errors naming them", function()
+	T.fails(function() appliance.new() end, "expects a table", "no spec")
+	T.fails(function() appliance.new { cycle = {}, programs = {}, idle_level = 1, run_level = 0 } end,
+		"cycle must be a cycle", "not a cycle")
+	local c = cycle.new(function() end)
+	T.fails(function() appliance.new { cycle = c, programs = {}, idle_level = 1.5, run_level = 0 } end,
+		"idle_level must be a whole number", "fractional level")
+	T.fails(function() appliance.new { cycle = c, idle_level = 1, run_level = 0 } end,
+		"programs must be a table", "no programs")
+end)
