@@ -224,10 +224,8 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
 	h->status.slot_load = calloc(1u << cfg->max_level, sizeof(*h->status.slot_load));
 	if (!h->status.devices || !h->status.slot_load) {
-		free(h->status.slot_load);
-		free(h->status.devices);
-		free(h);
 		snprintf(err, errlen, "out of memory");
+		vmac_http_stop(h);
 		return NULL;
 	}
 	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_USE_ERROR_LOG, 0, NULL,
@@ -237,7 +235,6 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	if (!h->daemon) {
 		snprintf(err, errlen, "cannot listen on %s (address in use, or not an address of this machine)",
 		         listen);
-		h->daemon = NULL;
 		vmac_http_stop(h);
 		return NULL;
 	}
