@@ -23,11 +23,15 @@
 #define PATTERN_STEPS_MAX (1 << 24) /* worst-case steps of one pattern call */
 #define EVENTS_PER_S 10
 
-enum io_kind { IO_DI, IO_AI, IO_ENCODER, IO_DO, IO_PWM };
+#define IO_DI VMAC_IO_DI
+#define IO_AI VMAC_IO_AI
+#define IO_ENCODER VMAC_IO_ENCODER
+#define IO_DO VMAC_IO_DO
+#define IO_PWM VMAC_IO_PWM
 
 struct io {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
-	enum io_kind kind;
+	enum vmac_io_kind kind;
 	unsigned channel;
 	uint32_t minor;  /* board of the machine; has_minor = 0: the primary */
 	int has_minor;
@@ -1268,6 +1272,23 @@ const char *vmac_driver_version(const struct vmac_driver *d)
 unsigned vmac_driver_level(const struct vmac_driver *d)
 {
 	return d->level;
+}
+
+int vmac_driver_nio(const struct vmac_driver *d)
+{
+	return d->nio;
+}
+
+void vmac_driver_io_info(const struct vmac_driver *d, int i, struct vmac_driver_io *out)
+{
+	const struct io *io = &d->io[i];
+	out->name = io->name;
+	out->kind = io->kind;
+	out->channel = io->channel;
+	out->has_minor = io->has_minor;
+	out->minor = io->minor;
+	out->scale = io->scale;
+	out->offset = io->offset;
 }
 
 void vmac_driver_bind(struct vmac_driver *d, const struct vmac_driver_host *host)

@@ -86,6 +86,20 @@ const char *vmac_driver_name(const struct vmac_driver *d);
 const char *vmac_driver_version(const struct vmac_driver *d);
 unsigned vmac_driver_level(const struct vmac_driver *d);
 
+/* The manifest's board I/O, in name order (for tools that show or test a
+ * machine by the driver's names; docs/TESTING.md). */
+enum vmac_io_kind { VMAC_IO_DI, VMAC_IO_AI, VMAC_IO_ENCODER, VMAC_IO_DO, VMAC_IO_PWM };
+struct vmac_driver_io {
+	const char *name;      /* valid while the driver is */
+	enum vmac_io_kind kind;
+	unsigned channel;      /* bit of digital in/out, analog input index */
+	int has_minor;         /* 0: the primary board; 1: the board with this minor id */
+	uint32_t minor;
+	double scale, offset;  /* analog inputs: counts * scale + offset */
+};
+int vmac_driver_nio(const struct vmac_driver *d);
+void vmac_driver_io_info(const struct vmac_driver *d, int i, struct vmac_driver_io *out);
+
 /* Bus thread from here on. */
 void vmac_driver_bind(struct vmac_driver *d, const struct vmac_driver_host *host);
 

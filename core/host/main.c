@@ -10,7 +10,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../api/http.h"
@@ -18,6 +17,7 @@
 #include "bus.h"
 #include "config.h"
 #include "events.h"
+#include "loader.h"
 
 struct host {
 	struct vmac_config cfg;
@@ -56,62 +56,16 @@ static void wakeup(void *ctx)
 	ev_async_send(h->loop, &h->wake_w);
 }
 
-static int driver_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
-{
-	struct stat st;
-	if (cfg->drivers_dir[0]) {
-		snprintf(path, len, "%s/%s.lua", cfg->drivers_dir, name);
-		if (stat(path, &st) == 0)
-			return 0;
-	}
-	snprintf(path, len, "%s/drivers/%s.lua", cfg->scripts_dir, name);
-	return stat(path, &st) == 0 ? 0 : -ENOENT;
-}
-
-/* cycles/NAME/ beside a --drivers folder if there is one, else the
- * shipped scripts/cycles/NAME/. */
-static void cycles_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
-{
-	struct stat st;
-	if (cfg->drivers_dir[0]) {
-		snprintf(path, len, "%s/cycles/%s", cfg->drivers_dir, name);
-		if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
-			return;
-	}
-	snprintf(path, len, "%s/cycles/%s", cfg->scripts_dir, name);
-}
-
 static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 {
 	struct vmac_host_cmd c;
-	struct vmac_driver_limits limits;
-	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];
-	char path[VMAC_PATH_MAX + 64], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
 
 	memset(&c, 0, sizeof(c));
 	c.kind = VMAC_CMD_LOADED;
 	c.slot = m->slot;
 	c.generation = m->generation;
-	memset(&limits, 0, sizeof(limits));
-	limits.memory_bytes = (size_t)h->cfg.driver_memory_kib * 1024;
-	limits.instructions = h->cfg.driver_instructions;
-	limits.budget_us = h->cfg.driver_budget_us;
-	limits.default_level = h->cfg.default_level;
-	limits.max_level = h->cfg.max_level;
-	limits.allow_jit = h->cfg.allow_jit;
-	limits.stdlib_dir = h->cfg.stdlib_dir;
-	cycles_path(&h->cfg, m->driver, cycles, sizeof(cycles));
-	limits.cycles_dir = cycles;
-	limits.expect_name = m->driver;
-	limits.settings = settings;
-	limits.nsettings = vmac_config_driver_settings(&h->cfg, m->driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
-	if (driver_path(&h->cfg, m->driver, path, sizeof(path)) != 0) {
+	if (vmac_load_driver(&h->cfg, m->driver, m->device, &c.drv, c.text, sizeof(c.text)) == -ENOENT)
 		c.missing = 1;
-		snprintf(c.text, sizeof(c.text), "no driver '%s' for %s (looked in %s%s%s/drivers)", m->driver, m->device,
-		         h->cfg.drivers_dir, h->cfg.drivers_dir[0] ? " and " : "", h->cfg.scripts_dir);
-	} else if (vmac_driver_load(path, &limits, &c.drv, err, sizeof(err)) != 0) {
-		snprintf(c.text, sizeof(c.text), "driver '%s' for %s failed to load: %s", m->driver, m->device, err);
-	}
 	if (vmac_bus_send_cmd(h->bus, &c) != 0) {
 		vmac_driver_free(c.drv);
 		vmac_event_log_add(&h->log, "warning", m->device, "command ring full; device will retry on discovery");

@@ -1,0 +1,67 @@
+/* See loader.h. */
+#include "loader.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/stat.h>
+
+int vmac_driver_path(const struct vmac_config *cfg, const char *driver, char *path, size_t len)
+{
+	struct stat st;
+	if (cfg->drivers_dir[0]) {
+		snprintf(path, len, "%s/%s.lua", cfg->drivers_dir, driver);
+		if (stat(path, &st) == 0)
+			return 0;
+	}
+	snprintf(path, len, "%s/drivers/%s.lua", cfg->scripts_dir, driver);
+	return stat(path, &st) == 0 ? 0 : -ENOENT;
+}
+
+/* cycles/NAME/ beside a --drivers folder if there is one, else the
+ * shipped scripts/cycles/NAME/. */
+static void cycles_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
+{
+	struct stat st;
+	if (cfg->drivers_dir[0]) {
+		snprintf(path, len, "%s/cycles/%s", cfg->drivers_dir, name);
+		if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+			return;
+	}
+	snprintf(path, len, "%s/cycles/%s", cfg->scripts_dir, name);
+}
+
+int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device,
+                     struct vmac_driver **out, char *text, size_t textlen)
+{
+	struct vmac_driver_limits limits;
+	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];
+	char path[VMAC_PATH_MAX + 64], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+	int rc;
+
+	*out = NULL;
+	memset(&limits, 0, sizeof(limits));
+	limits.memory_bytes = (size_t)cfg->driver_memory_kib * 1024;
+	limits.instructions = cfg->driver_instructions;
+	limits.budget_us = cfg->driver_budget_us;
+	limits.default_level = cfg->default_level;
+	limits.max_level = cfg->max_level;
+	limits.allow_jit = cfg->allow_jit;
+	limits.stdlib_dir = cfg->stdlib_dir;
+	cycles_path(cfg, driver, cycles, sizeof(cycles));
+	limits.cycles_dir = cycles;
+	limits.expect_name = driver;
+	limits.settings = settings;
+	limits.nsettings = vmac_config_driver_settings(cfg, driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
+	if (vmac_driver_path(cfg, driver, path, sizeof(path)) != 0) {
+		snprintf(text, textlen, "no driver '%s' for %s (looked in %s%s%s/drivers)", driver, device,
+		         cfg->drivers_dir, cfg->drivers_dir[0] ? " and " : "", cfg->scripts_dir);
+		return -ENOENT;
+	}
+	rc = vmac_driver_load(path, &limits, out, err, sizeof(err));
+	if (rc != 0) {
+		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
+		return rc < 0 ? rc : -EINVAL;
+	}
+	return 0;
+}

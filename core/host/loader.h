@@ -1,0 +1,23 @@
+/* Finding and loading a device's driver the way the host does: NAME.lua in
+ * --drivers first, then the shipped scripts/drivers/; its cycles/NAME/
+ * beside it; the limits and driver.NAME.* settings of the configuration.
+ * Used by vmacd's main thread and by `vmac test` (docs/TESTING.md). Slow:
+ * reads files and compiles; never on the bus thread. */
+#ifndef VMAC_LOADER_H
+#define VMAC_LOADER_H
+
+#include <stddef.h>
+
+#include "../driver/driver.h"
+#include "config.h"
+
+/* Load driver `driver` for board `device`. Returns 0 and *out; or -ENOENT
+ * (no such file) or another negative errno, with text saying why in words a
+ * person can act on ("no driver 'washer' for washer-1 (looked in ...)"). */
+int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device,
+                     struct vmac_driver **out, char *text, size_t textlen);
+
+/* The file vmac_load_driver would load for `driver`: 0, or -ENOENT. */
+int vmac_driver_path(const struct vmac_config *cfg, const char *driver, char *path, size_t len);
+
+#endif
