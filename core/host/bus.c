@@ -94,6 +94,7 @@ struct vmac_bus {
 	uint64_t tick_index;
 	struct device *dev;
 	uint32_t ndev;
+	uint32_t nused; /* slots at or past this have never held a device: loops stop here */
 	struct machine *mach;
 	struct vmac_sched *sched;
 	struct vmac_sched_entry *slot_entries;
@@ -118,7 +119,18 @@ struct vmac_bus {
 	pthread_mutex_t status_lock;
 	struct vmac_status status;
 	char host_addr[48];
+	/* Virtual mode (vmac test): no thread, no socket, no timer; the caller
+	 * owns the clock and carries the frames (struct vmac_bus_link). */
+	int virt;
+	int64_t virt_now_ns;
+	struct vmac_bus_link link;
 };
+
+/* The bus clock: CLOCK_MONOTONIC, or the caller's in virtual mode. */
+static int64_t bus_now(const struct vmac_bus *bus)
+{
+	return bus->virt ? bus->virt_now_ns : vmac_now_ns();
+}
 
 /* ---- messages to the main thread (no allocation: fixed ring slots) ---- */
 
@@ -141,7 +153,7 @@ static void event(struct vmac_bus *bus, const struct device *d, const char *kind
 	va_list ap;
 	memset(&m, 0, sizeof(m));
 	m.kind = VMAC_MSG_EVENT;
-	m.time_ns = vmac_now_ns();
+	m.time_ns = bus_now(bus);
 	if (d) {
 		memcpy(m.device, d->ann.board, sizeof(m.device));
 		memcpy(m.driver, d->ann.driver, sizeof(m.driver));
@@ -155,7 +167,7 @@ static void event(struct vmac_bus *bus, const struct device *d, const char *kind
 
 static double bus_time(const struct vmac_bus *bus)
 {
-	return (double)(vmac_now_ns() - bus->start_ns) / 1e9;
+	return (double)(bus_now(bus) - bus->start_ns) / 1e9;
 }
 
 /* Hand a driver to the main thread to close (closing a Lua state is slow). */
@@ -217,11 +229,14 @@ static void flush(struct vmac_bus *bus)
 	uint32_t i;
 	if (bus->ntx == 0)
 		return;
-	vmac_transport_send(&bus->tr, bus->tx, bus->ntx);
+	if (bus->virt)
+		bus->link.send(bus->link.ctx, bus->tx, bus->ntx);
+	else
+		vmac_transport_send(&bus->tr, bus->tx, bus->ntx);
 	/* The deadline runs from when the request actually left the host, so a
 	 * tick the machine delayed never counts against a board. */
-	sent_ns = vmac_now_ns();
-	for (i = 0; i < bus->ndev; i++)
+	sent_ns = bus_now(bus);
+	for (i = 0; i < bus->nused; i++)
 		if (bus->dev[i].pending && bus->dev[i].sent_ns == 0)
 			bus->dev[i].sent_ns = sent_ns;
 	bus->ntx = 0;
@@ -287,7 +302,7 @@ static void drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const c
 	if (d->mach >= 0) {
 		int mi = d->mach;
 		uint32_t i;
-		for (i = 0; i < bus->ndev; i++) {
+		for (i = 0; i < bus->nused; i++) {
 			struct device *o = &bus->dev[i];
 			if (o == d || o->mach != mi || o->state == DEV_FREE)
 				continue;
@@ -318,7 +333,7 @@ static void miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)
 static void check_deadlines(struct vmac_bus *bus, int64_t now)
 {
 	uint32_t i;
-	for (i = 0; i < bus->ndev; i++) {
+	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		char why[120];
 		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->deadline_ns)
@@ -370,7 +385,7 @@ static int reason_of(int proto_err)
 static struct device *find_by_identity(struct vmac_bus *bus, const struct vmac_announce *a)
 {
 	uint32_t i;
-	for (i = 0; i < bus->ndev; i++) {
+	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		if (d->state != DEV_FREE && d->ann.major == a->major && d->ann.minor == a->minor &&
 		    strcmp(d->ann.driver, a->driver) == 0)
@@ -387,7 +402,7 @@ static struct device *new_slot(struct vmac_bus *bus)
 		if (bus->dev[i].state == DEV_FREE)
 			return &bus->dev[i];
 	/* Full: reuse the errant device not heard of for the longest. */
-	for (i = 0; i < bus->ndev; i++) {
+	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		if (d->state == DEV_ERRANT && (!oldest || d->last_seen_ns < oldest->last_seen_ns))
 			oldest = d;
@@ -434,7 +449,7 @@ static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
 static void machine_to_sleep(struct vmac_bus *bus, int mi)
 {
 	uint32_t i;
-	for (i = 0; i < bus->ndev; i++) {
+	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		if (d->mach != mi)
 			continue;
@@ -450,7 +465,7 @@ static void machine_to_sleep(struct vmac_bus *bus, int mi)
 static int find_machine(const struct vmac_bus *bus, const char *driver, uint32_t major)
 {
 	uint32_t i;
-	for (i = 0; i < bus->ndev; i++)
+	for (i = 0; i < bus->nused; i++)
 		if (bus->mach[i].used && bus->mach[i].major == major && strcmp(bus->mach[i].driver, driver) == 0)
 			return (int)i;
 	return -1;
@@ -518,6 +533,8 @@ static void on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const st
 			return;
 		}
 	}
+	if (slot_of(bus, d) >= bus->nused)
+		bus->nused = slot_of(bus, d) + 1;
 	d->ann = m->u.announce;
 	d->addr = p->addr;
 	d->generation = (uint16_t)(d->generation + 1 ? d->generation + 1 : 1);
@@ -728,11 +745,46 @@ static const char *state_name(enum dev_state s)
 	}
 }
 
+/* Device slot i as the status shows it. */
+static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_status *o)
+{
+	const struct device *d = &bus->dev[i];
+	const struct machine *m = d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	struct vmac_sched_device sd;
+	int v;
+	memcpy(o->name, d->ann.board, sizeof(o->name));
+	memcpy(o->driver, d->ann.driver, sizeof(o->driver));
+	snprintf(o->driver_version, sizeof(o->driver_version), "%s", m && m->drv ? vmac_driver_version(m->drv) : "");
+	snprintf(o->machine, sizeof(o->machine), "%s", m ? bus->dev[m->primary].ann.board : "");
+	snprintf(o->note, sizeof(o->note), "%s", d->note);
+	o->state = state_name(d->state);
+	vmac_addr_format(&d->addr, o->address, sizeof(o->address));
+	o->id = d->id;
+	o->major = d->ann.major;
+	o->minor = d->ann.minor;
+	o->scheduled = d->scheduled && vmac_sched_device(bus->sched, i, &sd) == 0 && sd.state == VMAC_SCHED_RUNNING;
+	o->level = o->scheduled ? sd.level : (m ? m->level : 0);
+	o->slot = o->scheduled ? sd.offset : 0;
+	o->slice = o->scheduled ? sd.slice : 0;
+	o->period_us = (uint32_t)((bus->slot_ns << o->level) / 1000);
+	o->misses = d->misses;
+	o->served = d->served;
+	o->inputs = d->inputs;
+	o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
+	o->driver_memory = m && m->drv && m->primary == i ? vmac_driver_memory(m->drv) : 0;
+	o->nvars = 0;
+	if (m && m->drv && m->primary == i) {
+		o->nvars = vmac_driver_nvars(m->drv);
+		for (v = 0; v < o->nvars; v++)
+			o->vars[v] = *vmac_driver_variable(m->drv, v);
+	}
+}
+
 static void publish(struct vmac_bus *bus, int64_t now)
 {
 	struct vmac_status *s = &bus->status;
 	uint32_t i;
-	int n = 0, v;
+	int n = 0;
 	if (pthread_mutex_trylock(&bus->status_lock) != 0)
 		return; /* a reader holds it: try again next tick, never wait */
 	s->time_ns = now;
@@ -746,41 +798,9 @@ static void publish(struct vmac_bus *bus, int64_t now)
 	vmac_sched_capacity(bus->sched, &s->capacity_used, &s->capacity_total);
 	for (i = 0; i < s->slots_per_block; i++)
 		s->slot_load[i] = (uint16_t)vmac_sched_load(bus->sched, i);
-	for (i = 0; i < bus->ndev; i++) {
-		const struct device *d = &bus->dev[i];
-		const struct machine *m = d->mach >= 0 ? &bus->mach[d->mach] : NULL;
-		struct vmac_device_status *o = &s->devices[n];
-		struct vmac_sched_device sd;
-		if (d->state == DEV_FREE)
-			continue;
-		memcpy(o->name, d->ann.board, sizeof(o->name));
-		memcpy(o->driver, d->ann.driver, sizeof(o->driver));
-		snprintf(o->driver_version, sizeof(o->driver_version), "%s", m && m->drv ? vmac_driver_version(m->drv) : "");
-		snprintf(o->machine, sizeof(o->machine), "%s", m ? bus->dev[m->primary].ann.board : "");
-		snprintf(o->note, sizeof(o->note), "%s", d->note);
-		o->state = state_name(d->state);
-		vmac_addr_format(&d->addr, o->address, sizeof(o->address));
-		o->id = d->id;
-		o->major = d->ann.major;
-		o->minor = d->ann.minor;
-		o->scheduled = d->scheduled && vmac_sched_device(bus->sched, i, &sd) == 0 && sd.state == VMAC_SCHED_RUNNING;
-		o->level = o->scheduled ? sd.level : (m ? m->level : 0);
-		o->slot = o->scheduled ? sd.offset : 0;
-		o->slice = o->scheduled ? sd.slice : 0;
-		o->period_us = (uint32_t)((bus->slot_ns << o->level) / 1000);
-		o->misses = d->misses;
-		o->served = d->served;
-		o->inputs = d->inputs;
-		o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
-		o->driver_memory = m && m->drv && m->primary == i ? vmac_driver_memory(m->drv) : 0;
-		o->nvars = 0;
-		if (m && m->drv && m->primary == i) {
-			o->nvars = vmac_driver_nvars(m->drv);
-			for (v = 0; v < o->nvars; v++)
-				o->vars[v] = *vmac_driver_variable(m->drv, v);
-		}
-		n++;
-	}
+	for (i = 0; i < bus->nused; i++)
+		if (bus->dev[i].state != DEV_FREE)
+			device_status(bus, i, &s->devices[n++]);
 	s->ndevices = n;
 	pthread_mutex_unlock(&bus->status_lock);
 	bus->last_status_ns = now;
@@ -814,7 +834,7 @@ static void send_discover(struct vmac_bus *bus)
 static void service_registration(struct vmac_bus *bus)
 {
 	uint32_t i;
-	for (i = 0; i < bus->ndev; i++) {
+	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		struct vmac_msg m;
 		if (d->pending || d->register_sent || (d->state != DEV_REGISTERING && d->state != DEV_TO_SLEEP))
@@ -865,10 +885,10 @@ static void begin_stop(struct vmac_bus *bus, int64_t now)
 	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->period_ns;
 	if (bus->stop_deadline_ns < now + 100000000)
 		bus->stop_deadline_ns = now + 100000000; /* at least 100 ms for the acks */
-	for (i = 0; i < bus->ndev; i++)
+	for (i = 0; i < bus->nused; i++)
 		if (bus->mach[i].used && bus->mach[i].drv && bus->mach[i].attached)
 			vmac_driver_detach(bus->mach[i].drv, "host stopping");
-	for (i = 0; i < bus->ndev; i++) {
+	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		if (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP) {
 			d->pending = 0;
@@ -879,7 +899,7 @@ static void begin_stop(struct vmac_bus *bus, int64_t now)
 		unschedule(bus, d);
 		d->mach = -1;
 	}
-	for (i = 0; i < bus->ndev; i++)
+	for (i = 0; i < bus->nused; i++)
 		if (bus->mach[i].used)
 			free_machine(bus, &bus->mach[i]);
 	flush(bus);
@@ -890,30 +910,26 @@ static int stop_done(struct vmac_bus *bus, int64_t now)
 	uint32_t i;
 	if (now >= bus->stop_deadline_ns)
 		return 1;
-	for (i = 0; i < bus->ndev; i++)
+	for (i = 0; i < bus->nused; i++)
 		if (bus->dev[i].pending)
 			return 0;
 	return 1;
 }
 
-static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
+/* One tick at `now`, `expirations` slots after the previous one. Returns 1
+ * when the bus has stopped (VMAC_MSG_STOPPED posted), else 0. */
+static int tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 {
-	struct vmac_bus *bus = w->data;
-	uint64_t expirations = 0;
-	int64_t now, scheduled;
-	(void)revents;
-
-	if (read(bus->tfd, &expirations, sizeof(expirations)) != sizeof(expirations) || expirations == 0)
-		return;
-	now = vmac_now_ns();
+	int64_t scheduled;
 	bus->tick_index += expirations;
 	bus->counters.ticks++;
 	bus->counters.ticks_skipped += expirations - 1;
 	scheduled = bus->start_ns + (int64_t)bus->tick_index * bus->period_ns;
 	vmac_hist_add(&bus->lateness, (now - scheduled) / 1000);
-	vmac_transport_clock_sync(&bus->tr);
-
-	drain(bus);
+	if (!bus->virt) {
+		vmac_transport_clock_sync(&bus->tr);
+		drain(bus);
+	}
 	check_deadlines(bus, now);
 	if (bus->stopping) {
 		if (stop_done(bus, now)) {
@@ -925,9 +941,9 @@ static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
 				sched_yield(); /* last message: must get through */
 			if (bus->wakeup)
 				bus->wakeup(bus->wakeup_ctx);
-			ev_break(loop, EVBREAK_ALL);
+			return 1;
 		}
-		return;
+		return 0;
 	}
 	if (now >= bus->next_discover_ns) {
 		send_discover(bus);
@@ -941,8 +957,21 @@ static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
 		service_slot(bus, bus->slots_done);
 	}
 	flush(bus);
-	if (now - bus->last_status_ns >= STATUS_EVERY_NS)
-		publish(bus, now);
+	if (now - bus->last_status_ns >= STATUS_EVERY_NS && !bus->virt)
+		publish(bus, now); /* vmac test reads vmac_bus_device_status instead */
+	return 0;
+}
+
+static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
+{
+	struct vmac_bus *bus = w->data;
+	uint64_t expirations = 0;
+	(void)revents;
+
+	if (read(bus->tfd, &expirations, sizeof(expirations)) != sizeof(expirations) || expirations == 0)
+		return;
+	if (tick(bus, vmac_now_ns(), expirations))
+		ev_break(loop, EVBREAK_ALL);
 }
 
 static void on_socket(struct ev_loop *loop, ev_io *w, int revents)
@@ -983,7 +1012,7 @@ static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_
 		memcpy(d->note, note, sizeof(note));
 		return;
 	}
-	for (i = 0; i < bus->ndev; i++) { /* boards that announced while the driver loaded */
+	for (i = 0; i < bus->nused; i++) { /* boards that announced while the driver loaded */
 		struct device *o = &bus->dev[i];
 		if (o != d && o->mach == mi && o->state == DEV_LOADING && admit(bus, m, o) != 0) {
 			o->mach = -1;
@@ -992,17 +1021,14 @@ static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_
 	}
 }
 
-static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
+static void commands(struct vmac_bus *bus)
 {
-	struct vmac_bus *bus = w->data;
 	struct vmac_host_cmd c;
-	(void)revents;
-	(void)loop;
 	while (vmac_ring_pop(&bus->to_bus, &c)) {
 		struct device *d;
 		if (c.kind == VMAC_CMD_STOP) {
 			if (!bus->stopping)
-				begin_stop(bus, vmac_now_ns());
+				begin_stop(bus, bus_now(bus));
 			continue;
 		}
 		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
@@ -1013,6 +1039,13 @@ static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
 		}
 		on_loaded(bus, d, &c);
 	}
+}
+
+static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
+{
+	(void)revents;
+	(void)loop;
+	commands(w->data);
 }
 
 static void try_realtime(struct vmac_bus *bus)
@@ -1063,11 +1096,12 @@ static void *bus_main(void *arg)
 	return NULL;
 }
 
-struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t errlen)
+/* Everything both modes use: the device, machine and packet tables, the
+ * schedule, the rings. Every byte the bus thread will ever use is here. */
+static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size_t errlen)
 {
 	struct vmac_bus *bus = calloc(1, sizeof(*bus));
 	uint32_t i;
-	struct vmac_bus_spec spec;
 	if (!bus) {
 		snprintf(err, errlen, "out of memory");
 		return NULL;
@@ -1075,17 +1109,6 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 	bus->cfg = *cfg;
 	bus->tfd = -1;
 	bus->tr.fd = -1;
-	if (vmac_bus_spec_parse(cfg->bus, &spec) != 0) {
-		snprintf(err, errlen, "bus '%s': expected MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870", cfg->bus);
-		goto fail;
-	}
-	if (inet_pton(AF_INET, cfg->iface, &spec.iface) != 1) {
-		snprintf(err, errlen, "iface '%s': expected an IPv4 address", cfg->iface);
-		goto fail;
-	}
-	if (vmac_transport_open_host(&bus->tr, &spec, err, errlen) < 0)
-		goto fail;
-	vmac_addr_format(&bus->tr.local, bus->host_addr, sizeof(bus->host_addr));
 	bus->ndev = cfg->max_devices;
 	bus->slot_ns = (int64_t)vmac_config_slot_us(cfg) * 1000;
 	bus->period_ns = bus->slot_ns;
@@ -1098,17 +1121,42 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
-	bus->tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
 	if (!bus->dev || !bus->mach || !bus->tx || !bus->status.devices || !bus->status.slot_load ||
-	    !bus->slot_entries || !bus->sched || bus->tfd < 0 ||
-	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), 1024) ||
+	    !bus->slot_entries || !bus->sched || vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), 1024) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024)) {
-		snprintf(err, errlen, "out of memory or timers");
-		goto fail;
+		snprintf(err, errlen, "out of memory");
+		vmac_bus_free(bus);
+		return NULL;
 	}
 	for (i = 0; i < bus->ndev; i++)
 		bus->dev[i].mach = -1;
 	pthread_mutex_init(&bus->status_lock, NULL);
+	return bus;
+}
+
+struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t errlen)
+{
+	struct vmac_bus *bus;
+	struct vmac_bus_spec spec;
+	if (vmac_bus_spec_parse(cfg->bus, &spec) != 0) {
+		snprintf(err, errlen, "bus '%s': expected MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870", cfg->bus);
+		return NULL;
+	}
+	if (inet_pton(AF_INET, cfg->iface, &spec.iface) != 1) {
+		snprintf(err, errlen, "iface '%s': expected an IPv4 address", cfg->iface);
+		return NULL;
+	}
+	bus = bus_alloc(cfg, err, errlen);
+	if (!bus)
+		return NULL;
+	if (vmac_transport_open_host(&bus->tr, &spec, err, errlen) < 0)
+		goto fail;
+	vmac_addr_format(&bus->tr.local, bus->host_addr, sizeof(bus->host_addr));
+	bus->tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+	if (bus->tfd < 0) {
+		snprintf(err, errlen, "cannot create the tick timer: %s", strerror(errno));
+		goto fail;
+	}
 	bus->loop = ev_loop_new(EVFLAG_AUTO | EVFLAG_NOSIGMASK);
 	if (!bus->loop) {
 		snprintf(err, errlen, "cannot create the bus event loop");
@@ -1129,6 +1177,107 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 fail:
 	vmac_bus_free(bus);
 	return NULL;
+}
+
+struct vmac_bus *vmac_bus_new_virtual(const struct vmac_config *cfg, const struct vmac_bus_link *link,
+                                      const struct vmac_addr *group, char *err, size_t errlen)
+{
+	struct vmac_bus *bus = bus_alloc(cfg, err, errlen);
+	if (!bus)
+		return NULL;
+	bus->virt = 1;
+	bus->link = *link;
+	bus->tr.group = *group;
+	snprintf(bus->host_addr, sizeof(bus->host_addr), "virtual");
+	return bus;
+}
+
+int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns)
+{
+	uint64_t index = (uint64_t)(now_ns / bus->period_ns);
+	bus->virt_now_ns = now_ns;
+	if (index <= bus->tick_index)
+		return 0;
+	return tick(bus, now_ns, index - bus->tick_index);
+}
+
+int64_t vmac_bus_virtual_next_tick(const struct vmac_bus *bus)
+{
+	return (int64_t)(bus->tick_index + 1) * bus->period_ns;
+}
+
+void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p)
+{
+	bus->virt_now_ns = p->rx_ns;
+	handle_packet(bus, p);
+	flush(bus);
+}
+
+void vmac_bus_virtual_commands(struct vmac_bus *bus)
+{
+	commands(bus);
+}
+
+static struct device *find_by_name(struct vmac_bus *bus, const char *name)
+{
+	uint32_t i;
+	for (i = 0; i < bus->nused; i++)
+		if (bus->dev[i].state != DEV_FREE && strcmp(bus->dev[i].ann.board, name) == 0)
+			return &bus->dev[i];
+	return NULL;
+}
+
+int vmac_bus_device_status(struct vmac_bus *bus, const char *device, struct vmac_device_status *out)
+{
+	struct device *d = find_by_name(bus, device);
+	if (!d)
+		return -1;
+	device_status(bus, slot_of(bus, d), out);
+	return 0;
+}
+
+const char *vmac_bus_device_state(struct vmac_bus *bus, const char *device)
+{
+	struct device *d = find_by_name(bus, device);
+	return d ? state_name(d->state) : "absent";
+}
+
+const struct vmac_variable *vmac_bus_device_var(struct vmac_bus *bus, const char *device, const char *name)
+{
+	struct device *d = find_by_name(bus, device);
+	const struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	int i, n;
+	if (!m || !m->drv || m->primary != slot_of(bus, d))
+		return NULL;
+	n = vmac_driver_nvars(m->drv);
+	for (i = 0; i < n; i++) {
+		const struct vmac_variable *v = vmac_driver_variable(m->drv, i);
+		if (strcmp(v->name, name) == 0)
+			return v;
+	}
+	return NULL;
+}
+
+int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
+                   char *reply, size_t replylen)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	struct device *d = find_by_name(bus, device);
+	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	int rc;
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
+		snprintf(reply, replylen, "%s is not running (%s)", device, d ? state_name(d->state) : "no such device");
+		return -1;
+	}
+	rc = vmac_driver_input(m->drv, bus_time(bus), name, value, reply, replylen, err, sizeof(err));
+	if (rc >= 0)
+		return rc;
+	d = &bus->dev[m->primary];
+	event(bus, d, "driver_error", "%s: driver %s failed in input: %s", d->ann.board, m->driver, err);
+	drop(bus, d, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+	flush(bus);
+	snprintf(reply, replylen, "the driver failed: %s", err);
+	return -1;
 }
 
 void vmac_bus_free(struct vmac_bus *bus)
@@ -1181,7 +1330,8 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
 {
 	if (vmac_ring_push(&bus->to_bus, cmd) != 0)
 		return -EAGAIN;
-	ev_async_send(bus->loop, &bus->cmd_w);
+	if (!bus->virt)
+		ev_async_send(bus->loop, &bus->cmd_w);
 	return 0;
 }
 

@@ -128,4 +128,44 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd);
 void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out);
 const char *vmac_bus_host_addr(struct vmac_bus *bus);
 
+/* Operator input to the machine `device` belongs to: the driver's
+ * input(dev, name, value). Bus thread only (in vmacd that means through the
+ * command ring; `vmac test` calls it between steps of its virtual clock).
+ * Returns 0 (accepted), 1 (refused: reply holds the driver's message), or
+ * -1 (no running machine of that name, or its driver failed and the machine
+ * was dropped: reply says which). */
+int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
+                   char *reply, size_t replylen);
+
+/* ---- virtual mode: `vmac test` (docs/TESTING.md) ----
+ * The same bus (discovery, schedule, deadlines, drivers) with no thread, no
+ * socket and no timer: the caller owns the clock, carries the frames both
+ * ways and answers VMAC_MSG_LOAD itself (vmac_bus_send_cmd, then
+ * vmac_bus_virtual_commands). Single-threaded. */
+struct vmac_bus_link {
+	/* Frames the host sends (to a board's address or to the group). */
+	void (*send)(void *ctx, const struct vmac_packet *pkts, int n);
+	void *ctx;
+};
+
+struct vmac_bus *vmac_bus_new_virtual(const struct vmac_config *cfg, const struct vmac_bus_link *link,
+                                      const struct vmac_addr *group, char *err, size_t errlen);
+/* Run every tick due at or before now_ns (time 0 is the bus's start; ticks
+ * fall on multiples of the slot). Returns 1 once stopped, else 0. */
+int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns);
+/* The earliest time after now_ns at which the next tick falls. */
+int64_t vmac_bus_virtual_next_tick(const struct vmac_bus *bus);
+/* A frame reaching the host at p->rx_ns. */
+void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p);
+/* Handle the commands sent with vmac_bus_send_cmd. */
+void vmac_bus_virtual_commands(struct vmac_bus *bus);
+/* The status of one device now (not the 100 ms snapshot): 0, or -1 when no
+ * device has that name. */
+int vmac_bus_device_status(struct vmac_bus *bus, const char *device, struct vmac_device_status *out);
+/* The cheap parts of it, for checks made after every frame: the state
+ * ("absent" when no such device) and one published variable (NULL when the
+ * device or the variable is not there). */
+const char *vmac_bus_device_state(struct vmac_bus *bus, const char *device);
+const struct vmac_variable *vmac_bus_device_var(struct vmac_bus *bus, const char *device, const char *name);
+
 #endif
