@@ -91,7 +91,7 @@ def test_washer_runs_a_whole_programme(t):
     for step in ("fill", "wash", "drain", "spin"):
         assert step in seen, "step %s never seen; saw %s" % (step, seen)
     assert washer_var(host, s, "cycle") == "quick", "cycle variable %r" % washer_var(host, s, "cycle")
-    assert host.find_events("level", "washer-1", "level 5 -> 3", since), "the washer did not speed up to level 3"
+    assert host.find_events("level", "washer-1", "level 5 -> 4", since), "the washer did not speed up to level 4"
     host.wait_status(lambda s: host.device("washer-1", s)["level"] == 5, 30, "the washer back at level 5")
     s = host.wait_status(lambda s: host.device("washer-1", s)["outputs"] == {"digital": [False] * 7, "pwm": 0}
                          and not host.device("washer-1", s)["inputs"]["digital"][DOOR_LOCKED_BIT], 10,
