@@ -39,17 +39,20 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
-                core/host/events.c core/host/hist.c core/host/ring.c core/api/http.c core/sched/sched.c
+                core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/sched/sched.c
+# vmac test: the host core and the board firmware on one virtual clock.
+VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
 OBJ = $(BUILD)/obj
 
 portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
 host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o)
+vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver \
               $(BUILD)/tests/test_sched
 
-.PHONY: all deps run test test-unit test-lua test-fuzz test-integration test-asan bench clean
+.PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-asan bench clean
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
@@ -64,7 +67,7 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
-$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/common/paths.o
+$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
@@ -123,8 +126,13 @@ test-unit: $(UNIT_TESTS)
 test-lua: $(BUILD)/bin/vmac
 	@echo "== Lua tests of stdlib/"
 	@luajit tests/lua/run.lua
-	@echo "== vmac lint over stdlib/ and scripts/"
-	@$(BUILD)/bin/vmac lint stdlib/*.lua $$(find scripts -name '*.lua')
+	@echo "== vmac lint over stdlib/, scripts/ and the driver tests"
+	@$(BUILD)/bin/vmac lint stdlib/*.lua $$(find scripts -name '*.lua') $$(find tests -name '*_test.lua')
+
+# The shipped drivers against mock boards in virtual time (docs/TESTING.md).
+test-drivers: $(BUILD)/bin/vmac
+	@echo "== vmac test: the shipped drivers in virtual time"
+	@$(BUILD)/bin/vmac test
 
 # New inputs go to the build folder; tests/fuzz/corpus holds only the seeds.
 test-fuzz: $(BUILD)/fuzz/fuzz_proto
@@ -142,10 +150,10 @@ test-integration: $(BINS)
 # and UndefinedBehaviorSanitizer, any report fatal.
 test-asan:
 	@$(MAKE) --no-print-directory BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" \
-		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-integration
+		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-drivers test-integration
 
 test: deps
-	@$(MAKE) --no-print-directory all test-unit test-lua test-fuzz test-integration
+	@$(MAKE) --no-print-directory all test-unit test-lua test-drivers test-fuzz test-integration
 	@$(MAKE) --no-print-directory VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
 	@echo "make test: every suite passed"
 

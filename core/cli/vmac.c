@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "../common/paths.h"
+#include "../vtest/vtest.h"
 
 struct buffer {
 	char *data;
@@ -311,8 +312,9 @@ static void usage(FILE *f)
 	           "The command line for vmac hosts.\n\n"
 	           "  status    devices, tick lateness, counters and events of a running vmacd\n"
 	           "  lint      check driver scripts with luacheck and the sandbox's globals\n"
+	           "  test      run driver tests against mock boards in virtual time\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
-	           "Planned, not in this version yet: test, reload, console.\n"
+	           "Planned, not in this version yet: reload, console.\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
 
@@ -334,6 +336,8 @@ int main(int argc, char **argv)
 		return cmd_status(argc - 1, argv + 1);
 	if (strcmp(argv[1], "lint") == 0)
 		return cmd_lint(argc - 1, argv + 1);
+	if (strcmp(argv[1], "test") == 0)
+		return vmac_test_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "bench") == 0)
 		return cmd_bench(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);

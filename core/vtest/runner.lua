@@ -1,0 +1,661 @@
+-- vmac test: finds *_test.lua files, runs each test() in a fresh virtual
+-- world (core/vtest/world.c: the real host bus, drivers and board firmware
+-- on one virtual clock), and reports. The test API and the options are in
+-- docs/TESTING.md; this file is that API's implementation.
+
+local world = require "vmac.world"
+
+jit.off() -- count hooks (the runaway guard) do not fire inside JIT traces
+
+local USAGE = [[
+usage: vmac test [options] [PATH ...]
+Run driver tests (*_test.lua) against the real host core and board firmware with
+simulated plants, in virtual time: no sockets, no sleeping, no hardware, no root.
+With no PATH: the project's own tests under tests/ and scripts/.
+
+  --drivers DIR      look for NAME.lua in DIR before the shipped scripts/drivers/
+  --filter PATTERN   run only tests whose "file: name" contains PATTERN (plain text)
+  --seed N           seed of the fault injector (default 1); a run is a function of it
+  --list             list the tests and exit
+  --tap              TAP version 13 on standard output instead of the human report
+  --junit FILE       also write JUnit XML to FILE
+  --trace FILE       write every board service as CSV (test,time_s,board,io,value)
+  --time-limit S     virtual seconds a test may run (default 21600 = 6 h)
+  --timeout S        wall-clock seconds a test may take (default 120): catches endless loops
+  --history N        services per board shown when a test fails (default 8)
+  -h, --help         this text
+Exit status: 0 every test passed, 1 a test failed, 2 bad usage.
+See docs/TESTING.md.]]
+
+-- ---- options ----
+
+local opts = { paths = {}, seed = 1, time_limit = 21600, timeout = 120, history = 8 }
+
+local function usage_error(msg)
+	io.stderr:write("vmac test: ", msg, "\n(vmac test --help for the options)\n")
+	os.exit(2)
+end
+
+do
+	local i = 1
+	local function value(name)
+		i = i + 1
+		if arg[i] == nil then usage_error(name .. " needs a value") end
+		return arg[i]
+	end
+	local function number(name, lo)
+		local v = tonumber(value(name))
+		if not v or v < lo then usage_error(name .. " takes a number >= " .. lo) end
+		return v
+	end
+	while arg[i] do
+		local a = arg[i]
+		if a == "-h" or a == "--help" then
+			print(USAGE)
+			os.exit(0)
+		elseif a == "--drivers" then opts.drivers = value(a)
+		elseif a == "--filter" then opts.filter = value(a)
+		elseif a == "--seed" then opts.seed = math.floor(number(a, 0))
+		elseif a == "--list" then opts.list = true
+		elseif a == "--tap" then opts.tap = true
+		elseif a == "--junit" then opts.junit = value(a)
+		elseif a == "--trace" then opts.trace = value(a)
+		elseif a == "--time-limit" then opts.time_limit = number(a, 0.001)
+		elseif a == "--timeout" then opts.timeout = number(a, 0.001)
+		elseif a == "--history" then opts.history = math.floor(number(a, 0))
+		elseif a:sub(1, 1) == "-" and a ~= "-" then usage_error("unknown option " .. a)
+		else opts.paths[#opts.paths + 1] = a
+		end
+		i = i + 1
+	end
+end
+
+if opts.drivers then
+	local f = io.open(opts.drivers .. "/.", "r")
+	if not f then usage_error("--drivers " .. opts.drivers .. ": no such folder") end
+	f:close()
+end
+
+-- Opened now, so a folder that does not exist is said before the tests run.
+local junit_file
+if opts.junit then
+	local err
+	junit_file, err = io.open(opts.junit, "w")
+	if not junit_file then usage_error("--junit: " .. err) end
+end
+
+-- ---- finding test files ----
+
+local function shell_quote(s)
+	return "'" .. s:gsub("'", "'\\''") .. "'"
+end
+
+local function find_tests(path)
+	local p = io.popen("find " .. shell_quote(path) .. " -name '*_test.lua' -type f 2>/dev/null | LC_ALL=C sort")
+	local files = {}
+	for line in p:lines() do files[#files + 1] = line end
+	p:close()
+	return files
+end
+
+local function is_dir(path)
+	local p = io.popen("test -d " .. shell_quote(path) .. " && echo d")
+	local r = p:read("*l")
+	p:close()
+	return r == "d"
+end
+
+local files = {}
+do
+	local roots = opts.paths
+	if #roots == 0 then roots = { VMAC_ROOT .. "/tests", VMAC_ROOT .. "/scripts" } end
+	for _, p in ipairs(roots) do
+		if is_dir(p) then
+			for _, f in ipairs(find_tests(p)) do files[#files + 1] = f end
+		else
+			local f = io.open(p, "r")
+			if not f then usage_error(p .. ": no such file or folder") end
+			f:close()
+			files[#files + 1] = p
+		end
+	end
+	-- Files under the working folder are named relative to it.
+	local cwd = os.getenv("PWD")
+	for i, f in ipairs(files) do
+		if cwd and f:sub(1, #cwd + 1) == cwd .. "/" then files[i] = f:sub(#cwd + 2) end
+	end
+	if #files == 0 then
+		io.stderr:write("vmac test: no *_test.lua files under ", table.concat(roots, ", "), "\n")
+		os.exit(1)
+	end
+end
+
+-- ---- failures ----
+
+local Failure = {}
+Failure.__index = Failure
+Failure.__tostring = function(f) return f.message end
+
+local current -- the running test: { file, world, boards, always, ... }
+
+-- file:line of the innermost frame that is in the test file.
+local function where(level)
+	level = (level or 2) + 1
+	while true do
+		local info = debug.getinfo(level, "Sl")
+		if not info then return nil end
+		if current and info.source == "@" .. current.file and info.currentline > 0 then
+			return current.file .. ":" .. info.currentline
+		end
+		level = level + 1
+	end
+end
+
+local function fail(message, extra)
+	local f = setmetatable({ message = message, where = where(2) }, Failure)
+	if extra then for k, v in pairs(extra) do f[k] = v end end
+	error(f, 0)
+end
+
+local function show(v)
+	if type(v) == "string" then return string.format("%q", v) end
+	if type(v) == "number" then return string.format("%.6g", v) end
+	return tostring(v)
+end
+
+-- ---- the scene ----
+
+local Board = {}
+
+local function W()
+	if not current.world then
+		current.world = world.new(current.settings, opts.seed)
+		current.world:trace(current.trace_file, current.trace_name)
+	end
+	return current.world
+end
+
+local function io_view(b)
+	return setmetatable({}, {
+		__index = function(_, name)
+			local v, why = current.world:io(b.name, name)
+			if v == nil then
+				if why ~= "" then fail(b.name .. ": no I/O names: " .. why) end
+				fail(string.format("%s has no I/O named '%s' (its driver names: %s)", b.name, name,
+					table.concat(current.world:io_names(b.name), ", ")))
+			end
+			return v
+		end,
+		__newindex = function() fail("the board's I/O is read-only: act on the plant with b:set()") end,
+	})
+end
+
+local function make_board(spec)
+	if type(spec) ~= "table" then fail("board{...}: expected a table with name and plant") end
+	local name = spec.name or error("board{...}: name is required", 3)
+	local plant = spec.plant or error("board{...}: plant is required (washer, dishwasher, lights, generic)", 3)
+	local w = W()
+	local driver = spec.driver or plant
+	for k, v in pairs(spec.params or {}) do
+		w:config("driver." .. driver .. ".param." .. k, tostring(v))
+	end
+	w:board(name, plant, spec.driver, spec.major, spec.minor)
+	local b = { name = name, plant_kind = plant, driver = driver }
+	b.io = io_view(b)
+	b.inp, b.out = b.io, b.io
+	b.var = setmetatable({}, { __index = function(_, k) return current.world:var(name, k) end })
+	b.plant = setmetatable({}, { __index = function(_, k) return current.world:plant(name, k) end })
+	current.boards[#current.boards + 1] = b
+	return setmetatable(b, Board)
+end
+
+Board.__index = function(b, k)
+	if k == "state" then return current.world:state(b.name) end
+	if k == "device" then return current.world:device(b.name) end
+	return Board[k]
+end
+Board.__tostring = function(b) return "board " .. b.name end
+
+function Board:set(name, value)
+	local ok, err = pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value)
+	if not ok then fail((tostring(err):gsub("^[^:]*:%d+: ", ""))) end
+end
+
+function Board:try_set(name, value)
+	return (pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value))
+end
+
+function Board:press(name) self:set(name, 1) end
+function Board:open_door() self:set("door", 0) end
+function Board:close_door() self:set("door", 1) end
+
+function Board:try_input(name, value)
+	local rc, reply = current.world:input(self.name, name, value)
+	return rc == 0, reply
+end
+
+function Board:input(name, value)
+	local rc, reply = current.world:input(self.name, name, value)
+	if rc ~= 0 then
+		fail(string.format("%s: input %s(%s) %s: %s", self.name, name, value == nil and "" or show(value),
+			rc == 1 and "refused by the driver" or "failed", reply))
+	end
+	return reply
+end
+
+function Board:unplug() current.world:connect(self.name, false, true) end
+function Board:replug() current.world:connect(self.name, true, true) end
+function Board:power_off() current.world:connect(self.name, true, false) end
+function Board:power_on() current.world:connect(self.name, true, true) end
+function Board:faults(spec) current.world:faults(self.name, spec or {}) end
+function Board:history() return current.world:history(self.name) end
+
+-- ---- running time ----
+
+local function now() return current.world and current.world:now() or 0 end
+
+local function check_invariants()
+	for _, inv in ipairs(current.always) do
+		local ok, held = pcall(inv.fn)
+		if not ok then
+			if getmetatable(held) == Failure then error(held, 0) end
+			fail(string.format("always (%s): the condition raised: %s", inv.what, tostring(held)),
+				{ where = inv.where })
+		end
+		if not held then
+			local t = now()
+			fail(string.format("always: %s (declared at %s) was violated at %.6f s, tick %d", inv.what, inv.where,
+				t, math.floor(t / current.world:slot() + 0.5)), { time = t })
+		end
+	end
+end
+
+-- Advance to `until_t`, stopping early when cond() holds; true if it did.
+local function advance(until_t, cond)
+	local w = W()
+	local limited = false
+	if until_t > opts.time_limit then until_t, limited = opts.time_limit, true end
+	local check
+	if cond or #current.always > 0 then
+		check = function()
+			check_invariants()
+			return cond ~= nil and cond() and true or false
+		end
+	end
+	local stopped = w:run(until_t, check)
+	if not stopped and limited then
+		fail(string.format("the test ran past the virtual-time limit of %g s (--time-limit)", opts.time_limit))
+	end
+	return stopped
+end
+
+local function run_for(seconds)
+	if type(seconds) ~= "number" or seconds < 0 then fail("run_for(seconds): seconds must be a number >= 0") end
+	advance(now() + seconds)
+end
+
+local function wait_for(verb, cond, timeout, what)
+	if type(cond) ~= "function" then fail(verb .. "(condition, timeout): the condition must be a function") end
+	if type(timeout) ~= "number" or timeout < 0 then fail(verb .. "(condition, timeout): timeout must be seconds") end
+	local start = now()
+	W()
+	if cond() then return 0 end
+	if not advance(start + timeout, cond) then
+		fail(string.format("%s: %s not reached within %g s (from %.3f s to %.3f s of virtual time)", verb,
+			what or "the condition", timeout, start, now()))
+	end
+	return now() - start
+end
+
+local function run_until(cond, timeout, what) return wait_for("run_until", cond, timeout, what) end
+local function eventually(cond, within, what) return wait_for("eventually", cond, within, what) end
+
+local function always(what, fn)
+	if type(what) == "function" then what, fn = fn, what end
+	if type(fn) ~= "function" then fail("always(description, condition): the condition must be a function") end
+	local inv = { what = what or "condition", fn = fn, where = where(2) or "?" }
+	current.always[#current.always + 1] = inv
+	if current.world then check_invariants() end
+	return inv
+end
+
+-- ---- expectations ----
+
+local function expect(cond, what)
+	if not cond then fail("expected " .. (what or "the condition to hold") .. string.format(" (at %.3f s)", now())) end
+end
+
+local function expect_eq(actual, expected, what)
+	if actual ~= expected then
+		fail(string.format("%s: expected %s, got %s (at %.3f s)", what or "value", show(expected), show(actual), now()),
+			{ expected = expected, actual = actual })
+	end
+end
+
+local function expect_near(actual, expected, tolerance, what)
+	if type(actual) ~= "number" or math.abs(actual - expected) > tolerance then
+		fail(string.format("%s: expected %s +/- %s, got %s (at %.3f s)", what or "value", show(expected),
+			show(tolerance), show(actual), now()), { expected = expected, actual = actual })
+	end
+end
+
+local function events(filter)
+	local all = current.world and current.world:events(1) or {}
+	if not filter then return all end
+	local out = {}
+	for _, e in ipairs(all) do
+		if (not filter.kind or e.kind == filter.kind) and (not filter.device or e.device == filter.device)
+			and (not filter.text or e.text:find(filter.text, 1, true)) then
+			out[#out + 1] = e
+		end
+	end
+	return out
+end
+
+local function expect_event(filter, what)
+	if type(filter) == "string" then filter = { kind = filter } end
+	local got = events(filter)
+	if #got == 0 then
+		local parts = {}
+		for k, v in pairs(filter) do parts[#parts + 1] = k .. "=" .. show(v) end
+		table.sort(parts)
+		fail(string.format("expected %s: no event with %s by %.3f s", what or "an event", table.concat(parts, ", "),
+			now()))
+	end
+	return got[1]
+end
+
+local function config(settings)
+	if current.world then fail("config{...} must come before the first board") end
+	local keys = {}
+	for k in pairs(settings) do keys[#keys + 1] = k end
+	table.sort(keys)
+	for _, k in ipairs(keys) do current.settings[#current.settings + 1] = { k, tostring(settings[k]) } end
+end
+
+local function kitchen(spec)
+	spec = spec or {}
+	local params = spec.params or {}
+	return {
+		washer = make_board { name = "washer-1", plant = "washer", params = params.washer },
+		dishwasher = make_board { name = "dishwasher-1", plant = "dishwasher", params = params.dishwasher },
+		lights = make_board { name = "lights-1", plant = "lights", params = params.lights },
+	}
+end
+
+local function stop_host()
+	W():stop_host()
+end
+
+-- Keep the frames of the test file from a traceback.
+local function test_frames(tb, file)
+	local out = {}
+	for line in tb:gmatch("[^\n]+") do
+		if line:find(file, 1, true) and not line:find("^%S") then out[#out + 1] = line:gsub("^%s+", "") end
+	end
+	return out
+end
+
+local results = {}
+
+-- ---- loading test files ----
+
+local tests = {}      -- { file, name, fn, line }
+local file_errors = {} -- { file, message, where } as failed tests
+
+local function load_file(file)
+	local found = {}
+	local env = setmetatable({}, { __index = _G })
+	env.test = function(name, fn)
+		if type(name) ~= "string" or type(fn) ~= "function" then
+			error("test(name, function) expects a name and a function", 2)
+		end
+		local info = debug.getinfo(2, "l")
+		found[#found + 1] = { file = file, name = name, fn = fn, line = info and info.currentline or 0 }
+	end
+	for k, v in pairs {
+		board = make_board, kitchen = kitchen, config = config, run_for = run_for, run_until = run_until,
+		eventually = eventually, always = always, expect = expect, expect_eq = expect_eq,
+		expect_near = expect_near, expect_event = expect_event, events = events, now = now, fail = fail,
+		stop_host = stop_host,
+	} do
+		env[k] = v
+	end
+	-- A file that does not load runs none of its tests: it is one failure,
+	-- at the line of the error.
+	local function cannot_load(message)
+		file_errors[#file_errors + 1] = { file = file, name = "(loading the file)", message = message,
+			where = message:match("^([^:]+:%d+):") or file }
+	end
+	local chunk, err = loadfile(file)
+	if not chunk then return cannot_load(err) end
+	setfenv(chunk, env)
+	local ok, lerr = xpcall(chunk, function(e)
+		local frames = test_frames(debug.traceback("", 2), file)
+		return tostring(e) .. (#frames > 0 and "\n  from " .. table.concat(frames, "\n  from ") or "")
+	end)
+	if not ok then return cannot_load(lerr) end
+	if #found == 0 then return cannot_load(file .. ": defines no test (call test(name, function() ... end))") end
+	for _, t in ipairs(found) do tests[#tests + 1] = t end
+end
+
+for _, f in ipairs(files) do load_file(f) end
+
+local selected = {}
+for _, t in ipairs(tests) do
+	if not opts.filter or (t.file .. ": " .. t.name):find(opts.filter, 1, true) then
+		selected[#selected + 1] = t
+	end
+end
+
+if opts.list then
+	for _, t in ipairs(selected) do print(t.file .. ": " .. t.name) end
+	for _, e in ipairs(file_errors) do print(e.file .. ": " .. e.name .. "  [cannot load]") end
+	os.exit(#file_errors > 0 and 1 or 0)
+end
+
+-- ---- running ----
+
+local trace_file
+if opts.trace then
+	local err
+	trace_file, err = io.open(opts.trace, "w")
+	if not trace_file then usage_error("--trace: " .. err) end
+	trace_file:write("test,time_s,board,io,value\n")
+end
+
+local function fmt_value(v)
+	if v == true then return "1" elseif v == false then return "0" end
+	if type(v) == "number" then return string.format("%.4g", v) end
+	return tostring(v)
+end
+
+-- What a person needs to see when a test fails: the recent services of
+-- each board and the recent events.
+local function details()
+	local lines = {}
+	local w = current.world
+	if not w then return lines end
+	lines[#lines + 1] = string.format("virtual time %.6f s (tick %d)", w:now(), math.floor(w:now() / w:slot() + 0.5))
+	for _, b in ipairs(current.boards) do
+		local d = w:device(b.name)
+		lines[#lines + 1] = string.format("%s: host says %s%s", b.name, d and d.state or "absent",
+			d and d.note ~= "" and (" (" .. d.note .. ")") or "")
+		if d and next(d.vars) then
+			local names = {}
+			for k in pairs(d.vars) do names[#names + 1] = k end
+			table.sort(names)
+			local parts = {}
+			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) end
+			lines[#lines + 1] = "  variables: " .. table.concat(parts, " ")
+		end
+		local h = w:history(b.name)
+		local first = math.max(1, #h - opts.history + 1)
+		if #h > 0 and opts.history > 0 then
+			lines[#lines + 1] = string.format("  last %d services (board's view):", #h - first + 1)
+		end
+		for i = first, #h do
+			local names = {}
+			for k in pairs(h[i].io) do names[#names + 1] = k end
+			table.sort(names)
+			local parts = {}
+			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(h[i].io[k]) end
+			lines[#lines + 1] = string.format("    %10.4f  %s", h[i].time, table.concat(parts, " "))
+		end
+	end
+	local ev = w:events(1)
+	if #ev > 0 then
+		lines[#lines + 1] = "last events:"
+		for i = math.max(1, #ev - 7), #ev do
+			lines[#lines + 1] = string.format("  %10.4f %-14s %s", ev[i].time, ev[i].kind, ev[i].text)
+		end
+	end
+	return lines
+end
+
+local function run_test(t)
+	current = { file = t.file, settings = {}, boards = {}, always = {},
+		trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
+	if opts.drivers then current.settings[1] = { "drivers", opts.drivers } end
+	local wall0 = world.wall()
+	local deadline = wall0 + opts.timeout
+	debug.sethook(function()
+		if world.wall() > deadline then
+			debug.sethook()
+			fail(string.format("the test took more than %g s of wall time (--timeout): an endless loop?",
+				opts.timeout))
+		end
+	end, "", 100000)
+	local ok, err = xpcall(t.fn, function(e)
+		if getmetatable(e) == Failure then return e end
+		local msg = tostring(e)
+		local f = setmetatable({ message = msg, error = true }, Failure)
+		f.where = msg:match("^([^:]+:%d+):") or where(2)
+		f.frames = test_frames(debug.traceback("", 2), t.file)
+		return f
+	end)
+	debug.sethook()
+	local r = { file = t.file, name = t.name, wall = world.wall() - wall0, virtual = now(),
+		frames = current.world and current.world:frames() or 0 }
+	if not ok then
+		r.failure = err
+		r.details = details()
+	end
+	if current.world then current.world:free() end
+	current = nil
+	collectgarbage()
+	return r
+end
+
+local function human_duration(s)
+	if s >= 3600 then return string.format("%dh%02dm", math.floor(s / 3600), math.floor(s % 3600 / 60)) end
+	if s >= 60 then return string.format("%dm%02ds", math.floor(s / 60), math.floor(s % 60)) end
+	return string.format("%.3gs", s)
+end
+
+local total = #selected + #file_errors
+if opts.tap then
+	print("TAP version 13")
+	print("1.." .. total)
+end
+
+local n, failed, virtual_sum, wall_sum = 0, 0, 0, 0
+local last_file
+
+local function report(r)
+	n = n + 1
+	if r.failure then failed = failed + 1 end
+	virtual_sum, wall_sum = virtual_sum + (r.virtual or 0), wall_sum + (r.wall or 0)
+	local where_ = r.failure and (r.failure.where or r.where) or nil
+	if opts.tap then
+		print(string.format("%s %d - %s: %s", r.failure and "not ok" or "ok", n, r.file, r.name))
+		if r.failure then
+			print("  ---")
+			print("  message: " .. string.format("%q", r.failure.message):gsub("\\\n", "\\n"))
+			if where_ then print("  at: " .. where_) end
+			for _, l in ipairs(r.details or {}) do print("  # " .. l) end
+			print("  ...")
+		end
+		return
+	end
+	if r.file ~= last_file then
+		print(r.file)
+		last_file = r.file
+	end
+	if not r.failure then
+		print(string.format("  ok    %s  (%s virtual, %.2f s wall)", r.name, human_duration(r.virtual), r.wall))
+		return
+	end
+	print(string.format("  FAIL  %s", r.name))
+	if where_ then print("        at " .. where_) end
+	for l in (r.failure.message .. "\n"):gmatch("([^\n]*)\n") do print("        " .. l) end
+	for _, l in ipairs(r.failure.frames or {}) do print("        from " .. l) end
+	for _, l in ipairs(r.details or {}) do print("        " .. l) end
+end
+
+for _, e in ipairs(file_errors) do
+	report { file = e.file, name = e.name, failure = setmetatable({ message = e.message }, Failure), where = e.where,
+		virtual = 0, wall = 0 }
+	results[#results + 1] = { file = e.file, name = e.name, failure = { message = e.message }, virtual = 0, wall = 0 }
+end
+
+for _, t in ipairs(selected) do
+	local r = run_test(t)
+	results[#results + 1] = r
+	report(r)
+end
+
+if trace_file then trace_file:close() end
+
+-- ---- JUnit ----
+
+local function xml(s)
+	return (tostring(s):gsub("[&<>\"]", { ["&"] = "&amp;", ["<"] = "&lt;", [">"] = "&gt;", ['"'] = "&quot;" })
+		:gsub("[%z\1-\8\11\12\14-\31]", "?"))
+end
+
+if junit_file then
+	local f = junit_file
+	local by_file, order = {}, {}
+	for _, r in ipairs(results) do
+		if not by_file[r.file] then by_file[r.file] = {}; order[#order + 1] = r.file end
+		table.insert(by_file[r.file], r)
+	end
+	f:write('<?xml version="1.0" encoding="UTF-8"?>\n')
+	f:write(string.format('<testsuites name="vmac test" tests="%d" failures="%d">\n', n, failed))
+	for _, file in ipairs(order) do
+		local rs, nf, wall = by_file[file], 0, 0
+		for _, r in ipairs(rs) do
+			if r.failure then nf = nf + 1 end
+			wall = wall + (r.wall or 0)
+		end
+		f:write(string.format('  <testsuite name="%s" tests="%d" failures="%d" time="%.3f">\n', xml(file), #rs, nf,
+			wall))
+		for _, r in ipairs(rs) do
+			f:write(string.format('    <testcase classname="%s" name="%s" time="%.3f">', xml(file), xml(r.name),
+				r.wall or 0))
+			if r.failure then
+				f:write(string.format('\n      <failure message="%s">%s</failure>\n    ', xml(r.failure.message),
+					xml(table.concat(r.details or {}, "\n"))))
+			end
+			f:write("</testcase>\n")
+		end
+		f:write("  </testsuite>\n")
+	end
+	f:write("</testsuites>\n")
+	f:close()
+end
+
+local summary = string.format("%d test%s, %d failed; %s of virtual time in %.2f s of wall time", n,
+	n == 1 and "" or "s", failed, human_duration(virtual_sum), wall_sum)
+if wall_sum >= 0.01 and virtual_sum > 0 then summary = summary .. string.format(" (%.0fx real time)", virtual_sum / wall_sum) end
+if opts.tap then
+	print("# " .. summary)
+else
+	print(summary)
+end
+if n == 0 then
+	io.stderr:write("vmac test: no tests found\n")
+	return 1
+end
+return failed > 0 and 1 or 0

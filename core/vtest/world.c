@@ -1,0 +1,481 @@
+/* The virtual world: see world.h. */
+#include "world.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../host/loader.h"
+
+struct vt_pkt {
+	int64_t at;
+	uint64_t order;
+	int to_host;     /* else to board `board` (-1: every board, the group) */
+	int board;       /* sender when to_host */
+	struct vmac_packet p;
+};
+
+static uint64_t rng_next(struct vt_world *w)
+{
+	uint64_t x = w->rng;
+	x ^= x >> 12;
+	x ^= x << 25;
+	x ^= x >> 27;
+	w->rng = x;
+	return x * 0x2545F4914F6CDD1DULL;
+}
+
+/* Uniform in [0, 1). */
+static double rng_unit(struct vt_world *w)
+{
+	return (double)(rng_next(w) >> 11) / 9007199254740992.0;
+}
+
+static int chance(struct vt_world *w, double p)
+{
+	return p > 0 && rng_unit(w) < p;
+}
+
+/* ---- the queue of frames in flight: a binary heap by (at, order) ---- */
+
+static int before(const struct vt_pkt *a, const struct vt_pkt *b)
+{
+	return a->at < b->at || (a->at == b->at && a->order < b->order);
+}
+
+static int push(struct vt_world *w, const struct vt_pkt *p)
+{
+	size_t i;
+	if (w->nq == w->capq) {
+		size_t cap = w->capq ? 2 * w->capq : 64;
+		struct vt_pkt *q = realloc(w->q, cap * sizeof(*q));
+		if (!q)
+			return -1;
+		w->q = q;
+		w->capq = cap;
+	}
+	i = w->nq++;
+	w->q[i] = *p;
+	w->q[i].order = w->order++;
+	while (i > 0 && before(&w->q[i], &w->q[(i - 1) / 2])) {
+		struct vt_pkt t = w->q[i];
+		w->q[i] = w->q[(i - 1) / 2];
+		w->q[(i - 1) / 2] = t;
+		i = (i - 1) / 2;
+	}
+	return 0;
+}
+
+static void pop(struct vt_world *w, struct vt_pkt *out)
+{
+	size_t i = 0;
+	*out = w->q[0];
+	w->q[0] = w->q[--w->nq];
+	for (;;) {
+		size_t l = 2 * i + 1, r = l + 1, m = i;
+		struct vt_pkt t;
+		if (l < w->nq && before(&w->q[l], &w->q[m]))
+			m = l;
+		if (r < w->nq && before(&w->q[r], &w->q[m]))
+			m = r;
+		if (m == i)
+			break;
+		t = w->q[i];
+		w->q[i] = w->q[m];
+		w->q[m] = t;
+		i = m;
+	}
+}
+
+/* A frame leaving `from` (a board, or the host when NULL) with the faults of
+ * the board at either end applied. */
+static void send_frame(struct vt_world *w, struct vt_board *b, struct vt_pkt *p, int64_t extra_ns)
+{
+	p->at = w->now_ns + VT_WIRE_NS + extra_ns;
+	if (b) {
+		if (!b->plugged || chance(w, b->faults.drop))
+			return;
+		if (chance(w, b->faults.delay_fraction))
+			p->at += b->faults.delay_ns;
+		if (p->p.len > 0 && chance(w, b->faults.corrupt))
+			p->p.data[rng_next(w) % p->p.len] ^= (uint8_t)(1u + rng_next(w) % 255);
+	}
+	push(w, p);
+}
+
+/* struct vmac_bus_link: frames from the host. */
+static void host_send(void *ctx, const struct vmac_packet *pkts, int n)
+{
+	struct vt_world *w = ctx;
+	int i, j;
+	for (i = 0; i < n; i++) {
+		struct vt_pkt p;
+		memset(&p, 0, sizeof(p));
+		p.p = pkts[i];
+		if (vmac_addr_equal(&pkts[i].addr, &w->bus_group)) {
+			/* A multicast reaches every board, each with its own faults. */
+			for (j = 0; j < w->nboards; j++) {
+				p.board = j;
+				send_frame(w, w->boards[j], &p, 0);
+			}
+			continue;
+		}
+		for (j = 0; j < w->nboards && !vmac_addr_equal(&pkts[i].addr, &w->boards[j]->addr); j++)
+			;
+		if (j == w->nboards)
+			continue; /* nobody at that address any more */
+		p.board = j;
+		send_frame(w, w->boards[j], &p, 0);
+	}
+}
+
+/* ---- the host's messages (the main thread's job in vmacd) ---- */
+
+static void record_event(struct vt_world *w, const struct vmac_bus_msg *m)
+{
+	struct vt_event *e;
+	if (w->nevents == w->capevents) {
+		size_t cap = w->capevents ? 2 * w->capevents : 64;
+		struct vt_event *n = realloc(w->events, cap * sizeof(*n));
+		if (!n)
+			return;
+		w->events = n;
+		w->capevents = cap;
+	}
+	e = &w->events[w->nevents++];
+	e->t_ns = m->time_ns;
+	memcpy(e->kind, m->event_kind, sizeof(e->kind));
+	memcpy(e->device, m->device, sizeof(e->device));
+	memcpy(e->text, m->text, sizeof(e->text));
+}
+
+static void pump(struct vt_world *w)
+{
+	struct vmac_bus_msg m;
+	int loaded = 0;
+	while (vmac_bus_poll_msg(w->bus, &m)) {
+		struct vmac_host_cmd c;
+		switch (m.kind) {
+		case VMAC_MSG_EVENT:
+			record_event(w, &m);
+			break;
+		case VMAC_MSG_LOAD:
+			memset(&c, 0, sizeof(c));
+			c.kind = VMAC_CMD_LOADED;
+			c.slot = m.slot;
+			c.generation = m.generation;
+			c.missing = vmac_load_driver(&w->cfg, m.driver, m.device, &c.drv, c.text, sizeof(c.text)) == -ENOENT;
+			if (vmac_bus_send_cmd(w->bus, &c) != 0)
+				vmac_driver_free(c.drv);
+			loaded = 1;
+			break;
+		case VMAC_MSG_UNLOAD:
+			vmac_driver_free(m.drv);
+			break;
+		default:
+			break;
+		}
+		if (loaded) {
+			vmac_bus_virtual_commands(w->bus);
+			loaded = 0;
+		}
+	}
+}
+
+/* ---- boards ---- */
+
+static void record_service(struct vt_world *w, struct vt_board *b, int64_t t)
+{
+	struct vt_service *s = &b->hist[b->nhist++ % VT_HISTORY];
+	int i;
+	s->t_ns = t;
+	vmac_plant_sense(&b->plant, &s->in);
+	s->out = b->fw.outputs;
+	if (!w->trace)
+		return;
+	for (i = 0; i < b->nio; i++) {
+		double v;
+		int is_bool;
+		vt_io_value(w, b, b->io[i].name, &v, &is_bool);
+		fprintf(w->trace, "%s,%.6f,%s,%s,%.6g\n", w->trace_test, (double)t / 1e9, b->fw.id.board, b->io[i].name, v);
+	}
+}
+
+static void deliver(struct vt_world *w, struct vt_pkt *p)
+{
+	w->frames++;
+	if (p->to_host) {
+		p->p.rx_ns = w->now_ns;
+		vmac_bus_virtual_receive(w->bus, &p->p);
+		return;
+	}
+	{
+		struct vt_board *b = w->boards[p->board];
+		uint64_t ms = (uint64_t)(w->now_ns / 1000000);
+		struct vt_pkt r;
+		int len;
+		if (!b->powered || !b->plugged)
+			return;
+		vmac_board_poll(&b->fw, ms);
+		memset(&r, 0, sizeof(r));
+		len = vmac_board_receive(&b->fw, p->p.data, p->p.len, ms, r.p.data, sizeof(r.p.data));
+		if (len <= 0)
+			return;
+		record_service(w, b, w->now_ns);
+		r.to_host = 1;
+		r.board = p->board;
+		r.p.len = (size_t)len;
+		r.p.addr = b->addr;
+		send_frame(w, b, &r, b->faults.late_ns);
+	}
+}
+
+static void step_plants(struct vt_world *w)
+{
+	uint64_t ms = (uint64_t)(w->now_ns / 1000000);
+	int i;
+	for (i = 0; i < w->nboards; i++) {
+		struct vt_board *b = w->boards[i];
+		vmac_plant_step(&b->plant, (double)VT_PLANT_STEP_NS / 1e9);
+		if (b->powered)
+			vmac_board_poll(&b->fw, ms);
+	}
+}
+
+int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
+{
+	while (w->now_ns < until_ns) {
+		int64_t next_tick = vmac_bus_virtual_next_tick(w->bus), t = next_tick;
+		if (w->next_plant_ns < t)
+			t = w->next_plant_ns;
+		if (w->nq > 0 && w->q[0].at < t)
+			t = w->q[0].at;
+		if (until_ns < t)
+			t = until_ns;
+		w->now_ns = t;
+		if (t >= w->next_plant_ns) {
+			step_plants(w);
+			w->next_plant_ns += VT_PLANT_STEP_NS;
+			w->moved = 1;
+		}
+		while (w->nq > 0 && w->q[0].at <= t) {
+			struct vt_pkt p;
+			pop(w, &p);
+			deliver(w, &p);
+			w->moved = 1;
+		}
+		if (t < next_tick)
+			continue;
+		vmac_bus_virtual_tick(w->bus, t);
+		pump(w);
+		/* Checks run at each bus tick at which a frame has moved or the
+		 * plants have stepped (with the boards' watchdogs) since the last
+		 * one: every change a driver, a board or a plant can make is seen. */
+		if (w->moved && check) {
+			int rc;
+			w->moved = 0;
+			rc = check(ctx);
+			if (rc)
+				return rc;
+		}
+	}
+	return 0;
+}
+
+static int load_io_map(struct vt_world *w, struct vt_board *b, const char *driver, int primary)
+{
+	struct vmac_driver *drv;
+	int i, n;
+	if (vmac_load_driver(&w->cfg, driver, b->fw.id.board, &drv, b->io_note, sizeof(b->io_note)) != 0)
+		return -1;
+	n = vmac_driver_nio(drv);
+	for (i = 0; i < n && b->nio < VMAC_DRIVER_MAX_IO; i++) {
+		struct vmac_driver_io io;
+		struct vt_io *o = &b->io[b->nio];
+		vmac_driver_io_info(drv, i, &io);
+		if (io.has_minor ? io.minor != b->fw.id.minor : !primary)
+			continue;
+		snprintf(o->name, sizeof(o->name), "%s", io.name);
+		o->kind = io.kind;
+		o->channel = io.channel;
+		o->scale = io.scale;
+		o->offset = io.offset;
+		b->nio++;
+	}
+	vmac_driver_free(drv);
+	return 0;
+}
+
+struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_plant_kind plant, const char *driver,
+                              uint32_t major, uint32_t minor, char *err, size_t errlen)
+{
+	struct vmac_board_identity id;
+	struct sockaddr_in *sin;
+	struct vt_board *b;
+	int i, primary = 1;
+	if (w->nboards == VT_MAX_BOARDS) {
+		snprintf(err, errlen, "at most %d boards in one test", VT_MAX_BOARDS);
+		return NULL;
+	}
+	if (!name || !*name || strlen(name) > VMAC_NAME_MAX || vt_board_find(w, name)) {
+		snprintf(err, errlen, "board name '%s': must be 1..%d characters and not used yet", name ? name : "",
+		         VMAC_NAME_MAX);
+		return NULL;
+	}
+	if (!driver)
+		driver = vmac_plant_default_driver(plant);
+	if (strlen(driver) > VMAC_NAME_MAX) {
+		snprintf(err, errlen, "driver name '%s' is longer than %d characters", driver, VMAC_NAME_MAX);
+		return NULL;
+	}
+	for (i = 0; i < w->nboards; i++)
+		if (w->boards[i]->fw.id.major == major && strcmp(w->boards[i]->fw.id.driver, driver) == 0)
+			primary = 0; /* joins a machine that already has its primary */
+	b = calloc(1, sizeof(*b));
+	if (!b) {
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	memset(&id, 0, sizeof(id));
+	snprintf(id.board, sizeof(id.board), "%s", name);
+	snprintf(id.driver, sizeof(id.driver), "%s", driver);
+	id.major = major;
+	id.minor = minor;
+	id.caps = vmac_plant_caps(plant);
+	vmac_plant_init(&b->plant, plant);
+	b->plugged = b->powered = 1;
+	sin = (struct sockaddr_in *)&b->addr.ss;
+	sin->sin_family = AF_INET;
+	sin->sin_port = htons(5870);
+	sin->sin_addr.s_addr = htonl(0x0A4D0000u | (uint32_t)(w->nboards + 1)); /* 10.77.0.N */
+	b->addr.len = sizeof(*sin);
+	{
+		static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
+		vmac_board_init(&b->fw, &id, &plant_io, &b->plant, (uint64_t)(w->now_ns / 1000000));
+	}
+	load_io_map(w, b, driver, primary);
+	w->boards[w->nboards++] = b;
+	return b;
+}
+
+struct vt_board *vt_board_find(struct vt_world *w, const char *name)
+{
+	int i;
+	for (i = 0; i < w->nboards; i++)
+		if (strcmp(w->boards[i]->fw.id.board, name) == 0)
+			return w->boards[i];
+	return NULL;
+}
+
+void vt_board_power(struct vt_world *w, struct vt_board *b, int on)
+{
+	if (on && !b->powered) {
+		struct vmac_board_identity id = b->fw.id;
+		vmac_board_init(&b->fw, &id, b->fw.io, b->fw.io_ctx, (uint64_t)(w->now_ns / 1000000));
+	} else if (!on) {
+		vmac_board_safe(&b->fw);
+	}
+	b->powered = on;
+}
+
+int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, double *value, int *is_bool)
+{
+	struct vmac_inputs in;
+	int i;
+	(void)w;
+	for (i = 0; i < b->nio && strcmp(b->io[i].name, name) != 0; i++)
+		;
+	if (i == b->nio)
+		return -1;
+	*is_bool = 0;
+	switch (b->io[i].kind) {
+	case VMAC_IO_DO:
+		*is_bool = 1;
+		*value = (b->fw.outputs.digital >> b->io[i].channel) & 1;
+		return 0;
+	case VMAC_IO_PWM:
+		*value = b->fw.outputs.pwm;
+		return 0;
+	default:
+		break;
+	}
+	vmac_plant_sense(&b->plant, &in);
+	if (b->io[i].kind == VMAC_IO_DI) {
+		*is_bool = 1;
+		*value = (in.digital >> b->io[i].channel) & 1;
+	} else if (b->io[i].kind == VMAC_IO_AI) {
+		*value = in.analog[b->io[i].channel] * b->io[i].scale + b->io[i].offset;
+	} else {
+		*value = in.encoder;
+	}
+	return 0;
+}
+
+int vt_input(struct vt_world *w, const char *device, const char *name, const struct vmac_value *value, char *reply,
+             size_t replylen)
+{
+	int rc = vmac_bus_input(w->bus, device, name, value, reply, replylen);
+	pump(w);
+	return rc;
+}
+
+const struct vmac_device_status *vt_device(struct vt_world *w, const char *device)
+{
+	return vmac_bus_device_status(w->bus, device, &w->status) == 0 ? &w->status : NULL;
+}
+
+void vt_stop_host(struct vt_world *w)
+{
+	struct vmac_host_cmd c;
+	memset(&c, 0, sizeof(c));
+	c.kind = VMAC_CMD_STOP;
+	vmac_bus_send_cmd(w->bus, &c);
+	vmac_bus_virtual_commands(w->bus);
+	pump(w);
+}
+
+struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char *err, size_t errlen)
+{
+	struct vt_world *w = calloc(1, sizeof(*w));
+	struct vmac_bus_link link;
+	struct sockaddr_in *sin;
+	if (!w) {
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	w->cfg = *cfg;
+	w->rng = seed * 0x9E3779B97F4A7C15ULL + 0x632BE59BD9B4E019ULL;
+	if (!w->rng)
+		w->rng = 1;
+	sin = (struct sockaddr_in *)&w->bus_group.ss;
+	sin->sin_family = AF_INET;
+	sin->sin_port = htons(5870);
+	sin->sin_addr.s_addr = htonl(0xEFFF564Du); /* 239.255.86.77 */
+	w->bus_group.len = sizeof(*sin);
+	link.send = host_send;
+	link.ctx = w;
+	w->bus = vmac_bus_new_virtual(&w->cfg, &link, &w->bus_group, err, errlen);
+	if (!w->bus) {
+		free(w);
+		return NULL;
+	}
+	w->next_plant_ns = VT_PLANT_STEP_NS;
+	return w;
+}
+
+void vt_world_free(struct vt_world *w)
+{
+	int i;
+	if (!w)
+		return;
+	if (w->bus) {
+		pump(w);
+		vmac_bus_free(w->bus);
+	}
+	for (i = 0; i < w->nboards; i++)
+		free(w->boards[i]);
+	free(w->q);
+	free(w->events);
+	free(w);
+}

@@ -1,0 +1,128 @@
+/* The virtual world of `vmac test` (docs/TESTING.md): the real host bus
+ * (discovery, schedule, deadlines, sandboxed drivers) and real board
+ * firmware with simulated plants, in one process, on one virtual clock.
+ * No sockets, no sleeping, no threads: frames travel through a queue ordered
+ * by delivery time (ties in send order), so a run is a pure function of the
+ * scene, the test's actions and the seed.
+ *
+ * Time in nanoseconds from the world's start. Each frame takes
+ * VT_WIRE_NS to cross, plus any delay a fault adds; plants are stepped on a
+ * fixed VT_PLANT_STEP_NS grid; the bus ticks on its own slot grid. */
+#ifndef VMAC_VTEST_WORLD_H
+#define VMAC_VTEST_WORLD_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include "../../firmware/board.h"
+#include "../../firmware/plant.h"
+#include "../host/bus.h"
+#include "../host/config.h"
+
+#define VT_WIRE_NS 50000LL          /* one way, host <-> board */
+#define VT_PLANT_STEP_NS 5000000LL  /* physics and board watchdog grid */
+#define VT_HISTORY 32               /* services kept per board for failure reports */
+#define VT_MAX_BOARDS 64
+
+/* One service of a board as it saw it: inputs sensed, outputs applied. */
+struct vt_service {
+	int64_t t_ns;
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+};
+
+/* A named I/O of a board, from its driver's manifest. */
+struct vt_io {
+	char name[VMAC_DRIVER_NAME_MAX + 1];
+	enum vmac_io_kind kind;
+	unsigned channel;
+	double scale, offset;
+};
+
+struct vt_faults {
+	double drop;           /* fraction of frames lost, both ways */
+	double corrupt;        /* fraction of frames with one byte changed */
+	double delay_fraction; /* fraction of frames delayed by delay_ns */
+	int64_t delay_ns;
+	int64_t late_ns;       /* every answer of the board leaves this much later */
+};
+
+struct vt_board {
+	struct vmac_board fw;
+	struct vmac_plant plant;
+	struct vmac_addr addr;   /* synthetic, 10.77.0.N:5870 */
+	int plugged;             /* 0: frames to and from it are lost (its watchdog runs on) */
+	int powered;             /* 0: the board is off: silent, outputs off */
+	struct vt_faults faults;
+	struct vt_service hist[VT_HISTORY];
+	unsigned nhist;          /* services recorded so far (the last VT_HISTORY kept) */
+	struct vt_io io[VMAC_DRIVER_MAX_IO];
+	int nio;
+	char io_note[200];       /* why there are no names (driver missing, failed to load) */
+};
+
+struct vt_event {
+	int64_t t_ns;
+	char kind[24];
+	char device[VMAC_NAME_MAX + 1];
+	char text[VMAC_EVENT_TEXT];
+};
+
+struct vt_pkt; /* in flight */
+
+struct vt_world {
+	struct vmac_config cfg;
+	struct vmac_bus *bus;
+	struct vmac_addr bus_group; /* where DISCOVER goes: every board */
+	int64_t now_ns;
+	int64_t next_plant_ns;
+	struct vt_board *boards[VT_MAX_BOARDS];
+	int nboards;
+	struct vt_pkt *q;        /* binary heap by (at, order) */
+	size_t nq, capq;
+	uint64_t order;          /* send order, for ties */
+	uint64_t rng;            /* xorshift64* state (the seed) */
+	struct vt_event *events;
+	size_t nevents, capevents;
+	uint64_t frames;         /* frames delivered, for the summary */
+	int moved;               /* a frame or a plant step since the last check */
+	FILE *trace;             /* CSV of every service, or NULL */
+	char trace_test[128];    /* the running test's name, the CSV's first column */
+	struct vmac_device_status status; /* scratch for vt_device */
+};
+
+/* cfg: drivers_dir, scripts_dir, stdlib_dir and limits as the test wants. */
+struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char *err, size_t errlen);
+void vt_world_free(struct vt_world *w);
+
+/* A board running the firmware with a plant behind it, announcing `driver`
+ * (default: the plant's). Its I/O names come from that driver's manifest
+ * (loaded once here; a driver that does not load leaves io_note saying why).
+ * Returns the board, or NULL with err. */
+struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_plant_kind plant, const char *driver,
+                              uint32_t major, uint32_t minor, char *err, size_t errlen);
+struct vt_board *vt_board_find(struct vt_world *w, const char *name);
+/* Power: off makes the board silent with outputs off; on starts it afresh
+ * (unknown, answering discovery). */
+void vt_board_power(struct vt_world *w, struct vt_board *b, int on);
+
+/* Called at each bus tick at which a frame has been delivered since the
+ * last call; a non-zero return stops the run and is returned by vt_run. */
+typedef int (*vt_check_fn)(void *ctx);
+
+/* Advance the clock to until_ns (or until check stops it). */
+int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx);
+
+/* Operator input to a device's driver (vmac_bus_input). */
+int vt_input(struct vt_world *w, const char *device, const char *name, const struct vmac_value *value, char *reply,
+             size_t replylen);
+/* The device as the host sees it now, or NULL when the host has no such device. */
+const struct vmac_device_status *vt_device(struct vt_world *w, const char *device);
+/* A named I/O of board b now (the board's own view: outputs it drives,
+ * inputs its plant gives). 0, or -1 when b's driver has no such name. */
+int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, double *value, int *is_bool);
+
+/* Stop the host the way vmacd stops (every board told to go safe). */
+void vt_stop_host(struct vt_world *w);
+
+#endif
