@@ -1,0 +1,70 @@
+-- The lights driver (scripts/drivers/lights.lua) against the lights plant:
+-- wall switches toggle, operator input sets, the state is published.
+-- Run: build/bin/vmac test tests/drivers/lights_test.lua (docs/TESTING.md)
+
+local function lights()
+	local l = board { name = "lights-1", plant = "lights" }
+	run_until(function() return l.var.kitchen == false end, 5, "the lights attached")
+	return l
+end
+
+test("a wall switch toggles its light, whichever way it is flipped", function()
+	local l = lights()
+	always("the wall switches never switch the TV or the disposal", function()
+		return not l.out.tv and not l.out.disposal
+	end)
+	l:set("toggle1")
+	run_until(function() return l.out.kitchen end, 0.2, "the kitchen light on")
+	expect_eq(l.var.kitchen, true, "published kitchen")
+	l:set("toggle1")
+	run_until(function() return not l.out.kitchen end, 0.2, "the kitchen light off")
+	l:set("toggle2")
+	run_until(function() return l.out.dining end, 0.2, "the dining light on")
+	expect(not l.out.kitchen, "the kitchen light still off")
+end)
+
+test("operator input sets a relay, all_off clears them all", function()
+	local l = lights()
+	l:input("tv", true)
+	l:input("disposal", true)
+	run_until(function() return l.out.tv and l.out.disposal end, 0.2, "tv and disposal on")
+	expect_eq(l.var.tv, true, "published tv")
+	run_for(2)
+	expect_near(l.plant.on_seconds2, 2, 0.1, "seconds the tv relay was on")
+	l:input("all_off")
+	run_until(function() return not (l.out.tv or l.out.disposal or l.out.kitchen or l.out.dining) end, 0.2,
+		"every relay off")
+end)
+
+test("an unknown input is refused and changes nothing", function()
+	local l = lights()
+	local ok = l:try_input("sauna", true)
+	expect(not ok, "the unknown name to be refused")
+	run_for(0.1)
+	expect(not l.out.kitchen, "nothing switched on")
+end)
+
+test("a lights board that loses the host turns every relay off", function()
+	local l = lights()
+	l:input("kitchen", true)
+	run_until(function() return l.out.kitchen end, 0.2, "the kitchen light on")
+	l:unplug()
+	-- The board's watchdog (500 ms) ends its session; allow the margin of a
+	-- late poll and of the last service before the cable was pulled.
+	run_until(function() return not l.out.kitchen end, 2, "the board's watchdog turning the light off")
+	l:replug()
+	run_until(function() return l.var.kitchen == false end, 5, "the lights attached again, all off")
+end)
+
+test("stopping the host turns every board's outputs off", function()
+	local k = kitchen {}
+	run_until(function() return k.lights.state == "running" and k.washer.var.state == "idle" end, 5,
+		"the kitchen attached")
+	k.lights:input("kitchen", true)
+	k.washer:input("start", "quick")
+	run_until(function() return k.lights.out.kitchen and k.washer.out.cold_valve end, 5, "a light and a valve on")
+	stop_host()
+	run_for(0.5)
+	expect(not k.lights.out.kitchen, "the light off")
+	expect(not k.washer.out.cold_valve and not k.washer.out.door_lock, "the washer's outputs off")
+end)

@@ -1,0 +1,188 @@
+"""vmac test, the driver test runner (docs/TESTING.md), used the way a
+person uses it: on the shipped driver tests, on files that fail on purpose
+(tests/vtest/cases/), and on a driver of one's own in a folder of one's own."""
+
+import os
+import re
+import xml.etree.ElementTree as ET
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CASES = os.path.join(ROOT, "tests", "vtest", "cases")
+EXIT_S = 120  # the shipped driver tests take about a second; this is a bound, not a measure
+
+
+def vtest(t, base, *args, cwd_files=None, timeout_s=EXIT_S):
+    """Run vmac test with args: (exit code, stdout, stderr)."""
+    rc, out, err = t.run([t.path("vmac"), "test"] + list(args), base, timeout_s)
+    assert rc is not None and rc >= 0, "vmac test %s: killed by a signal (%s)\n%s" % (" ".join(args), rc, err)
+    return rc, out, err
+
+
+def case(name):
+    return os.path.join(CASES, name + ".lua")
+
+
+def test_shipped_driver_tests_pass(t):
+    rc, out, err = vtest(t, "vtest-shipped", os.path.join(ROOT, "tests", "drivers"))
+    assert rc == 0, "the shipped driver tests fail (exit %d):\n%s%s" % (rc, out[-3000:], err)
+    m = re.search(r"^(\d+) tests, 0 failed; .* of virtual time", out, re.M)
+    assert m and int(m.group(1)) >= 20, "no summary line with the test count:\n%s" % out[-500:]
+
+
+def test_failures_name_the_line(t):
+    """Each way a test file can fail is one failure, reported at the line
+    that caused it, and the run exits 1."""
+    expected = {
+        "syntax": (r"syntax\.lua:3", r"unexpected symbol"),
+        "load_error": (r"load_error\.lua:4", r"attempt to index local 't'"),
+        "expect": (r"expect\.lua:6", r"one plus one: expected 3, got 2"),
+        "always": (r"always\.lua:7", r"always: the kitchen light stays off \(declared at \S*always\.lua:5\) "
+                   r"was violated at 0\.\d+ s"),
+    }
+    problems = []
+    for name, (at, message) in expected.items():
+        rc, out, err = vtest(t, "vtest-" + name, case(name))
+        if rc != 1:
+            problems.append("%s: exit %d, expected 1" % (name, rc))
+        if not re.search(r"^\s+at \S*" + at + r"$", out, re.M):
+            problems.append("%s: no 'at ...%s' line:\n%s" % (name, at, out))
+        if not re.search(message, out):
+            problems.append("%s: the report does not say %r:\n%s" % (name, message, out))
+    assert not problems, "\n".join(problems)
+
+    # A file that does not load runs none of its tests.
+    rc, out, err = vtest(t, "vtest-load-error-list", "--list", case("load_error"))
+    assert "never runs" not in out, "a test of a file that failed to load is listed:\n%s" % out
+
+    # The report of a failure in a virtual world shows the board's recent
+    # services and the events.
+    rc, out, err = vtest(t, "vtest-always-details", case("always"))
+    for text in ("lights-1: host says running", "services (board's view)", "attached"):
+        assert text in out, "the failure report lacks %r:\n%s" % (text, out)
+
+
+def test_runaway_tests_are_stopped(t):
+    rc, out, err = vtest(t, "vtest-endless", "--timeout", "1", case("endless"))
+    assert rc == 1, "an endless test: exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"FAIL\s+spins forever\n\s+at \S*endless\.lua:4\n\s+the test took more than 1 s of wall time",
+                     out), "the endless loop is not reported at its line:\n%s" % out
+    assert re.search(r"ok\s+runs after the endless one", out), "the test after the endless one did not run:\n%s" % out
+
+    rc, out, err = vtest(t, "vtest-long", "--time-limit", "30", case("long"))
+    assert rc == 1, "a test past --time-limit: exit %d, expected 1\n%s" % (rc, out)
+    assert "ran past the virtual-time limit of 30 s" in out, "the time limit is not named:\n%s" % out
+    assert re.search(r"virtual time 30\.0+ s", out), "the test did not stop at the limit:\n%s" % out
+
+
+def test_output_formats(t):
+    rc, out, err = vtest(t, "vtest-tap", "--tap", case("expect"))
+    assert rc == 1, "--tap with a failing test: exit %d" % rc
+    lines = out.splitlines()
+    assert lines[:2] == ["TAP version 13", "1..2"], "no TAP header and plan:\n%s" % out
+    assert re.match(r"ok 1 - \S*expect\.lua: adds$", lines[2]), "first TAP line: %r" % lines[2]
+    assert re.match(r"not ok 2 - \S*expect\.lua: adds wrongly$", lines[3]), "second TAP line: %r" % lines[3]
+    assert re.search(r"^  at: \S*expect\.lua:6$", out, re.M), "no YAML 'at' for the failure:\n%s" % out
+
+    junit = os.path.join(t.logdir, "junit.xml")
+    rc, out, err = vtest(t, "vtest-junit", "--junit", junit, case("expect"), case("lossy"))
+    assert rc == 1, "--junit with a failing test: exit %d" % rc
+    root = ET.parse(junit).getroot()
+    assert root.tag == "testsuites" and root.get("tests") == "3" and root.get("failures") == "1", (
+        "JUnit totals: %r" % root.attrib)
+    cases = {c.get("name"): c for c in root.iter("testcase")}
+    assert set(cases) == {"adds", "adds wrongly", "lights over a lossy link"}, "JUnit test cases: %s" % list(cases)
+    failure = cases["adds wrongly"].find("failure")
+    assert failure is not None and "expected 3, got 2" in failure.get("message"), "JUnit failure: %r" % (
+        failure.attrib if failure is not None else None)
+    assert cases["adds"].find("failure") is None, "a passing test has a failure in JUnit"
+
+    trace = os.path.join(t.logdir, "trace.csv")
+    rc, out, err = vtest(t, "vtest-trace", "--trace", trace, case("lossy"))
+    assert rc == 0, "lossy.lua fails (exit %d):\n%s" % (rc, out)
+    with open(trace) as f:
+        rows = f.read().splitlines()
+    assert rows[0] == "test,time_s,board,io,value", "trace header: %r" % rows[0]
+    kitchen = [r for r in rows[1:] if ",lights-1,kitchen," in r]
+    assert kitchen and all(r.startswith('"') and "lights over a lossy link" in r for r in kitchen), (
+        "trace rows do not name the test: %r" % kitchen[:2])
+    assert any(r.endswith(",1") for r in kitchen), "the trace never shows the kitchen light on"
+
+
+def test_selection_and_seed(t):
+    rc, out, err = vtest(t, "vtest-list", "--list", "--filter", "wrongly", case("expect"), case("lossy"))
+    assert rc == 0 and out.strip().endswith("expect.lua: adds wrongly") and len(out.splitlines()) == 1, (
+        "--list --filter: exit %d, printed %r" % (rc, out))
+    rc, out, err = vtest(t, "vtest-filter", "--filter", "adds wrongly", case("expect"))
+    assert rc == 1 and "FAIL  adds wrongly" in out and "ok    adds " not in out, "--filter ran:\n%s" % out
+
+    # A run is a function of its seed: the same seed gives the same trace of
+    # a lossy link, another seed another one.
+    traces = []
+    for i, seed in enumerate(("7", "7", "8")):
+        path = os.path.join(t.logdir, "seed-%d.csv" % i)
+        rc, out, err = vtest(t, "vtest-seed-%d" % i, "--seed", seed, "--trace", path, case("lossy"))
+        assert rc == 0, "lossy.lua with --seed %s fails:\n%s" % (seed, out)
+        with open(path) as f:
+            traces.append(f.read())
+    assert traces[0] == traces[1], "two runs with --seed 7 differ"
+    assert traces[0] != traces[2], "--seed 7 and --seed 8 give the same trace of a lossy link"
+
+
+def test_a_driver_of_ones_own(t):
+    """What docs/TESTING.md walks through: a driver and its test in a folder
+    of one's own, run with --drivers."""
+    home = os.path.join(t.logdir, "mine")
+    os.makedirs(os.path.join(home, "drivers"))
+    os.makedirs(os.path.join(home, "tests"))
+    with open(os.path.join(home, "drivers", "blinker.lua"), "w") as f:
+        f.write("""-- Blinks do0 at 1 Hz while di0 is on.
+local driver = {
+	name = "blinker", version = "0.1.0", level = 5,
+	io = { enable = "di0", lamp = "do0" },
+	variables = { blinks = {} },
+}
+local last
+function driver.attach(dev) dev.vars.blinks = 0 end
+function driver.tick(dev, inputs)
+	local on = inputs.enable and math.floor(inputs.time * 2) % 2 == 0
+	if on and not last then dev.vars.blinks = dev.vars.blinks + 1 end
+	last = on
+	dev.out.lamp = on
+end
+return driver
+""")
+    with open(os.path.join(home, "tests", "blinker_test.lua"), "w") as f:
+        f.write("""test("blinks once a second while enabled", function()
+	local b = board { name = "blink-1", plant = "generic", driver = "blinker" }
+	run_until(function() return b.state == "running" end, 5, "the blinker attached")
+	expect(not b.out.lamp, "dark while disabled")
+	b:set("di0", 1)
+	run_for(10)
+	expect_near(b.var.blinks, 10, 1, "blinks in 10 s")
+	b:set("di0", 0)
+	run_for(1)
+	expect(not b.out.lamp, "dark once disabled")
+end)
+""")
+    drivers, tests = os.path.join(home, "drivers"), os.path.join(home, "tests")
+    rc, out, err = vtest(t, "vtest-mine", "--drivers", drivers, tests)
+    assert rc == 0, "the user's driver test fails (exit %d):\n%s%s" % (rc, out, err)
+    assert re.search(r"ok\s+blinks once a second while enabled", out), out
+
+    # Without --drivers the host has no blinker: the test says so.
+    rc, out, err = vtest(t, "vtest-mine-missing", tests)
+    assert rc == 1, "without --drivers: exit %d, expected 1\n%s" % (rc, out)
+    assert "blinker" in out, "the failure does not name the missing driver:\n%s" % out
+
+
+def test_bad_usage(t):
+    rc, out, err = vtest(t, "vtest-help", "--help")
+    assert rc == 0 and out.startswith("usage: vmac test"), "--help: exit %d, %r" % (rc, out[:100])
+    for args, mention in ((["--seed"], "--seed needs a value"), (["--timeout", "-1"], "--timeout"),
+                          (["--no-such"], "unknown option --no-such"),
+                          (["/nonexistent/x_test.lua"], "no such file or folder"),
+                          (["--drivers", "/nonexistent"], "no such folder"),
+                          (["--junit", "/nonexistent/dir/j.xml", case("expect")], "--junit")):
+        rc, out, err = vtest(t, "vtest-bad", *args)
+        assert rc == 2, "vmac test %s: exit %d, expected 2 (bad usage)\n%s" % (" ".join(args), rc, err)
+        assert mention in err, "vmac test %s: stderr does not say %r: %r" % (" ".join(args), mention, err)
