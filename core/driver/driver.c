@@ -59,6 +59,7 @@ struct vmac_driver {
 	char overrun_msg[96];
 	int ref_tick, ref_attach, ref_input, ref_detach, ref_migrate; /* registry refs, LUA_NOREF if absent */
 	int ref_manifest, ref_dev, ref_inputs, ref_out, ref_vars, ref_params;
+	int ref_keys; /* the names a tick reads and writes, interned once (key_*) */
 	char file[64];           /* file name, for messages */
 	char name[VMAC_NAME_MAX + 1];
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
@@ -1109,6 +1110,38 @@ static int dev_event(lua_State *L)
 	return 0;
 }
 
+/* The keys of a tick as Lua strings, in one array (registry ref_keys): I/O
+ * names, then variable names, then "time", "out", "vars". A tick pushes
+ * them by index instead of hashing C strings into Lua strings every time.
+ * [-0, +0] */
+static int key_io(const struct vmac_driver *d, int i) { (void)d; return i + 1; }
+static int key_var(const struct vmac_driver *d, int i) { return d->nio + i + 1; }
+static int key_time(const struct vmac_driver *d) { return d->nio + d->nvars + 1; }
+static int key_out(const struct vmac_driver *d) { return d->nio + d->nvars + 2; }
+static int key_vars(const struct vmac_driver *d) { return d->nio + d->nvars + 3; }
+
+static void make_keys(struct vmac_driver *d)
+{
+	lua_State *L = d->L;
+	int i;
+	lua_createtable(L, key_vars(d), 0);
+	for (i = 0; i < d->nio; i++) {
+		lua_pushstring(L, d->io[i].name);
+		lua_rawseti(L, -2, key_io(d, i));
+	}
+	for (i = 0; i < d->nvars; i++) {
+		lua_pushstring(L, d->vars[i].pub.name);
+		lua_rawseti(L, -2, key_var(d, i));
+	}
+	lua_pushliteral(L, "time");
+	lua_rawseti(L, -2, key_time(d));
+	lua_pushliteral(L, "out");
+	lua_rawseti(L, -2, key_out(d));
+	lua_pushliteral(L, "vars");
+	lua_rawseti(L, -2, key_vars(d));
+	d->ref_keys = luaL_ref(L, LUA_REGISTRYINDEX);
+}
+
 /* The dev table, with params (on top) moved into it: [-1, +0]. */
 static void make_dev(struct vmac_driver *d)
 {
@@ -1149,6 +1182,7 @@ static void make_dev(struct vmac_driver *d)
 	 * start, so a tick allocates nothing for it. */
 	lua_createtable(L, 0, d->nio + 1);
 	d->ref_inputs = luaL_ref(L, LUA_REGISTRYINDEX);
+	make_keys(d);
 }
 
 int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
@@ -1377,12 +1411,14 @@ void vmac_driver_detach(struct vmac_driver *d, const char *reason)
 static void fill_inputs(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[])
 {
 	lua_State *L = d->L;
-	int i;
+	int i, inputs = lua_gettop(L), keys = inputs + 1;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
 	for (i = 0; i < d->nio; i++) {
 		const struct io *io = &d->io[i];
 		const struct vmac_inputs *x = io->board >= 0 ? in[io->board] : NULL;
 		if (io->kind == IO_DO || io->kind == IO_PWM)
 			continue;
+		lua_rawgeti(L, keys, key_io(d, i));
 		if (!x)
 			lua_pushnil(L);
 		else if (io->kind == IO_DI)
@@ -1391,24 +1427,28 @@ static void fill_inputs(struct vmac_driver *d, double time_s, const struct vmac_
 			lua_pushnumber(L, x->analog[io->channel] * io->scale + io->offset);
 		else
 			lua_pushinteger(L, x->encoder);
-		lua_setfield(L, -2, io->name);
+		lua_rawset(L, inputs);
 	}
+	lua_rawgeti(L, keys, key_time(d));
 	lua_pushnumber(L, time_s);
-	lua_setfield(L, -2, "time");
+	lua_rawset(L, inputs);
+	lua_pop(L, 1);
 }
 
 /* dev.out -> out[]: [-0, +0]. */
 static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[], char *err, size_t errlen)
 {
 	lua_State *L = d->L;
-	int i, rc = 0;
+	int i, rc = 0, keys = lua_gettop(L) + 1, dev = keys + 1, t = keys + 2;
 	for (i = 0; i < d->nboards; i++)
 		memset(out[i], 0, sizeof(*out[i]));
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
-	lua_getfield(L, -1, "out");
-	if (!lua_istable(L, -1)) {
-		snprintf(err, errlen, "%s: dev.out must stay a table, got %s", d->file, luaL_typename(L, -1));
-		lua_pop(L, 2);
+	lua_rawgeti(L, keys, key_out(d));
+	lua_gettable(L, dev);
+	if (!lua_istable(L, t)) {
+		snprintf(err, errlen, "%s: dev.out must stay a table, got %s", d->file, luaL_typename(L, t));
+		lua_pop(L, 3);
 		return -1;
 	}
 	for (i = 0; i < d->nio && rc == 0; i++) {
@@ -1416,7 +1456,8 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 		struct vmac_outputs *o = io->board >= 0 && io->board < d->nboards ? out[io->board] : NULL;
 		if (io->kind != IO_DO && io->kind != IO_PWM)
 			continue;
-		lua_getfield(L, -1, io->name);
+		lua_rawgeti(L, keys, key_io(d, i));
+		lua_gettable(L, t);
 		if (io->kind == IO_DO) {
 			if (lua_isboolean(L, -1)) {
 				if (o && lua_toboolean(L, -1))
@@ -1438,7 +1479,7 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 		}
 		lua_pop(L, 1);
 	}
-	lua_pop(L, 2);
+	lua_pop(L, 3);
 	if (rc != 0)
 		for (i = 0; i < d->nboards; i++)
 			memset(out[i], 0, sizeof(*out[i]));
@@ -1490,30 +1531,33 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 {
 	lua_State *L = d->L;
 	struct vmac_value now[VMAC_DRIVER_MAX_VARS];
-	int i, j;
+	int i, j, keys = lua_gettop(L) + 1, dev = keys + 1, t = keys + 2;
 	if (d->nvars == 0)
 		return 0;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
-	lua_getfield(L, -1, "vars");
-	if (!lua_istable(L, -1)) {
-		snprintf(err, errlen, "%s: dev.vars must stay a table, got %s", d->file, luaL_typename(L, -1));
-		lua_pop(L, 2);
+	lua_rawgeti(L, keys, key_vars(d));
+	lua_gettable(L, dev);
+	if (!lua_istable(L, t)) {
+		snprintf(err, errlen, "%s: dev.vars must stay a table, got %s", d->file, luaL_typename(L, t));
+		lua_pop(L, 3);
 		return -1;
 	}
 	for (i = 0; i < d->nvars; i++) {
 		struct var *v = &d->vars[i];
-		lua_getfield(L, -1, v->pub.name);
+		lua_rawgeti(L, keys, key_var(d, i));
+		lua_gettable(L, t);
 		if (to_value(L, &now[i]) != 0) {
 			snprintf(err, errlen, "%s: dev.vars.%s must be a number, boolean, string or nil, got %s", d->file,
 			         v->pub.name, luaL_typename(L, -1));
-			lua_pop(L, 3);
+			lua_pop(L, 4);
 			return -1;
 		}
 		lua_pop(L, 1);
 		v->due = !value_equal(&now[i], &v->pub.value) &&
 		         (v->every_s == 0 || time_s - v->pub.published_s >= v->every_s || v->pub.published_s == 0);
 	}
-	lua_pop(L, 2);
+	lua_pop(L, 3);
 	for (i = 0; i < d->nvars; i++) /* a group is due as a whole */
 		if (d->vars[i].due && d->vars[i].group)
 			for (j = 0; j < d->nvars; j++)
@@ -1540,7 +1584,13 @@ int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inp
 		return -1;
 	if (read_outputs(d, out, err, errlen) != 0)
 		return -1;
-	return publish_vars(d, time_s, err, errlen);
+	if (publish_vars(d, time_s, err, errlen) != 0) {
+		int i;
+		for (i = 0; i < d->nboards; i++) /* a failed tick drives nothing */
+			memset(out[i], 0, sizeof(*out[i]));
+		return -1;
+	}
+	return 0;
 }
 
 int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,

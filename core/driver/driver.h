@@ -117,8 +117,8 @@ int vmac_driver_attach(struct vmac_driver *d, double time_s, char *err, size_t e
 /* One service of the machine: in[i] / out[i] are the inputs and outputs of
  * board i (as added). Runs tick(dev, inputs), then reads dev.out into out[]
  * and publishes due variables. 0, or -1 with err holding the driver's error,
- * file, line and traceback; after a failure the driver must not be called
- * again. */
+ * file, line and traceback, and every out[] all off; after a failure the
+ * driver must not be called again. */
 int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
                      struct vmac_outputs *const out[], char *err, size_t errlen);
 

@@ -169,6 +169,43 @@ START_TEST(bad_outputs_fail_and_turn_everything_off)
 }
 END_TEST
 
+/* The tick's tables are looked up by interned keys (driver.c, make_keys):
+ * a driver that replaces dev.out or dev.vars, or publishes a table, is
+ * still caught by name, the stack stays balanced, the outputs stay off. */
+START_TEST(replaced_tables_and_bad_variables_fail_by_name)
+{
+	static const char *const cases[][2] = {
+	    {"dev.out = 5", "dev.out must stay a table"},
+	    {"dev.vars = 'x'", "dev.vars must stay a table"},
+	    {"dev.vars.v = {}", "dev.vars.v must be a number, boolean, string or nil"},
+	};
+	size_t i;
+	for (i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+		char src[512], err[VMAC_DRIVER_ERR_MAX] = "";
+		struct vmac_driver *d;
+		struct vmac_inputs in;
+		struct vmac_outputs out;
+		snprintf(src, sizeof(src),
+		         "return { name = 't', version = '1', io = { a = 'do0', s = 'di0' }, variables = { v = {} },\n"
+		         "  tick = function(dev, inputs) dev.out.a = inputs.s; dev.vars.v = inputs.time\n"
+		         "    if inputs.time >= 1 then %s end end }\n",
+		         cases[i][0]);
+		d = load_ok(src);
+		vmac_driver_add_board(d, 0, "b0");
+		memset(&in, 0, sizeof(in));
+		in.digital = 1;
+		ck_assert_msg(tick1(d, 0.5, &in, &out, err, sizeof(err)) == 0, "%s: a good tick failed: %s", cases[i][0], err);
+		ck_assert_msg(out.digital == 1, "%s: output a not driven from input s", cases[i][0]);
+		ck_assert_msg(var(d, "v")->value.number == 0.5, "%s: v not published from inputs.time", cases[i][0]);
+		ck_assert_int_ne(tick1(d, 1, &in, &out, err, sizeof(err)), 0);
+		ck_assert_msg(strstr(err, cases[i][1]) != NULL, "'%s': error '%s' does not say '%s'", cases[i][0], err,
+		              cases[i][1]);
+		ck_assert_msg(out.digital == 0 && out.pwm == 0, "%s: outputs left on", cases[i][0]);
+		vmac_driver_free(d);
+	}
+}
+END_TEST
+
 START_TEST(two_boards_one_machine)
 {
 	struct vmac_driver *d = load_ok("return { name = 't', version = '1',\n"
@@ -391,6 +428,7 @@ int main(void)
 	tcase_add_test(tc, manifest_errors_name_the_field);
 	tcase_add_test(tc, named_io_in_and_out);
 	tcase_add_test(tc, bad_outputs_fail_and_turn_everything_off);
+	tcase_add_test(tc, replaced_tables_and_bad_variables_fail_by_name);
 	tcase_add_test(tc, two_boards_one_machine);
 	tcase_add_test(tc, variables_publish_by_their_rules);
 	tcase_add_test(tc, input_and_host_hooks);
