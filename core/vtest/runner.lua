@@ -167,18 +167,22 @@ end
 
 local Board = {}
 
+local methods -- the world's methods, for the accessors that checks call
+
 local function W()
 	if not current.world then
 		current.world = world.new(current.settings, opts.seed)
+		methods = methods or getmetatable(current.world).__index
 		current.world:trace(current.trace_file, current.trace_name)
 	end
 	return current.world
 end
 
 local function io_view(b)
+	local w, io, board_name = current.world, methods.io, b.name
 	return setmetatable({}, {
 		__index = function(_, name)
-			local v, why = current.world:io(b.name, name)
+			local v, why = io(w, board_name, name)
 			if v == nil then
 				if why ~= "" then fail(b.name .. ": no I/O names: " .. why) end
 				fail(string.format("%s has no I/O named '%s' (its driver names: %s)", b.name, name,
@@ -203,14 +207,15 @@ local function make_board(spec)
 	local b = { name = name, plant_kind = plant, driver = driver }
 	b.io = io_view(b)
 	b.inp, b.out = b.io, b.io
-	b.var = setmetatable({}, { __index = function(_, k) return current.world:var(name, k) end })
-	b.plant = setmetatable({}, { __index = function(_, k) return current.world:plant(name, k) end })
+	local var_of, plant_of = methods.var, methods.plant -- read at every check: no lookups on the way
+	b.var = setmetatable({}, { __index = function(_, k) return var_of(w, name, k) end })
+	b.plant = setmetatable({}, { __index = function(_, k) return plant_of(w, name, k) end })
 	current.boards[#current.boards + 1] = b
 	return setmetatable(b, Board)
 end
 
 Board.__index = function(b, k)
-	if k == "state" then return current.world:state(b.name) end
+	if k == "state" then return methods.state(current.world, b.name) end
 	if k == "device" then return current.world:device(b.name) end
 	return Board[k]
 end
@@ -254,14 +259,15 @@ function Board:history() return current.world:history(self.name) end
 
 local function now() return current.world and current.world:now() or 0 end
 
+-- Runs at every check (world.c), so it stays lean: no pcall per condition;
+-- an error raised inside one is named by run_test through current.checking.
 local function check_invariants()
-	for _, inv in ipairs(current.always) do
-		local ok, held = pcall(inv.fn)
-		if not ok then
-			if getmetatable(held) == Failure then error(held, 0) end
-			fail(string.format("always (%s): the condition raised: %s", inv.what, tostring(held)),
-				{ where = inv.where })
-		end
+	local list = current.always
+	for i = 1, #list do
+		local inv = list[i]
+		current.checking = inv
+		local held = inv.fn()
+		current.checking = nil
 		if not held then
 			local t = now()
 			fail(string.format("always: %s (declared at %s) was violated at %.6f s, tick %d", inv.what, inv.where,
@@ -529,6 +535,13 @@ local function run_test(t)
 	local ok, err = xpcall(t.fn, function(e)
 		if getmetatable(e) == Failure then return e end
 		local msg = tostring(e)
+		local inv = current.checking
+		if inv then
+			local f = setmetatable({ message = string.format("always (%s): the condition raised: %s", inv.what, msg),
+				error = true, where = inv.where }, Failure)
+			f.frames = test_frames(debug.traceback("", 2), t.file)
+			return f
+		end
 		local f = setmetatable({ message = msg, error = true }, Failure)
 		f.where = msg:match("^([^:]+:%d+):") or where(2)
 		f.frames = test_frames(debug.traceback("", 2), t.file)

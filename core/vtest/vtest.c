@@ -23,9 +23,21 @@ struct lworld {
 	int check_failed;   /* it raised: its error is on the stack */
 };
 
+/* The world's metatable, by reference: checks run at every tick, and
+ * luaL_checkudata would look the metatable up by name each time. */
+static int world_mt_ref = LUA_NOREF;
+
 static struct lworld *check_world(lua_State *L)
 {
-	struct lworld *lw = luaL_checkudata(L, 1, WORLD_MT);
+	struct lworld *lw = lua_touserdata(L, 1);
+	int ok;
+	if (!lw || !lua_getmetatable(L, 1))
+		luaL_typerror(L, 1, WORLD_MT);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, world_mt_ref);
+	ok = lua_rawequal(L, -1, -2);
+	lua_pop(L, 2);
+	if (!ok)
+		luaL_typerror(L, 1, WORLD_MT);
 	if (!lw->w)
 		luaL_error(L, "the world of this test is gone");
 	return lw;
@@ -158,6 +170,9 @@ static int l_run(lua_State *L)
 		lw->check_ref = LUA_NOREF;
 	}
 	lw->check_failed = 0;
+	/* The test may have acted since the last run: check at the first tick. */
+	lw->w->moved = 1;
+	lw->w->check_reads_plant = 1;
 	rc = vt_run(lw->w, (int64_t)(until * 1e9 + 0.5), lw->check_ref == LUA_NOREF ? NULL : run_check, lw);
 	if (lw->check_ref != LUA_NOREF)
 		luaL_unref(L, LUA_REGISTRYINDEX, lw->check_ref);
@@ -171,6 +186,7 @@ static int l_run(lua_State *L)
 static int l_now(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
+	lw->w->reads_plant = 1; /* time moves on at every tick */
 	lua_pushnumber(L, (double)lw->w->now_ns / 1e9);
 	return 1;
 }
@@ -327,6 +343,7 @@ static int l_plant(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
 	struct vt_board *b = check_board(L, lw, 2);
+	lw->w->reads_plant = 1;
 	const char *f = luaL_checkstring(L, 3);
 	const struct vmac_washer *wa = &b->plant.s.washer;
 	const struct vmac_dishwasher *dw = &b->plant.s.dishwasher;
@@ -438,6 +455,7 @@ static int l_history(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
 	struct vt_board *b = check_board(L, lw, 2);
+	lw->w->reads_plant = 1;
 	unsigned n = b->nhist < VT_HISTORY ? b->nhist : VT_HISTORY, k;
 	lua_createtable(L, (int)n, 0);
 	for (k = 0; k < n; k++) {
@@ -534,6 +552,8 @@ static int open_world(lua_State *L)
 	    {"slot", l_slot},       {NULL, NULL}};
 	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {NULL, NULL}};
 	luaL_newmetatable(L, WORLD_MT);
+	lua_pushvalue(L, -1);
+	world_mt_ref = luaL_ref(L, LUA_REGISTRYINDEX);
 	lua_pushcfunction(L, l_gc);
 	lua_setfield(L, -2, "__gc");
 	lua_newtable(L);

@@ -144,6 +144,7 @@ static void record_event(struct vt_world *w, const struct vmac_bus_msg *m)
 		w->capevents = cap;
 	}
 	e = &w->events[w->nevents++];
+	w->moved = 1;
 	e->t_ns = m->time_ns;
 	memcpy(e->kind, m->event_kind, sizeof(e->kind));
 	memcpy(e->device, m->device, sizeof(e->device));
@@ -238,8 +239,8 @@ static void step_plants(struct vt_world *w)
 	for (i = 0; i < w->nboards; i++) {
 		struct vt_board *b = w->boards[i];
 		vmac_plant_step(&b->plant, (double)VT_PLANT_STEP_NS / 1e9);
-		if (b->powered)
-			vmac_board_poll(&b->fw, ms);
+		if (b->powered && vmac_board_poll(&b->fw, ms))
+			w->moved = 1; /* the watchdog turned the outputs off */
 	}
 }
 
@@ -257,7 +258,7 @@ int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 		if (t >= w->next_plant_ns) {
 			step_plants(w);
 			w->next_plant_ns += VT_PLANT_STEP_NS;
-			w->moved = 1;
+			w->plant_moved = 1;
 		}
 		while (w->nq > 0 && w->q[0].at <= t) {
 			struct vt_pkt p;
@@ -269,13 +270,14 @@ int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 			continue;
 		vmac_bus_virtual_tick(w->bus, t);
 		pump(w);
-		/* Checks run at each bus tick at which a frame has moved or the
-		 * plants have stepped (with the boards' watchdogs) since the last
-		 * one: every change a driver, a board or a plant can make is seen. */
-		if (w->moved && check) {
+		/* Checks run at each bus tick at which something they read may
+		 * have changed (world.h, `moved`): every change a driver, a board
+		 * or a plant makes is seen at the tick it happens. */
+		if (check && (w->moved || (w->plant_moved && w->check_reads_plant))) {
 			int rc;
-			w->moved = 0;
+			w->moved = w->plant_moved = w->reads_plant = 0;
 			rc = check(ctx);
+			w->check_reads_plant = w->reads_plant;
 			if (rc)
 				return rc;
 		}
@@ -383,7 +385,6 @@ int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, 
 {
 	struct vmac_inputs in;
 	int i;
-	(void)w;
 	for (i = 0; i < b->nio && strcmp(b->io[i].name, name) != 0; i++)
 		;
 	if (i == b->nio)
@@ -400,6 +401,7 @@ int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, 
 	default:
 		break;
 	}
+	w->reads_plant = 1;
 	vmac_plant_sense(&b->plant, &in);
 	if (b->io[i].kind == VMAC_IO_DI) {
 		*is_bool = 1;

@@ -20,7 +20,7 @@
 #include "../host/config.h"
 
 #define VT_WIRE_NS 50000LL          /* one way, host <-> board */
-#define VT_PLANT_STEP_NS 5000000LL  /* physics and board watchdog grid */
+#define VT_PLANT_STEP_NS 10000000LL /* physics and board watchdog grid: vmac-board's largest physics sub-step */
 #define VT_HISTORY 32               /* services kept per board for failure reports */
 #define VT_MAX_BOARDS 64
 
@@ -85,7 +85,14 @@ struct vt_world {
 	struct vt_event *events;
 	size_t nevents, capevents;
 	uint64_t frames;         /* frames delivered, for the summary */
-	int moved;               /* a frame or a plant step since the last check */
+	/* When checks run (vt_run): `moved` is set by what can change any value a
+	 * check reads (a frame delivered, an event, a board's watchdog trip);
+	 * `plant_moved` by a plant step, which changes only plant-side values.
+	 * A check that read none of those last time (reads_plant, set by the
+	 * accessors during the check) cannot change its result on a plant step
+	 * alone, so it is not run for one. */
+	int moved, plant_moved;
+	int reads_plant, check_reads_plant;
 	FILE *trace;             /* CSV of every service, or NULL */
 	char trace_test[128];    /* the running test's name, the CSV's first column */
 	struct vmac_device_status status; /* scratch for vt_device */
