@@ -271,11 +271,12 @@ static int cmd_bench(int argc, char **argv)
 	ssize_t len;
 	int i, n = 0;
 	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf("usage: vmac bench [--seconds N] [--only lateness,cost,capacity] [--max-boards N] [--out FILE]\n"
-		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, and host\n"
-		       "CPU per device per tick (next to a bare sendmmsg loop). Figures are ratios to baselines run\n"
-		       "in the same run on the same machine. Needs cyclictest (Debian rt-tests) and the bare loop\n"
-		       "built by 'make bench' (build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
+		printf("usage: vmac bench [--seconds N] [--only lateness,cost,capacity,vtest] [--max-boards N] [--out FILE]\n"
+		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
+		       "per device per tick (next to a bare sendmmsg loop), and the speed of vmac test (wall time\n"
+		       "of a virtual hour of washing). Figures are ratios to baselines run in the same run on the\n"
+		       "same machine. Needs cyclictest (Debian rt-tests) and the bare loop built by 'make bench'\n"
+		       "(build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
 		return 0;
 	}
 	vmac_root_dir(root, sizeof(root));

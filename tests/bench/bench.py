@@ -8,8 +8,11 @@ same run on the same machine, reported as ratios.
             and 10 Hz with zero missed deadlines, next to the thesis's Table 3
   cost      host CPU microseconds per device per tick, next to bare_loop (the
             same sendmmsg/recvmmsg exchange with no drivers and no policy)
+  vtest     vmac test: wall seconds for one virtual hour of washing
+            (tests/bench/washer_hour.lua), alone and in the demo kitchen,
+            as a ratio to real time
 
-usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost]
+usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost,vtest]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -27,6 +30,7 @@ from harness import Context  # noqa: E402  (the integration tests' process handl
 
 PRIORITY = 50  # vmacd's bus thread asks for SCHED_FIFO 50; cyclictest gets the same
 THESIS_TABLE3 = {1000: 10, 100: 100, 10: 1000}
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def cpu_seconds(pid):
@@ -199,12 +203,31 @@ def capacity(args, rate_hz):
     return {"rate_hz": rate_hz, "max_boards": lo, "first_failing": hi}
 
 
+def vtest(args):
+    """Wall seconds of each test of washer_hour.lua (one virtual hour each),
+    best of three runs (the figure is the program's speed, not the
+    machine's neighbours); JUnit gives the per-test times."""
+    import xml.etree.ElementTree as ET
+    hour = os.path.join(ROOT, "tests", "bench", "washer_hour.lua")
+    best = {}
+    for run in range(3):
+        junit = os.path.join(args.logs, "vtest-%d.xml" % run)
+        p = subprocess.run([os.path.join(args.bin, "vmac"), "test", "--junit", junit, hour], capture_output=True,
+                           text=True, timeout=600)
+        if p.returncode != 0:
+            return {"error": "vmac test %s failed (exit %d): %s" % (hour, p.returncode, (p.stdout + p.stderr)[-500:])}
+        for case in ET.parse(junit).getroot().iter("testcase"):
+            t = float(case.get("time"))
+            best[case.get("name")] = min(t, best.get(case.get("name"), t))
+    return {"virtual_s": 3600, "wall_s": best}
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest")
     p.add_argument("--max-boards", type=int, default=2000)
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
     p.add_argument("--out", default="build/bench/results.json")
@@ -243,6 +266,10 @@ def main():
             c["thesis_table3"] = THESIS_TABLE3[rate]
             results["capacity"].append(c)
 
+    if "vtest" in only:
+        print("vtest: one virtual hour of washing, alone and in the kitchen (best of 3)", flush=True)
+        results["vtest"] = vtest(args)
+
     os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(results, f, indent=2)
@@ -277,6 +304,13 @@ def report(r):
         print("capacity at %4d Hz: %5d boards with zero misses (thesis Table 3: %d)%s" % (
             c["rate_hz"], c["max_boards"], c["thesis_table3"],
             "; %d failed" % c["first_failing"] if c.get("first_failing") else " " + c.get("limit", "")))
+    v = r.get("vtest")
+    if v:
+        if "error" in v:
+            print("vmac test: %s" % v["error"])
+        for name, wall in sorted(v.get("wall_s", {}).items()):
+            print("vmac test, %s: 1 virtual hour in %.2f s of wall time (%.0fx real time)" % (
+                name, wall, v["virtual_s"] / max(1e-9, wall)))
 
 
 if __name__ == "__main__":

@@ -50,6 +50,14 @@ def test_failures_name_the_line(t):
             problems.append("%s: the report does not say %r:\n%s" % (name, message, out))
     assert not problems, "\n".join(problems)
 
+    # An always() on the clock alone is checked between frames as well: it
+    # fails at 0.5 s, not at the next service of the board after it.
+    rc, out, err = vtest(t, "vtest-always-time", case("always_time"))
+    m = re.search(r"was violated at ([0-9.]+) s", out)
+    assert rc == 1 and m, "always_time.lua: exit %d, no violation reported:\n%s" % (rc, out)
+    assert 0.5 <= float(m.group(1)) <= 0.511, "the clock's always was first seen violated at %s s, not by 0.51 s" % (
+        m.group(1))
+
     # A file that does not load runs none of its tests.
     rc, out, err = vtest(t, "vtest-load-error-list", "--list", case("load_error"))
     assert "never runs" not in out, "a test of a file that failed to load is listed:\n%s" % out
