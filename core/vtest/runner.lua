@@ -231,6 +231,7 @@ function Board:try_set(name, value)
 end
 
 function Board:press(name) self:set(name, 1) end
+function Board:release(name) self:set(name, 0) end
 function Board:open_door() self:set("door", 0) end
 function Board:close_door() self:set("door", 1) end
 

@@ -163,6 +163,14 @@ test("the cancel button on the machine does what the cancel command does", funct
 	run_until(function() return w.var.state == "cancelled" end, 600, "the cancel to complete")
 end)
 
+test("the start button on the machine starts the chosen programme", function()
+	local w = board { name = "washer-1", plant = "washer", params = { time_scale = 0.05, program = "delicate" } }
+	run_until(function() return w.var.state == "idle" end, 5, "the washer attached and idle")
+	w:press("start")
+	run_until(function() return w.var.state == "running" end, 1, "the programme running")
+	expect_eq(w.var.cycle, "delicate", "the programme the button started")
+end)
+
 test("a slow fill that times out fails the cycle safely", function()
 	local w = board { name = "washer-1", plant = "washer", params = { time_scale = 0.05, fill_timeout_s = 30 } }
 	run_until(function() return w.var.state == "idle" end, 5, "the washer attached")
