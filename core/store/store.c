@@ -1,0 +1,298 @@
+/* The persistent store on SQLite, tokens hashed with libsodium: see store.h. */
+#include "store.h"
+
+#include <errno.h>
+#include <sodium.h>
+#include <sqlite3.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#define SECRET_LEN 64 /* hex digits */
+#define HASH_LEN crypto_generichash_BYTES
+#define BUSY_MS 5000 /* another process (vmac token, a second reader) holding the lock */
+
+struct vmac_store {
+	sqlite3 *db;
+};
+
+/* Schema versions, applied in order; PRAGMA user_version says how many ran. */
+static const char *const migrations[] = {
+    "CREATE TABLE tokens ("
+    " id TEXT PRIMARY KEY,"
+    " hash BLOB NOT NULL,"
+    " scope INTEGER NOT NULL,"
+    " created REAL NOT NULL,"
+    " revoked REAL,"
+    " note TEXT NOT NULL DEFAULT '')",
+};
+
+static const char *const scope_names[] = {"none", "read", "operate", "deploy"};
+
+const char *vmac_scope_name(enum vmac_scope scope)
+{
+	return (unsigned)scope < sizeof(scope_names) / sizeof(scope_names[0]) ? scope_names[scope] : "none";
+}
+
+int vmac_scope_parse(const char *name, enum vmac_scope *scope)
+{
+	int i;
+	for (i = VMAC_SCOPE_READ; i <= VMAC_SCOPE_DEPLOY; i++)
+		if (strcmp(name, scope_names[i]) == 0) {
+			*scope = (enum vmac_scope)i;
+			return 0;
+		}
+	return -1;
+}
+
+static double now_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
+static int fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
+{
+	snprintf(err, errlen, "store: %s: %s", what, s && s->db ? sqlite3_errmsg(s->db) : "cannot open");
+	return -1;
+}
+
+static int exec(struct vmac_store *s, const char *sql, char *err, size_t errlen)
+{
+	char *msg = NULL;
+	if (sqlite3_exec(s->db, sql, NULL, NULL, &msg) != SQLITE_OK) {
+		snprintf(err, errlen, "store: %s", msg ? msg : sqlite3_errmsg(s->db));
+		sqlite3_free(msg);
+		return -1;
+	}
+	return 0;
+}
+
+static int migrate(struct vmac_store *s, char *err, size_t errlen)
+{
+	sqlite3_stmt *st;
+	int version = 0, n = (int)(sizeof(migrations) / sizeof(migrations[0]));
+	char sql[64];
+	if (sqlite3_prepare_v2(s->db, "PRAGMA user_version", -1, &st, NULL) != SQLITE_OK)
+		return fail(s, "reading the schema version", err, errlen);
+	if (sqlite3_step(st) == SQLITE_ROW)
+		version = sqlite3_column_int(st, 0);
+	sqlite3_finalize(st);
+	if (version > n) {
+		snprintf(err, errlen, "store: the database is of a newer vmac (schema %d, this one knows %d)", version, n);
+		return -1;
+	}
+	for (; version < n; version++) {
+		if (exec(s, "BEGIN IMMEDIATE", err, errlen) != 0)
+			return -1;
+		snprintf(sql, sizeof(sql), "PRAGMA user_version = %d", version + 1);
+		if (exec(s, migrations[version], err, errlen) != 0 || exec(s, sql, err, errlen) != 0) {
+			sqlite3_exec(s->db, "ROLLBACK", NULL, NULL, NULL);
+			return -1;
+		}
+		if (exec(s, "COMMIT", err, errlen) != 0)
+			return -1;
+	}
+	return 0;
+}
+
+int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t errlen)
+{
+	struct vmac_store *s;
+	char path[4096];
+	*out = NULL;
+	if (sodium_init() < 0) {
+		snprintf(err, errlen, "store: libsodium cannot start");
+		return -1;
+	}
+	if (snprintf(path, sizeof(path), "%s/vmac.db", dir) >= (int)sizeof(path)) {
+		snprintf(err, errlen, "store: state folder path too long");
+		return -1;
+	}
+	if (mkdir(dir, 0700) != 0 && errno != EEXIST) {
+		snprintf(err, errlen, "store: cannot create the state folder %s: %s (choose one with --state DIR)", dir,
+		         strerror(errno));
+		return -1;
+	}
+	s = calloc(1, sizeof(*s));
+	if (!s) {
+		snprintf(err, errlen, "store: out of memory");
+		return -1;
+	}
+	if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, NULL) !=
+	    SQLITE_OK) {
+		snprintf(err, errlen, "store: %s: %s", path, s->db ? sqlite3_errmsg(s->db) : "cannot open");
+		vmac_store_close(s);
+		return -1;
+	}
+	sqlite3_busy_timeout(s->db, BUSY_MS);
+	/* WAL: readers never wait for the writer; synchronous FULL: a commit
+	 * that returned is on the disk, power loss included. */
+	if (exec(s, "PRAGMA journal_mode = WAL", err, errlen) != 0 ||
+	    exec(s, "PRAGMA synchronous = FULL", err, errlen) != 0 || migrate(s, err, errlen) != 0) {
+		char why[512];
+		snprintf(why, sizeof(why), "%s", err);
+		snprintf(err, errlen, "%s (database %s)", why, path);
+		vmac_store_close(s);
+		return -1;
+	}
+	*out = s;
+	return 0;
+}
+
+void vmac_store_close(struct vmac_store *s)
+{
+	if (!s)
+		return;
+	sqlite3_close(s->db);
+	free(s);
+}
+
+/* BLAKE2b of the secret, keyed by nothing: the secret is 256 random bits,
+ * so a fast hash is enough (no password stretching needed). */
+static void hash_secret(const char *secret, unsigned char out[HASH_LEN])
+{
+	crypto_generichash(out, HASH_LEN, (const unsigned char *)secret, SECRET_LEN, NULL, 0);
+}
+
+static void hex(const unsigned char *b, size_t n, char *out)
+{
+	static const char digits[] = "0123456789abcdef";
+	size_t i;
+	for (i = 0; i < n; i++) {
+		out[2 * i] = digits[b[i] >> 4];
+		out[2 * i + 1] = digits[b[i] & 15];
+	}
+	out[2 * n] = 0;
+}
+
+static int is_hex(const char *s, size_t n)
+{
+	size_t i;
+	for (i = 0; i < n; i++)
+		if (!((s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f')))
+			return 0;
+	return 1;
+}
+
+int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id,
+                      char *err, size_t errlen)
+{
+	unsigned char rid[VMAC_TOKEN_ID_LEN / 2], secret[SECRET_LEN / 2], h[HASH_LEN];
+	char id_hex[VMAC_TOKEN_ID_LEN + 1], secret_hex[SECRET_LEN + 1];
+	sqlite3_stmt *st;
+	int rc;
+	if (scope < VMAC_SCOPE_READ || scope > VMAC_SCOPE_DEPLOY) {
+		snprintf(err, errlen, "token: scope must be read, operate or deploy");
+		return -1;
+	}
+	randombytes_buf(rid, sizeof(rid));
+	randombytes_buf(secret, sizeof(secret));
+	hex(rid, sizeof(rid), id_hex);
+	hex(secret, sizeof(secret), secret_hex);
+	hash_secret(secret_hex, h);
+	if (sqlite3_prepare_v2(s->db, "INSERT INTO tokens (id, hash, scope, created, note) VALUES (?, ?, ?, ?, ?)", -1,
+	                       &st, NULL) != SQLITE_OK)
+		return fail(s, "creating a token", err, errlen);
+	sqlite3_bind_text(st, 1, id_hex, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_blob(st, 2, h, HASH_LEN, SQLITE_TRANSIENT);
+	sqlite3_bind_int(st, 3, (int)scope);
+	sqlite3_bind_double(st, 4, now_s());
+	sqlite3_bind_text(st, 5, note ? note : "", note ? (int)strnlen(note, VMAC_TOKEN_NOTE_MAX) : 0,
+	                  SQLITE_TRANSIENT);
+	rc = sqlite3_step(st);
+	sqlite3_finalize(st);
+	sodium_memzero(secret, sizeof(secret));
+	if (rc != SQLITE_DONE) {
+		sodium_memzero(secret_hex, sizeof(secret_hex));
+		return fail(s, "creating a token", err, errlen);
+	}
+	snprintf(token, VMAC_TOKEN_LEN + 1, "vmac_%s_%s", id_hex, secret_hex);
+	sodium_memzero(secret_hex, sizeof(secret_hex));
+	if (id)
+		memcpy(id, id_hex, sizeof(id_hex));
+	return 0;
+}
+
+int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc;
+	if (sqlite3_prepare_v2(s->db, "UPDATE tokens SET revoked = ? WHERE id = ? AND revoked IS NULL", -1, &st,
+	                       NULL) != SQLITE_OK)
+		return fail(s, "revoking a token", err, errlen);
+	sqlite3_bind_double(st, 1, now_s());
+	sqlite3_bind_text(st, 2, id, -1, SQLITE_TRANSIENT);
+	rc = sqlite3_step(st);
+	sqlite3_finalize(st);
+	if (rc != SQLITE_DONE)
+		return fail(s, "revoking a token", err, errlen);
+	return sqlite3_changes(s->db) == 1 ? 0 : 1;
+}
+
+int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx,
+                    char *err, size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc, n = 0;
+	if (sqlite3_prepare_v2(s->db, "SELECT id, scope, created, revoked, note FROM tokens ORDER BY created, id", -1,
+	                       &st, NULL) != SQLITE_OK)
+		return fail(s, "listing tokens", err, errlen);
+	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+		struct vmac_token_info t;
+		const unsigned char *text;
+		memset(&t, 0, sizeof(t));
+		text = sqlite3_column_text(st, 0);
+		snprintf(t.id, sizeof(t.id), "%s", text ? (const char *)text : "");
+		t.scope = (enum vmac_scope)sqlite3_column_int(st, 1);
+		t.created = sqlite3_column_double(st, 2);
+		t.revoked = sqlite3_column_type(st, 3) == SQLITE_NULL ? 0 : sqlite3_column_double(st, 3);
+		text = sqlite3_column_text(st, 4);
+		snprintf(t.note, sizeof(t.note), "%s", text ? (const char *)text : "");
+		fn(ctx, &t);
+		n++;
+	}
+	sqlite3_finalize(st);
+	if (rc != SQLITE_DONE)
+		return fail(s, "listing tokens", err, errlen);
+	return n;
+}
+
+enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
+{
+	static const unsigned char zero[HASH_LEN];
+	unsigned char h[HASH_LEN], stored[HASH_LEN];
+	char id[VMAC_TOKEN_ID_LEN + 1];
+	const char *secret;
+	enum vmac_scope scope = VMAC_SCOPE_NONE;
+	sqlite3_stmt *st;
+	int found = 0;
+	if (!token || strlen(token) != VMAC_TOKEN_LEN || strncmp(token, "vmac_", 5) != 0 ||
+	    token[5 + VMAC_TOKEN_ID_LEN] != '_' || !is_hex(token + 5, VMAC_TOKEN_ID_LEN))
+		return VMAC_SCOPE_NONE;
+	secret = token + 5 + VMAC_TOKEN_ID_LEN + 1;
+	if (!is_hex(secret, SECRET_LEN))
+		return VMAC_SCOPE_NONE;
+	memcpy(id, token + 5, VMAC_TOKEN_ID_LEN);
+	id[VMAC_TOKEN_ID_LEN] = 0;
+	memcpy(stored, zero, sizeof(stored));
+	if (sqlite3_prepare_v2(s->db, "SELECT hash, scope FROM tokens WHERE id = ? AND revoked IS NULL", -1, &st,
+	                       NULL) != SQLITE_OK)
+		return VMAC_SCOPE_NONE;
+	sqlite3_bind_text(st, 1, id, -1, SQLITE_TRANSIENT);
+	if (sqlite3_step(st) == SQLITE_ROW && sqlite3_column_bytes(st, 0) == HASH_LEN) {
+		memcpy(stored, sqlite3_column_blob(st, 0), HASH_LEN);
+		scope = (enum vmac_scope)sqlite3_column_int(st, 1);
+		found = 1;
+	}
+	sqlite3_finalize(st);
+	/* Hash and compare whether or not the ID exists: the time taken says
+	 * nothing about the secret. */
+	hash_secret(secret, h);
+	if (sodium_memcmp(h, stored, HASH_LEN) != 0 || !found || scope < VMAC_SCOPE_READ || scope > VMAC_SCOPE_DEPLOY)
+		return VMAC_SCOPE_NONE;
+	return scope;
+}

@@ -1,0 +1,61 @@
+/* The host's persistent store: one SQLite database in write-ahead-log mode,
+ * STATE_DIR/vmac.db, shared by vmacd and the `vmac token` command (host
+ * running or not). It holds the access tokens; persisted parameters, driver
+ * versions and the event log come with the rest of docs/API.md's control
+ * API. Never used on the bus thread: every call may touch the disk.
+ *
+ * Tokens (docs/API.md, "Access"): "vmac_" ID "_" SECRET, ID 16 and SECRET 64
+ * hex digits, both random. The store keeps the ID, the scope and a BLAKE2b
+ * hash of the secret, never the secret; a check hashes what it is shown and
+ * compares in constant time. */
+#ifndef VMAC_STORE_H
+#define VMAC_STORE_H
+
+#include <stddef.h>
+
+#define VMAC_TOKEN_ID_LEN 16
+#define VMAC_TOKEN_LEN (5 + VMAC_TOKEN_ID_LEN + 1 + 64) /* without the NUL */
+#define VMAC_TOKEN_NOTE_MAX 120
+
+struct vmac_store;
+
+/* What a token may do; each scope includes the ones before it. */
+enum vmac_scope {
+	VMAC_SCOPE_NONE = 0, /* no valid token */
+	VMAC_SCOPE_READ,     /* status, devices, variables, events */
+	VMAC_SCOPE_OPERATE,  /* + operator input, cycles, parameters */
+	VMAC_SCOPE_DEPLOY,   /* + drivers: upload, activate, roll back */
+};
+
+const char *vmac_scope_name(enum vmac_scope scope);
+/* 0, or -1 when name is not read, operate or deploy. */
+int vmac_scope_parse(const char *name, enum vmac_scope *scope);
+
+/* Open the store of state folder dir, creating the folder (mode 0700; its
+ * parent must exist), the database and its tables when missing. 0, or -1
+ * with err. */
+int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t errlen);
+void vmac_store_close(struct vmac_store *s);
+
+struct vmac_token_info {
+	char id[VMAC_TOKEN_ID_LEN + 1];
+	enum vmac_scope scope;
+	double created;  /* Unix time */
+	double revoked;  /* Unix time, 0 while valid */
+	char note[VMAC_TOKEN_NOTE_MAX + 1];
+};
+
+/* A new token of this scope: writes it to token (VMAC_TOKEN_LEN + 1 bytes)
+ * and its ID to id (may be NULL). 0, or -1 with err (nothing stored). */
+int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id,
+                      char *err, size_t errlen);
+/* Revoke by ID: 0 done, 1 no such token (or already revoked), -1 err. */
+int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t errlen);
+/* Every token, oldest first. Returns how many, or -1 with err. */
+int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx,
+                    char *err, size_t errlen);
+/* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
+ * revoked, or when the store cannot be read. */
+enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
+
+#endif
