@@ -13,6 +13,34 @@
 
 #include "../common/paths.h"
 #include "../vtest/vtest.h"
+#include "token.h"
+
+/* The bearer token for the host (docs/CLI.md, "Tokens"): --token, else
+ * $VMAC_TOKEN, else the first line of --token-file or $VMAC_TOKEN_FILE. ""
+ * when none is given (the host then answers 401). */
+static char bearer[256];
+
+static int set_token(const char *token, const char *file)
+{
+	if (!token)
+		token = getenv("VMAC_TOKEN");
+	if (!token && !file)
+		file = getenv("VMAC_TOKEN_FILE");
+	if (token) {
+		snprintf(bearer, sizeof(bearer), "%s", token);
+	} else if (file) {
+		FILE *f = fopen(file, "r");
+		if (!f || !fgets(bearer, sizeof(bearer), f)) {
+			fprintf(stderr, "vmac: cannot read a token from %s: %s\n", file, f ? "empty file" : strerror(errno));
+			if (f)
+				fclose(f);
+			return -1;
+		}
+		fclose(f);
+		bearer[strcspn(bearer, "\r\n")] = 0;
+	}
+	return 0;
+}
 
 struct buffer {
 	char *data;
@@ -42,9 +70,16 @@ static int http_get(const char *url, struct buffer *out)
 	CURL *c = curl_easy_init();
 	CURLcode rc;
 	long code = 0;
+	struct curl_slist *headers = NULL;
+	char auth[300];
 	if (!c) {
 		fprintf(stderr, "vmac: cannot initialise libcurl\n");
 		return 1;
+	}
+	if (bearer[0]) {
+		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
+		headers = curl_slist_append(headers, auth);
+		curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
 	}
 	curl_easy_setopt(c, CURLOPT_URL, url);
 	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
@@ -55,9 +90,16 @@ static int http_get(const char *url, struct buffer *out)
 	rc = curl_easy_perform(c);
 	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &code);
 	curl_easy_cleanup(c);
+	curl_slist_free_all(headers);
 	if (rc != CURLE_OK) {
 		fprintf(stderr, "vmac: cannot reach the host at %s: %s\n(is vmacd running? pick it with --http ADDR:PORT)\n",
 		        url, curl_easy_strerror(rc));
+		return 1;
+	}
+	if (code == 401 || code == 403) {
+		fprintf(stderr, "vmac: %s answered HTTP %ld: %s\n%s\n", url, code, out->data ? out->data : "",
+		        bearer[0] ? "(the token is not valid there, or lacks the scope: docs/API.md, \"Access\")"
+		                  : "(give a token with --token, $VMAC_TOKEN or --token-file; vmac token create makes one)");
 		return 1;
 	}
 	if (code != 200) {
@@ -173,9 +215,12 @@ static int cmd_status(int argc, char **argv)
 {
 	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
 	                                     {"json", no_argument, 0, 'j'},
+	                                     {"token", required_argument, 0, 't'},
+	                                     {"token-file", required_argument, 0, 'f'},
 	                                     {"help", no_argument, 0, 'h'},
 	                                     {0, 0, 0, 0}};
-	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080";
+	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080", *token = NULL,
+	           *token_file = NULL;
 	int raw = 0, opt, rc;
 	char url[256];
 	struct buffer b = {NULL, 0};
@@ -187,11 +232,15 @@ static int cmd_status(int argc, char **argv)
 		switch (opt) {
 		case 'H': http = optarg; break;
 		case 'j': raw = 1; break;
+		case 't': token = optarg; break;
+		case 'f': token_file = optarg; break;
 		case 'h':
-			printf("usage: vmac status [--http ADDR:PORT] [--json]\n"
+			printf("usage: vmac status [--http ADDR:PORT] [--json] [--token T | --token-file F]\n"
 			       "Show the devices, tick lateness, counters and recent events of a running vmacd.\n"
-			       "  --http ADDR:PORT  the host's HTTP address (default $VMAC_HTTP or 127.0.0.1:8080)\n"
-			       "  --json            print the raw JSON of GET /api/status\n");
+			       "  --http ADDR:PORT   the host's HTTP address (default $VMAC_HTTP or 127.0.0.1:8080)\n"
+			       "  --json             print the raw JSON of GET /api/status\n"
+			       "  --token T          a token of scope read or more (default $VMAC_TOKEN)\n"
+			       "  --token-file F     read the token from F's first line (default $VMAC_TOKEN_FILE)\n");
 			return 0;
 		default: return 2;
 		}
@@ -200,6 +249,8 @@ static int cmd_status(int argc, char **argv)
 		fprintf(stderr, "vmac status: unexpected argument '%s'\n", argv[optind]);
 		return 2;
 	}
+	if (set_token(token, token_file) != 0)
+		return 2;
 	snprintf(url, sizeof(url), "http://%s/api/status", http);
 	curl_global_init(CURL_GLOBAL_DEFAULT);
 	rc = http_get(url, &b);
@@ -314,6 +365,7 @@ static void usage(FILE *f)
 	           "  status    devices, tick lateness, counters and events of a running vmacd\n"
 	           "  lint      check driver scripts with luacheck and the sandbox's globals\n"
 	           "  test      run driver tests against mock boards in virtual time\n"
+	           "  token     create, list and revoke the host's access tokens\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
 	           "Planned, not in this version yet: reload, console.\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
@@ -341,6 +393,8 @@ int main(int argc, char **argv)
 		return vmac_test_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "bench") == 0)
 		return cmd_bench(argc - 1, argv + 1);
+	if (strcmp(argv[1], "token") == 0)
+		return vmac_token_main(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;
