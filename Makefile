@@ -14,16 +14,16 @@ SAN     ?=
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 # Debian packages: compiler and pkg-config, the libraries the host links
-# (LuaJIT, libev, libmicrohttpd, jansson, libcurl), Check for unit tests,
+# (LuaJIT, libev, libmicrohttpd, jansson, libcurl, SQLite, libsodium), Check for unit tests,
 # clang + its runtime for the libFuzzer harness, python3 for integration tests,
 # luajit for the stdlib's Lua tests, lua-check for vmac lint.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
-        libcurl4-openssl-dev check clang libclang-rt-dev python3 lua-check luajit
+        libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
 
-PKGS := luajit libmicrohttpd jansson libcurl
+PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lev -lpthread -lm
 
@@ -39,7 +39,8 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
-                core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/sched/sched.c
+                core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/sched/sched.c \
+                core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
 OBJ = $(BUILD)/obj
@@ -50,7 +51,7 @@ vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver \
-              $(BUILD)/tests/test_sched
+              $(BUILD)/tests/test_sched $(BUILD)/tests/test_store
 
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-asan bench clean
 all: $(BINS)
@@ -67,7 +68,7 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
-$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(vtest_obj) $(host_obj) $(portable_obj)
+$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
@@ -97,6 +98,10 @@ $(BUILD)/tests/test_driver: $(OBJ)/tests/unit/test_driver.o $(OBJ)/core/driver/d
 $(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sched.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
+
+$(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/store.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
 	@mkdir -p $(dir $@)

@@ -9,9 +9,24 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #define VMAC_VERSION_STRING "0.1.0"
 #define STATUS_EVENTS 20
+
+/* Failed attempts: at most FAIL_LIMIT per client address in FAIL_WINDOW_S;
+ * past that, every request from there gets 429 until the window ends. The
+ * table is small and reused oldest first: it only has to slow a guesser
+ * down (a token has 256 random bits), not remember everyone. */
+#define FAIL_LIMIT 10
+#define FAIL_WINDOW_S 60.0
+#define FAIL_CLIENTS 64
+
+struct fail_count {
+	struct in_addr addr;
+	double window_start;
+	unsigned fails;
+};
 
 struct vmac_http {
 	struct MHD_Daemon *daemon;
@@ -21,7 +36,16 @@ struct vmac_http {
 	pthread_mutex_t status_lock; /* guards the status copy below */
 	struct vmac_status status;
 	unsigned port;
+	struct vmac_store *store;
+	struct fail_count fails[FAIL_CLIENTS]; /* the HTTP thread only */
 };
+
+static double mono_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
 
 static json_t *bools(uint32_t bits, int n)
 {
@@ -132,7 +156,9 @@ static json_t *status_json(struct vmac_http *h)
 	return root;
 }
 
-static enum MHD_Result reply(struct MHD_Connection *c, unsigned code, json_t *body)
+/* Queue code with body as JSON (consumed) and one extra header if given. */
+static enum MHD_Result reply_with(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
+                                  const char *value)
 {
 	char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
 	struct MHD_Response *r;
@@ -149,14 +175,80 @@ static enum MHD_Result reply(struct MHD_Connection *c, unsigned code, json_t *bo
 		return MHD_NO;
 	MHD_add_response_header(r, "Content-Type", "application/json");
 	MHD_add_response_header(r, "Cache-Control", "no-store");
+	if (header)
+		MHD_add_response_header(r, header, value);
 	ret = MHD_queue_response(c, code, r);
 	MHD_destroy_response(r);
 	return ret;
 }
 
+static enum MHD_Result reply(struct MHD_Connection *c, unsigned code, json_t *body)
+{
+	return reply_with(c, code, body, NULL, NULL);
+}
+
 static json_t *error_body(const char *msg)
 {
 	return json_pack("{s:s}", "error", msg);
+}
+
+/* The failure record of the client's address (a new or the oldest slot). */
+static struct fail_count *fails_of(struct vmac_http *h, struct MHD_Connection *c, double now)
+{
+	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+	struct in_addr addr = {0};
+	struct fail_count *oldest = &h->fails[0];
+	int i;
+	if (ci && ci->client_addr && ci->client_addr->sa_family == AF_INET)
+		addr = ((const struct sockaddr_in *)ci->client_addr)->sin_addr;
+	for (i = 0; i < FAIL_CLIENTS; i++) {
+		struct fail_count *f = &h->fails[i];
+		if (f->fails && f->addr.s_addr == addr.s_addr) {
+			if (now - f->window_start >= FAIL_WINDOW_S)
+				f->fails = 0, f->window_start = now;
+			return f;
+		}
+		if (!f->fails || f->window_start < oldest->window_start)
+			oldest = f;
+	}
+	memset(oldest, 0, sizeof(*oldest));
+	oldest->addr = addr;
+	oldest->window_start = now;
+	return oldest;
+}
+
+/* Whether the request may go on with scope `need`; if not, the answer
+ * (401, 403 or 429) is queued into *ret. */
+static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need, enum MHD_Result *ret)
+{
+	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+	double now = mono_s();
+	struct fail_count *f = fails_of(h, c, now);
+	enum vmac_scope have = VMAC_SCOPE_NONE;
+	char msg[160];
+	if (f->fails >= FAIL_LIMIT) {
+		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s",
+		         FAIL_WINDOW_S - (now - f->window_start) + 0.5);
+		*ret = reply(c, MHD_HTTP_TOO_MANY_REQUESTS, error_body(msg));
+		return 0;
+	}
+	if (auth && strncmp(auth, "Bearer ", 7) == 0)
+		have = vmac_token_check(h->store, auth + 7);
+	if (have == VMAC_SCOPE_NONE) {
+		f->fails++;
+		*ret = reply_with(c, MHD_HTTP_UNAUTHORIZED,
+		                  error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
+		                                  : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
+		                  MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
+		return 0;
+	}
+	if (have < need) {
+		snprintf(msg, sizeof(msg), "this needs a token of scope %s; this one is %s", vmac_scope_name(need),
+		         vmac_scope_name(have));
+		*ret = reply(c, MHD_HTTP_FORBIDDEN, error_body(msg));
+		return 0;
+	}
+	return 1;
 }
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
@@ -176,10 +268,15 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	}
 	if (strcmp(method, "GET") != 0 && strcmp(method, "HEAD") != 0)
 		return reply(c, MHD_HTTP_METHOD_NOT_ALLOWED, error_body("only GET is supported here"));
+	if (strcmp(url, "/api/health") == 0) /* the one request without a token */
+		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
+	{
+		enum MHD_Result ret;
+		if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
+			return ret;
+	}
 	if (strcmp(url, "/api/status") == 0)
 		return reply(c, MHD_HTTP_OK, status_json(h));
-	if (strcmp(url, "/api/health") == 0)
-		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
 	if (strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
 		             json_pack("{s:s, s:[s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
@@ -188,7 +285,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 }
 
 struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, struct vmac_event_log *log,
-                                  const struct vmac_config *cfg, char *err, size_t errlen)
+                                  struct vmac_store *store, const struct vmac_config *cfg, char *err,
+                                  size_t errlen)
 {
 	struct vmac_http *h;
 	struct sockaddr_in sin;
@@ -219,6 +317,7 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	}
 	h->bus = bus;
 	h->log = log;
+	h->store = store;
 	h->cfg = *cfg;
 	pthread_mutex_init(&h->status_lock, NULL);
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));

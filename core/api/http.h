@@ -1,6 +1,8 @@
 /* The host's HTTP server (libmicrohttpd, its own thread): GET /api/status,
  * GET /api/health. Reads only the bus's published status and the event log,
- * never the bus thread's live tables. Endpoints: docs/API.md. */
+ * never the bus thread's live tables. Every request but the health check
+ * needs a bearer token of the store with the endpoint's scope; failed
+ * attempts are rate-limited per client address. Endpoints: docs/API.md. */
 #ifndef VMAC_HTTP_H
 #define VMAC_HTTP_H
 
@@ -8,13 +10,15 @@
 
 #include "../host/bus.h"
 #include "../host/events.h"
+#include "../store/store.h"
 
 struct vmac_http; /* opaque */
 
 /* Listen on "ADDR:PORT" (port 0: the kernel picks; see vmac_http_port).
  * Returns NULL with err set. */
 struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, struct vmac_event_log *log,
-                                  const struct vmac_config *cfg, char *err, size_t errlen);
+                                  struct vmac_store *store, const struct vmac_config *cfg, char *err,
+                                  size_t errlen);
 unsigned vmac_http_port(const struct vmac_http *h);
 void vmac_http_stop(struct vmac_http *h);
 

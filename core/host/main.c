@@ -14,6 +14,7 @@
 
 #include "../api/http.h"
 #include "../common/paths.h"
+#include "../store/store.h"
 #include "bus.h"
 #include "config.h"
 #include "events.h"
@@ -23,6 +24,7 @@ struct host {
 	struct vmac_config cfg;
 	struct vmac_bus *bus;
 	struct vmac_http *http;
+	struct vmac_store *store;
 	struct vmac_event_log log;
 	struct ev_loop *loop;
 	ev_async wake_w;
@@ -43,7 +45,7 @@ static void usage(FILE *f)
 	        "  --http ADDR:PORT   status/API server (default 127.0.0.1:8080; port 0 = any free)\n"
 	        "  --drivers DIR      look for NAME.lua here before the shipped scripts/drivers/\n"
 	        "  --scripts DIR      the shipped scripts folder (default: found beside the binary)\n"
-	        "  --state DIR        persistent state (default /var/lib/vmac; not written yet)\n"
+	        "  --state DIR        persistent state: the store with the access tokens (default /var/lib/vmac)\n"
 	        "  --set KEY=VALUE    any config key, e.g. --set slice_us=200 (repeatable);\n"
 	        "                     driver.NAME.KEY for one driver, e.g. --set driver.washer.param.time_scale=0.01\n"
 	        "  --help, --version\n\n"
@@ -202,9 +204,15 @@ int main(int argc, char **argv)
 		fprintf(stderr, "vmacd: bus: %s\n", err);
 		return 1;
 	}
-	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, &h->cfg, err, sizeof(err));
+	if (vmac_store_open(h->cfg.state_dir, &h->store, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmacd: %s\n", err);
+		vmac_bus_free(h->bus);
+		return 1;
+	}
+	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, h->store, &h->cfg, err, sizeof(err));
 	if (!h->http) {
 		fprintf(stderr, "vmacd: http: %s\n", err);
+		vmac_store_close(h->store);
 		vmac_bus_free(h->bus);
 		return 1;
 	}
@@ -245,6 +253,7 @@ int main(int argc, char **argv)
 	vmac_bus_join(h->bus);
 	on_wake(h->loop, &h->wake_w, 0); /* the last events */
 	vmac_http_stop(h->http);
+	vmac_store_close(h->store);
 	vmac_bus_free(h->bus);
 	fprintf(stderr, "vmacd: stopped; every board was told to go safe\n");
 	return 0;
