@@ -4,12 +4,25 @@
 # outputs off. Usage: scripts/run-kitchen.sh [BIN_DIR] (default build/bin).
 # Environment: VMAC_BUS (GROUP:PORT), VMAC_HTTP (ADDR:PORT), VMAC_TIME_SCALE
 # (how fast the washer and dishwasher programmes run; default 0.1, ten times
-# faster than real, so a demonstration wash takes minutes, not an hour).
+# faster than real, so a demonstration wash takes minutes, not an hour),
+# VMAC_STATE (the host's state folder; default build/state). Each run makes a
+# fresh operate token in STATE/token (the previous one is revoked).
 set -u
 bin=${1:-build/bin}
 bus=${VMAC_BUS:-239.255.86.77:5870}
 http=${VMAC_HTTP:-127.0.0.1:8080}
 scale=${VMAC_TIME_SCALE:-0.1}
+state=${VMAC_STATE:-build/state}
+
+mkdir -p "$state" || exit 1
+if [ -s "$state/token" ]; then
+	old_id=$(cut -d_ -f2 "$state/token")
+	"$bin/vmac" token revoke "$old_id" --state "$state" 2>/dev/null
+fi
+(umask 077 && "$bin/vmac" token create --state "$state" --scope operate --note "make run" >"$state/token") || {
+	echo "run-kitchen: cannot make an access token in $state" >&2
+	exit 1
+}
 pids=()
 fifos=$(mktemp -d)
 
@@ -34,7 +47,7 @@ stop() {
 }
 trap 'stop INT' INT
 trap 'stop TERM' TERM
-"$bin/vmacd" --bus "$bus" --http "$http" --set "driver.washer.param.time_scale=$scale" \
+"$bin/vmacd" --bus "$bus" --http "$http" --state "$state" --set "driver.washer.param.time_scale=$scale" \
 	--set "driver.dishwasher.param.time_scale=$scale" &
 pids+=($!)
 # Each board reads operator actions from a FIFO; the loop at the end hands
@@ -51,8 +64,9 @@ exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1"
 cat <<EOT
 
 The demo kitchen is running.
-  status page:   http://$http/api/status
-  in a shell:    $bin/vmac status --http $http
+  status:        VMAC_TOKEN_FILE=$state/token $bin/vmac status --http $http
+  status (JSON): curl -H "Authorization: Bearer \$(cat $state/token)" http://$http/api/status
+                 (the API needs the token in $state/token: docs/API.md, "Access")
   type here, then Enter (docs/KITCHEN.md lists more):
     lights-1 toggle1 1        flip the kitchen wall switch
     washer-1 start 1          press the washer's start button (programme: normal)

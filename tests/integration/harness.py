@@ -188,10 +188,17 @@ class Host(Proc):
         line = self.wait_line(r"status at http://(\S+)/api/status", 30, stream="stderr", what="'status at ...'")
         self.http = re.search(r"status at http://(\S+)/api/status", line.text).group(1)
 
+    def get(self, path, token=None):
+        """GET path with the context's token (or token); the parsed JSON."""
+        req = urllib.request.Request("http://%s%s" % (self.http, path))
+        token = self.ctx.token if token is None else token
+        if token:
+            req.add_header("Authorization", "Bearer " + token)
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return json.loads(r.read())
+
     def status(self):
-        with urllib.request.urlopen("http://%s/api/status" % self.http, timeout=10) as r:
-            body = r.read()
-        s = json.loads(body)
+        s = self.get("/api/status")
         for e in s.get("events", []):
             self.events[e["seq"]] = e
         self.last = s
@@ -289,6 +296,7 @@ class Context:
         self.bus = "239.255.%d.%d:%d" % (rnd.randint(1, 254), rnd.randint(1, 254), rnd.randint(20000, 60000))
         self.procs = []
         self.counter = 0
+        self.token = None  # made by the first host(): scope deploy, in this test's state folder
 
     def path(self, program):
         return os.path.join(self.bindir, program)
@@ -301,6 +309,8 @@ class Context:
         """Start vmacd on this test's bus with relaxed timing; returns once its
         status server is up. The HTTP port is chosen by the kernel. wrapper:
         a command vmacd runs under (e.g. setpriv to drop privileges)."""
+        if self.token is None:
+            self.token = self.make_token("deploy")
         values = dict(TIMING, realtime="false")
         values.update(settings or {})
         argv = list(wrapper) + [self.path("vmacd"), "--bus", self.bus, "--http", "127.0.0.1:0", "--state", self.logdir]
@@ -348,9 +358,18 @@ class Context:
                 f.write(source)
         return path
 
+    def make_token(self, scope):
+        """A new token of scope in this test's state folder (vmac token create)."""
+        p = subprocess.run([self.path("vmac"), "token", "create", "--state", self.logdir, "--scope", scope],
+                           capture_output=True, text=True, timeout=30)
+        assert p.returncode == 0, "vmac token create failed (exit %d): %s" % (p.returncode, p.stderr)
+        return p.stdout.strip()
+
     def start(self, argv, base):
-        """Start any program (for failure-path checks); killed at cleanup."""
-        p = Proc(self._name(base), argv, self.logdir)
+        """Start any program (for failure-path checks); killed at cleanup.
+        It gets the context's token as $VMAC_TOKEN (for vmac's commands)."""
+        env = dict(os.environ, VMAC_TOKEN=self.token) if self.token else None
+        p = Proc(self._name(base), argv, self.logdir, env=env)
         self.procs.append(p)
         return p
 

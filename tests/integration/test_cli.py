@@ -42,7 +42,8 @@ class Refusals:
     def vmacd(self, flags, base, mentions, want_rc=None):
         """check() vmacd on this test's bus with a free HTTP port, plus flags
         (later flags win, so a bad --bus or --http given here is the one used)."""
-        argv = [self.t.path("vmacd"), "--bus", self.t.bus, "--http", "127.0.0.1:0", "--set", "realtime=false"]
+        argv = [self.t.path("vmacd"), "--bus", self.t.bus, "--http", "127.0.0.1:0", "--state", self.t.logdir,
+                "--set", "realtime=false"]
         self.check(argv + flags, base, mentions, want_rc, shown="vmacd ... " + " ".join(flags))
 
 

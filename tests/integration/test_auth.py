@@ -1,0 +1,125 @@
+"""Access to the host's HTTP API (docs/API.md, "Access"): every request but
+the health check needs a token of the store; tokens are made, listed and
+revoked with vmac token, host running or not; failed attempts are limited
+per client address."""
+
+import json
+import os
+import re
+import subprocess
+import urllib.error
+import urllib.request
+
+EXIT_S = 30
+
+
+def http_code(host, path, token=None, header=None):
+    """(status code, parsed JSON body) of GET path, with a bearer token or a
+    raw Authorization header."""
+    req = urllib.request.Request("http://%s%s" % (host.http, path))
+    if token is not None:
+        req.add_header("Authorization", "Bearer " + token)
+    if header is not None:
+        req.add_header("Authorization", header)
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read() or b"{}")
+
+
+def token_cmd(t, *args):
+    p = subprocess.run([t.path("vmac"), "token"] + list(args) + ["--state", t.logdir], capture_output=True, text=True,
+                       timeout=EXIT_S)
+    return p.returncode, p.stdout, p.stderr
+
+
+def test_requests_need_a_token_of_the_store(t):
+    host = t.host()
+    code, body = http_code(host, "/api/health")
+    assert code == 200 and body.get("ok") is True, "the health check without a token: %d %r" % (code, body)
+
+    code, body = http_code(host, "/api/status")
+    assert code == 401 and "token" in body.get("error", ""), "status without a token: %d %r" % (code, body)
+    for bad in ("nonsense", t.token[:-1] + ("0" if t.token[-1] != "0" else "1"), t.token + "0", ""):
+        code, body = http_code(host, "/api/status", token=bad)
+        assert code == 401, "status with a bad token %r: HTTP %d, expected 401" % (bad[:12], code)
+    code, _ = http_code(host, "/api/status", header="Basic " + t.token)
+    assert code == 401, "a token sent as Basic authentication was accepted (HTTP %d)" % code
+
+    read = t.make_token("read")
+    code, body = http_code(host, "/api/status", token=read)
+    assert code == 200 and "devices" in body, "status with a read token: %d %r" % (code, body)
+
+
+def test_vmac_status_takes_the_token_three_ways(t):
+    host = t.host()
+    vmac = t.path("vmac")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("VMAC_TOKEN")}
+    p = subprocess.run([vmac, "status", "--http", host.http], capture_output=True, text=True, env=env,
+                       timeout=EXIT_S)
+    assert p.returncode == 1 and "401" in p.stderr and "--token" in p.stderr, (
+        "vmac status without a token: exit %d, %r" % (p.returncode, p.stderr))
+    p = subprocess.run([vmac, "status", "--http", host.http, "--token", t.token], capture_output=True, text=True,
+                       env=env, timeout=EXIT_S)
+    assert p.returncode == 0 and p.stdout.startswith("vmacd "), "vmac status --token: exit %d, %r" % (
+        p.returncode, p.stderr)
+    path = os.path.join(t.logdir, "token.txt")
+    with open(path, "w") as f:
+        f.write(t.token + "\n")
+    p = subprocess.run([vmac, "status", "--http", host.http], capture_output=True, text=True,
+                       env=dict(env, VMAC_TOKEN_FILE=path), timeout=EXIT_S)
+    assert p.returncode == 0, "vmac status with $VMAC_TOKEN_FILE: exit %d, %r" % (p.returncode, p.stderr)
+    p = subprocess.run([vmac, "status", "--http", host.http, "--token-file", "/nonexistent/token"],
+                       capture_output=True, text=True, env=env, timeout=EXIT_S)
+    assert p.returncode == 2 and "/nonexistent/token" in p.stderr, "a missing --token-file: exit %d, %r" % (
+        p.returncode, p.stderr)
+
+
+def test_tokens_are_listed_without_secrets_and_revoked_at_once(t):
+    host = t.host()
+    rc, token, err = token_cmd(t, "create", "--scope", "read", "--note", "wall panel")
+    token = token.strip()
+    assert rc == 0 and re.fullmatch(r"vmac_[0-9a-f]{16}_[0-9a-f]{64}", token), "create: exit %d, %r %r" % (
+        rc, token, err)
+    token_id = token.split("_")[1]
+    assert http_code(host, "/api/status", token=token)[0] == 200, "the new token is refused"
+
+    rc, out, err = token_cmd(t, "list")
+    assert rc == 0, "list: exit %d, %s" % (rc, err)
+    line = next((l for l in out.splitlines() if l.startswith(token_id)), None)
+    assert line and "read" in line and "wall panel" in line, "list does not show the token:\n%s" % out
+    assert token.split("_")[2] not in out, "list prints a secret"
+
+    rc, out, err = token_cmd(t, "revoke", token_id)
+    assert rc == 0, "revoke: exit %d, %s" % (rc, err)
+    code, _ = http_code(host, "/api/status", token=token)
+    assert code == 401, "a revoked token still works on the running host (HTTP %d)" % code
+    assert http_code(host, "/api/status")[0] == 401
+    assert http_code(host, "/api/status", token=t.token)[0] == 200, "revoking one token stopped another"
+    rc, out, err = token_cmd(t, "revoke", token_id)
+    assert rc == 1 and "no valid token" in err, "revoking twice: exit %d, %r" % (rc, err)
+
+    for args, mention in ((["create", "--scope", "admin"], "--scope"), (["create"], "--scope"),
+                          (["revoke"], "token ID"), (["frobnicate"], "unknown action")):
+        rc, out, err = token_cmd(t, *args)
+        assert rc == 2 and mention in err, "vmac token %s: exit %d, %r" % (" ".join(args), rc, err)
+
+
+def test_guessing_is_slowed_down(t):
+    host = t.host()
+    codes = [http_code(host, "/api/status", token="vmac_%016x_%s" % (i, "0" * 64))[0] for i in range(10)]
+    assert codes == [401] * 10, "the first ten wrong tokens: %s" % codes
+    code, body = http_code(host, "/api/status", token="vmac_%016x_%s" % (99, "0" * 64))
+    assert code == 429 and "too many failed attempts" in body.get("error", ""), (
+        "the eleventh wrong token within a minute: %d %r" % (code, body))
+    code, _ = http_code(host, "/api/status", token=t.token)
+    assert code == 429, "a right token from the same address during the lock-out: HTTP %d" % code
+    assert http_code(host, "/api/health")[0] == 200, "the health check is locked out too"
+
+
+def test_a_state_folder_that_cannot_be_made_stops_the_host(t):
+    p = subprocess.run([t.path("vmacd"), "--bus", t.bus, "--http", "127.0.0.1:0", "--state", "/nonexistent/state",
+                        "--set", "realtime=false"], capture_output=True, text=True, timeout=EXIT_S)
+    assert p.returncode == 1 and "/nonexistent/state" in p.stderr, (
+        "vmacd with a state folder it cannot create: exit %d, %r" % (p.returncode, p.stderr))
