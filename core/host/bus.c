@@ -10,7 +10,9 @@
 #include <errno.h>
 #include <ev.h>
 #include <sched.h>
+#include <semaphore.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -82,6 +84,19 @@ struct device {
 	int64_t last_seen_ns;
 };
 
+/* A request slot (vmac_bus_request_input): FREE -> FILLING (the caller
+ * writes it) -> QUEUED -> RUNNING (the bus thread) -> DONE (answered, sem
+ * posted) -> FREE (the caller read it). A caller that gives up moves QUEUED
+ * to ABANDONED, and the bus thread frees it without running it; once
+ * RUNNING, the caller waits for the answer, which comes without delay. */
+enum { REQ_FREE, REQ_FILLING, REQ_QUEUED, REQ_RUNNING, REQ_DONE, REQ_ABANDONED };
+
+struct request {
+	_Atomic int state;
+	sem_t done;
+	struct vmac_bus_input_request r;
+};
+
 struct vmac_bus {
 	struct vmac_config cfg;
 	struct vmac_transport tr;
@@ -114,6 +129,8 @@ struct vmac_bus {
 	int64_t last_malformed_log_ns;
 	uint64_t malformed_suppressed;
 	struct vmac_ring to_main, to_bus;
+	struct request req[VMAC_BUS_REQUESTS];
+	_Atomic int req_queued; /* requests QUEUED since the bus thread last looked */
 	void (*wakeup)(void *);
 	void *wakeup_ctx;
 	pthread_mutex_t status_lock;
@@ -1021,6 +1038,26 @@ static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_
 	}
 }
 
+/* The requests other threads queued: run each, answer, post. */
+static void requests(struct vmac_bus *bus)
+{
+	int i, expect;
+	if (atomic_exchange(&bus->req_queued, 0) == 0)
+		return;
+	for (i = 0; i < VMAC_BUS_REQUESTS; i++) {
+		struct request *q = &bus->req[i];
+		expect = REQ_QUEUED;
+		if (!atomic_compare_exchange_strong(&q->state, &expect, REQ_RUNNING)) {
+			if (expect == REQ_ABANDONED)
+				atomic_store(&q->state, REQ_FREE);
+			continue;
+		}
+		q->r.rc = vmac_bus_input(bus, q->r.device, q->r.name, &q->r.value, q->r.reply, sizeof(q->r.reply));
+		atomic_store(&q->state, REQ_DONE);
+		sem_post(&q->done);
+	}
+}
+
 static void commands(struct vmac_bus *bus)
 {
 	struct vmac_host_cmd c;
@@ -1046,6 +1083,7 @@ static void on_cmd(struct ev_loop *loop, ev_async *w, int revents)
 	(void)revents;
 	(void)loop;
 	commands(w->data);
+	requests(w->data);
 }
 
 static void try_realtime(struct vmac_bus *bus)
@@ -1130,6 +1168,8 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	}
 	for (i = 0; i < bus->ndev; i++)
 		bus->dev[i].mach = -1;
+	for (i = 0; i < VMAC_BUS_REQUESTS; i++)
+		sem_init(&bus->req[i].done, 0, 0);
 	pthread_mutex_init(&bus->status_lock, NULL);
 	return bus;
 }
@@ -1216,6 +1256,7 @@ void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p)
 void vmac_bus_virtual_commands(struct vmac_bus *bus)
 {
 	commands(bus);
+	requests(bus);
 }
 
 static struct device *find_by_name(struct vmac_bus *bus, const char *name)
@@ -1295,6 +1336,8 @@ void vmac_bus_free(struct vmac_bus *bus)
 		close(bus->tfd);
 	vmac_ring_fini(&bus->to_main);
 	vmac_ring_fini(&bus->to_bus);
+	for (i = 0; i < VMAC_BUS_REQUESTS; i++)
+		sem_destroy(&bus->req[i].done);
 	free(bus->dev);
 	free(bus->mach);
 	free(bus->tx);
@@ -1352,4 +1395,48 @@ void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out)
 const char *vmac_bus_host_addr(struct vmac_bus *bus)
 {
 	return bus->host_addr;
+}
+
+int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
+{
+	struct request *q = NULL;
+	struct timespec until;
+	int i, expect, rc;
+	for (i = 0; i < VMAC_BUS_REQUESTS && !q; i++) {
+		expect = REQ_FREE;
+		if (atomic_compare_exchange_strong(&bus->req[i].state, &expect, REQ_FILLING))
+			q = &bus->req[i];
+	}
+	if (!q) {
+		snprintf(req->reply, sizeof(req->reply), "the host is busy with other requests; try again");
+		return -1;
+	}
+	q->r = *req;
+	atomic_store(&q->state, REQ_QUEUED);
+	atomic_store(&bus->req_queued, 1);
+	if (!bus->virt)
+		ev_async_send(bus->loop, &bus->cmd_w);
+	clock_gettime(CLOCK_REALTIME, &until);
+	until.tv_sec += timeout_ms / 1000;
+	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
+	if (until.tv_nsec >= 1000000000L) {
+		until.tv_sec++;
+		until.tv_nsec -= 1000000000L;
+	}
+	while ((rc = sem_timedwait(&q->done, &until)) != 0 && errno == EINTR)
+		;
+	if (rc != 0) {
+		expect = REQ_QUEUED;
+		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_ABANDONED)) {
+			snprintf(req->reply, sizeof(req->reply), "the bus thread did not take the request within %d ms",
+			         timeout_ms);
+			return -1;
+		}
+		while (sem_wait(&q->done) != 0 && errno == EINTR) /* RUNNING or DONE: the answer is on its way */
+			;
+	}
+	req->rc = q->r.rc;
+	memcpy(req->reply, q->r.reply, sizeof(req->reply));
+	atomic_store(&q->state, REQ_FREE);
+	return 0;
 }

@@ -137,6 +137,23 @@ const char *vmac_bus_host_addr(struct vmac_bus *bus);
 int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
                    char *reply, size_t replylen);
 
+/* The same from any other thread (the HTTP server): hands the request to the
+ * bus thread and waits up to timeout_ms for its answer. Returns 0 with rc
+ * and reply filled in (rc as vmac_bus_input returns it), or -1 when the bus
+ * thread took no request (all VMAC_BUS_REQUESTS in use) or did not answer
+ * in time (reply says which; the input may still be applied). The bus thread
+ * only looks at the requests, sets the answer and posts a semaphore: it
+ * never waits for the caller. */
+#define VMAC_BUS_REQUESTS 16
+struct vmac_bus_input_request {
+	char device[VMAC_NAME_MAX + 1];
+	char name[VMAC_NAME_MAX + 1];
+	struct vmac_value value;
+	int rc;
+	char reply[VMAC_EVENT_TEXT];
+};
+int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms);
+
 /* ---- virtual mode: `vmac test` (docs/TESTING.md) ----
  * The same bus (discovery, schedule, deadlines, drivers) with no thread, no
  * socket and no timer: the caller owns the clock, carries the frames both

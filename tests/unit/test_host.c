@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "../../core/driver/driver.h"
+#include "../../core/host/bus.h"
 #include "../../core/host/config.h"
 #include "../../core/host/hist.h"
 #include "../../core/host/ring.h"
@@ -144,6 +145,36 @@ END_TEST
 
 /* ---- ring ---- */
 
+/* A bus whose thread never runs: every request times out and is left for
+ * the bus thread to free, so the slots run out; neither side waits for the
+ * other beyond the caller's timeout. */
+START_TEST(input_requests_time_out_and_run_out_without_a_bus_thread)
+{
+	struct vmac_config c;
+	struct vmac_bus *bus;
+	struct vmac_bus_input_request r;
+	char err[256] = "";
+	int i;
+	vmac_config_defaults(&c);
+	ck_assert_int_eq(vmac_config_set(&c, "bus", "239.255.77.1:47123", err, sizeof(err)), 0);
+	c.realtime = 0;
+	bus = vmac_bus_new(&c, err, sizeof(err));
+	ck_assert_msg(bus != NULL, "vmac_bus_new: %s", err);
+	for (i = 0; i <= VMAC_BUS_REQUESTS; i++) {
+		memset(&r, 0, sizeof(r));
+		snprintf(r.device, sizeof(r.device), "lights-1");
+		snprintf(r.name, sizeof(r.name), "kitchen");
+		ck_assert_int_eq(vmac_bus_request_input(bus, &r, 20), -1);
+		if (i < VMAC_BUS_REQUESTS)
+			ck_assert_msg(strstr(r.reply, "did not take the request within 20 ms") != NULL,
+			              "request %d: %s", i, r.reply);
+		else
+			ck_assert_msg(strstr(r.reply, "busy") != NULL, "request past the slots: %s", r.reply);
+	}
+	vmac_bus_free(bus);
+}
+END_TEST
+
 START_TEST(ring_fifo_and_full)
 {
 	struct vmac_ring r;
@@ -175,6 +206,7 @@ int main(void)
 	tcase_add_test(tc, config_driver_settings);
 	tcase_add_test(tc, hist_quantiles);
 	tcase_add_test(tc, ring_fifo_and_full);
+	tcase_add_test(tc, input_requests_time_out_and_run_out_without_a_bus_thread);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);
