@@ -37,7 +37,8 @@ struct vmac_http {
 	struct vmac_status status;
 	unsigned port;
 	struct vmac_store *store;
-	struct fail_count fails[FAIL_CLIENTS]; /* the HTTP thread only */
+	pthread_mutex_t fails_lock; /* connection threads share the table */
+	struct fail_count fails[FAIL_CLIENTS];
 };
 
 static double mono_s(void)
@@ -222,20 +223,28 @@ static struct fail_count *fails_of(struct vmac_http *h, struct MHD_Connection *c
 static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need, enum MHD_Result *ret)
 {
 	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
-	double now = mono_s();
-	struct fail_count *f = fails_of(h, c, now);
+	double now = mono_s(), wait_s = 0;
+	struct fail_count *f;
 	enum vmac_scope have = VMAC_SCOPE_NONE;
 	char msg[160];
-	if (f->fails >= FAIL_LIMIT) {
-		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s",
-		         FAIL_WINDOW_S - (now - f->window_start) + 0.5);
+	int locked;
+	pthread_mutex_lock(&h->fails_lock);
+	f = fails_of(h, c, now);
+	locked = f->fails >= FAIL_LIMIT;
+	if (locked)
+		wait_s = FAIL_WINDOW_S - (now - f->window_start);
+	pthread_mutex_unlock(&h->fails_lock);
+	if (locked) {
+		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s", wait_s + 0.5);
 		*ret = reply(c, MHD_HTTP_TOO_MANY_REQUESTS, error_body(msg));
 		return 0;
 	}
 	if (auth && strncmp(auth, "Bearer ", 7) == 0)
 		have = vmac_token_check(h->store, auth + 7);
 	if (have == VMAC_SCOPE_NONE) {
-		f->fails++;
+		pthread_mutex_lock(&h->fails_lock);
+		fails_of(h, c, now)->fails++; /* the record again: another thread may have reused it */
+		pthread_mutex_unlock(&h->fails_lock);
 		*ret = reply_with(c, MHD_HTTP_UNAUTHORIZED,
 		                  error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
 		                                  : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
@@ -251,36 +260,154 @@ static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_s
 	return 1;
 }
 
+/* A connection's request body (POST), kept up to BODY_MAX bytes. */
+#define BODY_MAX 65536
+#define INPUT_TIMEOUT_MS 2000 /* the bus thread answers within a tick; this bounds a stuck host */
+
+struct conn {
+	char *body;
+	size_t len;
+	int too_big;
+};
+
+static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, enum MHD_RequestTerminationCode why)
+{
+	struct conn *k = *con_cls;
+	(void)cls;
+	(void)c;
+	(void)why;
+	if (k) {
+		free(k->body);
+		free(k);
+	}
+	*con_cls = NULL;
+}
+
+static int valid_name(const char *s, size_t max)
+{
+	size_t n = 0;
+	for (; *s; s++, n++)
+		if (n >= max || !((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ||
+		                  *s == '-' || *s == '_' || *s == '.'))
+			return 0;
+	return n > 0;
+}
+
+/* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input
+ * to the device's driver, through the bus thread. */
+static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
+                                    const struct conn *k)
+{
+	struct vmac_bus_input_request req;
+	json_error_t jerr;
+	json_t *body, *name, *value;
+	unsigned code;
+	memset(&req, 0, sizeof(req));
+	if (k->too_big)
+		return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("the request body is over 64 KiB"));
+	if (!valid_name(device, VMAC_NAME_MAX))
+		return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such device"));
+	body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr);
+	name = json_object_get(body, "name");
+	value = json_object_get(body, "value");
+	if (!json_is_object(body) || !json_is_string(name) || !valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
+	    (value && !json_is_string(value) && !json_is_number(value) && !json_is_boolean(value) &&
+	     !json_is_null(value)) ||
+	    (json_is_string(value) && strlen(json_string_value(value)) > VMAC_DRIVER_STR_MAX)) {
+		json_decref(body);
+		return reply(c, MHD_HTTP_BAD_REQUEST,
+		             error_body("expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
+		                        "boolean or null}"));
+	}
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	snprintf(req.name, sizeof(req.name), "%s", json_string_value(name));
+	if (json_is_string(value)) {
+		req.value.type = VMAC_VALUE_STRING;
+		snprintf(req.value.str, sizeof(req.value.str), "%s", json_string_value(value));
+	} else if (json_is_number(value)) {
+		req.value.type = VMAC_VALUE_NUMBER;
+		req.value.number = json_number_value(value);
+	} else if (json_is_boolean(value)) {
+		req.value.type = VMAC_VALUE_BOOL;
+		req.value.number = json_is_true(value);
+	} else {
+		req.value.type = VMAC_VALUE_NONE; /* a command without a value */
+	}
+	json_decref(body);
+	if (vmac_bus_request_input(h->bus, &req, INPUT_TIMEOUT_MS) != 0)
+		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body(req.reply));
+	if (req.rc == 0)
+		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "reply", req.reply));
+	code = req.rc == 1 ? MHD_HTTP_CONFLICT : strstr(req.reply, "is not running") ? MHD_HTTP_NOT_FOUND
+	                                                                              : MHD_HTTP_BAD_GATEWAY;
+	return reply(c, code, error_body(req.reply));
+}
+
+/* "/api/devices/NAME" SUFFIX: NAME into device (at most len - 1 bytes, no
+ * slash); 0 when url is not of that form. */
+static int device_path(const char *url, const char *suffix, char *device, size_t len)
+{
+	static const char prefix[] = "/api/devices/";
+	size_t np = sizeof(prefix) - 1, ns = strlen(suffix), n = strlen(url);
+	if (n <= np + ns || strncmp(url, prefix, np) != 0 || strcmp(url + n - ns, suffix) != 0)
+		return 0;
+	n -= np + ns;
+	if (n >= len || memchr(url + np, '/', n))
+		return 0;
+	memcpy(device, url + np, n);
+	device[n] = 0;
+	return 1;
+}
+
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
                                   const char *version, const char *upload_data, size_t *upload_size,
                                   void **con_cls)
 {
 	struct vmac_http *h = cls;
+	struct conn *k = *con_cls;
+	enum MHD_Result ret;
+	char device[VMAC_NAME_MAX + 2];
+	int get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0, post = strcmp(method, "POST") == 0;
 	(void)version;
-	(void)upload_data;
-	if (*con_cls == NULL) { /* first call: headers only */
-		*con_cls = h;
+	if (!k) { /* first call: headers only */
+		k = calloc(1, sizeof(*k));
+		if (!k)
+			return MHD_NO;
+		*con_cls = k;
 		return MHD_YES;
 	}
-	if (*upload_size) { /* no endpoint here takes a body */
+	if (*upload_size) {
+		if (k->len + *upload_size > BODY_MAX) {
+			k->too_big = 1;
+		} else {
+			char *b = realloc(k->body, k->len + *upload_size + 1);
+			if (!b)
+				return MHD_NO;
+			memcpy(b + k->len, upload_data, *upload_size);
+			k->body = b;
+			k->len += *upload_size;
+			b[k->len] = 0;
+		}
 		*upload_size = 0;
 		return MHD_YES;
 	}
-	if (strcmp(method, "GET") != 0 && strcmp(method, "HEAD") != 0)
-		return reply(c, MHD_HTTP_METHOD_NOT_ALLOWED, error_body("only GET is supported here"));
-	if (strcmp(url, "/api/health") == 0) /* the one request without a token */
+	if (!get && !post)
+		return reply(c, MHD_HTTP_METHOD_NOT_ALLOWED, error_body("only GET, HEAD and POST are used here"));
+	if (get && strcmp(url, "/api/health") == 0) /* the one request without a token */
 		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
-	{
-		enum MHD_Result ret;
-		if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
+	if (post && device_path(url, "/input", device, sizeof(device))) {
+		if (!authorized(h, c, VMAC_SCOPE_OPERATE, &ret))
 			return ret;
+		return device_input(h, c, device, k);
 	}
-	if (strcmp(url, "/api/status") == 0)
+	if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
+		return ret;
+	if (get && strcmp(url, "/api/status") == 0)
 		return reply(c, MHD_HTTP_OK, status_json(h));
-	if (strcmp(url, "/") == 0)
+	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
-		                       "/api/health"));
+		             json_pack("{s:s, s:[s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		                       "/api/health", "/api/devices/NAME/input"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 
@@ -320,6 +447,7 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->store = store;
 	h->cfg = *cfg;
 	pthread_mutex_init(&h->status_lock, NULL);
+	pthread_mutex_init(&h->fails_lock, NULL);
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
 	h->status.slot_load = calloc(1u << cfg->max_level, sizeof(*h->status.slot_load));
 	if (!h->status.devices || !h->status.slot_load) {
@@ -327,8 +455,12 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 		vmac_http_stop(h);
 		return NULL;
 	}
-	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_USE_ERROR_LOG, 0, NULL,
-	                             NULL, on_request, h, MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin,
+	/* A thread per connection: an operator input waits for the bus thread
+	 * without holding up other clients. */
+	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION |
+	                                 MHD_USE_ERROR_LOG,
+	                             0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, NULL,
+	                             MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin,
 	                             MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)30, MHD_OPTION_CONNECTION_LIMIT,
 	                             (unsigned)256, MHD_OPTION_END);
 	if (!h->daemon) {
@@ -354,6 +486,7 @@ void vmac_http_stop(struct vmac_http *h)
 	if (h->daemon)
 		MHD_stop_daemon(h->daemon);
 	pthread_mutex_destroy(&h->status_lock);
+	pthread_mutex_destroy(&h->fails_lock);
 	free(h->status.devices);
 	free(h->status.slot_load);
 	free(h);

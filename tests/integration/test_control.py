@@ -1,0 +1,90 @@
+"""Operator input over the HTTP API (docs/API.md, "POST
+/api/devices/NAME/input"): it reaches the driver through the bus thread and
+the board's outputs follow; a token without the operate scope, a bad body,
+an unknown device or a name the driver refuses change nothing."""
+
+import json
+import urllib.error
+import urllib.request
+
+
+def post(host, path, body, token, raw=None):
+    """(status code, parsed JSON answer) of POST path with a JSON body."""
+    data = raw if raw is not None else json.dumps(body).encode()
+    req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method="POST")
+    req.add_header("Content-Type", "application/json")
+    if token:
+        req.add_header("Authorization", "Bearer " + token)
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read() or b"{}")
+
+
+def kitchen_light(host, s=None):
+    d = host.device("lights-1", s)
+    return d["outputs"]["digital"][0], d["variables"].get("kitchen")
+
+
+def test_operator_input_switches_a_light(t):
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    operate = t.make_token("operate")
+
+    code, body = post(host, "/api/devices/lights-1/input", {"name": "kitchen", "value": True}, operate)
+    assert code == 200 and body.get("ok") is True, "switching the kitchen light on: %d %r" % (code, body)
+    host.wait_status(lambda s: kitchen_light(host, s) == (True, True), 5,
+                     "the kitchen relay on and published after the input")
+
+    code, body = post(host, "/api/devices/lights-1/input", {"name": "all_off"}, operate)
+    assert code == 200, "the all_off command: %d %r" % (code, body)
+    host.wait_status(lambda s: kitchen_light(host, s) == (False, False), 5, "every relay off after all_off")
+
+
+def test_refused_input_changes_nothing(t):
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    read, operate = t.make_token("read"), t.make_token("operate")
+    path = "/api/devices/lights-1/input"
+    on = {"name": "kitchen", "value": True}
+
+    cases = [
+        ("no token", post(host, path, on, None), 401, "token"),
+        ("a read token", post(host, path, on, read), 403, "scope operate"),
+        ("a name the driver does not know", post(host, path, {"name": "sauna", "value": True}, operate), 409,
+         "sauna"),
+        ("a device that is not running", post(host, "/api/devices/nosuch-1/input", on, operate), 404,
+         "not running"),
+        ("a body that is not JSON", post(host, path, None, operate, raw=b"kitchen=1"), 400, "expected"),
+        ("a value that is a table", post(host, path, {"name": "kitchen", "value": {"a": 1}}, operate), 400,
+         "expected"),
+        ("a body over 64 KiB", post(host, path, None, operate, raw=b" " * 70000), 413, "64 KiB"),
+    ]
+    problems = ["%s: HTTP %d %r, expected %d mentioning %r" % (what, got[0], got[1], code, text)
+                for what, got, code, text in cases if got[0] != code or text not in got[1].get("error", "")]
+    assert not problems, "\n".join(problems)
+    s = host.status()
+    assert kitchen_light(host, s) == (False, False), "a refused request changed the light: %r" % (
+        kitchen_light(host, s),)
+    assert host.device("lights-1", s)["state"] == "running", "a refused request disturbed the board"
+
+
+def test_a_wash_started_over_the_api(t):
+    host = t.host(settings={"driver.washer.param.time_scale": "0.01"})
+    t.board("washer", "washer-1")
+    host.wait_status(lambda s: (host.device("washer-1", s) or {}).get("variables", {}).get("door") == "closed", 30,
+                     "the washer attached, its door seen closed")
+    operate = t.make_token("operate")
+    code, body = post(host, "/api/devices/washer-1/input", {"name": "start", "value": "quick"}, operate)
+    assert code == 200, "start quick: %d %r" % (code, body)
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") == "running", 10,
+                     "the washer running the quick programme")
+    code, body = post(host, "/api/devices/washer-1/input", {"name": "start", "value": "quick"}, operate)
+    assert code == 409 and "already running" in body.get("error", ""), "a second start: %d %r" % (code, body)
+    code, body = post(host, "/api/devices/washer-1/input", {"name": "cancel"}, operate)
+    assert code == 200, "cancel: %d %r" % (code, body)
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") in ("cancelling", "cancelled"),
+                     10, "the washer cancelling")
