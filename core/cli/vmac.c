@@ -13,93 +13,23 @@
 
 #include "../common/paths.h"
 #include "../vtest/vtest.h"
+#include "client.h"
+#include "console.h"
 #include "token.h"
 
-/* The bearer token for the host (docs/CLI.md, "Tokens"): --token, else
- * $VMAC_TOKEN, else the first line of --token-file or $VMAC_TOKEN_FILE. ""
- * when none is given (the host then answers 401). */
-static char bearer[256];
-
-static int set_token(const char *token, const char *file)
-{
-	if (!token)
-		token = getenv("VMAC_TOKEN");
-	if (!token && !file)
-		file = getenv("VMAC_TOKEN_FILE");
-	if (token) {
-		snprintf(bearer, sizeof(bearer), "%s", token);
-	} else if (file) {
-		FILE *f = fopen(file, "r");
-		if (!f || !fgets(bearer, sizeof(bearer), f)) {
-			fprintf(stderr, "vmac: cannot read a token from %s: %s\n", file, f ? "empty file" : strerror(errno));
-			if (f)
-				fclose(f);
-			return -1;
-		}
-		fclose(f);
-		bearer[strcspn(bearer, "\r\n")] = 0;
-	}
-	return 0;
-}
-
-struct buffer {
-	char *data;
-	size_t len;
-};
-
-static size_t collect(char *ptr, size_t size, size_t nmemb, void *ud)
-{
-	struct buffer *b = ud;
-	size_t n = size * nmemb;
-	char *p;
-	if (b->len + n > (16u << 20))
-		return 0; /* refuse absurd answers */
-	p = realloc(b->data, b->len + n + 1);
-	if (!p)
-		return 0;
-	b->data = p;
-	memcpy(b->data + b->len, ptr, n);
-	b->len += n;
-	b->data[b->len] = '\0';
-	return n;
-}
 
 /* GET url into *out. Returns 0, or prints why and returns 1. */
-static int http_get(const char *url, struct buffer *out)
+static int http_get(const char *url, struct vmac_buffer *out)
 {
-	CURL *c = curl_easy_init();
-	CURLcode rc;
-	long code = 0;
-	struct curl_slist *headers = NULL;
-	char auth[300];
-	if (!c) {
-		fprintf(stderr, "vmac: cannot initialise libcurl\n");
-		return 1;
-	}
-	if (bearer[0]) {
-		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
-		headers = curl_slist_append(headers, auth);
-		curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
-	}
-	curl_easy_setopt(c, CURLOPT_URL, url);
-	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
-	curl_easy_setopt(c, CURLOPT_WRITEDATA, out);
-	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
-	curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, 10000L);
-	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
-	rc = curl_easy_perform(c);
-	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &code);
-	curl_easy_cleanup(c);
-	curl_slist_free_all(headers);
-	if (rc != CURLE_OK) {
-		fprintf(stderr, "vmac: cannot reach the host at %s: %s\n(is vmacd running? pick it with --http ADDR:PORT)\n",
-		        url, curl_easy_strerror(rc));
+	char err[512];
+	long code;
+	if (vmac_client_call("GET", url, NULL, out, &code, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmac: %s\n", err);
 		return 1;
 	}
 	if (code == 401 || code == 403) {
 		fprintf(stderr, "vmac: %s answered HTTP %ld: %s\n%s\n", url, code, out->data ? out->data : "",
-		        bearer[0] ? "(the token is not valid there, or lacks the scope: docs/API.md, \"Access\")"
-		                  : "(give a token with --token, $VMAC_TOKEN or --token-file; vmac token create makes one)");
+		        vmac_client_auth_hint());
 		return 1;
 	}
 	if (code != 200) {
@@ -223,7 +153,7 @@ static int cmd_status(int argc, char **argv)
 	           *token_file = NULL;
 	int raw = 0, opt, rc;
 	char url[256];
-	struct buffer b = {NULL, 0};
+	struct vmac_buffer b = {NULL, 0};
 	json_t *s;
 	json_error_t jerr;
 
@@ -249,7 +179,7 @@ static int cmd_status(int argc, char **argv)
 		fprintf(stderr, "vmac status: unexpected argument '%s'\n", argv[optind]);
 		return 2;
 	}
-	if (set_token(token, token_file) != 0)
+	if (vmac_client_token(token, token_file) != 0)
 		return 2;
 	snprintf(url, sizeof(url), "http://%s/api/status", http);
 	curl_global_init(CURL_GLOBAL_DEFAULT);
@@ -366,8 +296,11 @@ static void usage(FILE *f)
 	           "  lint      check driver scripts with luacheck and the sandbox's globals\n"
 	           "  test      run driver tests against mock boards in virtual time\n"
 	           "  token     create, list and revoke the host's access tokens\n"
+	           "  console   the line console: DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME!\n"
+	           "  get       print published variables (DEVICE.NAME...)\n"
+	           "  set       operator input (DEVICE.NAME:VALUE, DEVICE.NAME!)\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
-	           "Planned, not in this version yet: reload, console.\n"
+	           "Planned, not in this version yet: reload, rollback, events.\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
 
@@ -395,6 +328,12 @@ int main(int argc, char **argv)
 		return cmd_bench(argc - 1, argv + 1);
 	if (strcmp(argv[1], "token") == 0)
 		return vmac_token_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "console") == 0)
+		return vmac_console_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "get") == 0)
+		return vmac_get_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "set") == 0)
+		return vmac_set_main(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

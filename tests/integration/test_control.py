@@ -4,6 +4,8 @@ the board's outputs follow; a token without the operate scope, a bad body,
 an unknown device or a name the driver refuses change nothing."""
 
 import json
+import os
+import subprocess
 import urllib.error
 import urllib.request
 
@@ -88,3 +90,39 @@ def test_a_wash_started_over_the_api(t):
     assert code == 200, "cancel: %d %r" % (code, body)
     host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") in ("cancelling", "cancelled"),
                      10, "the washer cancelling")
+
+
+def test_the_console_answers_line_by_line(t):
+    """vmac console from a pipe, vmac get and vmac set (docs/CLI.md,
+    "Console"): answers in order on one line per input line, errors as
+    NAME#CODE, the exit code 1 when any submessage failed."""
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    vmac = t.path("vmac")
+    env = dict(os.environ, VMAC_HTTP=host.http, VMAC_TOKEN=t.make_token("operate"))
+
+    def run(args, stdin=None, token=None):
+        e = dict(env, VMAC_TOKEN=token) if token else env
+        p = subprocess.run([vmac] + args, input=stdin, capture_output=True, text=True, env=e, timeout=30)
+        return p.returncode, p.stdout, p.stderr
+
+    rc, out, err = run(["set", "lights-1.kitchen:true"])
+    assert (rc, out) == (0, "lights-1.kitchen:true\n"), "vmac set: exit %d, %r %r" % (rc, out, err)
+    host.wait_status(lambda s: kitchen_light(host, s) == (True, True), 5, "the kitchen light on after vmac set")
+    rc, out, err = run(["get", "lights-1.kitchen", "lights-1.tv"])
+    assert (rc, out) == (0, "lights-1.kitchen:true lights-1.tv:false\n"), "vmac get: exit %d, %r %r" % (rc, out, err)
+
+    rc, out, err = run(["console", "--quiet"], stdin="lights-1.tv:true lights-1.sauna:1 nosuch-1.x? lights-1.tv>1 "
+                       "bad\nlights-1.all_off!\n\n")
+    assert out == "lights-1.tv:true lights-1.sauna#3 nosuch-1.x#2 lights-1.tv#6 bad#1\nlights-1.all_off!\n", (
+        "vmac console answers: %r" % out)
+    assert rc == 1 and err == "", "vmac console --quiet: exit %d, stderr %r" % (rc, err)
+    host.wait_status(lambda s: kitchen_light(host, s) == (False, False), 5, "every relay off after all_off!")
+
+    rc, out, err = run(["set", "lights-1.tv:true"], token=t.make_token("read"))
+    assert (rc, out) == (1, "lights-1.tv#7\n") and "scope operate" in err, (
+        "vmac set with a read token: exit %d, %r %r" % (rc, out, err))
+    assert not host.device("lights-1", host.status())["outputs"]["digital"][2], "a read token switched the TV on"
+    rc, out, err = run(["set"])
+    assert rc == 2 and "usage" in err, "vmac set without a submessage: exit %d, %r" % (rc, err)

@@ -1,0 +1,95 @@
+/* vmac's HTTP client: see client.h. */
+#include "client.h"
+
+#include <curl/curl.h>
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static char bearer[256];
+
+int vmac_client_token(const char *token, const char *file)
+{
+	if (!token)
+		token = getenv("VMAC_TOKEN");
+	if (!token && !file)
+		file = getenv("VMAC_TOKEN_FILE");
+	if (token) {
+		snprintf(bearer, sizeof(bearer), "%s", token);
+	} else if (file) {
+		FILE *f = fopen(file, "r");
+		if (!f || !fgets(bearer, sizeof(bearer), f)) {
+			fprintf(stderr, "vmac: cannot read a token from %s: %s\n", file, f ? "empty file" : strerror(errno));
+			if (f)
+				fclose(f);
+			return -1;
+		}
+		fclose(f);
+		bearer[strcspn(bearer, "\r\n")] = 0;
+	}
+	return 0;
+}
+
+const char *vmac_client_auth_hint(void)
+{
+	return bearer[0] ? "(the token is not valid there, or lacks the scope: docs/API.md, \"Access\")"
+	                 : "(give a token with --token, $VMAC_TOKEN or --token-file; vmac token create makes one)";
+}
+
+static size_t collect(char *ptr, size_t size, size_t nmemb, void *ud)
+{
+	struct vmac_buffer *b = ud;
+	size_t n = size * nmemb;
+	char *p;
+	if (b->len + n > (16u << 20))
+		return 0; /* refuse absurd answers */
+	p = realloc(b->data, b->len + n + 1);
+	if (!p)
+		return 0;
+	b->data = p;
+	memcpy(b->data + b->len, ptr, n);
+	b->len += n;
+	b->data[b->len] = '\0';
+	return n;
+}
+
+int vmac_client_call(const char *method, const char *url, const char *body, struct vmac_buffer *out, long *code,
+                     char *err, size_t errlen)
+{
+	CURL *c = curl_easy_init();
+	CURLcode rc;
+	struct curl_slist *headers = NULL;
+	char auth[300];
+	*code = 0;
+	if (!c) {
+		snprintf(err, errlen, "cannot initialise libcurl");
+		return -1;
+	}
+	if (bearer[0]) {
+		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
+		headers = curl_slist_append(headers, auth);
+	}
+	if (body) {
+		headers = curl_slist_append(headers, "Content-Type: application/json");
+		curl_easy_setopt(c, CURLOPT_POSTFIELDS, body);
+	}
+	curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
+	curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
+	curl_easy_setopt(c, CURLOPT_URL, url);
+	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
+	curl_easy_setopt(c, CURLOPT_WRITEDATA, out);
+	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
+	curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, 10000L);
+	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+	rc = curl_easy_perform(c);
+	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, code);
+	curl_easy_cleanup(c);
+	curl_slist_free_all(headers);
+	if (rc != CURLE_OK) {
+		snprintf(err, errlen, "cannot reach the host at %s: %s (is vmacd running? pick it with --http ADDR:PORT)",
+		         url, curl_easy_strerror(rc));
+		return -1;
+	}
+	return 0;
+}

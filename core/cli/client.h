@@ -1,0 +1,26 @@
+/* vmac's HTTP client for a running host (libcurl): the bearer token and one
+ * call. Shared by vmac status and vmac console / get / set (docs/CLI.md). */
+#ifndef VMAC_CLI_CLIENT_H
+#define VMAC_CLI_CLIENT_H
+
+#include <stddef.h>
+
+struct vmac_buffer {
+	char *data; /* NUL-terminated; free() it */
+	size_t len;
+};
+
+/* The token for every call (docs/CLI.md, "Tokens"): token, else $VMAC_TOKEN,
+ * else the first line of file or $VMAC_TOKEN_FILE. 0, or -1 after saying
+ * why (a file that cannot be read). */
+int vmac_client_token(const char *token, const char *file);
+
+/* method url [body as JSON]: 0 with the HTTP code and the answer in out, or
+ * -1 when the host cannot be reached (err says why). */
+int vmac_client_call(const char *method, const char *url, const char *body, struct vmac_buffer *out, long *code,
+                     char *err, size_t errlen);
+
+/* What to tell a person about a 401 or 403. */
+const char *vmac_client_auth_hint(void);
+
+#endif
