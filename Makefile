@@ -69,7 +69,7 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
 $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
-                   $(OBJ)/core/cli/console.o $(vtest_obj) $(host_obj) $(portable_obj)
+                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 

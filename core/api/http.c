@@ -4,6 +4,7 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <stdatomic.h>
 #include <jansson.h>
 #include <microhttpd.h>
 #include <stdio.h>
@@ -37,6 +38,7 @@ struct vmac_http {
 	struct vmac_status status;
 	unsigned port;
 	struct vmac_store *store;
+	_Atomic int stopping;       /* event streams end */
 	pthread_mutex_t fails_lock; /* connection threads share the table */
 	struct fail_count fails[FAIL_CLIENTS];
 };
@@ -343,6 +345,113 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	return reply(c, code, error_body(req.reply));
 }
 
+/* ---- GET /api/events: Server-Sent Events ---- */
+
+#define SSE_WAIT_MS 1000     /* how often a waiting stream looks at `stopping` */
+#define SSE_KEEPALIVE_S 15.0 /* a comment line when nothing else was sent */
+#define SSE_BATCH 8
+
+struct sse {
+	struct vmac_http *h;
+	uint64_t after; /* the last event sent */
+	double last_sent;
+	size_t len, off;
+	char buf[SSE_BATCH * (2 * VMAC_EVENT_TEXT + 256)];
+};
+
+static void sse_append(struct sse *e, const char *text)
+{
+	size_t n = strlen(text);
+	if (e->len + n < sizeof(e->buf)) {
+		memcpy(e->buf + e->len, text, n);
+		e->len += n;
+	}
+}
+
+/* The stream's next bytes: blocks (its own connection thread) until an
+ * event, a keep-alive or the host's stop. */
+static ssize_t sse_read(void *cls, uint64_t pos, char *out, size_t max)
+{
+	struct sse *e = cls;
+	size_t n;
+	(void)pos;
+	while (e->off == e->len) {
+		struct vmac_event ev[SSE_BATCH];
+		uint64_t lost;
+		char line[128];
+		double now;
+		int i, got;
+		if (atomic_load(&e->h->stopping))
+			return MHD_CONTENT_READER_END_OF_STREAM;
+		got = vmac_event_log_since(e->h->log, e->after, ev, SSE_BATCH, SSE_WAIT_MS, &lost);
+		now = mono_s();
+		e->len = e->off = 0;
+		if (lost) {
+			snprintf(line, sizeof(line), ": %llu events were lost (the log keeps the last %d)\n\n",
+			         (unsigned long long)lost, VMAC_EVENT_LOG_SIZE);
+			sse_append(e, line);
+		}
+		for (i = 0; i < got; i++) {
+			json_t *j = json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)ev[i].seq, "time",
+			                      (double)ev[i].time_ns / 1e9, "kind", ev[i].kind, "device", ev[i].device, "text",
+			                      ev[i].text);
+			char *data = j ? json_dumps(j, JSON_COMPACT) : NULL;
+			json_decref(j);
+			snprintf(line, sizeof(line), "id: %llu\nevent: %s\ndata: ", (unsigned long long)ev[i].seq, ev[i].kind);
+			sse_append(e, line);
+			sse_append(e, data ? data : "{}");
+			sse_append(e, "\n\n");
+			free(data);
+			e->after = ev[i].seq;
+		}
+		if (e->len == 0 && now - e->last_sent >= SSE_KEEPALIVE_S)
+			sse_append(e, ": keep-alive\n\n");
+		if (e->len)
+			e->last_sent = now;
+	}
+	n = e->len - e->off < max ? e->len - e->off : max;
+	memcpy(out, e->buf + e->off, n);
+	e->off += n;
+	return (ssize_t)n;
+}
+
+static enum MHD_Result events_stream(struct vmac_http *h, struct MHD_Connection *c)
+{
+	const char *after = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
+	const char *resume = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Last-Event-ID");
+	struct MHD_Response *r;
+	struct sse *e;
+	enum MHD_Result ret;
+	char *end;
+	const char *from = resume ? resume : after;
+	unsigned long long seq = 0;
+	if (from) {
+		errno = 0;
+		seq = strtoull(from, &end, 10);
+		if (errno || end == from || *end)
+			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("after (or Last-Event-ID) must be an event's seq"));
+	}
+	e = calloc(1, sizeof(*e));
+	if (!e)
+		return reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("out of memory"));
+	e->h = h;
+	e->after = seq;
+	e->last_sent = mono_s();
+	/* Something at once, so the client sees the stream is open before the
+	 * first event (and how soon to reconnect when it ends). */
+	sse_append(e, "retry: 2000\n: vmac events\n\n");
+	r = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, sse_read, e, free);
+	if (!r) {
+		free(e);
+		return MHD_NO;
+	}
+	MHD_add_response_header(r, "Content-Type", "text/event-stream");
+	MHD_add_response_header(r, "Cache-Control", "no-store");
+	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
+	MHD_destroy_response(r);
+	return ret;
+}
+
 /* "/api/devices/NAME" SUFFIX: NAME into device (at most len - 1 bytes, no
  * slash); 0 when url is not of that form. */
 static int device_path(const char *url, const char *suffix, char *device, size_t len)
@@ -404,10 +513,12 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return ret;
 	if (get && strcmp(url, "/api/status") == 0)
 		return reply(c, MHD_HTTP_OK, status_json(h));
+	if (get && strcmp(url, "/api/events") == 0)
+		return events_stream(h, c);
 	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
-		                       "/api/health", "/api/devices/NAME/input"));
+		             json_pack("{s:s, s:[s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		                       "/api/health", "/api/events", "/api/devices/NAME/input"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 
@@ -483,6 +594,7 @@ void vmac_http_stop(struct vmac_http *h)
 {
 	if (!h)
 		return;
+	atomic_store(&h->stopping, 1); /* event streams end within SSE_WAIT_MS */
 	if (h->daemon)
 		MHD_stop_daemon(h->daemon);
 	pthread_mutex_destroy(&h->status_lock);

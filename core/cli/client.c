@@ -93,3 +93,52 @@ int vmac_client_call(const char *method, const char *url, const char *body, stru
 	}
 	return 0;
 }
+
+struct stream {
+	int (*on_data)(void *ctx, const char *data, size_t len);
+	void *ctx;
+};
+
+static size_t stream_chunk(char *ptr, size_t size, size_t nmemb, void *ud)
+{
+	struct stream *st = ud;
+	size_t n = size * nmemb;
+	return st->on_data(st->ctx, ptr, n) == 0 ? n : 0;
+}
+
+int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *data, size_t len), void *ctx,
+                       long *code, char *err, size_t errlen)
+{
+	CURL *c = curl_easy_init();
+	CURLcode rc;
+	struct curl_slist *headers = NULL;
+	struct stream st = {on_data, ctx};
+	char auth[300];
+	*code = 0;
+	if (!c) {
+		snprintf(err, errlen, "cannot initialise libcurl");
+		return -1;
+	}
+	if (bearer[0]) {
+		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
+		headers = curl_slist_append(headers, auth);
+		curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
+	}
+	curl_easy_setopt(c, CURLOPT_URL, url);
+	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, stream_chunk);
+	curl_easy_setopt(c, CURLOPT_WRITEDATA, &st);
+	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
+	/* The host sends a keep-alive every 15 s: a minute of silence means it is gone. */
+	curl_easy_setopt(c, CURLOPT_LOW_SPEED_LIMIT, 1L);
+	curl_easy_setopt(c, CURLOPT_LOW_SPEED_TIME, 60L);
+	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+	rc = curl_easy_perform(c);
+	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, code);
+	curl_easy_cleanup(c);
+	curl_slist_free_all(headers);
+	if (rc != CURLE_OK && rc != CURLE_WRITE_ERROR) {
+		snprintf(err, errlen, "%s: %s", url, curl_easy_strerror(rc));
+		return *code ? 0 : -1;
+	}
+	return 0;
+}

@@ -15,6 +15,7 @@
 #include "../vtest/vtest.h"
 #include "client.h"
 #include "console.h"
+#include "events.h"
 #include "token.h"
 
 
@@ -299,8 +300,9 @@ static void usage(FILE *f)
 	           "  console   the line console: DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME!\n"
 	           "  get       print published variables (DEVICE.NAME...)\n"
 	           "  set       operator input (DEVICE.NAME:VALUE, DEVICE.NAME!)\n"
+	           "  events    follow the host's events as they happen\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
-	           "Planned, not in this version yet: reload, rollback, events.\n"
+	           "Planned, not in this version yet: reload, rollback.\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
 
@@ -328,6 +330,8 @@ int main(int argc, char **argv)
 		return cmd_bench(argc - 1, argv + 1);
 	if (strcmp(argv[1], "token") == 0)
 		return vmac_token_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "events") == 0)
+		return vmac_events_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "console") == 0)
 		return vmac_console_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "get") == 0)

@@ -7,8 +7,13 @@
 
 void vmac_event_log_init(struct vmac_event_log *log)
 {
+	pthread_condattr_t attr;
 	memset(log, 0, sizeof(*log));
 	pthread_mutex_init(&log->lock, NULL);
+	pthread_condattr_init(&attr);
+	pthread_condattr_setclock(&attr, CLOCK_MONOTONIC);
+	pthread_cond_init(&log->grew, &attr);
+	pthread_condattr_destroy(&attr);
 	log->next_seq = 1;
 }
 
@@ -24,6 +29,7 @@ void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char
 	snprintf(e->kind, sizeof(e->kind), "%s", kind);
 	snprintf(e->device, sizeof(e->device), "%s", device ? device : "");
 	snprintf(e->text, sizeof(e->text), "%s", text);
+	pthread_cond_broadcast(&log->grew);
 	pthread_mutex_unlock(&log->lock);
 	fprintf(stderr, "vmacd: [%s] %s\n", kind, text);
 }
@@ -37,6 +43,35 @@ int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, in
 	if (log->next_seq > VMAC_EVENT_LOG_SIZE && first < log->next_seq - VMAC_EVENT_LOG_SIZE)
 		first = log->next_seq - VMAC_EVENT_LOG_SIZE;
 	for (s = first; s < log->next_seq; s++)
+		out[n++] = log->ring[s % VMAC_EVENT_LOG_SIZE];
+	pthread_mutex_unlock(&log->lock);
+	return n;
+}
+
+int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac_event *out, int max,
+                         int timeout_ms, uint64_t *lost)
+{
+	struct timespec until;
+	uint64_t first, s;
+	int n = 0;
+	clock_gettime(CLOCK_MONOTONIC, &until);
+	until.tv_sec += timeout_ms / 1000;
+	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
+	if (until.tv_nsec >= 1000000000L) {
+		until.tv_sec++;
+		until.tv_nsec -= 1000000000L;
+	}
+	pthread_mutex_lock(&log->lock);
+	while (log->next_seq <= after + 1 && timeout_ms > 0)
+		if (pthread_cond_timedwait(&log->grew, &log->lock, &until) != 0)
+			break;
+	first = after + 1;
+	*lost = 0;
+	if (log->next_seq > VMAC_EVENT_LOG_SIZE && first < log->next_seq - VMAC_EVENT_LOG_SIZE) {
+		*lost = log->next_seq - VMAC_EVENT_LOG_SIZE - first;
+		first = log->next_seq - VMAC_EVENT_LOG_SIZE;
+	}
+	for (s = first; s < log->next_seq && n < max; s++)
 		out[n++] = log->ring[s % VMAC_EVENT_LOG_SIZE];
 	pthread_mutex_unlock(&log->lock);
 	return n;

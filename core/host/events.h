@@ -1,6 +1,6 @@
 /* The host's event log: the last events (attached, dropped, driver errors,
  * missing drivers, malformed frames) kept in memory for the status API and
- * printed to stderr. Written by the main thread, read by the HTTP thread. */
+ * printed to stderr. Written by the main thread, read by the HTTP threads. */
 #ifndef VMAC_EVENTS_H
 #define VMAC_EVENTS_H
 
@@ -21,6 +21,7 @@ struct vmac_event {
 
 struct vmac_event_log {
 	pthread_mutex_t lock;
+	pthread_cond_t grew; /* broadcast on every add (CLOCK_MONOTONIC) */
 	uint64_t next_seq;
 	struct vmac_event ring[VMAC_EVENT_LOG_SIZE];
 };
@@ -29,5 +30,11 @@ void vmac_event_log_init(struct vmac_event_log *log);
 void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char *device, const char *text);
 /* Copy the newest events, oldest first, into out (room for max). Returns how many. */
 int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, int max);
+/* The events after seq `after`, oldest first, at most max; when there is
+ * none yet, waits up to timeout_ms for one. Returns how many (0: none came).
+ * *lost: how many after `after` had already been overwritten (the log keeps
+ * the last VMAC_EVENT_LOG_SIZE). For the event stream (GET /api/events). */
+int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac_event *out, int max,
+                         int timeout_ms, uint64_t *lost);
 
 #endif

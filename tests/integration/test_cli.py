@@ -99,7 +99,7 @@ def test_bad_flags_are_refused(t):
 def test_help_and_version(t):
     for argv in (["vmacd", "--help"], ["vmac-board", "--help"], ["vmac", "--help"], ["vmac", "status", "--help"],
                  ["vmac", "token", "--help"], ["vmac", "console", "--help"], ["vmac", "get", "--help"],
-                 ["vmac", "set", "--help"], ["vmac", "test", "--help"]):
+                 ["vmac", "set", "--help"], ["vmac", "events", "--help"], ["vmac", "test", "--help"]):
         rc, out, err = t.run([t.path(argv[0])] + argv[1:], argv[0] + "-help", EXIT_S)
         assert rc == 0, "'%s' exited %d: %s" % (" ".join(argv), rc, err)
         assert out.startswith("usage: "), "'%s' printed no usage on stdout: %r" % (" ".join(argv), out[:200])

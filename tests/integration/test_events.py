@@ -1,0 +1,86 @@
+"""The event stream (docs/API.md, "GET /api/events"; docs/CLI.md, "vmac
+events"): events arrive as they happen, a client resumes after the last one
+it saw, the stream needs a token, and a host that stops ends its streams
+instead of waiting for them."""
+
+import json
+import signal
+import urllib.error
+import urllib.request
+
+
+def events_cmd(t, host, base, *args):
+    return t.start([t.path("vmac"), "events", "--http", host.http] + list(args), base)
+
+
+def json_lines(proc):
+    return [json.loads(l.text) for l in proc.lines["stdout"]]
+
+
+def test_events_arrive_as_they_happen_and_resume(t):
+    host = t.host()
+    follow = events_cmd(t, host, "events-follow", "--json", "--count", "2")
+    # Whether the stream opens before or after the board attaches, it starts
+    # with the events the log keeps (after=0), so nothing is missed.
+    board = t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    board.signal(signal.SIGSTOP)
+    rc = follow.wait_exit(30)
+    board.signal(signal.SIGCONT)
+    events = json_lines(follow)
+    assert rc == 0, "vmac events --count 2 exited %d: %s" % (rc, follow.text("stderr"))
+    assert [(e["kind"], e["device"]) for e in events] == [("attached", "lights-1"), ("dropped", "lights-1")], (
+        "the stream's events: %r" % events)
+    assert events[0]["seq"] < events[1]["seq"], "events out of order: %r" % events
+
+    # Resume after the first: the second comes at once, from the log.
+    again = events_cmd(t, host, "events-resume", "--json", "--count", "1", "--after", str(events[0]["seq"]))
+    assert again.wait_exit(30) == 0, "resuming failed: %s" % again.text("stderr")
+    assert [e["seq"] for e in json_lines(again)] == [events[1]["seq"]], "resumed at the wrong event: %r" % (
+        json_lines(again))
+
+    # People's format: seq, time, kind, text.
+    people = events_cmd(t, host, "events-people", "--count", "1")
+    assert people.wait_exit(30) == 0
+    line = people.lines["stdout"][0].text
+    assert line.startswith("%d " % events[0]["seq"]) and "attached" in line and "lights-1 attached" in line, (
+        "vmac events' line: %r" % line)
+
+
+def test_the_stream_needs_a_token_and_a_valid_resume_point(t):
+    host = t.host()
+    req = urllib.request.Request("http://%s/api/events" % host.http)
+    try:
+        urllib.request.urlopen(req, timeout=10)
+        raise AssertionError("GET /api/events without a token was answered")
+    except urllib.error.HTTPError as e:
+        assert e.code == 401, "GET /api/events without a token: HTTP %d" % e.code
+    req = urllib.request.Request("http://%s/api/events?after=abc" % host.http)
+    req.add_header("Authorization", "Bearer " + t.token)
+    try:
+        urllib.request.urlopen(req, timeout=10)
+        raise AssertionError("GET /api/events?after=abc was answered")
+    except urllib.error.HTTPError as e:
+        assert e.code == 400, "GET /api/events?after=abc: HTTP %d" % e.code
+    p = t.start([t.path("vmac"), "events", "--http", host.http, "--token", "vmac_bad"], "events-bad-token")
+    rc = p.wait_exit(30)
+    assert rc == 1 and "401" in p.text("stderr"), "vmac events with a bad token: exit %d, %r" % (
+        rc, p.text("stderr"))
+
+
+def test_a_stopping_host_ends_its_streams(t):
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    follow = events_cmd(t, host, "events-open")
+    follow.wait_line(r"lights-1 attached", 30, what="the replayed attach event: the stream is open")
+    streams = [urllib.request.urlopen(urllib.request.Request(
+        "http://%s/api/events" % host.http, headers={"Authorization": "Bearer " + t.token}), timeout=30)
+        for _ in range(3)]
+    host.signal(signal.SIGTERM)
+    assert host.wait_exit(10) == 0, "vmacd did not stop within 10 s with event streams open"
+    rc = follow.wait_exit(10)
+    assert rc == 0 and "the host ended the stream" in follow.text("stderr"), (
+        "vmac events when the host stopped: exit %d, %r" % (rc, follow.text("stderr")))
+    for s in streams:
+        s.close()
