@@ -38,7 +38,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
-HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c \
+HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c core/host/deploy.c \
                 core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
@@ -69,7 +69,7 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
 $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
-                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(vtest_obj) $(host_obj) $(portable_obj)
+                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 

@@ -12,6 +12,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "../host/deploy.h"
+
 #define VMAC_VERSION_STRING "0.1.0"
 #define STATUS_EVENTS 20
 
@@ -262,8 +264,10 @@ static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_s
 	return 1;
 }
 
-/* A connection's request body (POST), kept up to BODY_MAX bytes. */
-#define BODY_MAX 65536
+/* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
+ * upload); other requests take at most INPUT_MAX. */
+#define BODY_MAX (1 << 20)
+#define INPUT_MAX 65536
 #define INPUT_TIMEOUT_MS 2000 /* the bus thread answers within a tick; this bounds a stuck host */
 
 struct conn {
@@ -305,7 +309,7 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	json_t *body, *name, *value;
 	unsigned code;
 	memset(&req, 0, sizeof(req));
-	if (k->too_big)
+	if (k->too_big || k->len > INPUT_MAX)
 		return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("the request body is over 64 KiB"));
 	if (!valid_name(device, VMAC_NAME_MAX))
 		return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such device"));
@@ -343,6 +347,129 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	code = req.rc == 1 ? MHD_HTTP_CONFLICT : strstr(req.reply, "is not running") ? MHD_HTTP_NOT_FOUND
 	                                                                              : MHD_HTTP_BAD_GATEWAY;
 	return reply(c, code, error_body(req.reply));
+}
+
+/* ---- drivers: versions, upload (hot reload), rollback ---- */
+
+static json_t *version_json(const struct vmac_driver_version *v)
+{
+	return json_pack("{s:I, s:s, s:s, s:s, s:f, s:s, s:s, s:I, s:s, s:I}", "id", (json_int_t)v->id, "driver",
+	                 v->driver, "version", v->version, "hash", v->hash, "deployed", v->deployed, "deployed_by",
+	                 v->deployed_by, "state", v->state, "previous", (json_int_t)v->previous, "note", v->note, "size",
+	                 (json_int_t)v->size);
+}
+
+static void append_version(void *ctx, const struct vmac_driver_version *v)
+{
+	json_array_append_new(ctx, version_json(v));
+}
+
+/* GET /api/drivers and /api/drivers/NAME: the versions kept. */
+static enum MHD_Result driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+{
+	char err[512];
+	json_t *list = json_array(), *body;
+	struct vmac_driver_version active;
+	int rc;
+	if (vmac_store_driver_list(h->store, driver, append_version, list, err, sizeof(err)) < 0) {
+		json_decref(list);
+		return reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body(err));
+	}
+	if (!driver)
+		return reply(c, MHD_HTTP_OK, json_pack("{s:o}", "versions", list));
+	rc = vmac_store_driver_active(h->store, driver, &active, NULL, NULL, err, sizeof(err));
+	if (rc < 0) {
+		json_decref(list);
+		return reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body(err));
+	}
+	body = json_pack("{s:s, s:I, s:o}", "driver", driver, "active", (json_int_t)(rc == 1 ? active.id : 0),
+	                 "versions", list);
+	return reply(c, MHD_HTTP_OK, body);
+}
+
+static enum MHD_Result deploy_reply(struct MHD_Connection *c, const char *driver,
+                                    const struct vmac_deploy_result *r, double probation_s)
+{
+	json_t *machines = json_array(), *body;
+	int i;
+	for (i = 0; i < r->nmachines; i++)
+		json_array_append_new(machines, json_pack("{s:s, s:b, s:s}", "device", r->machines[i].device, "ok",
+		                                          r->machines[i].ok, "text", r->machines[i].text));
+	if (r->status != 200) {
+		body = json_pack("{s:s, s:o}", "error", r->error, "machines", machines);
+		return reply(c, (unsigned)r->status, body);
+	}
+	body = json_pack("{s:b, s:s, s:I, s:s, s:s, s:f, s:o}", "ok", 1, "driver", driver, "id", (json_int_t)r->id,
+	                 "version", r->version, "hash", r->hash, "probation_s", probation_s, "machines", machines);
+	return reply(c, MHD_HTTP_OK, body);
+}
+
+/* The id of the token a request was authorized by ("vmac_ID_..."). */
+static void token_id(struct MHD_Connection *c, char *id, size_t len)
+{
+	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+	snprintf(id, len, "%.*s", VMAC_TOKEN_ID_LEN, auth && strlen(auth) > 12 ? auth + 12 : "?");
+}
+
+/* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
+static enum MHD_Result driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
+                                     const struct conn *k)
+{
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_result *r;
+	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
+	double probation_s = h->cfg.reload_probation_s;
+	char by[VMAC_TOKEN_ID_LEN + 1], *end;
+	enum MHD_Result ret;
+	if (k->too_big)
+		return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("a driver file is at most 1 MiB"));
+	if (!k->len)
+		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("the request body must be the driver's source (Lua text)"));
+	if (arg) {
+		probation_s = strtod(arg, &end);
+		if (!*arg || *end || !(probation_s >= 0 && probation_s <= 86400))
+			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("probation must be seconds, 0..86400"));
+	}
+	r = malloc(sizeof(*r));
+	if (!r)
+		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body("out of memory"));
+	token_id(c, by, sizeof(by));
+	vmac_deploy(&x, driver, k->body, k->len, by, (unsigned)(probation_s * 1000 + 0.5), r);
+	ret = deploy_reply(c, driver, r, probation_s);
+	free(r);
+	return ret;
+}
+
+/* POST /api/drivers/NAME/rollback */
+static enum MHD_Result driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+{
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_result *r = malloc(sizeof(*r));
+	char by[VMAC_TOKEN_ID_LEN + 1];
+	enum MHD_Result ret;
+	if (!r)
+		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body("out of memory"));
+	token_id(c, by, sizeof(by));
+	vmac_deploy_rollback(&x, driver, by, r);
+	ret = deploy_reply(c, driver, r, 0);
+	free(r);
+	return ret;
+}
+
+/* "/api/drivers/NAME" SUFFIX: NAME into driver; 0 when url is not of that
+ * form or NAME is not a valid name. */
+static int driver_path(const char *url, const char *suffix, char *driver, size_t len)
+{
+	static const char prefix[] = "/api/drivers/";
+	size_t np = sizeof(prefix) - 1, ns = strlen(suffix), n = strlen(url);
+	if (n <= np + ns || strncmp(url, prefix, np) != 0 || strcmp(url + n - ns, suffix) != 0)
+		return 0;
+	n -= np + ns;
+	if (n >= len || memchr(url + np, '/', n))
+		return 0;
+	memcpy(driver, url + np, n);
+	driver[n] = 0;
+	return valid_name(driver, VMAC_NAME_MAX);
 }
 
 /* ---- GET /api/events: Server-Sent Events ---- */
@@ -509,16 +636,28 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return ret;
 		return device_input(h, c, device, k);
 	}
+	if (post && (driver_path(url, "/rollback", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
+		if (!authorized(h, c, VMAC_SCOPE_DEPLOY, &ret))
+			return ret;
+		if (driver_path(url, "/rollback", device, sizeof(device)))
+			return driver_rollback(h, c, device);
+		return driver_upload(h, c, device, k);
+	}
 	if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
 		return ret;
+	if (get && strcmp(url, "/api/drivers") == 0)
+		return driver_versions(h, c, NULL);
+	if (get && driver_path(url, "", device, sizeof(device)))
+		return driver_versions(h, c, device);
 	if (get && strcmp(url, "/api/status") == 0)
 		return reply(c, MHD_HTTP_OK, status_json(h));
 	if (get && strcmp(url, "/api/events") == 0)
 		return events_stream(h, c);
 	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
-		                       "/api/health", "/api/events", "/api/devices/NAME/input"));
+		             json_pack("{s:s, s:[s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
+		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 

@@ -54,8 +54,23 @@ static size_t collect(char *ptr, size_t size, size_t nmemb, void *ud)
 	return n;
 }
 
+static int call(const char *method, const char *url, const char *body, size_t len, const char *type,
+                struct vmac_buffer *out, long *code, char *err, size_t errlen);
+
 int vmac_client_call(const char *method, const char *url, const char *body, struct vmac_buffer *out, long *code,
                      char *err, size_t errlen)
+{
+	return call(method, url, body, body ? strlen(body) : 0, "Content-Type: application/json", out, code, err, errlen);
+}
+
+int vmac_client_upload(const char *url, const char *body, size_t len, struct vmac_buffer *out, long *code, char *err,
+                       size_t errlen)
+{
+	return call("POST", url, body, len, "Content-Type: text/x-lua", out, code, err, errlen);
+}
+
+static int call(const char *method, const char *url, const char *body, size_t len, const char *type,
+                struct vmac_buffer *out, long *code, char *err, size_t errlen)
 {
 	CURL *c = curl_easy_init();
 	CURLcode rc;
@@ -71,7 +86,8 @@ int vmac_client_call(const char *method, const char *url, const char *body, stru
 		headers = curl_slist_append(headers, auth);
 	}
 	if (body) {
-		headers = curl_slist_append(headers, "Content-Type: application/json");
+		headers = curl_slist_append(headers, type);
+		curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE, (long)len);
 		curl_easy_setopt(c, CURLOPT_POSTFIELDS, body);
 	}
 	curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
@@ -80,7 +96,7 @@ int vmac_client_call(const char *method, const char *url, const char *body, stru
 	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
 	curl_easy_setopt(c, CURLOPT_WRITEDATA, out);
 	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
-	curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, 10000L);
+	curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, 60000L); /* a reload of many machines takes a while */
 	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
 	rc = curl_easy_perform(c);
 	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, code);

@@ -20,6 +20,11 @@ int vmac_client_token(const char *token, const char *file);
 int vmac_client_call(const char *method, const char *url, const char *body, struct vmac_buffer *out, long *code,
                      char *err, size_t errlen);
 
+/* POST url with body (len bytes) as text/x-lua (a driver upload); as
+ * vmac_client_call. */
+int vmac_client_upload(const char *url, const char *body, size_t len, struct vmac_buffer *out, long *code, char *err,
+                       size_t errlen);
+
 /* GET url as a stream: on_data gets the bytes as they come, until the host
  * ends the answer (or on_data returns nonzero). 0 with the HTTP code, or -1
  * when the host cannot be reached (err says why). */

@@ -16,6 +16,7 @@
 #include "client.h"
 #include "console.h"
 #include "events.h"
+#include "reload.h"
 #include "token.h"
 
 
@@ -301,8 +302,10 @@ static void usage(FILE *f)
 	           "  get       print published variables (DEVICE.NAME...)\n"
 	           "  set       operator input (DEVICE.NAME:VALUE, DEVICE.NAME!)\n"
 	           "  events    follow the host's events as they happen\n"
+	           "  reload    upload a new version of a driver; machines switch at a slot boundary\n"
+	           "  rollback  go back to a driver's previous version\n"
+	           "  drivers   list the driver versions the host keeps\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
-	           "Planned, not in this version yet: reload, rollback.\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
 
@@ -338,6 +341,12 @@ int main(int argc, char **argv)
 		return vmac_get_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "set") == 0)
 		return vmac_set_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "reload") == 0)
+		return vmac_reload_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "rollback") == 0)
+		return vmac_rollback_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "drivers") == 0)
+		return vmac_drivers_main(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

@@ -76,6 +76,7 @@ struct vmac_driver {
 	void *clock_ctx;
 	double now_s;            /* bus time of the current call */
 	double event_window_s;   /* dev:event rate limit */
+	int64_t tag;             /* the host's (vmac_driver_set_tag) */
 	int events_in_window;
 };
 
@@ -1188,20 +1189,33 @@ static void make_dev(struct vmac_driver *d)
 int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
                      char *err, size_t errlen)
 {
-	struct vmac_driver *d;
 	const char *base = strrchr(path, '/');
-	char chunkname[80];
 	size_t len = 0;
-	int code = 0, i;
+	int code = 0;
 	char *src = read_file(path, &len, err, errlen, &code);
-	lua_State *L;
-
 	*out = NULL;
 	if (!src)
 		return code;
+	code = vmac_driver_load_source(base ? base + 1 : path, src, len, limits, out, err, errlen);
+	free(src);
+	return code;
+}
+
+int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
+                            struct vmac_driver **out, char *err, size_t errlen)
+{
+	struct vmac_driver *d;
+	char chunkname[80];
+	int code = 0, i;
+	lua_State *L;
+
+	*out = NULL;
+	if (len > FILE_MAX) {
+		snprintf(err, errlen, "%s: larger than 1 MiB", file);
+		return -EFBIG;
+	}
 	d = calloc(1, sizeof(*d));
 	if (!d) {
-		free(src);
 		snprintf(err, errlen, "out of memory");
 		return -ENOMEM;
 	}
@@ -1224,7 +1238,6 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 		else if (strncmp(k, "param.", 6) != 0) {
 			snprintf(err, errlen, "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
 			         "instructions, budget_us, param.NAME)", limits->expect_name ? limits->expect_name : "?", k, v);
-			free(src);
 			free(d);
 			return -EINVAL;
 		}
@@ -1233,11 +1246,10 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 		snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir);
 	if (limits->cycles_dir)
 		snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir);
-	snprintf(d->file, sizeof(d->file), "%s", base ? base + 1 : path);
+	snprintf(d->file, sizeof(d->file), "%s", file);
 	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");
 	L = d->L = lua_newstate(counting_alloc, d);
 	if (!L) {
-		free(src);
 		free(d);
 		snprintf(err, errlen, "cannot create Lua state");
 		return -ENOMEM;
@@ -1262,8 +1274,6 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 		snprintf(err, errlen, "%s", lua_tostring(L, -1));
 		goto fail;
 	}
-	free(src);
-	src = NULL;
 	make_env(L);
 	lua_setfenv(L, -2);
 	d->loading = 1;
@@ -1287,7 +1297,6 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	*out = d;
 	return 0;
 fail:
-	free(src);
 	lua_close(L);
 	free(d);
 	return -EINVAL;
@@ -1681,6 +1690,227 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
 	return 1;
 }
 
+/* ---- hot reload: one instance takes over from another ---- */
+
+#define MIGRATE_MAX_ENTRIES 10000
+#define MIGRATE_MAX_DEPTH 32
+
+enum { COPY_PARAMS, COPY_STATE };
+
+/* A copy of plain data from one driver's state into another's, run with
+ * lua_cpcall in the new state so that its memory cap stays an error. */
+struct copy {
+	struct vmac_driver *from, *to;
+	int what;     /* COPY_PARAMS, or COPY_STATE: dev.out and dev.state */
+	int seen;     /* index in to: a table old table -> new table */
+	int entries;
+	int ref;      /* COPY_STATE: the copy of dev.state, in to's registry */
+	char why[120];
+};
+
+static int copy_value(struct copy *c, int i, int depth);
+
+/* [-0, +1] in to: a copy of the table at index i of from. */
+static int copy_table(struct copy *c, int i, int depth)
+{
+	lua_State *F = c->from->L, *T = c->to->L;
+	const void *p = lua_topointer(F, i);
+	lua_pushlightuserdata(T, (void *)p);
+	lua_rawget(T, c->seen);
+	if (!lua_isnil(T, -1))
+		return 0; /* shared (or a cycle): one table in the copy too */
+	lua_pop(T, 1);
+	if (depth > MIGRATE_MAX_DEPTH) {
+		snprintf(c->why, sizeof(c->why), "dev.state is nested deeper than %d tables", MIGRATE_MAX_DEPTH);
+		return -1;
+	}
+	luaL_checkstack(T, 6, "dev.state copy");
+	if (!lua_checkstack(F, 4)) {
+		snprintf(c->why, sizeof(c->why), "dev.state: no stack to copy it");
+		return -1;
+	}
+	lua_newtable(T);
+	lua_pushlightuserdata(T, (void *)p);
+	lua_pushvalue(T, -2);
+	lua_rawset(T, c->seen);
+	lua_pushnil(F);
+	while (lua_next(F, i)) {
+		int rk, rv;
+		if (++c->entries > MIGRATE_MAX_ENTRIES) {
+			snprintf(c->why, sizeof(c->why), "dev.state holds more than %d entries", MIGRATE_MAX_ENTRIES);
+			lua_pop(F, 2);
+			return -1;
+		}
+		rk = copy_value(c, lua_gettop(F) - 1, depth + 1);
+		if (rk < 0) {
+			lua_pop(F, 2);
+			return -1;
+		}
+		if (rk == 0) {
+			rv = copy_value(c, lua_gettop(F), depth + 1);
+			if (rv < 0) {
+				lua_pop(F, 2);
+				return -1;
+			}
+			if (rv == 0)
+				lua_rawset(T, -3);
+			else
+				lua_pop(T, 1); /* the key: its value was not plain data */
+		}
+		lua_pop(F, 1);
+	}
+	return 0;
+}
+
+/* Push onto to a copy of from's value at absolute index i: 0, 1 when it is
+ * not plain data (nothing pushed), -1 when too large (c->why). */
+static int copy_value(struct copy *c, int i, int depth)
+{
+	lua_State *F = c->from->L, *T = c->to->L;
+	size_t n;
+	const char *s;
+	switch (lua_type(F, i)) {
+	case LUA_TBOOLEAN:
+		lua_pushboolean(T, lua_toboolean(F, i));
+		return 0;
+	case LUA_TNUMBER:
+		lua_pushnumber(T, lua_tonumber(F, i));
+		return 0;
+	case LUA_TSTRING:
+		s = lua_tolstring(F, i, &n);
+		lua_pushlstring(T, s, n);
+		return 0;
+	case LUA_TTABLE:
+		return copy_table(c, i, depth);
+	default:
+		return 1;
+	}
+}
+
+/* Is name one of d's outputs? */
+static int is_output(const struct vmac_driver *d, const char *name)
+{
+	int i;
+	for (i = 0; i < d->nio; i++)
+		if ((d->io[i].kind == IO_DO || d->io[i].kind == IO_PWM) && strcmp(d->io[i].name, name) == 0)
+			return 1;
+	return 0;
+}
+
+/* to.t[k] = from.t[k] for every string key k whose value has the type it
+ * has in to (params: declared there) or that is one of to's outputs. */
+static void copy_fields_typed(struct copy *c, int ref_from, int ref_to, int outputs)
+{
+	lua_State *F = c->from->L, *T = c->to->L;
+	int f, t;
+	lua_rawgeti(F, LUA_REGISTRYINDEX, ref_from);
+	f = lua_gettop(F);
+	lua_rawgeti(T, LUA_REGISTRYINDEX, ref_to);
+	t = lua_gettop(T);
+	lua_pushnil(F);
+	while (lua_next(F, f)) {
+		int type = lua_type(F, -1);
+		if (lua_type(F, -2) == LUA_TSTRING && (type == LUA_TBOOLEAN || type == LUA_TNUMBER || type == LUA_TSTRING)) {
+			const char *k = lua_tostring(F, -2);
+			int ok;
+			if (outputs) {
+				ok = is_output(c->to, k) && type != LUA_TSTRING;
+			} else {
+				lua_getfield(T, t, k);
+				ok = lua_type(T, -1) == type;
+				lua_pop(T, 1);
+			}
+			if (ok) {
+				copy_value(c, lua_gettop(F), 0);
+				lua_setfield(T, t, k);
+			}
+		}
+		lua_pop(F, 1);
+	}
+	lua_settop(F, f - 1);
+	lua_settop(T, t - 1);
+}
+
+static int copy_protected(lua_State *T)
+{
+	struct copy *c = lua_touserdata(T, 1);
+	lua_State *F = c->from->L;
+	int rc;
+	if (c->what == COPY_PARAMS) {
+		copy_fields_typed(c, c->from->ref_params, c->to->ref_params, 0);
+		return 0;
+	}
+	copy_fields_typed(c, c->from->ref_out, c->to->ref_out, 1);
+	lua_newtable(T);
+	c->seen = lua_gettop(T);
+	lua_rawgeti(F, LUA_REGISTRYINDEX, c->from->ref_dev);
+	lua_getfield(F, -1, "state");
+	if (lua_istable(F, -1))
+		rc = copy_table(c, lua_gettop(F), 0);
+	else {
+		lua_newtable(T);
+		rc = 0;
+	}
+	lua_pop(F, 2);
+	if (rc != 0)
+		return 0;
+	c->ref = luaL_ref(T, LUA_REGISTRYINDEX);
+	return 0;
+}
+
+/* Run one copy; 0, or -1 with err. from's stack is left as it was. */
+static int run_copy(struct copy *c, char *err, size_t errlen)
+{
+	int top = lua_gettop(c->from->L), rc;
+	c->why[0] = 0;
+	c->ref = LUA_NOREF;
+	rc = lua_cpcall(c->to->L, copy_protected, c);
+	lua_settop(c->from->L, top);
+	if (rc != 0) {
+		snprintf(err, errlen, "copying the old state: %s",
+		         rc == LUA_ERRMEM ? "memory cap exceeded (not enough memory)" : lua_tostring(c->to->L, -1));
+		lua_pop(c->to->L, 1);
+		return -1;
+	}
+	if (c->why[0]) {
+		snprintf(err, errlen, "copying the old state: %s", c->why);
+		return -1;
+	}
+	return 0;
+}
+
+int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double time_s, char *err, size_t errlen)
+{
+	struct copy c;
+	lua_State *L = nd->L;
+	int i, j;
+	memset(&c, 0, sizeof(c));
+	c.from = od;
+	c.to = nd;
+	c.what = COPY_PARAMS;
+	if (run_copy(&c, err, errlen) != 0)
+		return -1;
+	if (vmac_driver_attach(nd, time_s, err, errlen) != 0)
+		return -1;
+	c.what = COPY_STATE;
+	if (run_copy(&c, err, errlen) != 0)
+		return -1;
+	for (i = 0; i < nd->nvars; i++) /* the status keeps its values until the new version publishes */
+		for (j = 0; j < od->nvars; j++)
+			if (strcmp(nd->vars[i].pub.name, od->vars[j].pub.name) == 0)
+				nd->vars[i].pub = od->vars[j].pub;
+	if (nd->ref_migrate == LUA_NOREF) {
+		luaL_unref(L, LUA_REGISTRYINDEX, c.ref);
+		return 0;
+	}
+	nd->now_s = time_s;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, nd->ref_migrate);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, nd->ref_dev);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, c.ref);
+	luaL_unref(L, LUA_REGISTRYINDEX, c.ref);
+	return guarded_call(nd, 2, 0, 1, err, errlen);
+}
+
 int vmac_driver_nvars(const struct vmac_driver *d)
 {
 	return d->nvars;
@@ -1689,6 +1919,16 @@ int vmac_driver_nvars(const struct vmac_driver *d)
 const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, int i)
 {
 	return &d->vars[i].pub;
+}
+
+void vmac_driver_set_tag(struct vmac_driver *d, int64_t tag)
+{
+	d->tag = tag;
+}
+
+int64_t vmac_driver_tag(const struct vmac_driver *d)
+{
+	return d->tag;
 }
 
 size_t vmac_driver_memory(const struct vmac_driver *d)

@@ -81,6 +81,11 @@ struct vmac_driver; /* opaque */
 int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
                      char *err, size_t errlen);
 
+/* The same from a text in memory (hot reload: a driver uploaded to the
+ * host); file names it in messages ("washer.lua"). */
+int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
+                            struct vmac_driver **out, char *err, size_t errlen);
+
 /* What the manifest says. */
 const char *vmac_driver_name(const struct vmac_driver *d);
 const char *vmac_driver_version(const struct vmac_driver *d);
@@ -128,6 +133,16 @@ int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inp
 int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,
                       char *reply, size_t replylen, char *err, size_t errlen);
 
+/* Hot reload, bus thread: nd (loaded, bound, its boards added) takes over
+ * the machine od runs now (docs/DRIVERS.md "Hot reload"). In order: od's
+ * dev.params values nd also declares, with the same type, are copied; nd's
+ * attach(dev) runs; od's dev.out values of nd's outputs are copied; a copy
+ * of od's dev.state, plain data only (tables, strings, numbers, booleans;
+ * shared tables stay shared; at most 10,000 entries, 32 deep), goes to nd's
+ * migrate(dev, old_state). od is only read (it may be one that failed).
+ * 0, or -1 with err: nd must then not run; od is as it was. */
+int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double time_s, char *err, size_t errlen);
+
 /* detach(dev, reason) if the driver has one; errors are ignored (the
  * machine is going away). */
 void vmac_driver_detach(struct vmac_driver *d, const char *reason);
@@ -136,6 +151,11 @@ void vmac_driver_detach(struct vmac_driver *d, const char *reason);
  * order) with its latest published value. */
 int vmac_driver_nvars(const struct vmac_driver *d);
 const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, int i);
+
+/* A number the host attaches to an instance (the store's id of the version
+ * it runs; 0 for a driver file). */
+void vmac_driver_set_tag(struct vmac_driver *d, int64_t tag);
+int64_t vmac_driver_tag(const struct vmac_driver *d);
 
 /* Bytes the driver's heap holds now. */
 size_t vmac_driver_memory(const struct vmac_driver *d);

@@ -53,6 +53,10 @@ struct machine {
 	int nboards;
 	unsigned level;
 	int attached;            /* attach() has run */
+	/* Hot reload: the instance drv took over from, kept while drv is on
+	 * probation (until probation_end_ns) to roll back to if drv fails. */
+	struct vmac_driver *prev;
+	int64_t probation_end_ns;
 	struct vmac_bus *bus;
 };
 
@@ -91,10 +95,15 @@ struct device {
  * RUNNING, the caller waits for the answer, which comes without delay. */
 enum { REQ_FREE, REQ_FILLING, REQ_QUEUED, REQ_RUNNING, REQ_DONE, REQ_ABANDONED };
 
+enum { REQ_INPUT, REQ_SWAP };
+
 struct request {
 	_Atomic int state;
 	sem_t done;
+	int kind;
 	struct vmac_bus_input_request r;
+	struct vmac_driver *drv; /* REQ_SWAP: the new instance */
+	int64_t probation_ns;
 };
 
 struct vmac_bus {
@@ -117,6 +126,7 @@ struct vmac_bus {
 	uint64_t slots_done;    /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;
+	int64_t next_probation_ns; /* next look for reloads whose probation is over */
 	struct vmac_packet *tx;
 	int ntx;
 	struct vmac_packet rx[RX_BATCH];
@@ -307,6 +317,7 @@ static void set_aside(struct vmac_bus *bus, struct device *d, uint8_t reason)
 static void free_machine(struct vmac_bus *bus, struct machine *m)
 {
 	unload(bus, m->drv);
+	unload(bus, m->prev);
 	memset(m, 0, sizeof(*m));
 }
 
@@ -568,6 +579,92 @@ static void on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const st
 	join_or_load(bus, d);
 }
 
+static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen);
+static void hook_event(void *ctx, const char *text);
+static void end_probations(struct vmac_bus *bus, int64_t now);
+
+/* Bind drv to machine m (dev:set_level, dev:event). */
+static void bind_driver(struct machine *m, struct vmac_driver *drv)
+{
+	struct vmac_driver_host host;
+	host.set_level = hook_set_level;
+	host.event = hook_event;
+	host.ctx = m;
+	vmac_driver_bind(drv, &host);
+}
+
+/* Hand drv every board of m it does not have yet (in m's order) and m's
+ * level. */
+static void give_boards(struct vmac_bus *bus, struct machine *m, struct vmac_driver *drv)
+{
+	int i;
+	for (i = vmac_driver_boards(drv); i < m->nboards; i++) {
+		const struct device *b = &bus->dev[m->board[i]];
+		vmac_driver_add_board(drv, b->ann.minor, b->ann.board);
+	}
+	vmac_driver_set_level_now(drv, m->level);
+}
+
+/* The version on probation failed (why): the instance it took over from
+ * takes over again from it. 0, or -1 when that fails too (m->drv is still
+ * the failed one; the caller drops the machine). */
+static int roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	struct vmac_driver *failed = m->drv, *prev = m->prev;
+	struct device *primary = &bus->dev[m->primary];
+	struct vmac_bus_msg msg;
+	m->prev = NULL;
+	give_boards(bus, m, prev);
+	if (vmac_driver_take_over(prev, failed, bus_time(bus), err, sizeof(err)) != 0) {
+		event(bus, primary, "driver_error", "%s: rolling back to driver %s %s failed too: %s", primary->ann.board,
+		      m->driver, vmac_driver_version(prev), err);
+		unload(bus, prev);
+		return -1;
+	}
+	m->drv = prev;
+	memset(&msg, 0, sizeof(msg));
+	msg.kind = VMAC_MSG_EVENT;
+	msg.time_ns = bus_now(bus);
+	memcpy(msg.device, primary->ann.board, sizeof(msg.device));
+	memcpy(msg.driver, m->driver, sizeof(msg.driver));
+	snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
+	msg.version_id = vmac_driver_tag(failed);
+	snprintf(msg.text, sizeof(msg.text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
+	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev), why);
+	post(bus, &msg);
+	unload(bus, failed);
+	return 0;
+}
+
+/* m's driver failed in a call (where: "", " in input", ...): a version on
+ * probation rolls back; otherwise, or if that fails, the machine is
+ * dropped (every board to its safe state). */
+static void driver_failed(struct vmac_bus *bus, struct machine *m, const char *where, const char *err)
+{
+	struct device *primary = &bus->dev[m->primary];
+	event(bus, primary, "driver_error", "%s: driver %s %s failed%s: %s", primary->ann.board, m->driver,
+	      vmac_driver_version(m->drv), where, err);
+	if (m->prev) {
+		int64_t tag = vmac_driver_tag(m->drv);
+		uint32_t i;
+		if (roll_back(bus, m, err) == 0) {
+			/* One version everywhere: every other machine on probation
+			 * with the same version goes back too. */
+			for (i = 0; i < bus->nused; i++) {
+				struct machine *o = &bus->mach[i];
+				if (o == m || !o->used || !o->prev || vmac_driver_tag(o->drv) != tag ||
+				    strcmp(o->driver, m->driver) != 0)
+					continue;
+				if (roll_back(bus, o, "the same version failed on another machine") != 0)
+					drop(bus, &bus->dev[o->primary], VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+			}
+			return;
+		}
+	}
+	drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+}
+
 /* The machine's tick, on its primary board's reply. */
 static void run_machine(struct vmac_bus *bus, struct machine *m)
 {
@@ -582,8 +679,8 @@ static void run_machine(struct vmac_bus *bus, struct machine *m)
 	}
 	if (vmac_driver_tick(m->drv, bus_time(bus), in, out, err, sizeof(err)) == 0)
 		return;
-	event(bus, primary, "driver_error", "%s: driver %s failed: %s", primary->ann.board, m->driver, err);
-	drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+	(void)primary;
+	driver_failed(bus, m, "", err);
 }
 
 /* The bus's side of dev:set_level and dev:event (struct vmac_driver_host). */
@@ -646,10 +743,8 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 			struct machine *mm = &bus->mach[d->mach];
 			char err[VMAC_DRIVER_ERR_MAX];
 			mm->attached = 1;
-			if (vmac_driver_attach(mm->drv, bus_time(bus), err, sizeof(err)) != 0) {
-				event(bus, d, "driver_error", "%s: driver %s failed in attach: %s", d->ann.board, mm->driver, err);
-				drop(bus, d, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
-			}
+			if (vmac_driver_attach(mm->drv, bus_time(bus), err, sizeof(err)) != 0)
+				driver_failed(bus, mm, " in attach", err);
 		}
 		break;
 	case DEV_TO_SLEEP:
@@ -966,6 +1061,10 @@ static int tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 		send_discover(bus);
 		bus->next_discover_ns = now + (int64_t)bus->cfg.discovery_period_ms * 1000000;
 	}
+	if (now >= bus->next_probation_ns) {
+		end_probations(bus, now);
+		bus->next_probation_ns = now + STATUS_EVERY_NS;
+	}
 	service_registration(bus);
 	/* Every slot in order, late ones included: the schedule's guarantees
 	 * (docs/SCHEDULER.md) hold only if no slot is skipped. */
@@ -1005,7 +1104,6 @@ static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_
 {
 	int mi = d->mach;
 	struct machine *m = &bus->mach[mi];
-	struct vmac_driver_host host;
 	uint32_t i;
 	if (!c->drv) {
 		event(bus, d, c->missing ? "driver_missing" : "driver_error", "%s", c->text);
@@ -1017,10 +1115,7 @@ static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_
 	}
 	m->drv = c->drv;
 	m->level = vmac_driver_level(c->drv);
-	host.set_level = hook_set_level;
-	host.event = hook_event;
-	host.ctx = m;
-	vmac_driver_bind(m->drv, &host);
+	bind_driver(m, m->drv);
 	if (admit(bus, m, d) != 0) {
 		char note[sizeof(d->note)];
 		memcpy(note, d->note, sizeof(note));
@@ -1038,6 +1133,70 @@ static void on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_
 	}
 }
 
+static struct device *find_by_name(struct vmac_bus *bus, const char *name);
+
+/* Hot reload at this slot boundary (between two ticks): nd takes over the
+ * machine named device from the instance running it. 0 done (nd is the
+ * bus's), 1 refused (reply says why; nd is still the caller's and has not
+ * run, or ran only its attach/migrate). */
+static int swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
+                size_t replylen)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	struct device *d = find_by_name(bus, device);
+	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	struct vmac_driver *od;
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
+		snprintf(reply, replylen, "%s is not running (%s)", device, d ? state_name(d->state) : "no such device");
+		return 1;
+	}
+	if (strcmp(vmac_driver_name(nd), m->driver) != 0) {
+		snprintf(reply, replylen, "%s runs driver %s, not %s", device, m->driver, vmac_driver_name(nd));
+		return 1;
+	}
+	bind_driver(m, nd);
+	give_boards(bus, m, nd);
+	od = m->drv;
+	if (vmac_driver_take_over(nd, od, bus_time(bus), err, sizeof(err)) != 0) {
+		snprintf(reply, replylen, "the new version failed to take over %s: %s", device, err);
+		event(bus, d, "reload_refused", "%s: driver %s %s not taken: %s", device, m->driver,
+		      vmac_driver_version(nd), err);
+		return 1;
+	}
+	m->drv = nd;
+	if (m->prev) /* a version still on probation: the one just replaced is what a rollback goes back to */
+		unload(bus, m->prev);
+	m->prev = NULL;
+	if (probation_ns > 0) {
+		m->prev = od;
+		m->probation_end_ns = bus_now(bus) + probation_ns;
+	} else {
+		unload(bus, od);
+	}
+	event(bus, &bus->dev[m->primary], "reloaded", "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)",
+	      bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(od), vmac_driver_version(nd),
+	      (double)probation_ns / 1e9);
+	snprintf(reply, replylen, "%s: driver %s %s -> %s", device, m->driver, vmac_driver_version(od),
+	         vmac_driver_version(nd));
+	return 0;
+}
+
+/* Versions whose probation is over keep the machine: the previous
+ * instance goes. */
+static void end_probations(struct vmac_bus *bus, int64_t now)
+{
+	uint32_t i;
+	for (i = 0; i < bus->nused; i++) {
+		struct machine *m = &bus->mach[i];
+		if (!m->used || !m->prev || now < m->probation_end_ns)
+			continue;
+		unload(bus, m->prev);
+		m->prev = NULL;
+		event(bus, &bus->dev[m->primary], "probation_passed", "%s: driver %s %s passed its probation",
+		      bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(m->drv));
+	}
+}
+
 /* The requests other threads queued: run each, answer, post. */
 static void requests(struct vmac_bus *bus)
 {
@@ -1052,7 +1211,10 @@ static void requests(struct vmac_bus *bus)
 				atomic_store(&q->state, REQ_FREE);
 			continue;
 		}
-		q->r.rc = vmac_bus_input(bus, q->r.device, q->r.name, &q->r.value, q->r.reply, sizeof(q->r.reply));
+		if (q->kind == REQ_SWAP)
+			q->r.rc = swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
+		else
+			q->r.rc = vmac_bus_input(bus, q->r.device, q->r.name, &q->r.value, q->r.reply, sizeof(q->r.reply));
 		atomic_store(&q->state, REQ_DONE);
 		sem_post(&q->done);
 	}
@@ -1313,9 +1475,7 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	rc = vmac_driver_input(m->drv, bus_time(bus), name, value, reply, replylen, err, sizeof(err));
 	if (rc >= 0)
 		return rc;
-	d = &bus->dev[m->primary];
-	event(bus, d, "driver_error", "%s: driver %s failed in input: %s", d->ann.board, m->driver, err);
-	drop(bus, d, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+	driver_failed(bus, m, " in input", err);
 	flush(bus);
 	snprintf(reply, replylen, "the driver failed: %s", err);
 	return -1;
@@ -1397,7 +1557,8 @@ const char *vmac_bus_host_addr(struct vmac_bus *bus)
 	return bus->host_addr;
 }
 
-int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
+static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
+                   int64_t probation_ns, int timeout_ms)
 {
 	struct request *q = NULL;
 	struct timespec until;
@@ -1411,7 +1572,10 @@ int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *
 		snprintf(req->reply, sizeof(req->reply), "the host is busy with other requests; try again");
 		return -1;
 	}
+	q->kind = req_kind;
 	q->r = *req;
+	q->drv = drv;
+	q->probation_ns = probation_ns;
 	atomic_store(&q->state, REQ_QUEUED);
 	atomic_store(&bus->req_queued, 1);
 	if (!bus->virt)
@@ -1439,4 +1603,22 @@ int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *
 	memcpy(req->reply, q->r.reply, sizeof(req->reply));
 	atomic_store(&q->state, REQ_FREE);
 	return 0;
+}
+
+int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
+{
+	return request(bus, REQ_INPUT, req, NULL, 0, timeout_ms);
+}
+
+int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
+                          int timeout_ms, int *rc, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	int r;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	r = request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, timeout_ms);
+	*rc = r == 0 ? req.rc : -1;
+	snprintf(reply, replylen, "%s", req.reply);
+	return r;
 }

@@ -33,6 +33,7 @@ struct vmac_bus_msg {
 	char device[VMAC_NAME_MAX + 1];
 	char driver[VMAC_NAME_MAX + 1];
 	char event_kind[24];          /* attached, dropped, driver_missing, ... */
+	int64_t version_id;           /* rolled_back: the store's id of the version that failed */
 	char text[VMAC_EVENT_TEXT];
 };
 
@@ -153,6 +154,17 @@ struct vmac_bus_input_request {
 	char reply[VMAC_EVENT_TEXT];
 };
 int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms);
+
+/* Hot reload from another thread (docs/API.md "Drivers"): drv, loaded for
+ * the machine named device and not yet used, takes it over at the next
+ * slot boundary (vmac_driver_take_over). With probation_ms > 0 the old
+ * instance is kept that long: if drv fails meanwhile, the old one takes
+ * over again and an event of kind "rolled_back" carries drv's tag
+ * (vmac_driver_tag). Returns -1 when the bus thread took no request (reply
+ * says why; drv is the caller's), else 0 with *rc: 0 switched (drv is the
+ * bus's now), 1 refused (reply says why; drv is the caller's to free). */
+int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
+                          int timeout_ms, int *rc, char *reply, size_t replylen);
 
 /* ---- virtual mode: `vmac test` (docs/TESTING.md) ----
  * The same bus (discovery, schedule, deadlines, drivers) with no thread, no

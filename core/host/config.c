@@ -45,6 +45,7 @@ static const struct key keys[] = {
     {U(driver_memory_kib, 64, 1048576)},
     {U(driver_instructions, 1000, 1000000000)},
     {U(driver_budget_us, 0, 10000000)},
+    {U(reload_probation_s, 0, 86400)},
     {B(allow_jit)},
     {B(realtime)},
 };
@@ -69,6 +70,7 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->driver_memory_kib = 4096;
 	c->driver_instructions = 200000;
 	c->driver_budget_us = 2000;
+	c->reload_probation_s = 30;
 	c->realtime = 1;
 }
 

@@ -37,6 +37,7 @@ struct vmac_config {
 	uint32_t driver_memory_kib;
 	uint32_t driver_instructions;
 	uint32_t driver_budget_us;   /* wall-clock per driver call; 0 = none */
+	uint32_t reload_probation_s; /* hot reload: a new version failing within this goes back (0 = none) */
 	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
 	struct vmac_config_driver_setting driver[VMAC_CONFIG_DRIVER_SETTINGS];

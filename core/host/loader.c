@@ -31,6 +31,25 @@ static void cycles_path(const struct vmac_config *cfg, const char *name, char *p
 	snprintf(path, len, "%s/cycles/%s", cfg->scripts_dir, name);
 }
 
+/* The limits and settings the configuration gives driver `driver`. */
+static void limits_for(const struct vmac_config *cfg, const char *driver, struct vmac_driver_limits *limits,
+                       struct vmac_driver_setting *settings, char *cycles, size_t cycleslen)
+{
+	memset(limits, 0, sizeof(*limits));
+	limits->memory_bytes = (size_t)cfg->driver_memory_kib * 1024;
+	limits->instructions = cfg->driver_instructions;
+	limits->budget_us = cfg->driver_budget_us;
+	limits->default_level = cfg->default_level;
+	limits->max_level = cfg->max_level;
+	limits->allow_jit = cfg->allow_jit;
+	limits->stdlib_dir = cfg->stdlib_dir;
+	cycles_path(cfg, driver, cycles, cycleslen);
+	limits->cycles_dir = cycles;
+	limits->expect_name = driver;
+	limits->settings = settings;
+	limits->nsettings = vmac_config_driver_settings(cfg, driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
+}
+
 int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device,
                      struct vmac_driver **out, char *text, size_t textlen)
 {
@@ -40,25 +59,32 @@ int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const ch
 	int rc;
 
 	*out = NULL;
-	memset(&limits, 0, sizeof(limits));
-	limits.memory_bytes = (size_t)cfg->driver_memory_kib * 1024;
-	limits.instructions = cfg->driver_instructions;
-	limits.budget_us = cfg->driver_budget_us;
-	limits.default_level = cfg->default_level;
-	limits.max_level = cfg->max_level;
-	limits.allow_jit = cfg->allow_jit;
-	limits.stdlib_dir = cfg->stdlib_dir;
-	cycles_path(cfg, driver, cycles, sizeof(cycles));
-	limits.cycles_dir = cycles;
-	limits.expect_name = driver;
-	limits.settings = settings;
-	limits.nsettings = vmac_config_driver_settings(cfg, driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
+	limits_for(cfg, driver, &limits, settings, cycles, sizeof(cycles));
 	if (vmac_driver_path(cfg, driver, path, sizeof(path)) != 0) {
 		snprintf(text, textlen, "no driver '%s' for %s (looked in %s%s%s/drivers)", driver, device,
 		         cfg->drivers_dir, cfg->drivers_dir[0] ? " and " : "", cfg->scripts_dir);
 		return -ENOENT;
 	}
 	rc = vmac_driver_load(path, &limits, out, err, sizeof(err));
+	if (rc != 0) {
+		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
+		return rc < 0 ? rc : -EINVAL;
+	}
+	return 0;
+}
+
+int vmac_load_driver_source(const struct vmac_config *cfg, const char *driver, const char *device, const char *src,
+                            size_t len, struct vmac_driver **out, char *text, size_t textlen)
+{
+	struct vmac_driver_limits limits;
+	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];
+	char file[VMAC_NAME_MAX + 8], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+	int rc;
+
+	*out = NULL;
+	limits_for(cfg, driver, &limits, settings, cycles, sizeof(cycles));
+	snprintf(file, sizeof(file), "%s.lua", driver);
+	rc = vmac_driver_load_source(file, src, len, &limits, out, err, sizeof(err));
 	if (rc != 0) {
 		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
 		return rc < 0 ? rc : -EINVAL;

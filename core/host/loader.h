@@ -17,6 +17,11 @@
 int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device,
                      struct vmac_driver **out, char *text, size_t textlen);
 
+/* The same from a text in memory (a version uploaded for hot reload); its
+ * messages call it DRIVER.lua. */
+int vmac_load_driver_source(const struct vmac_config *cfg, const char *driver, const char *device, const char *src,
+                            size_t len, struct vmac_driver **out, char *text, size_t textlen);
+
 /* The file vmac_load_driver would load for `driver`: 0, or -ENOENT. */
 int vmac_driver_path(const struct vmac_config *cfg, const char *driver, char *path, size_t len);
 

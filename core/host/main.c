@@ -15,6 +15,7 @@
 #include "../api/http.h"
 #include "../common/paths.h"
 #include "../store/store.h"
+#include "deploy.h"
 #include "bus.h"
 #include "config.h"
 #include "events.h"
@@ -66,12 +67,21 @@ static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 	c.kind = VMAC_CMD_LOADED;
 	c.slot = m->slot;
 	c.generation = m->generation;
-	if (vmac_load_driver(&h->cfg, m->driver, m->device, &c.drv, c.text, sizeof(c.text)) == -ENOENT)
+	if (vmac_deploy_load(h->store, &h->cfg, m->driver, m->device, &c.drv, c.text, sizeof(c.text)) == -ENOENT)
 		c.missing = 1;
 	if (vmac_bus_send_cmd(h->bus, &c) != 0) {
 		vmac_driver_free(c.drv);
 		vmac_event_log_add(&h->log, "warning", m->device, "command ring full; device will retry on discovery");
 	}
+}
+
+/* A version on probation failed and its machines went back: the store
+ * says so too, so that boards attaching later load the version before. */
+static void roll_back_version(struct host *h, const struct vmac_bus_msg *m)
+{
+	char err[512];
+	if (vmac_store_driver_roll_back(h->store, m->driver, m->version_id, m->text, err, sizeof(err)) < 0)
+		vmac_event_log_add(&h->log, "warning", m->device, err);
 }
 
 static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
@@ -83,6 +93,8 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 		switch (m.kind) {
 		case VMAC_MSG_EVENT:
 			vmac_event_log_add(&h->log, m.event_kind, m.device, m.text);
+			if (strcmp(m.event_kind, "rolled_back") == 0 && m.version_id)
+				roll_back_version(h, &m);
 			break;
 		case VMAC_MSG_LOAD:
 			load_driver(h, &m);

@@ -2,6 +2,7 @@
 #include "store.h"
 
 #include <errno.h>
+#include <pthread.h>
 #include <sodium.h>
 #include <sqlite3.h>
 #include <stdio.h>
@@ -16,6 +17,9 @@
 
 struct vmac_store {
 	sqlite3 *db;
+	/* Held across every transaction of several statements: the one
+	 * connection is shared by the host's threads. */
+	pthread_mutex_t lock;
 };
 
 /* Schema versions, applied in order; PRAGMA user_version says how many ran. */
@@ -27,6 +31,18 @@ static const char *const migrations[] = {
     " created REAL NOT NULL,"
     " revoked REAL,"
     " note TEXT NOT NULL DEFAULT '')",
+    "CREATE TABLE driver_versions ("
+    " id INTEGER PRIMARY KEY,"
+    " driver TEXT NOT NULL,"
+    " version TEXT NOT NULL,"
+    " hash TEXT NOT NULL,"
+    " source BLOB NOT NULL,"
+    " deployed REAL NOT NULL,"
+    " deployed_by TEXT NOT NULL,"
+    " state TEXT NOT NULL,"
+    " previous INTEGER NOT NULL DEFAULT 0,"
+    " note TEXT NOT NULL DEFAULT '');"
+    "CREATE INDEX driver_versions_by_driver ON driver_versions (driver, id)",
 };
 
 static const char *const scope_names[] = {"none", "read", "operate", "deploy"};
@@ -122,6 +138,7 @@ int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t 
 		snprintf(err, errlen, "store: out of memory");
 		return -1;
 	}
+	pthread_mutex_init(&s->lock, NULL);
 	if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, NULL) !=
 	    SQLITE_OK) {
 		snprintf(err, errlen, "store: %s: %s", path, s->db ? sqlite3_errmsg(s->db) : "cannot open");
@@ -148,6 +165,7 @@ void vmac_store_close(struct vmac_store *s)
 	if (!s)
 		return;
 	sqlite3_close(s->db);
+	pthread_mutex_destroy(&s->lock);
 	free(s);
 }
 
@@ -295,4 +313,267 @@ enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
 	if (sodium_memcmp(h, stored, HASH_LEN) != 0 || !found || scope < VMAC_SCOPE_READ || scope > VMAC_SCOPE_DEPLOY)
 		return VMAC_SCOPE_NONE;
 	return scope;
+}
+
+/* ---- driver versions ---- */
+
+#define VERSION_COLUMNS "id, driver, version, hash, deployed, deployed_by, state, previous, note, length(source)"
+
+static void text_col(sqlite3_stmt *st, int i, char *out, size_t len)
+{
+	const unsigned char *t = sqlite3_column_text(st, i);
+	snprintf(out, len, "%s", t ? (const char *)t : "");
+}
+
+static void version_row(sqlite3_stmt *st, struct vmac_driver_version *v)
+{
+	memset(v, 0, sizeof(*v));
+	v->id = sqlite3_column_int64(st, 0);
+	text_col(st, 1, v->driver, sizeof(v->driver));
+	text_col(st, 2, v->version, sizeof(v->version));
+	text_col(st, 3, v->hash, sizeof(v->hash));
+	v->deployed = sqlite3_column_double(st, 4);
+	text_col(st, 5, v->deployed_by, sizeof(v->deployed_by));
+	text_col(st, 6, v->state, sizeof(v->state));
+	v->previous = sqlite3_column_int64(st, 7);
+	text_col(st, 8, v->note, sizeof(v->note));
+	v->size = (size_t)sqlite3_column_int64(st, 9);
+}
+
+/* The active version's id of driver (0: none, the file runs); -1 on error. */
+static int64_t active_id(struct vmac_store *s, const char *driver)
+{
+	sqlite3_stmt *st;
+	int64_t id = 0;
+	int rc;
+	if (sqlite3_prepare_v2(s->db, "SELECT id FROM driver_versions WHERE driver = ? AND state = 'active'", -1, &st,
+	                       NULL) != SQLITE_OK)
+		return -1;
+	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
+	rc = sqlite3_step(st);
+	if (rc == SQLITE_ROW)
+		id = sqlite3_column_int64(st, 0);
+	sqlite3_finalize(st);
+	return rc == SQLITE_ROW || rc == SQLITE_DONE ? id : -1;
+}
+
+int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src,
+                          size_t len, const char *by, int64_t *id, char *err, size_t errlen)
+{
+	unsigned char h[32];
+	char hash[65];
+	sqlite3_stmt *st;
+	int64_t prev;
+	int rc;
+	crypto_generichash(h, sizeof(h), (const unsigned char *)src, len, NULL, 0);
+	hex(h, sizeof(h), hash);
+	pthread_mutex_lock(&s->lock);
+	prev = active_id(s, driver);
+	if (prev < 0) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "reading driver versions", err, errlen);
+	}
+	if (sqlite3_prepare_v2(s->db,
+	                       "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
+	                       "previous) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?)",
+	                       -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "storing a driver version", err, errlen);
+	}
+	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 2, version, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 3, hash, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_blob(st, 4, src, (int)len, SQLITE_TRANSIENT);
+	sqlite3_bind_double(st, 5, now_s());
+	sqlite3_bind_text(st, 6, by, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_int64(st, 7, prev);
+	rc = sqlite3_step(st);
+	sqlite3_finalize(st);
+	if (rc != SQLITE_DONE) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "storing a driver version", err, errlen);
+	}
+	*id = sqlite3_last_insert_rowid(s->db);
+	pthread_mutex_unlock(&s->lock);
+	return 0;
+}
+
+/* UPDATE driver_versions SET state = ?, note = ? WHERE id = ? */
+static int set_state(struct vmac_store *s, int64_t id, const char *state, const char *note)
+{
+	sqlite3_stmt *st;
+	int rc;
+	if (sqlite3_prepare_v2(s->db,
+	                       note ? "UPDATE driver_versions SET state = ?, note = ? WHERE id = ?"
+	                            : "UPDATE driver_versions SET state = ? WHERE id = ?",
+	                       -1, &st, NULL) != SQLITE_OK)
+		return -1;
+	sqlite3_bind_text(st, 1, state, -1, SQLITE_TRANSIENT);
+	if (note) {
+		sqlite3_bind_text(st, 2, note, (int)strnlen(note, 400), SQLITE_TRANSIENT);
+		sqlite3_bind_int64(st, 3, id);
+	} else {
+		sqlite3_bind_int64(st, 2, id);
+	}
+	rc = sqlite3_step(st);
+	sqlite3_finalize(st);
+	return rc == SQLITE_DONE ? 0 : -1;
+}
+
+static int begin(struct vmac_store *s)
+{
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_exec(s->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return -1;
+	}
+	return 0;
+}
+
+static int end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen)
+{
+	if (ok && sqlite3_exec(s->db, "COMMIT", NULL, NULL, NULL) == SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return 0;
+	}
+	fail(s, what, err, errlen);
+	sqlite3_exec(s->db, "ROLLBACK", NULL, NULL, NULL);
+	pthread_mutex_unlock(&s->lock);
+	return -1;
+}
+
+int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t id, char *err, size_t errlen)
+{
+	int64_t prev;
+	int ok;
+	if (begin(s) != 0)
+		return fail(s, "activating a driver version", err, errlen);
+	prev = active_id(s, driver);
+	ok = prev >= 0 && (prev == 0 || prev == id || set_state(s, prev, "replaced", NULL) == 0) &&
+	     set_state(s, id, "active", NULL) == 0;
+	return end(s, ok, "activating a driver version", err, errlen);
+}
+
+int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, char *err, size_t errlen)
+{
+	pthread_mutex_lock(&s->lock);
+	if (set_state(s, id, "refused", why) != 0) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "marking a driver version refused", err, errlen);
+	}
+	pthread_mutex_unlock(&s->lock);
+	return 0;
+}
+
+int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_t id, const char *why, char *err,
+                                size_t errlen)
+{
+	sqlite3_stmt *st;
+	int64_t prev = 0;
+	int ok, rc;
+	if (begin(s) != 0)
+		return fail(s, "rolling back a driver version", err, errlen);
+	if (active_id(s, driver) != id) { /* already rolled back, or replaced meanwhile */
+		end(s, 1, "", err, errlen);
+		return 1;
+	}
+	ok = sqlite3_prepare_v2(s->db, "SELECT previous FROM driver_versions WHERE id = ?", -1, &st, NULL) == SQLITE_OK;
+	if (ok) {
+		sqlite3_bind_int64(st, 1, id);
+		rc = sqlite3_step(st);
+		if (rc == SQLITE_ROW)
+			prev = sqlite3_column_int64(st, 0);
+		sqlite3_finalize(st);
+		ok = rc == SQLITE_ROW;
+	}
+	ok = ok && set_state(s, id, "rolled_back", why) == 0 && (prev == 0 || set_state(s, prev, "active", NULL) == 0);
+	return end(s, ok, "rolling back a driver version", err, errlen);
+}
+
+/* One version by a WHERE clause with one parameter; with its source when
+ * src is not NULL. 1 found, 0 none, -1 err. */
+static int version_where(struct vmac_store *s, const char *where, const char *text_arg, int64_t int_arg,
+                         struct vmac_driver_version *v, char **src, size_t *len, char *err, size_t errlen)
+{
+	char sql[256];
+	sqlite3_stmt *st;
+	int rc, found = 0;
+	snprintf(sql, sizeof(sql), "SELECT " VERSION_COLUMNS ", source FROM driver_versions WHERE %s", where);
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db, sql, -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "reading driver versions", err, errlen);
+	}
+	if (text_arg)
+		sqlite3_bind_text(st, 1, text_arg, -1, SQLITE_TRANSIENT);
+	else
+		sqlite3_bind_int64(st, 1, int_arg);
+	rc = sqlite3_step(st);
+	if (rc == SQLITE_ROW) {
+		found = 1;
+		version_row(st, v);
+		if (src) {
+			*len = (size_t)sqlite3_column_bytes(st, 10);
+			*src = malloc(*len + 1);
+			if (*src) {
+				if (*len)
+					memcpy(*src, sqlite3_column_blob(st, 10), *len);
+				(*src)[*len] = 0;
+			} else {
+				found = -1;
+			}
+		}
+	}
+	sqlite3_finalize(st);
+	if (found < 0 || (rc != SQLITE_ROW && rc != SQLITE_DONE)) {
+		pthread_mutex_unlock(&s->lock);
+		if (found < 0) {
+			snprintf(err, errlen, "store: out of memory");
+			return -1;
+		}
+		return fail(s, "reading driver versions", err, errlen);
+	}
+	pthread_mutex_unlock(&s->lock);
+	return found;
+}
+
+int vmac_store_driver_active(struct vmac_store *s, const char *driver, struct vmac_driver_version *v, char **src,
+                             size_t *len, char *err, size_t errlen)
+{
+	return version_where(s, "driver = ? AND state = 'active'", driver, 0, v, src, len, err, errlen);
+}
+
+int vmac_store_driver_get(struct vmac_store *s, int64_t id, struct vmac_driver_version *v, char **src, size_t *len,
+                          char *err, size_t errlen)
+{
+	return version_where(s, "id = ?", NULL, id, v, src, len, err, errlen);
+}
+
+int vmac_store_driver_list(struct vmac_store *s, const char *driver,
+                           void (*fn)(void *ctx, const struct vmac_driver_version *v), void *ctx, char *err,
+                           size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc, n = 0;
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db,
+	                       driver ? "SELECT " VERSION_COLUMNS " FROM driver_versions WHERE driver = ? ORDER BY id"
+	                              : "SELECT " VERSION_COLUMNS " FROM driver_versions ORDER BY driver, id",
+	                       -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "listing driver versions", err, errlen);
+	}
+	if (driver)
+		sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
+	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+		struct vmac_driver_version v;
+		version_row(st, &v);
+		fn(ctx, &v);
+		n++;
+	}
+	sqlite3_finalize(st);
+	pthread_mutex_unlock(&s->lock);
+	if (rc != SQLITE_DONE)
+		return fail(s, "listing driver versions", err, errlen);
+	return n;
 }

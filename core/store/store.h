@@ -12,6 +12,7 @@
 #define VMAC_STORE_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #define VMAC_TOKEN_ID_LEN 16
 #define VMAC_TOKEN_LEN (5 + VMAC_TOKEN_ID_LEN + 1 + 64) /* without the NUL */
@@ -57,5 +58,52 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 /* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
  * revoked, or when the store cannot be read. */
 enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
+
+/* ---- driver versions (hot reload, docs/API.md "Drivers") ----
+ * Every version uploaded is kept with its source, a BLAKE2b-256 hash of it,
+ * when and by which token it was deployed, and its state: pending (being
+ * put in place), active (what machines of that driver load; at most one per
+ * driver; none: the driver's file), replaced, rolled_back or refused (with
+ * a note saying why). previous: the version that was active when it came
+ * (0: the file), what a rollback returns to. */
+struct vmac_driver_version {
+	int64_t id;
+	char driver[64];
+	char version[32];
+	char hash[65];
+	double deployed; /* Unix time */
+	char deployed_by[VMAC_TOKEN_ID_LEN + 1];
+	char state[16];
+	int64_t previous;
+	char note[400];
+	size_t size; /* bytes of source */
+};
+
+/* Store a new version, state pending: 0 and *id, or -1 with err (nothing
+ * stored: e.g. the disk is full). */
+int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src,
+                          size_t len, const char *by, int64_t *id, char *err, size_t errlen);
+/* Make version id the active one of driver (the one active before becomes
+ * replaced), in one transaction. 0, or -1 with err. */
+int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t id, char *err, size_t errlen);
+/* A version that did not take: state refused, note why. 0, or -1 with err. */
+int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, char *err, size_t errlen);
+/* If version id is driver's active one: it becomes rolled_back (note why)
+ * and its previous one active again (or none: the file). 0 done, 1 id was
+ * not active (nothing changed), -1 err. */
+int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_t id, const char *why, char *err,
+                                size_t errlen);
+/* driver's active version (1), or none (0: the file runs), or -1 with err.
+ * With src: the source too, in malloc'd memory (NUL-terminated), *len. */
+int vmac_store_driver_active(struct vmac_store *s, const char *driver, struct vmac_driver_version *v, char **src,
+                             size_t *len, char *err, size_t errlen);
+/* Version id: 1, 0 no such version, -1 err; src as above. */
+int vmac_store_driver_get(struct vmac_store *s, int64_t id, struct vmac_driver_version *v, char **src, size_t *len,
+                          char *err, size_t errlen);
+/* Every version of driver (NULL: of every driver), oldest first. Returns
+ * how many, or -1 with err. */
+int vmac_store_driver_list(struct vmac_store *s, const char *driver,
+                           void (*fn)(void *ctx, const struct vmac_driver_version *v), void *ctx, char *err,
+                           size_t errlen);
 
 #endif

@@ -86,6 +86,93 @@ static const struct vmac_variable *var(const struct vmac_driver *d, const char *
 	return NULL;
 }
 
+START_TEST(take_over_hands_plain_state_params_and_outputs)
+{
+	/* The old version: state with shared tables, a cycle, a function, a
+	 * coroutine and an object with a metatable; a param set; outputs on. */
+	struct vmac_driver *od = load_ok(
+	    "return { name = 't', version = '1', io = { lamp = 'do0', pump = 'do1', motor = 'pwm' },\n"
+	    "  params = { fill_l = { default = 8, min = 1, max = 20 }, mode = { default = 'eco' } },\n"
+	    "  attach = function(dev)\n"
+	    "    local shared = { n = 1 }\n"
+	    "    local s = dev.state\n"
+	    "    s.a, s.b, s.count, s.name, s.flag = shared, shared, 41, 'wash', true\n"
+	    "    s.self = s\n"
+	    "    s.fn = function() end\n"
+	    "    s.co = coroutine and coroutine.create(s.fn) or nil\n"
+	    "    s.obj = setmetatable({ x = 2 }, { __index = function() return 'm' end })\n"
+	    "    s[1], s[2] = 'one', 'two'\n"
+	    "    dev.params.fill_l = 12\n"
+	    "    dev.params.mode = 'hot'\n"
+	    "  end,\n"
+	    "  tick = function(dev) dev.out.lamp = true; dev.out.motor = 300 end }\n");
+	/* The new version checks what it got. */
+	struct vmac_driver *nd = load_ok(
+	    "return { name = 't', version = '2', io = { lamp = 'do0', motor = 'pwm', fan = 'do2' },\n"
+	    "  params = { fill_l = { default = 8, min = 1, max = 20 } },\n"
+	    "  variables = { got = {} },\n"
+	    "  attach = function(dev) assert(dev.params.fill_l == 12, 'params copied before attach') end,\n"
+	    "  migrate = function(dev, old)\n"
+	    "    assert(old.count == 41 and old.name == 'wash' and old.flag == true, 'plain values')\n"
+	    "    assert(old.a == old.b and old.a.n == 1, 'a shared table stays one table')\n"
+	    "    assert(old.self == old, 'a cycle stays a cycle')\n"
+	    "    assert(old.fn == nil and old.co == nil, 'functions and coroutines are dropped')\n"
+	    "    assert(old.obj.x == 2 and getmetatable(old.obj) == nil, 'metatables are not copied')\n"
+	    "    assert(old[1] == 'one' and old[2] == 'two', 'array part')\n"
+	    "    assert(dev.out.lamp == true and dev.out.motor == 300 and dev.out.pump == nil, 'outputs it has')\n"
+	    "    dev.state.count = old.count + 1\n"
+	    "    dev.vars.got = dev.state.count\n"
+	    "  end,\n"
+	    "  tick = function(dev) end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	memset(&in, 0, sizeof(in));
+	ck_assert_int_eq(vmac_driver_add_board(od, 0, "b0"), 0);
+	ck_assert_int_eq(vmac_driver_add_board(nd, 0, "b0"), 0);
+	ck_assert_msg(vmac_driver_attach(od, 0, err, sizeof(err)) == 0, "old attach: %s", err);
+	ck_assert_msg(tick1(od, 0.1, &in, &out, err, sizeof(err)) == 0, "old tick: %s", err);
+	ck_assert_msg(vmac_driver_take_over(nd, od, 0.2, err, sizeof(err)) == 0, "take over failed: %s", err);
+	ck_assert_msg(tick1(nd, 0.3, &in, &out, err, sizeof(err)) == 0, "new tick: %s", err);
+	ck_assert_msg(out.digital == 0x01 && out.pwm == 300, "the new version's outputs: 0x%02x pwm %d", out.digital,
+	              out.pwm);
+	ck_assert_msg(var(nd, "got")->value.number == 42, "migrate's result: %g", var(nd, "got")->value.number);
+	vmac_driver_free(od);
+	vmac_driver_free(nd);
+}
+END_TEST
+
+START_TEST(take_over_refuses_what_it_cannot_copy)
+{
+	static const char *const cases[][2] = {
+	    {"for i = 1, 20000 do dev.state[i] = i end", "more than 10000 entries"},
+	    {"local t = dev.state; for i = 1, 40 do t.next = {}; t = t.next end", "deeper than 32"},
+	    {"for i = 1, 8 do dev.state[i] = string.rep(string.char(64 + i), 60000) end", "memory cap"},
+	};
+	char text[1024], err[VMAC_DRIVER_ERR_MAX];
+	size_t i;
+	for (i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+		struct vmac_driver *od, *nd;
+		snprintf(text, sizeof(text),
+		         "return { name = 't', version = '1', io = { lamp = 'do0' }, attach = function(dev) %s end,\n"
+		         "  tick = function() end }",
+		         cases[i][0]);
+		od = load_ok(text);
+		limits.memory_bytes = 300 * 1024; /* the new one cannot hold the big string */
+		nd = load_ok("return { name = 't', version = '2', io = { lamp = 'do0' }, tick = function() end,\n"
+		             "  migrate = function() error('must not run') end }");
+		limits.memory_bytes = 1 << 20;
+		ck_assert_msg(vmac_driver_attach(od, 0, err, sizeof(err)) == 0, "old attach (%s): %s", cases[i][0], err);
+		err[0] = 0;
+		ck_assert_msg(vmac_driver_take_over(nd, od, 0, err, sizeof(err)) != 0, "took over with %s", cases[i][0]);
+		ck_assert_msg(strstr(err, cases[i][1]) != NULL, "'%s': error '%s' does not say '%s'", cases[i][0], err,
+		              cases[i][1]);
+		vmac_driver_free(od);
+		vmac_driver_free(nd);
+	}
+}
+END_TEST
+
 START_TEST(manifest_errors_name_the_field)
 {
 	load_fails("return 42\n", "must return a table");
@@ -434,6 +521,8 @@ int main(void)
 	tcase_add_test(tc, input_and_host_hooks);
 	tcase_add_test(tc, sandbox_bounds);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
+	tcase_add_test(tc, take_over_hands_plain_state_params_and_outputs);
+	tcase_add_test(tc, take_over_refuses_what_it_cannot_copy);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);

@@ -1,0 +1,57 @@
+/* Hot reload on a running host (docs/API.md "Drivers"): a new version of a
+ * driver is compiled in a fresh sandbox, kept in the store, and handed to
+ * every running machine of that driver, each switching at a slot boundary
+ * (vmac_bus_request_swap); a rollback does the same with the version
+ * before. Runs on the HTTP server's threads, never the bus thread; one
+ * deploy or rollback at a time. */
+#ifndef VMAC_DEPLOY_H
+#define VMAC_DEPLOY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../store/store.h"
+#include "bus.h"
+#include "config.h"
+
+#define VMAC_DEPLOY_MACHINES 64 /* machines reported one by one */
+
+struct vmac_deploy_machine {
+	char device[VMAC_NAME_MAX + 1];
+	int ok;
+	char text[VMAC_EVENT_TEXT];
+};
+
+struct vmac_deploy_result {
+	int status;          /* HTTP status: 200, 400 bad source, 409 refused, 500/507 store, 503 busy */
+	char error[VMAC_EVENT_TEXT]; /* when status is not 200 */
+	int64_t id;          /* the version now active (0: the driver's file) */
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	char hash[65];
+	int nmachines;
+	struct vmac_deploy_machine machines[VMAC_DEPLOY_MACHINES];
+};
+
+struct vmac_deploy_ctx {
+	struct vmac_bus *bus;
+	struct vmac_store *store;
+	const struct vmac_config *cfg;
+};
+
+/* Upload and activate: src (len bytes) must compile, and its manifest must
+ * name driver. by: the deploying token's id. probation_ms: 0 for none. */
+void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char *src, size_t len, const char *by,
+                 unsigned probation_ms, struct vmac_deploy_result *out);
+
+/* Back to the version that was active before the active one (or to the
+ * driver's file), on every running machine of driver. */
+void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, const char *by,
+                          struct vmac_deploy_result *out);
+
+/* The driver a board of driver `driver` loads: the store's active version
+ * (tagged with its id) or else the file (vmac_load_driver). vmacd's main
+ * thread, on VMAC_MSG_LOAD. Returns as vmac_load_driver. */
+int vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,
+                     struct vmac_driver **out, char *text, size_t textlen);
+
+#endif

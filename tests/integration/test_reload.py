@@ -1,0 +1,221 @@
+"""Hot reload on a running host (docs/API.md "Drivers", docs/CLI.md "vmac
+reload"): a new version takes over at a slot boundary with the old one's
+state; a version that does not compile or whose manifest is wrong is refused
+and nothing changes; a version that fails on probation goes back by itself;
+`vmac rollback` goes back by hand; every version is kept; a neighbouring
+machine misses nothing."""
+
+import json
+import os
+import urllib.error
+import urllib.request
+
+from harness import undisturbed
+
+# A driver for a lights board that counts its ticks in dev.state, holds its
+# relay from dev.state, and says which version runs. VERSION and the body of
+# BOOM are filled in per version.
+COUNTER = """
+local VERSION = "%(version)s"
+local driver = {
+	name = "counter",
+	version = VERSION,
+	level = 3,
+	io = { relay = "do0" },
+	variables = { ticks = {}, version = {}, migrated = {}, relay = { set = true } },
+}
+
+function driver.attach(dev)
+	dev.state.ticks = 0
+	dev.state.relay = false
+	dev.vars.migrated = false
+end
+
+function driver.tick(dev, inputs)
+	dev.state.ticks = dev.state.ticks + 1
+	dev.vars.ticks, dev.vars.version = dev.state.ticks, VERSION
+	dev.vars.relay = dev.state.relay
+	dev.out.relay = dev.state.relay
+	%(boom)s
+end
+
+function driver.input(dev, name, value)
+	dev.state.relay = value == true
+	return true
+end
+
+function driver.migrate(dev, old)
+	dev.state.ticks, dev.state.relay = old.ticks, old.relay
+	dev.vars.migrated = true
+end
+
+return driver
+"""
+
+
+def counter(version, boom=""):
+    return COUNTER % {"version": version, "boom": boom}
+
+
+def call(host, method, path, token, data=None, content_type="text/x-lua"):
+    """(HTTP status, parsed JSON answer)."""
+    req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method=method)
+    if data is not None:
+        req.add_header("Content-Type", content_type)
+    if token:
+        req.add_header("Authorization", "Bearer " + token)
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read() or b"{}")
+
+
+def start(t):
+    """A host with the counter driver (1.0.0) running on lamp-1 and the
+    lights driver on lights-1 beside it; the relay of lamp-1 switched on."""
+    host = t.host(drivers=t.drivers(counter=counter("1.0.0")))
+    t.board("lights", "lamp-1", driver="counter")
+    t.board("lights", "lights-1")
+    host.wait_running(["lamp-1", "lights-1"])
+    code, body = call(host, "POST", "/api/devices/lamp-1/input", t.token,
+                      json.dumps({"name": "relay", "value": True}).encode(), "application/json")
+    assert code == 200, "switching the counter's relay on: %d %r" % (code, body)
+    host.wait_status(lambda s: host.device("lamp-1", s)["outputs"]["digital"][0] is True, 10, "lamp-1's relay on")
+    return host
+
+
+def write(t, name, text):
+    path = os.path.join(t.logdir, name)
+    with open(path, "w") as f:
+        f.write(text)
+    return path
+
+
+def test_reload_keeps_state_and_disturbs_nobody(t):
+    host = start(t)
+    before = host.device("lamp-1", host.wait_status(
+        lambda s: host.device("lamp-1", s)["variables"].get("ticks", 0) > 20, 10, "lamp-1 counting"))
+    seq = host.last_event_seq()
+    path = write(t, "counter.lua", counter("2.0.0"))
+    rc, out, err = t.run([t.path("vmac"), "reload", "--http", host.http, "--probation", "0", path], "reload")
+    assert rc == 0, "vmac reload failed (exit %d): %s %s" % (rc, out, err)
+    assert "counter 2.0.0 is active" in out and "lamp-1" in out and "switched" in out, \
+        "vmac reload did not report the switch: %r" % out
+
+    s = host.wait_status(lambda s: host.device("lamp-1", s)["variables"].get("version") == "2.0.0", 10,
+                         "lamp-1 running 2.0.0", invariant=undisturbed(["lamp-1", "lights-1"]))
+    d = host.device("lamp-1", s)
+    assert d["driver_version"] == "2.0.0", "status still says driver_version %r" % d["driver_version"]
+    assert d["variables"]["migrated"] is True, "the new version's migrate() did not run"
+    assert d["variables"]["ticks"] >= before["variables"]["ticks"], \
+        "the tick count started over (%r after %r): dev.state was not handed over" % (
+            d["variables"]["ticks"], before["variables"]["ticks"])
+    assert d["outputs"]["digital"][0] is True, "the relay went off across the reload"
+    assert d["misses"] == 0 and host.device("lights-1", s)["misses"] == 0, "a device missed a deadline: %s" % (
+        [(x["name"], x["misses"]) for x in s["devices"]],)
+    host.wait_event("reloaded", "lamp-1", "1.0.0 -> 2.0.0", after_seq=seq)
+
+    code, body = call(host, "GET", "/api/drivers/counter", t.token)
+    assert code == 200 and body["active"] > 0, "GET /api/drivers/counter: %d %r" % (code, body)
+    states = [(v["version"], v["state"]) for v in body["versions"]]
+    assert states == [("2.0.0", "active")], "versions kept: %r" % states
+    assert len(body["versions"][0]["hash"]) == 64 and body["versions"][0]["deployed_by"], \
+        "a version without its hash or who deployed it: %r" % body["versions"][0]
+
+
+def test_broken_versions_are_refused_and_change_nothing(t):
+    host = start(t)
+    read = t.make_token("read")
+    operate = t.make_token("operate")
+    good = counter("2.0.0").encode()
+    cases = [
+        ("no token", call(host, "POST", "/api/drivers/counter", None, good), 401, "token"),
+        ("a read token", call(host, "POST", "/api/drivers/counter", read, good), 403, "scope deploy"),
+        ("an operate token", call(host, "POST", "/api/drivers/counter", operate, good), 403, "scope deploy"),
+        ("a syntax error", call(host, "POST", "/api/drivers/counter", t.token,
+                                counter("2.0.0").replace("return driver", "return driver end").encode()), 400,
+         "counter.lua:"),
+        ("an error while loading", call(host, "POST", "/api/drivers/counter", t.token,
+                                        b'error("no")\n' + good), 400, "counter.lua:1"),
+        ("a manifest naming another driver", call(host, "POST", "/api/drivers/counter", t.token,
+                                                  good.replace(b'name = "counter"', b'name = "other"')), 400,
+         "name is 'other'"),
+        ("a manifest with a bad channel", call(host, "POST", "/api/drivers/counter", t.token,
+                                               good.replace(b'"do0"', b'"do9"')), 400, "do9"),
+        ("an empty body", call(host, "POST", "/api/drivers/counter", t.token, b""), 400, "source"),
+        ("a bad probation", call(host, "POST", "/api/drivers/counter?probation=-1", t.token, good), 400,
+         "probation"),
+        ("an attach that fails", call(host, "POST", "/api/drivers/counter", t.token,
+                                      counter("2.0.0").replace("dev.state.ticks = 0\n", "error('nope')\n", 1)
+                                      .encode()), 409, "nope"),
+    ]
+    problems = ["%s: HTTP %d %r, expected %d mentioning %r" % (what, got[0], got[1], code, text)
+                for what, got, code, text in cases if got[0] != code or text not in got[1].get("error", "")]
+    assert not problems, "\n".join(problems)
+    s = host.status()
+    d = host.device("lamp-1", s)
+    assert d["state"] == "running" and d["driver_version"] == "1.0.0", \
+        "a refused upload changed the machine: %s %s" % (d["state"], d["driver_version"])
+    assert d["outputs"]["digital"][0] is True, "a refused upload turned the relay off"
+    code, body = call(host, "GET", "/api/drivers/counter", t.token)
+    assert body["active"] == 0, "a refused version became active: %r" % body
+    assert [v["state"] for v in body["versions"]] == ["refused"], \
+        "only the version that compiled but failed to take over is kept, as refused: %r" % body["versions"]
+
+
+def test_a_version_failing_on_probation_goes_back(t):
+    host = start(t)
+    seq = host.last_event_seq()
+    bad = counter("2.0.0", boom="if dev.state.ticks > 40 then error('boom at tick ' .. dev.state.ticks) end")
+    code, body = call(host, "POST", "/api/drivers/counter?probation=30", t.token, bad.encode())
+    assert code == 200 and body["probation_s"] == 30, "uploading 2.0.0: %d %r" % (code, body)
+    e = host.wait_event("rolled_back", "lamp-1", after_seq=seq, timeout_s=30)
+    assert "boom at tick" in e["text"] and "2.0.0" in e["text"], "the rollback event does not say why: %r" % e
+    s = host.wait_status(lambda s: host.device("lamp-1", s)["variables"].get("version") == "1.0.0", 10,
+                         "lamp-1 back on 1.0.0")
+    d = host.device("lamp-1", s)
+    assert d["state"] == "running", "lamp-1 was dropped instead of rolled back: %s" % d["state"]
+    assert d["variables"]["ticks"] > 40, "the old version did not take the state back: ticks %r" % (
+        d["variables"]["ticks"],)
+    assert d["outputs"]["digital"][0] is True, "the relay is off after the rollback"
+    assert host.device("lights-1", s)["misses"] == 0, "the neighbour missed a deadline"
+    assert not host.find_events("dropped", "lamp-1", after_seq=seq), "lamp-1 was dropped"
+    code, body = call(host, "GET", "/api/drivers/counter", t.token)
+    assert body["active"] == 0 and [v["state"] for v in body["versions"]] == ["rolled_back"], \
+        "the store does not say the version was rolled back: %r" % body
+
+
+def test_rollback_by_hand_and_the_version_list(t):
+    host = start(t)
+    for version in ("2.0.0", "3.0.0"):
+        code, body = call(host, "POST", "/api/drivers/counter?probation=0", t.token, counter(version).encode())
+        assert code == 200, "uploading %s: %d %r" % (version, code, body)
+    host.wait_status(lambda s: host.device("lamp-1", s)["driver_version"] == "3.0.0", 10, "lamp-1 on 3.0.0")
+
+    rc, out, err = t.run([t.path("vmac"), "rollback", "--http", host.http, "counter"], "rollback")
+    assert rc == 0 and "2.0.0" in out, "vmac rollback to 2.0.0 failed (exit %d): %s %s" % (rc, out, err)
+    host.wait_status(lambda s: host.device("lamp-1", s)["driver_version"] == "2.0.0", 10, "lamp-1 back on 2.0.0")
+    rc, out, err = t.run([t.path("vmac"), "rollback", "--http", host.http, "counter"], "rollback")
+    assert rc == 0, "vmac rollback to the file failed (exit %d): %s %s" % (rc, out, err)
+    s = host.wait_status(lambda s: host.device("lamp-1", s)["driver_version"] == "1.0.0", 10,
+                         "lamp-1 back on the file's 1.0.0")
+    assert host.device("lamp-1", s)["outputs"]["digital"][0] is True, "the relay went off across the rollbacks"
+    rc, out, err = t.run([t.path("vmac"), "rollback", "--http", host.http, "counter"], "rollback")
+    assert rc == 1 and "runs its file" in err, "a rollback with nothing to go back to: exit %d %r" % (rc, err)
+
+    rc, out, err = t.run([t.path("vmac"), "drivers", "--http", host.http, "counter"], "drivers")
+    assert rc == 0, "vmac drivers failed: %s" % err
+    lines = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
+    assert [(x[2], x[3]) for x in lines] == [("2.0.0", "rolled_back"), ("3.0.0", "rolled_back")], \
+        "vmac drivers shows: %r" % out
+
+
+def test_a_board_attaching_later_loads_the_active_version(t):
+    host = start(t)
+    code, body = call(host, "POST", "/api/drivers/counter?probation=0", t.token, counter("2.0.0").encode())
+    assert code == 200, "uploading 2.0.0: %d %r" % (code, body)
+    t.board("lights", "lamp-2", driver="counter", major=77)
+    s = host.wait_running(["lamp-2"])
+    assert host.device("lamp-2", s)["driver_version"] == "2.0.0", \
+        "a board attaching after the reload got %r" % host.device("lamp-2", s)["driver_version"]
