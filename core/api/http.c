@@ -73,10 +73,12 @@ static json_t *value_json(const struct vmac_value *v)
 
 static json_t *device_json(const struct vmac_device_status *d)
 {
-	json_t *o, *vars = json_object();
+	json_t *o, *vars = json_object(), *params = json_object();
 	int i;
 	for (i = 0; i < d->nvars; i++)
 		json_object_set_new(vars, d->vars[i].name, value_json(&d->vars[i].value));
+	for (i = 0; i < d->nparams; i++)
+		json_object_set_new(params, d->params[i].name, value_json(&d->params[i].value));
 	json_t *in = json_pack("{s:o, s:[i,i], s:I}", "digital", bools(d->inputs.digital, VMAC_DIGITAL_INPUTS),
 	                       "analog", (int)d->inputs.analog[0], (int)d->inputs.analog[1], "encoder",
 	                       (json_int_t)d->inputs.encoder);
@@ -95,6 +97,7 @@ static json_t *device_json(const struct vmac_device_status *d)
 	json_object_set_new(o, "slice", d->scheduled ? json_integer(d->slice) : json_null());
 	json_object_set_new(o, "machine", d->machine[0] ? json_string(d->machine) : json_null());
 	json_object_set_new(o, "note", d->note[0] ? json_string(d->note) : json_null());
+	json_object_set_new(o, "params", params);
 	return o;
 }
 
@@ -306,7 +309,8 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 {
 	struct vmac_bus_input_request req;
 	json_error_t jerr;
-	json_t *body, *name, *value;
+	json_t *body, *name, *value, *persist;
+	char err[512];
 	unsigned code;
 	memset(&req, 0, sizeof(req));
 	if (k->too_big || k->len > INPUT_MAX)
@@ -316,14 +320,15 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr);
 	name = json_object_get(body, "name");
 	value = json_object_get(body, "value");
-	if (!json_is_object(body) || !json_is_string(name) || !valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
+	persist = json_object_get(body, "persist");
+	if (!json_is_object(body) || !json_is_string(name) || (persist && !json_is_boolean(persist)) || !valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
 	    (value && !json_is_string(value) && !json_is_number(value) && !json_is_boolean(value) &&
 	     !json_is_null(value)) ||
 	    (json_is_string(value) && strlen(json_string_value(value)) > VMAC_DRIVER_STR_MAX)) {
 		json_decref(body);
 		return reply(c, MHD_HTTP_BAD_REQUEST,
 		             error_body("expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
-		                        "boolean or null}"));
+		                        "boolean or null, \"persist\": true or false (optional)}"));
 	}
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", json_string_value(name));
@@ -339,11 +344,21 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	} else {
 		req.value.type = VMAC_VALUE_NONE; /* a command without a value */
 	}
+	req.persist = json_is_true(persist);
 	json_decref(body);
+	if (req.persist && req.value.type == VMAC_VALUE_NONE)
+		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("a value to persist is needed"));
 	if (vmac_bus_request_input(h->bus, &req, INPUT_TIMEOUT_MS) != 0)
 		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body(req.reply));
+	if (req.rc == 0 && req.persist &&
+	    vmac_store_param_set(h->store, req.machine, req.name, &req.value, err, sizeof(err)) != 0) {
+		char msg[700];
+		snprintf(msg, sizeof(msg), "%s.%s is set, but it could not be persisted: %s", req.machine, req.name, err);
+		return reply(c, strstr(err, "full") ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR, error_body(msg));
+	}
 	if (req.rc == 0)
-		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "reply", req.reply));
+		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted",
+		                                       req.persist));
 	code = req.rc == 1 ? MHD_HTTP_CONFLICT : strstr(req.reply, "is not running") ? MHD_HTTP_NOT_FOUND
 	                                                                              : MHD_HTTP_BAD_GATEWAY;
 	return reply(c, code, error_body(req.reply));

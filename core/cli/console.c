@@ -1,7 +1,7 @@
 /* The line console over the HTTP API: see console.h and docs/CLI.md.
- * `?` reads a published variable from GET /api/status (one fetch per line),
- * `:` and `!` go to POST /api/devices/DEVICE/input; `>` (set and persist)
- * answers #6 until the store keeps parameters. */
+ * `?` reads a published variable or a param from GET /api/status (one
+ * fetch per line); `:`, `>` (with "persist": true) and `!` go to
+ * POST /api/devices/DEVICE/input. */
 #include "console.h"
 
 #include <getopt.h>
@@ -20,7 +20,7 @@ enum {
 	E_NAME = 3,       /* the device has no such variable, param or command */
 	E_REFUSED = 4,    /* the driver refused the value */
 	E_READ_ONLY = 5,  /* a published variable an operator may not set */
-	E_PERSIST = 6,    /* `>` is not available yet */
+	E_PERSIST = 6,    /* `>` on a name that is not a persist = true param, or the store could not write */
 	E_ACCESS = 7,     /* the token is missing, invalid or lacks the scope */
 	E_HOST = 8,       /* the host cannot be reached, is busy, or answered nonsense */
 };
@@ -125,8 +125,10 @@ static int request(struct session *s, const char *device, const char *name, cons
 		if (strcmp(text(json_object_get(d, "state")), "running") != 0)
 			break;
 		v = json_object_get(json_object_get(d, "variables"), name);
+		if (!v)
+			v = json_object_get(json_object_get(d, "params"), name);
 		if (!v) {
-			say(s, what, "no such published variable");
+			say(s, what, "no such published variable or param");
 			return E_NAME;
 		}
 		printf("%s:", what);
@@ -137,7 +139,8 @@ static int request(struct session *s, const char *device, const char *name, cons
 	return E_DEVICE;
 }
 
-static int input(struct session *s, const char *device, const char *name, json_t *value, const char *what)
+static int input(struct session *s, const char *device, const char *name, json_t *value, int persist,
+                 const char *what)
 {
 	char url[256], err[512], *body;
 	struct vmac_buffer b = {NULL, 0};
@@ -147,6 +150,8 @@ static int input(struct session *s, const char *device, const char *name, json_t
 	int rc;
 	if (value)
 		json_object_set(req, "value", value);
+	if (persist)
+		json_object_set_new(req, "persist", json_true());
 	body = json_dumps(req, JSON_COMPACT);
 	json_decref(req);
 	snprintf(url, sizeof(url), "http://%s/api/devices/%s/input", s->http, device);
@@ -167,14 +172,17 @@ static int input(struct session *s, const char *device, const char *name, json_t
 	case 409:
 		rc = msg && strstr(msg, "no such variable, param or command") ? E_NAME
 		     : msg && strstr(msg, "is read-only")                     ? E_READ_ONLY
+		     : msg && strstr(msg, "persist")                          ? E_PERSIST
 		                                                              : E_REFUSED;
 		break;
+	case 500:
+	case 507: rc = persist ? E_PERSIST : E_HOST; break;
 	default: rc = E_HOST; break;
 	}
 	if (rc == 0) {
 		fputs(what, stdout);
 		if (value) {
-			putchar(':');
+			putchar(persist ? '>' : ':');
 			print_value(stdout, value);
 		} else {
 			putchar('!');
@@ -207,12 +215,9 @@ static void submessage(struct session *s, const char *m)
 	snprintf(what, sizeof(what), "%s.%s", device, name);
 	if (*op == '?') {
 		rc = request(s, device, name, what);
-	} else if (*op == '>') {
-		rc = E_PERSIST;
-		say(s, what, "set-and-persist (>) is not in this version: use : to set");
 	} else {
-		json_t *v = *op == ':' ? parse_value(op + 1) : NULL;
-		rc = input(s, device, name, v, what);
+		json_t *v = *op == ':' || *op == '>' ? parse_value(op + 1) : NULL;
+		rc = input(s, device, name, v, *op == '>', what);
 		json_decref(v);
 	}
 	if (rc)

@@ -69,6 +69,12 @@ struct vmac_driver {
 	int nio;
 	struct var vars[VMAC_DRIVER_MAX_VARS];
 	int nvars;
+	struct param {
+		char name[VMAC_DRIVER_NAME_MAX + 1];
+		char unit[16];
+		int persist; /* persist = true: an operator may set it with persistence */
+	} params[VMAC_DRIVER_MAX_PARAMS];
+	int nparams;
 	uint32_t board_minor[VMAC_DRIVER_MAX_BOARDS];
 	int nboards;
 	struct vmac_driver_host host;
@@ -853,7 +859,14 @@ static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_l
 		if (check_value(L, s, why, sizeof(why)) != 0)
 			BAD("params.%s: %s%s", name, why, over ? " (host setting)" : "");
 		lua_setfield(L, values, name);
-		lua_pop(L, 1);
+		snprintf(d->params[d->nparams].name, sizeof(d->params[0].name), "%s", name);
+		if (opt_string(L, s, "unit", d->params[d->nparams].unit, sizeof(d->params[0].unit)))
+			BAD("params.%s: unit must be a string of at most 15 bytes", name);
+		lua_getfield(L, s, "persist");
+		if (!lua_isnil(L, -1) && !lua_isboolean(L, -1))
+			BAD("params.%s: persist must be true or false", name);
+		d->params[d->nparams++].persist = lua_toboolean(L, -1);
+		lua_pop(L, 2);
 	}
 	lua_pop(L, 1);
 overrides:
@@ -1909,6 +1922,82 @@ int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double
 	lua_rawgeti(L, LUA_REGISTRYINDEX, c.ref);
 	luaL_unref(L, LUA_REGISTRYINDEX, c.ref);
 	return guarded_call(nd, 2, 0, 1, err, errlen);
+}
+
+/* ---- params ---- */
+
+int vmac_driver_nparams(const struct vmac_driver *d)
+{
+	return d->nparams;
+}
+
+static int param_index(const struct vmac_driver *d, const char *name)
+{
+	int i;
+	for (i = 0; i < d->nparams; i++)
+		if (strcmp(d->params[i].name, name) == 0)
+			return i;
+	return -1;
+}
+
+int vmac_driver_param_persists(const struct vmac_driver *d, const char *name)
+{
+	int i = param_index(d, name);
+	return i < 0 ? -1 : d->params[i].persist;
+}
+
+int vmac_driver_param(const struct vmac_driver *d, int i, struct vmac_variable *out)
+{
+	lua_State *L = d->L;
+	memset(out, 0, sizeof(*out));
+	if (i < 0 || i >= d->nparams)
+		return -1;
+	memcpy(out->name, d->params[i].name, sizeof(out->name));
+	memcpy(out->unit, d->params[i].unit, sizeof(out->unit));
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+	lua_getfield(L, -1, d->params[i].name); /* an existing key: nothing allocated */
+	to_value(L, &out->value);
+	lua_pop(L, 2);
+	return 0;
+}
+
+int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const struct vmac_value *v, char *why,
+                              size_t whylen)
+{
+	lua_State *L = d->L;
+	int top = lua_gettop(L), i = param_index(d, name), type;
+	char how[160];
+	if (i < 0 || !d->params[i].persist) {
+		snprintf(why, whylen, "%s is %s", name, i < 0 ? "no longer a param of the driver" : "not persist = true");
+		return -1;
+	}
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+	lua_getfield(L, -1, name);
+	type = lua_type(L, -1);
+	lua_pop(L, 1);
+	if ((type == LUA_TNUMBER && v->type != VMAC_VALUE_NUMBER) || (type == LUA_TBOOLEAN && v->type != VMAC_VALUE_BOOL) ||
+	    (type == LUA_TSTRING && v->type != VMAC_VALUE_STRING)) {
+		snprintf(why, whylen, "%s: the stored value is not a %s", name, lua_typename(L, type));
+		lua_settop(L, top);
+		return -1;
+	}
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
+	lua_getfield(L, -1, "params");
+	lua_getfield(L, -1, name);
+	if (v->type == VMAC_VALUE_NUMBER)
+		lua_pushnumber(L, v->number);
+	else if (v->type == VMAC_VALUE_BOOL)
+		lua_pushboolean(L, v->number != 0);
+	else
+		lua_pushstring(L, v->str);
+	if (check_value(L, lua_gettop(L) - 1, how, sizeof(how)) != 0) {
+		snprintf(why, whylen, "%s: %s", name, how);
+		lua_settop(L, top);
+		return -1;
+	}
+	lua_setfield(L, top + 1, name); /* dev.params[name] = value */
+	lua_settop(L, top);
+	return 0;
 }
 
 int vmac_driver_nvars(const struct vmac_driver *d)

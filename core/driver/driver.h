@@ -157,6 +157,20 @@ const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, in
 void vmac_driver_set_tag(struct vmac_driver *d, int64_t tag);
 int64_t vmac_driver_tag(const struct vmac_driver *d);
 
+/* Params (the manifest's `params`, in name order): how many; whether name
+ * is one with persist = true (1), one without (0), or none (-1); the i-th
+ * with its value now (bus thread once bound; reads only, allocates
+ * nothing). 0, or -1 when there is no i-th. */
+int vmac_driver_nparams(const struct vmac_driver *d);
+int vmac_driver_param_persists(const struct vmac_driver *d, const char *name);
+int vmac_driver_param(const struct vmac_driver *d, int i, struct vmac_variable *out);
+
+/* A persisted value back into dev.params before the driver runs (the host's
+ * main thread, right after loading): name must be a persist = true param,
+ * v of its type and within its declaration. 0, or -1 with why. */
+int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const struct vmac_value *v, char *why,
+                              size_t whylen);
+
 /* Bytes the driver's heap holds now. */
 size_t vmac_driver_memory(const struct vmac_driver *d);
 

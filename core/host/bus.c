@@ -884,11 +884,14 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->inputs = d->inputs;
 	o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
 	o->driver_memory = m && m->drv && m->primary == i ? vmac_driver_memory(m->drv) : 0;
-	o->nvars = 0;
+	o->nvars = o->nparams = 0;
 	if (m && m->drv && m->primary == i) {
 		o->nvars = vmac_driver_nvars(m->drv);
 		for (v = 0; v < o->nvars; v++)
 			o->vars[v] = *vmac_driver_variable(m->drv, v);
+		o->nparams = vmac_driver_nparams(m->drv);
+		for (v = 0; v < o->nparams; v++)
+			vmac_driver_param(m->drv, v, &o->params[v]);
 	}
 }
 
@@ -1197,6 +1200,28 @@ static void end_probations(struct vmac_bus *bus, int64_t now)
 	}
 }
 
+int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
+                   char *reply, size_t replylen);
+
+/* An input request; with persist, only to a persist = true param. */
+static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
+{
+	struct device *d = find_by_name(bus, r->device);
+	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	int rc;
+	if (r->persist && m && m->drv && vmac_driver_param_persists(m->drv, r->name) != 1) {
+		snprintf(r->reply, sizeof(r->reply), "%s: %s", r->name,
+		         vmac_driver_param_persists(m->drv, r->name) < 0
+		             ? "only params persist, and the driver has no such param"
+		             : "this param does not persist (the driver does not declare it persist = true)");
+		return 1;
+	}
+	rc = vmac_bus_input(bus, r->device, r->name, &r->value, r->reply, sizeof(r->reply));
+	if (rc == 0 && m && m->used)
+		memcpy(r->machine, bus->dev[m->primary].ann.board, sizeof(r->machine));
+	return rc;
+}
+
 /* The requests other threads queued: run each, answer, post. */
 static void requests(struct vmac_bus *bus)
 {
@@ -1214,7 +1239,7 @@ static void requests(struct vmac_bus *bus)
 		if (q->kind == REQ_SWAP)
 			q->r.rc = swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
 		else
-			q->r.rc = vmac_bus_input(bus, q->r.device, q->r.name, &q->r.value, q->r.reply, sizeof(q->r.reply));
+			q->r.rc = input_request(bus, &q->r);
 		atomic_store(&q->state, REQ_DONE);
 		sem_post(&q->done);
 	}
@@ -1599,8 +1624,7 @@ static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_req
 		while (sem_wait(&q->done) != 0 && errno == EINTR) /* RUNNING or DONE: the answer is on its way */
 			;
 	}
-	req->rc = q->r.rc;
-	memcpy(req->reply, q->r.reply, sizeof(req->reply));
+	*req = q->r;
 	atomic_store(&q->state, REQ_FREE);
 	return 0;
 }

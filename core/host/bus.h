@@ -63,6 +63,8 @@ struct vmac_device_status {
 	unsigned level, slot, slice;
 	int nvars;         /* published variables (primary board only) */
 	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
+	int nparams;       /* the driver's params and their values now (primary board only) */
+	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
 	char address[48];
 	uint32_t id, major, minor;
 	uint32_t period_us;
@@ -150,8 +152,10 @@ struct vmac_bus_input_request {
 	char device[VMAC_NAME_MAX + 1];
 	char name[VMAC_NAME_MAX + 1];
 	struct vmac_value value;
+	int persist; /* set and persist: refused (rc 1) unless name is a persist = true param */
 	int rc;
 	char reply[VMAC_EVENT_TEXT];
+	char machine[VMAC_NAME_MAX + 1]; /* rc 0: the machine's name (its primary board), what persists under */
 };
 int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms);
 

@@ -59,6 +59,32 @@ static void wakeup(void *ctx)
 	ev_async_send(h->loop, &h->wake_w);
 }
 
+struct restore {
+	struct host *h;
+	struct vmac_driver *drv;
+	const char *device;
+};
+
+static void restore_one(void *ctx, const char *name, const struct vmac_value *v)
+{
+	struct restore *r = ctx;
+	char why[200], text[300];
+	if (vmac_driver_restore_param(r->drv, name, v, why, sizeof(why)) != 0) {
+		snprintf(text, sizeof(text), "%s: persisted param not restored: %s", r->device, why);
+		vmac_event_log_add(&r->h->log, "warning", r->device, text);
+	}
+}
+
+/* The params persisted for the machine whose primary is device go back
+ * into its freshly loaded driver (before it runs). */
+static void restore_params(struct host *h, struct vmac_driver *drv, const char *device)
+{
+	struct restore r = {h, drv, device};
+	char err[512];
+	if (vmac_store_param_list(h->store, device, restore_one, &r, err, sizeof(err)) < 0)
+		vmac_event_log_add(&h->log, "warning", device, err);
+}
+
 static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 {
 	struct vmac_host_cmd c;
@@ -69,6 +95,8 @@ static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 	c.generation = m->generation;
 	if (vmac_deploy_load(h->store, &h->cfg, m->driver, m->device, &c.drv, c.text, sizeof(c.text)) == -ENOENT)
 		c.missing = 1;
+	if (c.drv)
+		restore_params(h, c.drv, m->device);
 	if (vmac_bus_send_cmd(h->bus, &c) != 0) {
 		vmac_driver_free(c.drv);
 		vmac_event_log_add(&h->log, "warning", m->device, "command ring full; device will retry on discovery");

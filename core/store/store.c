@@ -43,6 +43,14 @@ static const char *const migrations[] = {
     " previous INTEGER NOT NULL DEFAULT 0,"
     " note TEXT NOT NULL DEFAULT '');"
     "CREATE INDEX driver_versions_by_driver ON driver_versions (driver, id)",
+    "CREATE TABLE params ("
+    " machine TEXT NOT NULL,"
+    " name TEXT NOT NULL,"
+    " type INTEGER NOT NULL,"
+    " number REAL NOT NULL DEFAULT 0,"
+    " string TEXT NOT NULL DEFAULT '',"
+    " updated REAL NOT NULL,"
+    " PRIMARY KEY (machine, name))",
 };
 
 static const char *const scope_names[] = {"none", "read", "operate", "deploy"};
@@ -575,5 +583,71 @@ int vmac_store_driver_list(struct vmac_store *s, const char *driver,
 	pthread_mutex_unlock(&s->lock);
 	if (rc != SQLITE_DONE)
 		return fail(s, "listing driver versions", err, errlen);
+	return n;
+}
+
+/* ---- persisted parameters ---- */
+
+int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *name, const struct vmac_value *v,
+                         char *err, size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc;
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db,
+	                       "INSERT OR REPLACE INTO params (machine, name, type, number, string, updated) "
+	                       "VALUES (?, ?, ?, ?, ?, ?)",
+	                       -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "persisting a param", err, errlen);
+	}
+	sqlite3_bind_text(st, 1, machine, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 2, name, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_int(st, 3, (int)v->type);
+	sqlite3_bind_double(st, 4, v->type == VMAC_VALUE_STRING ? 0 : v->number);
+	sqlite3_bind_text(st, 5, v->type == VMAC_VALUE_STRING ? v->str : "", -1, SQLITE_TRANSIENT);
+	sqlite3_bind_double(st, 6, now_s());
+	rc = sqlite3_step(st);
+	sqlite3_finalize(st);
+	if (rc != SQLITE_DONE) {
+		fail(s, "persisting a param", err, errlen);
+		pthread_mutex_unlock(&s->lock);
+		return -1;
+	}
+	pthread_mutex_unlock(&s->lock);
+	return 0;
+}
+
+int vmac_store_param_list(struct vmac_store *s, const char *machine,
+                          void (*fn)(void *ctx, const char *name, const struct vmac_value *v), void *ctx, char *err,
+                          size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc, n = 0;
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db, "SELECT name, type, number, string FROM params WHERE machine = ? ORDER BY name",
+	                       -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "reading persisted params", err, errlen);
+	}
+	sqlite3_bind_text(st, 1, machine, -1, SQLITE_TRANSIENT);
+	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+		struct vmac_value v;
+		char name[64];
+		memset(&v, 0, sizeof(v));
+		text_col(st, 0, name, sizeof(name));
+		v.type = (enum vmac_value_type)sqlite3_column_int(st, 1);
+		v.number = sqlite3_column_double(st, 2);
+		text_col(st, 3, v.str, sizeof(v.str));
+		fn(ctx, name, &v);
+		n++;
+	}
+	sqlite3_finalize(st);
+	if (rc != SQLITE_DONE) {
+		fail(s, "reading persisted params", err, errlen);
+		pthread_mutex_unlock(&s->lock);
+		return -1;
+	}
+	pthread_mutex_unlock(&s->lock);
 	return n;
 }

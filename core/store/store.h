@@ -14,6 +14,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../driver/driver.h"
+
 #define VMAC_TOKEN_ID_LEN 16
 #define VMAC_TOKEN_LEN (5 + VMAC_TOKEN_ID_LEN + 1 + 64) /* without the NUL */
 #define VMAC_TOKEN_NOTE_MAX 120
@@ -58,6 +60,19 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 /* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
  * revoked, or when the store cannot be read. */
 enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
+
+/* ---- persisted parameters (the console's `>`; docs/API.md) ----
+ * A param value per machine (its primary board's name) and param name,
+ * restored into dev.params when the machine's driver loads again. */
+
+/* Store (or replace) one value. 0, or -1 with err (nothing changed). */
+int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *name, const struct vmac_value *v,
+                         char *err, size_t errlen);
+/* Every persisted value of machine, in name order. Returns how many, or -1
+ * with err. */
+int vmac_store_param_list(struct vmac_store *s, const char *machine,
+                          void (*fn)(void *ctx, const char *name, const struct vmac_value *v), void *ctx, char *err,
+                          size_t errlen);
 
 /* ---- driver versions (hot reload, docs/API.md "Drivers") ----
  * Every version uploaded is kept with its source, a BLAKE2b-256 hash of it,

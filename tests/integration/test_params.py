@@ -1,0 +1,47 @@
+"""Persisted parameters (docs/API.md "POST /api/devices/NAME/input",
+docs/CLI.md "Console"): `>` sets a param and keeps it in the store; the value
+comes back when the machine attaches again, after a restart of the host too;
+only params declared persist = true persist, and a refused value stores
+nothing."""
+
+import os
+import subprocess
+
+
+def params(host, name, status=None):
+    return (host.device(name, status) or {}).get("params", {})
+
+
+def test_a_persisted_param_survives_a_restart(t):
+    host = t.host()
+    t.board("washer", "washer-1")
+    s = host.wait_running(["washer-1"])
+    assert params(host, "washer-1", s).get("program") == "normal", "the default programme: %r" % (
+        params(host, "washer-1", s),)
+    vmac = t.path("vmac")
+    env = dict(os.environ, VMAC_HTTP=host.http, VMAC_TOKEN=t.make_token("operate"))
+
+    def console(line):
+        p = subprocess.run([vmac, "console"], input=line + "\n", capture_output=True, text=True, env=env, timeout=30)
+        return p.returncode, p.stdout, p.stderr
+
+    rc, out, err = console("washer-1.program>quick washer-1.time_scale>0.5 washer-1.program>nosuch "
+                           "washer-1.state>idle washer-1.door_level_l:7")
+    assert out == ("washer-1.program>quick washer-1.time_scale#6 washer-1.program#4 washer-1.state#6 "
+                   "washer-1.door_level_l:7\n"), "console answers: %r (stderr %r)" % (out, err)
+    assert "does not persist" in err and "not one of the allowed values" in err, \
+        "the console does not say why: %r" % err
+    s = host.wait_status(lambda s: params(host, "washer-1", s).get("program") == "quick", 5,
+                         "program quick in the status")
+    rc, out, err = console("washer-1.program? washer-1.door_level_l?")
+    assert out == "washer-1.program:quick washer-1.door_level_l:7\n", "reading params back: %r %r" % (out, err)
+
+    # The host stops and starts again on the same store: the persisted
+    # programme is back, the value set without persistence is not.
+    host.kill()
+    host = t.host()
+    s = host.wait_running(["washer-1"], timeout_s=60)
+    p = params(host, "washer-1", s)
+    assert p.get("program") == "quick", "the persisted programme was not restored: %r" % p
+    assert p.get("door_level_l") == 5 and p.get("time_scale") == 1, \
+        "values set without persistence came back: %r" % p
