@@ -104,6 +104,11 @@ $(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/stor
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
+# The store killed mid-write (tests/integration/test_store.py).
+$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
 	@mkdir -p $(dir $@)
 	clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
@@ -149,7 +154,7 @@ test-fuzz: $(BUILD)/fuzz/fuzz_proto
 		grep -E '^Done' $(BUILD)/fuzz/log; \
 	else cat $(BUILD)/fuzz/log; echo "fuzzing found a failure; the input is in $(BUILD)/fuzz/"; exit 1; fi
 
-test-integration: $(BINS)
+test-integration: $(BINS) $(BUILD)/tests/store_crash
 	python3 tests/integration/run.py --bin $(BUILD)/bin
 
 # The whole unit and integration suite again, built with AddressSanitizer

@@ -1,0 +1,90 @@
+"""The store loses nothing committed (docs/HOST.md "The store"): a process
+writing to it is killed with SIGKILL at random points, 200 times; each time
+the database opens, passes SQLite's integrity check and holds every write
+that was acknowledged. And a full disk is an error on the request, not a
+crash: the host keeps running and nothing changes."""
+
+import os
+import random
+import shutil
+import subprocess
+import time
+import urllib.error
+import urllib.request
+
+RUNS = 200
+
+
+def store_crash(t):
+    return os.path.normpath(os.path.join(t.bindir, "..", "tests", "store_crash"))
+
+
+def test_kill_9_during_writes_loses_nothing_acknowledged(t):
+    exe = store_crash(t)
+    assert os.access(exe, os.X_OK), "%s is missing (make %s)" % (exe, exe)
+    seed = random.SystemRandom().randrange(1 << 30)
+    rnd = random.Random(seed)
+    acked_total = 0
+    for run in range(RUNS):
+        state = os.path.join(t.logdir, "kill-%03d" % run)
+        p = subprocess.Popen([exe, "write", state], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        first = p.stdout.readline()  # the store is open and one write is acknowledged
+        assert first.strip() == b"1", "run %d: the writer did not start: %r %r" % (run, first, p.stderr.read())
+        time.sleep(rnd.uniform(0, 0.05))  # the random point of the kill, not a synchronisation
+        p.kill()
+        rest = p.stdout.read()
+        p.wait()
+        lines = (first + rest).split(b"\n")
+        acked = int(lines[-2])  # the last complete line: its write had returned
+        acked_total += acked
+        c = subprocess.run([exe, "check", state, str(acked)], capture_output=True, text=True, timeout=60)
+        assert c.returncode == 0, "run %d of %d (seed %d), killed after %d acknowledged writes: %s" % (
+            run + 1, RUNS, seed, acked, c.stderr.strip())
+        shutil.rmtree(state)
+    assert acked_total > RUNS, "the writer hardly wrote anything (%d writes in %d runs)" % (acked_total, RUNS)
+
+
+def post(host, path, token, data, content_type="application/json"):
+    req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method="POST")
+    req.add_header("Content-Type", content_type)
+    req.add_header("Authorization", "Bearer " + token)
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, r.read().decode()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read().decode()
+
+
+def test_a_full_disk_is_an_error_not_a_crash(t):
+    """The state folder on a small tmpfs of its own (a mount namespace:
+    needs root, as CI has), filled up while the host runs."""
+    if os.geteuid() != 0:
+        raise AssertionError("this test needs root (a tmpfs in a mount namespace); run make test as root")
+    state = os.path.join(t.logdir, "small")
+    os.makedirs(state)
+    token = t.make_token("deploy")  # in the test's own state folder: copied below
+    wrapper = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+               'mount -t tmpfs -o size=1m tmpfs "$0" && cp "$1"/vmac.db* "$0"/ && shift && exec "$@"',
+               state, t.logdir]
+    host = t.host(wrapper=wrapper, extra=("--state", state))
+    t.board("washer", "washer-1")
+    version = host.device("washer-1", host.wait_running(["washer-1"]))["driver_version"]
+    # Fill the tmpfs from inside the host's mount namespace.
+    pid = host.popen.pid
+    fill = subprocess.run(["nsenter", "-t", str(pid), "-m", "sh", "-c",
+                           'dd if=/dev/zero of="%s/fill" bs=4k 2>/dev/null; df -k "%s" | tail -1' % (state, state)],
+                          capture_output=True, text=True, timeout=60)
+    assert " 0 " in fill.stdout or "100%" in fill.stdout, "the tmpfs did not fill: %r %r" % (fill.stdout,
+                                                                                            fill.stderr)
+    big = ("-- " + "x" * 76 + "\n") * 9000 + open(os.path.join(os.path.dirname(__file__), "..", "..", "scripts",
+                                                               "drivers", "washer.lua")).read()
+    code, body = post(host, "/api/drivers/washer?probation=0", token, big.encode(), "text/x-lua")
+    assert code in (500, 507) and "store" in body, "uploading to a full disk: HTTP %d %s" % (code, body[:300])
+    code, body = post(host, "/api/devices/washer-1/input", token, b'{"name": "program", "value": "quick", '
+                      b'"persist": true}')
+    assert code in (200, 500, 507), "persisting to a full disk: HTTP %d %s" % (code, body)
+    s = host.status()
+    d = host.device("washer-1", s)
+    assert d["state"] == "running" and d["driver_version"] == version, \
+        "the full disk changed the running machine: %s %s" % (d["state"], d["driver_version"])
+    assert host.alive(), "vmacd died on a full disk"
