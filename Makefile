@@ -16,9 +16,11 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Debian packages: compiler and pkg-config, the libraries the host links
 # (LuaJIT, libev, libmicrohttpd, jansson, libcurl, SQLite, libsodium), Check for unit tests,
 # clang + its runtime for the libFuzzer harness, python3 for integration tests,
-# luajit for the stdlib's Lua tests, lua-check for vmac lint.
+# luajit for the stdlib's Lua tests, lua-check for vmac lint, openssl for the
+# TLS test's certificate.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
-        libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit
+        libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
+        openssl
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests

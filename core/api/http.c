@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sodium.h>
 #include <time.h>
 
 #include "../host/deploy.h"
@@ -40,6 +41,7 @@ struct vmac_http {
 	struct vmac_status status;
 	unsigned port;
 	struct vmac_store *store;
+	char *tls_cert, *tls_key;   /* PEM texts while the daemon runs (TLS) */
 	_Atomic int stopping;       /* event streams end */
 	pthread_mutex_t fails_lock; /* connection threads share the table */
 	struct fail_count fails[FAIL_CLIENTS];
@@ -676,6 +678,33 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 
+/* A PEM file's text (at most 64 KiB), or NULL with err. */
+static char *read_pem(const char *path, const char *what, char *err, size_t errlen)
+{
+	FILE *f = fopen(path, "rb");
+	char *buf;
+	size_t n;
+	if (!f) {
+		snprintf(err, errlen, "%s %s: %s", what, path, strerror(errno));
+		return NULL;
+	}
+	buf = malloc(65537);
+	if (!buf) {
+		fclose(f);
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	n = fread(buf, 1, 65536, f);
+	fclose(f);
+	buf[n] = 0;
+	if (n == 0 || n == 65536 || !strstr(buf, "-----BEGIN ")) {
+		snprintf(err, errlen, "%s %s: not a PEM file (or empty, or over 64 KiB)", what, path);
+		free(buf);
+		return NULL;
+	}
+	return buf;
+}
+
 struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, struct vmac_event_log *log,
                                   struct vmac_store *store, const struct vmac_config *cfg, char *err,
                                   size_t errlen)
@@ -720,23 +749,49 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 		vmac_http_stop(h);
 		return NULL;
 	}
+	if (cfg->tls_cert[0] || cfg->tls_key[0]) {
+		if (!cfg->tls_cert[0] || !cfg->tls_key[0]) {
+			snprintf(err, errlen, "TLS needs both tls_cert and tls_key (PEM files)");
+			vmac_http_stop(h);
+			return NULL;
+		}
+		if (!MHD_is_feature_supported(MHD_FEATURE_TLS)) {
+			snprintf(err, errlen, "TLS: this libmicrohttpd was built without TLS support");
+			vmac_http_stop(h);
+			return NULL;
+		}
+		h->tls_cert = read_pem(cfg->tls_cert, "tls_cert", err, errlen);
+		h->tls_key = h->tls_cert ? read_pem(cfg->tls_key, "tls_key", err, errlen) : NULL;
+		if (!h->tls_key) {
+			vmac_http_stop(h);
+			return NULL;
+		}
+	}
 	/* A thread per connection: an operator input waits for the bus thread
 	 * without holding up other clients. */
 	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION |
-	                                 MHD_USE_ERROR_LOG,
+	                                 MHD_USE_ERROR_LOG | (h->tls_cert ? MHD_USE_TLS : 0),
 	                             0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, NULL,
 	                             MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin,
 	                             MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)30, MHD_OPTION_CONNECTION_LIMIT,
-	                             (unsigned)256, MHD_OPTION_END);
+	                             (unsigned)256,
+	                             /* the certificate and key, or nothing */
+	                             h->tls_cert ? MHD_OPTION_HTTPS_MEM_CERT : MHD_OPTION_END, h->tls_cert,
+	                             MHD_OPTION_HTTPS_MEM_KEY, h->tls_key, MHD_OPTION_END);
 	if (!h->daemon) {
-		snprintf(err, errlen, "cannot listen on %s (address in use, or not an address of this machine)",
-		         listen);
+		snprintf(err, errlen, "cannot listen on %s (address in use, not an address of this machine%s)", listen,
+		         h->tls_cert ? ", or a certificate and key that do not go together" : "");
 		vmac_http_stop(h);
 		return NULL;
 	}
 	info = MHD_get_daemon_info(h->daemon, MHD_DAEMON_INFO_BIND_PORT);
 	h->port = info ? info->port : (unsigned)port;
 	return h;
+}
+
+int vmac_http_tls(const struct vmac_http *h)
+{
+	return h->tls_cert != NULL;
 }
 
 unsigned vmac_http_port(const struct vmac_http *h)
@@ -755,5 +810,9 @@ void vmac_http_stop(struct vmac_http *h)
 	pthread_mutex_destroy(&h->fails_lock);
 	free(h->status.devices);
 	free(h->status.slot_load);
+	free(h->tls_cert);
+	if (h->tls_key)
+		sodium_memzero(h->tls_key, strlen(h->tls_key));
+	free(h->tls_key);
 	free(h);
 }

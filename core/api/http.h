@@ -20,6 +20,8 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
                                   struct vmac_store *store, const struct vmac_config *cfg, char *err,
                                   size_t errlen);
 unsigned vmac_http_port(const struct vmac_http *h);
+/* Whether it serves HTTPS (settings tls_cert and tls_key). */
+int vmac_http_tls(const struct vmac_http *h);
 void vmac_http_stop(struct vmac_http *h);
 
 #endif

@@ -15,6 +15,12 @@ struct vmac_buffer {
  * why (a file that cannot be read). */
 int vmac_client_token(const char *token, const char *file);
 
+/* The URL of path (starting with /) on host: "ADDR:PORT" means
+ * http://ADDR:PORT; "https://ADDR:PORT" (or "http://...") is taken as
+ * given. A host's self-signed certificate is trusted through $VMAC_CACERT
+ * (a PEM file). */
+void vmac_client_url(char *out, size_t len, const char *host, const char *path);
+
 /* method url [body as JSON]: 0 with the HTTP code and the answer in out, or
  * -1 when the host cannot be reached (err says why). */
 int vmac_client_call(const char *method, const char *url, const char *body, struct vmac_buffer *out, long *code,

@@ -100,7 +100,7 @@ static int request(struct session *s, const char *device, const char *name, cons
 	json_t *d;
 	size_t i;
 	if (!s->status) {
-		snprintf(url, sizeof(url), "http://%s/api/status", s->http);
+		vmac_client_url(url, sizeof(url), s->http, "/api/status");
 		if (vmac_client_call("GET", url, NULL, &b, &code, err, sizeof(err)) != 0) {
 			say(s, what, err);
 			return E_HOST;
@@ -142,7 +142,7 @@ static int request(struct session *s, const char *device, const char *name, cons
 static int input(struct session *s, const char *device, const char *name, json_t *value, int persist,
                  const char *what)
 {
-	char url[256], err[512], *body;
+	char url[256], path[160], err[512], *body;
 	struct vmac_buffer b = {NULL, 0};
 	long code;
 	json_t *req = json_pack("{s:s}", "name", name), *ans;
@@ -154,7 +154,8 @@ static int input(struct session *s, const char *device, const char *name, json_t
 		json_object_set_new(req, "persist", json_true());
 	body = json_dumps(req, JSON_COMPACT);
 	json_decref(req);
-	snprintf(url, sizeof(url), "http://%s/api/devices/%s/input", s->http, device);
+	snprintf(path, sizeof(path), "/api/devices/%s/input", device);
+	vmac_client_url(url, sizeof(url), s->http, path);
 	rc = vmac_client_call("POST", url, body ? body : "{}", &b, &code, err, sizeof(err));
 	free(body);
 	if (rc != 0) {

@@ -81,7 +81,7 @@ int vmac_events_main(int argc, char **argv)
 	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080", *token = NULL, *file = NULL;
 	struct follow *f = calloc(1, sizeof(*f));
 	unsigned long long after = 0;
-	char url[256], err[512], *end;
+	char url[256], path[64], err[512], *end;
 	long code;
 	int opt, rc;
 	if (!f)
@@ -130,7 +130,8 @@ int vmac_events_main(int argc, char **argv)
 		free(f);
 		return 2;
 	}
-	snprintf(url, sizeof(url), "http://%s/api/events?after=%llu", http, after);
+	snprintf(path, sizeof(path), "/api/events?after=%llu", after);
+	vmac_client_url(url, sizeof(url), http, path);
 	rc = vmac_client_stream(url, on_data, f, &code, err, sizeof(err));
 	if (rc != 0) {
 		fprintf(stderr, "vmac events: %s\n", err);

@@ -47,7 +47,7 @@ static int run(const struct common *o, const char *method, const char *path, con
 	json_t *a;
 	json_error_t jerr;
 	int rc;
-	snprintf(url, sizeof(url), "http://%s%s", o->http, path);
+	vmac_client_url(url, sizeof(url), o->http, path);
 	curl_global_init(CURL_GLOBAL_DEFAULT);
 	rc = body ? vmac_client_upload(url, body, len, &b, &code, err, sizeof(err))
 	          : vmac_client_call(method, url, NULL, &b, &code, err, sizeof(err));

@@ -183,7 +183,7 @@ static int cmd_status(int argc, char **argv)
 	}
 	if (vmac_client_token(token, token_file) != 0)
 		return 2;
-	snprintf(url, sizeof(url), "http://%s/api/status", http);
+	vmac_client_url(url, sizeof(url), http, "/api/status");
 	curl_global_init(CURL_GLOBAL_DEFAULT);
 	rc = http_get(url, &b);
 	curl_global_cleanup();

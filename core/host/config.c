@@ -32,6 +32,8 @@ static const struct key keys[] = {
     {S(scripts_dir)},
     {S(stdlib_dir)},
     {S(state_dir)},
+    {S(tls_cert)},
+    {S(tls_key)},
     {U(slice_us, 1, 1000000)},
     {U(slices_per_slot, 1, 256)},
     {U(max_level, 0, 12)},

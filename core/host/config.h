@@ -24,6 +24,8 @@ struct vmac_config {
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ below it) */
 	char stdlib_dir[VMAC_PATH_MAX];  /* the Lua standard library drivers require() from */
 	char state_dir[VMAC_PATH_MAX];
+	char tls_cert[VMAC_PATH_MAX];    /* PEM certificate (chain): the API serves HTTPS ("" = plain HTTP) */
+	char tls_key[VMAC_PATH_MAX];     /* its PEM private key */
 	uint32_t slice_us;           /* one time slice; a slot is slices_per_slot of them */
 	uint32_t slices_per_slot;    /* S: devices one slot can serve */
 	uint32_t max_level;          /* K: a block is 2^K slots; levels are 0..K */

@@ -284,10 +284,11 @@ int main(int argc, char **argv)
 	fprintf(stderr,
 	        "vmacd: bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us\n"
 	        "vmacd: drivers from %s%s%s/drivers\n"
-	        "vmacd: status at http://%.*s:%u/api/status\n",
+	        "vmacd: status at %s://%.*s:%u/api/status\n",
 	        h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
 	        h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us, h->cfg.drivers_dir,
-	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, (int)(strrchr(h->cfg.http, ':') - h->cfg.http),
+	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, vmac_http_tls(h->http) ? "https" : "http",
+	        (int)(strrchr(h->cfg.http, ':') - h->cfg.http),
 	        h->cfg.http, vmac_http_port(h->http));
 	ev_run(h->loop, 0);
 	vmac_bus_join(h->bus);

@@ -184,9 +184,10 @@ class Host(Proc):
         self.http = None
 
     def ready(self):
-        """Wait for the status server to be up; sets self.http."""
-        line = self.wait_line(r"status at http://(\S+)/api/status", 30, stream="stderr", what="'status at ...'")
-        self.http = re.search(r"status at http://(\S+)/api/status", line.text).group(1)
+        """Wait for the status server to be up; sets self.http (ADDR:PORT) and self.scheme (http or https)."""
+        line = self.wait_line(r"status at https?://(\S+)/api/status", 30, stream="stderr", what="'status at ...'")
+        m = re.search(r"status at (https?)://(\S+)/api/status", line.text)
+        self.scheme, self.http = m.group(1), m.group(2)
 
     def get(self, path, token=None):
         """GET path with the context's token (or token); the parsed JSON."""
