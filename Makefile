@@ -41,7 +41,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c core/host/deploy.c \
-                core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/sched/sched.c \
+                core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c

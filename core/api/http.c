@@ -14,6 +14,7 @@
 #include <time.h>
 
 #include "../host/deploy.h"
+#include "console.h"
 
 #define VMAC_VERSION_STRING "0.1.0"
 #define STATUS_EVENTS 20
@@ -269,6 +270,13 @@ static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_s
 	return 1;
 }
 
+/* The scope of the request's token (it has passed authorized()). */
+static enum vmac_scope scope_of(struct vmac_http *h, struct MHD_Connection *c)
+{
+	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+	return auth && strncmp(auth, "Bearer ", 7) == 0 ? vmac_token_check(h->store, auth + 7) : VMAC_SCOPE_NONE;
+}
+
 /* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
  * upload); other requests take at most INPUT_MAX. */
 #define BODY_MAX (1 << 20)
@@ -304,6 +312,27 @@ static int valid_name(const char *s, size_t max)
 	return n > 0;
 }
 
+/* Operator input through the bus thread, and into the store when it
+ * persists. Returns the HTTP status; msg says why on anything but 200. */
+static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *req, char *msg, size_t msglen)
+{
+	char err[512];
+	if (vmac_bus_request_input(h->bus, req, INPUT_TIMEOUT_MS) != 0) {
+		snprintf(msg, msglen, "%s", req->reply);
+		return MHD_HTTP_SERVICE_UNAVAILABLE;
+	}
+	if (req->rc == 0 && req->persist &&
+	    vmac_store_param_set(h->store, req->machine, req->name, &req->value, err, sizeof(err)) != 0) {
+		snprintf(msg, msglen, "%s.%s is set, but it could not be persisted: %s", req->machine, req->name, err);
+		return strstr(err, "full") ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR;
+	}
+	if (req->rc == 0)
+		return MHD_HTTP_OK;
+	snprintf(msg, msglen, "%s", req->reply);
+	return req->rc == 1 ? MHD_HTTP_CONFLICT : strstr(req->reply, "is not running") ? MHD_HTTP_NOT_FOUND
+	                                                                               : MHD_HTTP_BAD_GATEWAY;
+}
+
 /* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input
  * to the device's driver, through the bus thread. */
 static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
@@ -312,7 +341,7 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	struct vmac_bus_input_request req;
 	json_error_t jerr;
 	json_t *body, *name, *value, *persist;
-	char err[512];
+	char msg[VMAC_EVENT_TEXT + 200];
 	unsigned code;
 	memset(&req, 0, sizeof(req));
 	if (k->too_big || k->len > INPUT_MAX)
@@ -350,20 +379,82 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	json_decref(body);
 	if (req.persist && req.value.type == VMAC_VALUE_NONE)
 		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("a value to persist is needed"));
-	if (vmac_bus_request_input(h->bus, &req, INPUT_TIMEOUT_MS) != 0)
-		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body(req.reply));
-	if (req.rc == 0 && req.persist &&
-	    vmac_store_param_set(h->store, req.machine, req.name, &req.value, err, sizeof(err)) != 0) {
-		char msg[700];
-		snprintf(msg, sizeof(msg), "%s.%s is set, but it could not be persisted: %s", req.machine, req.name, err);
-		return reply(c, strstr(err, "full") ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR, error_body(msg));
-	}
-	if (req.rc == 0)
+	code = run_input(h, &req, msg, sizeof(msg));
+	if (code == MHD_HTTP_OK)
 		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted",
 		                                       req.persist));
-	code = req.rc == 1 ? MHD_HTTP_CONFLICT : strstr(req.reply, "is not running") ? MHD_HTTP_NOT_FOUND
-	                                                                              : MHD_HTTP_BAD_GATEWAY;
-	return reply(c, code, error_body(req.reply));
+	return reply(c, code, error_body(msg));
+}
+
+/* ---- POST /api/console: the line console ---- */
+
+struct console_ctx {
+	struct vmac_http *h;
+	int fresh; /* the status was read for this line */
+	struct vmac_device_status dev;
+};
+
+static const struct vmac_device_status *console_device(void *ctx, const char *name)
+{
+	struct console_ctx *x = ctx;
+	struct vmac_status *s = &x->h->status;
+	int i, found = 0;
+	pthread_mutex_lock(&x->h->status_lock);
+	if (!x->fresh) {
+		vmac_bus_status(x->h->bus, s);
+		x->fresh = 1;
+	}
+	for (i = 0; i < s->ndevices && !found; i++)
+		if (strcmp(s->devices[i].name, name) == 0 && strcmp(s->devices[i].state, "running") == 0) {
+			x->dev = s->devices[i];
+			found = 1;
+		}
+	pthread_mutex_unlock(&x->h->status_lock);
+	return found ? &x->dev : NULL;
+}
+
+static unsigned console_input(void *ctx, struct vmac_bus_input_request *req, char *msg, size_t msglen)
+{
+	struct console_ctx *x = ctx;
+	return run_input(x->h, req, msg, msglen);
+}
+
+/* The body: lines of submessages. The answer: each line's answer and the
+ * messages of its errors. */
+static enum MHD_Result console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate)
+{
+	struct console_ctx *x = malloc(sizeof(*x));
+	struct vmac_console_ops ops;
+	char answer[4096], errors[8192];
+	json_t *lines = json_array();
+	const char *p = k->body ? k->body : "";
+	int nerr = 0;
+	if (!x)
+		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body("out of memory"));
+	ops.device = console_device;
+	ops.input = console_input;
+	ops.ctx = x;
+	ops.may_operate = operate;
+	x->h = h;
+	while (*p) {
+		size_t n = strcspn(p, "\n");
+		char *line = strndup(p, n), *e, *save = NULL;
+		json_t *errs = json_array();
+		x->fresh = 0;
+		nerr += line ? vmac_console_line(&ops, line, answer, sizeof(answer), errors, sizeof(errors)) : 0;
+		for (e = strtok_r(errors, "\n", &save); line && e; e = strtok_r(NULL, "\n", &save))
+			json_array_append_new(errs, json_string(e));
+		if (line && strspn(line, " \t\r") < n)
+			json_array_append_new(lines, json_pack("{s:s, s:o}", "answer", answer, "errors", errs));
+		else
+			json_decref(errs);
+		free(line);
+		p += n;
+		if (*p)
+			p++;
+	}
+	free(x);
+	return reply(c, MHD_HTTP_OK, json_pack("{s:o, s:i}", "lines", lines, "errors", nerr));
 }
 
 /* ---- drivers: versions, upload (hot reload), rollback ---- */
@@ -662,6 +753,11 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	}
 	if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
 		return ret;
+	if (post && strcmp(url, "/api/console") == 0) {
+		if (k->too_big || k->len > INPUT_MAX)
+			return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("the request body is over 64 KiB"));
+		return console(h, c, k, scope_of(h, c) >= VMAC_SCOPE_OPERATE);
+	}
 	if (get && strcmp(url, "/api/drivers") == 0)
 		return driver_versions(h, c, NULL);
 	if (get && driver_path(url, "", device, sizeof(device)))
@@ -672,9 +768,9 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return events_stream(h, c);
 	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
 		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
-		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback"));
+		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 

@@ -1,7 +1,6 @@
 /* The line console over the HTTP API: see console.h and docs/CLI.md.
- * `?` reads a published variable or a param from GET /api/status (one
- * fetch per line); `:`, `>` (with "persist": true) and `!` go to
- * POST /api/devices/DEVICE/input. */
+ * Each line goes to the host's POST /api/console, which answers it
+ * (core/api/console.c): the console's rules live in one place. */
 #include "console.h"
 
 #include <getopt.h>
@@ -13,234 +12,76 @@
 
 #include "client.h"
 
-/* Error codes of a `#` answer (docs/CLI.md, "Console"). */
+/* Error codes the client gives itself (docs/CLI.md, "Console"): the host
+ * answers every other one. */
 enum {
-	E_SYNTAX = 1,     /* the submessage does not parse */
-	E_DEVICE = 2,     /* no running device of that name */
-	E_NAME = 3,       /* the device has no such variable, param or command */
-	E_REFUSED = 4,    /* the driver refused the value */
-	E_READ_ONLY = 5,  /* a published variable an operator may not set */
-	E_PERSIST = 6,    /* `>` on a name that is not a persist = true param, or the store could not write */
-	E_ACCESS = 7,     /* the token is missing, invalid or lacks the scope */
-	E_HOST = 8,       /* the host cannot be reached, is busy, or answered nonsense */
+	E_ACCESS = 7, /* the token is missing, invalid or lacks the scope */
+	E_HOST = 8,   /* the host cannot be reached, is busy, or answered nonsense */
 };
 
 struct session {
 	char http[128];
-	json_t *status; /* this line's status, fetched on the first `?` */
 	int errors;
-	int verbose;    /* say each error's message on stderr */
+	int verbose; /* say each error's message on stderr */
 };
 
-/* An error answer's message for people, on stderr. */
-static void say(struct session *s, const char *what, const char *why)
+/* Every submessage of text answered #code, the reason said once. */
+static void all_failed(struct session *s, const char *text, int code, const char *why)
 {
+	const char *p = text;
+	int first = 1;
+	for (;;) {
+		size_t n;
+		p += strspn(p, " \t\r\n");
+		if (!*p)
+			break;
+		n = strcspn(p, " \t\r\n");
+		printf("%s%.*s#%d", first ? "" : " ", (int)strcspn(p, "?:>! \t\r\n"), p, code);
+		s->errors++;
+		first = 0;
+		p += n;
+	}
+	if (!first)
+		putchar('\n');
 	if (s->verbose && why && *why)
-		fprintf(stderr, "vmac: %s: %s\n", what, why);
-	s->errors++;
+		fprintf(stderr, "vmac: %s\n", why);
 }
 
-static const char *text(json_t *v)
-{
-	const char *t = json_string_value(v);
-	return t ? t : "";
-}
-
-static int valid_name(const char *p, size_t n)
-{
-	size_t i;
-	if (n == 0 || !((p[0] >= 'a' && p[0] <= 'z') || (p[0] >= 'A' && p[0] <= 'Z')))
-		return 0;
-	for (i = 0; i < n; i++)
-		if (!((p[i] >= 'a' && p[i] <= 'z') || (p[i] >= 'A' && p[i] <= 'Z') || (p[i] >= '0' && p[i] <= '9') ||
-		      p[i] == '_' || p[i] == '-'))
-			return 0;
-	return 1;
-}
-
-/* A value as JSON: true/false, a number, or a string (bare or "quoted"). */
-static json_t *parse_value(const char *v)
-{
-	char *end;
-	double d;
-	size_t n = strlen(v);
-	if (strcmp(v, "true") == 0)
-		return json_true();
-	if (strcmp(v, "false") == 0)
-		return json_false();
-	if (n >= 2 && v[0] == '"' && v[n - 1] == '"')
-		return json_stringn(v + 1, n - 2);
-	d = strtod(v, &end);
-	if (n > 0 && *end == 0)
-		return json_real(d);
-	return json_string(v);
-}
-
-static void print_value(FILE *out, json_t *v)
-{
-	if (json_is_true(v))
-		fputs("true", out);
-	else if (json_is_false(v))
-		fputs("false", out);
-	else if (json_is_integer(v))
-		fprintf(out, "%lld", (long long)json_integer_value(v));
-	else if (json_is_real(v))
-		fprintf(out, "%.6g", json_real_value(v));
-	else if (json_is_string(v))
-		fputs(json_string_value(v), out);
-	else
-		fputs("-", out);
-}
-
-static int request(struct session *s, const char *device, const char *name, const char *what)
+/* One line of submessages: POST /api/console, its answer on stdout. */
+static void line(struct session *s, const char *text)
 {
 	char url[256], err[512];
 	struct vmac_buffer b = {NULL, 0};
 	long code;
-	json_t *d;
-	size_t i;
-	if (!s->status) {
-		vmac_client_url(url, sizeof(url), s->http, "/api/status");
-		if (vmac_client_call("GET", url, NULL, &b, &code, err, sizeof(err)) != 0) {
-			say(s, what, err);
-			return E_HOST;
-		}
-		if (code == 401 || code == 403) {
-			say(s, what, vmac_client_auth_hint());
-			free(b.data);
-			return E_ACCESS;
-		}
-		s->status = code == 200 ? json_loads(b.data ? b.data : "", 0, NULL) : NULL;
-		free(b.data);
-		if (!s->status) {
-			say(s, what, "the host's status is not readable");
-			return E_HOST;
-		}
-	}
-	json_array_foreach(json_object_get(s->status, "devices"), i, d)
-	{
-		json_t *v;
-		if (strcmp(text(json_object_get(d, "name")), device) != 0)
-			continue;
-		if (strcmp(text(json_object_get(d, "state")), "running") != 0)
-			break;
-		v = json_object_get(json_object_get(d, "variables"), name);
-		if (!v)
-			v = json_object_get(json_object_get(d, "params"), name);
-		if (!v) {
-			say(s, what, "no such published variable or param");
-			return E_NAME;
-		}
-		printf("%s:", what);
-		print_value(stdout, v);
-		return 0;
-	}
-	say(s, what, "no running device of that name");
-	return E_DEVICE;
-}
-
-static int input(struct session *s, const char *device, const char *name, json_t *value, int persist,
-                 const char *what)
-{
-	char url[256], path[160], err[512], *body;
-	struct vmac_buffer b = {NULL, 0};
-	long code;
-	json_t *req = json_pack("{s:s}", "name", name), *ans;
-	const char *msg;
-	int rc;
-	if (value)
-		json_object_set(req, "value", value);
-	if (persist)
-		json_object_set_new(req, "persist", json_true());
-	body = json_dumps(req, JSON_COMPACT);
-	json_decref(req);
-	snprintf(path, sizeof(path), "/api/devices/%s/input", device);
-	vmac_client_url(url, sizeof(url), s->http, path);
-	rc = vmac_client_call("POST", url, body ? body : "{}", &b, &code, err, sizeof(err));
-	free(body);
-	if (rc != 0) {
-		say(s, what, err);
-		return E_HOST;
+	json_t *ans, *l, *e;
+	size_t i, j;
+	if (strspn(text, " \t\r\n") == strlen(text))
+		return;
+	vmac_client_url(url, sizeof(url), s->http, "/api/console");
+	if (vmac_client_upload(url, text, strlen(text), &b, &code, err, sizeof(err)) != 0) {
+		all_failed(s, text, E_HOST, err);
+		fflush(stdout);
+		return;
 	}
 	ans = json_loads(b.data ? b.data : "", 0, NULL);
 	free(b.data);
-	msg = json_string_value(json_object_get(ans, "error"));
-	switch (code) {
-	case 200: rc = 0; break;
-	case 401:
-	case 403: rc = E_ACCESS; msg = msg ? msg : vmac_client_auth_hint(); break;
-	case 404: rc = E_DEVICE; break;
-	case 409:
-		rc = msg && strstr(msg, "no such variable, param or command") ? E_NAME
-		     : msg && strstr(msg, "is read-only")                     ? E_READ_ONLY
-		     : msg && strstr(msg, "persist")                          ? E_PERSIST
-		                                                              : E_REFUSED;
-		break;
-	case 500:
-	case 507: rc = persist ? E_PERSIST : E_HOST; break;
-	default: rc = E_HOST; break;
-	}
-	if (rc == 0) {
-		fputs(what, stdout);
-		if (value) {
-			putchar(persist ? '>' : ':');
-			print_value(stdout, value);
-		} else {
-			putchar('!');
+	if (code == 401 || code == 403)
+		all_failed(s, text, E_ACCESS, vmac_client_auth_hint());
+	else if (code != 200 || !json_is_array(json_object_get(ans, "lines")))
+		all_failed(s, text, E_HOST, json_string_value(json_object_get(ans, "error")));
+	json_array_foreach(code == 200 ? json_object_get(ans, "lines") : NULL, i, l)
+	{
+		printf("%s\n", json_string_value(json_object_get(l, "answer")));
+		json_array_foreach(json_object_get(l, "errors"), j, e)
+		{
+			if (s->verbose)
+				fprintf(stderr, "vmac: %s\n", json_string_value(e));
 		}
-	} else {
-		say(s, what, msg ? msg : "unexpected answer");
 	}
+	if (code == 200)
+		s->errors += (int)json_integer_value(json_object_get(ans, "errors"));
 	json_decref(ans);
-	return rc;
-}
-
-/* One submessage: answers on stdout (no newline). */
-static void submessage(struct session *s, const char *m)
-{
-	const char *dot = strchr(m, '.'), *op = dot ? strpbrk(dot + 1, "?:>!") : NULL;
-	char device[64], name[64], what[160];
-	int rc;
-	size_t nd, nn;
-	if (!dot || !op || (nd = (size_t)(dot - m)) >= sizeof(device) || (nn = (size_t)(op - dot - 1)) >= sizeof(name) ||
-	    !valid_name(m, nd) || !valid_name(dot + 1, nn) || ((*op == '?' || *op == '!') && op[1] != 0) ||
-	    ((*op == ':' || *op == '>') && op[1] == 0)) {
-		printf("%.*s#%d", (int)strcspn(m, "?:>!"), m, E_SYNTAX);
-		say(s, m, "expected DEVICE.NAME? DEVICE.NAME:VALUE DEVICE.NAME>VALUE or DEVICE.NAME!");
-		return;
-	}
-	memcpy(device, m, nd);
-	device[nd] = 0;
-	memcpy(name, dot + 1, nn);
-	name[nn] = 0;
-	snprintf(what, sizeof(what), "%s.%s", device, name);
-	if (*op == '?') {
-		rc = request(s, device, name, what);
-	} else {
-		json_t *v = *op == ':' || *op == '>' ? parse_value(op + 1) : NULL;
-		rc = input(s, device, name, v, *op == '>', what);
-		json_decref(v);
-	}
-	if (rc)
-		printf("%s#%d", what, rc);
-}
-
-/* One line of submessages, answered on one line. */
-static void line(struct session *s, char *text)
-{
-	char *save = NULL, *m;
-	int first = 1;
-	for (m = strtok_r(text, " \t\r\n", &save); m; m = strtok_r(NULL, " \t\r\n", &save)) {
-		if (!first)
-			putchar(' ');
-		first = 0;
-		submessage(s, m);
-	}
-	if (!first)
-		putchar('\n');
 	fflush(stdout);
-	json_decref(s->status);
-	s->status = NULL;
 }
 
 static int setup(struct session *s, int argc, char **argv, const char *usage, int *first_arg)

@@ -126,3 +126,24 @@ def test_the_console_answers_line_by_line(t):
     assert not host.device("lights-1", host.status())["outputs"]["digital"][2], "a read token switched the TV on"
     rc, out, err = run(["set"])
     assert rc == 2 and "usage" in err, "vmac set without a submessage: exit %d, %r" % (rc, err)
+
+
+def test_the_console_through_the_api(t):
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    host.wait_status(lambda s: host.device("lights-1", s)["variables"].get("tv") is False, 5, "tv published")
+    read, operate = t.make_token("read"), t.make_token("operate")
+    code, body = post(host, "/api/console", None, operate, raw=b"lights-1.kitchen:true lights-1.tv?\n\nx.y!\n")
+    assert code == 200, "POST /api/console: %d %r" % (code, body)
+    assert [line["answer"] for line in body["lines"]] == ["lights-1.kitchen:true lights-1.tv:false", "x.y#2"], \
+        "console answers: %r" % body
+    assert body["errors"] == 1 and "not running" in body["lines"][1]["errors"][0], \
+        "the error and its message: %r" % body
+    host.wait_status(lambda s: kitchen_light(host, s) == (True, True), 5, "the kitchen light on")
+    code, body = post(host, "/api/console", None, read, raw=b"lights-1.kitchen? lights-1.tv:true")
+    assert code == 200 and body["lines"][0]["answer"] == "lights-1.kitchen:true lights-1.tv#7", \
+        "a read token reads but does not set: %d %r" % (code, body)
+    assert not host.device("lights-1", host.status())["outputs"]["digital"][2], "a read token switched the TV on"
+    code, body = post(host, "/api/console", None, None, raw=b"lights-1.kitchen?")
+    assert code == 401, "the console without a token: %d %r" % (code, body)
