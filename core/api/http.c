@@ -386,6 +386,70 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	return reply(c, code, error_body(msg));
 }
 
+/* POST /api/devices/NAME/cycle {"action": "start", "program": "quick"}:
+ * start (a programme, or the driver's default), pause, resume or cancel a
+ * cycle: the commands of the same names of the driver (the stdlib's
+ * appliance offers them), through the same way as input. */
+static enum MHD_Result device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
+                                    const struct conn *k)
+{
+	static const char *const actions[] = {"start", "pause", "resume", "cancel"};
+	struct vmac_bus_input_request req;
+	char msg[VMAC_EVENT_TEXT + 200];
+	json_error_t jerr;
+	json_t *body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr), *action, *program;
+	unsigned code, i;
+	if (k->too_big || k->len > INPUT_MAX) {
+		json_decref(body);
+		return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("the request body is over 64 KiB"));
+	}
+	action = json_object_get(body, "action");
+	program = json_object_get(body, "program");
+	for (i = 0; i < 4 && !(json_is_string(action) && strcmp(json_string_value(action), actions[i]) == 0); i++)
+		;
+	if (i == 4 || (program && (i != 0 || !json_is_string(program) ||
+	                           strlen(json_string_value(program)) > VMAC_DRIVER_STR_MAX))) {
+		json_decref(body);
+		return reply(c, MHD_HTTP_BAD_REQUEST,
+		             error_body("expected {\"action\": \"start\", \"pause\", \"resume\" or \"cancel\", "
+		                        "\"program\": a programme's name (start only, optional)}"));
+	}
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	snprintf(req.name, sizeof(req.name), "%s", actions[i]);
+	if (program) {
+		req.value.type = VMAC_VALUE_STRING;
+		snprintf(req.value.str, sizeof(req.value.str), "%s", json_string_value(program));
+	}
+	json_decref(body);
+	code = run_input(h, &req, msg, sizeof(msg));
+	if (code == MHD_HTTP_OK)
+		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "reply", req.reply));
+	return reply(c, code, error_body(msg));
+}
+
+/* GET /api/devices and /api/devices/NAME: the devices of the status. */
+static enum MHD_Result devices(struct vmac_http *h, struct MHD_Connection *c, const char *name)
+{
+	struct vmac_status *s = &h->status;
+	json_t *list = json_array(), *one = NULL;
+	int i;
+	pthread_mutex_lock(&h->status_lock);
+	vmac_bus_status(h->bus, s);
+	for (i = 0; i < s->ndevices; i++)
+		if (!name)
+			json_array_append_new(list, device_json(&s->devices[i]));
+		else if (!one && strcmp(s->devices[i].name, name) == 0)
+			one = device_json(&s->devices[i]);
+	pthread_mutex_unlock(&h->status_lock);
+	if (!name)
+		return reply(c, MHD_HTTP_OK, json_pack("{s:o}", "devices", list));
+	json_decref(list);
+	if (!one)
+		return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such device"));
+	return reply(c, MHD_HTTP_OK, one);
+}
+
 /* ---- POST /api/console: the line console ---- */
 
 struct console_ctx {
@@ -744,6 +808,11 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return ret;
 		return device_input(h, c, device, k);
 	}
+	if (post && device_path(url, "/cycle", device, sizeof(device))) {
+		if (!authorized(h, c, VMAC_SCOPE_OPERATE, &ret))
+			return ret;
+		return device_cycle(h, c, device, k);
+	}
 	if (post && (driver_path(url, "/rollback", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
 		if (!authorized(h, c, VMAC_SCOPE_DEPLOY, &ret))
 			return ret;
@@ -758,6 +827,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("the request body is over 64 KiB"));
 		return console(h, c, k, scope_of(h, c) >= VMAC_SCOPE_OPERATE);
 	}
+	if (get && strcmp(url, "/api/devices") == 0)
+		return devices(h, c, NULL);
+	if (get && device_path(url, "", device, sizeof(device)))
+		return devices(h, c, device);
 	if (get && strcmp(url, "/api/drivers") == 0)
 		return driver_versions(h, c, NULL);
 	if (get && driver_path(url, "", device, sizeof(device)))
@@ -768,9 +841,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return events_stream(h, c);
 	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
 		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
-		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console"));
+		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
+		                       "/api/devices/NAME", "/api/devices/NAME/cycle"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 

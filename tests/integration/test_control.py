@@ -147,3 +147,45 @@ def test_the_console_through_the_api(t):
     assert not host.device("lights-1", host.status())["outputs"]["digital"][2], "a read token switched the TV on"
     code, body = post(host, "/api/console", None, None, raw=b"lights-1.kitchen?")
     assert code == 401, "the console without a token: %d %r" % (code, body)
+
+
+def test_devices_and_cycles_endpoints(t):
+    host = t.host(settings={"driver.washer.param.time_scale": "0.01"})
+    t.board("washer", "washer-1")
+    t.board("lights", "lights-1")
+    host.wait_status(lambda s: (host.device("washer-1", s) or {}).get("variables", {}).get("door") == "closed", 30,
+                     "the washer attached, its door seen closed")
+    names = sorted(d["name"] for d in host.get("/api/devices")["devices"])
+    assert names == ["lights-1", "washer-1"], "GET /api/devices: %r" % names
+    one = host.get("/api/devices/washer-1")
+    assert one["name"] == "washer-1" and one["params"]["program"] == "normal", "GET /api/devices/washer-1: %r" % one
+    try:
+        host.get("/api/devices/nosuch-1")
+        raise AssertionError("GET /api/devices/nosuch-1 answered 200")
+    except urllib.error.HTTPError as e:
+        assert e.code == 404, "GET /api/devices/nosuch-1: %d" % e.code
+
+    operate = t.make_token("operate")
+    cycle = "/api/devices/washer-1/cycle"
+    for body, want, text in [({"action": "explode"}, 400, "expected"),
+                             ({"action": "pause", "program": "quick"}, 400, "start only"),
+                             ({"action": "start", "program": "nosuch"}, 409, "no programme")]:
+        code, answer = post(host, cycle, body, operate)
+        assert code == want and text in answer.get("error", ""), "%r: %d %r" % (body, code, answer)
+    code, answer = post(host, "/api/devices/lights-1/cycle", {"action": "start"}, operate)
+    assert code == 409, "a cycle on the lights, which have none: %d %r" % (code, answer)
+    assert host.device("washer-1", host.status())["variables"]["state"] == "idle", "a refused start started"
+
+    code, answer = post(host, cycle, {"action": "start", "program": "quick"}, operate)
+    assert code == 200, "start quick: %d %r" % (code, answer)
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") == "running", 10, "running")
+    code, answer = post(host, cycle, {"action": "pause"}, operate)
+    assert code == 200, "pause: %d %r" % (code, answer)
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") == "paused", 10, "paused")
+    code, answer = post(host, cycle, {"action": "resume"}, operate)
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") == "running", 10,
+                     "running again")
+    code, answer = post(host, cycle, {"action": "cancel"}, operate)
+    assert code == 200, "cancel: %d %r" % (code, answer)
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("state") in ("cancelling", "cancelled"),
+                     10, "the washer cancelling")
