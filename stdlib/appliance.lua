@@ -3,7 +3,8 @@
 -- cancel, the machine's start and cancel buttons, a faster service level
 -- while a programme runs, and the programme's status as published variables.
 -- The programme itself is a `cycle`; the driver keeps its outputs and its
--- safety (interlocks, guards).
+-- safety (interlocks, guards). restore() continues the appliance of the old
+-- instance of the driver after a hot reload.
 
 local type, error, tostring = type, error, tostring
 
@@ -58,9 +59,11 @@ function Appliance:start(dev, name)
 	if why then
 		return nil, why
 	end
-	self.chosen = name
+	-- The cycle's body asks programme() at its first tick, after this; a
+	-- refused start leaves the running programme's name alone.
 	local ok, err = self.cycle:start()
 	if ok then
+		self.chosen = name
 		dev:set_level(self.run_level)
 		dev.vars.cycle = name
 	end
@@ -84,8 +87,8 @@ function Appliance:buttons(dev, start_pressed, cancel_pressed)
 end
 
 -- Once per tick, after the cycle's tick: back to the idle level when the
--- programme has ended, and the status variables (state, step, running,
--- paused_by, error, time_left_s).
+-- programme has ended, and the status variables (cycle, state, step,
+-- running, paused_by, error, time_left_s).
 function Appliance:publish(dev)
 	local c, v = self.cycle, dev.vars
 	local active = c:active()
@@ -93,6 +96,7 @@ function Appliance:publish(dev)
 		dev:set_level(self.idle_level)
 	end
 	self.was_active = active
+	v.cycle = self.chosen
 	v.state, v.step, v.running = c.state, c.step_name or "-", active
 	v.paused_by, v.error = c.pause_reasons[1] or "", c.error or ""
 	v.time_left_s = c:wait_left() or 0
@@ -113,6 +117,36 @@ function Appliance:input(dev, name, value)
 	elseif name == "cancel" then
 		return self.cycle:cancel()
 	end
+	return true
+end
+
+-- Take over the appliance of the old instance of the driver (hot reload):
+-- old is the plain-data copy of it found in migrate's old_state. Keeps the
+-- programme chosen last, the buttons' states at the old instance's last
+-- tick (a button held across the reload is no new press), whether a
+-- programme was running (so the idle level comes back when it ends), and the
+-- cycle (cycle:restore). Returns true, or nil and a message when the
+-- programme cannot go on: the running one is not among this version's
+-- programmes, or the cycle's own refusal. Nothing is changed then.
+function Appliance:restore(old)
+	if type(old) ~= "table" or type(old.cycle) ~= "table" then
+		error("appliance:restore: old must be a copy of an appliance (a table with its cycle)", 2)
+	end
+	local chosen = old.chosen
+	if type(chosen) ~= "string" then
+		chosen = nil
+	end
+	if old.cycle.phase == "running" and self.programs[chosen] == nil then
+		return nil, "appliance:restore: programme '" .. tostring(chosen)
+			.. "' is running, but this version has no programme of that name"
+	end
+	local ok, err = self.cycle:restore(old.cycle)
+	if not ok then
+		return nil, err
+	end
+	self.chosen = chosen
+	self.last_start, self.last_cancel = old.last_start == true, old.last_cancel == true
+	self.was_active = old.was_active == true
 	return true
 end
 

@@ -3,6 +3,9 @@
 -- pause/resume, cancel with a cleanup, interlocks and failure by step.
 -- Needs `coroutine` in the sandbox. Time comes only from tick(now, ...): the
 -- cycle clock counts running time in seconds and stands still while paused.
+-- restore() continues in a new instance of the driver (hot reload) a cycle
+-- of the old one, from a plain copy of it: the body runs again, skipping the
+-- steps the old instance had finished.
 
 local timer = require "timer"
 
@@ -23,9 +26,20 @@ local EPSILON_S = 1e-9
 
 local ACTIVE = { running = true, cancelling = true }
 local FINISHED = { done = true, cancelled = true, failed = true }
+local PHASES = { idle = true, running = true, cancelling = true, done = true, cancelled = true, failed = true }
 
 local function is_number(x)
 	return type(x) == "number" and x == x
+end
+
+local function number_or(x, default)
+	if is_number(x) then return x end
+	return default
+end
+
+local function string_or_nil(x)
+	if type(x) == "string" then return x end
+	return nil
 end
 
 -- The default hold: every boolean output of the cycle off, every number 0.
@@ -68,6 +82,25 @@ local function remove_reason(c, reason)
 		end
 	end
 	return false
+end
+
+-- The coroutine of the steps. A restored cycle (restore) replays the body
+-- from its start: a body that ends before it got back to where the old
+-- instance was is not the body the old instance ran.
+local function run_body(c)
+	if c.replay ~= nil then
+		c.step_index = 0 -- found again step by step, as the old instance found them
+	end
+	c.body(c)
+	local replay = c.replay
+	if replay ~= nil then
+		error("restore: the body ended after " .. c.steps_begun .. " steps, but the old version was at step "
+			.. replay.steps_begun .. " (" .. tostring(replay.step_name) .. "); cannot resume", 0)
+	end
+end
+
+local function run_cleanup(c)
+	c.cleanup(c)
 end
 
 -- A step list {{name, fn}, ...} (or {name = , run = }) as one body function.
@@ -157,6 +190,15 @@ function cycle.new(body, options)
 		steps = names or {}, declared_steps = names ~= nil,
 		out = out, pause_reasons = {},
 		phase = "idle", state = "idle",
+		-- Where the coroutine is, in plain data that a hot reload copies
+		-- (restore): steps begun since start (or since the cleanup began),
+		-- seconds of the wait() calls finished since the last step boundary,
+		-- and the cycle time at which the current wait began.
+		steps_begun = 0, segment_waited_s = 0, wait_started_s = nil,
+		-- After restore: credit_s, seconds of waiting the old instance had
+		-- done in this step, taken off its waits; replay, until the body is
+		-- back where the old instance was, that position (restore).
+		credit_s = 0, replay = nil,
 	}, Cycle)
 	return c
 end
@@ -169,13 +211,13 @@ function Cycle:start()
 	if ACTIVE[self.phase] then
 		return nil, "cycle is already " .. self.phase
 	end
-	local body = self.body
-	self.co = create(function() body(self) end)
+	self.co = create(run_body)
 	self.phase = "running"
 	self.error, self.error_step = nil, nil
 	self.step_name, self.step_index, self.in_step = nil, 0, false
 	self.step_started_s = 0
-	self.wait_until_s = nil
+	self.wait_until_s, self.wait_started_s = nil, nil
+	self.steps_begun, self.segment_waited_s, self.credit_s, self.replay = 0, 0, 0, nil
 	self.clock, self.time, self.dt, self.started_at = nil, nil, 0, nil
 	self.pause_reasons = {}
 	self.hold_pending, self.flush_pending = false, false
@@ -228,13 +270,13 @@ end
 local function stop(c)
 	c.hold_pending = true
 	c.in_step = false
-	c.wait_until_s = nil
+	c.wait_until_s, c.wait_started_s = nil, nil
+	c.steps_begun, c.segment_waited_s, c.credit_s, c.replay = 0, 0, 0, nil
 	c.step_started_s = c:elapsed()
 	if c.cleanup then
-		local cleanup = c.cleanup
 		c.phase = "cancelling"
 		c.step_name = "cleanup"
-		c.co = create(function() cleanup(c) end)
+		c.co = create(run_cleanup)
 	else
 		c.phase = c.error and "failed" or "cancelled"
 		c.co = nil
@@ -422,8 +464,33 @@ local function step_position(c, name)
 	return #steps
 end
 
+-- The end of a step, passing fn's results through.
+local function end_step(c, ...)
+	c.in_step = false
+	c.segment_waited_s, c.credit_s = 0, 0
+	return ...
+end
+
+-- A restored cycle is back where the old instance was: from here on it runs
+-- for real, and its waits take off what the old instance had waited since
+-- the last step boundary (replay.waited_s, plus the wait it was in).
+local function arrive(c, replay)
+	c.replay = nil
+	c.step_started_s = replay.step_started_s
+	local credit = replay.waited_s
+	local wait_started = replay.wait_started_s
+	if wait_started ~= nil then
+		local into = c:elapsed() - wait_started
+		if into > 0 then credit = credit + into end
+	end
+	c.segment_waited_s, c.credit_s = 0, credit
+	c.wait_until_s, c.wait_started_s = nil, nil
+end
+
 -- Run fn(c) as the step called name (c.step_name, c.step_index); returns
--- what fn returns. Steps do not nest.
+-- what fn returns. Steps do not nest. While a restored cycle replays its
+-- body, the steps the old instance had finished return at once (nil), and
+-- the one it was in runs again from its beginning.
 function Cycle:step(name, fn)
 	if type(name) ~= "string" then
 		error("cycle:step: name must be a string", 2)
@@ -435,39 +502,63 @@ function Cycle:step(name, fn)
 	if self.in_step then
 		error("cycle:step: step " .. name .. " inside step " .. self.step_name .. "; steps do not nest", 2)
 	end
+	local begun = self.steps_begun + 1
+	self.steps_begun = begun
 	self.step_name = name
 	if self.phase == "running" then
 		self.step_index = step_position(self, name)
 	end
-	self.step_started_s = self:elapsed()
-	self.in_step = true
-	-- fn's results pass through; an error propagates and fails the cycle.
-	local function finish_step(...)
-		self.in_step = false
-		return ...
+	local replay = self.replay
+	if replay ~= nil and begun <= replay.steps_begun then
+		if begun < replay.steps_begun then
+			return -- the old instance finished this step
+		end
+		if name ~= replay.step_name then
+			error("restore: step " .. begun .. " is '" .. name .. "' in this version but was '"
+				.. tostring(replay.step_name) .. "' in the old one; cannot resume", 0)
+		end
+		if not replay.in_step then
+			arrive(self, replay) -- the old instance was past the end of this step
+			return
+		end
+		self.in_step = true
+		arrive(self, replay)
+	else
+		self.step_started_s = self:elapsed()
+		self.in_step = true
+		self.segment_waited_s, self.credit_s = 0, 0
 	end
-	return finish_step(fn(self))
+	-- fn's results pass through; an error propagates and fails the cycle.
+	return end_step(self, fn(self))
 end
 
--- Wait for the next tick.
+-- Wait for the next tick. (Replaying a restored cycle: at once.)
 function Cycle:yield()
 	check_inside(self, "yield", 2)
+	if self.replay ~= nil then return end
 	yield()
 end
 
 -- Wait seconds of running time (paused time does not count). wait(0)
--- returns at once.
+-- returns at once. In a restored step, the old instance's waiting (credit_s)
+-- counts as waited; replaying a restored cycle, it returns at once.
 function Cycle:wait(seconds)
 	if not is_number(seconds) or seconds < 0 then
 		error("cycle:wait: seconds must be a number >= 0", 2)
 	end
 	check_inside(self, "wait", 2)
-	local deadline = self:elapsed() + seconds
-	self.wait_until_s = deadline
+	if self.replay ~= nil then return end
+	local credit = self.credit_s
+	local taken = credit < seconds and credit or seconds
+	self.credit_s = credit - taken
+	local started = self:elapsed() - taken -- as if it had begun taken seconds ago
+	local deadline = started + seconds
+	self.wait_started_s, self.wait_until_s = started, deadline
 	while self:elapsed() < deadline - EPSILON_S do
 		yield()
 	end
-	self.wait_until_s = nil
+	self.wait_started_s, self.wait_until_s = nil, nil
+	self.segment_waited_s = self.segment_waited_s + seconds
 end
 
 local function await(c, condition, timeout_s, where)
@@ -478,6 +569,9 @@ local function await(c, condition, timeout_s, where)
 		error("cycle:" .. where .. ": timeout must be a number >= 0 (seconds) or nil", 3)
 	end
 	check_inside(c, where, 3)
+	if c.replay ~= nil then
+		return true -- replaying a restored cycle: the old instance got past this
+	end
 	local deadline = timeout_s and c:elapsed() + timeout_s
 	while not condition(c) do
 		if deadline and c:elapsed() >= deadline - EPSILON_S then
@@ -502,6 +596,174 @@ end
 -- on timeout, for steps that handle a timeout themselves.
 function Cycle:try_wait_until(condition, timeout_s)
 	return await(self, condition, timeout_s, "try_wait_until")
+end
+
+-- ---- hot reload: continue the cycle of an old instance ----
+
+-- Running seconds on a copied cycle's clock at its last tick, or nil when
+-- it never ticked. The clock arrives as a plain table (timer's fields).
+local function copied_elapsed(old)
+	local clock, time = old.clock, old.time
+	if type(clock) ~= "table" or not is_number(time) then return nil end
+	local elapsed = number_or(clock.banked_s, 0)
+	if clock.running == true and is_number(clock.started_s) then
+		elapsed = elapsed + (time - clock.started_s)
+	end
+	return elapsed > 0 and elapsed or 0
+end
+
+-- Where a copied running cycle was in its body, as a replay position (all
+-- times on the cycle clock, which restore continues), or nil when the copy
+-- does not say.
+local function replay_position(old)
+	local pos = old.replay
+	if type(pos) ~= "table" then -- the coroutine's own position
+		if not is_number(old.steps_begun) then return nil end
+		local wait_started = number_or(old.wait_started_s, nil)
+		pos = {
+			steps_begun = old.steps_begun, step_name = old.step_name, in_step = old.in_step,
+			step_started_s = old.step_started_s,
+			-- waits finished since the last step boundary, and credit not yet used
+			waited_s = number_or(old.segment_waited_s, 0) + number_or(old.credit_s, 0),
+			wait_started_s = wait_started,
+		}
+	end -- else: itself restored and not yet back where its old instance was
+	if not is_number(pos.steps_begun) or pos.steps_begun < 0
+		or (pos.steps_begun > 0 and type(pos.step_name) ~= "string") then
+		return nil
+	end
+	return {
+		steps_begun = pos.steps_begun, step_name = pos.step_name, in_step = pos.in_step == true,
+		step_started_s = number_or(pos.step_started_s, 0), waited_s = number_or(pos.waited_s, 0),
+		wait_started_s = number_or(pos.wait_started_s, nil),
+	}
+end
+
+-- The pause reasons to keep: the old ones, but not those of an interlock
+-- the old instance had and this one has not (nothing would clear them).
+local function kept_reasons(c, old)
+	local mine, dropped = {}, {}
+	for _, il in ipairs(c.interlocks) do mine[il.name] = true end
+	if type(old.interlocks) == "table" then
+		for _, il in ipairs(old.interlocks) do
+			if type(il) == "table" and type(il.name) == "string" and not mine[il.name] then
+				dropped[il.name] = true
+			end
+		end
+	end
+	local reasons, seen = {}, {}
+	if type(old.pause_reasons) == "table" then
+		for _, reason in ipairs(old.pause_reasons) do
+			if type(reason) == "string" and not dropped[reason] and not seen[reason] then
+				seen[reason] = true
+				reasons[#reasons + 1] = reason
+			end
+		end
+	end
+	return reasons
+end
+
+-- Take over the cycle of the old instance of the driver (hot reload); old
+-- is the plain-data copy of that cycle object found in migrate's old_state
+-- (functions, coroutines and metatables dropped). Finished or idle: its
+-- status is taken over. Running: the body starts again and replays to where
+-- the old one was (docs/STDLIB.md "cycle", "Hot reload"). Cancelling: the
+-- cleanup runs again from its start. Call it before the first tick of the
+-- new instance. Returns true, or nil and a message when the copy does not
+-- say where a running cycle was (this object is then unchanged).
+function Cycle:restore(old)
+	if type(old) ~= "table" or not PHASES[old.phase] then
+		error("cycle:restore: old must be a copy of a cycle (a table with its phase)", 2)
+	end
+	if self.co ~= nil and running() == self.co then
+		error("cycle:restore: call it from the driver (migrate), not from the cycle's steps", 2)
+	end
+	local phase = old.phase
+	local position
+	if phase == "running" then
+		position = replay_position(old)
+		if position == nil then
+			return nil, "cycle:restore: the old cycle is running but its copy does not say how far it got"
+				.. " (no steps_begun: a cycle.lua without restore)"
+		end
+	end
+
+	-- The clock goes on from the old one's elapsed time at its last tick.
+	local elapsed = copied_elapsed(old)
+	if elapsed ~= nil then
+		self.time = old.time
+		self.clock = timer.new(old.time, elapsed)
+		if old.clock.running ~= true then
+			self.clock:pause(old.time)
+		end
+		self.started_at = number_or(old.started_at, nil)
+	else
+		self.time, self.clock, self.started_at = nil, nil, nil
+	end
+	self.dt = 0
+
+	-- The outputs the steps had set: the names this version declares (all,
+	-- when it declares none).
+	local declared = next(self.out) ~= nil
+	if type(old.out) == "table" then
+		for name, value in pairs(old.out) do
+			local kind = type(value)
+			if (kind == "boolean" or kind == "number" or kind == "string")
+				and (not declared or self.out[name] ~= nil) then
+				self.out[name] = value
+			end
+		end
+	end
+	if not self.declared_steps then
+		local steps = {}
+		if type(old.steps) == "table" then
+			for index, name in ipairs(old.steps) do
+				if type(name) ~= "string" then break end
+				steps[index] = name
+			end
+		end
+		self.steps = steps
+	end
+	if type(old.interlocks) == "table" then
+		for _, il in ipairs(self.interlocks) do
+			for _, old_il in ipairs(old.interlocks) do
+				if type(old_il) == "table" and old_il.name == il.name then
+					il:restore(old_il)
+					break
+				end
+			end
+		end
+	end
+
+	self.phase = phase
+	self.co = nil
+	self.error, self.error_step = string_or_nil(old.error), string_or_nil(old.error_step)
+	self.step_name = string_or_nil(old.step_name)
+	self.step_index = number_or(old.step_index, 0)
+	self.in_step = false
+	self.step_started_s = number_or(old.step_started_s, 0)
+	self.wait_until_s, self.wait_started_s = nil, nil
+	self.steps_begun, self.segment_waited_s, self.credit_s, self.replay = 0, 0, 0, nil
+	self.hold_pending, self.flush_pending = false, false
+	self.pause_reasons = ACTIVE[phase] and kept_reasons(self, old) or {}
+
+	if phase == "running" then
+		self.co = create(run_body)
+		self.wait_until_s = number_or(old.wait_until_s, nil) -- wait_left() until the replay
+		if position.steps_begun == 0 then
+			arrive(self, position) -- before the first step: nothing to replay
+		else
+			self.replay = position
+		end
+	elseif phase == "cancelling" then
+		stop(self) -- the cleanup again from its start, from safe outputs
+	elseif FINISHED[phase] then
+		-- the last outputs of a cycle that ended after its last tick
+		self.hold_pending = old.hold_pending == true
+		self.flush_pending = old.flush_pending == true
+	end
+	update_state(self)
+	return true
 end
 
 return cycle

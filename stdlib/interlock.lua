@@ -65,6 +65,22 @@ function Interlock:reset()
 	self.state, self.since, self.message, self.rearmed = "clear", nil, nil, false
 end
 
+local STATES = { clear = true, tripped = true, rearming = true, fault = true }
+
+-- Take over the state of the same interlock in another instance of the
+-- driver (hot reload): old is a plain copy of it, its functions dropped.
+-- One that held goes on holding, so a door being locked again must still
+-- report locked before a guarded cycle goes on.
+function Interlock:restore(old)
+	if type(old) ~= "table" or not STATES[old.state] then
+		error("interlock:restore: old must be a copy of an interlock (a table with its state)", 2)
+	end
+	self.state = old.state
+	self.since = type(old.since) == "number" and old.since or nil
+	self.message = type(old.message) == "string" and old.message or nil
+	self.rearmed = old.rearmed == true
+end
+
 -- level 3: the caller of the public function that checks.
 local function check_time_inputs(now, inputs, where)
 	if type(now) ~= "number" or now ~= now then

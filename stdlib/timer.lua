@@ -28,15 +28,22 @@ local function check_seconds(seconds, where, what)
 	end
 end
 
--- timer.new(now) -> a running timer started at now.
-function timer.new(now)
+-- timer.new(now, elapsed_s) -> a running timer started at now, with
+-- elapsed_s seconds (default 0) already on it: a timer that continues one
+-- of another instance (hot reload, cycle:restore).
+function timer.new(now, elapsed_s)
 	check_time(now, "timer.new")
+	if elapsed_s == nil then
+		elapsed_s = 0
+	else
+		check_seconds(elapsed_s, "timer.new", "elapsed_s")
+	end
 	return setmetatable({
 		running = true,
-		started_s = now,     -- bus time of the last (re)start or resume
-		banked_s = 0,        -- running time accumulated before started_s
-		fired = false,       -- after() has returned true since the last reset
-		next_due_s = nil,    -- every(): elapsed time of the next period end
+		started_s = now,      -- bus time of the last (re)start or resume
+		banked_s = elapsed_s, -- running time accumulated before started_s
+		fired = false,        -- after() has returned true since the last reset
+		next_due_s = nil,     -- every(): elapsed time of the next period end
 	}, Timer)
 end
 

@@ -2,7 +2,8 @@
 -- again for each rinse (docs/BOARD.md, "Dishwasher"). Programmes are files
 -- in scripts/cycles/dishwasher/, written with the steps this driver offers
 -- (`d` below): fill, wash, drain, dry. The door has no lock: opening it
--- stops everything and pauses the programme until it is closed again.
+-- stops everything and pauses the programme until it is closed again. A
+-- hot reload continues a running programme where it was (migrate, below).
 
 local appliance = require "appliance"
 local cycle = require "cycle"
@@ -19,7 +20,7 @@ local IDLE_LEVEL, RUN_LEVEL = 6, 5
 
 local driver = {
 	name = "dishwasher",
-	version = "1.0.0",
+	version = "1.1.0",
 	level = IDLE_LEVEL,
 	description = "dishwasher: fill to the level switch, wash, drain, rinse; door interlock",
 	io = {
@@ -115,6 +116,7 @@ control = appliance.new { cycle = run, programs = programs, idle_level = IDLE_LE
 
 function driver.attach(dev)
 	params = dev.params
+	dev.state.control = control -- the programme, the buttons and the cycle (migrate)
 end
 
 function driver.tick(dev, inputs)
@@ -130,6 +132,19 @@ end
 
 function driver.input(dev, name, value)
 	return control:input(dev, name, value)
+end
+
+-- Hot reload (docs/DRIVERS.md): after attach, with the old version's
+-- outputs in dev.out. The programme goes on where it was.
+function driver.migrate(dev, old)
+	if type(old.control) ~= "table" then -- 1.0.0 kept nothing in dev.state
+		local out = dev.out
+		if out.fill_valve or out.wash_motor or out.drain_pump then
+			error("the running version keeps no state to continue from; reload when the dishwasher is idle", 0)
+		end
+		return
+	end
+	assert(control:restore(old.control))
 end
 
 return driver

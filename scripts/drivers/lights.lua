@@ -2,11 +2,12 @@
 -- relays. The wall switches are toggle switches: every change of a switch's
 -- position flips its light (switch 1: kitchen, switch 2: dining). An
 -- operator may set any of the four from the UI or the API; the state is
--- published. Board I/O: docs/BOARD.md, "Lights".
+-- published. A hot reload keeps every relay as it was. Board I/O:
+-- docs/BOARD.md, "Lights".
 
 local driver = {
 	name = "lights",
-	version = "1.0.0",
+	version = "1.1.0",
 	level = 4, -- 16 ms with 1 ms slots: a switch feels instant
 	description = "kitchen and dining lights, TV and disposal relays, two wall switches",
 	io = {
@@ -30,36 +31,68 @@ local driver = {
 }
 
 local RELAYS = { "kitchen", "dining", "tv", "disposal" }
-local last1, last2 -- switch positions at the previous tick
+local SWITCHES = { "switch1", "switch2" }
+-- The state, in dev.state for a hot reload: relay name -> on, and switch
+-- name -> its position at the previous tick (nil before the first).
+local relays = { kitchen = false, dining = false, tv = false, disposal = false }
+local switches = {}
 
-function driver.attach(dev)
+local function show(dev)
 	for _, r in ipairs(RELAYS) do
-		dev.vars[r] = false
+		dev.vars[r] = relays[r]
 	end
 end
 
-function driver.tick(dev, inputs)
-	if last1 ~= nil and inputs.switch1 ~= last1 then
-		dev.vars.kitchen = not dev.vars.kitchen
-	end
-	if last2 ~= nil and inputs.switch2 ~= last2 then
-		dev.vars.dining = not dev.vars.dining
-	end
-	last1, last2 = inputs.switch1, inputs.switch2
+function driver.attach(dev)
 	for _, r in ipairs(RELAYS) do
-		dev.out[r] = dev.vars[r]
+		relays[r] = false
+	end
+	dev.state.relays, dev.state.switches = relays, switches
+	show(dev)
+end
+
+function driver.tick(dev, inputs)
+	if switches.switch1 ~= nil and inputs.switch1 ~= switches.switch1 then
+		relays.kitchen = not relays.kitchen
+	end
+	if switches.switch2 ~= nil and inputs.switch2 ~= switches.switch2 then
+		relays.dining = not relays.dining
+	end
+	switches.switch1, switches.switch2 = inputs.switch1, inputs.switch2
+	show(dev)
+	for _, r in ipairs(RELAYS) do
+		dev.out[r] = relays[r]
 	end
 end
 
 function driver.input(dev, name, value)
 	if name == "all_off" then
 		for _, r in ipairs(RELAYS) do
-			dev.vars[r] = false
+			relays[r] = false
 		end
 	else
-		dev.vars[name] = value == true
+		relays[name] = value == true
 	end
+	show(dev)
 	return true
+end
+
+-- Hot reload (docs/DRIVERS.md): the relays as the old version had them
+-- (from dev.out, its outputs, when it kept no dev.state: 1.0.0), and the
+-- switch positions, so a flip between the two versions' ticks still counts.
+function driver.migrate(dev, old)
+	local old_relays = type(old.relays) == "table" and old.relays or dev.out
+	for _, r in ipairs(RELAYS) do
+		relays[r] = old_relays[r] == true
+	end
+	if type(old.switches) == "table" then
+		for _, name in ipairs(SWITCHES) do
+			if type(old.switches[name]) == "boolean" then
+				switches[name] = old.switches[name]
+			end
+		end
+	end
+	show(dev)
 end
 
 return driver

@@ -5,7 +5,8 @@
 -- velocity loop behind a ramp; the door interlock stops everything when the
 -- door opens and resumes after it is closed and locked again; cancel stops
 -- the drum and drains. The door is never unlocked while the drum turns or
--- the water is above the door.
+-- the water is above the door. A hot reload continues a running programme
+-- where it was (dev.state and migrate, at the end).
 
 local appliance = require "appliance"
 local cycle = require "cycle"
@@ -29,7 +30,7 @@ local TEMPS = { hot = { true, false }, warm = { true, true }, cold = { false, tr
 
 local driver = {
 	name = "washer",
-	version = "1.0.0",
+	version = "1.1.0",
 	level = IDLE_LEVEL,
 	description = "washing machine: fill, wash, rinse, spin; door interlock",
 	io = {
@@ -86,6 +87,10 @@ local want = { hot_valve = false, cold_valve = false, drain_pump = false, door_l
 	motor_on = false, motor_rpm = 0 }
 -- Named inputs plus the measured drum speed, for the steps.
 local inp = { drum_rpm = 0 }
+-- What the driver carries from tick to tick besides the cycle: the last
+-- encoder reading and its bus time (for the drum speed), whether the guard
+-- holds the door locked, and the drum's set point.
+local memory = { encoder = nil, time = nil, guard = false, setpoint_rpm = 0 }
 local params -- dev.params, for the steps
 
 local function all_off(o)
@@ -107,16 +112,15 @@ end
 -- drum coasting near the threshold cannot make the solenoid chatter. A door
 -- already open (the emergency release) is not locked: the interlock has
 -- everything off.
-local guard = false
 local function guard_lock()
 	if not inp.door_closed then
-		guard = false
+		memory.guard = false
 	elseif not safe_to_open() then
-		guard = true
-	elseif guard and safe_below(STILL_RPM / 2) then
-		guard = false
+		memory.guard = true
+	elseif memory.guard and safe_below(STILL_RPM / 2) then
+		memory.guard = false
 	end
-	return guard
+	return memory.guard
 end
 
 -- Paused: all off; the door stays locked until it is safe to open (the
@@ -221,16 +225,16 @@ end, {
 -- The drum: a ramp shapes the requested speed, a PID follows it.
 local drum_ramp = ramp.new { accel = 100, max_rate = 50 } -- RPM/s^2, RPM/s
 local drum_pid = pid.new { kp = 2, ki = 0.8, out_min = -1000, out_max = 1000 }
-local setpoint = 0
 
 local function drive_drum(dt)
 	if not want.motor_on then
 		drum_pid:reset()
 		drum_ramp:reset(inp.drum_rpm)
-		setpoint = 0
+		memory.setpoint_rpm = 0
 		return 0
 	end
-	setpoint = drum_ramp:update(want.motor_rpm, dt)
+	local setpoint = drum_ramp:update(want.motor_rpm, dt)
+	memory.setpoint_rpm = setpoint
 	return drum_pid:update(setpoint, inp.drum_rpm, dt)
 end
 
@@ -244,24 +248,28 @@ control = appliance.new {
 	end,
 }
 
-local last_encoder, last_time
-
 local function read_board(inputs)
 	for k, v in pairs(inputs) do
 		inp[k] = v
 	end
-	local dt = last_time and inputs.time - last_time or 0
+	local dt = memory.time and inputs.time - memory.time or 0
 	if dt > 0 then
 		-- counts since the last tick, across the int32 wrap; 0.1 s filter
-		local rpm = bit.tobit(inputs.drum - last_encoder) / COUNTS_PER_REV / dt * 60
+		local rpm = bit.tobit(inputs.drum - memory.encoder) / COUNTS_PER_REV / dt * 60
 		inp.drum_rpm = inp.drum_rpm + (rpm - inp.drum_rpm) * dt / (0.1 + dt)
 	end
-	last_encoder, last_time = inputs.drum, inputs.time
+	memory.encoder, memory.time = inputs.drum, inputs.time
 	return dt
 end
 
 function driver.attach(dev)
 	params = dev.params
+	-- What a new version continues from (its migrate gets a plain copy).
+	local keep = dev.state
+	keep.control = control -- the programme, the buttons and the cycle
+	keep.inp = inp         -- the last inputs and the measured drum speed
+	keep.memory = memory
+	keep.drum_ramp, keep.drum_pid = drum_ramp, drum_pid
 end
 
 function driver.tick(dev, inputs)
@@ -276,7 +284,7 @@ function driver.tick(dev, inputs)
 	o.drum_drive = drive_drum(dt)
 
 	local v = dev.vars
-	v.drum_rpm, v.drum_setpoint_rpm = inp.drum_rpm, setpoint
+	v.drum_rpm, v.drum_setpoint_rpm = inp.drum_rpm, memory.setpoint_rpm
 	v.level_l, v.temp_c = inp.level_l, inp.temp_c
 	v.door = inputs.door_locked and "locked" or inputs.door_closed and "closed" or "open"
 end
@@ -287,6 +295,49 @@ end
 
 function driver.detach()
 	all_off(want)
+end
+
+-- into[name] = from[name] for each of names whose value in from (a plain
+-- copy, maybe of another version's layout) has the type kind.
+local function take(into, from, names, kind)
+	if type(from) ~= "table" then return end
+	for _, name in ipairs(names) do
+		if type(from[name]) == kind then
+			into[name] = from[name]
+		end
+	end
+end
+
+-- Any output on: the machine is doing something.
+local function busy(out)
+	return out.hot_valve or out.cold_valve or out.drain_pump or out.door_lock or out.motor_on
+		or (out.drum_drive or 0) ~= 0
+end
+
+-- Hot reload (docs/DRIVERS.md): after attach, with the old version's
+-- outputs in dev.out. The programme goes on where it was; the drum speed,
+-- its loop and the door guard go on from their last values, so the first
+-- tick neither brakes the drum nor lets go of the lock.
+function driver.migrate(dev, old)
+	if type(old.control) ~= "table" then -- 1.0.0 kept nothing in dev.state
+		if busy(dev.out) then
+			error("the running version keeps no state to continue from; reload when the washer is idle", 0)
+		end
+		return
+	end
+	assert(control:restore(old.control))
+	if type(old.inp) == "table" then
+		for name, value in pairs(old.inp) do
+			local kind = type(value)
+			if kind == "boolean" or kind == "number" or kind == "string" then
+				inp[name] = value
+			end
+		end
+	end
+	take(memory, old.memory, { "encoder", "time", "setpoint_rpm" }, "number")
+	take(memory, old.memory, { "guard" }, "boolean")
+	take(drum_ramp, old.drum_ramp, { "value", "rate", "target" }, "number")
+	take(drum_pid, old.drum_pid, { "i_term", "p_term", "d_term", "output" }, "number")
 end
 
 return driver

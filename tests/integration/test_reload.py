@@ -219,3 +219,45 @@ def test_a_board_attaching_later_loads_the_active_version(t):
     s = host.wait_running(["lamp-2"])
     assert host.device("lamp-2", s)["driver_version"] == "2.0.0", \
         "a board attaching after the reload got %r" % host.device("lamp-2", s)["driver_version"]
+
+
+def test_a_running_wash_continues_across_a_reload(t):
+    """The shipped washer, mid-wash, reloaded with its own file: the cycle
+    goes on in the same step with the time it had left, then on to the
+    next steps (not back to the start)."""
+    host = t.host(settings={"driver.washer.param.time_scale": "0.05"})
+    t.board("washer", "washer-1")
+    host.wait_status(lambda s: (host.device("washer-1", s) or {}).get("variables", {}).get("door") == "closed", 30,
+                     "the washer attached, its door seen closed")
+    code, body = call(host, "POST", "/api/devices/washer-1/cycle", t.token,
+                      json.dumps({"action": "start", "program": "quick"}).encode(), "application/json")
+    assert code == 200, "start quick: %d %r" % (code, body)
+    s = host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("step") == "wash"
+                         and host.device("washer-1", s)["variables"].get("time_left_s", 0) > 3, 120,
+                         "the quick programme washing")
+    left = host.device("washer-1", s)["variables"]["time_left_s"]
+    seq = host.last_event_seq()
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "drivers", "washer.lua")
+    rc, out, err = t.run([t.path("vmac"), "reload", "--http", host.http, path], "reload")
+    assert rc == 0, "vmac reload washer.lua mid-wash: exit %d %s %s" % (rc, out, err)
+    host.wait_event("reloaded", "washer-1", after_seq=seq)
+    s = host.status()
+    v = host.device("washer-1", s)["variables"]
+    assert v["state"] == "running" and v["step"] == "wash", "after the reload: state %s, step %s" % (v["state"],
+                                                                                                    v["step"])
+    assert v["time_left_s"] <= left + 0.5, "the wash started over: %.1f s left after, %.1f s before" % (
+        v["time_left_s"], left)
+    assert host.device("washer-1", s)["outputs"]["digital"][3], "the door lock opened across the reload"
+    steps = ["wash"]  # the steps seen after the reload, in order
+
+    def no_restart(s):
+        step = host.device("washer-1", s)["variables"].get("step")
+        if step != steps[-1]:
+            steps.append(step)
+        assert host.device("washer-1", s)["state"] == "running", "the washer was dropped"
+
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("step") == "rinse", 180,
+                     "the quick programme rinsing", invariant=no_restart)
+    assert steps == ["wash", "drain", "fill", "rinse"], \
+        "the cycle did not go on from the wash after the reload: steps %r" % steps
+    assert not host.find_events("dropped", "washer-1", after_seq=seq), "the washer was dropped"

@@ -4,6 +4,8 @@
 local T = require "testing"
 local appliance = require "appliance"
 local cycle = require "cycle"
+local sandbox = require "sandbox"
+local host_copy = require "host_copy"
 local test = T.test
 
 -- A fake dev: records set_level calls; vars and params as a driver has them.
@@ -14,15 +16,17 @@ local function fake_dev()
 end
 
 -- A machine with two programmes ("short": one 1 s step; "long": one 10 s
--- step) and a door that may forbid starting.
-local function machine()
+-- step) and a door that may forbid starting. stdlib: the modules to build it
+-- from (default this file's; a new driver instance loads its own).
+local function machine(stdlib)
+	stdlib = stdlib or { cycle = cycle, appliance = appliance }
 	local m = { door_closed = true, out = {} }
 	m.programs = {
 		short = function(c) c:step("short step", function() c:wait(1) end) end,
 		long = function(c) c:step("long step", function() c:wait(10) end) end,
 	}
-	m.cycle = cycle.new(function(c) m.ctl:programme()(c) end)
-	m.ctl = appliance.new {
+	m.cycle = stdlib.cycle.new(function(c) m.ctl:programme()(c) end)
+	m.ctl = stdlib.appliance.new {
 		cycle = m.cycle, programs = m.programs, idle_level = 5, run_level = 3,
 		can_start = function() if not m.door_closed then return "close the door first" end end,
 	}
@@ -108,4 +112,68 @@ test("bad arguments raise errors naming them", function()
 		"idle_level must be a whole number", "fractional level")
 	T.fails(function() appliance.new { cycle = c, idle_level = 1, run_level = 0 } end,
 		"programs must be a table", "no programs")
+end)
+
+test("a start refused while a programme runs leaves the running programme chosen", function()
+	local m = machine()
+	m.ctl:start(m.dev, "long")
+	m.tick()
+	local ok = m.ctl:start(m.dev, "short")
+	T.equal(ok, nil, "a second start while running accepted")
+	T.equal(m.ctl:programme(), m.programs.long, "the programme chosen after the refused start")
+	T.equal(m.dev.vars.cycle, "long", "cycle variable after the refused start")
+end)
+
+-- A hot reload of machine m: a new machine (its own stdlib, as a new Lua
+-- state) on the same clock, restored from the host's copy of m's appliance.
+-- Returns the new machine and what restore returned.
+local function reload(m, programs)
+	local state = sandbox.new_state("stdlib/")
+	local n = machine { cycle = state.require "cycle", appliance = state.require "appliance" }
+	if programs then n.ctl.programs = programs end
+	n.t = m.t
+	local old_state = host_copy.state({ control = m.ctl })
+	return n, n.ctl:restore(old_state.control)
+end
+
+test("restore goes on with the running programme, and back to the idle level at its end", function()
+	local m = machine()
+	m.ctl:start(m.dev, "long")
+	for _ = 1, 30 do m.tick() end
+	local n, ok = reload(m)
+	T.equal(ok, true, "restore()")
+	n.tick()
+	T.equal(n.dev.vars.cycle, "long", "cycle variable after the reload")
+	T.equal(n.dev.vars.step, "long step", "step after the reload")
+	T.equal(n.dev.vars.state, "running", "state after the reload")
+	T.near(n.dev.vars.time_left_s, 10 - 3.1, 0.11, "time left after the reload")
+	for _ = 1, 80 do n.tick() end
+	T.equal(n.dev.vars.state, "done", "state at the end")
+	T.equal(n.dev.levels[#n.dev.levels], 5, "level asked for at the end")
+end)
+
+test("a button held across the reload is no new press", function()
+	local m = machine()
+	for _ = 1, 20 do m.tick(true) end -- the short programme, started by the held button, ends
+	T.equal(m.dev.vars.state, "done", "state before the reload")
+	local n = reload(m)
+	n.tick(true)
+	T.equal(n.dev.vars.state, "done", "state after a tick with the button still held")
+	T.equal(#n.dev.levels, 0, "set_level calls after the reload")
+	n.tick(false)
+	n.tick(true)
+	T.equal(n.dev.vars.state, "running", "a new press starts it")
+end)
+
+test("restore refuses a running programme this version does not have, and changes nothing", function()
+	local m = machine()
+	m.ctl:start(m.dev, "long")
+	m.tick()
+	local n, ok, message = reload(m, { short = m.programs.short })
+	T.equal(ok, nil, "restore() without the running programme")
+	T.check(message:find("programme 'long' is running", 1, true), "message, got %q", message)
+	T.equal(n.cycle.state, "idle", "the new cycle")
+	T.equal(n.ctl.chosen, nil, "the new programme chosen")
+	T.fails(function() n.ctl:restore({}) end, "appliance:restore: old must be a copy of an appliance",
+		"restore({})")
 end)
