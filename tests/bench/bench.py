@@ -11,8 +11,12 @@ same run on the same machine, reported as ratios.
   vtest     vmac test: wall seconds for one virtual hour of washing
             (tests/bench/washer_hour.lua), alone and in the demo kitchen,
             as a ratio to real time
+  reload    hot reload: 1,000 reloads of a driver running on 10 of 100
+            boards at 10 Hz; missed deadlines during the reloads next to
+            the same window without reloads, and the reload latency (request
+            to every machine switched)
 
-usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost,vtest]
+usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost,vtest,reload]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -222,12 +226,79 @@ def vtest(args):
     return {"virtual_s": 3600, "wall_s": best}
 
 
+RELOAD_LUA = """local driver = { name = "reloadprobe", version = "%d", io = { switch = "di0", lamp = "do0" },
+	variables = { ticks = {} } }
+function driver.attach(dev) dev.state.ticks = 0 end
+function driver.tick(dev, inputs)
+	dev.state.ticks = dev.state.ticks + 1
+	dev.vars.ticks = dev.state.ticks
+	dev.out.lamp = inputs.switch
+end
+function driver.migrate(dev, old) dev.state.ticks = old.ticks end
+return driver
+"""
+
+
+def reload_bench(args, reloads=1000, boards=100, reloaded=10, period_us=100000):
+    """`reloads` hot reloads of reloadprobe (on `reloaded` of `boards` boards)."""
+    import urllib.request
+
+    def run(ctx):
+        settings = {"reply_deadline_us": period_us, "realtime": "true", "watchdog_ms": max(500, 4 * period_us // 1000),
+                    "discovery_period_ms": 200, "max_devices": 1024}
+        settings.update(schedule_for(boards, period_us))
+        host = ctx.host(drivers=ctx.drivers(benchprobe=BENCH_LUA, reloadprobe=RELOAD_LUA % 0), settings=settings)
+        ctx.board("generic", "b", count=boards - reloaded, driver="benchprobe", wrapper=board_wrapper())
+        ctx.board("generic", "r", count=reloaded, driver="reloadprobe", wrapper=board_wrapper())
+        names = ["b-%d" % i for i in range(1, boards - reloaded + 1)] + ["r-%d" % i for i in range(1, reloaded + 1)]
+        host.wait_running(names, timeout_s=120)
+
+        def counters():
+            c = host.status()["counters"]
+            return c["misses"], c["drops"]
+
+        # The reloads, then a window of the same length without any.
+        m0, d0 = counters()
+        latencies, failed = [], 0
+        t0 = time.monotonic()
+        for i in range(1, reloads + 1):
+            req = urllib.request.Request("http://%s/api/drivers/reloadprobe?probation=0" % host.http,
+                                         data=(RELOAD_LUA % i).encode(), method="POST")
+            req.add_header("Authorization", "Bearer " + ctx.token)
+            start = time.monotonic()
+            try:
+                with urllib.request.urlopen(req, timeout=60) as r:
+                    answer = json.loads(r.read())
+                ok = all(m["ok"] for m in answer["machines"]) and len(answer["machines"]) == reloaded
+            except Exception:  # noqa: BLE001 (a refused reload is counted, not fatal)
+                ok = False
+            latencies.append(time.monotonic() - start)
+            failed += not ok
+            if i % 100 == 0:
+                print("    %d reloads, last %.1f ms" % (i, latencies[-1] * 1e3), flush=True)
+        window = time.monotonic() - t0
+        m1, d1 = counters()
+        time.sleep(window)  # the same window without reloads: the baseline, not a synchronisation
+        m2, d2 = counters()
+        latencies.sort()
+        q = lambda f: latencies[min(len(latencies) - 1, int(f * len(latencies)))] * 1e3  # noqa: E731
+        final = host.device("r-1", host.status())
+        return {"reloads": reloads, "boards": boards, "reloaded_boards": reloaded, "period_us": period_us,
+                "window_s": window, "refused": failed,
+                "misses_during": m1 - m0, "drops_during": d1 - d0,
+                "misses_baseline": m2 - m1, "drops_baseline": d2 - d1,
+                "latency_ms": {"p50": q(0.5), "p99": q(0.99), "max": latencies[-1] * 1e3},
+                "final_version": final and final["driver_version"],
+                "ticks_kept": final and final["variables"].get("ticks")}
+    return with_ctx(args, "reload", run)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload")
     p.add_argument("--max-boards", type=int, default=2000)
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
     p.add_argument("--out", default="build/bench/results.json")
@@ -270,6 +341,10 @@ def main():
         print("vtest: one virtual hour of washing, alone and in the kitchen (best of 3)", flush=True)
         results["vtest"] = vtest(args)
 
+    if "reload" in only:
+        print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
+        results["reload"] = reload_bench(args)
+
     os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
     with open(args.out, "w") as f:
         json.dump(results, f, indent=2)
@@ -311,6 +386,15 @@ def report(r):
         for name, wall in sorted(v.get("wall_s", {}).items()):
             print("vmac test, %s: 1 virtual hour in %.2f s of wall time (%.0fx real time)" % (
                 name, wall, v["virtual_s"] / max(1e-9, wall)))
+    rl = r.get("reload")
+    if rl:
+        print("hot reload: %d reloads of a driver on %d of %d boards at %d Hz in %.1f s: %d misses, %d drops "
+              "(the same window without reloads: %d misses, %d drops); %d refused; latency p50 %.1f ms, "
+              "p99 %.1f ms, max %.1f ms (request to all %d switched); last version %s, tick count kept %s" % (
+                  rl["reloads"], rl["reloaded_boards"], rl["boards"], 1000000 // rl["period_us"], rl["window_s"],
+                  rl["misses_during"], rl["drops_during"], rl["misses_baseline"], rl["drops_baseline"],
+                  rl["refused"], rl["latency_ms"]["p50"], rl["latency_ms"]["p99"], rl["latency_ms"]["max"],
+                  rl["reloaded_boards"], rl["final_version"], rl["ticks_kept"]))
 
 
 if __name__ == "__main__":
