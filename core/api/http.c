@@ -450,6 +450,39 @@ static enum MHD_Result devices(struct vmac_http *h, struct MHD_Connection *c, co
 	return reply(c, MHD_HTTP_OK, one);
 }
 
+/* GET /api/events/log[?after=SEQ][&limit=N]: the events the store keeps. */
+static void append_event(void *ctx, const struct vmac_stored_event *e)
+{
+	json_array_append_new(ctx, json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)e->seq, "time", e->time,
+	                                     "kind", e->kind, "device", e->device, "text", e->text));
+}
+
+static enum MHD_Result event_log(struct vmac_http *h, struct MHD_Connection *c)
+{
+	const char *after_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
+	const char *limit_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "limit");
+	unsigned long long after = 0;
+	long limit = 100;
+	char *end, err[512];
+	json_t *list;
+	if (after_s) {
+		after = strtoull(after_s, &end, 10);
+		if (!*after_s || *end || after_s[0] == '-')
+			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("after must be an event's seq (a whole number)"));
+	}
+	if (limit_s) {
+		limit = strtol(limit_s, &end, 10);
+		if (!*limit_s || *end || limit < 1 || limit > 1000)
+			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("limit must be 1..1000"));
+	}
+	list = json_array();
+	if (vmac_store_events_list(h->store, after, (int)limit, append_event, list, err, sizeof(err)) < 0) {
+		json_decref(list);
+		return reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body(err));
+	}
+	return reply(c, MHD_HTTP_OK, json_pack("{s:o}", "events", list));
+}
+
 /* ---- POST /api/console: the line console ---- */
 
 struct console_ctx {
@@ -837,14 +870,16 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return driver_versions(h, c, device);
 	if (get && strcmp(url, "/api/status") == 0)
 		return reply(c, MHD_HTTP_OK, status_json(h));
+	if (get && strcmp(url, "/api/events/log") == 0)
+		return event_log(h, c);
 	if (get && strcmp(url, "/api/events") == 0)
 		return events_stream(h, c);
 	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
 		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
 		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
-		                       "/api/devices/NAME", "/api/devices/NAME/cycle"));
+		                       "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 

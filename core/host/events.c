@@ -17,6 +17,13 @@ void vmac_event_log_init(struct vmac_event_log *log)
 	log->next_seq = 1;
 }
 
+void vmac_event_log_start_at(struct vmac_event_log *log, uint64_t seq)
+{
+	pthread_mutex_lock(&log->lock);
+	log->next_seq = seq ? seq : 1;
+	pthread_mutex_unlock(&log->lock);
+}
+
 void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char *device, const char *text)
 {
 	struct timespec ts;

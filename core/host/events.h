@@ -1,6 +1,7 @@
 /* The host's event log: the last events (attached, dropped, driver errors,
  * missing drivers, malformed frames) kept in memory for the status API and
- * printed to stderr. Written by the main thread, read by the HTTP threads. */
+ * the event stream, printed to stderr, and copied into the store by the main
+ * thread (vmac_store_events_add). Written by the main thread, read by the HTTP threads. */
 #ifndef VMAC_EVENTS_H
 #define VMAC_EVENTS_H
 
@@ -27,6 +28,9 @@ struct vmac_event_log {
 };
 
 void vmac_event_log_init(struct vmac_event_log *log);
+/* Number the events from seq on (after the ones a store already holds),
+ * before the first is added. */
+void vmac_event_log_start_at(struct vmac_event_log *log, uint64_t seq);
 void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char *device, const char *text);
 /* Copy the newest events, oldest first, into out (room for max). Returns how many. */
 int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, int max);

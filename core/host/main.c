@@ -27,6 +27,8 @@ struct host {
 	struct vmac_http *http;
 	struct vmac_store *store;
 	struct vmac_event_log log;
+	uint64_t stored_seq; /* events up to this one are in the store */
+	int store_failing;   /* the last copy failed: said once, retried */
 	struct ev_loop *loop;
 	ev_async wake_w;
 	ev_signal int_w, term_w;
@@ -112,6 +114,44 @@ static void roll_back_version(struct host *h, const struct vmac_bus_msg *m)
 		vmac_event_log_add(&h->log, "warning", m->device, err);
 }
 
+/* The events not yet in the store go there, in one transaction. An event
+ * the in-memory log has already dropped (over 100 in one go) is counted. */
+static void store_events(struct host *h)
+{
+	struct vmac_event ev[VMAC_EVENT_LOG_SIZE];
+	struct vmac_stored_event st[VMAC_EVENT_LOG_SIZE];
+	char err[512], text[600];
+	uint64_t lost;
+	int n, i;
+	for (;;) {
+		n = vmac_event_log_since(&h->log, h->stored_seq, ev, VMAC_EVENT_LOG_SIZE, 0, &lost);
+		if (n == 0)
+			return;
+		for (i = 0; i < n; i++) {
+			st[i].seq = ev[i].seq;
+			st[i].time = (double)ev[i].time_ns / 1e9;
+			st[i].kind = ev[i].kind;
+			st[i].device = ev[i].device;
+			st[i].text = ev[i].text;
+		}
+		if (vmac_store_events_add(h->store, st, n, err, sizeof(err)) != 0) {
+			if (!h->store_failing) { /* this warning is not stored either: it would fail the same way */
+				h->store_failing = 1;
+				snprintf(text, sizeof(text), "events are not being stored: %s", err);
+				vmac_event_log_add(&h->log, "warning", "", text);
+			}
+			return;
+		}
+		h->store_failing = 0;
+		h->stored_seq = ev[n - 1].seq;
+		if (lost) {
+			snprintf(text, sizeof(text), "%llu events came too fast to be stored",
+			         (unsigned long long)lost);
+			vmac_event_log_add(&h->log, "warning", "", text);
+		}
+	}
+}
+
 static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 {
 	struct host *h = w->data;
@@ -135,6 +175,7 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 			break;
 		}
 	}
+	store_events(h);
 }
 
 static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
@@ -244,11 +285,14 @@ int main(int argc, char **argv)
 		fprintf(stderr, "vmacd: bus: %s\n", err);
 		return 1;
 	}
-	if (vmac_store_open(h->cfg.state_dir, &h->store, err, sizeof(err)) != 0) {
+	if (vmac_store_open(h->cfg.state_dir, &h->store, err, sizeof(err)) != 0 ||
+	    vmac_store_events_last(h->store, &h->stored_seq, err, sizeof(err)) != 0) {
 		fprintf(stderr, "vmacd: %s\n", err);
+		vmac_store_close(h->store);
 		vmac_bus_free(h->bus);
 		return 1;
 	}
+	vmac_event_log_start_at(&h->log, h->stored_seq + 1); /* seq goes on across restarts */
 	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, h->store, &h->cfg, err, sizeof(err));
 	if (!h->http) {
 		fprintf(stderr, "vmacd: http: %s\n", err);

@@ -51,6 +51,12 @@ static const char *const migrations[] = {
     " string TEXT NOT NULL DEFAULT '',"
     " updated REAL NOT NULL,"
     " PRIMARY KEY (machine, name))",
+    "CREATE TABLE events ("
+    " seq INTEGER PRIMARY KEY,"
+    " time REAL NOT NULL,"
+    " kind TEXT NOT NULL,"
+    " device TEXT NOT NULL,"
+    " text TEXT NOT NULL)",
 };
 
 static const char *const scope_names[] = {"none", "read", "operate", "deploy"};
@@ -649,5 +655,86 @@ int vmac_store_param_list(struct vmac_store *s, const char *machine,
 		return -1;
 	}
 	pthread_mutex_unlock(&s->lock);
+	return n;
+}
+
+/* ---- the event log ---- */
+
+int vmac_store_events_add(struct vmac_store *s, const struct vmac_stored_event *ev, int n, char *err, size_t errlen)
+{
+	sqlite3_stmt *st = NULL;
+	int i, ok;
+	if (n <= 0)
+		return 0;
+	if (begin(s) != 0)
+		return fail(s, "recording events", err, errlen);
+	ok = sqlite3_prepare_v2(s->db,
+	                        "INSERT OR REPLACE INTO events (seq, time, kind, device, text) VALUES (?, ?, ?, ?, ?)",
+	                        -1, &st, NULL) == SQLITE_OK;
+	for (i = 0; ok && i < n; i++) {
+		sqlite3_reset(st);
+		sqlite3_bind_int64(st, 1, (sqlite3_int64)ev[i].seq);
+		sqlite3_bind_double(st, 2, ev[i].time);
+		sqlite3_bind_text(st, 3, ev[i].kind, -1, SQLITE_TRANSIENT);
+		sqlite3_bind_text(st, 4, ev[i].device, -1, SQLITE_TRANSIENT);
+		sqlite3_bind_text(st, 5, ev[i].text, -1, SQLITE_TRANSIENT);
+		ok = sqlite3_step(st) == SQLITE_DONE;
+	}
+	sqlite3_finalize(st);
+	if (ok && ev[n - 1].seq > VMAC_STORE_EVENTS && ev[n - 1].seq % 100 < (uint64_t)n) { /* now and then */
+		char sql[96];
+		snprintf(sql, sizeof(sql), "DELETE FROM events WHERE seq <= %llu",
+		         (unsigned long long)(ev[n - 1].seq - VMAC_STORE_EVENTS));
+		ok = sqlite3_exec(s->db, sql, NULL, NULL, NULL) == SQLITE_OK;
+	}
+	return end(s, ok, "recording events", err, errlen);
+}
+
+int vmac_store_events_last(struct vmac_store *s, uint64_t *seq, char *err, size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc;
+	*seq = 0;
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db, "SELECT max(seq) FROM events", -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "reading the event log", err, errlen);
+	}
+	rc = sqlite3_step(st);
+	if (rc == SQLITE_ROW && sqlite3_column_type(st, 0) != SQLITE_NULL)
+		*seq = (uint64_t)sqlite3_column_int64(st, 0);
+	sqlite3_finalize(st);
+	pthread_mutex_unlock(&s->lock);
+	return rc == SQLITE_ROW ? 0 : fail(s, "reading the event log", err, errlen);
+}
+
+int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
+                           void (*fn)(void *ctx, const struct vmac_stored_event *e), void *ctx, char *err,
+                           size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc, n = 0;
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db, "SELECT seq, time, kind, device, text FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
+	                       -1, &st, NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
+		return fail(s, "reading the event log", err, errlen);
+	}
+	sqlite3_bind_int64(st, 1, (sqlite3_int64)after);
+	sqlite3_bind_int(st, 2, limit);
+	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+		struct vmac_stored_event e;
+		e.seq = (uint64_t)sqlite3_column_int64(st, 0);
+		e.time = sqlite3_column_double(st, 1);
+		e.kind = (const char *)sqlite3_column_text(st, 2);
+		e.device = (const char *)sqlite3_column_text(st, 3);
+		e.text = (const char *)sqlite3_column_text(st, 4);
+		fn(ctx, &e);
+		n++;
+	}
+	sqlite3_finalize(st);
+	pthread_mutex_unlock(&s->lock);
+	if (rc != SQLITE_DONE)
+		return fail(s, "reading the event log", err, errlen);
 	return n;
 }

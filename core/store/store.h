@@ -74,6 +74,27 @@ int vmac_store_param_list(struct vmac_store *s, const char *machine,
                           void (*fn)(void *ctx, const char *name, const struct vmac_value *v), void *ctx, char *err,
                           size_t errlen);
 
+/* ---- the event log ----
+ * Every event of the host, numbered as the event stream numbers them (seq
+ * goes on across restarts); the newest VMAC_STORE_EVENTS are kept. */
+#define VMAC_STORE_EVENTS 100000
+
+struct vmac_stored_event {
+	uint64_t seq;
+	double time; /* Unix time */
+	const char *kind, *device, *text;
+};
+
+/* Add n events in one transaction (one disk sync). 0, or -1 with err. */
+int vmac_store_events_add(struct vmac_store *s, const struct vmac_stored_event *ev, int n, char *err, size_t errlen);
+/* The highest seq stored (0: none). 0, or -1 with err. */
+int vmac_store_events_last(struct vmac_store *s, uint64_t *seq, char *err, size_t errlen);
+/* The events after seq after, oldest first, at most limit. Returns how
+ * many, or -1 with err. */
+int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
+                           void (*fn)(void *ctx, const struct vmac_stored_event *e), void *ctx, char *err,
+                           size_t errlen);
+
 /* ---- driver versions (hot reload, docs/API.md "Drivers") ----
  * Every version uploaded is kept with its source, a BLAKE2b-256 hash of it,
  * when and by which token it was deployed, and its state: pending (being

@@ -84,3 +84,36 @@ def test_a_stopping_host_ends_its_streams(t):
         "vmac events when the host stopped: exit %d, %r" % (rc, follow.text("stderr")))
     for s in streams:
         s.close()
+
+
+def test_the_event_log_is_kept_in_the_store(t):
+    """Events go to the store (docs/API.md "GET /api/events/log"): they are
+    there after the host stops and starts again, and numbering goes on."""
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    host.wait_status(lambda s: any(e["kind"] == "attached" for e in host.get("/api/events/log")["events"]), 10,
+                     "the attach event in the stored log")
+    before = host.get("/api/events/log")["events"]
+    attached = [e for e in before if e["kind"] == "attached" and e["device"] == "lights-1"]
+    assert attached, "no attached event for lights-1 in the stored log: %r" % before
+    host.signal(signal.SIGTERM)
+    assert host.wait_exit(30) == 0, "vmacd did not stop cleanly"
+
+    host = t.host()
+    host.wait_running(["lights-1"], timeout_s=60)
+    host.wait_status(lambda s: len([e for e in host.get("/api/events/log?limit=1000")["events"]
+                                    if e["kind"] == "attached"]) >= 2, 10, "the second attach stored")
+    after = host.get("/api/events/log?limit=1000")["events"]
+    seqs = [e["seq"] for e in after]
+    assert seqs == sorted(set(seqs)), "the stored seqs are not unique and in order: %r" % seqs
+    assert after[0] == before[0], "the first run's events are gone: %r vs %r" % (after[0], before[0])
+    assert host.status()["events"][-1]["seq"] > before[-1]["seq"], "numbering started over after the restart"
+    assert host.get("/api/events/log?after=%d&limit=1" % after[0]["seq"])["events"][0]["seq"] == after[1]["seq"], \
+        "after= does not page"
+    for bad in ("after=-1", "limit=0", "limit=5000", "after=x"):
+        try:
+            host.get("/api/events/log?" + bad)
+            raise AssertionError("GET /api/events/log?%s answered 200" % bad)
+        except urllib.error.HTTPError as e:
+            assert e.code == 400, "GET /api/events/log?%s: %d" % (bad, e.code)
