@@ -645,6 +645,34 @@ static enum MHD_Result driver_upload(struct vmac_http *h, struct MHD_Connection 
 	return ret;
 }
 
+/* POST /api/drivers/NAME/activate?id=N[&probation=S] */
+static enum MHD_Result driver_activate(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+{
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_result *r;
+	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
+	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
+	double probation_s = h->cfg.reload_probation_s;
+	char by[VMAC_TOKEN_ID_LEN + 1], *end;
+	long long id = id_s ? strtoll(id_s, &end, 10) : 0;
+	enum MHD_Result ret;
+	if (!id_s || !*id_s || *end || id < 1)
+		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("id must be a version's id (vmac drivers lists them)"));
+	if (arg) {
+		probation_s = strtod(arg, &end);
+		if (!*arg || *end || !(probation_s >= 0 && probation_s <= 86400))
+			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("probation must be seconds, 0..86400"));
+	}
+	r = malloc(sizeof(*r));
+	if (!r)
+		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body("out of memory"));
+	token_id(c, by, sizeof(by));
+	vmac_deploy_activate(&x, driver, id, by, (unsigned)(probation_s * 1000 + 0.5), r);
+	ret = deploy_reply(c, driver, r, probation_s);
+	free(r);
+	return ret;
+}
+
 /* POST /api/drivers/NAME/rollback */
 static enum MHD_Result driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
 {
@@ -846,11 +874,14 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return ret;
 		return device_cycle(h, c, device, k);
 	}
-	if (post && (driver_path(url, "/rollback", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
+	if (post && (driver_path(url, "/rollback", device, sizeof(device)) ||
+	             driver_path(url, "/activate", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
 		if (!authorized(h, c, VMAC_SCOPE_DEPLOY, &ret))
 			return ret;
 		if (driver_path(url, "/rollback", device, sizeof(device)))
 			return driver_rollback(h, c, device);
+		if (driver_path(url, "/activate", device, sizeof(device)))
+			return driver_activate(h, c, device);
 		return driver_upload(h, c, device, k);
 	}
 	if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
@@ -876,10 +907,11 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return events_stream(h, c);
 	if (get && strcmp(url, "/") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
+		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
 		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
 		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
-		                       "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log"));
+		                       "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
+		                       "/api/drivers/NAME/activate"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
 }
 

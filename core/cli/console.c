@@ -86,7 +86,7 @@ static void line(struct session *s, const char *text)
 
 static int setup(struct session *s, int argc, char **argv, const char *usage, int *first_arg)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},
 	                                     {"token", required_argument, 0, 't'},
 	                                     {"token-file", required_argument, 0, 'f'},
 	                                     {"quiet", no_argument, 0, 'q'},

@@ -74,7 +74,8 @@ static int on_data(void *ctx, const char *data, size_t len)
 
 int vmac_events_main(int argc, char **argv)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},  {"token", required_argument, 0, 't'},
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'},  {"host", required_argument, 0, 'H'},
+	                                     {"token", required_argument, 0, 't'},
 	                                     {"token-file", required_argument, 0, 'f'}, {"after", required_argument, 0, 'a'},
 	                                     {"count", required_argument, 0, 'n'}, {"json", no_argument, 0, 'j'},
 	                                     {"help", no_argument, 0, 'h'},         {0, 0, 0, 0}};

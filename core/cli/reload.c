@@ -166,8 +166,9 @@ static char *read_all(const char *path, size_t *len)
 }
 
 #define COMMON_OPTS                                                                                                \
-	{"http", required_argument, 0, 'H'}, {"token", required_argument, 0, 't'},                                   \
-	    {"token-file", required_argument, 0, 'f'}, {"json", no_argument, 0, 'j'}, {"help", no_argument, 0, 'h'}
+	{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},                                    \
+	    {"token", required_argument, 0, 't'}, {"token-file", required_argument, 0, 'f'},                         \
+	    {"json", no_argument, 0, 'j'}, {"help", no_argument, 0, 'h'}
 
 static void common_init(struct common *o)
 {
@@ -268,6 +269,48 @@ int vmac_rollback_main(int argc, char **argv)
 	if (vmac_client_token(o.token, o.token_file) != 0)
 		return 2;
 	snprintf(path, sizeof(path), "/api/drivers/%s/rollback", argv[optind]);
+	return run(&o, "POST", path, NULL, 0, show_deploy);
+}
+
+int vmac_activate_main(int argc, char **argv)
+{
+	static const struct option opts[] = {COMMON_OPTS, {"probation", required_argument, 0, 'p'}, {0, 0, 0, 0}};
+	struct common o;
+	const char *probation = NULL;
+	char path[256], *end;
+	long long id;
+	int opt;
+	common_init(&o);
+	optind = 1;
+	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
+		if (common_opt(opt, &o))
+			continue;
+		if (opt == 'p') {
+			probation = optarg;
+			continue;
+		}
+		if (opt == 'h') {
+			printf("usage: vmac activate [options] DRIVER ID\n"
+			       "Make version ID of DRIVER (vmac drivers lists them) the active one again: its source is\n"
+			       "deployed as vmac reload would (a new entry in the list, the same hash), with migrate()\n"
+			       "and probation. Needs a token of scope deploy.\n"
+			       "  --probation S      seconds of probation (default: the host's reload_probation_s, 30)\n%s",
+			       COMMON_HELP);
+			return 0;
+		}
+		return 2;
+	}
+	if (optind != argc - 2 || strlen(argv[optind]) > 63 || strchr(argv[optind], '/') ||
+	    (id = strtoll(argv[optind + 1], &end, 10)) < 1 || *end) {
+		fprintf(stderr, "usage: vmac activate [options] DRIVER ID (vmac activate --help)\n");
+		return 2;
+	}
+	if (vmac_client_token(o.token, o.token_file) != 0)
+		return 2;
+	if (probation)
+		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld&probation=%s", argv[optind], id, probation);
+	else
+		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld", argv[optind], id);
 	return run(&o, "POST", path, NULL, 0, show_deploy);
 }
 

@@ -6,5 +6,6 @@
 int vmac_reload_main(int argc, char **argv);
 int vmac_rollback_main(int argc, char **argv);
 int vmac_drivers_main(int argc, char **argv);
+int vmac_activate_main(int argc, char **argv);
 
 #endif

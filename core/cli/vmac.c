@@ -145,7 +145,7 @@ static void print_status(json_t *s)
 
 static int cmd_status(int argc, char **argv)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},
 	                                     {"json", no_argument, 0, 'j'},
 	                                     {"token", required_argument, 0, 't'},
 	                                     {"token-file", required_argument, 0, 'f'},
@@ -307,6 +307,7 @@ static void usage(FILE *f)
 	           "  reload    upload a new version of a driver; machines switch at a slot boundary\n"
 	           "  rollback  go back to a driver's previous version\n"
 	           "  drivers   list the driver versions the host keeps\n"
+	           "  activate  make a kept driver version the active one again\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
@@ -349,6 +350,8 @@ int main(int argc, char **argv)
 		return vmac_rollback_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "drivers") == 0)
 		return vmac_drivers_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "activate") == 0)
+		return vmac_activate_main(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

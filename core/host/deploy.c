@@ -152,6 +152,29 @@ done:
 	free(prev_src);
 }
 
+void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, int64_t id, const char *by,
+                          unsigned probation_ms, struct vmac_deploy_result *out)
+{
+	struct vmac_driver_version v;
+	char *src = NULL, err[VMAC_EVENT_TEXT];
+	size_t len = 0;
+	int rc = vmac_store_driver_get(x->store, id, &v, &src, &len, err, sizeof(err));
+	if (rc != 1 || strcmp(v.driver, driver) != 0) {
+		memset(out, 0, sizeof(*out));
+		if (rc < 0) {
+			store_failed(out, err);
+		} else {
+			out->status = 404;
+			snprintf(out->error, sizeof(out->error), "driver %s has no version %lld (vmac drivers %s lists them)",
+			         driver, (long long)id, driver);
+		}
+		free(src);
+		return;
+	}
+	vmac_deploy(x, driver, src, len, by, probation_ms, out);
+	free(src);
+}
+
 void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, const char *by,
                           struct vmac_deploy_result *out)
 {

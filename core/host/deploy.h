@@ -43,6 +43,12 @@ struct vmac_deploy_ctx {
 void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char *src, size_t len, const char *by,
                  unsigned probation_ms, struct vmac_deploy_result *out);
 
+/* A version kept in the store (vmac_store_driver_get) made active again:
+ * its source is deployed as an upload would be (a new entry, the same
+ * hash). 404 when driver has no version id. */
+void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, int64_t id, const char *by,
+                          unsigned probation_ms, struct vmac_deploy_result *out);
+
 /* Back to the version that was active before the active one (or to the
  * driver's file), on every running machine of driver. */
 void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, const char *by,

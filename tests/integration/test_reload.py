@@ -261,3 +261,24 @@ def test_a_running_wash_continues_across_a_reload(t):
     assert steps == ["wash", "drain", "fill", "rinse"], \
         "the cycle did not go on from the wash after the reload: steps %r" % steps
     assert not host.find_events("dropped", "washer-1", after_seq=seq), "the washer was dropped"
+
+
+def test_activating_a_kept_version(t):
+    host = start(t)
+    ids = {}
+    for version in ("2.0.0", "3.0.0"):
+        code, body = call(host, "POST", "/api/drivers/counter?probation=0", t.token, counter(version).encode())
+        assert code == 200, "uploading %s: %d %r" % (version, code, body)
+        ids[version] = body["id"]
+    rc, out, err = t.run([t.path("vmac"), "activate", "--host", host.http, "--probation", "0", "counter",
+                          str(ids["2.0.0"])], "activate")
+    assert rc == 0 and "counter 2.0.0 is active" in out, "vmac activate: exit %d %s %s" % (rc, out, err)
+    s = host.wait_status(lambda s: host.device("lamp-1", s)["driver_version"] == "2.0.0", 10, "lamp-1 on 2.0.0")
+    assert host.device("lamp-1", s)["variables"]["migrated"] is True, "activate did not migrate"
+    code, body = call(host, "GET", "/api/drivers/counter", t.token)
+    versions = [(v["version"], v["state"]) for v in body["versions"]]
+    assert versions == [("2.0.0", "replaced"), ("3.0.0", "replaced"), ("2.0.0", "active")], \
+        "the list after activating: %r" % versions
+    assert body["versions"][0]["hash"] == body["versions"][2]["hash"], "the activated copy has another hash"
+    rc, out, err = t.run([t.path("vmac"), "activate", "--host", host.http, "counter", "9999"], "activate")
+    assert rc == 1 and "no version 9999" in err, "activating a version that does not exist: %d %r" % (rc, err)
