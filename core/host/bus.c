@@ -1210,10 +1210,12 @@ static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
 	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
 	int rc;
 	if (r->persist && m && m->drv && vmac_driver_param_persists(m->drv, r->name) != 1) {
-		snprintf(r->reply, sizeof(r->reply), "%s: %s", r->name,
-		         vmac_driver_param_persists(m->drv, r->name) < 0
-		             ? "only params persist, and the driver has no such param"
-		             : "this param does not persist (the driver does not declare it persist = true)");
+		const char *why = vmac_driver_param_persists(m->drv, r->name) < 0
+		                      ? "only params persist, and the driver has no such param"
+		                      : "this param does not persist (the driver does not declare it persist = true)";
+		size_t n = strlen(r->name);
+		memcpy(r->reply, r->name, n); /* name and reply are parts of one struct: no snprintf of one into the other */
+		snprintf(r->reply + n, sizeof(r->reply) - n, ": %s", why);
 		return 1;
 	}
 	rc = vmac_bus_input(bus, r->device, r->name, &r->value, r->reply, sizeof(r->reply));
