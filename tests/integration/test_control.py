@@ -48,7 +48,8 @@ def test_operator_input_switches_a_light(t):
 def test_refused_input_changes_nothing(t):
     host = t.host()
     t.board("lights", "lights-1")
-    host.wait_running(["lights-1"])
+    host.wait_status(lambda s: kitchen_light(host, s) == (False, False), 30,
+                     "lights-1 running, its kitchen light published off")
     read, operate = t.make_token("read"), t.make_token("operate")
     path = "/api/devices/lights-1/input"
     on = {"name": "kitchen", "value": True}
@@ -153,6 +154,7 @@ def test_devices_and_cycles_endpoints(t):
     host = t.host(settings={"driver.washer.param.time_scale": "0.01"})
     t.board("washer", "washer-1")
     t.board("lights", "lights-1")
+    host.wait_running(["washer-1", "lights-1"])
     host.wait_status(lambda s: (host.device("washer-1", s) or {}).get("variables", {}).get("door") == "closed", 30,
                      "the washer attached, its door seen closed")
     names = sorted(d["name"] for d in host.get("/api/devices")["devices"])
