@@ -3,7 +3,8 @@
 #   make            build build/bin/{vmacd,vmac,vmac-board}
 #   make deps       install missing Debian packages (apt-get; sudo when not root)
 #   make run        deps + build + the demo kitchen (host and three mock boards)
-#   make test       deps + build + every test (unit, fuzz, integration, then again under ASan+UBSan)
+#   make test       deps + build + every test (unit, fuzz, integration, the web UI in chromium,
+#                   then again under ASan+UBSan)
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
 #   make clean
 
@@ -48,14 +49,14 @@ VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
 OBJ = $(BUILD)/obj
 
 portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
-host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o)
+host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver \
               $(BUILD)/tests/test_sched $(BUILD)/tests/test_store
 
-.PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-asan bench clean
+.PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-ui test-asan bench clean
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
@@ -65,6 +66,16 @@ $(portable_obj): $(OBJ)/%.o: %.c
 $(OBJ)/%.o: %.c
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) -MMD -c $< -o $@
+
+# The web UI's files, built into vmacd (core/api/ui/embed.py).
+UI_FILES := $(sort $(wildcard core/api/ui/*.html core/api/ui/*.js core/api/ui/*.css))
+$(BUILD)/gen/ui_assets.c: core/api/ui/embed.py $(UI_FILES)
+	@mkdir -p $(dir $@)
+	python3 core/api/ui/embed.py $@ $(UI_FILES)
+
+$(OBJ)/gen/ui_assets.o: $(BUILD)/gen/ui_assets.c core/api/ui_assets.h
+	@mkdir -p $(dir $@)
+	$(CC) $(HOST_CFLAGS) -Icore/api -c $< -o $@
 
 $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
@@ -156,6 +167,10 @@ test-fuzz: $(BUILD)/fuzz/fuzz_proto
 		grep -E '^Done' $(BUILD)/fuzz/log; \
 	else cat $(BUILD)/fuzz/log; echo "fuzzing found a failure; the input is in $(BUILD)/fuzz/"; exit 1; fi
 
+# The web UI in headless chromium (installs chromium and playwright-core).
+test-ui: $(BINS)
+	@tests/ui/run.sh $(BUILD)/bin $(BUILD)/ui
+
 test-integration: $(BINS) $(BUILD)/tests/store_crash
 	python3 tests/integration/run.py --bin $(BUILD)/bin
 
@@ -166,7 +181,7 @@ test-asan:
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-drivers test-integration
 
 test: deps
-	@$(MAKE) --no-print-directory all test-unit test-lua test-drivers test-fuzz test-integration
+	@$(MAKE) --no-print-directory all test-unit test-lua test-drivers test-fuzz test-integration test-ui
 	@$(MAKE) --no-print-directory VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
 	@echo "make test: every suite passed"
 

@@ -64,6 +64,8 @@ exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1"
 cat <<EOT
 
 The demo kitchen is running.
+  in a browser:  http://$http/#token=$(cat "$state/token")
+                 (signs in with the operate token once; docs/UI.md)
   status:        VMAC_TOKEN_FILE=$state/token $bin/vmac status --http $http
   status (JSON): curl -H "Authorization: Bearer \$(cat $state/token)" http://$http/api/status
                  (the API needs the token in $state/token: docs/API.md, "Access")

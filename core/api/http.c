@@ -12,9 +12,12 @@
 #include <string.h>
 #include <sodium.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "../host/deploy.h"
+#include "../host/loader.h"
 #include "console.h"
+#include "ui_assets.h"
 
 #define VMAC_VERSION_STRING "0.1.0"
 #define STATUS_EVENTS 20
@@ -812,6 +815,115 @@ static enum MHD_Result events_stream(struct vmac_http *h, struct MHD_Connection 
 	return ret;
 }
 
+/* ---- GET /api/live: the status pushed, for the web UI ---- */
+
+#define LIVE_PERIOD_MS 250 /* how often a client gets the latest status (if it changed) */
+
+struct live {
+	struct vmac_http *h;
+	double last_sent, next;
+	char *text;   /* what is being sent */
+	size_t len, off;
+	char *last;   /* the last status sent (not sent again unchanged) */
+};
+
+static void live_free(void *cls)
+{
+	struct live *l = cls;
+	free(l->text);
+	free(l->last);
+	free(l);
+}
+
+/* The stream's next bytes: every LIVE_PERIOD_MS the latest status, if it
+ * changed. A slow client is asked nothing until it has read what it got,
+ * and then gets the newest status: it never backs anything up. */
+static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
+{
+	struct live *l = cls;
+	size_t n;
+	(void)pos;
+	while (l->off == l->len) {
+		double now = mono_s();
+		json_t *s;
+		char *data;
+		if (atomic_load(&l->h->stopping))
+			return MHD_CONTENT_READER_END_OF_STREAM;
+		if (now < l->next) {
+			usleep((useconds_t)((l->next - now) * 1e6));
+			continue;
+		}
+		l->next = now + LIVE_PERIOD_MS / 1000.0;
+		free(l->text);
+		l->text = NULL;
+		l->len = l->off = 0;
+		s = status_json(l->h);
+		data = s ? json_dumps(s, JSON_COMPACT) : NULL;
+		json_decref(s);
+		if (data && (!l->last || strcmp(data, l->last) != 0)) {
+			size_t dn = strlen(data);
+			l->text = malloc(dn + 16);
+			if (l->text) {
+				memcpy(l->text, "data: ", 6);
+				memcpy(l->text + 6, data, dn);
+				memcpy(l->text + 6 + dn, "\n\n", 2);
+				l->len = dn + 8;
+			}
+			free(l->last);
+			l->last = data;
+			l->last_sent = now;
+		} else {
+			free(data);
+			if (now - l->last_sent >= SSE_KEEPALIVE_S) {
+				l->text = strdup(": keep-alive\n\n");
+				l->len = l->text ? strlen(l->text) : 0;
+				l->last_sent = now;
+			}
+		}
+	}
+	n = l->len - l->off < max ? l->len - l->off : max;
+	memcpy(out, l->text + l->off, n);
+	l->off += n;
+	return (ssize_t)n;
+}
+
+static enum MHD_Result live_stream(struct vmac_http *h, struct MHD_Connection *c)
+{
+	struct live *l = calloc(1, sizeof(*l));
+	struct MHD_Response *r;
+	enum MHD_Result ret;
+	if (!l)
+		return reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("out of memory"));
+	l->h = h;
+	l->last_sent = mono_s();
+	r = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 16384, live_read, l, live_free);
+	if (!r) {
+		live_free(l);
+		return MHD_NO;
+	}
+	MHD_add_response_header(r, "Content-Type", "text/event-stream");
+	MHD_add_response_header(r, "Cache-Control", "no-store");
+	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
+	MHD_destroy_response(r);
+	return ret;
+}
+
+/* GET /api/drivers/NAME/manifest?version=V: a loaded version's declarations. */
+static enum MHD_Result driver_manifest(struct MHD_Connection *c, const char *driver)
+{
+	const char *version = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "version");
+	char *json = version ? vmac_loaded_manifest(driver, version) : NULL;
+	json_error_t jerr;
+	json_t *body;
+	if (!version)
+		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("version is needed: ?version=V (a device's driver_version)"));
+	if (!json)
+		return reply(c, MHD_HTTP_NOT_FOUND, error_body("that driver version has not been loaded on this host"));
+	body = json_loads(json, 0, &jerr);
+	free(json);
+	return body ? reply(c, MHD_HTTP_OK, body) : reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("bad manifest"));
+}
+
 /* "/api/devices/NAME" SUFFIX: NAME into device (at most len - 1 bytes, no
  * slash); 0 when url is not of that form. */
 static int device_path(const char *url, const char *suffix, char *device, size_t len)
@@ -826,6 +938,29 @@ static int device_path(const char *url, const char *suffix, char *device, size_t
 	memcpy(device, url + np, n);
 	device[n] = 0;
 	return 1;
+}
+
+/* GET / and /ui/NAME: the web UI's files (docs/UI.md), from the binary. */
+static enum MHD_Result ui_asset(struct MHD_Connection *c, const char *name)
+{
+	const struct vmac_ui_asset *a;
+	struct MHD_Response *r;
+	enum MHD_Result ret;
+	for (a = vmac_ui_assets; a->name && strcmp(a->name, name) != 0; a++)
+		;
+	if (!a->name)
+		return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such file of the web UI"));
+	r = MHD_create_response_from_buffer(a->len, (void *)a->data, MHD_RESPMEM_PERSISTENT);
+	if (!r)
+		return MHD_NO;
+	MHD_add_response_header(r, "Content-Type", a->content_type);
+	MHD_add_response_header(r, "Cache-Control", "no-cache");
+	MHD_add_response_header(r, "X-Content-Type-Options", "nosniff");
+	MHD_add_response_header(r, "Content-Security-Policy",
+	                        "default-src 'self'; img-src 'self' data:; frame-ancestors 'none'");
+	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
+	MHD_destroy_response(r);
+	return ret;
 }
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
@@ -862,6 +997,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	}
 	if (!get && !post)
 		return reply(c, MHD_HTTP_METHOD_NOT_ALLOWED, error_body("only GET, HEAD and POST are used here"));
+	if (get && (strcmp(url, "/") == 0 || strncmp(url, "/ui/", 4) == 0)) /* the web UI: no token, nothing secret */
+		return ui_asset(c, strcmp(url, "/") == 0 ? "index.html" : url + 4);
 	if (get && strcmp(url, "/api/health") == 0) /* the one request without a token */
 		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
 	if (post && device_path(url, "/input", device, sizeof(device))) {
@@ -901,11 +1038,17 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return driver_versions(h, c, device);
 	if (get && strcmp(url, "/api/status") == 0)
 		return reply(c, MHD_HTTP_OK, status_json(h));
+	if (get && strcmp(url, "/api/live") == 0)
+		return live_stream(h, c);
+	if (get && strcmp(url, "/api/whoami") == 0)
+		return reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(scope_of(h, c))));
+	if (get && driver_path(url, "/manifest", device, sizeof(device)))
+		return driver_manifest(c, device);
 	if (get && strcmp(url, "/api/events/log") == 0)
 		return event_log(h, c);
 	if (get && strcmp(url, "/api/events") == 0)
 		return events_stream(h, c);
-	if (get && strcmp(url, "/") == 0)
+	if (get && strcmp(url, "/api") == 0)
 		return reply(c, MHD_HTTP_OK,
 		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
 		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",

@@ -9,6 +9,7 @@
 #include <lauxlib.h>
 #include <lua.h>
 #include <lualib.h>
+#include <jansson.h>
 #include <luajit.h>
 #include <math.h>
 #include <stdio.h>
@@ -83,6 +84,7 @@ struct vmac_driver {
 	double now_s;            /* bus time of the current call */
 	double event_window_s;   /* dev:event rate limit */
 	int64_t tag;             /* the host's (vmac_driver_set_tag) */
+	char *describe;          /* the manifest's declarations as JSON (vmac_driver_describe) */
 	int events_in_window;
 };
 
@@ -1214,6 +1216,76 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	return code;
 }
 
+/* ---- the declarations as JSON, for user interfaces ---- */
+
+/* The plain data at index i as JSON (depth-limited; functions and the like
+ * are left out: NULL). A table with 1..n and nothing else is an array. */
+static json_t *to_json(lua_State *L, int i, int depth)
+{
+	json_t *o;
+	size_t n;
+	switch (lua_type(L, i)) {
+	case LUA_TBOOLEAN: return json_boolean(lua_toboolean(L, i));
+	case LUA_TNUMBER: return json_real(lua_tonumber(L, i));
+	case LUA_TSTRING: return json_stringn(lua_tostring(L, i), lua_objlen(L, i));
+	case LUA_TTABLE: break;
+	default: return NULL;
+	}
+	if (depth > 8)
+		return NULL;
+	i = i < 0 ? lua_gettop(L) + i + 1 : i;
+	n = lua_objlen(L, i);
+	o = n > 0 ? json_array() : json_object();
+	lua_pushnil(L);
+	while (lua_next(L, i)) {
+		json_t *v = to_json(L, -1, depth + 1);
+		if (v && json_is_array(o) && lua_type(L, -2) == LUA_TNUMBER) {
+			lua_Number k = lua_tonumber(L, -2);
+			if (k >= 1 && k <= (lua_Number)n && k == (lua_Number)(size_t)k) {
+				while (json_array_size(o) < (size_t)k)
+					json_array_append_new(o, json_null());
+				json_array_set_new(o, (size_t)k - 1, v);
+				v = NULL;
+			}
+		} else if (v && json_is_object(o) && lua_type(L, -2) == LUA_TSTRING) {
+			json_object_set_new(o, lua_tostring(L, -2), v);
+			v = NULL;
+		}
+		json_decref(v);
+		lua_pop(L, 1);
+	}
+	return o;
+}
+
+/* name, version, description, level and the tables io, variables, params,
+ * commands and ui of the manifest (on top of the stack) as JSON text. */
+static char *describe(struct vmac_driver *d)
+{
+	static const char *const fields[] = {"description", "io", "variables", "params", "commands", "ui", NULL};
+	lua_State *L = d->L;
+	json_t *o = json_pack("{s:s, s:s, s:i}", "name", d->name, "version", d->version, "level", (int)d->level);
+	const char *const *f;
+	char *text;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
+	for (f = fields; *f && o; f++) {
+		json_t *v;
+		lua_getfield(L, -1, *f);
+		v = to_json(L, -1, 0);
+		if (v)
+			json_object_set_new(o, *f, v);
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 1);
+	text = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	json_decref(o);
+	return text;
+}
+
+const char *vmac_driver_describe(const struct vmac_driver *d)
+{
+	return d->describe ? d->describe : "{}";
+}
+
 int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
                             struct vmac_driver **out, char *err, size_t errlen)
 {
@@ -1303,6 +1375,7 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 		goto fail;
 	make_dev(d);                                     /* consumes params */
 	d->ref_manifest = luaL_ref(L, LUA_REGISTRYINDEX); /* the driver table */
+	d->describe = describe(d);
 	if (d->jit)
 		luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_ON);
 	lua_settop(L, 0);
@@ -2030,5 +2103,6 @@ void vmac_driver_free(struct vmac_driver *d)
 	if (!d)
 		return;
 	lua_close(d->L);
+	free(d->describe);
 	free(d);
 }

@@ -86,6 +86,12 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
                             struct vmac_driver **out, char *err, size_t errlen);
 
+/* The manifest's declarations as JSON text, made at load for user
+ * interfaces (docs/API.md "GET /api/drivers/NAME/manifest"): name,
+ * version, description, level, io, variables, params, commands, ui; plain
+ * data only. Valid while the driver is. */
+const char *vmac_driver_describe(const struct vmac_driver *d);
+
 /* What the manifest says. */
 const char *vmac_driver_name(const struct vmac_driver *d);
 const char *vmac_driver_version(const struct vmac_driver *d);

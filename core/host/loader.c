@@ -2,6 +2,8 @@
 #include "loader.h"
 
 #include <errno.h>
+#include <pthread.h>
+#include <stdlib.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -29,6 +31,55 @@ static void cycles_path(const struct vmac_config *cfg, const char *name, char *p
 			return;
 	}
 	snprintf(path, len, "%s/cycles/%s", cfg->scripts_dir, name);
+}
+
+/* The declarations of the driver versions loaded so far, newest first: a
+ * few dozen at most in practice; the oldest go past MANIFESTS. */
+#define MANIFESTS 128
+
+static struct manifest {
+	char driver[VMAC_NAME_MAX + 1];
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	char *json;
+} manifests[MANIFESTS];
+static pthread_mutex_t manifests_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static void remember(const struct vmac_driver *d)
+{
+	struct manifest keep;
+	int i;
+	pthread_mutex_lock(&manifests_lock);
+	for (i = 0; i < MANIFESTS && manifests[i].json; i++)
+		if (strcmp(manifests[i].driver, vmac_driver_name(d)) == 0 &&
+		    strcmp(manifests[i].version, vmac_driver_version(d)) == 0)
+			break;
+	if (i == MANIFESTS) { /* full: the oldest goes */
+		i = MANIFESTS - 1;
+		free(manifests[i].json);
+		manifests[i].json = NULL;
+	}
+	keep = manifests[i];
+	if (!keep.json || strcmp(keep.json, vmac_driver_describe(d)) != 0) {
+		free(keep.json);
+		snprintf(keep.driver, sizeof(keep.driver), "%s", vmac_driver_name(d));
+		snprintf(keep.version, sizeof(keep.version), "%s", vmac_driver_version(d));
+		keep.json = strdup(vmac_driver_describe(d));
+	}
+	memmove(&manifests[1], &manifests[0], (size_t)i * sizeof(manifests[0])); /* to the front */
+	manifests[0] = keep;
+	pthread_mutex_unlock(&manifests_lock);
+}
+
+char *vmac_loaded_manifest(const char *driver, const char *version)
+{
+	char *json = NULL;
+	int i;
+	pthread_mutex_lock(&manifests_lock);
+	for (i = 0; i < MANIFESTS && manifests[i].json && !json; i++)
+		if (strcmp(manifests[i].driver, driver) == 0 && strcmp(manifests[i].version, version) == 0)
+			json = strdup(manifests[i].json);
+	pthread_mutex_unlock(&manifests_lock);
+	return json;
 }
 
 /* The limits and settings the configuration gives driver `driver`. */
@@ -70,6 +121,7 @@ int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const ch
 		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
 		return rc < 0 ? rc : -EINVAL;
 	}
+	remember(*out);
 	return 0;
 }
 
@@ -89,5 +141,6 @@ int vmac_load_driver_source(const struct vmac_config *cfg, const char *driver, c
 		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
 		return rc < 0 ? rc : -EINVAL;
 	}
+	remember(*out);
 	return 0;
 }

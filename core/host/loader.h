@@ -22,6 +22,12 @@ int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const ch
 int vmac_load_driver_source(const struct vmac_config *cfg, const char *driver, const char *device, const char *src,
                             size_t len, struct vmac_driver **out, char *text, size_t textlen);
 
+/* The declarations (vmac_driver_describe) of every driver version this
+ * process has loaded, for user interfaces: a malloc'd copy of the JSON
+ * text of driver `driver` version `version`, or NULL when none was loaded.
+ * Any thread. */
+char *vmac_loaded_manifest(const char *driver, const char *version);
+
 /* The file vmac_load_driver would load for `driver`: 0, or -ENOENT. */
 int vmac_driver_path(const struct vmac_config *cfg, const char *driver, char *path, size_t len);
 

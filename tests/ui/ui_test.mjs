@@ -1,0 +1,208 @@
+// The web UI in a real browser (docs/UI.md): Debian's chromium, headless,
+// driven by playwright-core, against vmacd and the three mock boards of the
+// demo kitchen, all started here on a bus of their own.
+//
+//   node tests/ui/ui_test.mjs --bin build/bin --out build/ui
+//
+// Prints PASS or FAIL per check and exits 1 when any failed; screenshots of
+// every state go to --out for people to look at.
+import { spawn, execFileSync } from "node:child_process";
+import fs from "node:fs";
+import os from "node:os";
+import path from "node:path";
+import readline from "node:readline";
+import { chromium } from "playwright-core";
+
+const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) =>
+  (a.startsWith("--") ? acc.concat([[a.slice(2), all[i + 1]]]) : acc), []));
+const BIN = path.resolve(args.bin || "build/bin");
+const OUT = path.resolve(args.out || "build/ui");
+const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
+fs.mkdirSync(OUT, { recursive: true });
+const STATE = fs.mkdtempSync(path.join(os.tmpdir(), "vmac-ui-"));
+const rnd = (lo, hi) => lo + Math.floor(Math.random() * (hi - lo + 1));
+const BUS = `239.255.${rnd(1, 254)}.${rnd(1, 254)}:${rnd(20000, 60000)}`;
+const procs = [];
+let failures = 0;
+
+function start(name, argv, withStdin) {
+  const p = spawn(argv[0], argv.slice(1), { stdio: [withStdin ? "pipe" : "ignore", "pipe", "pipe"] });
+  p.lines = [];
+  p.waiters = [];
+  for (const stream of [p.stdout, p.stderr]) {
+    readline.createInterface({ input: stream }).on("line", (line) => {
+      p.lines.push(line);
+      fs.appendFileSync(path.join(OUT, name + ".log"), line + "\n");
+      p.waiters = p.waiters.filter((w) => !w(line));
+    });
+  }
+  procs.push(p);
+  return p;
+}
+
+function waitLine(p, re, ms, what) {
+  return new Promise((resolve, reject) => {
+    const found = p.lines.find((l) => re.test(l));
+    if (found) return resolve(found);
+    const timer = setTimeout(() => reject(new Error(`${what} not seen within ${ms} ms`)), ms);
+    p.waiters.push((line) => {
+      if (!re.test(line)) return false;
+      clearTimeout(timer);
+      resolve(line);
+      return true;
+    });
+  });
+}
+
+function token(scope) {
+  return execFileSync(path.join(BIN, "vmac"), ["token", "create", "--state", STATE, "--scope", scope]).toString().trim();
+}
+
+async function status(host, tok) {
+  const r = await fetch(`http://${host}/api/status`, { headers: { Authorization: "Bearer " + tok } });
+  return r.json();
+}
+
+async function until(fn, ms, what) {
+  const end = Date.now() + ms;
+  for (;;) {
+    const v = await fn();
+    if (v) return v;
+    if (Date.now() > end) throw new Error(`${what}: not within ${ms} ms`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+}
+
+async function check(name, fn) {
+  try {
+    await fn();
+    console.log("PASS " + name);
+  } catch (e) {
+    failures++;
+    console.log("FAIL " + name + ": " + (e && e.message ? e.message.split("\n")[0] : e));
+  }
+}
+
+const deviceOut = (s, name, bit) => ((s.devices.find((d) => d.name === name) || {}).outputs || { digital: [] }).digital[bit];
+
+async function main() {
+  const operate = token("operate");
+  const read = token("read");
+  const host = start("vmacd", [path.join(BIN, "vmacd"), "--bus", BUS, "--http", "127.0.0.1:0", "--state", STATE,
+    "--set", "realtime=false", "--set", "slice_us=1250", "--set", "slices_per_slot=5", "--set", "watchdog_ms=1500",
+    "--set", "reply_deadline_us=80000", "--set", "discovery_period_ms=300",
+    "--set", "driver.washer.param.time_scale=0.05"]);
+  const line = await waitLine(host, /status at http:\/\/(\S+)\/api\/status/, 30000, "vmacd's 'status at'");
+  const addr = /status at http:\/\/(\S+)\/api\/status/.exec(line)[1];
+  const boards = {};
+  for (const [plant, name] of [["washer", "washer-1"], ["dishwasher", "dish-1"], ["lights", "lights-1"]]) {
+    boards[name] = start(name, [path.join(BIN, "vmac-board"), "--plant", plant, "--name", name, "--bus", BUS,
+      "--commands"], true);
+  }
+
+  const browser = await chromium.launch({
+    executablePath: CHROMIUM,
+    args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+      "--disable-background-networking", "--disable-component-update", "--disable-sync"],
+  });
+  try {
+    const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+    page.on("pageerror", (e) => { failures++; console.log("FAIL the page raised: " + e.message); });
+
+    await check("three cards appear, and the token leaves the address bar", async () => {
+      await page.goto(`http://${addr}/#token=${operate}`);
+      for (const name of ["washer-1", "dish-1", "lights-1"]) {
+        await page.waitForSelector(`[data-device="${name}"] [data-var]`, { timeout: 30000 });
+      }
+      const cards = await page.locator(".card").count();
+      if (cards !== 3) throw new Error(`${cards} cards`);
+      if (page.url().includes("token")) throw new Error("the token is still in the address bar: " + page.url());
+      await page.screenshot({ path: path.join(OUT, "1-kitchen.png"), fullPage: true });
+    });
+
+    await check("switching the kitchen light on in the page turns the board's output on", async () => {
+      await page.click('[data-device="lights-1"] [data-input="kitchen"]');
+      await until(async () => deviceOut(await status(addr, operate), "lights-1", 0) === true, 5000,
+        "lights-1 output 0 on");
+      await page.waitForSelector('[data-device="lights-1"] [data-var="kitchen"]:text("on")', { timeout: 5000 });
+      await page.screenshot({ path: path.join(OUT, "2-kitchen-light-on.png") });
+    });
+
+    await check("the wall switch pressed on the board shows on the page", async () => {
+      boards["lights-1"].stdin.write("lights-1 toggle2 1\n");
+      await page.waitForSelector('[data-device="lights-1"] [data-var="dining"]:text("on")', { timeout: 5000 });
+      await page.screenshot({ path: path.join(OUT, "3-dining-switch.png") });
+    });
+
+    await check("a quick wash started in the page shows its step and a moving drum plot", async () => {
+      const card = '[data-device="washer-1"]';
+      await page.selectOption(`${card} [data-param-select="program"]`, "quick");
+      await page.click(`${card} [data-command="start"]`);
+      await page.waitForSelector(`${card} [data-var="step"]`, { timeout: 10000 });
+      await page.waitForFunction((sel) => {
+        const c = document.querySelector(sel);
+        return c && Number(c.dataset.points) > 20;
+      }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 });
+      await until(async () => {
+        const v = (await status(addr, operate)).devices.find((d) => d.name === "washer-1").variables;
+        return v.step === "wash";
+      }, 90000, "the washer washing");
+      await page.waitForFunction((sel) => {
+        const c = document.querySelector(sel);
+        return c && Math.abs(Number(c.dataset.last)) > 10;
+      }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 });
+      const step = await page.textContent(`${card} [data-var="step"]`);
+      if (step !== "wash") throw new Error("the page shows step " + step);
+      await page.screenshot({ path: path.join(OUT, "4-washing.png"), fullPage: true });
+    });
+
+    await check("stopping the washer board removes its card within two seconds", async () => {
+      const t0 = Date.now();
+      boards["washer-1"].kill("SIGKILL");
+      await page.waitForSelector('[data-device="washer-1"]', { state: "detached", timeout: 2000 });
+      console.log(`  (the card went ${Date.now() - t0} ms after the kill)`);
+      await page.waitForSelector(".toast", { timeout: 2000 });
+      await page.screenshot({ path: path.join(OUT, "5-washer-gone.png") });
+    });
+
+    await check("the events and system pages", async () => {
+      await page.click('nav a[data-page="events"]');
+      await page.waitForSelector('#event-rows tr:has(td.kind:text("dropped"))', { timeout: 5000 });
+      await page.screenshot({ path: path.join(OUT, "6-events.png"), fullPage: true });
+      await page.click('nav a[data-page="system"]');
+      await page.waitForSelector("#system-facts div", { timeout: 5000 });
+      await page.screenshot({ path: path.join(OUT, "7-system.png"), fullPage: true });
+    });
+
+    await check("a read-only token sees no controls and changes nothing", async () => {
+      const ro = await browser.newPage({ viewport: { width: 412, height: 915 } }); // a phone
+      await ro.goto(`http://${addr}/#token=${read}`);
+      await ro.waitForSelector('[data-device="lights-1"] [data-var="kitchen"]', { timeout: 10000 });
+      const controls = await ro.locator("[data-input], [data-command], [data-param], [data-set], [data-keep]").count();
+      if (controls !== 0) throw new Error(`${controls} controls shown to a read token`);
+      await ro.screenshot({ path: path.join(OUT, "8-read-only-phone.png"), fullPage: true });
+      await ro.close();
+    });
+
+    await check("a wrong token is asked to sign in", async () => {
+      const bad = await browser.newPage();
+      await bad.goto(`http://${addr}/#token=vmac_0000000000000000_${"0".repeat(64)}`);
+      await bad.waitForSelector("#signin:not([hidden]) #signin-error:text('not valid')", { timeout: 10000 });
+      await bad.close();
+    });
+  } finally {
+    await browser.close();
+  }
+}
+
+try {
+  await main();
+} catch (e) {
+  failures++;
+  console.log("FAIL the test could not run: " + e.message);
+} finally {
+  for (const p of procs) p.kill("SIGKILL");
+  fs.rmSync(STATE, { recursive: true, force: true });
+}
+console.log(failures ? `${failures} failed (logs and screenshots in ${OUT})` : `every check passed (screenshots in ${OUT})`);
+process.exit(failures ? 1 : 0);
