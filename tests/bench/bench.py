@@ -11,12 +11,14 @@ same run on the same machine, reported as ratios.
   vtest     vmac test: wall seconds for one virtual hour of washing
             (tests/bench/washer_hour.lua), alone and in the demo kitchen,
             as a ratio to real time
+  ui        tick lateness of vmacd with 10 boards at 1 kHz while 50 web UI
+            clients read GET /api/live, next to the same host with none
   reload    hot reload: 1,000 reloads of a driver running on 10 of 100
             boards at 10 Hz; missed deadlines during the reloads next to
             the same window without reloads, and the reload latency (request
             to every machine switched)
 
-usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost,vtest,reload]
+usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S] [--only lateness,capacity,cost,vtest,reload,ui]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -293,12 +295,56 @@ def reload_bench(args, reloads=1000, boards=100, reloaded=10, period_us=100000):
     return with_ctx(args, "reload", run)
 
 
+def ui_clients(args, clients=50):
+    """The same host twice (10 boards at 1 kHz): once alone, once with
+    `clients` readers of GET /api/live."""
+    import threading
+    import urllib.request
+
+    def run(ctx, n):
+        host, _ = start_kitchen(ctx, 10, 1000, 1000)
+        stop = threading.Event()
+        counts = [0] * n
+
+        def reader(i):
+            req = urllib.request.Request("http://%s/api/live" % host.http)
+            req.add_header("Authorization", "Bearer " + ctx.token)
+            try:
+                with urllib.request.urlopen(req, timeout=30) as r:
+                    while not stop.is_set():
+                        line = r.readline()
+                        if not line:
+                            return
+                        if line.startswith(b"data: "):
+                            counts[i] += 1
+            except Exception:  # noqa: BLE001 (a client that fails shows as fewer messages)
+                return
+
+        threads = [threading.Thread(target=reader, args=(i,), daemon=True) for i in range(n)]
+        for th in threads:
+            th.start()
+        before = host.status()
+        time.sleep(args.seconds)  # the measurement window itself, not a synchronisation
+        after = host.status()
+        stop.set()
+        return {"clients": n, "lateness_us": after["tick"]["lateness_us"],
+                "misses": after["counters"]["misses"] - before["counters"]["misses"],
+                "messages_per_client_per_s": sum(counts) / max(1, n) / args.seconds if n else 0,
+                "realtime": after["bus"]["realtime"]}
+
+    alone = with_ctx(args, "ui0", lambda c: run(c, 0))
+    loaded = with_ctx(args, "ui%d" % clients, lambda c: run(c, clients))
+    return {"alone": alone, "with_clients": loaded,
+            "ratio": {"p99": loaded["lateness_us"]["p99"] / max(1, alone["lateness_us"]["p99"]),
+                      "max": loaded["lateness_us"]["max"] / max(1, alone["lateness_us"]["max"])}}
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui")
     p.add_argument("--max-boards", type=int, default=2000)
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
     p.add_argument("--out", default="build/bench/results.json")
@@ -340,6 +386,10 @@ def main():
     if "vtest" in only:
         print("vtest: one virtual hour of washing, alone and in the kitchen (best of 3)", flush=True)
         results["vtest"] = vtest(args)
+
+    if "ui" in only:
+        print("ui: 10 boards at 1 kHz, alone and with 50 web UI clients, %d s each" % args.seconds, flush=True)
+        results["ui"] = ui_clients(args)
 
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
@@ -386,6 +436,14 @@ def report(r):
         for name, wall in sorted(v.get("wall_s", {}).items()):
             print("vmac test, %s: 1 virtual hour in %.2f s of wall time (%.0fx real time)" % (
                 name, wall, v["virtual_s"] / max(1e-9, wall)))
+    u = r.get("ui")
+    if u:
+        a, w = u["alone"]["lateness_us"], u["with_clients"]["lateness_us"]
+        print("tick lateness, 10 boards at 1 kHz: alone p50 %d, p99 %d, p99.9 %d, max %d us; with %d web UI clients "
+              "(%.1f messages/s each) p50 %d, p99 %d, p99.9 %d, max %d us; ratio p99 %.2f, max %.2f; misses %d / %d" % (
+                  a["p50"], a["p99"], a["p999"], a["max"], u["with_clients"]["clients"],
+                  u["with_clients"]["messages_per_client_per_s"], w["p50"], w["p99"], w["p999"], w["max"],
+                  u["ratio"]["p99"], u["ratio"]["max"], u["alone"]["misses"], u["with_clients"]["misses"]))
     rl = r.get("reload")
     if rl:
         print("hot reload: %d reloads of a driver on %d of %d boards at %d Hz in %.1f s: %d misses, %d drops "
