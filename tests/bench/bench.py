@@ -297,39 +297,36 @@ def reload_bench(args, reloads=1000, boards=100, reloaded=10, period_us=100000):
 
 def ui_clients(args, clients=50):
     """The same host twice (10 boards at 1 kHz): once alone, once with
-    `clients` readers of GET /api/live."""
-    import threading
-    import urllib.request
+    `clients` readers of GET /api/live. The clients are plain sockets read
+    by one thread (a browser would be on another machine: the figure is the
+    host's cost, not the clients')."""
+    import selectors
+    import socket
 
     def run(ctx, n):
         host, _ = start_kitchen(ctx, 10, 1000, 1000)
-        stop = threading.Event()
-        counts = [0] * n
-
-        def reader(i):
-            req = urllib.request.Request("http://%s/api/live" % host.http)
-            req.add_header("Authorization", "Bearer " + ctx.token)
-            try:
-                with urllib.request.urlopen(req, timeout=30) as r:
-                    while not stop.is_set():
-                        line = r.readline()
-                        if not line:
-                            return
-                        if line.startswith(b"data: "):
-                            counts[i] += 1
-            except Exception:  # noqa: BLE001 (a client that fails shows as fewer messages)
-                return
-
-        threads = [threading.Thread(target=reader, args=(i,), daemon=True) for i in range(n)]
-        for th in threads:
-            th.start()
+        addr, port = host.http.rsplit(":", 1)
+        sel = selectors.DefaultSelector()
+        counts = {}
+        for i in range(n):
+            sock = socket.create_connection((addr, int(port)))
+            sock.sendall(("GET /api/live HTTP/1.1\r\nHost: %s\r\nAuthorization: Bearer %s\r\n\r\n" % (
+                host.http, ctx.token)).encode())
+            sock.setblocking(False)
+            sel.register(sock, selectors.EVENT_READ, i)
+            counts[i] = 0
         before = host.status()
-        time.sleep(args.seconds)  # the measurement window itself, not a synchronisation
+        end = time.monotonic() + args.seconds
+        while time.monotonic() < end:  # the measurement window: read whatever comes
+            for key, _ in sel.select(timeout=0.5):
+                data = key.fileobj.recv(1 << 16)
+                counts[key.data] += data.count(b"data: ")
         after = host.status()
-        stop.set()
+        for key in list(sel.get_map().values()):
+            key.fileobj.close()
         return {"clients": n, "lateness_us": after["tick"]["lateness_us"],
                 "misses": after["counters"]["misses"] - before["counters"]["misses"],
-                "messages_per_client_per_s": sum(counts) / max(1, n) / args.seconds if n else 0,
+                "messages_per_client_per_s": sum(counts.values()) / max(1, n) / args.seconds if n else 0,
                 "realtime": after["bus"]["realtime"]}
 
     alone = with_ctx(args, "ui0", lambda c: run(c, 0))

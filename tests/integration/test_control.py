@@ -25,7 +25,11 @@ def post(host, path, body, token, raw=None):
 
 
 def kitchen_light(host, s=None):
+    """(relay output, published variable) of the kitchen light; (None, None)
+    before lights-1 is there."""
     d = host.device("lights-1", s)
+    if d is None:
+        return None, None
     return d["outputs"]["digital"][0], d["variables"].get("kitchen")
 
 
