@@ -46,6 +46,9 @@ struct vmac_http {
 	unsigned port;
 	struct vmac_store *store;
 	char *tls_cert, *tls_key;   /* PEM texts while the daemon runs (TLS) */
+	pthread_mutex_t live_lock;  /* the live streams' shared message: */
+	double live_at;             /* when it was built */
+	char *live_json;            /* the newest status as JSON */
 	_Atomic int stopping;       /* event streams end */
 	pthread_mutex_t fails_lock; /* connection threads share the table */
 	struct fail_count fails[FAIL_CLIENTS];
@@ -692,20 +695,25 @@ static enum MHD_Result driver_rollback(struct vmac_http *h, struct MHD_Connectio
 	return ret;
 }
 
-/* "/api/drivers/NAME" SUFFIX: NAME into driver; 0 when url is not of that
- * form or NAME is not a valid name. */
-static int driver_path(const char *url, const char *suffix, char *driver, size_t len)
+/* PREFIX NAME SUFFIX: NAME into name (at most len - 1 bytes, no slash, a
+ * valid name); 0 when url is not of that form. */
+static int named_path(const char *url, const char *prefix, const char *suffix, char *name, size_t len)
 {
-	static const char prefix[] = "/api/drivers/";
-	size_t np = sizeof(prefix) - 1, ns = strlen(suffix), n = strlen(url);
+	size_t np = strlen(prefix), ns = strlen(suffix), n = strlen(url);
 	if (n <= np + ns || strncmp(url, prefix, np) != 0 || strcmp(url + n - ns, suffix) != 0)
 		return 0;
 	n -= np + ns;
 	if (n >= len || memchr(url + np, '/', n))
 		return 0;
-	memcpy(driver, url + np, n);
-	driver[n] = 0;
-	return valid_name(driver, VMAC_NAME_MAX);
+	memcpy(name, url + np, n);
+	name[n] = 0;
+	return valid_name(name, VMAC_NAME_MAX);
+}
+
+/* "/api/drivers/NAME" SUFFIX */
+static int driver_path(const char *url, const char *suffix, char *driver, size_t len)
+{
+	return named_path(url, "/api/drivers/", suffix, driver, len);
 }
 
 /* ---- GET /api/events: Server-Sent Events ---- */
@@ -838,6 +846,28 @@ static void live_free(void *cls)
 /* The stream's next bytes: every LIVE_PERIOD_MS the latest status, if it
  * changed. A slow client is asked nothing until it has read what it got,
  * and then gets the newest status: it never backs anything up. */
+/* The newest status as JSON for the live streams, a malloc'd copy: built
+ * at most once a period however many clients read it. */
+static char *live_snapshot(struct vmac_http *h)
+{
+	double now = mono_s();
+	char *copy;
+	pthread_mutex_lock(&h->live_lock);
+	if (!h->live_json || now - h->live_at >= LIVE_PERIOD_MS / 1000.0 * 0.8) {
+		json_t *s = status_json(h);
+		char *data = s ? json_dumps(s, JSON_COMPACT) : NULL;
+		json_decref(s);
+		if (data) {
+			free(h->live_json);
+			h->live_json = data;
+			h->live_at = now;
+		}
+	}
+	copy = h->live_json ? strdup(h->live_json) : NULL;
+	pthread_mutex_unlock(&h->live_lock);
+	return copy;
+}
+
 static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
 {
 	struct live *l = cls;
@@ -845,7 +875,6 @@ static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
 	(void)pos;
 	while (l->off == l->len) {
 		double now = mono_s();
-		json_t *s;
 		char *data;
 		if (atomic_load(&l->h->stopping))
 			return MHD_CONTENT_READER_END_OF_STREAM;
@@ -857,9 +886,7 @@ static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
 		free(l->text);
 		l->text = NULL;
 		l->len = l->off = 0;
-		s = status_json(l->h);
-		data = s ? json_dumps(s, JSON_COMPACT) : NULL;
-		json_decref(s);
+		data = live_snapshot(l->h);
 		if (data && (!l->last || strcmp(data, l->last) != 0)) {
 			size_t dn = strlen(data);
 			l->text = malloc(dn + 16);
@@ -924,20 +951,10 @@ static enum MHD_Result driver_manifest(struct MHD_Connection *c, const char *dri
 	return body ? reply(c, MHD_HTTP_OK, body) : reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("bad manifest"));
 }
 
-/* "/api/devices/NAME" SUFFIX: NAME into device (at most len - 1 bytes, no
- * slash); 0 when url is not of that form. */
+/* "/api/devices/NAME" SUFFIX */
 static int device_path(const char *url, const char *suffix, char *device, size_t len)
 {
-	static const char prefix[] = "/api/devices/";
-	size_t np = sizeof(prefix) - 1, ns = strlen(suffix), n = strlen(url);
-	if (n <= np + ns || strncmp(url, prefix, np) != 0 || strcmp(url + n - ns, suffix) != 0)
-		return 0;
-	n -= np + ns;
-	if (n >= len || memchr(url + np, '/', n))
-		return 0;
-	memcpy(device, url + np, n);
-	device[n] = 0;
-	return 1;
+	return named_path(url, "/api/devices/", suffix, device, len);
 }
 
 /* GET / and /ui/NAME: the web UI's files (docs/UI.md), from the binary. */
@@ -1122,6 +1139,7 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->cfg = *cfg;
 	pthread_mutex_init(&h->status_lock, NULL);
 	pthread_mutex_init(&h->fails_lock, NULL);
+	pthread_mutex_init(&h->live_lock, NULL);
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
 	h->status.slot_load = calloc(1u << cfg->max_level, sizeof(*h->status.slot_load));
 	if (!h->status.devices || !h->status.slot_load) {
@@ -1188,6 +1206,8 @@ void vmac_http_stop(struct vmac_http *h)
 		MHD_stop_daemon(h->daemon);
 	pthread_mutex_destroy(&h->status_lock);
 	pthread_mutex_destroy(&h->fails_lock);
+	pthread_mutex_destroy(&h->live_lock);
+	free(h->live_json);
 	free(h->status.devices);
 	free(h->status.slot_load);
 	free(h->tls_cert);

@@ -241,27 +241,37 @@ int vmac_reload_main(int argc, char **argv)
 	return rc;
 }
 
-int vmac_rollback_main(int argc, char **argv)
+/* The options of a command that takes only the common ones: 0 to go on
+ * (optind at the first argument), else the exit code (--help: 0, printed). */
+static int only_common(int argc, char **argv, struct common *o, const char *help, int *exit_code)
 {
 	static const struct option opts[] = {COMMON_OPTS, {0, 0, 0, 0}};
-	struct common o;
-	char path[256];
 	int opt;
-	common_init(&o);
+	common_init(o);
 	optind = 1;
 	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (common_opt(opt, &o))
+		if (common_opt(opt, o))
 			continue;
-		if (opt == 'h') {
-			printf("usage: vmac rollback [options] DRIVER\n"
-			       "Go back to the version of DRIVER that was active before the active one (or to the\n"
-			       "driver's file), on every running machine, each at a slot boundary with migrate().\n"
-			       "Needs a token of scope deploy.\n%s",
-			       COMMON_HELP);
-			return 0;
-		}
-		return 2;
+		if (opt == 'h')
+			printf("%s%s", help, COMMON_HELP);
+		*exit_code = opt == 'h' ? 0 : 2;
+		return 1;
 	}
+	return 0;
+}
+
+int vmac_rollback_main(int argc, char **argv)
+{
+	struct common o;
+	char path[256];
+	int rc;
+	if (only_common(argc, argv, &o,
+	                "usage: vmac rollback [options] DRIVER\n"
+	                "Go back to the version of DRIVER that was active before the active one (or to the\n"
+	                "driver's file), on every running machine, each at a slot boundary with migrate().\n"
+	                "Needs a token of scope deploy.\n",
+	                &rc))
+		return rc;
 	if (optind != argc - 1 || strlen(argv[optind]) > 63 || strchr(argv[optind], '/')) {
 		fprintf(stderr, "usage: vmac rollback [options] DRIVER (vmac rollback --help)\n");
 		return 2;
@@ -316,25 +326,16 @@ int vmac_activate_main(int argc, char **argv)
 
 int vmac_drivers_main(int argc, char **argv)
 {
-	static const struct option opts[] = {COMMON_OPTS, {0, 0, 0, 0}};
 	struct common o;
 	char path[256];
-	int opt;
-	common_init(&o);
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (common_opt(opt, &o))
-			continue;
-		if (opt == 'h') {
-			printf("usage: vmac drivers [options] [DRIVER]\n"
-			       "List the driver versions a running vmacd keeps (uploaded with vmac reload): id, version,\n"
-			       "state (active, replaced, rolled_back, refused, pending), when, by which token, hash.\n"
-			       "Needs a token of scope read.\n%s",
-			       COMMON_HELP);
-			return 0;
-		}
-		return 2;
-	}
+	int rc;
+	if (only_common(argc, argv, &o,
+	                "usage: vmac drivers [options] [DRIVER]\n"
+	                "List the driver versions a running vmacd keeps (uploaded with vmac reload): id, version,\n"
+	                "state (active, replaced, rolled_back, refused, pending), when, by which token, hash.\n"
+	                "Needs a token of scope read.\n",
+	                &rc))
+		return rc;
 	if (optind < argc - 1 || (optind == argc - 1 && (strlen(argv[optind]) > 63 || strchr(argv[optind], '/')))) {
 		fprintf(stderr, "usage: vmac drivers [options] [DRIVER] (vmac drivers --help)\n");
 		return 2;
