@@ -1167,6 +1167,12 @@ static int swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd
 		return 1;
 	}
 	m->drv = nd;
+	/* Said before od is handed over: the main thread may free it at once. */
+	event(bus, &bus->dev[m->primary], "reloaded", "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)",
+	      bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(od), vmac_driver_version(nd),
+	      (double)probation_ns / 1e9);
+	snprintf(reply, replylen, "%s: driver %s %s -> %s", device, m->driver, vmac_driver_version(od),
+	         vmac_driver_version(nd));
 	if (m->prev) /* a version still on probation: the one just replaced is what a rollback goes back to */
 		unload(bus, m->prev);
 	m->prev = NULL;
@@ -1176,11 +1182,6 @@ static int swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd
 	} else {
 		unload(bus, od);
 	}
-	event(bus, &bus->dev[m->primary], "reloaded", "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)",
-	      bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(od), vmac_driver_version(nd),
-	      (double)probation_ns / 1e9);
-	snprintf(reply, replylen, "%s: driver %s %s -> %s", device, m->driver, vmac_driver_version(od),
-	         vmac_driver_version(nd));
 	return 0;
 }
 
