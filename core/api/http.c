@@ -786,13 +786,29 @@ static ssize_t sse_read(void *cls, uint64_t pos, char *out, size_t max)
 	return (ssize_t)n;
 }
 
+/* A Server-Sent Events answer whose bytes come from read(cls); cls is
+ * freed with done(cls) when the stream ends, or now if it cannot start. */
+static enum MHD_Result stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
+                                       MHD_ContentReaderFreeCallback done)
+{
+	struct MHD_Response *r = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 16384, read, cls, done);
+	enum MHD_Result ret;
+	if (!r) {
+		done(cls);
+		return MHD_NO;
+	}
+	MHD_add_response_header(r, "Content-Type", "text/event-stream");
+	MHD_add_response_header(r, "Cache-Control", "no-store");
+	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
+	MHD_destroy_response(r);
+	return ret;
+}
+
 static enum MHD_Result events_stream(struct vmac_http *h, struct MHD_Connection *c)
 {
 	const char *after = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
 	const char *resume = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Last-Event-ID");
-	struct MHD_Response *r;
 	struct sse *e;
-	enum MHD_Result ret;
 	char *end;
 	const char *from = resume ? resume : after;
 	unsigned long long seq = 0;
@@ -811,16 +827,7 @@ static enum MHD_Result events_stream(struct vmac_http *h, struct MHD_Connection 
 	/* Something at once, so the client sees the stream is open before the
 	 * first event (and how soon to reconnect when it ends). */
 	sse_append(e, "retry: 2000\n: vmac events\n\n");
-	r = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, sse_read, e, free);
-	if (!r) {
-		free(e);
-		return MHD_NO;
-	}
-	MHD_add_response_header(r, "Content-Type", "text/event-stream");
-	MHD_add_response_header(r, "Cache-Control", "no-store");
-	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
-	MHD_destroy_response(r);
-	return ret;
+	return stream_response(c, sse_read, e, free);
 }
 
 /* ---- GET /api/live: the status pushed, for the web UI ---- */
@@ -917,22 +924,11 @@ static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
 static enum MHD_Result live_stream(struct vmac_http *h, struct MHD_Connection *c)
 {
 	struct live *l = calloc(1, sizeof(*l));
-	struct MHD_Response *r;
-	enum MHD_Result ret;
 	if (!l)
 		return reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("out of memory"));
 	l->h = h;
 	l->last_sent = mono_s();
-	r = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 16384, live_read, l, live_free);
-	if (!r) {
-		live_free(l);
-		return MHD_NO;
-	}
-	MHD_add_response_header(r, "Content-Type", "text/event-stream");
-	MHD_add_response_header(r, "Cache-Control", "no-store");
-	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
-	MHD_destroy_response(r);
-	return ret;
+	return stream_response(c, live_read, l, live_free);
 }
 
 /* GET /api/drivers/NAME/manifest?version=V: a loaded version's declarations. */
