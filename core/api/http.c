@@ -234,9 +234,10 @@ static struct fail_count *fails_of(struct vmac_http *h, struct MHD_Connection *c
 	return oldest;
 }
 
-/* Whether the request may go on with scope `need`; if not, the answer
- * (401, 403 or 429) is queued into *ret. */
-static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need, enum MHD_Result *ret)
+/* The scope of the request's token when it has at least `need`; else
+ * VMAC_SCOPE_NONE (0), with the answer (401, 403 or 429) queued into *ret. */
+static enum vmac_scope authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
+                                  enum MHD_Result *ret)
 {
 	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
 	double now = mono_s(), wait_s = 0;
@@ -253,7 +254,7 @@ static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_s
 	if (locked) {
 		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s", wait_s + 0.5);
 		*ret = reply(c, MHD_HTTP_TOO_MANY_REQUESTS, error_body(msg));
-		return 0;
+		return VMAC_SCOPE_NONE;
 	}
 	if (auth && strncmp(auth, "Bearer ", 7) == 0)
 		have = vmac_token_check(h->store, auth + 7);
@@ -265,22 +266,15 @@ static int authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_s
 		                  error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
 		                                  : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
 		                  MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
-		return 0;
+		return VMAC_SCOPE_NONE;
 	}
 	if (have < need) {
 		snprintf(msg, sizeof(msg), "this needs a token of scope %s; this one is %s", vmac_scope_name(need),
 		         vmac_scope_name(have));
 		*ret = reply(c, MHD_HTTP_FORBIDDEN, error_body(msg));
-		return 0;
+		return VMAC_SCOPE_NONE;
 	}
-	return 1;
-}
-
-/* The scope of the request's token (it has passed authorized()). */
-static enum vmac_scope scope_of(struct vmac_http *h, struct MHD_Connection *c)
-{
-	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
-	return auth && strncmp(auth, "Bearer ", 7) == 0 ? vmac_token_check(h->store, auth + 7) : VMAC_SCOPE_NONE;
+	return have;
 }
 
 /* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
@@ -622,30 +616,46 @@ static void token_id(struct MHD_Connection *c, char *id, size_t len)
 	snprintf(id, len, "%.*s", VMAC_TOKEN_ID_LEN, auth && strlen(auth) > 12 ? auth + 12 : "?");
 }
 
+/* ?probation=S into *ms (default: the host's reload_probation_s): 0, or -1
+ * with the 400 answer queued into *ret. */
+static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned *ms, double *s,
+                         enum MHD_Result *ret)
+{
+	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
+	char *end;
+	*s = h->cfg.reload_probation_s;
+	if (arg) {
+		*s = strtod(arg, &end);
+		if (!*arg || *end || !(*s >= 0 && *s <= 86400)) {
+			*ret = reply(c, MHD_HTTP_BAD_REQUEST, error_body("probation must be seconds, 0..86400"));
+			return -1;
+		}
+	}
+	*ms = (unsigned)(*s * 1000 + 0.5);
+	return 0;
+}
+
 /* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
 static enum MHD_Result driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
                                      const struct conn *k)
 {
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r;
-	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
-	double probation_s = h->cfg.reload_probation_s;
-	char by[VMAC_TOKEN_ID_LEN + 1], *end;
+	double probation_s;
+	unsigned probation_ms;
+	char by[VMAC_TOKEN_ID_LEN + 1];
 	enum MHD_Result ret;
 	if (k->too_big)
 		return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("a driver file is at most 1 MiB"));
 	if (!k->len)
 		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("the request body must be the driver's source (Lua text)"));
-	if (arg) {
-		probation_s = strtod(arg, &end);
-		if (!*arg || *end || !(probation_s >= 0 && probation_s <= 86400))
-			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("probation must be seconds, 0..86400"));
-	}
+	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
+		return ret;
 	r = malloc(sizeof(*r));
 	if (!r)
 		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body("out of memory"));
 	token_id(c, by, sizeof(by));
-	vmac_deploy(&x, driver, k->body, k->len, by, (unsigned)(probation_s * 1000 + 0.5), r);
+	vmac_deploy(&x, driver, k->body, k->len, by, probation_ms, r);
 	ret = deploy_reply(c, driver, r, probation_s);
 	free(r);
 	return ret;
@@ -657,23 +667,20 @@ static enum MHD_Result driver_activate(struct vmac_http *h, struct MHD_Connectio
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r;
 	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
-	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
-	double probation_s = h->cfg.reload_probation_s;
+	double probation_s;
+	unsigned probation_ms;
 	char by[VMAC_TOKEN_ID_LEN + 1], *end;
 	long long id = id_s ? strtoll(id_s, &end, 10) : 0;
 	enum MHD_Result ret;
 	if (!id_s || !*id_s || *end || id < 1)
 		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("id must be a version's id (vmac drivers lists them)"));
-	if (arg) {
-		probation_s = strtod(arg, &end);
-		if (!*arg || *end || !(probation_s >= 0 && probation_s <= 86400))
-			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("probation must be seconds, 0..86400"));
-	}
+	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
+		return ret;
 	r = malloc(sizeof(*r));
 	if (!r)
 		return reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, error_body("out of memory"));
 	token_id(c, by, sizeof(by));
-	vmac_deploy_activate(&x, driver, id, by, (unsigned)(probation_s * 1000 + 0.5), r);
+	vmac_deploy_activate(&x, driver, id, by, probation_ms, r);
 	ret = deploy_reply(c, driver, r, probation_s);
 	free(r);
 	return ret;
@@ -983,6 +990,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	struct vmac_http *h = cls;
 	struct conn *k = *con_cls;
 	enum MHD_Result ret;
+	enum vmac_scope scope;
 	char device[VMAC_NAME_MAX + 2];
 	int get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0, post = strcmp(method, "POST") == 0;
 	(void)version;
@@ -1034,12 +1042,12 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return driver_activate(h, c, device);
 		return driver_upload(h, c, device, k);
 	}
-	if (!authorized(h, c, VMAC_SCOPE_READ, &ret))
+	if (!(scope = authorized(h, c, VMAC_SCOPE_READ, &ret)))
 		return ret;
 	if (post && strcmp(url, "/api/console") == 0) {
 		if (k->too_big || k->len > INPUT_MAX)
 			return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("the request body is over 64 KiB"));
-		return console(h, c, k, scope_of(h, c) >= VMAC_SCOPE_OPERATE);
+		return console(h, c, k, scope >= VMAC_SCOPE_OPERATE);
 	}
 	if (get && strcmp(url, "/api/devices") == 0)
 		return devices(h, c, NULL);
@@ -1054,7 +1062,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	if (get && strcmp(url, "/api/live") == 0)
 		return live_stream(h, c);
 	if (get && strcmp(url, "/api/whoami") == 0)
-		return reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(scope_of(h, c))));
+		return reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(scope)));
 	if (get && driver_path(url, "/manifest", device, sizeof(device)))
 		return driver_manifest(c, device);
 	if (get && strcmp(url, "/api/events/log") == 0)
