@@ -114,7 +114,11 @@ async function main() {
       for (const name of ["washer-1", "dish-1", "lights-1"]) {
         await page.waitForSelector(`[data-device="${name}"] [data-var]`, { timeout: 30000 });
       }
-      const cards = await page.locator(".card").count();
+      // A machine dropped and attached again (a slow start) leaves its old
+      // card fading out for half a second: count the cards that stay.
+      await page.waitForFunction(() => document.querySelectorAll(".card:not(.leaving)").length === 3 &&
+        !document.querySelector(".card.leaving"), null, { timeout: 10000 }).catch(() => {});
+      const cards = await page.locator(".card:not(.leaving)").count();
       if (cards !== 3) throw new Error(`${cards} cards`);
       if (page.url().includes("token")) throw new Error("the token is still in the address bar: " + page.url());
       await page.screenshot({ path: path.join(OUT, "1-kitchen.png"), fullPage: true });
