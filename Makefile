@@ -53,7 +53,7 @@ host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
-UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver \
+UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver $(BUILD)/tests/test_isolation \
               $(BUILD)/tests/test_sched $(BUILD)/tests/test_store
 
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-ui test-asan bench clean
@@ -106,6 +106,11 @@ $(BUILD)/tests/test_host: $(OBJ)/tests/unit/test_host.o $(host_obj) $(portable_o
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
 $(BUILD)/tests/test_driver: $(OBJ)/tests/unit/test_driver.o $(OBJ)/core/driver/driver.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
+
+# White-box: includes core/driver/driver.c itself (tests/unit/test_isolation.c).
+$(BUILD)/tests/test_isolation: $(OBJ)/tests/unit/test_isolation.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 

@@ -1,7 +1,26 @@
 /* Lua driver instances: sandbox construction, loading, the manifest, and
  * the guarded call. Stack contracts are stated per function; everything a
  * driver can reach is built up from nothing in make_env(). The driver API
- * is docs/DRIVERS.md. */
+ * is docs/DRIVERS.md.
+ *
+ * The protection rule (docs/DRIVERS.md "Isolation"): no lua_* call that can
+ * allocate or raise runs on a driver's state outside a protected call.
+ * Every entry point below does its Lua work inside protect(): one lua_pcall
+ * of a C function made at load (entering it allocates nothing), with the
+ * count hook armed, so that a metamethod the host's access happens to reach
+ * is held to the budget as well. An error in the host's own work (a refused
+ * allocation, above all) comes back as a failure of that driver, never as a
+ * panic. Driver code runs inside that through guarded_call(), with its
+ * traceback. The host may go HOST_RESERVE bytes past the cap for its own
+ * work (inputs, the traceback, copied state); driver code never may, and an
+ * allocation refused while driver code runs fails the call even when the
+ * driver catches the error. Outside protect() only calls that neither
+ * allocate nor raise are made (lua_rawgeti on the registry, pushes onto the
+ * empty top-level stack, reads of plain values). The atpanic handler is the
+ * last line: should anything raise outside protection after all, it jumps
+ * back into protect(), which marks the driver broken, and every later call
+ * fails without touching the state; the host unloads it as any failed
+ * driver. */
 #include "driver.h"
 
 #include <dirent.h>
@@ -12,6 +31,7 @@
 #include <jansson.h>
 #include <luajit.h>
 #include <math.h>
+#include <setjmp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,6 +43,7 @@
 #define REP_MAX 65536              /* bytes string.rep may build */
 #define PATTERN_STEPS_MAX (1 << 24) /* worst-case steps of one pattern call */
 #define EVENTS_PER_S 10
+#define HOST_RESERVE (64 * 1024) /* bytes past the cap the host's own work may use */
 
 #define IO_DI VMAC_IO_DI
 #define IO_AI VMAC_IO_AI
@@ -58,6 +79,15 @@ struct vmac_driver {
 	int64_t budget_ns, deadline_ns; /* wall-clock budget per call; 0 = none */
 	int overrun;             /* budget exceeded: keep raising until the call unwinds */
 	char overrun_msg[96];
+	int in_driver;           /* driver code runs now: the cap holds without the host's reserve */
+	int mem_refused;         /* an allocation was refused while driver code ran (sticky for the call) */
+	int ref_job, ref_traceback; /* protect()'s entry and the traceback handler, made once */
+	jmp_buf panic_jmp;       /* where the atpanic handler returns to (panic_armed) */
+	int panic_armed;
+	int broken;              /* an error escaped protection: the state is never touched again */
+	char broken_msg[200];
+	int failed;              /* the host's work on it failed where no caller hears (failure says why): */
+	char failure[VMAC_DRIVER_ERR_MAX]; /* the next call that reports errors fails with it */
 	int ref_tick, ref_attach, ref_input, ref_detach, ref_migrate; /* registry refs, LUA_NOREF if absent */
 	int ref_manifest, ref_dev, ref_inputs, ref_out, ref_vars, ref_params;
 	int ref_keys; /* the names a tick reads and writes, interned once (key_*) */
@@ -116,8 +146,10 @@ static void *counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 	}
 	if (!ptr)
 		osize = 0;
-	if (nsize > osize && d->used - osize + nsize > d->cap)
+	if (nsize > osize && d->used - osize + nsize > d->cap + (d->in_driver ? 0 : HOST_RESERVE)) {
+		d->mem_refused |= d->in_driver;
 		return NULL;
+	}
 	p = realloc(ptr, nsize);
 	if (p)
 		d->used = d->used - osize + nsize;
@@ -146,41 +178,183 @@ static void budget_hook(lua_State *L, lua_Debug *ar)
 		luaL_error(L, "%s", d->overrun_msg);
 }
 
+/* The error handler of guarded_call: the host's work, so it may use the
+ * reserve (a driver at its cap still gets its traceback). */
 static int traceback(lua_State *L)
 {
-	const char *msg = lua_tostring(L, 1);
+	const char *msg = lua_type(L, 1) == LUA_TSTRING ? lua_tostring(L, 1) : NULL;
+	driver_of(L)->in_driver = 0;
 	luaL_traceback(L, L, msg ? msg : "(error object is not a string)", 1);
 	return 1;
 }
 
-/* The one guarded call: [-(nargs+1), +nresults]. Calls the function below
- * nargs arguments with a fresh budget (times factor); on failure leaves
- * nothing on the stack and writes the message with traceback into err. */
+static void memory_message(const struct vmac_driver *d, char *err, size_t errlen)
+{
+	snprintf(err, errlen, "%s: memory cap exceeded (not enough memory; the cap is %zu KiB)", d->file,
+	         d->cap / 1024);
+}
+
+/* The one guarded call of driver code: [-(nargs+1), +nresults]. Calls the
+ * function below nargs arguments with a fresh budget (times factor); on
+ * failure leaves nothing on the stack and writes the message with traceback
+ * into err. Runs inside protect() only. */
 static int guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned factor, char *err, size_t errlen)
 {
 	lua_State *L = d->L;
 	int base = lua_gettop(L) - nargs, rc;
 	uint64_t hooks = d->budget_hooks;
-	lua_pushcfunction(L, traceback);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_traceback);
 	lua_insert(L, base);
 	d->hooks = 0;
 	d->overrun = 0;
+	d->mem_refused = 0;
 	d->budget_hooks = hooks * factor;
 	d->deadline_ns = d->budget_ns ? mono_ns() + d->budget_ns * factor : 0;
-	lua_sethook(L, budget_hook, LUA_MASKCOUNT, HOOK_EVERY);
+	d->in_driver = 1;
 	rc = lua_pcall(L, nargs, nresults, base);
-	lua_sethook(L, NULL, 0, 0);
+	d->in_driver = 0;
 	d->budget_hooks = hooks;
-	if (rc != 0 || d->overrun) {
-		const char *msg = rc != 0 ? lua_tostring(L, -1) : d->overrun_msg;
-		if (rc == LUA_ERRMEM)
-			msg = "memory cap exceeded (not enough memory)";
-		snprintf(err, errlen, "%s", msg ? msg : "unknown error");
+	if (rc != 0 || d->overrun || d->mem_refused) {
+		if (rc == LUA_ERRMEM || d->mem_refused)
+			memory_message(d, err, errlen);
+		else if (d->overrun)
+			snprintf(err, errlen, "%s", d->overrun_msg);
+		else
+			snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "unknown error");
 		lua_settop(L, base - 1);
 		return -1;
 	}
 	lua_remove(L, base);
 	return 0;
+}
+
+/* ---- protection of the host's work ---- */
+
+/* The host's work on a driver's state: fn(d, args, err, errlen) returns 0 or
+ * -1 with err; it may raise (a raise is a failure of the driver). */
+typedef int (*host_work)(struct vmac_driver *d, void *args, char *err, size_t errlen);
+
+struct job {
+	struct vmac_driver *d;
+	host_work fn;
+	void *args;
+	char *err;
+	size_t errlen;
+	int rc;
+};
+
+/* protect()'s entry, made once per state: [-1 (the job), +0]. */
+static int run_job(lua_State *L)
+{
+	struct job *j = lua_touserdata(L, 1);
+	lua_pop(L, 1);
+	j->rc = j->fn(j->d, j->args, j->err, j->errlen);
+	return 0;
+}
+
+/* The last line: an error raised outside any protected call. LuaJIT would
+ * exit the process after this returns, so it never returns while an entry
+ * point is armed; it says which driver and why on stderr either way. */
+static int on_panic(lua_State *L)
+{
+	struct vmac_driver *d = driver_of(L);
+	const char *msg = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "(error object is not a string)";
+	snprintf(d->broken_msg, sizeof(d->broken_msg), "%s: error outside a protected call: %s", d->file, msg);
+	fprintf(stderr, "vmac: driver %s: %s%s\n", d->name, d->broken_msg,
+	        d->panic_armed ? "; the driver is stopped" : "; cannot recover, the process ends");
+	if (d->panic_armed)
+		longjmp(d->panic_jmp, 1);
+	return 0;
+}
+
+/* Run fn inside one protected call with the budget's hook armed (factor
+ * budgets for the host's own work). 0, or -1 with err. Entering allocates
+ * nothing: the entry function is in the registry, the job is light
+ * userdata, and the top-level stack is empty between calls. */
+static int protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	struct job job;
+	volatile int rc;
+	if (d->broken) {
+		snprintf(err, errlen, "%s", d->broken_msg);
+		return -1;
+	}
+	job.d = d;
+	job.fn = fn;
+	job.args = args;
+	job.err = err;
+	job.errlen = errlen;
+	job.rc = -1;
+	if (setjmp(d->panic_jmp) != 0) {
+		d->panic_armed = 0;
+		d->broken = 1;
+		d->in_driver = 0;
+		lua_sethook(L, NULL, 0, 0);
+		snprintf(err, errlen, "%s", d->broken_msg);
+		return -1;
+	}
+	d->panic_armed = 1;
+	lua_settop(L, 0);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_job);
+	lua_pushlightuserdata(L, &job);
+	d->hooks = 0;
+	d->overrun = 0;
+	d->deadline_ns = d->budget_ns ? mono_ns() + d->budget_ns : 0;
+	lua_sethook(L, budget_hook, LUA_MASKCOUNT, HOOK_EVERY);
+	rc = lua_pcall(L, 1, 0, 0);
+	lua_sethook(L, NULL, 0, 0);
+	d->in_driver = 0;
+	if (rc != 0) {
+		if (rc == LUA_ERRMEM)
+			snprintf(err, errlen, "%s: memory cap exceeded while the host worked on its state (the cap is %zu "
+			         "KiB)", d->file, d->cap / 1024);
+		else if (d->overrun)
+			snprintf(err, errlen, "%s", d->overrun_msg);
+		else
+			snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "unknown error");
+		job.rc = -1;
+	}
+	lua_settop(L, 0);
+	d->panic_armed = 0;
+	return job.rc;
+}
+
+/* protect_any for an instance that may run: one whose host work failed
+ * unheard (d->failed) fails here with that reason. */
+static int protect(struct vmac_driver *d, host_work fn, void *args, char *err, size_t errlen)
+{
+	if (d->failed) {
+		snprintf(err, errlen, "%s", d->failure);
+		return -1;
+	}
+	return protect_any(d, fn, args, err, errlen);
+}
+
+/* protect for callers that hear no error: a failure is kept for the next
+ * call that can report it. */
+static void protect_quiet(struct vmac_driver *d, host_work fn, void *args)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	if (protect(d, fn, args, err, sizeof(err)) != 0 && !d->failed) {
+		d->failed = 1;
+		snprintf(d->failure, sizeof(d->failure), "%s", err);
+	}
+}
+
+/* Raw field access by name (no metamethod runs): [-0, +1] and [-1, +0];
+ * i is an absolute index. May allocate the key: protected work only. */
+static void raw_getfield(lua_State *L, int i, const char *k)
+{
+	lua_pushstring(L, k);
+	lua_rawget(L, i);
+}
+
+static void raw_setfield(lua_State *L, int i, const char *k)
+{
+	lua_pushstring(L, k);
+	lua_insert(L, -2);
+	lua_rawset(L, i);
 }
 
 /* ---- the sandbox ---- */
@@ -282,7 +456,8 @@ static int safe_pattern(lua_State *L)
 }
 
 /* pcall, xpcall and coroutine.resume as drivers see them: the originals
- * (upvalue 1), then, once the budget is spent, the budget error again.
+ * (upvalue 1), then, once the budget is spent or an allocation was refused
+ * at the cap, that error again.
  * LuaJIT restarts the instruction count after every error, so in
  * `while true do pcall(f) end` the hook would always fire inside f and be
  * caught there; re-raising here makes the overrun reach the host whatever
@@ -296,6 +471,8 @@ static int budget_checked_call(lua_State *L)
 	lua_call(L, n, LUA_MULTRET);
 	if (d->overrun)
 		return luaL_error(L, "%s", d->overrun_msg);
+	if (d->mem_refused)
+		return luaL_error(L, "not enough memory");
 	return lua_gettop(L);
 }
 
@@ -1127,20 +1304,22 @@ static int dev_event(lua_State *L)
 }
 
 /* The keys of a tick as Lua strings, in one array (registry ref_keys): I/O
- * names, then variable names, then "time", "out", "vars". A tick pushes
- * them by index instead of hashing C strings into Lua strings every time.
+ * names, then variable names, then "time", "out", "vars", "state". A tick
+ * pushes them by index instead of hashing C strings into Lua strings every
+ * time, and reading another state's dev.state with them allocates nothing.
  * [-0, +0] */
 static int key_io(const struct vmac_driver *d, int i) { (void)d; return i + 1; }
 static int key_var(const struct vmac_driver *d, int i) { return d->nio + i + 1; }
 static int key_time(const struct vmac_driver *d) { return d->nio + d->nvars + 1; }
 static int key_out(const struct vmac_driver *d) { return d->nio + d->nvars + 2; }
 static int key_vars(const struct vmac_driver *d) { return d->nio + d->nvars + 3; }
+static int key_state(const struct vmac_driver *d) { return d->nio + d->nvars + 4; }
 
 static void make_keys(struct vmac_driver *d)
 {
 	lua_State *L = d->L;
 	int i;
-	lua_createtable(L, key_vars(d), 0);
+	lua_createtable(L, key_state(d), 0);
 	for (i = 0; i < d->nio; i++) {
 		lua_pushstring(L, d->io[i].name);
 		lua_rawseti(L, -2, key_io(d, i));
@@ -1155,6 +1334,8 @@ static void make_keys(struct vmac_driver *d)
 	lua_rawseti(L, -2, key_out(d));
 	lua_pushliteral(L, "vars");
 	lua_rawseti(L, -2, key_vars(d));
+	lua_pushliteral(L, "state");
+	lua_rawseti(L, -2, key_state(d));
 	d->ref_keys = luaL_ref(L, LUA_REGISTRYINDEX);
 }
 
@@ -1258,24 +1439,28 @@ static json_t *to_json(lua_State *L, int i, int depth)
 }
 
 /* name, version, description, level and the tables io, variables, params,
- * commands and ui of the manifest (on top of the stack) as JSON text. */
+ * commands and ui of the manifest as JSON text. Protected work: the fields
+ * are fetched first (that may raise), then turned into JSON with calls that
+ * neither raise nor allocate on the state, so no JSON leaks. */
 static char *describe(struct vmac_driver *d)
 {
 	static const char *const fields[] = {"description", "io", "variables", "params", "commands", "ui", NULL};
 	lua_State *L = d->L;
-	json_t *o = json_pack("{s:s, s:s, s:i}", "name", d->name, "version", d->version, "level", (int)d->level);
-	const char *const *f;
+	int first, i;
+	json_t *o;
 	char *text;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
-	for (f = fields; *f && o; f++) {
-		json_t *v;
-		lua_getfield(L, -1, *f);
-		v = to_json(L, -1, 0);
+	first = lua_gettop(L) + 1;
+	for (i = 0; fields[i]; i++)
+		raw_getfield(L, first - 1, fields[i]);
+	luaL_checkstack(L, 2 * 10 + 4, "describe"); /* to_json: two slots a level, nine levels */
+	o = json_pack("{s:s, s:s, s:i}", "name", d->name, "version", d->version, "level", (int)d->level);
+	for (i = 0; fields[i] && o; i++) {
+		json_t *v = to_json(L, first + i, 0);
 		if (v)
-			json_object_set_new(o, *f, v);
-		lua_pop(L, 1);
+			json_object_set_new(o, fields[i], v);
 	}
-	lua_pop(L, 1);
+	lua_settop(L, first - 2);
 	text = o ? json_dumps(o, JSON_COMPACT) : NULL;
 	json_decref(o);
 	return text;
@@ -1286,12 +1471,82 @@ const char *vmac_driver_describe(const struct vmac_driver *d)
 	return d->describe ? d->describe : "{}";
 }
 
+/* The load's Lua work, protected: libraries, the environment, the file run
+ * under LOAD_FACTOR budgets, the manifest, dev, the description. */
+struct load_args {
+	const char *src;
+	size_t len;
+	const struct vmac_driver_limits *limits;
+};
+
+static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	struct load_args *a = args;
+	lua_State *L = d->L;
+	char chunkname[80];
+	/* Interpreter only: the count hook that enforces the budget is not
+	 * honoured inside JIT-compiled traces. */
+	luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_OFF);
+	if (open_lib(L, luaopen_base, "") || open_lib(L, luaopen_string, LUA_STRLIBNAME) ||
+	    open_lib(L, luaopen_table, LUA_TABLIBNAME) || open_lib(L, luaopen_math, LUA_MATHLIBNAME) ||
+	    open_lib(L, luaopen_bit, LUA_BITLIBNAME)) {
+		snprintf(err, errlen, "cannot open libraries: %s",
+		         lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
+		return -1;
+	}
+	lua_getglobal(L, "string");
+	lua_pushnil(L);
+	lua_setfield(L, -2, "dump");
+	lua_pop(L, 1);
+	lua_newtable(L);
+	lua_setfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
+	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
+	if (luaL_loadbufferx(L, a->src, a->len, chunkname, "t") != 0) {
+		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
+		return -1;
+	}
+	make_env(L);
+	lua_setfenv(L, -2);
+	d->loading = 1;
+	if (guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen) != 0) {
+		d->loading = 0;
+		return -1;
+	}
+	d->loading = 0;
+	if (!lua_istable(L, -1)) {
+		snprintf(err, errlen, "%s: the file must return a table (the driver), got %s", d->file,
+		         luaL_typename(L, -1));
+		return -1;
+	}
+	if (parse_manifest(d, a->limits, err, errlen) != 0)
+		return -1;
+	make_dev(d);                                     /* consumes params */
+	d->ref_manifest = luaL_ref(L, LUA_REGISTRYINDEX); /* the driver table */
+	d->describe = describe(d);
+	if (d->jit)
+		luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_ON);
+	lua_settop(L, 0);
+	lua_gc(L, LUA_GCCOLLECT, 0);
+	return 0;
+}
+
+/* protect()'s entry and the traceback handler, made once (lua_cpcall'd). */
+static int make_entries(lua_State *L)
+{
+	struct vmac_driver *d = lua_touserdata(L, 1);
+	lua_pushcfunction(L, run_job);
+	d->ref_job = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_pushcfunction(L, traceback);
+	d->ref_traceback = luaL_ref(L, LUA_REGISTRYINDEX);
+	return 0;
+}
+
 int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
                             struct vmac_driver **out, char *err, size_t errlen)
 {
 	struct vmac_driver *d;
-	char chunkname[80];
-	int code = 0, i;
+	struct load_args args;
+	int i;
 	lua_State *L;
 
 	*out = NULL;
@@ -1339,51 +1594,21 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 		snprintf(err, errlen, "cannot create Lua state");
 		return -ENOMEM;
 	}
-	/* Interpreter only: the count hook that enforces the budget is not
-	 * honoured inside JIT-compiled traces. */
-	luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_OFF);
-	if (open_lib(L, luaopen_base, "") || open_lib(L, luaopen_string, LUA_STRLIBNAME) ||
-	    open_lib(L, luaopen_table, LUA_TABLIBNAME) || open_lib(L, luaopen_math, LUA_MATHLIBNAME) ||
-	    open_lib(L, luaopen_bit, LUA_BITLIBNAME)) {
-		snprintf(err, errlen, "cannot open libraries: %s", lua_tostring(L, -1));
+	lua_atpanic(L, on_panic);
+	if (lua_cpcall(L, make_entries, d) != 0) {
+		snprintf(err, errlen, "%s: not enough memory to set up the sandbox", file);
 		goto fail;
 	}
-	lua_getglobal(L, "string");
-	lua_pushnil(L);
-	lua_setfield(L, -2, "dump");
-	lua_pop(L, 1);
-	lua_newtable(L);
-	lua_setfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
-	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
-	if (luaL_loadbufferx(L, src, len, chunkname, "t") != 0) {
-		snprintf(err, errlen, "%s", lua_tostring(L, -1));
+	args.src = src;
+	args.len = len;
+	args.limits = limits;
+	if (protect(d, load_work, &args, err, errlen) != 0)
 		goto fail;
-	}
-	make_env(L);
-	lua_setfenv(L, -2);
-	d->loading = 1;
-	code = guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen);
-	d->loading = 0;
-	if (code != 0)
-		goto fail;
-	if (!lua_istable(L, -1)) {
-		snprintf(err, errlen, "%s: the file must return a table (the driver), got %s", d->file,
-		         luaL_typename(L, -1));
-		goto fail;
-	}
-	if (parse_manifest(d, limits, err, errlen) != 0)
-		goto fail;
-	make_dev(d);                                     /* consumes params */
-	d->ref_manifest = luaL_ref(L, LUA_REGISTRYINDEX); /* the driver table */
-	d->describe = describe(d);
-	if (d->jit)
-		luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_ON);
-	lua_settop(L, 0);
-	lua_gc(L, LUA_GCCOLLECT, 0);
 	*out = d;
 	return 0;
 fail:
 	lua_close(L);
+	free(d->describe);
 	free(d);
 	return -EINVAL;
 }
@@ -1430,75 +1655,109 @@ int vmac_driver_boards(const struct vmac_driver *d)
 	return d->nboards;
 }
 
+/* dev.boards[b + 1] = {name = , minor = }; the primary names the machine. */
+struct board_args {
+	int b;
+	uint32_t minor;
+	const char *name;
+};
+
+static int add_board_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	struct board_args *a = args;
+	lua_State *L = d->L;
+	int dev;
+	(void)err;
+	(void)errlen;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	dev = lua_gettop(L);
+	if (a->b == 0) {
+		lua_pushstring(L, a->name);
+		raw_setfield(L, dev, "name");
+	}
+	raw_getfield(L, dev, "boards");
+	if (lua_istable(L, -1)) {
+		lua_createtable(L, 0, 2);
+		lua_pushstring(L, a->name);
+		raw_setfield(L, lua_gettop(L) - 1, "name");
+		lua_pushnumber(L, a->minor);
+		raw_setfield(L, lua_gettop(L) - 1, "minor");
+		lua_rawseti(L, -2, a->b + 1);
+	}
+	return 0;
+}
+
 int vmac_driver_add_board(struct vmac_driver *d, uint32_t minor, const char *name)
 {
-	lua_State *L = d->L;
-	int i, b;
+	struct board_args a;
+	int i;
 	for (i = 0; i < d->nboards; i++)
 		if (d->board_minor[i] == minor)
 			return -1;
 	if (d->nboards == VMAC_DRIVER_MAX_BOARDS)
 		return -1;
-	b = d->nboards++;
-	d->board_minor[b] = minor;
+	a.b = d->nboards++;
+	a.minor = minor;
+	a.name = name;
+	d->board_minor[a.b] = minor;
 	for (i = 0; i < d->nio; i++)
 		if (d->io[i].has_minor && d->io[i].minor == minor)
-			d->io[i].board = b;
-	/* dev.boards[#+1] = {name = , minor = }; the primary names the machine */
+			d->io[i].board = a.b;
+	protect_quiet(d, add_board_work, &a); /* a failure fails the next call */
+	return 0;
+}
+
+static int set_level_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	(void)args;
+	(void)err;
+	(void)errlen;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
-	if (b == 0) {
-		lua_pushstring(L, name);
-		lua_setfield(L, -2, "name");
-	}
-	lua_getfield(L, -1, "boards");
-	if (lua_istable(L, -1)) {
-		lua_createtable(L, 0, 2);
-		lua_pushstring(L, name);
-		lua_setfield(L, -2, "name");
-		lua_pushnumber(L, minor);
-		lua_setfield(L, -2, "minor");
-		lua_rawseti(L, -2, b + 1);
-	}
-	lua_pop(L, 2);
+	lua_pushinteger(L, (lua_Integer)d->level);
+	raw_setfield(L, 1, "level");
 	return 0;
 }
 
 void vmac_driver_set_level_now(struct vmac_driver *d, unsigned level)
 {
-	lua_State *L = d->L;
 	d->level = level;
-	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
-	lua_pushinteger(L, (lua_Integer)level);
-	lua_setfield(L, -2, "level");
-	lua_pop(L, 1);
+	protect_quiet(d, set_level_work, NULL);
 }
 
-static int call_ref(struct vmac_driver *d, int ref, double time_s, char *err, size_t errlen)
+/* A callback with dev (and maybe a string) as its arguments. */
+struct callback_args {
+	int ref;
+	const char *arg; /* NULL: none */
+};
+
+static int callback_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
+	struct callback_args *a = args;
 	lua_State *L = d->L;
-	if (ref == LUA_NOREF)
-		return 0;
-	d->now_s = time_s;
-	lua_rawgeti(L, LUA_REGISTRYINDEX, ref);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, a->ref);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
-	return guarded_call(d, 1, 0, 1, err, errlen);
+	if (a->arg)
+		lua_pushstring(L, a->arg);
+	return guarded_call(d, a->arg ? 2 : 1, 0, 1, err, errlen);
 }
 
 int vmac_driver_attach(struct vmac_driver *d, double time_s, char *err, size_t errlen)
 {
-	return call_ref(d, d->ref_attach, time_s, err, errlen);
+	struct callback_args a = {d->ref_attach, NULL};
+	if (d->ref_attach == LUA_NOREF)
+		return d->failed ? protect(d, callback_work, &a, err, errlen) : 0;
+	d->now_s = time_s;
+	return protect(d, callback_work, &a, err, errlen);
 }
 
 void vmac_driver_detach(struct vmac_driver *d, const char *reason)
 {
+	struct callback_args a = {d->ref_detach, reason};
 	char err[VMAC_DRIVER_ERR_MAX];
-	lua_State *L = d->L;
 	if (d->ref_detach == LUA_NOREF)
 		return;
-	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_detach);
-	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
-	lua_pushstring(L, reason);
-	guarded_call(d, 2, 0, 1, err, sizeof(err));
+	protect(d, callback_work, &a, err, sizeof(err)); /* the machine is going away: errors are ignored */
 }
 
 /* ---- the tick ---- */
@@ -1540,7 +1799,7 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	lua_rawgeti(L, keys, key_out(d));
-	lua_gettable(L, dev);
+	lua_rawget(L, dev);
 	if (!lua_istable(L, t)) {
 		snprintf(err, errlen, "%s: dev.out must stay a table, got %s", d->file, luaL_typename(L, t));
 		lua_pop(L, 3);
@@ -1552,7 +1811,7 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 		if (io->kind != IO_DO && io->kind != IO_PWM)
 			continue;
 		lua_rawgeti(L, keys, key_io(d, i));
-		lua_gettable(L, t);
+		lua_rawget(L, t);
 		if (io->kind == IO_DO) {
 			if (lua_isboolean(L, -1)) {
 				if (o && lua_toboolean(L, -1))
@@ -1632,7 +1891,7 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	lua_rawgeti(L, keys, key_vars(d));
-	lua_gettable(L, dev);
+	lua_rawget(L, dev);
 	if (!lua_istable(L, t)) {
 		snprintf(err, errlen, "%s: dev.vars must stay a table, got %s", d->file, luaL_typename(L, t));
 		lua_pop(L, 3);
@@ -1641,7 +1900,7 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 	for (i = 0; i < d->nvars; i++) {
 		struct var *v = &d->vars[i];
 		lua_rawgeti(L, keys, key_var(d, i));
-		lua_gettable(L, t);
+		lua_rawget(L, t);
 		if (to_value(L, &now[i]) != 0) {
 			snprintf(err, errlen, "%s: dev.vars.%s must be a number, boolean, string or nil, got %s", d->file,
 			         v->pub.name, luaL_typename(L, -1));
@@ -1666,20 +1925,32 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 	return 0;
 }
 
-int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
-                     struct vmac_outputs *const out[], char *err, size_t errlen)
+struct tick_args {
+	double time_s;
+	const struct vmac_inputs *const *in;
+	struct vmac_outputs *const *out;
+};
+
+static int tick_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
+	struct tick_args *a = args;
 	lua_State *L = d->L;
-	d->now_s = time_s;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_tick);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_inputs);
-	fill_inputs(d, time_s, in);
-	if (guarded_call(d, 2, 0, 1, err, errlen) != 0)
+	fill_inputs(d, a->time_s, a->in);
+	if (guarded_call(d, 2, 0, 1, err, errlen) != 0 || read_outputs(d, a->out, err, errlen) != 0 ||
+	    publish_vars(d, a->time_s, err, errlen) != 0)
 		return -1;
-	if (read_outputs(d, out, err, errlen) != 0)
-		return -1;
-	if (publish_vars(d, time_s, err, errlen) != 0) {
+	return 0;
+}
+
+int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
+                     struct vmac_outputs *const out[], char *err, size_t errlen)
+{
+	struct tick_args a = {time_s, in, out};
+	d->now_s = time_s;
+	if (protect(d, tick_work, &a, err, errlen) != 0) {
 		int i;
 		for (i = 0; i < d->nboards; i++) /* a failed tick drives nothing */
 			memset(out[i], 0, sizeof(*out[i]));
@@ -1688,14 +1959,25 @@ int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inp
 	return 0;
 }
 
-int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,
-                      char *reply, size_t replylen, char *err, size_t errlen)
+struct input_args {
+	double time_s;
+	const char *name;
+	const struct vmac_value *value;
+	char *reply;
+	size_t replylen;
+};
+
+static int input_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
+	struct input_args *a = args;
 	lua_State *L = d->L;
+	const char *name = a->name;
+	const struct vmac_value *value = a->value;
+	char *reply = a->reply;
+	size_t replylen = a->replylen;
 	int i, top = lua_gettop(L), kind = 0; /* 1 variable, 2 param, 3 command */
 	char why[160];
 
-	reply[0] = 0;
 	for (i = 0; i < d->nvars; i++)
 		if (strcmp(d->vars[i].pub.name, name) == 0) {
 			if (!d->vars[i].settable) {
@@ -1707,7 +1989,7 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
 	if (!kind) {
 		lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
-		lua_getfield(L, -1, name);
+		raw_getfield(L, lua_gettop(L), name);
 		kind = lua_isnil(L, -1) ? 0 : 2;
 		lua_pop(L, 2);
 	}
@@ -1747,7 +2029,7 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
 		if (kind == 2) {
 			lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
 			lua_pushvalue(L, -2);
-			lua_setfield(L, -2, name);
+			raw_setfield(L, lua_gettop(L) - 1, name);
 			lua_pop(L, 1);
 		}
 	}
@@ -1758,7 +2040,6 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
 		snprintf(reply, replylen, "%s: the driver takes no input", name);
 		return 1;
 	}
-	d->now_s = time_s;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_input);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	lua_pushstring(L, name);
@@ -1771,9 +2052,20 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
 		lua_settop(L, top);
 		return 0;
 	}
-	snprintf(reply, replylen, "%s", lua_isstring(L, -1) ? lua_tostring(L, -1) : "refused by the driver");
+	snprintf(reply, replylen, "%s",
+	         lua_type(L, -1) == LUA_TSTRING || lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1)
+	                                                                          : "refused by the driver");
 	lua_settop(L, top);
 	return 1;
+}
+
+int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,
+                      char *reply, size_t replylen, char *err, size_t errlen)
+{
+	struct input_args a = {time_s, name, value, reply, replylen};
+	reply[0] = 0;
+	d->now_s = time_s;
+	return protect(d, input_work, &a, err, errlen);
 }
 
 /* ---- hot reload: one instance takes over from another ---- */
@@ -1783,8 +2075,17 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
 
 enum { COPY_PARAMS, COPY_STATE };
 
-/* A copy of plain data from one driver's state into another's, run with
- * lua_cpcall in the new state so that its memory cap stays an error. */
+/* Slots of the old state's stack one copy uses at most: a key and a value a
+ * level, reserved beforehand (reserve_work) so that reading it never grows
+ * the stack. */
+#define COPY_FROM_SLOTS (2 * (MIGRATE_MAX_DEPTH + 2) + 8)
+
+/* A copy of plain data from one driver's state into another's. It runs in
+ * the new state's protection (its memory cap stays an error there); the old
+ * state is only read, with calls that neither allocate nor raise (raw
+ * reads, lua_next over an unchanged table, strings as they are) on stack
+ * reserved in its own protection, so that no error of one state can unwind
+ * through the other's protected call. */
 struct copy {
 	struct vmac_driver *from, *to;
 	int what;     /* COPY_PARAMS, or COPY_STATE: dev.out and dev.state */
@@ -1810,11 +2111,7 @@ static int copy_table(struct copy *c, int i, int depth)
 		snprintf(c->why, sizeof(c->why), "dev.state is nested deeper than %d tables", MIGRATE_MAX_DEPTH);
 		return -1;
 	}
-	luaL_checkstack(T, 6, "dev.state copy");
-	if (!lua_checkstack(F, 4)) {
-		snprintf(c->why, sizeof(c->why), "dev.state: no stack to copy it");
-		return -1;
-	}
+	luaL_checkstack(T, 6, "dev.state copy"); /* F: COPY_FROM_SLOTS, reserved */
 	lua_newtable(T);
 	lua_pushlightuserdata(T, (void *)p);
 	lua_pushvalue(T, -2);
@@ -1902,13 +2199,13 @@ static void copy_fields_typed(struct copy *c, int ref_from, int ref_to, int outp
 			if (outputs) {
 				ok = is_output(c->to, k) && type != LUA_TSTRING;
 			} else {
-				lua_getfield(T, t, k);
+				raw_getfield(T, t, k);
 				ok = lua_type(T, -1) == type;
 				lua_pop(T, 1);
 			}
 			if (ok) {
 				copy_value(c, lua_gettop(F), 0);
-				lua_setfield(T, t, k);
+				raw_setfield(T, t, k);
 			}
 		}
 		lua_pop(F, 1);
@@ -1917,84 +2214,105 @@ static void copy_fields_typed(struct copy *c, int ref_from, int ref_to, int outp
 	lua_settop(T, t - 1);
 }
 
-static int copy_protected(lua_State *T)
+/* COPY_PARAMS: dev.params; COPY_STATE: dev.out, then a copy of dev.state
+ * into c->ref. Work in to's protection; 0, or -1 with c->why. */
+static int copy_into(struct vmac_driver *to, struct copy *c)
 {
-	struct copy *c = lua_touserdata(T, 1);
-	lua_State *F = c->from->L;
-	int rc;
+	lua_State *F = c->from->L, *T = to->L;
+	int rc, top = lua_gettop(F);
 	if (c->what == COPY_PARAMS) {
-		copy_fields_typed(c, c->from->ref_params, c->to->ref_params, 0);
+		copy_fields_typed(c, c->from->ref_params, to->ref_params, 0);
 		return 0;
 	}
-	copy_fields_typed(c, c->from->ref_out, c->to->ref_out, 1);
+	copy_fields_typed(c, c->from->ref_out, to->ref_out, 1);
 	lua_newtable(T);
 	c->seen = lua_gettop(T);
 	lua_rawgeti(F, LUA_REGISTRYINDEX, c->from->ref_dev);
-	lua_getfield(F, -1, "state");
+	lua_rawgeti(F, LUA_REGISTRYINDEX, c->from->ref_keys);
+	lua_rawgeti(F, -1, key_state(c->from));
+	lua_rawget(F, -3);
 	if (lua_istable(F, -1))
 		rc = copy_table(c, lua_gettop(F), 0);
 	else {
 		lua_newtable(T);
 		rc = 0;
 	}
-	lua_pop(F, 2);
+	lua_settop(F, top);
 	if (rc != 0)
-		return 0;
+		return -1;
 	c->ref = luaL_ref(T, LUA_REGISTRYINDEX);
 	return 0;
 }
 
-/* Run one copy; 0, or -1 with err. from's stack is left as it was. */
-static int run_copy(struct copy *c, char *err, size_t errlen)
+/* Reserve the old state's stack for a copy out of it (its own protection). */
+static int reserve_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
-	int top = lua_gettop(c->from->L), rc;
+	(void)args;
+	(void)err;
+	(void)errlen;
+	luaL_checkstack(d->L, COPY_FROM_SLOTS, "copying dev.state");
+	return 0;
+}
+
+struct take_over_args {
+	struct vmac_driver *od;
+	double time_s;
+};
+
+static int take_over_copy(struct vmac_driver *nd, struct copy *c, int what, char *err, size_t errlen)
+{
+	c->what = what;
 	c->why[0] = 0;
-	c->ref = LUA_NOREF;
-	rc = lua_cpcall(c->to->L, copy_protected, c);
-	lua_settop(c->from->L, top);
-	if (rc != 0) {
-		snprintf(err, errlen, "copying the old state: %s",
-		         rc == LUA_ERRMEM ? "memory cap exceeded (not enough memory)" : lua_tostring(c->to->L, -1));
-		lua_pop(c->to->L, 1);
-		return -1;
-	}
-	if (c->why[0]) {
+	if (copy_into(nd, c) != 0) {
 		snprintf(err, errlen, "copying the old state: %s", c->why);
 		return -1;
 	}
 	return 0;
 }
 
-int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double time_s, char *err, size_t errlen)
+/* In nd's protection: params, attach, dev.out and dev.state, migrate. */
+static int take_over_work(struct vmac_driver *nd, void *args, char *err, size_t errlen)
 {
-	struct copy c;
+	struct take_over_args *a = args;
+	struct vmac_driver *od = a->od;
 	lua_State *L = nd->L;
+	struct copy c;
 	int i, j;
 	memset(&c, 0, sizeof(c));
 	c.from = od;
 	c.to = nd;
-	c.what = COPY_PARAMS;
-	if (run_copy(&c, err, errlen) != 0)
+	c.ref = LUA_NOREF;
+	if (take_over_copy(nd, &c, COPY_PARAMS, err, errlen) != 0)
 		return -1;
-	if (vmac_driver_attach(nd, time_s, err, errlen) != 0)
-		return -1;
-	c.what = COPY_STATE;
-	if (run_copy(&c, err, errlen) != 0)
+	if (nd->ref_attach != LUA_NOREF) {
+		lua_rawgeti(L, LUA_REGISTRYINDEX, nd->ref_attach);
+		lua_rawgeti(L, LUA_REGISTRYINDEX, nd->ref_dev);
+		if (guarded_call(nd, 1, 0, 1, err, errlen) != 0)
+			return -1;
+	}
+	if (take_over_copy(nd, &c, COPY_STATE, err, errlen) != 0)
 		return -1;
 	for (i = 0; i < nd->nvars; i++) /* the status keeps its values until the new version publishes */
 		for (j = 0; j < od->nvars; j++)
 			if (strcmp(nd->vars[i].pub.name, od->vars[j].pub.name) == 0)
 				nd->vars[i].pub = od->vars[j].pub;
-	if (nd->ref_migrate == LUA_NOREF) {
-		luaL_unref(L, LUA_REGISTRYINDEX, c.ref);
+	if (nd->ref_migrate == LUA_NOREF)
 		return 0;
-	}
-	nd->now_s = time_s;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, nd->ref_migrate);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, nd->ref_dev);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, c.ref);
-	luaL_unref(L, LUA_REGISTRYINDEX, c.ref);
 	return guarded_call(nd, 2, 0, 1, err, errlen);
+}
+
+int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double time_s, char *err, size_t errlen)
+{
+	struct take_over_args a = {od, time_s};
+	/* od may be one that failed (a rollback takes over from it): only an
+	 * error outside protection makes it unreadable. */
+	if (protect_any(od, reserve_work, NULL, err, errlen) != 0)
+		return -1;
+	nd->now_s = time_s;
+	return protect(nd, take_over_work, &a, err, errlen);
 }
 
 /* ---- params ---- */
@@ -2019,40 +2337,61 @@ int vmac_driver_param_persists(const struct vmac_driver *d, const char *name)
 	return i < 0 ? -1 : d->params[i].persist;
 }
 
-int vmac_driver_param(const struct vmac_driver *d, int i, struct vmac_variable *out)
+struct param_args {
+	int i;
+	struct vmac_variable *out;
+	const char *name;
+	const struct vmac_value *v;
+	char *why;
+	size_t whylen;
+};
+
+static int param_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
+	struct param_args *a = args;
 	lua_State *L = d->L;
+	(void)err;
+	(void)errlen;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+	raw_getfield(L, 1, d->params[a->i].name);
+	to_value(L, &a->out->value);
+	return 0;
+}
+
+int vmac_driver_param(const struct vmac_driver *cd, int i, struct vmac_variable *out)
+{
+	struct vmac_driver *d = (struct vmac_driver *)cd; /* reads only; protection keeps flags in d */
+	struct param_args a;
 	memset(out, 0, sizeof(*out));
 	if (i < 0 || i >= d->nparams)
 		return -1;
 	memcpy(out->name, d->params[i].name, sizeof(out->name));
 	memcpy(out->unit, d->params[i].unit, sizeof(out->unit));
-	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
-	lua_getfield(L, -1, d->params[i].name); /* an existing key: nothing allocated */
-	to_value(L, &out->value);
-	lua_pop(L, 2);
+	a.i = i;
+	a.out = out;
+	protect_quiet(d, param_work, &a);
 	return 0;
 }
 
-int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const struct vmac_value *v, char *why,
-                              size_t whylen)
+static int restore_param_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
+	struct param_args *a = args;
 	lua_State *L = d->L;
-	int top = lua_gettop(L), i = param_index(d, name), type;
+	const struct vmac_value *v = a->v;
+	const char *name = a->name;
+	int type, params;
 	char how[160];
-	if (i < 0 || !d->params[i].persist) {
-		snprintf(why, whylen, "%s is %s", name, i < 0 ? "no longer a param of the driver" : "not persist = true");
-		return -1;
-	}
+	(void)err;
+	(void)errlen;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
-	lua_getfield(L, -1, name);
+	params = lua_gettop(L);
+	raw_getfield(L, params, name);
 	type = lua_type(L, -1);
 	lua_pop(L, 1);
 	if ((type == LUA_TNUMBER && v->type != VMAC_VALUE_NUMBER) || (type == LUA_TBOOLEAN && v->type != VMAC_VALUE_BOOL) ||
 	    (type == LUA_TSTRING && v->type != VMAC_VALUE_STRING)) {
-		snprintf(why, whylen, "%s: the stored value is not a %s", name, lua_typename(L, type));
-		lua_settop(L, top);
-		return -1;
+		snprintf(a->why, a->whylen, "%s: the stored value is not a %s", name, lua_typename(L, type));
+		return 1;
 	}
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
 	lua_getfield(L, -1, "params");
@@ -2064,13 +2403,32 @@ int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const str
 	else
 		lua_pushstring(L, v->str);
 	if (check_value(L, lua_gettop(L) - 1, how, sizeof(how)) != 0) {
-		snprintf(why, whylen, "%s: %s", name, how);
-		lua_settop(L, top);
+		snprintf(a->why, a->whylen, "%s: %s", name, how);
+		return 1;
+	}
+	raw_setfield(L, params, name); /* dev.params[name] = value */
+	return 0;
+}
+
+int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const struct vmac_value *v, char *why,
+                              size_t whylen)
+{
+	struct param_args a;
+	char err[VMAC_DRIVER_ERR_MAX];
+	int i = param_index(d, name), rc;
+	if (i < 0 || !d->params[i].persist) {
+		snprintf(why, whylen, "%s is %s", name, i < 0 ? "no longer a param of the driver" : "not persist = true");
 		return -1;
 	}
-	lua_setfield(L, top + 1, name); /* dev.params[name] = value */
-	lua_settop(L, top);
-	return 0;
+	memset(&a, 0, sizeof(a));
+	a.name = name;
+	a.v = v;
+	a.why = why;
+	a.whylen = whylen;
+	rc = protect(d, restore_param_work, &a, err, sizeof(err));
+	if (rc < 0)
+		snprintf(why, whylen, "%s", err);
+	return rc == 0 ? 0 : -1;
 }
 
 int vmac_driver_nvars(const struct vmac_driver *d)

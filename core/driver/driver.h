@@ -1,7 +1,10 @@
 /* Lua driver instances: one sandboxed LuaJIT state per machine (one or more
  * boards). Every call from C into driver code goes through driver.c's one
- * guarded call (budget, memory cap, traceback); a failure marks the driver,
- * never the host. The driver API is in docs/DRIVERS.md.
+ * guarded call (budget, memory cap, traceback), and every piece of the
+ * host's own work on a state runs protected too; a failure marks the
+ * driver, never the host: no driver, however written, and no upload can end
+ * the process (docs/DRIVERS.md "Isolation"). The driver API is in
+ * docs/DRIVERS.md.
  *
  * Threads: vmac_driver_load runs on the main thread (it reads files); every
  * other call is the bus thread's once the driver is handed over, and
@@ -115,11 +118,14 @@ void vmac_driver_io_info(const struct vmac_driver *d, int i, struct vmac_driver_
 void vmac_driver_bind(struct vmac_driver *d, const struct vmac_driver_host *host);
 
 /* Boards of the machine: index 0 is the primary. Adding a board that is
- * already there, or past VMAC_DRIVER_MAX_BOARDS, fails (-1). */
+ * already there, or past VMAC_DRIVER_MAX_BOARDS, fails (-1). Should the
+ * driver's state have no room for the board's entry in dev.boards, the
+ * driver's next call (attach, tick, input) fails with that reason. */
 int vmac_driver_add_board(struct vmac_driver *d, uint32_t minor, const char *name);
 int vmac_driver_boards(const struct vmac_driver *d);
 
-/* The level the machine runs at now (the bus thread tells the driver). */
+/* The level the machine runs at now (the bus thread tells the driver); a
+ * failure to write dev.level fails the next call, as above. */
 void vmac_driver_set_level_now(struct vmac_driver *d, unsigned level);
 
 /* Call attach(dev) if the driver has one. 0, or -1 with err. */
@@ -165,8 +171,9 @@ int64_t vmac_driver_tag(const struct vmac_driver *d);
 
 /* Params (the manifest's `params`, in name order): how many; whether name
  * is one with persist = true (1), one without (0), or none (-1); the i-th
- * with its value now (bus thread once bound; reads only, allocates
- * nothing). 0, or -1 when there is no i-th. */
+ * with its value now (bus thread once bound; a raw read in a protected
+ * call, no metamethod runs; a value that cannot be read is NONE). 0, or -1
+ * when there is no i-th. */
 int vmac_driver_nparams(const struct vmac_driver *d);
 int vmac_driver_param_persists(const struct vmac_driver *d, const char *name);
 int vmac_driver_param(const struct vmac_driver *d, int i, struct vmac_variable *out);
