@@ -1,4 +1,7 @@
-/* Host configuration: defaults, Lua config file, key=value overrides. */
+/* Host configuration: defaults, Lua config file, key=value overrides. The
+ * config file runs in a Lua state of its own, all of it inside one
+ * protected call (lua_cpcall) with an instruction limit, so a broken or
+ * endless file is an error with its reason, never a panic or a hang. */
 #include "config.h"
 
 #include "../bus/transport.h"
@@ -216,32 +219,61 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
 	return 0;
 }
 
+#define CONFIG_INSTRUCTIONS 10000000 /* a settings file needs a few thousand */
+
+static void config_too_long(lua_State *L, lua_Debug *ar)
+{
+	(void)ar;
+	luaL_error(L, "the file ran for more than %d instructions (settings are plain assignments)",
+	           CONFIG_INSTRUCTIONS);
+}
+
+struct config_load {
+	struct vmac_config *c;
+	const char *path;
+	char *err;
+	size_t errlen;
+	int rc;
+};
+
+/* The whole load, lua_cpcall'd: [-0, +0]; a raise is the file's error. */
+static int config_load_protected(lua_State *L)
+{
+	struct config_load *a = lua_touserdata(L, 1);
+	/* The file runs with an empty environment: plain assignments only. */
+	if (luaL_loadfile(L, a->path) != 0)
+		return lua_error(L);
+	lua_newtable(L);
+	lua_pushvalue(L, -1);
+	lua_insert(L, -3); /* env, chunk, env */
+	lua_setfenv(L, -2);
+	lua_sethook(L, config_too_long, LUA_MASKCOUNT, CONFIG_INSTRUCTIONS);
+	lua_call(L, 0, 0);
+	lua_sethook(L, NULL, 0, 0);
+	a->rc = apply_table(a->c, L, a->path, "", 0, a->err, a->errlen);
+	return 0;
+}
+
 int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
 {
 	lua_State *L = luaL_newstate();
-	int rc = -1;
+	struct config_load a = {c, path, err, errlen, -1};
 
 	if (!L) {
 		snprintf(err, errlen, "%s: cannot create Lua state", path);
 		return -1;
 	}
-	/* The file runs with an empty environment: plain assignments only. */
-	if (luaL_loadfile(L, path) != 0) {
-		snprintf(err, errlen, "%s", lua_tostring(L, -1));
-		goto out;
+	if (lua_cpcall(L, config_load_protected, &a) != 0) {
+		const char *msg = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "error object is not a string";
+		size_t n = strlen(path);
+		if (strncmp(msg, path, n) == 0)
+			snprintf(err, errlen, "%s", msg);
+		else
+			snprintf(err, errlen, "%s: %s", path, msg);
+		a.rc = -1;
 	}
-	lua_newtable(L);
-	lua_pushvalue(L, -1);
-	lua_insert(L, -3); /* env, chunk, env */
-	lua_setfenv(L, -2);
-	if (lua_pcall(L, 0, 0, 0) != 0) {
-		snprintf(err, errlen, "%s", lua_tostring(L, -1));
-		goto out;
-	}
-	rc = apply_table(c, L, path, "", 0, err, errlen);
-out:
 	lua_close(L);
-	return rc;
+	return a.rc;
 }
 
 /* "IPv4:PORT" with port 0..65535. */

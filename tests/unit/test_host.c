@@ -73,6 +73,16 @@ START_TEST(config_file_errors_name_the_problem)
 	path = write_temp("os.exit(1)\n"); /* no library reachable from a config file */
 	ck_assert_int_ne(vmac_config_load(&c, path, err, sizeof(err)), 0);
 	unlink(path);
+
+	path = write_temp("slice_us = 2000\nwhile true do end\n"); /* an endless file: an error, not a hang */
+	ck_assert_int_ne(vmac_config_load(&c, path, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, path) != NULL && strstr(err, "instructions") != NULL,
+	              "an endless config file: '%s' does not name the file and the limit", err);
+	unlink(path);
+
+	path = write_temp("error(setmetatable({}, { __tostring = function() while true do end end }))\n");
+	ck_assert_int_ne(vmac_config_load(&c, path, err, sizeof(err)), 0);
+	unlink(path);
 }
 END_TEST
 
