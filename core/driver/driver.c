@@ -215,12 +215,16 @@ static int guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned
 	d->in_driver = 0;
 	d->budget_hooks = hooks;
 	if (rc != 0 || d->overrun || d->mem_refused) {
-		if (rc == LUA_ERRMEM || d->mem_refused)
-			memory_message(d, err, errlen);
-		else if (d->overrun)
-			snprintf(err, errlen, "%s", d->overrun_msg);
-		else
-			snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "unknown error");
+		/* The traceback names the file and line; when the driver swallowed
+		 * the error (rc 0) there is none, only what happened. */
+		const char *trace = rc == LUA_ERRRUN && lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
+		if (rc == LUA_ERRMEM || d->mem_refused) {
+			char what[160];
+			memory_message(d, what, sizeof(what));
+			snprintf(err, errlen, "%s%s%s", what, trace ? ": " : "", trace ? trace : "");
+		} else {
+			snprintf(err, errlen, "%s", trace ? trace : d->overrun ? d->overrun_msg : "unknown error");
+		}
 		lua_settop(L, base - 1);
 		return -1;
 	}

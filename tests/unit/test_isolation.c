@@ -81,6 +81,7 @@ START_TEST(creeping_memory_fails_the_call_at_every_entry)
 	out.digital = 0xff;
 	ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) != 0, "tick that creeps succeeded");
 	says(err, "memory cap exceeded", "tick");
+	says(err, "t.lua:2:", "tick (the line that raised)");
 	ck_assert_msg(out.digital == 0 && out.pwm == 0, "a failed tick left outputs 0x%02x", out.digital);
 	tick1(d, 0.01, &out, err, sizeof(err)); /* the host must not, but it must survive it */
 	ck_assert_msg(out.digital == 0, "a second tick after the failure drove 0x%02x", out.digital);
