@@ -475,8 +475,13 @@ static int budget_checked_call(lua_State *L)
 	lua_call(L, n, LUA_MULTRET);
 	if (d->overrun)
 		return luaL_error(L, "%s", d->overrun_msg);
-	if (d->mem_refused)
-		return luaL_error(L, "not enough memory");
+	if (d->mem_refused) {
+		/* The call is failing now: the message and the unwinding (stack for
+		 * the handlers, the traceback) come from the host's reserve. */
+		d->in_driver = 0;
+		lua_pushliteral(L, "not enough memory (the driver's memory cap)");
+		return lua_error(L);
+	}
 	return lua_gettop(L);
 }
 
