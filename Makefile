@@ -41,7 +41,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
-HOST_SRC     := core/common/paths.c core/bus/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c core/host/deploy.c \
+HOST_SRC     := core/common/paths.c core/transport/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c core/host/deploy.c \
                 core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
@@ -61,11 +61,11 @@ all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
 	@mkdir -p $(dir $@)
-	$(CC) $(PORTABLE_CFLAGS) -MMD -c $< -o $@
+	$(CC) $(PORTABLE_CFLAGS) -MMD -MP -c $< -o $@
 
 $(OBJ)/%.o: %.c
 	@mkdir -p $(dir $@)
-	$(CC) $(HOST_CFLAGS) -MMD -c $< -o $@
+	$(CC) $(HOST_CFLAGS) -MMD -MP -c $< -o $@
 
 # The web UI's files, built into vmacd (core/api/ui/embed.py).
 UI_FILES := $(sort $(wildcard core/api/ui/*.html core/api/ui/*.js core/api/ui/*.css))
@@ -86,7 +86,7 @@ $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cl
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
-$(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/core/bus/transport_udp.o $(portable_obj)
+$(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/core/transport/transport_udp.o $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) -lm
 
@@ -190,7 +190,7 @@ test: deps
 	@$(MAKE) --no-print-directory VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
 	@echo "make test: every suite passed"
 
-$(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/bus/transport_udp.o $(OBJ)/core/proto/proto.o
+$(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/transport/transport_udp.o $(OBJ)/core/proto/proto.o
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL)
 

@@ -9,7 +9,7 @@
 #include <pthread.h>
 #include <stdint.h>
 
-#include "../bus/transport.h"
+#include "../transport/transport.h"
 #include "../driver/driver.h"
 #include "config.h"
 #include "hist.h"

@@ -4,7 +4,7 @@
  * endless file is an error with its reason, never a panic or a hang. */
 #include "config.h"
 
-#include "../bus/transport.h"
+#include "../transport/transport.h"
 
 #include <arpa/inet.h>
 #include <errno.h>

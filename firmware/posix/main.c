@@ -12,7 +12,7 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-#include "../../core/bus/transport.h"
+#include "../../core/transport/transport.h"
 #include "../board.h"
 #include "../plant.h"
 

@@ -14,7 +14,7 @@
 #include <sys/timerfd.h>
 #include <unistd.h>
 
-#include "../../core/bus/transport.h"
+#include "../../core/transport/transport.h"
 
 struct board {
 	struct vmac_addr addr;
