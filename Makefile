@@ -172,12 +172,18 @@ test-fuzz: $(BUILD)/fuzz/fuzz_proto
 		grep -E '^Done' $(BUILD)/fuzz/log; \
 	else cat $(BUILD)/fuzz/log; echo "fuzzing found a failure; the input is in $(BUILD)/fuzz/"; exit 1; fi
 
+# A suite (or test) that cannot run on this machine (no chromium, no root
+# for a mount namespace) appends its reason to SKIPPED and passes; make test
+# prints that file at its end. With CI=true in the environment such a suite
+# fails instead (tests/ui/run.sh, tests/integration/run.py).
+SKIPPED ?= $(BUILD)/skipped
+
 # The web UI in headless chromium (installs chromium and playwright-core).
 test-ui: $(BINS)
-	@tests/ui/run.sh $(BUILD)/bin $(BUILD)/ui
+	@VMAC_SKIP_FILE=$(SKIPPED) tests/ui/run.sh $(BUILD)/bin $(BUILD)/ui
 
 test-integration: $(BINS) $(BUILD)/tests/store_crash
-	python3 tests/integration/run.py --bin $(BUILD)/bin
+	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/integration/run.py --bin $(BUILD)/bin
 
 # The whole unit and integration suite again, built with AddressSanitizer
 # and UndefinedBehaviorSanitizer, any report fatal.
@@ -185,10 +191,18 @@ test-asan:
 	@$(MAKE) --no-print-directory BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" \
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-drivers test-integration
 
+# Ends with every suite that was skipped, if any: what did not run did not pass.
 test: deps
-	@$(MAKE) --no-print-directory all test-unit test-lua test-drivers test-fuzz test-integration test-ui
-	@$(MAKE) --no-print-directory VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
-	@echo "make test: every suite passed"
+	@mkdir -p $(BUILD) && rm -f $(SKIPPED)
+	@$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) all test-unit test-lua test-drivers test-fuzz \
+		test-integration test-ui
+	@$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
+	@if [ -s $(SKIPPED) ]; then \
+		echo "################################################################################"; \
+		echo "make test: every suite that ran passed, but these were SKIPPED (not run, not passed):"; \
+		sed 's/^/  /' $(SKIPPED); \
+		echo "################################################################################"; \
+	else echo "make test: every suite passed"; fi
 
 $(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/transport/transport_udp.o $(OBJ)/core/proto/proto.o
 	@mkdir -p $(dir $@)

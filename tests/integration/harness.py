@@ -35,6 +35,13 @@ POLL_S = 0.05  # between two looks at a condition that has not come yet
 SANITIZER_MARKS = ("AddressSanitizer", "LeakSanitizer", "UndefinedBehaviorSanitizer", "runtime error:")
 
 
+class Skip(Exception):
+    """Raised by a test that cannot run on this machine (no root, no mount
+    namespace...), with the reason. run.py reports it as SKIP, lists it at
+    the end and in $VMAC_SKIP_FILE; with CI=true it is a failure instead: a
+    CI run must not pass a test it did not run."""
+
+
 class Line:
     """One line a program printed: its text, stream, index in that stream
     and when the harness read it (time.monotonic)."""

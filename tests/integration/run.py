@@ -5,9 +5,15 @@ processes on its own bus, and kills whatever a test started however it ends.
 
     python3 tests/integration/run.py --bin build/bin [--filter NAME]
 
-Prints one PASS/FAIL line per test and ends with 'N passed, N failed'; the
-exit code is 1 when any test failed. A failed test keeps its programs' output
-in the log directory its FAIL line names."""
+Prints one PASS/FAIL/SKIP line per test and ends with 'N passed, N failed,
+N skipped'; the exit code is 1 when any test failed. A failed test keeps its
+programs' output in the log directory its FAIL line names.
+
+A test that cannot run on this machine raises harness.Skip(reason) (e.g. one
+that needs root for a mount namespace). It is printed as SKIP with a banner,
+listed again at the end, and appended to the file $VMAC_SKIP_FILE when that
+is set (make test prints every skipped suite at its end). With CI=true in the
+environment a skip is a failure: a CI run must not pass what it did not run."""
 
 import argparse
 import glob
@@ -70,13 +76,16 @@ def reason_of(exc):
 
 
 def run_one(name, fn, bindir, limit_s, keep):
-    """Run one test; returns (passed, reason)."""
+    """Run one test; returns (outcome, reason), outcome "pass", "fail" or
+    "skip"."""
     logdir = tempfile.mkdtemp(prefix="vmac-it-%s-" % name)
     ctx = harness.Context(bindir, logdir)
-    failure = None
+    failure = skipped = None
     signal.alarm(int(limit_s))
     try:
         fn(ctx)
+    except harness.Skip as e:
+        skipped = str(e) or "no reason given"
     except Exception as e:  # every failure (TestTimeout too) is reported, none escapes
         failure = reason_of(e)
     finally:
@@ -85,11 +94,13 @@ def run_one(name, fn, bindir, limit_s, keep):
     if report:
         failure = "%s%ssanitizer report from %s" % (failure or "", "; " if failure else "", report)
     if failure:
-        return False, "%s [logs: %s]" % (failure, logdir)
-    if keep:
-        return True, " [logs: %s]" % logdir
+        return "fail", "%s [logs: %s]" % (failure, logdir)
     shutil.rmtree(logdir, ignore_errors=True)
-    return True, ""
+    if skipped:
+        return "skip", skipped
+    if keep:
+        return "pass", " [logs: %s]" % logdir
+    return "pass", ""
 
 
 def main():
@@ -112,20 +123,36 @@ def main():
 
     signal.signal(signal.SIGALRM, on_alarm)
     signal.signal(signal.SIGTERM, on_terminate)
+    ci = os.environ.get("CI") == "true"
+    skip_file = os.environ.get("VMAC_SKIP_FILE")
     passed = failed = 0
+    skips = []
     started = time.monotonic()
     for name, fn in tests:
         t0 = time.monotonic()
-        ok, reason = run_one(name, fn, bindir, args.time_limit, args.keep)
+        outcome, reason = run_one(name, fn, bindir, args.time_limit, args.keep)
         took = time.monotonic() - t0
-        if ok:
+        if outcome == "skip" and ci:
+            outcome, reason = "fail", "could not run, and CI=true makes that a failure: %s" % reason
+        if outcome == "pass":
             passed += 1
             print("PASS %s (%.1f s)%s" % (name, took, reason), flush=True)
+        elif outcome == "skip":
+            skips.append((name, reason))
+            print("#" * 80 + "\nSKIP %s (%.1f s): %s\n" % (name, took, reason) + "#" * 80, flush=True)
         else:
             failed += 1
             print("FAIL %s (%.1f s): %s" % (name, took, reason), flush=True)
     print("total %.0f s" % (time.monotonic() - started), file=sys.stderr, flush=True)
-    print("%d passed, %d failed" % (passed, failed), flush=True)
+    if skips:
+        print("SKIPPED (did not run, not passed):", flush=True)
+        for name, reason in skips:
+            print("  %s: %s" % (name, reason), flush=True)
+        if skip_file:
+            with open(skip_file, "a") as f:
+                for name, reason in skips:
+                    f.write("integration test %s (%s): %s\n" % (name, args.bin, reason))
+    print("%d passed, %d failed, %d skipped" % (passed, failed, len(skips)), flush=True)
     return 1 if failed else 0
 
 

@@ -3,8 +3,13 @@
 # Installs what they need when it is missing: Debian's chromium (apt) and,
 # when there is no Node.js 20 or later, Debian's nodejs and npm; then
 # playwright-core from npm at the version tests/ui/package-lock.json pins.
-# When chromium or a Node.js new enough cannot be installed on this machine,
-# says so and skips (exit 0): the rest of make test does not depend on them.
+# When chromium or a Node.js new enough cannot be installed on this machine
+# the suite cannot run:
+#   - with CI=true in the environment that is a failure (exit 1, the reason
+#     printed): a CI run must not pass a suite it did not run;
+#   - elsewhere it is skipped (exit 0) with a banner, and the reason is
+#     appended to the file $VMAC_SKIP_FILE when that is set (make test
+#     lists every skipped suite there at its end).
 #
 #   tests/ui/run.sh BIN_DIR OUT_DIR
 set -eu
@@ -23,6 +28,23 @@ install() {
 	$sudo apt-get update -qq && $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@"
 }
 
+# The suite cannot run, for reason $1: fail under CI, else skip loudly.
+cannot_run() {
+	if [ "${CI:-}" = true ]; then
+		echo "test-ui: FAILED: the web UI's tests cannot run: $1" >&2
+		echo "test-ui: (CI=true: a suite that cannot run is a failure, not a skip)" >&2
+		exit 1
+	fi
+	echo "################################################################################"
+	echo "## test-ui: SKIPPED: the web UI's tests did not run"
+	echo "## $1"
+	echo "################################################################################"
+	if [ -n "${VMAC_SKIP_FILE:-}" ]; then
+		echo "test-ui: $1" >>"$VMAC_SKIP_FILE"
+	fi
+	exit 0
+}
+
 if [ ! -x /usr/bin/chromium ]; then
 	echo "test-ui: installing chromium"
 	install chromium || true
@@ -32,12 +54,10 @@ if ! node_ok; then
 	install nodejs npm || true
 fi
 if [ ! -x /usr/bin/chromium ]; then
-	echo "test-ui: SKIPPED: Debian's chromium cannot be installed on this machine"
-	exit 0
+	cannot_run "Debian's chromium cannot be installed on this machine"
 fi
 if ! node_ok; then
-	echo "test-ui: SKIPPED: playwright-core needs Node.js 20 or later, and this machine has $(node --version 2>/dev/null || echo none)"
-	exit 0
+	cannot_run "playwright-core needs Node.js 20 or later, and this machine has $(node --version 2>/dev/null || echo none)"
 fi
 (cd "$here" && npm ci --no-audit --no-fund --loglevel=error)
 echo "== the web UI in headless chromium (screenshots in $out)"
