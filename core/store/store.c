@@ -17,8 +17,12 @@
 
 struct vmac_store {
 	sqlite3 *db;
-	/* Held across every transaction of several statements: the one
-	 * connection is shared by the host's threads. */
+	/* Held by every function below from its first statement until its
+	 * error text is written: the one connection is shared by the host's
+	 * threads, and what it says about the last statement
+	 * (sqlite3_changes, sqlite3_last_insert_rowid, sqlite3_errmsg) or
+	 * which transaction a statement joins is only true while no other
+	 * thread's statement runs in between. */
 	pthread_mutex_t lock;
 };
 
@@ -88,6 +92,15 @@ static int fail(struct vmac_store *s, const char *what, char *err, size_t errlen
 {
 	snprintf(err, errlen, "store: %s: %s", what, s && s->db ? sqlite3_errmsg(s->db) : "cannot open");
 	return -1;
+}
+
+/* fail(), then let the other threads in: the message is the one of this
+ * thread's statement. */
+static int fail_unlock(struct vmac_store *s, const char *what, char *err, size_t errlen)
+{
+	int rc = fail(s, what, err, errlen);
+	pthread_mutex_unlock(&s->lock);
+	return rc;
 }
 
 static int exec(struct vmac_store *s, const char *sql, char *err, size_t errlen)
@@ -226,9 +239,13 @@ int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *n
 	hex(rid, sizeof(rid), id_hex);
 	hex(secret, sizeof(secret), secret_hex);
 	hash_secret(secret_hex, h);
+	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "INSERT INTO tokens (id, hash, scope, created, note) VALUES (?, ?, ?, ?, ?)", -1,
-	                       &st, NULL) != SQLITE_OK)
-		return fail(s, "creating a token", err, errlen);
+	                       &st, NULL) != SQLITE_OK) {
+		sodium_memzero(secret, sizeof(secret));
+		sodium_memzero(secret_hex, sizeof(secret_hex));
+		return fail_unlock(s, "creating a token", err, errlen);
+	}
 	sqlite3_bind_text(st, 1, id_hex, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_blob(st, 2, h, HASH_LEN, SQLITE_TRANSIENT);
 	sqlite3_bind_int(st, 3, (int)scope);
@@ -240,8 +257,9 @@ int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *n
 	sodium_memzero(secret, sizeof(secret));
 	if (rc != SQLITE_DONE) {
 		sodium_memzero(secret_hex, sizeof(secret_hex));
-		return fail(s, "creating a token", err, errlen);
+		return fail_unlock(s, "creating a token", err, errlen);
 	}
+	pthread_mutex_unlock(&s->lock);
 	snprintf(token, VMAC_TOKEN_LEN + 1, "vmac_%s_%s", id_hex, secret_hex);
 	sodium_memzero(secret_hex, sizeof(secret_hex));
 	if (id)
@@ -252,17 +270,20 @@ int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *n
 int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t errlen)
 {
 	sqlite3_stmt *st;
-	int rc;
+	int rc, changed;
+	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "UPDATE tokens SET revoked = ? WHERE id = ? AND revoked IS NULL", -1, &st,
 	                       NULL) != SQLITE_OK)
-		return fail(s, "revoking a token", err, errlen);
+		return fail_unlock(s, "revoking a token", err, errlen);
 	sqlite3_bind_double(st, 1, now_s());
 	sqlite3_bind_text(st, 2, id, -1, SQLITE_TRANSIENT);
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail(s, "revoking a token", err, errlen);
-	return sqlite3_changes(s->db) == 1 ? 0 : 1;
+		return fail_unlock(s, "revoking a token", err, errlen);
+	changed = sqlite3_changes(s->db); /* of this statement: no other ran since */
+	pthread_mutex_unlock(&s->lock);
+	return changed == 1 ? 0 : 1;
 }
 
 int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx,
@@ -270,9 +291,10 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 {
 	sqlite3_stmt *st;
 	int rc, n = 0;
+	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT id, scope, created, revoked, note FROM tokens ORDER BY created, id", -1,
 	                       &st, NULL) != SQLITE_OK)
-		return fail(s, "listing tokens", err, errlen);
+		return fail_unlock(s, "listing tokens", err, errlen);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
 		struct vmac_token_info t;
 		const unsigned char *text;
@@ -289,7 +311,8 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 	}
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail(s, "listing tokens", err, errlen);
+		return fail_unlock(s, "listing tokens", err, errlen);
+	pthread_mutex_unlock(&s->lock);
 	return n;
 }
 
@@ -311,9 +334,12 @@ enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
 	memcpy(id, token + 5, VMAC_TOKEN_ID_LEN);
 	id[VMAC_TOKEN_ID_LEN] = 0;
 	memcpy(stored, zero, sizeof(stored));
+	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT hash, scope FROM tokens WHERE id = ? AND revoked IS NULL", -1, &st,
-	                       NULL) != SQLITE_OK)
+	                       NULL) != SQLITE_OK) {
+		pthread_mutex_unlock(&s->lock);
 		return VMAC_SCOPE_NONE;
+	}
 	sqlite3_bind_text(st, 1, id, -1, SQLITE_TRANSIENT);
 	if (sqlite3_step(st) == SQLITE_ROW && sqlite3_column_bytes(st, 0) == HASH_LEN) {
 		memcpy(stored, sqlite3_column_blob(st, 0), HASH_LEN);
@@ -321,6 +347,7 @@ enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
 		found = 1;
 	}
 	sqlite3_finalize(st);
+	pthread_mutex_unlock(&s->lock);
 	/* Hash and compare whether or not the ID exists: the time taken says
 	 * nothing about the secret. */
 	hash_secret(secret, h);
@@ -383,17 +410,13 @@ int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *
 	hex(h, sizeof(h), hash);
 	pthread_mutex_lock(&s->lock);
 	prev = active_id(s, driver);
-	if (prev < 0) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "reading driver versions", err, errlen);
-	}
+	if (prev < 0)
+		return fail_unlock(s, "reading driver versions", err, errlen);
 	if (sqlite3_prepare_v2(s->db,
 	                       "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
 	                       "previous) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?)",
-	                       -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "storing a driver version", err, errlen);
-	}
+	                       -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "storing a driver version", err, errlen);
 	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 2, version, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 3, hash, -1, SQLITE_TRANSIENT);
@@ -403,11 +426,9 @@ int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *
 	sqlite3_bind_int64(st, 7, prev);
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
-	if (rc != SQLITE_DONE) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "storing a driver version", err, errlen);
-	}
-	*id = sqlite3_last_insert_rowid(s->db);
+	if (rc != SQLITE_DONE)
+		return fail_unlock(s, "storing a driver version", err, errlen);
+	*id = sqlite3_last_insert_rowid(s->db); /* of this statement: no other ran since */
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -434,14 +455,12 @@ static int set_state(struct vmac_store *s, int64_t id, const char *state, const 
 	return rc == SQLITE_DONE ? 0 : -1;
 }
 
+/* Take the lock and open a write transaction: 0, or -1 still holding the
+ * lock (the caller says why with fail_unlock). */
 static int begin(struct vmac_store *s)
 {
 	pthread_mutex_lock(&s->lock);
-	if (sqlite3_exec(s->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return -1;
-	}
-	return 0;
+	return sqlite3_exec(s->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) == SQLITE_OK ? 0 : -1;
 }
 
 static int end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen)
@@ -461,7 +480,7 @@ int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t
 	int64_t prev;
 	int ok;
 	if (begin(s) != 0)
-		return fail(s, "activating a driver version", err, errlen);
+		return fail_unlock(s, "activating a driver version", err, errlen);
 	prev = active_id(s, driver);
 	ok = prev >= 0 && (prev == 0 || prev == id || set_state(s, prev, "replaced", NULL) == 0) &&
 	     set_state(s, id, "active", NULL) == 0;
@@ -471,10 +490,8 @@ int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t
 int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, char *err, size_t errlen)
 {
 	pthread_mutex_lock(&s->lock);
-	if (set_state(s, id, "refused", why) != 0) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "marking a driver version refused", err, errlen);
-	}
+	if (set_state(s, id, "refused", why) != 0)
+		return fail_unlock(s, "marking a driver version refused", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -486,7 +503,7 @@ int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_
 	int64_t prev = 0;
 	int ok, rc;
 	if (begin(s) != 0)
-		return fail(s, "rolling back a driver version", err, errlen);
+		return fail_unlock(s, "rolling back a driver version", err, errlen);
 	if (active_id(s, driver) != id) { /* already rolled back, or replaced meanwhile */
 		end(s, 1, "", err, errlen);
 		return 1;
@@ -514,10 +531,8 @@ static int version_where(struct vmac_store *s, const char *where, const char *te
 	int rc, found = 0;
 	snprintf(sql, sizeof(sql), "SELECT " VERSION_COLUMNS ", source FROM driver_versions WHERE %s", where);
 	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db, sql, -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "reading driver versions", err, errlen);
-	}
+	if (sqlite3_prepare_v2(s->db, sql, -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "reading driver versions", err, errlen);
 	if (text_arg)
 		sqlite3_bind_text(st, 1, text_arg, -1, SQLITE_TRANSIENT);
 	else
@@ -539,14 +554,13 @@ static int version_where(struct vmac_store *s, const char *where, const char *te
 		}
 	}
 	sqlite3_finalize(st);
-	if (found < 0 || (rc != SQLITE_ROW && rc != SQLITE_DONE)) {
+	if (found < 0) {
 		pthread_mutex_unlock(&s->lock);
-		if (found < 0) {
-			snprintf(err, errlen, "store: out of memory");
-			return -1;
-		}
-		return fail(s, "reading driver versions", err, errlen);
+		snprintf(err, errlen, "store: out of memory");
+		return -1;
 	}
+	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
+		return fail_unlock(s, "reading driver versions", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return found;
 }
@@ -573,10 +587,8 @@ int vmac_store_driver_list(struct vmac_store *s, const char *driver,
 	if (sqlite3_prepare_v2(s->db,
 	                       driver ? "SELECT " VERSION_COLUMNS " FROM driver_versions WHERE driver = ? ORDER BY id"
 	                              : "SELECT " VERSION_COLUMNS " FROM driver_versions ORDER BY driver, id",
-	                       -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "listing driver versions", err, errlen);
-	}
+	                       -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "listing driver versions", err, errlen);
 	if (driver)
 		sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
@@ -586,9 +598,9 @@ int vmac_store_driver_list(struct vmac_store *s, const char *driver,
 		n++;
 	}
 	sqlite3_finalize(st);
-	pthread_mutex_unlock(&s->lock);
 	if (rc != SQLITE_DONE)
-		return fail(s, "listing driver versions", err, errlen);
+		return fail_unlock(s, "listing driver versions", err, errlen);
+	pthread_mutex_unlock(&s->lock);
 	return n;
 }
 
@@ -603,10 +615,8 @@ int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *
 	if (sqlite3_prepare_v2(s->db,
 	                       "INSERT OR REPLACE INTO params (machine, name, type, number, string, updated) "
 	                       "VALUES (?, ?, ?, ?, ?, ?)",
-	                       -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "persisting a param", err, errlen);
-	}
+	                       -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "persisting a param", err, errlen);
 	sqlite3_bind_text(st, 1, machine, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 2, name, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_int(st, 3, (int)v->type);
@@ -615,11 +625,8 @@ int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *
 	sqlite3_bind_double(st, 6, now_s());
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
-	if (rc != SQLITE_DONE) {
-		fail(s, "persisting a param", err, errlen);
-		pthread_mutex_unlock(&s->lock);
-		return -1;
-	}
+	if (rc != SQLITE_DONE)
+		return fail_unlock(s, "persisting a param", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -632,10 +639,8 @@ int vmac_store_param_list(struct vmac_store *s, const char *machine,
 	int rc, n = 0;
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT name, type, number, string FROM params WHERE machine = ? ORDER BY name",
-	                       -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "reading persisted params", err, errlen);
-	}
+	                       -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "reading persisted params", err, errlen);
 	sqlite3_bind_text(st, 1, machine, -1, SQLITE_TRANSIENT);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
 		struct vmac_value v;
@@ -649,11 +654,8 @@ int vmac_store_param_list(struct vmac_store *s, const char *machine,
 		n++;
 	}
 	sqlite3_finalize(st);
-	if (rc != SQLITE_DONE) {
-		fail(s, "reading persisted params", err, errlen);
-		pthread_mutex_unlock(&s->lock);
-		return -1;
-	}
+	if (rc != SQLITE_DONE)
+		return fail_unlock(s, "reading persisted params", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return n;
 }
@@ -667,7 +669,7 @@ int vmac_store_events_add(struct vmac_store *s, const struct vmac_stored_event *
 	if (n <= 0)
 		return 0;
 	if (begin(s) != 0)
-		return fail(s, "recording events", err, errlen);
+		return fail_unlock(s, "recording events", err, errlen);
 	ok = sqlite3_prepare_v2(s->db,
 	                        "INSERT OR REPLACE INTO events (seq, time, kind, device, text) VALUES (?, ?, ?, ?, ?)",
 	                        -1, &st, NULL) == SQLITE_OK;
@@ -696,16 +698,16 @@ int vmac_store_events_last(struct vmac_store *s, uint64_t *seq, char *err, size_
 	int rc;
 	*seq = 0;
 	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db, "SELECT max(seq) FROM events", -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "reading the event log", err, errlen);
-	}
+	if (sqlite3_prepare_v2(s->db, "SELECT max(seq) FROM events", -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "reading the event log", err, errlen);
 	rc = sqlite3_step(st);
 	if (rc == SQLITE_ROW && sqlite3_column_type(st, 0) != SQLITE_NULL)
 		*seq = (uint64_t)sqlite3_column_int64(st, 0);
 	sqlite3_finalize(st);
+	if (rc != SQLITE_ROW)
+		return fail_unlock(s, "reading the event log", err, errlen);
 	pthread_mutex_unlock(&s->lock);
-	return rc == SQLITE_ROW ? 0 : fail(s, "reading the event log", err, errlen);
+	return 0;
 }
 
 int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
@@ -716,10 +718,8 @@ int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
 	int rc, n = 0;
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT seq, time, kind, device, text FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
-	                       -1, &st, NULL) != SQLITE_OK) {
-		pthread_mutex_unlock(&s->lock);
-		return fail(s, "reading the event log", err, errlen);
-	}
+	                       -1, &st, NULL) != SQLITE_OK)
+		return fail_unlock(s, "reading the event log", err, errlen);
 	sqlite3_bind_int64(st, 1, (sqlite3_int64)after);
 	sqlite3_bind_int(st, 2, limit);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
@@ -733,8 +733,8 @@ int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
 		n++;
 	}
 	sqlite3_finalize(st);
-	pthread_mutex_unlock(&s->lock);
 	if (rc != SQLITE_DONE)
-		return fail(s, "reading the event log", err, errlen);
+		return fail_unlock(s, "reading the event log", err, errlen);
+	pthread_mutex_unlock(&s->lock);
 	return n;
 }

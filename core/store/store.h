@@ -2,7 +2,9 @@
  * STATE_DIR/vmac.db, shared by vmacd and the `vmac token` command (host
  * running or not). It holds the access tokens; persisted parameters, driver
  * versions and the event log come with the rest of docs/API.md's control
- * API. Never used on the bus thread: every call may touch the disk.
+ * API. Never used on the bus thread: every call may touch the disk. Any
+ * other thread may call any function at any time: each holds the store's
+ * lock around its statements (one connection is shared).
  *
  * Tokens (docs/API.md, "Access"): "vmac_" ID "_" SECRET, ID 16 and SECRET 64
  * hex digits, both random. The store keeps the ID, the scope and a BLAKE2b

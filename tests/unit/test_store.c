@@ -1,7 +1,10 @@
 /* Unit tests of the store (core/store): tokens are created with the scope
  * asked for, checked by hash, refused when malformed, altered, unknown or
- * revoked, listed without their secrets, and kept across a reopen. */
+ * revoked, listed without their secrets, and kept across a reopen; and two
+ * threads using every function at once on the one connection get the
+ * answers each would get alone. */
 #include <check.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -126,6 +129,148 @@ START_TEST(a_missing_folder_is_an_error)
 }
 END_TEST
 
+/* ---- two threads on one store (the host's HTTP and main threads) ----
+ * Each round of a thread uses every function of the store on names of its
+ * own and checks what comes back. Without the store's lock around each
+ * call, the other thread's statements run in between: sqlite3_changes()
+ * and sqlite3_last_insert_rowid() of the one connection then answer for
+ * the other thread's statement (a revoke says "no such token", a version
+ * added gets another row's id), and a statement can land inside the other
+ * thread's transaction. */
+#define HAMMER_ROUNDS 150
+
+struct hammer {
+	int index; /* 0 or 1: names and event numbers of this thread's own */
+	int rounds;
+	char problem[400]; /* the first wrong answer, "" when none */
+};
+
+static void count_token(void *ctx, const struct vmac_token_info *t)
+{
+	(void)t;
+	++*(int *)ctx;
+}
+
+static void count_version(void *ctx, const struct vmac_driver_version *v)
+{
+	(void)v;
+	++*(int *)ctx;
+}
+
+static void last_param(void *ctx, const char *name, const struct vmac_value *v)
+{
+	(void)name;
+	*(double *)ctx = v->number;
+}
+
+static void count_event(void *ctx, const struct vmac_stored_event *e)
+{
+	(void)e;
+	++*(int *)ctx;
+}
+
+#define HAMMER_CHECK(cond, ...)                                                                              \
+	do {                                                                                                 \
+		if (!(cond)) {                                                                               \
+			snprintf(h->problem, sizeof(h->problem), __VA_ARGS__);                               \
+			return NULL;                                                                         \
+		}                                                                                            \
+	} while (0)
+
+static void *hammer(void *arg)
+{
+	struct hammer *h = arg;
+	char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1], err[512] = "", driver[16], machine[16],
+	    version[32], src[64];
+	int i;
+	snprintf(driver, sizeof(driver), "drv%d", h->index);
+	snprintf(machine, sizeof(machine), "machine-%d", h->index);
+	for (i = 0; i < HAMMER_ROUNDS; i++, h->rounds++) {
+		struct vmac_driver_version v;
+		struct vmac_value value;
+		struct vmac_stored_event ev = {(uint64_t)(2 * i + h->index + 1), 1.0, "test", machine, "hammered"};
+		char *back = NULL;
+		size_t len = 0;
+		int64_t vid = 0;
+		int n = 0, rc;
+		double got = -1;
+		uint64_t last = 0;
+
+		rc = vmac_token_create(store, VMAC_SCOPE_OPERATE, "test", token, id, err, sizeof(err));
+		HAMMER_CHECK(rc == 0, "round %d: token create: %d %s", i, rc, err);
+		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_OPERATE, "round %d: a new token is refused", i);
+		rc = vmac_token_revoke(store, id, err, sizeof(err));
+		HAMMER_CHECK(rc == 0, "round %d: revoking a valid token answered %d (%s)", i, rc, err);
+		rc = vmac_token_revoke(store, id, err, sizeof(err));
+		HAMMER_CHECK(rc == 1, "round %d: revoking it again answered %d, not 1 (%s)", i, rc, err);
+		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_NONE, "round %d: a revoked token is valid", i);
+		rc = vmac_token_list(store, count_token, &n, err, sizeof(err));
+		HAMMER_CHECK(rc > i && rc == n, "round %d: token list: %d (%d seen) %s", i, rc, n, err);
+
+		snprintf(version, sizeof(version), "1.%d.%d", h->index, i);
+		snprintf(src, sizeof(src), "return {name = '%s', version = '%s'}", driver, version);
+		rc = vmac_store_driver_add(store, driver, version, src, strlen(src), "test", &vid, err, sizeof(err));
+		HAMMER_CHECK(rc == 0, "round %d: driver add: %d %s", i, rc, err);
+		rc = vmac_store_driver_get(store, vid, &v, &back, &len, err, sizeof(err));
+		HAMMER_CHECK(rc == 1 && strcmp(v.driver, driver) == 0 && strcmp(v.version, version) == 0 && back &&
+		                 strcmp(back, src) == 0,
+		             "round %d: version %s of %s was stored as id %lld, which holds %d %s %s", i, version, driver,
+		             (long long)vid, rc, rc == 1 ? v.driver : "-", rc == 1 ? v.version : err);
+		free(back);
+		rc = vmac_store_driver_activate(store, driver, vid, err, sizeof(err));
+		HAMMER_CHECK(rc == 0, "round %d: activate: %d %s", i, rc, err);
+		rc = vmac_store_driver_active(store, driver, &v, NULL, NULL, err, sizeof(err));
+		HAMMER_CHECK(rc == 1 && v.id == vid, "round %d: the active version is %d %lld, not %lld", i, rc,
+		             (long long)v.id, (long long)vid);
+		n = 0;
+		rc = vmac_store_driver_list(store, driver, count_version, &n, err, sizeof(err));
+		HAMMER_CHECK(rc == i + 1 && n == i + 1, "round %d: %s has %d versions listed (%d seen) %s", i, driver, rc,
+		             n, err);
+		if (i % 3 == 2) {
+			rc = vmac_store_driver_roll_back(store, driver, vid, "test", err, sizeof(err));
+			HAMMER_CHECK(rc == 0, "round %d: roll back: %d %s", i, rc, err);
+		} else if (i % 3 == 1) {
+			rc = vmac_store_driver_refuse(store, vid, "test", err, sizeof(err));
+			HAMMER_CHECK(rc == 0, "round %d: refuse: %d %s", i, rc, err);
+		}
+
+		memset(&value, 0, sizeof(value));
+		value.type = VMAC_VALUE_NUMBER;
+		value.number = i;
+		rc = vmac_store_param_set(store, machine, "count", &value, err, sizeof(err));
+		HAMMER_CHECK(rc == 0, "round %d: param set: %d %s", i, rc, err);
+		rc = vmac_store_param_list(store, machine, last_param, &got, err, sizeof(err));
+		HAMMER_CHECK(rc == 1 && got == i, "round %d: param list: %d, value %g", i, rc, got);
+
+		rc = vmac_store_events_add(store, &ev, 1, err, sizeof(err));
+		HAMMER_CHECK(rc == 0, "round %d: events add: %d %s", i, rc, err);
+		rc = vmac_store_events_last(store, &last, err, sizeof(err));
+		HAMMER_CHECK(rc == 0 && last >= ev.seq, "round %d: events last: %d, %llu", i, rc, (unsigned long long)last);
+		n = 0;
+		rc = vmac_store_events_list(store, ev.seq - 1, 1, count_event, &n, err, sizeof(err));
+		HAMMER_CHECK(rc == 1 && n == 1, "round %d: events list: %d %s", i, rc, err);
+	}
+	return NULL;
+}
+
+START_TEST(two_threads_at_once_get_their_own_answers)
+{
+	struct hammer h[2];
+	pthread_t th[2];
+	int i;
+	memset(h, 0, sizeof(h));
+	for (i = 0; i < 2; i++) {
+		h[i].index = i;
+		ck_assert_int_eq(pthread_create(&th[i], NULL, hammer, &h[i]), 0);
+	}
+	for (i = 0; i < 2; i++)
+		pthread_join(th[i], NULL);
+	for (i = 0; i < 2; i++)
+		ck_assert_msg(h[i].problem[0] == 0, "thread %d, after %d good rounds: %s", i, h[i].rounds, h[i].problem);
+	ck_assert_int_eq(h[0].rounds + h[1].rounds, 2 * HAMMER_ROUNDS);
+}
+END_TEST
+
 int main(void)
 {
 	Suite *s = suite_create("store");
@@ -137,6 +282,8 @@ int main(void)
 	tcase_add_test(tc, wrong_tokens_are_refused);
 	tcase_add_test(tc, revoked_tokens_stop_at_once_and_survive_a_reopen);
 	tcase_add_test(tc, a_missing_folder_is_an_error);
+	tcase_add_test(tc, two_threads_at_once_get_their_own_answers);
+	tcase_set_timeout(tc, 60);
 	suite_add_tcase(s, tc);
 	r = srunner_create(s);
 	srunner_run_all(r, CK_NORMAL);
