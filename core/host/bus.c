@@ -95,7 +95,7 @@ struct device {
  * RUNNING, the caller waits for the answer, which comes without delay. */
 enum { REQ_FREE, REQ_FILLING, REQ_QUEUED, REQ_RUNNING, REQ_DONE, REQ_ABANDONED };
 
-enum { REQ_INPUT, REQ_SWAP };
+enum { REQ_INPUT, REQ_SWAP, REQ_MACHINES };
 
 struct request {
 	_Atomic int state;
@@ -104,6 +104,10 @@ struct request {
 	struct vmac_bus_input_request r;
 	struct vmac_driver *drv; /* REQ_SWAP: the new instance */
 	int64_t probation_ns;
+	/* REQ_MACHINES: the caller's array, written only while RUNNING (a
+	 * caller that finds its request RUNNING waits for the answer). */
+	char (*names)[VMAC_NAME_MAX + 1];
+	int max_names;
 };
 
 struct vmac_bus {
@@ -1225,6 +1229,25 @@ static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
 	return rc;
 }
 
+/* The machines of driver that have a driver instance (attached, or their
+ * boards still registering): their primary boards' names into names, at
+ * most max. Returns how many. */
+static int list_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max)
+{
+	uint32_t i;
+	int n = 0;
+	if (bus->stopping)
+		return 0;
+	for (i = 0; i < bus->nused && n < max; i++) {
+		const struct machine *m = &bus->mach[i];
+		if (m->used && m->drv && strcmp(m->driver, driver) == 0)
+			snprintf(names[n++], VMAC_NAME_MAX + 1, "%s", bus->dev[m->primary].ann.board);
+	}
+	return n;
+}
+
+static void commands(struct vmac_bus *bus);
+
 /* The requests other threads queued: run each, answer, post. */
 static void requests(struct vmac_bus *bus)
 {
@@ -1239,10 +1262,17 @@ static void requests(struct vmac_bus *bus)
 				atomic_store(&q->state, REQ_FREE);
 			continue;
 		}
-		if (q->kind == REQ_SWAP)
+		if (q->kind == REQ_SWAP) {
 			q->r.rc = swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
-		else
+		} else if (q->kind == REQ_MACHINES) {
+			/* Every command sent before this request was queued is
+			 * handled first: a driver the main thread handed over is
+			 * in its machine when the list is made. */
+			commands(bus);
+			q->r.rc = list_machines(bus, q->r.name, q->names, q->max_names);
+		} else {
 			q->r.rc = input_request(bus, &q->r);
+		}
 		atomic_store(&q->state, REQ_DONE);
 		sem_post(&q->done);
 	}
@@ -1586,7 +1616,7 @@ const char *vmac_bus_host_addr(struct vmac_bus *bus)
 }
 
 static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
-                   int64_t probation_ns, int timeout_ms)
+                   int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms)
 {
 	struct request *q = NULL;
 	struct timespec until;
@@ -1604,6 +1634,8 @@ static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_req
 	q->r = *req;
 	q->drv = drv;
 	q->probation_ns = probation_ns;
+	q->names = names;
+	q->max_names = max_names;
 	atomic_store(&q->state, REQ_QUEUED);
 	atomic_store(&bus->req_queued, 1);
 	if (!bus->virt)
@@ -1634,7 +1666,7 @@ static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_req
 
 int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
 {
-	return request(bus, REQ_INPUT, req, NULL, 0, timeout_ms);
+	return request(bus, REQ_INPUT, req, NULL, 0, NULL, 0, timeout_ms);
 }
 
 int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
@@ -1644,8 +1676,21 @@ int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_
 	int r;
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);
-	r = request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, timeout_ms);
+	r = request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, NULL, 0, timeout_ms);
 	*rc = r == 0 ? req.rc : -1;
 	snprintf(reply, replylen, "%s", req.reply);
 	return r;
+}
+
+int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
+                              int timeout_ms, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.name, sizeof(req.name), "%s", driver);
+	if (request(bus, REQ_MACHINES, &req, NULL, 0, names, max, timeout_ms) != 0) {
+		snprintf(reply, replylen, "%s", req.reply);
+		return -1;
+	}
+	return req.rc;
 }

@@ -170,6 +170,16 @@ int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *
 int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
                           int timeout_ms, int *rc, char *reply, size_t replylen);
 
+/* The machines of driver `driver` as the bus thread has them when it takes
+ * this request, every command sent with vmac_bus_send_cmd before the call
+ * handled first: the names of their primary boards, every machine that has
+ * a driver instance (running, or its boards still registering: such a
+ * machine refuses a swap as not running until it has attached). Returns
+ * how many (at most max), or -1 when the bus thread took no request
+ * (reply says why). Any thread but the bus thread. */
+int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
+                              int timeout_ms, char *reply, size_t replylen);
+
 /* ---- virtual mode: `vmac test` (docs/TESTING.md) ----
  * The same bus (discovery, schedule, deadlines, drivers) with no thread, no
  * socket and no timer: the caller owns the clock, carries the frames both

@@ -6,12 +6,47 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "loader.h"
 
 #define SWAP_TIMEOUT_MS 2000 /* the bus thread takes a request within a tick */
+#define ATTACH_POLL_US 5000  /* how often a machine still registering is looked at again */
 
+/* Held through a whole deploy or rollback (store and machines), and by
+ * vmac_deploy_load from reading the store until the new machine's driver
+ * is handed to the bus thread. So a machine that comes while a deploy is
+ * under way either was handed its driver before the deploy began (the
+ * deploy then finds it, vmac_bus_request_machines, and switches it) or
+ * loads after the deploy has ended (the store then says which version
+ * won): none keeps the version the deploy replaced. */
 static pthread_mutex_t deploy_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* Test-only knob: VMAC_TEST_DEPLOY_PAUSE_MS=N makes every deploy and
+ * rollback wait N ms (at most 60 s) after switching the machines and before
+ * writing the store, the moment a board attaching would once have loaded
+ * the old version (tests/integration/test_reload.py makes one attach
+ * then). Unset, the default, nothing waits. It only delays a deploy: the
+ * deploy lock is held the whole time, so it cannot change an outcome. */
+static void test_pause(const char *driver)
+{
+	const char *v = getenv("VMAC_TEST_DEPLOY_PAUSE_MS");
+	long ms = v ? strtol(v, NULL, 10) : 0;
+	if (ms <= 0)
+		return;
+	if (ms > 60000)
+		ms = 60000;
+	fprintf(stderr, "vmacd: deploy of %s paused %ld ms between its steps (VMAC_TEST_DEPLOY_PAUSE_MS)\n", driver, ms);
+	usleep((useconds_t)ms * 1000);
+}
+
+static int64_t mono_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
 
 /* A store error as an HTTP status: a full disk is 507, the rest 500. */
 static void store_failed(struct vmac_deploy_result *out, const char *err)
@@ -20,31 +55,55 @@ static void store_failed(struct vmac_deploy_result *out, const char *err)
 	snprintf(out->error, sizeof(out->error), "%s", err);
 }
 
-/* The names of the running machines of driver (their primary boards), at
- * most max. Returns how many. */
+/* The machines of driver (their primary boards' names), at most max, as
+ * the bus thread has them now: running ones, and ones handed their driver
+ * whose boards are still registering. Returns how many, or -1 (the bus
+ * thread took no request) with out's status 503. */
 static int machines_of(const struct vmac_deploy_ctx *x, const char *driver, char (*names)[VMAC_NAME_MAX + 1],
-                       int max)
+                       int max, struct vmac_deploy_result *out)
 {
-	struct vmac_status st;
-	int i, n = 0;
-	memset(&st, 0, sizeof(st));
-	st.devices = calloc(x->cfg->max_devices, sizeof(*st.devices));
-	st.slot_load = calloc(1u << x->cfg->max_level, sizeof(*st.slot_load));
-	if (st.devices && st.slot_load) {
-		vmac_bus_status(x->bus, &st);
-		for (i = 0; i < st.ndevices && n < max; i++) {
-			const struct vmac_device_status *d = &st.devices[i];
-			if (strcmp(d->driver, driver) == 0 && strcmp(d->state, "running") == 0 &&
-			    strcmp(d->name, d->machine) == 0)
-				snprintf(names[n++], VMAC_NAME_MAX + 1, "%s", d->name);
-		}
+	char why[VMAC_EVENT_TEXT];
+	int n = vmac_bus_request_machines(x->bus, driver, names, max, SWAP_TIMEOUT_MS, why, sizeof(why));
+	if (n < 0) {
+		out->status = 503;
+		snprintf(out->error, sizeof(out->error), "%s", why);
 	}
-	free(st.devices);
-	free(st.slot_load);
 	return n;
 }
 
-/* Hand every running machine of driver a fresh instance of src (tagged
+/* Whether name is still one of driver's machines (with a driver instance). */
+static int still_a_machine(const struct vmac_deploy_ctx *x, const char *driver, const char *name)
+{
+	char names[VMAC_DEPLOY_MACHINES][VMAC_NAME_MAX + 1], why[VMAC_EVENT_TEXT];
+	int i, n = vmac_bus_request_machines(x->bus, driver, names, VMAC_DEPLOY_MACHINES, SWAP_TIMEOUT_MS, why,
+	                                     sizeof(why));
+	for (i = 0; i < n; i++)
+		if (strcmp(names[i], name) == 0)
+			return 1;
+	return 0;
+}
+
+/* drv takes over machine `name` (vmac_bus_request_swap). A machine whose
+ * boards are still registering refuses as not running: it is waited for
+ * (it attaches with the version it was loaded with, then takes the new
+ * one over like the others) while it is still a machine of driver, at most
+ * two reply deadlines and a second (a board that does not answer REGISTER
+ * is dropped within one). 0 switched; else not, text says why. */
+static int swap_one(const struct vmac_deploy_ctx *x, const char *driver, const char *name, struct vmac_driver *drv,
+                    unsigned probation_ms, char *text, size_t textlen)
+{
+	int64_t until = mono_ms() + 2 * (int64_t)x->cfg->reply_deadline_us / 1000 + 1000;
+	int rc = -1;
+	for (;;) {
+		if (vmac_bus_request_swap(x->bus, name, drv, probation_ms, SWAP_TIMEOUT_MS, &rc, text, textlen) != 0)
+			return -1;
+		if (rc != 1 || !strstr(text, "is not running") || mono_ms() > until || !still_a_machine(x, driver, name))
+			return rc;
+		usleep(ATTACH_POLL_US);
+	}
+}
+
+/* Hand every machine of names a fresh instance of driver's src (tagged
  * tag; src NULL: the driver's file). Records each machine in out; returns
  * how many refused. switched[i] says which took it. */
 static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const char *src, size_t len, int64_t tag,
@@ -62,9 +121,7 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const c
 		if ((src ? vmac_load_driver_source(x->cfg, driver, names[i], src, len, &drv, r->text, sizeof(r->text))
 		         : vmac_load_driver(x->cfg, driver, names[i], &drv, r->text, sizeof(r->text))) == 0) {
 			vmac_driver_set_tag(drv, tag);
-			if (vmac_bus_request_swap(x->bus, names[i], drv, probation_ms, SWAP_TIMEOUT_MS, &rc, r->text,
-			                          sizeof(r->text)) != 0)
-				rc = -1;
+			rc = swap_one(x, driver, names[i], drv, probation_ms, r->text, sizeof(r->text));
 			if (rc != 0)
 				vmac_driver_free(drv);
 		}
@@ -102,14 +159,17 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char
 	vmac_driver_free(check);
 
 	pthread_mutex_lock(&deploy_lock);
+	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES, out);
+	if (n < 0)
+		goto done;
 	have_prev = vmac_store_driver_active(x->store, driver, &prev, &prev_src, &prev_len, err, sizeof(err));
 	if (have_prev < 0 || vmac_store_driver_add(x->store, driver, out->version, src, len, by, &id, err,
 	                                           sizeof(err)) != 0) {
 		store_failed(out, err);
 		goto done;
 	}
-	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES);
 	refused = swap_all(x, driver, src, len, id, probation_ms, names, n, switched, out);
+	test_pause(driver);
 	if (refused == 0) {
 		if (vmac_store_driver_activate(x->store, driver, id, err, sizeof(err)) != 0) {
 			store_failed(out, err);
@@ -215,8 +275,11 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 		snprintf(out->version, sizeof(out->version), "%s", vmac_driver_version(check));
 		vmac_driver_free(check);
 	}
-	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES);
+	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES, out);
+	if (n < 0)
+		goto done;
 	swap_all(x, driver, src, len, cur.previous, 0, names, n, switched, out);
+	test_pause(driver);
 	snprintf(why, sizeof(why), "rolled back by hand (token %s)", by);
 	rc = vmac_store_driver_roll_back(x->store, driver, cur.id, why, err, sizeof(err));
 	if (rc < 0) {
@@ -230,20 +293,26 @@ done:
 	free(src);
 }
 
-int vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,
-                     struct vmac_driver **out, char *text, size_t textlen)
+void vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,
+                      void (*hand_over)(void *ctx, int rc, struct vmac_driver *drv, const char *text), void *ctx)
 {
 	struct vmac_driver_version v;
-	char *src = NULL;
+	struct vmac_driver *drv = NULL;
+	char *src = NULL, text[VMAC_EVENT_TEXT] = "";
 	size_t len = 0;
-	int rc = store ? vmac_store_driver_active(store, driver, &v, &src, &len, text, textlen) : 0;
-	if (rc < 0)
-		return -EIO;
-	if (rc == 0)
-		return vmac_load_driver(cfg, driver, device, out, text, textlen);
-	rc = vmac_load_driver_source(cfg, driver, device, src, len, out, text, textlen);
+	int rc;
+	pthread_mutex_lock(&deploy_lock); /* waits for a deploy under way: see deploy_lock */
+	rc = store ? vmac_store_driver_active(store, driver, &v, &src, &len, text, sizeof(text)) : 0;
+	if (rc < 0) {
+		rc = -EIO;
+	} else if (rc == 0) {
+		rc = vmac_load_driver(cfg, driver, device, &drv, text, sizeof(text));
+	} else {
+		rc = vmac_load_driver_source(cfg, driver, device, src, len, &drv, text, sizeof(text));
+		if (rc == 0)
+			vmac_driver_set_tag(drv, v.id);
+	}
 	free(src);
-	if (rc == 0)
-		vmac_driver_set_tag(*out, v.id);
-	return rc;
+	hand_over(ctx, rc, drv, text);
+	pthread_mutex_unlock(&deploy_lock);
 }

@@ -3,7 +3,8 @@
  * every running machine of that driver, each switching at a slot boundary
  * (vmac_bus_request_swap); a rollback does the same with the version
  * before. Runs on the HTTP server's threads, never the bus thread; one
- * deploy or rollback at a time. */
+ * deploy or rollback at a time, and a new machine's driver is loaded
+ * (vmac_deploy_load) only between them. */
 #ifndef VMAC_DEPLOY_H
 #define VMAC_DEPLOY_H
 
@@ -54,10 +55,15 @@ void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, i
 void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, const char *by,
                           struct vmac_deploy_result *out);
 
-/* The driver a board of driver `driver` loads: the store's active version
- * (tagged with its id) or else the file (vmac_load_driver). vmacd's main
- * thread, on VMAC_MSG_LOAD. Returns as vmac_load_driver. */
-int vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,
-                     struct vmac_driver **out, char *text, size_t textlen);
+/* The driver a new machine of driver `driver` (primary board `device`)
+ * loads: the store's active version (tagged with its id) or else the file
+ * (vmac_load_driver). vmacd's main thread, on VMAC_MSG_LOAD. A deploy or
+ * rollback under way is waited for. hand_over(ctx, rc, drv, text) gets the
+ * result (rc as vmac_load_driver returns it, -EIO when the store cannot be
+ * read; drv NULL unless rc is 0, then the callee's; text says why not) and
+ * must hand drv to the bus thread (vmac_bus_send_cmd) before it returns: no
+ * deploy begins until it has, so a deploy finds the machine with it. */
+void vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,
+                      void (*hand_over)(void *ctx, int rc, struct vmac_driver *drv, const char *text), void *ctx);
 
 #endif

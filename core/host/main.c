@@ -87,22 +87,37 @@ static void restore_params(struct host *h, struct vmac_driver *drv, const char *
 		vmac_event_log_add(&h->log, "warning", device, err);
 }
 
-static void load_driver(struct host *h, const struct vmac_bus_msg *m)
+struct load {
+	struct host *h;
+	const struct vmac_bus_msg *m;
+};
+
+/* vmac_deploy_load's result goes to the bus thread, with the machine's
+ * persisted params in the driver. */
+static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *text)
 {
+	struct load *l = ctx;
 	struct vmac_host_cmd c;
 
 	memset(&c, 0, sizeof(c));
 	c.kind = VMAC_CMD_LOADED;
-	c.slot = m->slot;
-	c.generation = m->generation;
-	if (vmac_deploy_load(h->store, &h->cfg, m->driver, m->device, &c.drv, c.text, sizeof(c.text)) == -ENOENT)
-		c.missing = 1;
+	c.slot = l->m->slot;
+	c.generation = l->m->generation;
+	c.drv = drv;
+	c.missing = rc == -ENOENT;
+	snprintf(c.text, sizeof(c.text), "%s", text);
 	if (c.drv)
-		restore_params(h, c.drv, m->device);
-	if (vmac_bus_send_cmd(h->bus, &c) != 0) {
+		restore_params(l->h, c.drv, l->m->device);
+	if (vmac_bus_send_cmd(l->h->bus, &c) != 0) {
 		vmac_driver_free(c.drv);
-		vmac_event_log_add(&h->log, "warning", m->device, "command ring full; device will retry on discovery");
+		vmac_event_log_add(&l->h->log, "warning", l->m->device, "command ring full; device will retry on discovery");
 	}
+}
+
+static void load_driver(struct host *h, const struct vmac_bus_msg *m)
+{
+	struct load l = {h, m};
+	vmac_deploy_load(h->store, &h->cfg, m->driver, m->device, hand_over, &l);
 }
 
 /* A version on probation failed and its machines went back: the store

@@ -7,6 +7,7 @@ machine misses nothing."""
 
 import json
 import os
+import threading
 import urllib.error
 import urllib.request
 
@@ -282,3 +283,59 @@ def test_activating_a_kept_version(t):
     assert body["versions"][0]["hash"] == body["versions"][2]["hash"], "the activated copy has another hash"
     rc, out, err = t.run([t.path("vmac"), "activate", "--host", host.http, "counter", "9999"], "activate")
     assert rc == 1 and "no version 9999" in err, "activating a version that does not exist: %d %r" % (rc, err)
+
+
+PAUSE_MS = 3000  # VMAC_TEST_DEPLOY_PAUSE_MS: long enough for a board to be found, announce and attach
+
+
+def paused_host(t):
+    """start(t) with every deploy and rollback paused PAUSE_MS between
+    switching the machines and writing the store (core/host/deploy.c,
+    test_pause): the moment a board attaching would load the old version
+    from the store."""
+    os.environ["VMAC_TEST_DEPLOY_PAUSE_MS"] = str(PAUSE_MS)
+    try:  # vmacd inherits the runner's environment
+        return start(t)
+    finally:
+        del os.environ["VMAC_TEST_DEPLOY_PAUSE_MS"]
+
+
+def attach_during(t, host, method, path, data=None):
+    """Call method path in the background; once the host says it is paused
+    between the deploy's steps, start a new machine (lamp-2, major 77) of
+    the counter driver. Returns the call's (status, answer) and lamp-2's
+    status once running."""
+    answer = []
+    mark = host.mark("stderr")
+    caller = threading.Thread(target=lambda: answer.append(call(host, method, path, t.token, data)), daemon=True)
+    caller.start()
+    host.wait_line(r"deploy of counter paused", 30, since=mark, stream="stderr", what="the deploy's test pause")
+    t.board("lights", "lamp-2", driver="counter", major=77)
+    caller.join(60)
+    assert answer, "%s %s did not answer within 60 s" % (method, path)
+    s = host.wait_running(["lamp-2"], timeout_s=30)
+    return answer[0], host.device("lamp-2", s)
+
+
+def test_a_board_attaching_during_a_deploy_gets_the_new_version(t):
+    host = paused_host(t)
+    (code, body), lamp2 = attach_during(t, host, "POST", "/api/drivers/counter?probation=0",
+                                        counter("2.0.0").encode())
+    assert code == 200, "uploading 2.0.0: %d %r" % (code, body)
+    assert lamp2["driver_version"] == "2.0.0", \
+        "lamp-2 attached while 2.0.0 was being deployed and runs %r" % lamp2["driver_version"]
+    s = host.wait_status(lambda s: host.device("lamp-2", s)["variables"].get("version") == "2.0.0", 10,
+                         "lamp-2 ticking with 2.0.0")
+    assert host.device("lamp-1", s)["driver_version"] == "2.0.0", "lamp-1 is not on 2.0.0"
+
+
+def test_a_board_attaching_during_a_rollback_gets_the_version_rolled_back_to(t):
+    host = paused_host(t)
+    for version in ("2.0.0", "3.0.0"):  # no board attaches during these: nothing waits for the pause
+        code, body = call(host, "POST", "/api/drivers/counter?probation=0", t.token, counter(version).encode())
+        assert code == 200, "uploading %s: %d %r" % (version, code, body)
+    (code, body), lamp2 = attach_during(t, host, "POST", "/api/drivers/counter/rollback")
+    assert code == 200, "rolling back to 2.0.0: %d %r" % (code, body)
+    assert lamp2["driver_version"] == "2.0.0", \
+        "lamp-2 attached while 3.0.0 was being rolled back to 2.0.0 and runs %r" % lamp2["driver_version"]
+    assert host.device("lamp-1", host.status())["driver_version"] == "2.0.0", "lamp-1 is not back on 2.0.0"
