@@ -14,7 +14,8 @@
 #define SWAP_TIMEOUT_MS 2000 /* the bus thread takes a request within a tick */
 #define ATTACH_POLL_US 5000  /* how often a machine still registering is looked at again */
 
-/* Held through a whole deploy or rollback (store and machines), and by
+/* Held through a whole deploy or rollback (store and machines), by the
+ * store's record of a probation rollback (vmac_deploy_rolled_back), and by
  * vmac_deploy_load from reading the store until the new machine's driver
  * is handed to the bus thread. So a machine that comes while a deploy is
  * under way either was handed its driver before the deploy began (the
@@ -291,6 +292,16 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 done:
 	pthread_mutex_unlock(&deploy_lock);
 	free(src);
+}
+
+int vmac_deploy_rolled_back(struct vmac_store *store, const char *driver, int64_t id, const char *why, char *err,
+                            size_t errlen)
+{
+	int rc;
+	pthread_mutex_lock(&deploy_lock);
+	rc = vmac_store_driver_roll_back(store, driver, id, why, err, errlen);
+	pthread_mutex_unlock(&deploy_lock);
+	return rc;
 }
 
 void vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,

@@ -55,6 +55,16 @@ void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, i
 void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, const char *by,
                           struct vmac_deploy_result *out);
 
+/* A version on probation failed and the bus thread put its machines back
+ * on the instance before (event rolled_back carrying version id): the
+ * store says so too (vmac_store_driver_roll_back), so that boards attaching
+ * later load the version before. Under the deploy lock: it waits for a
+ * deploy or rollback under way, and none interleaves with it. vmacd's main
+ * thread. 0, 1 (id was no longer the active version: nothing changed), or
+ * -1 with err. */
+int vmac_deploy_rolled_back(struct vmac_store *store, const char *driver, int64_t id, const char *why, char *err,
+                            size_t errlen);
+
 /* The driver a new machine of driver `driver` (primary board `device`)
  * loads: the store's active version (tagged with its id) or else the file
  * (vmac_load_driver). vmacd's main thread, on VMAC_MSG_LOAD. A deploy or

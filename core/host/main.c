@@ -121,11 +121,12 @@ static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 }
 
 /* A version on probation failed and its machines went back: the store
- * says so too, so that boards attaching later load the version before. */
+ * says so too, so that boards attaching later load the version before
+ * (under the deploy lock: never in the middle of a deploy). */
 static void roll_back_version(struct host *h, const struct vmac_bus_msg *m)
 {
 	char err[512];
-	if (vmac_store_driver_roll_back(h->store, m->driver, m->version_id, m->text, err, sizeof(err)) < 0)
+	if (vmac_deploy_rolled_back(h->store, m->driver, m->version_id, m->text, err, sizeof(err)) < 0)
 		vmac_event_log_add(&h->log, "warning", m->device, err);
 }
 

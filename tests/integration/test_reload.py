@@ -8,6 +8,7 @@ machine misses nothing."""
 import json
 import os
 import threading
+import time
 import urllib.error
 import urllib.request
 
@@ -288,12 +289,12 @@ def test_activating_a_kept_version(t):
 PAUSE_MS = 3000  # VMAC_TEST_DEPLOY_PAUSE_MS: long enough for a board to be found, announce and attach
 
 
-def paused_host(t):
-    """start(t) with every deploy and rollback paused PAUSE_MS between
+def paused_host(t, pause_ms=PAUSE_MS):
+    """start(t) with every deploy and rollback paused pause_ms between
     switching the machines and writing the store (core/host/deploy.c,
     test_pause): the moment a board attaching would load the old version
     from the store."""
-    os.environ["VMAC_TEST_DEPLOY_PAUSE_MS"] = str(PAUSE_MS)
+    os.environ["VMAC_TEST_DEPLOY_PAUSE_MS"] = str(pause_ms)
     try:  # vmacd inherits the runner's environment
         return start(t)
     finally:
@@ -339,3 +340,48 @@ def test_a_board_attaching_during_a_rollback_gets_the_version_rolled_back_to(t):
     assert lamp2["driver_version"] == "2.0.0", \
         "lamp-2 attached while 3.0.0 was being rolled back to 2.0.0 and runs %r" % lamp2["driver_version"]
     assert host.device("lamp-1", host.status())["driver_version"] == "2.0.0", "lamp-1 is not back on 2.0.0"
+
+
+def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
+    """A version failing on probation goes back at once on the bus, but the
+    store records it under the deploy lock (core/host/deploy.c,
+    vmac_deploy_rolled_back): during another deploy it waits for that to
+    end, so the two never interleave their writes."""
+    pause_ms = 6000  # the failure, its event and a look at the store all fall within it, even under ASan
+    host = paused_host(t, pause_ms)
+    boom = counter("2.0.0", boom="if not dev.state.relay then error('boom: relay off') end")
+    code, body = call(host, "POST", "/api/drivers/counter?probation=60", t.token, boom.encode())
+    assert code == 200, "uploading 2.0.0 on probation: %d %r" % (code, body)
+    seq = host.last_event_seq()
+
+    # A deploy of another driver, paused between its steps (it holds the lock).
+    lights = open(os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "drivers", "lights.lua")).read()
+    answer = []
+    mark = host.mark("stderr")
+    caller = threading.Thread(target=lambda: answer.append(
+        call(host, "POST", "/api/drivers/lights?probation=0", t.token, lights.encode())), daemon=True)
+    caller.start()
+    host.wait_line(r"deploy of lights paused", 30, since=mark, stream="stderr", what="the deploy's test pause")
+
+    # 2.0.0 fails on lamp-1 meanwhile: the bus rolls it back at once.
+    code, body = call(host, "POST", "/api/devices/lamp-1/input", t.token,
+                      json.dumps({"name": "relay", "value": False}).encode(), "application/json")
+    host.wait_event("rolled_back", "lamp-1", "boom: relay off", after_seq=seq, timeout_s=pause_ms / 1000)
+    code, body = call(host, "GET", "/api/drivers/counter", t.token)
+    in_deploy = caller.is_alive()
+    assert in_deploy, "the deploy of lights ended before the store could be looked at (pause too short)"
+    states = [(v["version"], v["state"]) for v in body["versions"]]
+    assert states == [("2.0.0", "active")], \
+        "the store recorded the probation rollback in the middle of another deploy: %r" % states
+
+    caller.join(60)
+    assert answer and answer[0][0] == 200, "deploying lights: %r" % answer
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        code, body = call(host, "GET", "/api/drivers/counter", t.token)
+        if body["active"] == 0:
+            break
+        time.sleep(0.05)
+    assert [v["state"] for v in body["versions"]] == ["rolled_back"], \
+        "the store does not record the rollback once the deploy is over: %r" % body
+    assert host.device("lamp-1", host.status())["driver_version"] == "1.0.0", "lamp-1 is not back on 1.0.0"
