@@ -17,7 +17,7 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Debian packages: compiler and pkg-config, the libraries the host links
 # (LuaJIT, libev, libmicrohttpd, jansson, libcurl, SQLite, libsodium), Check for unit tests,
 # clang + its runtime for the libFuzzer harness, python3 for integration tests,
-# luajit for the stdlib's Lua tests, lua-check for vmac lint, openssl for the
+# luajit for the escape corpus's bytecode driver, lua-check for vmac lint, openssl for the
 # TLS test's certificate.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
@@ -82,7 +82,8 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
 $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
-                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(vtest_obj) $(host_obj) $(portable_obj)
+                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(OBJ)/core/cli/lint.o \
+                   $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
@@ -122,6 +123,12 @@ $(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/stor
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
+# The stdlib's Lua tests, each case in a real driver sandbox (tests/lua/run.c;
+# white-box: includes core/driver/driver.c).
+$(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+
 # The store killed mid-write (tests/integration/test_store.py).
 $(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o
 	@mkdir -p $(dir $@)
@@ -150,11 +157,11 @@ run: deps
 test-unit: $(UNIT_TESTS)
 	@for t in $(UNIT_TESTS); do echo "== $$t"; CK_FORK=yes $$t || exit 1; done
 
-# The stdlib's own tests (plain LuaJIT, the sandbox emulated) and luacheck
-# over every shipped script.
-test-lua: $(BUILD)/bin/vmac
-	@echo "== Lua tests of stdlib/"
-	@luajit tests/lua/run.lua
+# The stdlib's own tests, in the driver sandbox itself (tests/lua/run.c), and
+# luacheck with the sandbox's globals over every shipped script.
+test-lua: $(BUILD)/bin/vmac $(BUILD)/tests/lua_tests
+	@echo "== Lua tests of stdlib/, in the driver sandbox"
+	@$(BUILD)/tests/lua_tests
 	@echo "== vmac lint over stdlib/, scripts/ and the driver tests"
 	@$(BUILD)/bin/vmac lint stdlib/*.lua $$(find scripts -name '*.lua') $$(find tests -name '*_test.lua')
 

@@ -16,6 +16,7 @@
 #include "client.h"
 #include "console.h"
 #include "events.h"
+#include "lint.h"
 #include "reload.h"
 #include "token.h"
 
@@ -207,43 +208,6 @@ static int cmd_status(int argc, char **argv)
 	return 0;
 }
 
-/* vmac lint FILE...: luacheck with the sandbox's globals (scripts/luacheckrc). */
-static int cmd_lint(int argc, char **argv)
-{
-	static char luacheck[] = "luacheck", config_flag[] = "--config", no_color[] = "--no-color";
-	char root[1024], config[1100];
-	char **args;
-	int i, n = 0;
-	if (argc < 2 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
-		printf("usage: vmac lint FILE.lua...\n"
-		       "Check driver and stdlib scripts with luacheck, knowing exactly the globals the driver\n"
-		       "sandbox provides: anything else (os, io, debug, load, ...) is reported.\n"
-		       "Exit 0 when clean, 1 on warnings or errors, 2 when luacheck is missing.\n");
-		return argc < 2 ? 2 : 0;
-	}
-	vmac_root_dir(root, sizeof(root));
-	snprintf(config, sizeof(config), "%s/scripts/luacheckrc", root);
-	if (access(config, R_OK) != 0) {
-		fprintf(stderr, "vmac lint: cannot read %s\n", config);
-		return 2;
-	}
-	args = calloc((size_t)argc + 6, sizeof(*args));
-	if (!args)
-		return 2;
-	args[n++] = luacheck;
-	args[n++] = config_flag;
-	args[n++] = config;
-	if (!isatty(STDOUT_FILENO))
-		args[n++] = no_color;
-	for (i = 1; i < argc; i++)
-		args[n++] = argv[i];
-	execvp("luacheck", args);
-	fprintf(stderr, "vmac lint: cannot run luacheck (%s); install Debian's lua-check (make deps)\n",
-	        strerror(errno));
-	free(args);
-	return 2;
-}
-
 /* vmac bench [bench.py options]: the timing benchmark (tests/bench/bench.py)
  * against the programs beside this vmac. */
 static int cmd_bench(int argc, char **argv)
@@ -329,7 +293,7 @@ int main(int argc, char **argv)
 	if (strcmp(argv[1], "status") == 0)
 		return cmd_status(argc - 1, argv + 1);
 	if (strcmp(argv[1], "lint") == 0)
-		return cmd_lint(argc - 1, argv + 1);
+		return vmac_lint_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "test") == 0)
 		return vmac_test_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "bench") == 0)

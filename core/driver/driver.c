@@ -698,28 +698,56 @@ static void wrap_field(lua_State *L, const char *lib, const char *name, lua_CFun
 	lua_setfield(L, -2, name);
 }
 
-/* Build the driver's global table from nothing: [-0, +1]. */
+/* ---- the allow-list ----
+ * Everything a driver's global table holds, by library: the one list
+ * (docs/DRIVERS.md "The sandbox"). make_env() copies the `copied` names
+ * from LuaJIT's own libraries as they are and puts in the `own` names
+ * itself (wrapped, bounded, or the host's); `vmac lint` hands the whole
+ * list to luacheck (vmac_driver_allowed). A name LuaJIT lacks (rawlen,
+ * without its 5.2 extensions) is copied as nil. Adding a name here is
+ * widening the sandbox: the escape corpus (tests/escape) must still fail. */
+static const char *const allow_base[] = {"assert", "error", "ipairs", "pairs", "next", "select", "tonumber",
+                                         "tostring", "type", "unpack", "rawequal", "rawget", "rawlen",
+                                         "setmetatable", "getmetatable", NULL};
+static const char *const allow_base_own[] = {"pcall", "xpcall", "rawset", "require", "_G", NULL};
+static const char *const allow_str[] = {"byte", "char", "format", "len", "lower", "reverse", "sub", "upper", NULL};
+static const char *const allow_str_own[] = {"rep", "find", "match", "gmatch", "gsub", NULL}; /* bounded */
+static const char *const allow_tab[] = {"concat", "insert", "remove", "sort", "maxn", NULL};
+static const char *const allow_math[] = {"abs", "ceil", "floor", "max", "min", "sqrt", "exp", "log", "log10",
+                                         "pow", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "fmod",
+                                         "modf", "huge", "pi", "random", "randomseed", "frexp", "ldexp", "sinh",
+                                         "cosh", "tanh", "deg", "rad", NULL};
+static const char *const allow_bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
+                                        "arshift", "rol", "ror", "bswap", NULL};
+/* resume is the host's: like pcall it catches errors, so it must re-raise a
+ * budget overrun. wrap re-raises every error by itself. */
+static const char *const allow_co[] = {"create", "yield", "status", "wrap", "running", NULL};
+static const char *const allow_co_own[] = {"resume", NULL};
+static const char *const allow_os_own[] = {"clock", NULL}; /* bus time, nothing else of os */
+static const char *const allow_vmac_own[] = {"cycles", "version", NULL};
+static const char *const allow_none[] = {NULL};
+
+const struct vmac_driver_lib vmac_driver_allowed[] = {
+    {NULL, allow_base, allow_base_own},
+    {"string", allow_str, allow_str_own},
+    {"table", allow_tab, allow_none},
+    {"math", allow_math, allow_none},
+    {"bit", allow_bit, allow_none},
+    {"coroutine", allow_co, allow_co_own},
+    {"os", allow_none, allow_os_own},
+    {"vmac", allow_none, allow_vmac_own},
+    {NULL, NULL, NULL},
+};
+
+/* Build the driver's global table from nothing, exactly vmac_driver_allowed:
+ * [-0, +1]. */
 static void make_env(lua_State *L)
 {
-	static const char *const base[] = {"assert", "error", "ipairs", "pairs", "next", "select", "tonumber",
-	                                   "tostring", "type", "unpack", "rawequal", "rawget", "rawlen",
-	                                   "setmetatable", "getmetatable", NULL};
-	static const char *const str[] = {"byte", "char", "format", "len", "lower", "reverse", "sub", "upper", NULL};
-	static const char *const tab[] = {"concat", "insert", "remove", "sort", "maxn", NULL};
-	static const char *const math[] = {"abs", "ceil", "floor", "max", "min", "sqrt", "exp", "log", "log10",
-	                                   "pow", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "fmod",
-	                                   "modf", "huge", "pi", "random", "randomseed", "frexp", "ldexp", "sinh",
-	                                   "cosh", "tanh", "deg", "rad", NULL};
-	static const char *const bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
-	                                  "arshift", "rol", "ror", "bswap", NULL};
-	/* resume is replaced below: like pcall it catches errors, so it must
-	 * re-raise a budget overrun. wrap re-raises every error by itself. */
-	static const char *const co[] = {"create", "yield", "status", "wrap", "running", NULL};
 	int env;
 
 	lua_newtable(L);
 	env = lua_gettop(L);
-	copy_fields(L, LUA_GLOBALSINDEX, base);
+	copy_fields(L, LUA_GLOBALSINDEX, allow_base);
 	lua_getglobal(L, "pcall");
 	lua_pushcclosure(L, budget_checked_call, 1);
 	lua_setfield(L, env, "pcall");
@@ -729,7 +757,7 @@ static void make_env(lua_State *L)
 	lua_pushcfunction(L, safe_rawset);
 	lua_setfield(L, env, "rawset");
 
-	copy_lib(L, "string", str);
+	copy_lib(L, "string", allow_str);
 	wrap_field(L, "string", "rep", safe_rep, 0);
 	wrap_field(L, "string", "find", safe_pattern, 1);
 	wrap_field(L, "string", "match", safe_pattern, 0);
@@ -747,16 +775,16 @@ static void make_env(lua_State *L)
 	lua_pop(L, 2);
 	lua_setfield(L, env, "string");
 
-	copy_lib(L, "table", tab);
+	copy_lib(L, "table", allow_tab);
 	make_read_only(L);
 	lua_setfield(L, env, "table");
-	copy_lib(L, "math", math);
+	copy_lib(L, "math", allow_math);
 	make_read_only(L);
 	lua_setfield(L, env, "math");
-	copy_lib(L, "bit", bit);
+	copy_lib(L, "bit", allow_bit);
 	make_read_only(L);
 	lua_setfield(L, env, "bit");
-	copy_lib(L, "coroutine", co);
+	copy_lib(L, "coroutine", allow_co);
 	lua_getglobal(L, "coroutine");
 	lua_getfield(L, -1, "resume");
 	lua_pushcclosure(L, budget_checked_call, 1);

@@ -74,6 +74,19 @@ struct vmac_variable {
 	double published_s; /* bus time of the last publication */
 };
 
+/* The sandbox's allow-list (docs/DRIVERS.md "The sandbox"): every name a
+ * driver's global table holds, by library, and nothing else is there.
+ * lib NULL is the globals themselves; copied are LuaJIT's own functions as
+ * they are, own are the host's (bounded or wrapped versions, os.clock,
+ * require, vmac). The one list: the sandbox is built from it, `vmac lint`
+ * gives it to luacheck. Ends with lib, copied and own all NULL. */
+struct vmac_driver_lib {
+	const char *lib;
+	const char *const *copied; /* NULL-terminated */
+	const char *const *own;    /* NULL-terminated */
+};
+extern const struct vmac_driver_lib vmac_driver_allowed[];
+
 struct vmac_driver; /* opaque */
 
 /* Load the driver file at path into a fresh sandboxed state, run it, and

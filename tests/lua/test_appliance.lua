@@ -4,7 +4,6 @@
 local T = require "testing"
 local appliance = require "appliance"
 local cycle = require "cycle"
-local sandbox = require "sandbox"
 local host_copy = require "host_copy"
 local test = T.test
 
@@ -124,12 +123,13 @@ test("a start refused while a programme runs leaves the running programme chosen
 	T.equal(m.dev.vars.cycle, "long", "cycle variable after the refused start")
 end)
 
--- A hot reload of machine m: a new machine (its own stdlib, as a new Lua
--- state) on the same clock, restored from the host's copy of m's appliance.
+-- A hot reload of machine m: a new machine on the same clock, restored from
+-- the host's copy of m's appliance (plain data: no functions, no metatables).
+-- The test runs in one driver state (tests/lua/run.c), so the new machine is
+-- built from the same stdlib modules, not from a second state's own copies.
 -- Returns the new machine and what restore returned.
 local function reload(m, programs)
-	local state = sandbox.new_state("stdlib/")
-	local n = machine { cycle = state.require "cycle", appliance = state.require "appliance" }
+	local n = machine()
 	if programs then n.ctl.programs = programs end
 	n.t = m.t
 	local old_state = host_copy.state({ control = m.ctl })

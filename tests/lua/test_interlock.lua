@@ -171,13 +171,14 @@ test("it holds the cancel's cleanup too", function()
 end)
 
 test("bad arguments raise errors naming the argument", function()
+	local function noop() end
 	T.fails(function() interlock.new() end, "interlock.new: expects a table", "interlock.new()")
-	T.fails(function() interlock.new({ trip = print, safe = print }) end, "interlock.new: name must be", "no name")
-	T.fails(function() interlock.new({ name = "x", safe = print }) end, "interlock.new: trip must be a function",
+	T.fails(function() interlock.new({ trip = noop, safe = noop }) end, "interlock.new: name must be", "no name")
+	T.fails(function() interlock.new({ name = "x", safe = noop }) end, "interlock.new: trip must be a function",
 		"no trip")
-	T.fails(function() interlock.new({ name = "x", trip = print }) end, "interlock.new: safe must be a function",
+	T.fails(function() interlock.new({ name = "x", trip = noop }) end, "interlock.new: safe must be a function",
 		"no safe")
-	T.fails(function() interlock.new({ name = "x", trip = print, safe = print, rearm_timeout = 1 }) end,
+	T.fails(function() interlock.new({ name = "x", trip = noop, safe = noop, rearm_timeout = 1 }) end,
 		"interlock.new: rearm_timeout needs a rearm function", "timeout without rearm")
 	local il = door_interlock()
 	local message = T.fails(function() il:tick(nil, {}, {}) end, "interlock:tick: now must be a number", "tick(nil)")

@@ -1,4 +1,5 @@
--- testing: the registry and assertions of the Lua tests (tests/lua/run.lua).
+-- testing: the registry and assertions of the Lua tests (tests/lua/run.c),
+-- which run in the driver sandbox: only what drivers get (no debug, io).
 -- A test file calls test(name, fn) for each case; the assertions count
 -- themselves, so a test that asserted nothing fails. Failure messages are
 -- formatted only when an assertion fails, so checks in long simulation
@@ -32,11 +33,10 @@ local function show(v)
 	return tostring(v)
 end
 
--- An assertion failure: a table, so the runner prints the message (which
--- starts with the test's file and line) without a traceback.
+-- An assertion failure: an error at the test's own line (level 3: the
+-- caller of the assertion), so the message starts with its file and line.
 local function fail(message)
-	local where = debug.getinfo(3, "Sl")
-	error({ assertion = where.short_src .. ":" .. where.currentline .. ": " .. message }, 3)
+	error(message, 3)
 end
 
 -- check(cond, what, ...): cond must be true.

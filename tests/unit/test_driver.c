@@ -1,13 +1,18 @@
 /* Unit tests of the driver module (core/driver) through its C API: the
  * manifest and its errors, named I/O, machines of several boards, published
- * variables, operator input, the host hooks, and the sandbox's bounds. The
- * escape corpus runs end to end in tests/integration/test_escape.py. */
+ * variables, operator input, the host hooks, the sandbox's bounds, and the
+ * sandbox being exactly its allow-list. The escape corpus runs end to end in
+ * tests/integration/test_escape.py. */
 #include <check.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+
+#include <lauxlib.h>
+#include <lualib.h>
 
 #include "../../core/driver/driver.h"
 
@@ -474,6 +479,74 @@ START_TEST(sandbox_bounds)
 }
 END_TEST
 
+/* Append printf-style to src (size cap), at *n. */
+__attribute__((format(printf, 4, 5))) static void add(char *src, size_t cap, size_t *n, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	*n += (size_t)vsnprintf(src + *n, cap - *n, fmt, ap);
+	va_end(ap);
+	ck_assert_msg(*n < cap, "the checking driver is larger than %zu bytes", cap);
+}
+
+/* Whether LuaJIT's own libraries (a plain state) have lib.name (lib NULL:
+ * the global name). */
+static int luajit_has(lua_State *plain, const char *lib, const char *name)
+{
+	int has;
+	lua_getglobal(plain, lib ? lib : name);
+	has = lib ? lua_istable(plain, -1) : !lua_isnil(plain, -1);
+	if (has && lib) {
+		lua_getfield(plain, -1, name);
+		has = !lua_isnil(plain, -1);
+		lua_pop(plain, 1);
+	}
+	lua_pop(plain, 1);
+	return has;
+}
+
+/* The sandbox is its allow-list (vmac_driver_allowed, which vmac lint gives
+ * luacheck): no global outside it, and every name on it there: the host's
+ * own always, a copied one whenever this LuaJIT has it (rawlen only with
+ * its 5.2 extensions). Checked from inside a driver, as it loads. */
+START_TEST(sandbox_is_exactly_the_allow_list)
+{
+	static char src[32768];
+	size_t n = 0;
+	const struct vmac_driver_lib *lib;
+	const char *const *name;
+	lua_State *plain = luaL_newstate();
+	int own, checked = 0;
+	ck_assert_ptr_nonnull(plain);
+	luaL_openlibs(plain);
+	add(src, sizeof(src), &n, "local listed = {\n");
+	for (lib = vmac_driver_allowed; lib->copied; lib++) {
+		if (lib->lib)
+			add(src, sizeof(src), &n, "['%s'] = true,\n", lib->lib);
+		else
+			for (own = 0; own < 2; own++)
+				for (name = own ? lib->own : lib->copied; *name; name++)
+					add(src, sizeof(src), &n, "['%s'] = true,\n", *name);
+	}
+	add(src, sizeof(src), &n,
+	    "}\nfor k in pairs(_G) do if not listed[k] then\n"
+	    "  error('a global not in the allow-list: ' .. tostring(k)) end end\n");
+	for (lib = vmac_driver_allowed; lib->copied; lib++)
+		for (own = 0; own < 2; own++)
+			for (name = own ? lib->own : lib->copied; *name; name++) {
+				if (!own && !luajit_has(plain, lib->lib, *name))
+					continue;
+				checked++;
+				add(src, sizeof(src), &n, "if %s['%s'] == nil then error('missing %s%s%s') end\n",
+				    lib->lib ? lib->lib : "_G", *name, lib->lib ? lib->lib : "", lib->lib ? "." : "", *name);
+			}
+	add(src, sizeof(src), &n, "return { name = 't', version = '1', io = {}, tick = function() end }\n");
+	lua_close(plain);
+	ck_assert_int_gt(checked, 80);
+	vmac_driver_free(load_ok(src));
+}
+END_TEST
+
 START_TEST(load_gets_a_larger_budget_and_stdlib)
 {
 	struct vmac_driver *d;
@@ -520,6 +593,7 @@ int main(void)
 	tcase_add_test(tc, variables_publish_by_their_rules);
 	tcase_add_test(tc, input_and_host_hooks);
 	tcase_add_test(tc, sandbox_bounds);
+	tcase_add_test(tc, sandbox_is_exactly_the_allow_list);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
 	tcase_add_test(tc, take_over_hands_plain_state_params_and_outputs);
 	tcase_add_test(tc, take_over_refuses_what_it_cannot_copy);
