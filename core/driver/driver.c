@@ -217,7 +217,7 @@ static int guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned
 	if (rc != 0 || d->overrun || d->mem_refused) {
 		/* The traceback names the file and line; when the driver swallowed
 		 * the error (rc 0) there is none, only what happened. */
-		const char *trace = rc == LUA_ERRRUN && lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
+		const char *trace = rc != 0 && rc != LUA_ERRMEM && lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
 		if (rc == LUA_ERRMEM || d->mem_refused) {
 			char what[160];
 			memory_message(d, what, sizeof(what));

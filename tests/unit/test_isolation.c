@@ -232,6 +232,23 @@ START_TEST(error_objects_with_metamethods)
 }
 END_TEST
 
+/* An error in the error handler (a stack overflow leaves it no room) still
+ * comes back with what LuaJIT said. */
+START_TEST(a_stack_overflow_says_so)
+{
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	struct vmac_outputs out;
+	struct vmac_driver *d;
+	limits.memory_bytes = 4 << 20; /* the default cap: the stack overflows before the heap is full */
+	d = load_ok("return { name = 't', version = '1', io = {},\n"
+	            "  tick = function() local function f() return 1 + f() end f() end }");
+	ck_assert_int_ne(tick1(d, 0, &out, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "stack overflow") || strstr(err, "error in error handling"),
+	              "a stack overflow said '%s'", err);
+	vmac_driver_free(d);
+}
+END_TEST
+
 /* Metamethods on what the host reads or writes never run unbounded: the
  * host's accesses are raw, and the hook is armed for all its work. */
 START_TEST(metamethods_the_host_could_reach)
@@ -299,6 +316,7 @@ int main(void)
 	tcase_add_test(tc, every_way_of_catching_the_refusal_is_refused);
 	tcase_add_test(tc, a_state_at_its_cap_fails_as_a_driver_not_the_host);
 	tcase_add_test(tc, error_objects_with_metamethods);
+	tcase_add_test(tc, a_stack_overflow_says_so);
 	tcase_add_test(tc, metamethods_the_host_could_reach);
 	tcase_add_test(tc, an_unprotected_error_stops_the_driver_not_the_process);
 	suite_add_tcase(s, tc);
