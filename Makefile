@@ -41,7 +41,10 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
-HOST_SRC     := core/common/paths.c core/transport/transport_udp.c core/driver/driver.c core/host/bus.c core/host/config.c core/host/deploy.c \
+# The driver sandbox (core/driver/internal.h says which file owns what).
+DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
+                core/driver/instance.c core/driver/takeover.c
+HOST_SRC     := core/common/paths.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/config.c core/host/deploy.c \
                 core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
@@ -49,6 +52,7 @@ VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
 OBJ = $(BUILD)/obj
 
 portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
+driver_obj   = $(DRIVER_SRC:%.c=$(OBJ)/%.o)
 host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
@@ -106,12 +110,12 @@ $(BUILD)/tests/test_host: $(OBJ)/tests/unit/test_host.o $(host_obj) $(portable_o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
-$(BUILD)/tests/test_driver: $(OBJ)/tests/unit/test_driver.o $(OBJ)/core/driver/driver.o
+$(BUILD)/tests/test_driver: $(OBJ)/tests/unit/test_driver.o $(driver_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
-# White-box: includes core/driver/driver.c itself (tests/unit/test_isolation.c).
-$(BUILD)/tests/test_isolation: $(OBJ)/tests/unit/test_isolation.o
+# White-box: reaches the driver's insides (core/driver/internal.h).
+$(BUILD)/tests/test_isolation: $(OBJ)/tests/unit/test_isolation.o $(driver_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
@@ -124,8 +128,8 @@ $(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/stor
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
 # The stdlib's Lua tests, each case in a real driver sandbox (tests/lua/run.c;
-# white-box: includes core/driver/driver.c).
-$(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o
+# white-box: core/driver/internal.h).
+$(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o $(driver_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 

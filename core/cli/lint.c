@@ -1,7 +1,7 @@
 /* vmac lint FILE...: luacheck over driver scripts and stdlib modules with
  * exactly the globals the driver sandbox has. The globals are not written
  * down here nor in a luacheck file: they come from the sandbox's own
- * allow-list (vmac_driver_allowed, core/driver/driver.c), written as the
+ * allow-list (vmac_driver_allowed, core/driver/sandbox.c), written as the
  * luacheck std "vmac" into a temporary configuration, followed by the
  * other settings of scripts/luacheckrc (line length, the driver tests' std).
  * So anything a driver cannot reach (os.execute, io, load, string.dump) is
@@ -31,7 +31,7 @@ static int write_config(FILE *out, FILE *settings)
 	const struct vmac_driver_lib *lib;
 	char buf[4096];
 	size_t n;
-	fprintf(out, "-- Written by vmac lint: the driver sandbox's allow-list (core/driver/driver.c,\n"
+	fprintf(out, "-- Written by vmac lint: the driver sandbox's allow-list (core/driver/sandbox.c,\n"
 	             "-- vmac_driver_allowed), then scripts/luacheckrc.\n"
 	             "stds.vmac = { read_globals = {\n");
 	for (lib = vmac_driver_allowed; lib->copied; lib++) {

@@ -1,5 +1,5 @@
 /* Lua driver instances: one sandboxed LuaJIT state per machine (one or more
- * boards). Every call from C into driver code goes through driver.c's one
+ * boards). Every call from C into driver code goes through protect.c's one
  * guarded call (budget, memory cap, traceback), and every piece of the
  * host's own work on a state runs protected too; a failure marks the
  * driver, never the host: no driver, however written, and no upload can end

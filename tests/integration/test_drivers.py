@@ -117,7 +117,7 @@ def test_runaway_driver_is_dropped(t):
     served = {n: host.device(n)["served"] for n in KITCHEN_NAMES}
     host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 5 for n in KITCHEN_NAMES), 30,
                      "the kitchen served after the runaway driver", undisturbed(KITCHEN_NAMES))
-    # core/driver/driver.c formats "time budget exceeded (N instructions)".
+    # core/driver/protect.c formats "time budget exceeded (N instructions)".
     assert re.search(r"time budget exceeded \(\d+ instructions\)", event["text"]), (
         "the budget message is mangled: %r" % event["text"].splitlines()[0])
 

@@ -1,5 +1,5 @@
 -- host_copy: for the Lua tests, the copy of dev.state that the host hands a
--- new version's migrate(dev, old_state) on a hot reload (core/driver/driver.c,
+-- new version's migrate(dev, old_state) on a hot reload (core/driver/takeover.c,
 -- copy_table): plain data only. Functions, coroutines and userdata are
 -- dropped (a key or value of those types takes its entry with it),
 -- metatables are not copied, and a table reached twice (shared, or a cycle)

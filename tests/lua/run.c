@@ -8,7 +8,7 @@
  * Every case gets a fresh driver state, made the way the host makes one
  * (vmac_driver_load_source of a minimal driver: the same libraries, the
  * JIT off, the memory cap of a driver, the count hook), and the test file
- * runs there in a global table built by the sandbox's own make_env(), as
+ * runs there in a global table built by the sandbox's own drv_make_env(), as
  * a driver file does at load: exactly vmac_driver_allowed, nothing more
  * (no print, io, debug or load). tests/lua/run.lua, the runner's Lua half,
  * is that state's chunk: it requires the test file (which registers its
@@ -31,10 +31,16 @@
  *
  * Budget: the driver's count hook, CASE_BUDGETS times a driver's default
  * instructions per case; no wall-clock limit, so a result does not depend
- * on the machine. White-box: it includes driver.c, as
+ * on the machine. White-box: it reaches core/driver/internal.h, as
  * tests/unit/test_isolation.c does, to build the global table with
- * make_env() and run the case with guarded_call(). */
-#include "../../core/driver/driver.c"
+ * drv_make_env() and run the case with drv_guarded_call(). */
+#include "../../core/driver/internal.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
 
 #include <glob.h>
 
@@ -57,7 +63,7 @@ static void load_example(lua_State *L)
 	char err[300];
 	size_t len = 0, i, lines = 0, code_len;
 	int code = 0;
-	char *doc = read_file(EXAMPLE_DOC, &len, err, sizeof(err), &code), *at, *start, *end, *text;
+	char *doc = drv_read_file(EXAMPLE_DOC, &len, err, sizeof(err), &code), *at, *start, *end, *text;
 	if (!doc)
 		luaL_error(L, "%s", err);
 	doc[len] = 0;
@@ -93,8 +99,8 @@ static int test_require(lua_State *L)
 	const char *name = luaL_checkstring(L, 1);
 	char path[600], chunk[600];
 	int helper, example;
-	snprintf(path, sizeof(path), "%s/%s.lua", driver_of(L)->stdlib_dir, name);
-	if (!valid_module_name(name, 40) || access(path, R_OK) == 0)
+	snprintf(path, sizeof(path), "%s/%s.lua", drv_of(L)->stdlib_dir, name);
+	if (!drv_valid_module_name(name, 40) || access(path, R_OK) == 0)
 		goto driver_require;
 	snprintf(path, sizeof(path), TESTS_DIR "/%s.lua", name);
 	helper = access(path, R_OK) == 0;
@@ -108,7 +114,7 @@ static int test_require(lua_State *L)
 	lua_pop(L, 1);
 	if (helper) {
 		snprintf(chunk, sizeof(chunk), "@%s", path);
-		run_sandboxed(L, path, chunk, name);
+		drv_run_sandboxed(L, path, chunk, name);
 	} else {
 		load_example(L);
 		lua_pushvalue(L, lua_upvalueindex(1));
@@ -147,7 +153,7 @@ static int case_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_State *L = d->L;
 	size_t len = 0;
 	int code = 0;
-	char *src = read_file(TESTS_DIR "/run.lua", &len, err, errlen, &code);
+	char *src = drv_read_file(TESTS_DIR "/run.lua", &len, err, errlen, &code);
 	if (!src)
 		return -1;
 	code = luaL_loadbufferx(L, src, len, "@" TESTS_DIR "/run.lua", "t");
@@ -156,7 +162,7 @@ static int case_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
 		return -1;
 	}
-	make_env(L);                    /* chunk, env */
+	drv_make_env(L);                    /* chunk, env */
 	lua_pushvalue(L, -1);           /* chunk, env, env */
 	lua_getfield(L, -1, "require"); /* chunk, env, env, the driver's require */
 	lua_pushcclosure(L, test_require, 2);
@@ -165,7 +171,7 @@ static int case_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pushstring(L, a->suite);
 	lua_pushinteger(L, a->index);
 	d->loading = 1;
-	code = guarded_call(d, 2, 1, CASE_BUDGETS, err, errlen);
+	code = drv_guarded_call(d, 2, 1, CASE_BUDGETS, err, errlen);
 	d->loading = 0;
 	if (code != 0)
 		return -1;
@@ -195,7 +201,7 @@ static int run_case(struct case_args *a, char *err, size_t errlen)
 	limits.stdlib_dir = "stdlib";
 	if (vmac_driver_load_source(a->file, STATE_SOURCE, sizeof(STATE_SOURCE) - 1, &limits, &d, err, errlen) != 0)
 		return -1;
-	rc = protect(d, case_work, a, err, errlen);
+	rc = drv_protect(d, case_work, a, err, errlen);
 	vmac_driver_free(d);
 	return rc;
 }

@@ -261,7 +261,7 @@ START_TEST(bad_outputs_fail_and_turn_everything_off)
 }
 END_TEST
 
-/* The tick's tables are looked up by interned keys (driver.c, make_keys):
+/* The tick's tables are looked up by interned keys (load.c, make_keys):
  * a driver that replaces dev.out or dev.vars, or publishes a table, is
  * still caught by name, the stack stays balanced, the outputs stay off. */
 START_TEST(replaced_tables_and_bad_variables_fail_by_name)

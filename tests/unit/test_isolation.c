@@ -2,13 +2,17 @@
  * "Isolation"): memory creeping under pcall at every entry point, states at
  * their cap when the host works on them, error objects with metamethods,
  * metamethods the host's reads could reach, and the atpanic handler. A
- * white-box test: it includes driver.c to set a state's cap to what it holds
- * and to raise outside protection, which no driver can do. Any of these
+ * white-box test: through core/driver/internal.h it sets a state's cap to
+ * what it holds and raises outside protection, which no driver can do. Any of these
  * used to end the process (LuaJIT's panic) or hang it; here each must come
  * back as an error of that driver. */
 #include <check.h>
 
-#include "../../core/driver/driver.c"
+#include "../../core/driver/internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 static struct vmac_driver_limits limits;
 

@@ -1,0 +1,474 @@
+/* The sandbox a driver runs in (docs/DRIVERS.md "The sandbox"): its
+ * global table built from nothing out of the one allow-list
+ * (vmac_driver_allowed), the bounded string functions, pcall and its kin
+ * that re-raise a budget or memory overrun, require and vmac.cycles (load
+ * time only), os.clock. Stack contracts are stated per function. */
+#include "internal.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* ---- the sandbox ---- */
+
+/* string.rep bounded: one C call must not stall the bus. */
+static int safe_rep(lua_State *L)
+{
+	size_t len, seplen = 0;
+	lua_Integer n;
+	luaL_checklstring(L, 1, &len);
+	n = luaL_checkinteger(L, 2);
+	luaL_optlstring(L, 3, "", &seplen);
+	if (n > 0 && ((double)(len + seplen) * (double)n > REP_MAX || n > REP_MAX))
+		return luaL_error(L, "string.rep result too large (limit %d bytes)", REP_MAX);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, lua_gettop(L) - 1, 1);
+	return 1;
+}
+
+/* Worst-case steps of matching pattern p against a subject of n bytes: Lua
+ * patterns backtrack, so each unbounded quantifier (*, +, -) can multiply
+ * the work by n, each ? by 2, and an unanchored search tries n starts. One
+ * pass over the items of the pattern: %x, %bxy, %f[set], [set], or one
+ * character, each maybe followed by a quantifier. */
+static double pattern_cost(const char *p, size_t plen, size_t n)
+{
+	double cost = 1, nn = (double)n + 1;
+	size_t i = 0;
+	if (plen > 0 && p[0] == '^')
+		i = 1;
+	else
+		cost = nn;
+	while (i < plen) {
+		char c = p[i];
+		if (c == '(' || c == ')') { /* captures: no item of their own */
+			i++;
+			continue;
+		}
+		if (c == '%' && i + 1 < plen && p[i + 1] == 'b') {
+			i += 4; /* %bxy: balanced match, linear */
+			continue;
+		}
+		if (c == '%' && i + 1 < plen && p[i + 1] == 'f') {
+			i += 2; /* %f[set]: a frontier, zero width */
+			if (i < plen && p[i] == '[') {
+				i++;
+				if (i < plen && p[i] == '^')
+					i++;
+				if (i < plen && p[i] == ']')
+					i++;
+				while (i < plen && p[i] != ']')
+					i += p[i] == '%' ? 2 : 1;
+				i++;
+			}
+			continue;
+		}
+		if (c == '%') {
+			i += 2;
+		} else if (c == '[') {
+			i++;
+			if (i < plen && p[i] == '^')
+				i++;
+			if (i < plen && p[i] == ']')
+				i++;
+			while (i < plen && p[i] != ']')
+				i += p[i] == '%' ? 2 : 1;
+			i++;
+		} else {
+			i++;
+		}
+		if (i < plen && (p[i] == '*' || p[i] == '+' || p[i] == '-')) {
+			cost *= nn;
+			i++;
+		} else if (i < plen && p[i] == '?') {
+			cost *= 2;
+			i++;
+		}
+	}
+	return cost;
+}
+
+/* string.find/match/gmatch/gsub bounded (upvalue 1: the original). */
+static int safe_pattern(lua_State *L)
+{
+	size_t n, plen;
+	const char *p;
+	luaL_checklstring(L, 1, &n);
+	p = luaL_checklstring(L, 2, &plen);
+	if (!(lua_gettop(L) >= 4 && lua_toboolean(L, 4) && lua_tocfunction(L, lua_upvalueindex(2)) != NULL) &&
+	    pattern_cost(p, plen, n) > PATTERN_STEPS_MAX)
+		return luaL_error(L, "pattern too costly for a %d-byte subject (worst case over %d steps): "
+		                     "use fewer '*', '+', '-' or a shorter string",
+		                  (int)n, PATTERN_STEPS_MAX);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, lua_gettop(L) - 1, LUA_MULTRET);
+	return lua_gettop(L);
+}
+
+/* pcall, xpcall and coroutine.resume as drivers see them: the originals
+ * (upvalue 1), then, once the budget is spent or an allocation was refused
+ * at the cap, that error again.
+ * LuaJIT restarts the instruction count after every error, so in
+ * `while true do pcall(f) end` the hook would always fire inside f and be
+ * caught there; re-raising here makes the overrun reach the host whatever
+ * the driver wraps it in. */
+static int budget_checked_call(lua_State *L)
+{
+	struct vmac_driver *d = drv_of(L);
+	int n = lua_gettop(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, n, LUA_MULTRET);
+	if (d->overrun)
+		return luaL_error(L, "%s", d->overrun_msg);
+	if (d->mem_refused) {
+		/* The call is failing now: the message and the unwinding (stack for
+		 * the handlers, the traceback) come from the host's reserve. */
+		d->in_driver = 0;
+		lua_pushliteral(L, "not enough memory (the driver's memory cap)");
+		return lua_error(L);
+	}
+	return lua_gettop(L);
+}
+
+/* rawset refuses the read-only library tables (their metatable is locked). */
+static int safe_rawset(lua_State *L)
+{
+	luaL_checktype(L, 1, LUA_TTABLE);
+	if (lua_getmetatable(L, 1)) {
+		lua_getfield(L, -1, "__metatable");
+		if (lua_isstring(L, -1))
+			return luaL_error(L, "rawset: this table is read-only");
+		lua_pop(L, 2);
+	}
+	luaL_checkany(L, 3);
+	lua_settop(L, 3);
+	lua_rawset(L, 1);
+	return 1;
+}
+
+static int read_only(lua_State *L)
+{
+	return luaL_error(L, "library tables are read-only (tried to set '%s')", lua_tostring(L, 2));
+}
+
+/* os.clock(): bus time in seconds (the clock of inputs.time). */
+static int bus_clock(lua_State *L)
+{
+	struct vmac_driver *d = drv_of(L);
+	lua_pushnumber(L, d->loading ? 0 : d->now_s);
+	return 1;
+}
+
+char *drv_read_file(const char *path, size_t *len, char *err, size_t errlen, int *code)
+{
+	FILE *f = fopen(path, "rb");
+	char *buf;
+	if (!f) {
+		*code = -errno;
+		snprintf(err, errlen, "%s: %s", path, strerror(errno));
+		return NULL;
+	}
+	buf = malloc(FILE_MAX + 1);
+	if (!buf) {
+		fclose(f);
+		*code = -ENOMEM;
+		snprintf(err, errlen, "%s: out of memory", path);
+		return NULL;
+	}
+	*len = fread(buf, 1, FILE_MAX + 1, f);
+	if (ferror(f) || *len > FILE_MAX) {
+		*code = ferror(f) ? -EIO : -EFBIG;
+		snprintf(err, errlen, "%s: %s", path, ferror(f) ? "read error" : "larger than 1 MiB");
+		fclose(f);
+		free(buf);
+		return NULL;
+	}
+	fclose(f);
+	return buf;
+}
+
+/* Load a file as text into the driver's environment (upvalue 1 of the
+ * calling C closure) and call it with arg: [-0, +1] the result, or raises. */
+void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg)
+{
+	char err[300];
+	size_t len = 0;
+	int code = 0;
+	char *src = drv_read_file(path, &len, err, sizeof(err), &code);
+	if (!src)
+		luaL_error(L, "%s", err);
+	code = luaL_loadbufferx(L, src, len, chunk, "t");
+	free(src);
+	if (code != 0)
+		lua_error(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_setfenv(L, -2);
+	lua_pushstring(L, arg);
+	lua_call(L, 1, 1);
+}
+
+int drv_valid_module_name(const char *name, size_t maxlen)
+{
+	size_t i;
+	for (i = 0; name[i]; i++)
+		if (!((name[i] >= 'a' && name[i] <= 'z') || (name[i] >= '0' && name[i] <= '9') || name[i] == '_'))
+			return 0;
+	return i > 0 && i <= maxlen;
+}
+
+/* require(name) for drivers: loads stdlib/NAME.lua once, as text, into the
+ * driver's own environment (upvalue 1), and caches it. Only while the driver
+ * file itself is loading (main thread): a callback must never read a file. */
+static int sandbox_require(lua_State *L)
+{
+	struct vmac_driver *d = drv_of(L);
+	size_t nlen;
+	const char *name = luaL_checklstring(L, 1, &nlen);
+	char path[600], chunk[80];
+
+	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
+	lua_getfield(L, -1, name);
+	if (!lua_isnil(L, -1))
+		return 1;
+	lua_pop(L, 1);
+	if (strlen(name) != nlen || !drv_valid_module_name(name, 40))
+		return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_], at most 40)", name);
+	if (!d->loading)
+		return luaL_error(L, "require '%s': modules can only be required when the driver loads (top of the file)",
+		                  name);
+	if (!d->stdlib_dir[0])
+		return luaL_error(L, "require '%s': no standard library configured", name);
+	snprintf(path, sizeof(path), "%s/%s.lua", d->stdlib_dir, name);
+	snprintf(chunk, sizeof(chunk), "@stdlib/%s.lua", name);
+	if (access(path, R_OK) != 0)
+		return luaL_error(L, "require '%s': no such stdlib module (stdlib/%s.lua)", name, name);
+	drv_run_sandboxed(L, path, chunk, name);
+	if (lua_isnil(L, -1)) {
+		lua_pop(L, 1);
+		lua_pushboolean(L, 1);
+	}
+	lua_pushvalue(L, -1);
+	lua_setfield(L, -3, name);
+	return 1;
+}
+
+/* vmac.cycles(): every CYCLES_DIR/NAME.lua, run in the driver's sandbox, as
+ * a table NAME -> what the file returned, in name order. Load time only.
+ * The names live on the C stack, so a file that raises leaks nothing. */
+static int sandbox_cycles(lua_State *L)
+{
+	struct vmac_driver *d = drv_of(L);
+	char names[64][48], path[900], chunk[120];
+	int n = 0, i, j;
+	DIR *dir;
+	struct dirent *e;
+
+	if (!d->loading)
+		return luaL_error(L, "vmac.cycles: call it when the driver loads (top of the file)");
+	lua_newtable(L);
+	if (!d->cycles_dir[0] || !(dir = opendir(d->cycles_dir)))
+		return 1;
+	while ((e = readdir(dir)) && n < 64) {
+		size_t len = strlen(e->d_name);
+		if (len < 5 || len - 4 >= sizeof(names[0]) || strcmp(e->d_name + len - 4, ".lua") != 0)
+			continue;
+		memcpy(names[n], e->d_name, len - 4);
+		names[n][len - 4] = 0;
+		if (drv_valid_module_name(names[n], 40))
+			n++;
+	}
+	closedir(dir);
+	for (i = 1; i < n; i++) /* insertion sort: a handful of names */
+		for (j = i; j > 0 && strcmp(names[j - 1], names[j]) > 0; j--) {
+			char t[48];
+			memcpy(t, names[j], sizeof(t));
+			memcpy(names[j], names[j - 1], sizeof(t));
+			memcpy(names[j - 1], t, sizeof(t));
+		}
+	for (i = 0; i < n; i++) {
+		snprintf(path, sizeof(path), "%s/%s.lua", d->cycles_dir, names[i]);
+		snprintf(chunk, sizeof(chunk), "@cycles/%s/%s.lua", d->name, names[i]);
+		drv_run_sandboxed(L, path, chunk, names[i]);
+		lua_setfield(L, -2, names[i]);
+	}
+	return 1;
+}
+
+/* Copy the listed fields of the table at src (an absolute or pseudo index)
+ * into the table on top of the stack: [-0, +0]. */
+static void copy_fields(lua_State *L, int src, const char *const *names)
+{
+	for (; *names; names++) {
+		lua_getfield(L, src, *names);
+		lua_setfield(L, -2, *names);
+	}
+}
+
+/* Replace the table on top with a read-only view of it: [-1, +1]. */
+static void make_read_only(lua_State *L)
+{
+	lua_newtable(L);                 /* lib, proxy */
+	lua_createtable(L, 0, 3);        /* lib, proxy, mt */
+	lua_pushvalue(L, -3);
+	lua_setfield(L, -2, "__index");
+	lua_pushcfunction(L, read_only);
+	lua_setfield(L, -2, "__newindex");
+	lua_pushliteral(L, "locked");
+	lua_setfield(L, -2, "__metatable");
+	lua_setmetatable(L, -2);
+	lua_remove(L, -2);
+}
+
+/* Push a new table with the listed fields of the global library lib:
+ * [-0, +1]. */
+static void copy_lib(lua_State *L, const char *lib, const char *const *names)
+{
+	lua_getglobal(L, lib);
+	lua_newtable(L);
+	copy_fields(L, lua_gettop(L) - 1, names);
+	lua_remove(L, -2);
+}
+
+/* t[name] = closure(t_orig[name] [, marker]) on the table on top: [-0, +0]. */
+static void wrap_field(lua_State *L, const char *lib, const char *name, lua_CFunction f, int marker)
+{
+	lua_getglobal(L, lib);
+	lua_getfield(L, -1, name);
+	lua_remove(L, -2);
+	if (marker)
+		lua_pushcfunction(L, read_only);
+	else
+		lua_pushnil(L);
+	lua_pushcclosure(L, f, 2);
+	lua_setfield(L, -2, name);
+}
+
+/* ---- the allow-list ----
+ * Everything a driver's global table holds, by library: the one list
+ * (docs/DRIVERS.md "The sandbox"). drv_make_env() copies the `copied` names
+ * from LuaJIT's own libraries as they are and puts in the `own` names
+ * itself (wrapped, bounded, or the host's); `vmac lint` hands the whole
+ * list to luacheck (vmac_driver_allowed). A name LuaJIT lacks (rawlen,
+ * without its 5.2 extensions) is copied as nil. Adding a name here is
+ * widening the sandbox: the escape corpus (tests/escape) must still fail. */
+static const char *const allow_base[] = {"assert", "error", "ipairs", "pairs", "next", "select", "tonumber",
+                                         "tostring", "type", "unpack", "rawequal", "rawget", "rawlen",
+                                         "setmetatable", "getmetatable", NULL};
+static const char *const allow_base_own[] = {"pcall", "xpcall", "rawset", "require", "_G", NULL};
+static const char *const allow_str[] = {"byte", "char", "format", "len", "lower", "reverse", "sub", "upper", NULL};
+static const char *const allow_str_own[] = {"rep", "find", "match", "gmatch", "gsub", NULL}; /* bounded */
+static const char *const allow_tab[] = {"concat", "insert", "remove", "sort", "maxn", NULL};
+static const char *const allow_math[] = {"abs", "ceil", "floor", "max", "min", "sqrt", "exp", "log", "log10",
+                                         "pow", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "fmod",
+                                         "modf", "huge", "pi", "random", "randomseed", "frexp", "ldexp", "sinh",
+                                         "cosh", "tanh", "deg", "rad", NULL};
+static const char *const allow_bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
+                                        "arshift", "rol", "ror", "bswap", NULL};
+/* resume is the host's: like pcall it catches errors, so it must re-raise a
+ * budget overrun. wrap re-raises every error by itself. */
+static const char *const allow_co[] = {"create", "yield", "status", "wrap", "running", NULL};
+static const char *const allow_co_own[] = {"resume", NULL};
+static const char *const allow_os_own[] = {"clock", NULL}; /* bus time, nothing else of os */
+static const char *const allow_vmac_own[] = {"cycles", "version", NULL};
+static const char *const allow_none[] = {NULL};
+
+const struct vmac_driver_lib vmac_driver_allowed[] = {
+    {NULL, allow_base, allow_base_own},
+    {"string", allow_str, allow_str_own},
+    {"table", allow_tab, allow_none},
+    {"math", allow_math, allow_none},
+    {"bit", allow_bit, allow_none},
+    {"coroutine", allow_co, allow_co_own},
+    {"os", allow_none, allow_os_own},
+    {"vmac", allow_none, allow_vmac_own},
+    {NULL, NULL, NULL},
+};
+
+/* Build the driver's global table from nothing, exactly vmac_driver_allowed:
+ * [-0, +1]. */
+void drv_make_env(lua_State *L)
+{
+	int env;
+
+	lua_newtable(L);
+	env = lua_gettop(L);
+	copy_fields(L, LUA_GLOBALSINDEX, allow_base);
+	lua_getglobal(L, "pcall");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, env, "pcall");
+	lua_getglobal(L, "xpcall");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, env, "xpcall");
+	lua_pushcfunction(L, safe_rawset);
+	lua_setfield(L, env, "rawset");
+
+	copy_lib(L, "string", allow_str);
+	wrap_field(L, "string", "rep", safe_rep, 0);
+	wrap_field(L, "string", "find", safe_pattern, 1);
+	wrap_field(L, "string", "match", safe_pattern, 0);
+	wrap_field(L, "string", "gmatch", safe_pattern, 0);
+	wrap_field(L, "string", "gsub", safe_pattern, 0);
+	make_read_only(L);
+	/* Methods on strings ("x"):rep(n) must reach the bounded functions too,
+	 * and getmetatable("") must not hand out anything. */
+	lua_pushliteral(L, "");
+	lua_getmetatable(L, -1);
+	lua_pushvalue(L, -3);
+	lua_setfield(L, -2, "__index");
+	lua_pushliteral(L, "locked");
+	lua_setfield(L, -2, "__metatable");
+	lua_pop(L, 2);
+	lua_setfield(L, env, "string");
+
+	copy_lib(L, "table", allow_tab);
+	make_read_only(L);
+	lua_setfield(L, env, "table");
+	copy_lib(L, "math", allow_math);
+	make_read_only(L);
+	lua_setfield(L, env, "math");
+	copy_lib(L, "bit", allow_bit);
+	make_read_only(L);
+	lua_setfield(L, env, "bit");
+	copy_lib(L, "coroutine", allow_co);
+	lua_getglobal(L, "coroutine");
+	lua_getfield(L, -1, "resume");
+	lua_pushcclosure(L, budget_checked_call, 1);
+	lua_setfield(L, -3, "resume");
+	lua_pop(L, 1);
+	make_read_only(L);
+	lua_setfield(L, env, "coroutine");
+
+	lua_createtable(L, 0, 1);
+	lua_pushcfunction(L, bus_clock);
+	lua_setfield(L, -2, "clock");
+	make_read_only(L);
+	lua_setfield(L, env, "os");
+
+	lua_createtable(L, 0, 2);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, sandbox_cycles, 1);
+	lua_setfield(L, -2, "cycles");
+	lua_pushliteral(L, "0.2");
+	lua_setfield(L, -2, "version");
+	make_read_only(L);
+	lua_setfield(L, env, "vmac");
+
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, sandbox_require, 1);
+	lua_setfield(L, env, "require");
+	lua_pushvalue(L, env);
+	lua_setfield(L, env, "_G");
+}
+
+int drv_open_lib(lua_State *L, lua_CFunction f, const char *name)
+{
+	lua_pushcfunction(L, f);
+	lua_pushstring(L, name);
+	return lua_pcall(L, 1, 0, 0);
+}
