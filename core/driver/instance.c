@@ -311,6 +311,19 @@ int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inp
 	return 0;
 }
 
+/* A host value as Lua: [-0, +1]; NONE (a command without argument) is true. */
+static void push_value(lua_State *L, const struct vmac_value *v)
+{
+	if (v->type == VMAC_VALUE_NUMBER)
+		lua_pushnumber(L, v->number);
+	else if (v->type == VMAC_VALUE_BOOL)
+		lua_pushboolean(L, v->number != 0);
+	else if (v->type == VMAC_VALUE_STRING)
+		lua_pushstring(L, v->str);
+	else
+		lua_pushboolean(L, 1);
+}
+
 struct input_args {
 	double time_s;
 	const char *name;
@@ -360,14 +373,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		return 1;
 	}
 	/* Push the value, then check it against the declaration. */
-	if (value->type == VMAC_VALUE_NUMBER)
-		lua_pushnumber(L, value->number);
-	else if (value->type == VMAC_VALUE_BOOL)
-		lua_pushboolean(L, value->number != 0);
-	else if (value->type == VMAC_VALUE_STRING)
-		lua_pushstring(L, value->str);
-	else
-		lua_pushboolean(L, 1);
+	push_value(L, value);
 	if (kind != 3) {
 		lua_getfield(L, -2, kind == 1 ? "variables" : "params");
 		lua_getfield(L, -1, name);
@@ -501,12 +507,7 @@ static int restore_param_work(struct vmac_driver *d, void *args, char *err, size
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
 	lua_getfield(L, -1, "params");
 	lua_getfield(L, -1, name);
-	if (v->type == VMAC_VALUE_NUMBER)
-		lua_pushnumber(L, v->number);
-	else if (v->type == VMAC_VALUE_BOOL)
-		lua_pushboolean(L, v->number != 0);
-	else
-		lua_pushstring(L, v->str);
+	push_value(L, v);
 	if (drv_check_value(L, lua_gettop(L) - 1, how, sizeof(how)) != 0) {
 		snprintf(a->why, a->whylen, "%s: %s", name, how);
 		return 1;
