@@ -14,6 +14,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../common/errors.h"
 #include "../host/deploy.h"
 #include "../host/loader.h"
 #include "console.h"
@@ -317,20 +318,22 @@ static int valid_name(const char *s, size_t max)
 static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *req, char *msg, size_t msglen)
 {
 	char err[512];
+	int rc;
 	if (vmac_bus_request_input(h->bus, req, INPUT_TIMEOUT_MS) != 0) {
 		snprintf(msg, msglen, "%s", req->reply);
 		return MHD_HTTP_SERVICE_UNAVAILABLE;
 	}
 	if (req->rc == 0 && req->persist &&
-	    vmac_store_param_set(h->store, req->machine, req->name, &req->value, err, sizeof(err)) != 0) {
+	    (rc = vmac_store_param_set(h->store, req->machine, req->name, &req->value, err, sizeof(err))) != 0) {
 		snprintf(msg, msglen, "%s.%s is set, but it could not be persisted: %s", req->machine, req->name, err);
-		return strstr(err, "full") ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR;
+		return rc == -VMAC_ESTOREFULL ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR;
 	}
 	if (req->rc == 0)
 		return MHD_HTTP_OK;
 	snprintf(msg, msglen, "%s", req->reply);
-	return req->rc == 1 ? MHD_HTTP_CONFLICT : strstr(req->reply, "is not running") ? MHD_HTTP_NOT_FOUND
-	                                                                               : MHD_HTTP_BAD_GATEWAY;
+	if (req->rc == 1) /* the driver refused it */
+		return MHD_HTTP_CONFLICT;
+	return req->rc == -VMAC_ENOTRUNNING ? MHD_HTTP_NOT_FOUND : MHD_HTTP_BAD_GATEWAY; /* else -VMAC_EDRIVER */
 }
 
 /* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input

@@ -20,6 +20,7 @@
 #include <sys/timerfd.h>
 #include <unistd.h>
 
+#include "../common/errors.h"
 #include "../sched/sched.h"
 
 #define RX_BATCH 64
@@ -633,6 +634,7 @@ static int roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
 	memcpy(msg.device, primary->ann.board, sizeof(msg.device));
 	memcpy(msg.driver, m->driver, sizeof(msg.driver));
 	snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
+	msg.code = VMAC_EVENT_ROLLED_BACK;
 	msg.version_id = vmac_driver_tag(failed);
 	snprintf(msg.text, sizeof(msg.text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
 	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev), why);
@@ -1144,8 +1146,9 @@ static struct device *find_by_name(struct vmac_bus *bus, const char *name);
 
 /* Hot reload at this slot boundary (between two ticks): nd takes over the
  * machine named device from the instance running it. 0 done (nd is the
- * bus's), 1 refused (reply says why; nd is still the caller's and has not
- * run, or ran only its attach/migrate). */
+ * bus's); else nd is still the caller's and has not run, or ran only its
+ * attach/migrate, and reply says why: -VMAC_ENOTRUNNING (no running
+ * machine of that name), -VMAC_EREFUSED (it would not take nd). */
 static int swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
                 size_t replylen)
 {
@@ -1155,11 +1158,11 @@ static int swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd
 	struct vmac_driver *od;
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
 		snprintf(reply, replylen, "%s is not running (%s)", device, d ? state_name(d->state) : "no such device");
-		return 1;
+		return -VMAC_ENOTRUNNING;
 	}
 	if (strcmp(vmac_driver_name(nd), m->driver) != 0) {
 		snprintf(reply, replylen, "%s runs driver %s, not %s", device, m->driver, vmac_driver_name(nd));
-		return 1;
+		return -VMAC_EREFUSED;
 	}
 	bind_driver(m, nd);
 	give_boards(bus, m, nd);
@@ -1168,7 +1171,7 @@ static int swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd
 		snprintf(reply, replylen, "the new version failed to take over %s: %s", device, err);
 		event(bus, d, "reload_refused", "%s: driver %s %s not taken: %s", device, m->driver,
 		      vmac_driver_version(nd), err);
-		return 1;
+		return -VMAC_EREFUSED;
 	}
 	m->drv = nd;
 	/* Said before od is handed over: the main thread may free it at once. */
@@ -1528,7 +1531,7 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	int rc;
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
 		snprintf(reply, replylen, "%s is not running (%s)", device, d ? state_name(d->state) : "no such device");
-		return -1;
+		return -VMAC_ENOTRUNNING;
 	}
 	rc = vmac_driver_input(m->drv, bus_time(bus), name, value, reply, replylen, err, sizeof(err));
 	if (rc >= 0)
@@ -1536,7 +1539,7 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	driver_failed(bus, m, " in input", err);
 	flush(bus);
 	snprintf(reply, replylen, "the driver failed: %s", err);
-	return -1;
+	return -VMAC_EDRIVER;
 }
 
 void vmac_bus_free(struct vmac_bus *bus)
@@ -1628,7 +1631,7 @@ static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_req
 	}
 	if (!q) {
 		snprintf(req->reply, sizeof(req->reply), "the host is busy with other requests; try again");
-		return -1;
+		return -VMAC_EBUSY;
 	}
 	q->kind = req_kind;
 	q->r = *req;
@@ -1654,7 +1657,7 @@ static int request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_req
 		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_ABANDONED)) {
 			snprintf(req->reply, sizeof(req->reply), "the bus thread did not take the request within %d ms",
 			         timeout_ms);
-			return -1;
+			return -VMAC_EBUSY;
 		}
 		while (sem_wait(&q->done) != 0 && errno == EINTR) /* RUNNING or DONE: the answer is on its way */
 			;
@@ -1677,7 +1680,7 @@ int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	r = request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, NULL, 0, timeout_ms);
-	*rc = r == 0 ? req.rc : -1;
+	*rc = r == 0 ? req.rc : r;
 	snprintf(reply, replylen, "%s", req.reply);
 	return r;
 }
@@ -1688,9 +1691,10 @@ int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*n
 	struct vmac_bus_input_request req;
 	memset(&req, 0, sizeof(req));
 	snprintf(req.name, sizeof(req.name), "%s", driver);
-	if (request(bus, REQ_MACHINES, &req, NULL, 0, names, max, timeout_ms) != 0) {
+	int r = request(bus, REQ_MACHINES, &req, NULL, 0, names, max, timeout_ms);
+	if (r != 0) {
 		snprintf(reply, replylen, "%s", req.reply);
-		return -1;
+		return r;
 	}
 	return req.rc;
 }

@@ -9,6 +9,7 @@
 #include <pthread.h>
 #include <stdint.h>
 
+#include "../common/errors.h"
 #include "../transport/transport.h"
 #include "../driver/driver.h"
 #include "config.h"
@@ -25,8 +26,16 @@ enum vmac_bus_msg_kind {
 	VMAC_MSG_STOPPED,  /* every board told to go safe; the bus thread is done */
 };
 
+/* What the main thread does with a VMAC_MSG_EVENT beyond recording it; the
+ * event's kind (text) is for people and the event log. */
+enum vmac_event_code {
+	VMAC_EVENT_RECORD = 0,   /* only recorded */
+	VMAC_EVENT_ROLLED_BACK,  /* a version on probation failed and went back: the store records it (version_id) */
+};
+
 struct vmac_bus_msg {
 	enum vmac_bus_msg_kind kind;
+	enum vmac_event_code code;    /* VMAC_MSG_EVENT */
 	int64_t time_ns;
 	uint32_t slot, generation;
 	struct vmac_driver *drv;
@@ -134,17 +143,18 @@ const char *vmac_bus_host_addr(struct vmac_bus *bus);
 /* Operator input to the machine `device` belongs to: the driver's
  * input(dev, name, value). Bus thread only (in vmacd that means through the
  * command ring; `vmac test` calls it between steps of its virtual clock).
- * Returns 0 (accepted), 1 (refused: reply holds the driver's message), or
- * -1 (no running machine of that name, or its driver failed and the machine
- * was dropped: reply says which). */
+ * Returns 0 (accepted), 1 (refused: reply holds the driver's message),
+ * -VMAC_ENOTRUNNING (no running machine of that name) or -VMAC_EDRIVER (its
+ * driver failed and the machine was dropped or rolled back); reply says
+ * which. */
 int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
                    char *reply, size_t replylen);
 
 /* The same from any other thread (the HTTP server): hands the request to the
  * bus thread and waits up to timeout_ms for its answer. Returns 0 with rc
- * and reply filled in (rc as vmac_bus_input returns it), or -1 when the bus
- * thread took no request (all VMAC_BUS_REQUESTS in use) or did not answer
- * in time (reply says which; the input may still be applied). The bus thread
+ * and reply filled in (rc as vmac_bus_input returns it), or -VMAC_EBUSY when
+ * the bus thread took no request (all VMAC_BUS_REQUESTS in use) or did not
+ * take it in time (reply says which). The bus thread
  * only looks at the requests, sets the answer and posts a semaphore: it
  * never waits for the caller. */
 #define VMAC_BUS_REQUESTS 16
@@ -164,9 +174,11 @@ int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *
  * slot boundary (vmac_driver_take_over). With probation_ms > 0 the old
  * instance is kept that long: if drv fails meanwhile, the old one takes
  * over again and an event of kind "rolled_back" carries drv's tag
- * (vmac_driver_tag). Returns -1 when the bus thread took no request (reply
- * says why; drv is the caller's), else 0 with *rc: 0 switched (drv is the
- * bus's now), 1 refused (reply says why; drv is the caller's to free). */
+ * (vmac_driver_tag). Returns -VMAC_EBUSY when the bus thread took no
+ * request (*rc the same; reply says why; drv is the caller's), else 0 with
+ * *rc: 0 switched (drv is the bus's now), or, drv the caller's to free and
+ * reply saying why, -VMAC_ENOTRUNNING (no running machine of that name)
+ * or -VMAC_EREFUSED (the machine would not take drv). */
 int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
                           int timeout_ms, int *rc, char *reply, size_t replylen);
 
@@ -175,8 +187,8 @@ int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_
  * handled first: the names of their primary boards, every machine that has
  * a driver instance (running, or its boards still registering: such a
  * machine refuses a swap as not running until it has attached). Returns
- * how many (at most max), or -1 when the bus thread took no request
- * (reply says why). Any thread but the bus thread. */
+ * how many (at most max), or -VMAC_EBUSY when the bus thread took no
+ * request (reply says why). Any thread but the bus thread. */
 int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
                               int timeout_ms, char *reply, size_t replylen);
 

@@ -9,6 +9,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../common/errors.h"
 #include "loader.h"
 
 #define SWAP_TIMEOUT_MS 2000 /* the bus thread takes a request within a tick */
@@ -49,10 +50,11 @@ static int64_t mono_ms(void)
 	return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
-/* A store error as an HTTP status: a full disk is 507, the rest 500. */
-static void store_failed(struct vmac_deploy_result *out, const char *err)
+/* A store error (code as the store returns it) as an HTTP status: a full
+ * disk is 507, the rest 500. */
+static void store_failed(struct vmac_deploy_result *out, int code, const char *err)
 {
-	out->status = strstr(err, "full") ? 507 : 500;
+	out->status = code == -VMAC_ESTOREFULL ? 507 : 500;
 	snprintf(out->error, sizeof(out->error), "%s", err);
 }
 
@@ -97,8 +99,8 @@ static int swap_one(const struct vmac_deploy_ctx *x, const char *driver, const c
 	int rc = -1;
 	for (;;) {
 		if (vmac_bus_request_swap(x->bus, name, drv, probation_ms, SWAP_TIMEOUT_MS, &rc, text, textlen) != 0)
-			return -1;
-		if (rc != 1 || !strstr(text, "is not running") || mono_ms() > until || !still_a_machine(x, driver, name))
+			return rc;
+		if (rc != -VMAC_ENOTRUNNING || mono_ms() > until || !still_a_machine(x, driver, name))
 			return rc;
 		usleep(ATTACH_POLL_US);
 	}
@@ -116,7 +118,7 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const c
 	for (i = 0; i < n; i++) {
 		struct vmac_deploy_machine *r = &out->machines[out->nmachines++];
 		struct vmac_driver *drv = NULL;
-		int rc = -1;
+		int rc = -VMAC_EFAIL;
 		snprintf(r->device, sizeof(r->device), "%s", names[i]);
 		switched[i] = 0;
 		if ((src ? vmac_load_driver_source(x->cfg, driver, names[i], src, len, &drv, r->text, sizeof(r->text))
@@ -128,7 +130,7 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const c
 		}
 		if (rc == 0) {
 			r->ok = switched[i] = 1;
-		} else if (strstr(r->text, "is not running")) {
+		} else if (rc == -VMAC_ENOTRUNNING) {
 			out->nmachines--; /* it went away meanwhile: nothing to switch */
 		} else {
 			refused++;
@@ -147,7 +149,7 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char
 	char *prev_src = NULL;
 	size_t prev_len = 0;
 	int64_t id;
-	int have_prev;
+	int have_prev, rc;
 
 	memset(out, 0, sizeof(*out));
 	/* Compile it and check its manifest, off the bus thread. */
@@ -163,17 +165,17 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char
 	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES, out);
 	if (n < 0)
 		goto done;
-	have_prev = vmac_store_driver_active(x->store, driver, &prev, &prev_src, &prev_len, err, sizeof(err));
-	if (have_prev < 0 || vmac_store_driver_add(x->store, driver, out->version, src, len, by, &id, err,
-	                                           sizeof(err)) != 0) {
-		store_failed(out, err);
+	have_prev = rc = vmac_store_driver_active(x->store, driver, &prev, &prev_src, &prev_len, err, sizeof(err));
+	if (rc < 0 || (rc = vmac_store_driver_add(x->store, driver, out->version, src, len, by, &id, err,
+	                                          sizeof(err))) != 0) {
+		store_failed(out, rc, err);
 		goto done;
 	}
 	refused = swap_all(x, driver, src, len, id, probation_ms, names, n, switched, out);
 	test_pause(driver);
 	if (refused == 0) {
-		if (vmac_store_driver_activate(x->store, driver, id, err, sizeof(err)) != 0) {
-			store_failed(out, err);
+		if ((rc = vmac_store_driver_activate(x->store, driver, id, err, sizeof(err))) != 0) {
+			store_failed(out, rc, err);
 			goto done;
 		}
 		out->status = 200;
@@ -223,7 +225,7 @@ void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, i
 	if (rc != 1 || strcmp(v.driver, driver) != 0) {
 		memset(out, 0, sizeof(*out));
 		if (rc < 0) {
-			store_failed(out, err);
+			store_failed(out, rc, err);
 		} else {
 			out->status = 404;
 			snprintf(out->error, sizeof(out->error), "driver %s has no version %lld (vmac drivers %s lists them)",
@@ -249,7 +251,7 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 	pthread_mutex_lock(&deploy_lock);
 	rc = vmac_store_driver_active(x->store, driver, &cur, NULL, NULL, err, sizeof(err));
 	if (rc < 0) {
-		store_failed(out, err);
+		store_failed(out, rc, err);
 		goto done;
 	}
 	if (rc == 0) {
@@ -261,7 +263,7 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 	if (cur.previous) {
 		rc = vmac_store_driver_get(x->store, cur.previous, &target, &src, &len, err, sizeof(err));
 		if (rc != 1) {
-			store_failed(out, rc < 0 ? err : "store: the previous version is missing");
+			store_failed(out, rc, rc < 0 ? err : "store: the previous version is missing");
 			goto done;
 		}
 		snprintf(out->version, sizeof(out->version), "%s", target.version);
@@ -284,7 +286,7 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 	snprintf(why, sizeof(why), "rolled back by hand (token %s)", by);
 	rc = vmac_store_driver_roll_back(x->store, driver, cur.id, why, err, sizeof(err));
 	if (rc < 0) {
-		store_failed(out, err);
+		store_failed(out, rc, err);
 		goto done;
 	}
 	out->status = 200;

@@ -177,7 +177,7 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 		switch (m.kind) {
 		case VMAC_MSG_EVENT:
 			vmac_event_log_add(&h->log, m.event_kind, m.device, m.text);
-			if (strcmp(m.event_kind, "rolled_back") == 0 && m.version_id)
+			if (m.code == VMAC_EVENT_ROLLED_BACK && m.version_id)
 				roll_back_version(h, &m);
 			break;
 		case VMAC_MSG_LOAD:

@@ -88,10 +88,12 @@ static double now_s(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
 }
 
+/* err says what failed and SQLite's why; returns the code of it: the disk
+ * is full (SQLITE_FULL), or any other failure. */
 static int fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
 {
 	snprintf(err, errlen, "store: %s: %s", what, s && s->db ? sqlite3_errmsg(s->db) : "cannot open");
-	return -1;
+	return s && s->db && (sqlite3_extended_errcode(s->db) & 0xff) == SQLITE_FULL ? -VMAC_ESTOREFULL : -VMAC_ESTORE;
 }
 
 /* fail(), then let the other threads in: the message is the one of this
@@ -463,16 +465,19 @@ static int begin(struct vmac_store *s)
 	return sqlite3_exec(s->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) == SQLITE_OK ? 0 : -1;
 }
 
+/* Commit when ok, else roll back; let the other threads in. 0, or < 0
+ * with err. */
 static int end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen)
 {
+	int rc;
 	if (ok && sqlite3_exec(s->db, "COMMIT", NULL, NULL, NULL) == SQLITE_OK) {
 		pthread_mutex_unlock(&s->lock);
 		return 0;
 	}
-	fail(s, what, err, errlen);
+	rc = fail(s, what, err, errlen); /* before the ROLLBACK: SQLite's why is the failed statement's */
 	sqlite3_exec(s->db, "ROLLBACK", NULL, NULL, NULL);
 	pthread_mutex_unlock(&s->lock);
-	return -1;
+	return rc;
 }
 
 int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t id, char *err, size_t errlen)

@@ -9,13 +9,19 @@
  * Tokens (docs/API.md, "Access"): "vmac_" ID "_" SECRET, ID 16 and SECRET 64
  * hex digits, both random. The store keeps the ID, the scope and a BLAKE2b
  * hash of the secret, never the secret; a check hashes what it is shown and
- * compares in constant time. */
+ * compares in constant time.
+ *
+ * Errors ("< 0 with err" below): -VMAC_ESTOREFULL when the disk is full
+ * (SQLITE_FULL: an HTTP answer makes it 507), -VMAC_ESTORE for any other
+ * failure of the database, -VMAC_EFAIL (-1) for a wrong argument or no
+ * memory (core/common/errors.h); err says what, for people. */
 #ifndef VMAC_STORE_H
 #define VMAC_STORE_H
 
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../common/errors.h"
 #include "../driver/driver.h"
 
 #define VMAC_TOKEN_ID_LEN 16
@@ -51,12 +57,12 @@ struct vmac_token_info {
 };
 
 /* A new token of this scope: writes it to token (VMAC_TOKEN_LEN + 1 bytes)
- * and its ID to id (may be NULL). 0, or -1 with err (nothing stored). */
+ * and its ID to id (may be NULL). 0, or < 0 with err (nothing stored). */
 int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id,
                       char *err, size_t errlen);
-/* Revoke by ID: 0 done, 1 no such token (or already revoked), -1 err. */
+/* Revoke by ID: 0 done, 1 no such token (or already revoked), < 0 err. */
 int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t errlen);
-/* Every token, oldest first. Returns how many, or -1 with err. */
+/* Every token, oldest first. Returns how many, or < 0 with err. */
 int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx,
                     char *err, size_t errlen);
 /* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
@@ -67,10 +73,10 @@ enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
  * A param value per machine (its primary board's name) and param name,
  * restored into dev.params when the machine's driver loads again. */
 
-/* Store (or replace) one value. 0, or -1 with err (nothing changed). */
+/* Store (or replace) one value. 0, or < 0 with err (nothing changed). */
 int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *name, const struct vmac_value *v,
                          char *err, size_t errlen);
-/* Every persisted value of machine, in name order. Returns how many, or -1
+/* Every persisted value of machine, in name order. Returns how many, or < 0
  * with err. */
 int vmac_store_param_list(struct vmac_store *s, const char *machine,
                           void (*fn)(void *ctx, const char *name, const struct vmac_value *v), void *ctx, char *err,
@@ -87,12 +93,12 @@ struct vmac_stored_event {
 	const char *kind, *device, *text;
 };
 
-/* Add n events in one transaction (one disk sync). 0, or -1 with err. */
+/* Add n events in one transaction (one disk sync). 0, or < 0 with err. */
 int vmac_store_events_add(struct vmac_store *s, const struct vmac_stored_event *ev, int n, char *err, size_t errlen);
-/* The highest seq stored (0: none). 0, or -1 with err. */
+/* The highest seq stored (0: none). 0, or < 0 with err. */
 int vmac_store_events_last(struct vmac_store *s, uint64_t *seq, char *err, size_t errlen);
 /* The events after seq after, oldest first, at most limit. Returns how
- * many, or -1 with err. */
+ * many, or < 0 with err. */
 int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
                            void (*fn)(void *ctx, const struct vmac_stored_event *e), void *ctx, char *err,
                            size_t errlen);
@@ -117,29 +123,29 @@ struct vmac_driver_version {
 	size_t size; /* bytes of source */
 };
 
-/* Store a new version, state pending: 0 and *id, or -1 with err (nothing
+/* Store a new version, state pending: 0 and *id, or < 0 with err (nothing
  * stored: e.g. the disk is full). */
 int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src,
                           size_t len, const char *by, int64_t *id, char *err, size_t errlen);
 /* Make version id the active one of driver (the one active before becomes
- * replaced), in one transaction. 0, or -1 with err. */
+ * replaced), in one transaction. 0, or < 0 with err. */
 int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t id, char *err, size_t errlen);
-/* A version that did not take: state refused, note why. 0, or -1 with err. */
+/* A version that did not take: state refused, note why. 0, or < 0 with err. */
 int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, char *err, size_t errlen);
 /* If version id is driver's active one: it becomes rolled_back (note why)
  * and its previous one active again (or none: the file). 0 done, 1 id was
- * not active (nothing changed), -1 err. */
+ * not active (nothing changed), < 0 err. */
 int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_t id, const char *why, char *err,
                                 size_t errlen);
-/* driver's active version (1), or none (0: the file runs), or -1 with err.
+/* driver's active version (1), or none (0: the file runs), or < 0 with err.
  * With src: the source too, in malloc'd memory (NUL-terminated), *len. */
 int vmac_store_driver_active(struct vmac_store *s, const char *driver, struct vmac_driver_version *v, char **src,
                              size_t *len, char *err, size_t errlen);
-/* Version id: 1, 0 no such version, -1 err; src as above. */
+/* Version id: 1, 0 no such version, < 0 err; src as above. */
 int vmac_store_driver_get(struct vmac_store *s, int64_t id, struct vmac_driver_version *v, char **src, size_t *len,
                           char *err, size_t errlen);
 /* Every version of driver (NULL: of every driver), oldest first. Returns
- * how many, or -1 with err. */
+ * how many, or < 0 with err. */
 int vmac_store_driver_list(struct vmac_store *s, const char *driver,
                            void (*fn)(void *ctx, const struct vmac_driver_version *v), void *ctx, char *err,
                            size_t errlen);

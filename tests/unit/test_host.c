@@ -1,13 +1,17 @@
 /* Unit tests of the host's own modules: configuration, the lateness
- * histogram and the SPSC ring. The driver module has its own tests
- * (test_driver.c). */
+ * histogram, the SPSC ring, and the error codes the bus answers other
+ * threads with. The driver module has its own tests (test_driver.c). */
+#include <arpa/inet.h>
 #include <check.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "../../core/common/errors.h"
 #include "../../core/driver/driver.h"
 #include "../../core/host/bus.h"
 #include "../../core/host/config.h"
@@ -174,13 +178,98 @@ START_TEST(input_requests_time_out_and_run_out_without_a_bus_thread)
 		memset(&r, 0, sizeof(r));
 		snprintf(r.device, sizeof(r.device), "lights-1");
 		snprintf(r.name, sizeof(r.name), "kitchen");
-		ck_assert_int_eq(vmac_bus_request_input(bus, &r, 20), -1);
+		ck_assert_int_eq(vmac_bus_request_input(bus, &r, 20), -VMAC_EBUSY);
 		if (i < VMAC_BUS_REQUESTS)
 			ck_assert_msg(strstr(r.reply, "did not take the request within 20 ms") != NULL,
 			              "request %d: %s", i, r.reply);
 		else
 			ck_assert_msg(strstr(r.reply, "busy") != NULL, "request past the slots: %s", r.reply);
 	}
+	vmac_bus_free(bus);
+}
+END_TEST
+
+/* ---- what the bus answers, as codes (core/common/errors.h) ---- */
+
+static void send_nowhere(void *ctx, const struct vmac_packet *pkts, int n)
+{
+	(void)ctx;
+	(void)pkts;
+	(void)n;
+}
+
+/* A bus in virtual mode with no board at all. */
+static struct vmac_bus *empty_bus(void)
+{
+	struct vmac_config c;
+	struct vmac_bus_link link = {send_nowhere, NULL};
+	struct vmac_addr group;
+	struct sockaddr_in *sin = (struct sockaddr_in *)&group.ss;
+	struct vmac_bus *bus;
+	char err[256] = "";
+	vmac_config_defaults(&c);
+	c.realtime = 0;
+	memset(&group, 0, sizeof(group));
+	sin->sin_family = AF_INET;
+	sin->sin_port = htons(5870);
+	sin->sin_addr.s_addr = htonl(0xEFFF564Du);
+	group.len = sizeof(*sin);
+	bus = vmac_bus_new_virtual(&c, &link, &group, err, sizeof(err));
+	ck_assert_msg(bus != NULL, "vmac_bus_new_virtual: %s", err);
+	return bus;
+}
+
+/* The bus thread's part, for requests made from another thread: what a
+ * virtual bus does when its caller handles commands. */
+struct pump {
+	struct vmac_bus *bus;
+	atomic_int stop;
+};
+
+static void *pump_requests(void *arg)
+{
+	struct pump *p = arg;
+	while (!atomic_load(&p->stop)) {
+		vmac_bus_virtual_commands(p->bus);
+		usleep(1000);
+	}
+	return NULL;
+}
+
+START_TEST(the_bus_answers_with_codes)
+{
+	struct vmac_bus *bus = empty_bus();
+	struct vmac_value v = {.type = VMAC_VALUE_BOOL, .number = 1};
+	struct vmac_bus_input_request r;
+	struct pump p = {bus, 0};
+	pthread_t th;
+	char reply[VMAC_EVENT_TEXT] = "", names[4][VMAC_NAME_MAX + 1];
+	int rc = 99, n;
+
+	n = vmac_bus_input(bus, "nosuch-1", "relay", &v, reply, sizeof(reply));
+	ck_assert_msg(n == -VMAC_ENOTRUNNING && strstr(reply, "nosuch-1 is not running"),
+	              "input to a device that is not there: %d %s", n, reply);
+	ck_assert_str_eq(vmac_strerror(n), "not running");
+
+	ck_assert_int_eq(pthread_create(&th, NULL, pump_requests, &p), 0);
+	memset(&r, 0, sizeof(r));
+	snprintf(r.device, sizeof(r.device), "nosuch-1");
+	snprintf(r.name, sizeof(r.name), "relay");
+	r.value = v;
+	ck_assert_int_eq(vmac_bus_request_input(bus, &r, 2000), 0);
+	ck_assert_msg(r.rc == -VMAC_ENOTRUNNING, "input through a request: %d %s", r.rc, r.reply);
+	/* The swap is refused before the new instance is looked at: none is needed. */
+	n = vmac_bus_request_swap(bus, "nosuch-1", NULL, 0, 2000, &rc, reply, sizeof(reply));
+	ck_assert_msg(n == 0 && rc == -VMAC_ENOTRUNNING && strstr(reply, "is not running"),
+	              "a swap for a device that is not there: %d %d %s", n, rc, reply);
+	n = vmac_bus_request_machines(bus, "counter", names, 4, 2000, reply, sizeof(reply));
+	ck_assert_msg(n == 0, "machines of a driver nothing runs: %d %s", n, reply);
+	atomic_store(&p.stop, 1);
+	pthread_join(th, NULL);
+
+	/* No one takes requests now: busy, as a code. */
+	n = vmac_bus_request_swap(bus, "nosuch-1", NULL, 0, 20, &rc, reply, sizeof(reply));
+	ck_assert_msg(n == -VMAC_EBUSY && rc == -VMAC_EBUSY, "a swap no one takes: %d %d %s", n, rc, reply);
 	vmac_bus_free(bus);
 }
 END_TEST
@@ -217,6 +306,7 @@ int main(void)
 	tcase_add_test(tc, hist_quantiles);
 	tcase_add_test(tc, ring_fifo_and_full);
 	tcase_add_test(tc, input_requests_time_out_and_run_out_without_a_bus_thread);
+	tcase_add_test(tc, the_bus_answers_with_codes);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);

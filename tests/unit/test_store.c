@@ -1,10 +1,11 @@
 /* Unit tests of the store (core/store): tokens are created with the scope
  * asked for, checked by hash, refused when malformed, altered, unknown or
- * revoked, listed without their secrets, and kept across a reopen; and two
+ * revoked, listed without their secrets, and kept across a reopen; two
  * threads using every function at once on the one connection get the
- * answers each would get alone. */
+ * answers each would get alone; a full disk is told by its own code. */
 #include <check.h>
 #include <pthread.h>
+#include <sqlite3.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -271,6 +272,157 @@ START_TEST(two_threads_at_once_get_their_own_answers)
 }
 END_TEST
 
+/* ---- a full disk ----
+ * A VFS in front of SQLite's own that, while disk_full is set, fails every
+ * write with SQLITE_FULL, as a file system with no space left does (the
+ * store opens its database through the default VFS). */
+static sqlite3_vfs *real_vfs, full_vfs;
+static sqlite3_io_methods full_methods;
+static int disk_full; /* 1: writes fail with SQLITE_FULL; 2: with SQLITE_IOERR_WRITE */
+
+struct full_file {
+	sqlite3_file base;
+	sqlite3_file *real; /* SQLite's own file, right after this struct */
+};
+
+#define REAL(f) (((struct full_file *)(f))->real)
+
+static int full_close(sqlite3_file *f)
+{
+	return REAL(f)->pMethods->xClose(REAL(f));
+}
+static int full_read(sqlite3_file *f, void *buf, int n, sqlite3_int64 off)
+{
+	return REAL(f)->pMethods->xRead(REAL(f), buf, n, off);
+}
+static int full_write(sqlite3_file *f, const void *buf, int n, sqlite3_int64 off)
+{
+	return disk_full == 1 ? SQLITE_FULL
+	       : disk_full   ? SQLITE_IOERR_WRITE
+	                     : REAL(f)->pMethods->xWrite(REAL(f), buf, n, off);
+}
+static int full_truncate(sqlite3_file *f, sqlite3_int64 size)
+{
+	return REAL(f)->pMethods->xTruncate(REAL(f), size);
+}
+static int full_sync(sqlite3_file *f, int flags)
+{
+	return REAL(f)->pMethods->xSync(REAL(f), flags);
+}
+static int full_size(sqlite3_file *f, sqlite3_int64 *size)
+{
+	return REAL(f)->pMethods->xFileSize(REAL(f), size);
+}
+static int full_lock(sqlite3_file *f, int level)
+{
+	return REAL(f)->pMethods->xLock(REAL(f), level);
+}
+static int full_unlock(sqlite3_file *f, int level)
+{
+	return REAL(f)->pMethods->xUnlock(REAL(f), level);
+}
+static int full_reserved(sqlite3_file *f, int *out)
+{
+	return REAL(f)->pMethods->xCheckReservedLock(REAL(f), out);
+}
+static int full_control(sqlite3_file *f, int op, void *arg)
+{
+	return REAL(f)->pMethods->xFileControl(REAL(f), op, arg);
+}
+static int full_sector(sqlite3_file *f)
+{
+	return REAL(f)->pMethods->xSectorSize(REAL(f));
+}
+static int full_device(sqlite3_file *f)
+{
+	return REAL(f)->pMethods->xDeviceCharacteristics(REAL(f));
+}
+static int full_shm_map(sqlite3_file *f, int page, int size, int extend, void volatile **out)
+{
+	return REAL(f)->pMethods->xShmMap(REAL(f), page, size, extend, out);
+}
+static int full_shm_lock(sqlite3_file *f, int offset, int n, int flags)
+{
+	return REAL(f)->pMethods->xShmLock(REAL(f), offset, n, flags);
+}
+static void full_shm_barrier(sqlite3_file *f)
+{
+	REAL(f)->pMethods->xShmBarrier(REAL(f));
+}
+static int full_shm_unmap(sqlite3_file *f, int delete_flag)
+{
+	return REAL(f)->pMethods->xShmUnmap(REAL(f), delete_flag);
+}
+
+static int full_open(sqlite3_vfs *vfs, const char *name, sqlite3_file *f, int flags, int *out_flags)
+{
+	struct full_file *ff = (struct full_file *)f;
+	int rc;
+	(void)vfs;
+	ff->real = (sqlite3_file *)&ff[1];
+	rc = real_vfs->xOpen(real_vfs, name, ff->real, flags, out_flags);
+	/* SQLite calls xClose only when pMethods is set: only on success. */
+	ff->base.pMethods = rc == SQLITE_OK && ff->real->pMethods ? &full_methods : NULL;
+	return rc;
+}
+
+/* full_vfs, the default from now on (in this test's own process). */
+static void install_full_vfs(void)
+{
+	real_vfs = sqlite3_vfs_find(NULL);
+	ck_assert_msg(real_vfs != NULL, "no default VFS");
+	full_vfs = *real_vfs;
+	full_vfs.zName = "vmac-full-disk";
+	full_vfs.szOsFile = (int)sizeof(struct full_file) + real_vfs->szOsFile;
+	full_vfs.xOpen = full_open;
+	full_methods = (sqlite3_io_methods){2,           full_close,   full_read,      full_write,
+	                                    full_truncate, full_sync,    full_size,      full_lock,
+	                                    full_unlock,   full_reserved, full_control,  full_sector,
+	                                    full_device,   full_shm_map, full_shm_lock, full_shm_barrier,
+	                                    full_shm_unmap, NULL,        NULL};
+	ck_assert_int_eq(sqlite3_vfs_register(&full_vfs, 1), SQLITE_OK);
+}
+
+START_TEST(a_full_disk_is_told_by_its_own_code)
+{
+	char token[VMAC_TOKEN_LEN + 1], err[512] = "";
+	const char *src = "return {name = 'drv', version = '1.0.0'}";
+	struct vmac_value value;
+	struct vmac_stored_event ev = {1, 1.0, "test", "machine-1", "full"};
+	int64_t id = 0;
+	int rc;
+	vmac_store_close(store); /* open again through the VFS that can fill up */
+	install_full_vfs();
+	ck_assert_msg(vmac_store_open(dir, &store, err, sizeof(err)) == 0, "reopen failed: %s", err);
+	memset(&value, 0, sizeof(value));
+	value.type = VMAC_VALUE_NUMBER;
+
+	disk_full = 1;
+	rc = vmac_store_driver_add(store, "drv", "1.0.0", src, strlen(src), "test", &id, err, sizeof(err));
+	ck_assert_msg(rc == -VMAC_ESTOREFULL && strstr(err, "full"), "a version added to a full disk: %d %s", rc, err);
+	rc = vmac_store_param_set(store, "machine-1", "count", &value, err, sizeof(err));
+	ck_assert_msg(rc == -VMAC_ESTOREFULL, "a param persisted to a full disk: %d %s", rc, err);
+	rc = vmac_token_create(store, VMAC_SCOPE_READ, "test", token, NULL, err, sizeof(err));
+	ck_assert_msg(rc == -VMAC_ESTOREFULL, "a token created on a full disk: %d %s", rc, err);
+	rc = vmac_store_events_add(store, &ev, 1, err, sizeof(err));
+	ck_assert_msg(rc == -VMAC_ESTOREFULL, "events added on a full disk: %d %s", rc, err);
+	ck_assert_str_eq(vmac_strerror(rc), "the store's disk is full");
+
+	disk_full = 0; /* space again: the same writes go through */
+	rc = vmac_store_driver_add(store, "drv", "1.0.0", src, strlen(src), "test", &id, err, sizeof(err));
+	ck_assert_msg(rc == 0, "a version added once there is space: %d %s", rc, err);
+	rc = vmac_store_driver_activate(store, "drv", id, err, sizeof(err));
+	ck_assert_msg(rc == 0, "activating once there is space: %d %s", rc, err);
+	rc = vmac_store_param_set(store, "machine-1", "count", &value, err, sizeof(err));
+	ck_assert_msg(rc == 0, "a param persisted once there is space: %d %s", rc, err);
+
+	disk_full = 2; /* a write that fails otherwise (an I/O error) is not a full disk */
+	rc = vmac_store_param_set(store, "machine-1", "count", &value, err, sizeof(err));
+	ck_assert_msg(rc == -VMAC_ESTORE, "a param persisted on a failing disk: %d %s", rc, err);
+	disk_full = 0;
+}
+END_TEST
+
 int main(void)
 {
 	Suite *s = suite_create("store");
@@ -283,6 +435,7 @@ int main(void)
 	tcase_add_test(tc, revoked_tokens_stop_at_once_and_survive_a_reopen);
 	tcase_add_test(tc, a_missing_folder_is_an_error);
 	tcase_add_test(tc, two_threads_at_once_get_their_own_answers);
+	tcase_add_test(tc, a_full_disk_is_told_by_its_own_code);
 	tcase_set_timeout(tc, 60);
 	suite_add_tcase(s, tc);
 	r = srunner_create(s);
