@@ -131,10 +131,10 @@ static int write_value(const struct vmac_console_ops *ops, const char *device, c
 	switch (status) {
 	case 404: return VMAC_CON_DEVICE;
 	case 409:
-		return strstr(msg, "no such variable, param or command") ? VMAC_CON_NAME
-		       : strstr(msg, "is read-only")                     ? VMAC_CON_READ_ONLY
-		       : req.persist && strstr(msg, "persist")           ? VMAC_CON_PERSIST
-		                                                         : VMAC_CON_REFUSED;
+		return req.rc == VMAC_REFUSED_NAME          ? VMAC_CON_NAME
+		       : req.rc == VMAC_REFUSED_READ_ONLY   ? VMAC_CON_READ_ONLY
+		       : req.rc == VMAC_REFUSED_NOT_PERSIST ? VMAC_CON_PERSIST
+		                                            : VMAC_CON_REFUSED;
 	case 500:
 	case 507: return req.persist ? VMAC_CON_PERSIST : VMAC_CON_HOST;
 	default: return VMAC_CON_HOST;

@@ -331,7 +331,7 @@ static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *re
 	if (req->rc == 0)
 		return MHD_HTTP_OK;
 	snprintf(msg, msglen, "%s", req->reply);
-	if (req->rc == 1) /* the driver refused it */
+	if (req->rc > 0) /* refused (a vmac_refusal) */
 		return MHD_HTTP_CONFLICT;
 	return req->rc == -VMAC_ENOTRUNNING ? MHD_HTTP_NOT_FOUND : MHD_HTTP_BAD_GATEWAY; /* else -VMAC_EDRIVER */
 }

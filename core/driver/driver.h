@@ -152,9 +152,20 @@ int vmac_driver_attach(struct vmac_driver *d, double time_s, char *err, size_t e
 int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
                      struct vmac_outputs *const out[], char *err, size_t errlen);
 
+/* Why operator input was refused: what vmac_driver_input returns (> 0),
+ * with the text for people in its reply. */
+enum vmac_refusal {
+	VMAC_REFUSED_BY_DRIVER = 1, /* input() said no: the driver's message */
+	VMAC_REFUSED_NAME,          /* no such variable, param or command */
+	VMAC_REFUSED_READ_ONLY,     /* a variable without set = true */
+	VMAC_REFUSED_VALUE,         /* outside the declaration's min, max or values */
+	VMAC_REFUSED_NO_INPUT,      /* a variable or command, and the driver has no input() */
+	VMAC_REFUSED_NOT_PERSIST,   /* persist asked for what is not a persist = true param (the bus's check) */
+};
+
 /* Operator input: input(dev, name, value) with value a number, boolean or
- * string as given. Returns 0 (accepted), 1 (refused: reply holds the
- * driver's message), -1 (driver failure: err). */
+ * string as given. Returns 0 (accepted), a vmac_refusal (> 0: reply says
+ * why), -1 (driver failure: err). */
 int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,
                       char *reply, size_t replylen, char *err, size_t errlen);
 

@@ -347,7 +347,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		if (strcmp(d->vars[i].pub.name, name) == 0) {
 			if (!d->vars[i].settable) {
 				snprintf(reply, replylen, "%s is read-only", name);
-				return 1;
+				return VMAC_REFUSED_READ_ONLY;
 			}
 			kind = 1;
 		}
@@ -370,7 +370,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 	if (!kind) {
 		snprintf(reply, replylen, "%s: no such variable, param or command", name);
 		lua_settop(L, top);
-		return 1;
+		return VMAC_REFUSED_NAME;
 	}
 	/* Push the value, then check it against the declaration. */
 	push_value(L, value);
@@ -381,7 +381,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		if (drv_check_value(L, lua_gettop(L) - 1, why, sizeof(why)) != 0) {
 			snprintf(reply, replylen, "%s: %s", name, why);
 			lua_settop(L, top);
-			return 1;
+			return VMAC_REFUSED_VALUE;
 		}
 		lua_pop(L, 3);
 		if (kind == 2) {
@@ -396,7 +396,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		if (kind == 2)
 			return 0;
 		snprintf(reply, replylen, "%s: the driver takes no input", name);
-		return 1;
+		return VMAC_REFUSED_NO_INPUT;
 	}
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_input);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
@@ -414,7 +414,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 	         lua_type(L, -1) == LUA_TSTRING || lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1)
 	                                                                          : "refused by the driver");
 	lua_settop(L, top);
-	return 1;
+	return VMAC_REFUSED_BY_DRIVER;
 }
 
 int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, const struct vmac_value *value,

@@ -1224,7 +1224,7 @@ static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
 		size_t n = strlen(r->name);
 		memcpy(r->reply, r->name, n); /* name and reply are parts of one struct: no snprintf of one into the other */
 		snprintf(r->reply + n, sizeof(r->reply) - n, ": %s", why);
-		return 1;
+		return VMAC_REFUSED_NOT_PERSIST;
 	}
 	rc = vmac_bus_input(bus, r->device, r->name, &r->value, r->reply, sizeof(r->reply));
 	if (rc == 0 && m && m->used)

@@ -143,7 +143,7 @@ const char *vmac_bus_host_addr(struct vmac_bus *bus);
 /* Operator input to the machine `device` belongs to: the driver's
  * input(dev, name, value). Bus thread only (in vmacd that means through the
  * command ring; `vmac test` calls it between steps of its virtual clock).
- * Returns 0 (accepted), 1 (refused: reply holds the driver's message),
+ * Returns 0 (accepted), a vmac_refusal (> 0: refused, reply says why),
  * -VMAC_ENOTRUNNING (no running machine of that name) or -VMAC_EDRIVER (its
  * driver failed and the machine was dropped or rolled back); reply says
  * which. */
@@ -162,7 +162,7 @@ struct vmac_bus_input_request {
 	char device[VMAC_NAME_MAX + 1];
 	char name[VMAC_NAME_MAX + 1];
 	struct vmac_value value;
-	int persist; /* set and persist: refused (rc 1) unless name is a persist = true param */
+	int persist; /* set and persist: refused (VMAC_REFUSED_NOT_PERSIST) unless name is a persist = true param */
 	int rc;
 	char reply[VMAC_EVENT_TEXT];
 	char machine[VMAC_NAME_MAX + 1]; /* rc 0: the machine's name (its primary board), what persists under */

@@ -244,7 +244,7 @@ function Board:input(name, value)
 	local rc, reply = current.world:input(self.name, name, value)
 	if rc ~= 0 then
 		fail(string.format("%s: input %s(%s) %s: %s", self.name, name, value == nil and "" or show(value),
-			rc == 1 and "refused by the driver" or "failed", reply))
+			rc > 0 and "refused" or "failed", reply))
 	end
 	return reply
 end

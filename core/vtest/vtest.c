@@ -293,7 +293,7 @@ static int l_device(lua_State *L)
 	return 1;
 }
 
-/* w:input(device, name, value) -> rc (0 accepted, 1 refused, -1 failed), reply */
+/* w:input(device, name, value) -> rc (0 accepted, > 0 refused: a vmac_refusal, < 0 failed), reply */
 static int l_input(lua_State *L)
 {
 	struct lworld *lw = check_world(L);

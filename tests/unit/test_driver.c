@@ -410,19 +410,19 @@ START_TEST(input_and_host_hooks)
 	v.number = 1;
 	ck_assert_msg(vmac_driver_input(d, 0, "lamp", &v, reply, sizeof(reply), err, sizeof(err)) == 0,
 	              "settable variable refused: %s %s", reply, err);
-	ck_assert_int_eq(vmac_driver_input(d, 0, "ro", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "ro", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_READ_ONLY);
 	ck_assert_msg(strstr(reply, "read-only") != NULL, "read-only variable reply: %s", reply);
-	ck_assert_int_eq(vmac_driver_input(d, 0, "nosuch", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "nosuch", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_NAME);
 	v.type = VMAC_VALUE_NUMBER;
 	v.number = 500;
-	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_VALUE);
 	ck_assert_msg(strstr(reply, "out of range 0..100") != NULL, "range reply: %s", reply);
 	v.number = 50;
 	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), 0);
 	v.number = 40;
 	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), 0);
 	v.number = 60;
-	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_BY_DRIVER);
 	ck_assert_msg(strcmp(reply, "too fast") == 0, "the driver's refusal not passed on: %s", reply);
 	ck_assert_int_eq(vmac_driver_input(d, 0, "fail", &v, reply, sizeof(reply), err, sizeof(err)), -1);
 	ck_assert_msg(strstr(err, "input boom") != NULL && strstr(err, "traceback") != NULL, "input error: %s", err);
