@@ -44,7 +44,7 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
 # The driver sandbox (core/driver/internal.h says which file owns what).
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c
-HOST_SRC     := core/common/paths.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/config.c core/host/deploy.c \
+HOST_SRC     := core/common/paths.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/host/deploy.c \
                 core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.

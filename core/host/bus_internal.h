@@ -1,0 +1,193 @@
+/* The bus thread's insides, shared by its files (bus.c, devices.c,
+ * mailbox.c, status.c, ../reload/swap.c); the rest of the host sees only
+ * bus.h. Everything here runs on the bus thread unless it says otherwise.
+ * Names shared between the files carry the prefix bus_. */
+#ifndef VMAC_BUS_INTERNAL_H
+#define VMAC_BUS_INTERNAL_H
+
+#include "bus.h"
+
+#include <ev.h>
+#include <semaphore.h>
+#include <stdatomic.h>
+#include <stdint.h>
+
+#define RX_BATCH 64
+
+#define STATUS_EVERY_NS 100000000LL   /* publish status at most every 100 ms */
+
+#define MALFORMED_LOG_EVERY_NS 1000000000LL
+
+#define STOP_GRACE_PERIODS 3          /* wait this long for SHUTDOWN acks */
+
+enum dev_state {
+	DEV_FREE,
+	DEV_LOADING,     /* announce seen, driver being loaded on the main thread */
+	DEV_REGISTERING, /* REGISTER sent or to be sent */
+	DEV_RUNNING,
+	DEV_TO_SLEEP,    /* registered only to be told to SLEEP (no driver) */
+	DEV_SLEEPING,
+	DEV_ERRANT,      /* dropped; waits for the board to announce again */
+};
+
+/* A machine: the boards that share a driver name and major id, run by one
+ * driver instance. Board 0 is the primary: its reply runs the tick. */
+struct machine {
+	int used;
+	struct vmac_driver *drv; /* NULL while loading */
+	char driver[VMAC_NAME_MAX + 1];
+	uint32_t major;
+	uint32_t primary;        /* device slot of the primary board */
+	uint32_t board[VMAC_DRIVER_MAX_BOARDS]; /* device slots, in the driver's board order */
+	int nboards;
+	unsigned level;
+	int attached;            /* attach() has run */
+	/* Hot reload: the instance drv took over from, kept while drv is on
+	 * probation (until probation_end_ns) to roll back to if drv fails. */
+	struct vmac_driver *prev;
+	int64_t probation_end_ns;
+	struct vmac_bus *bus;
+};
+
+struct device {
+	enum dev_state state;
+	int mach;          /* index into bus->mach, -1 when none */
+	int scheduled;     /* admitted to the schedule */
+	int64_t deadline_ns;    /* reply deadline at the device's level */
+	uint16_t aside_seq;     /* a request sent without awaiting its answer (WATCHDOG) */
+	uint16_t watchdog_ms;   /* what the board was told */
+	uint16_t want_watchdog; /* a longer one to send before the next UPDATE (slower level) */
+	char note[200];         /* why it is not running ("schedule full: ...") */
+	uint16_t generation;
+	uint32_t id; /* generation << 16 | slot */
+	struct vmac_announce ann;
+	struct vmac_addr addr;
+	struct vmac_driver *drv;
+	int register_sent;
+	uint16_t seq;
+	uint16_t missed_seq;   /* the request whose deadline passed last (its late reply is no stranger) */
+	uint16_t courtesy_seq; /* the SHUTDOWN/SLEEP sent on dropping, whose answer nobody awaits */
+	int pending;       /* a request is out, no reply yet */
+	uint8_t pending_op;
+	int64_t sent_ns;
+	uint32_t consecutive_misses;
+	uint64_t misses, served;
+	struct vmac_inputs inputs;
+	struct vmac_outputs outputs; /* sent with the next UPDATE */
+	int64_t last_seen_ns;
+};
+
+/* A request slot (vmac_bus_request_input): FREE -> FILLING (the caller
+ * writes it) -> QUEUED -> RUNNING (the bus thread) -> DONE (answered, sem
+ * posted) -> FREE (the caller read it). A caller that gives up moves QUEUED
+ * to ABANDONED, and the bus thread frees it without running it; once
+ * RUNNING, the caller waits for the answer, which comes without delay. */
+enum { REQ_FREE, REQ_FILLING, REQ_QUEUED, REQ_RUNNING, REQ_DONE, REQ_ABANDONED };
+
+enum { REQ_INPUT, REQ_SWAP, REQ_MACHINES };
+
+struct request {
+	_Atomic int state;
+	sem_t done;
+	int kind;
+	struct vmac_bus_input_request r;
+	struct vmac_driver *drv; /* REQ_SWAP: the new instance */
+	int64_t probation_ns;
+	/* REQ_MACHINES: the caller's array, written only while RUNNING (a
+	 * caller that finds its request RUNNING waits for the answer). */
+	char (*names)[VMAC_NAME_MAX + 1];
+	int max_names;
+};
+
+struct vmac_bus {
+	struct vmac_config cfg;
+	struct vmac_transport tr;
+	struct ev_loop *loop;
+	ev_io timer_w, sock_w;
+	ev_async cmd_w;
+	pthread_t thread;
+	int tfd;
+	int64_t period_ns, deadline_ns, start_ns; /* period_ns: one slot */
+	uint64_t tick_index;
+	struct device *dev;
+	uint32_t ndev;
+	uint32_t nused; /* slots at or past this have never held a device: loops stop here */
+	struct machine *mach;
+	struct vmac_sched *sched;
+	struct vmac_sched_entry *slot_entries;
+	int64_t slot_ns;
+	uint64_t slots_done;    /* slots handed to the scheduler so far */
+	uint16_t discover_seq;
+	int64_t next_discover_ns;
+	int64_t next_probation_ns; /* next look for reloads whose probation is over */
+	struct vmac_packet *tx;
+	int ntx;
+	struct vmac_packet rx[RX_BATCH];
+	struct vmac_hist lateness;
+	struct vmac_bus_counters counters;
+	int realtime;
+	int stopping;
+	int64_t stop_deadline_ns;
+	int64_t last_status_ns;
+	int64_t last_malformed_log_ns;
+	uint64_t malformed_suppressed;
+	struct vmac_ring to_main, to_bus;
+	struct request req[VMAC_BUS_REQUESTS];
+	_Atomic int req_queued; /* requests QUEUED since the bus thread last looked */
+	void (*wakeup)(void *);
+	void *wakeup_ctx;
+	pthread_mutex_t status_lock;
+	struct vmac_status status;
+	char host_addr[48];
+	/* Virtual mode (vmac test): no thread, no socket, no timer; the caller
+	 * owns the clock and carries the frames (struct vmac_bus_link). */
+	int virt;
+	int64_t virt_now_ns;
+	struct vmac_bus_link link;
+};
+
+
+/* bus.c */
+int64_t bus_now(const struct vmac_bus *bus);
+double bus_time(const struct vmac_bus *bus);
+void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int expect_reply);
+void bus_flush(struct vmac_bus *bus);
+void bus_send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason, int expect_reply);
+void bus_begin_stop(struct vmac_bus *bus, int64_t now);
+int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations);
+
+/* mailbox.c */
+void bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m);
+void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+void bus_requests(struct vmac_bus *bus);
+void bus_commands(struct vmac_bus *bus);
+void bus_on_cmd(struct ev_loop *loop, ev_async *w, int revents);
+int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv, int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms);
+
+/* devices.c */
+void bus_unload(struct vmac_bus *bus, struct vmac_driver *drv);
+uint32_t bus_slot_of(const struct vmac_bus *bus, const struct device *d);
+void bus_unschedule(struct vmac_bus *bus, struct device *d);
+void bus_free_machine(struct vmac_bus *bus, struct machine *m);
+void bus_drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char *kind, const char *why);
+void bus_miss(struct vmac_bus *bus, struct device *d, const char *fmt_why);
+void bus_check_deadlines(struct vmac_bus *bus, int64_t now);
+void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p);
+void bus_bind_driver(struct machine *m, struct vmac_driver *drv);
+void bus_give_boards(struct vmac_bus *bus, struct machine *m, struct vmac_driver *drv);
+void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *where, const char *err);
+void bus_run_machine(struct vmac_bus *bus, struct machine *m);
+void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_host_cmd *c);
+struct device *bus_find_by_name(struct vmac_bus *bus, const char *name);
+
+/* ../reload/swap.c */
+int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why);
+int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply, size_t replylen);
+void bus_end_probations(struct vmac_bus *bus, int64_t now);
+
+/* status.c */
+const char *bus_state_name(enum dev_state s);
+void bus_publish(struct vmac_bus *bus, int64_t now);
+
+#endif

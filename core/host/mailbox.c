@@ -1,0 +1,273 @@
+/* Between the bus thread and the others, without waiting and without
+ * allocating on the bus thread: events and unloaded drivers to the main
+ * thread (a ring), commands from it (a ring and an ev_async), and the
+ * request slots through which the HTTP threads hand in operator input, a
+ * hot-reload swap or a question, and wait for the answer. */
+#include "bus_internal.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <ev.h>
+#include <sched.h>
+#include <semaphore.h>
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/timerfd.h>
+#include <unistd.h>
+
+#include "../common/errors.h"
+#include "../sched/sched.h"
+
+int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
+                   char *reply, size_t replylen);
+
+/* ---- messages to the main thread (no allocation: fixed ring slots) ---- */
+
+void bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m)
+{
+	if (vmac_ring_push(&bus->to_main, m) != 0) {
+		bus->counters.events_lost++;
+		return;
+	}
+	if (bus->wakeup)
+		bus->wakeup(bus->wakeup_ctx);
+}
+
+void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
+{
+	struct vmac_bus_msg m;
+	va_list ap;
+	memset(&m, 0, sizeof(m));
+	m.kind = VMAC_MSG_EVENT;
+	m.time_ns = bus_now(bus);
+	if (d) {
+		memcpy(m.device, d->ann.board, sizeof(m.device));
+		memcpy(m.driver, d->ann.driver, sizeof(m.driver));
+	}
+	snprintf(m.event_kind, sizeof(m.event_kind), "%s", kind);
+	va_start(ap, fmt);
+	vsnprintf(m.text, sizeof(m.text), fmt, ap);
+	va_end(ap);
+	bus_post(bus, &m);
+}
+
+/* An input request; with persist, only to a persist = true param. */
+static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
+{
+	struct device *d = bus_find_by_name(bus, r->device);
+	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	int rc;
+	if (r->persist && m && m->drv && vmac_driver_param_persists(m->drv, r->name) != 1) {
+		const char *why = vmac_driver_param_persists(m->drv, r->name) < 0
+		                      ? "only params persist, and the driver has no such param"
+		                      : "this param does not persist (the driver does not declare it persist = true)";
+		size_t n = strlen(r->name);
+		memcpy(r->reply, r->name, n); /* name and reply are parts of one struct: no snprintf of one into the other */
+		snprintf(r->reply + n, sizeof(r->reply) - n, ": %s", why);
+		return VMAC_REFUSED_NOT_PERSIST;
+	}
+	rc = vmac_bus_input(bus, r->device, r->name, &r->value, r->reply, sizeof(r->reply));
+	if (rc == 0 && m && m->used)
+		memcpy(r->machine, bus->dev[m->primary].ann.board, sizeof(r->machine));
+	return rc;
+}
+
+/* The machines of driver that have a driver instance (attached, or their
+ * boards still registering): their primary boards' names into names, at
+ * most max. Returns how many. */
+static int list_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max)
+{
+	uint32_t i;
+	int n = 0;
+	if (bus->stopping)
+		return 0;
+	for (i = 0; i < bus->nused && n < max; i++) {
+		const struct machine *m = &bus->mach[i];
+		if (m->used && m->drv && strcmp(m->driver, driver) == 0)
+			snprintf(names[n++], VMAC_NAME_MAX + 1, "%s", bus->dev[m->primary].ann.board);
+	}
+	return n;
+}
+
+/* The requests other threads queued: run each, answer, post. */
+void bus_requests(struct vmac_bus *bus)
+{
+	int i, expect;
+	if (atomic_exchange(&bus->req_queued, 0) == 0)
+		return;
+	for (i = 0; i < VMAC_BUS_REQUESTS; i++) {
+		struct request *q = &bus->req[i];
+		expect = REQ_QUEUED;
+		if (!atomic_compare_exchange_strong(&q->state, &expect, REQ_RUNNING)) {
+			if (expect == REQ_ABANDONED)
+				atomic_store(&q->state, REQ_FREE);
+			continue;
+		}
+		if (q->kind == REQ_SWAP) {
+			q->r.rc = bus_swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
+		} else if (q->kind == REQ_MACHINES) {
+			/* Every command sent before this request was queued is
+			 * handled first: a driver the main thread handed over is
+			 * in its machine when the list is made. */
+			bus_commands(bus);
+			q->r.rc = list_machines(bus, q->r.name, q->names, q->max_names);
+		} else {
+			q->r.rc = input_request(bus, &q->r);
+		}
+		atomic_store(&q->state, REQ_DONE);
+		sem_post(&q->done);
+	}
+}
+
+void bus_commands(struct vmac_bus *bus)
+{
+	struct vmac_host_cmd c;
+	while (vmac_ring_pop(&bus->to_bus, &c)) {
+		struct device *d;
+		if (c.kind == VMAC_CMD_STOP) {
+			if (!bus->stopping)
+				bus_begin_stop(bus, bus_now(bus));
+			continue;
+		}
+		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
+		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping || d->mach < 0 ||
+		    bus->mach[d->mach].primary != c.slot || bus->mach[d->mach].drv) {
+			bus_unload(bus, c.drv); /* the device went away meanwhile */
+			continue;
+		}
+		bus_on_loaded(bus, d, &c);
+	}
+}
+
+void bus_on_cmd(struct ev_loop *loop, ev_async *w, int revents)
+{
+	(void)revents;
+	(void)loop;
+	bus_commands(w->data);
+	bus_requests(w->data);
+}
+
+int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
+                   char *reply, size_t replylen)
+{
+	char err[VMAC_DRIVER_ERR_MAX];
+	struct device *d = bus_find_by_name(bus, device);
+	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	int rc;
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
+		snprintf(reply, replylen, "%s is not running (%s)", device, d ? bus_state_name(d->state) : "no such device");
+		return -VMAC_ENOTRUNNING;
+	}
+	rc = vmac_driver_input(m->drv, bus_time(bus), name, value, reply, replylen, err, sizeof(err));
+	if (rc >= 0)
+		return rc;
+	bus_driver_failed(bus, m, " in input", err);
+	bus_flush(bus);
+	snprintf(reply, replylen, "the driver failed: %s", err);
+	return -VMAC_EDRIVER;
+}
+
+void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx)
+{
+	bus->wakeup = wakeup;
+	bus->wakeup_ctx = ctx;
+}
+
+int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg)
+{
+	return vmac_ring_pop(&bus->to_main, msg);
+}
+
+int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
+{
+	if (vmac_ring_push(&bus->to_bus, cmd) != 0)
+		return -EAGAIN;
+	if (!bus->virt)
+		ev_async_send(bus->loop, &bus->cmd_w);
+	return 0;
+}
+
+int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
+                   int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms)
+{
+	struct request *q = NULL;
+	struct timespec until;
+	int i, expect, rc;
+	for (i = 0; i < VMAC_BUS_REQUESTS && !q; i++) {
+		expect = REQ_FREE;
+		if (atomic_compare_exchange_strong(&bus->req[i].state, &expect, REQ_FILLING))
+			q = &bus->req[i];
+	}
+	if (!q) {
+		snprintf(req->reply, sizeof(req->reply), "the host is busy with other requests; try again");
+		return -VMAC_EBUSY;
+	}
+	q->kind = req_kind;
+	q->r = *req;
+	q->drv = drv;
+	q->probation_ns = probation_ns;
+	q->names = names;
+	q->max_names = max_names;
+	atomic_store(&q->state, REQ_QUEUED);
+	atomic_store(&bus->req_queued, 1);
+	if (!bus->virt)
+		ev_async_send(bus->loop, &bus->cmd_w);
+	clock_gettime(CLOCK_REALTIME, &until);
+	until.tv_sec += timeout_ms / 1000;
+	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
+	if (until.tv_nsec >= 1000000000L) {
+		until.tv_sec++;
+		until.tv_nsec -= 1000000000L;
+	}
+	while ((rc = sem_timedwait(&q->done, &until)) != 0 && errno == EINTR)
+		;
+	if (rc != 0) {
+		expect = REQ_QUEUED;
+		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_ABANDONED)) {
+			snprintf(req->reply, sizeof(req->reply), "the bus thread did not take the request within %d ms",
+			         timeout_ms);
+			return -VMAC_EBUSY;
+		}
+		while (sem_wait(&q->done) != 0 && errno == EINTR) /* RUNNING or DONE: the answer is on its way */
+			;
+	}
+	*req = q->r;
+	atomic_store(&q->state, REQ_FREE);
+	return 0;
+}
+
+int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
+{
+	return bus_request(bus, REQ_INPUT, req, NULL, 0, NULL, 0, timeout_ms);
+}
+
+int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
+                          int timeout_ms, int *rc, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	int r;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	r = bus_request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, NULL, 0, timeout_ms);
+	*rc = r == 0 ? req.rc : r;
+	snprintf(reply, replylen, "%s", req.reply);
+	return r;
+}
+
+int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
+                              int timeout_ms, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.name, sizeof(req.name), "%s", driver);
+	int r = bus_request(bus, REQ_MACHINES, &req, NULL, 0, names, max, timeout_ms);
+	if (r != 0) {
+		snprintf(reply, replylen, "%s", req.reply);
+		return r;
+	}
+	return req.rc;
+}
