@@ -44,8 +44,8 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
 # The driver sandbox (core/driver/internal.h says which file owns what).
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c
-HOST_SRC     := core/common/paths.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/host/deploy.c \
-                core/host/events.c core/host/hist.c core/host/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
+HOST_SRC     := core/common/paths.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
+                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
@@ -81,7 +81,7 @@ $(OBJ)/gen/ui_assets.o: $(BUILD)/gen/ui_assets.c core/api/ui_assets.h
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) -Icore/api -c $< -o $@
 
-$(BUILD)/bin/vmacd: $(OBJ)/core/host/main.o $(host_obj) $(portable_obj)
+$(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 

@@ -15,8 +15,8 @@
 #include <unistd.h>
 
 #include "../common/errors.h"
-#include "../host/deploy.h"
-#include "../host/loader.h"
+#include "../reload/deploy.h"
+#include "../reload/loader.h"
 #include "console.h"
 #include "ui_assets.h"
 

@@ -6,7 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../host/loader.h"
+#include "../reload/loader.h"
 
 struct vt_pkt {
 	int64_t at;

@@ -291,7 +291,7 @@ PAUSE_MS = 3000  # VMAC_TEST_DEPLOY_PAUSE_MS: long enough for a board to be foun
 
 def paused_host(t, pause_ms=PAUSE_MS):
     """start(t) with every deploy and rollback paused pause_ms between
-    switching the machines and writing the store (core/host/deploy.c,
+    switching the machines and writing the store (core/reload/deploy.c,
     test_pause): the moment a board attaching would load the old version
     from the store."""
     os.environ["VMAC_TEST_DEPLOY_PAUSE_MS"] = str(pause_ms)
@@ -344,7 +344,7 @@ def test_a_board_attaching_during_a_rollback_gets_the_version_rolled_back_to(t):
 
 def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
     """A version failing on probation goes back at once on the bus, but the
-    store records it under the deploy lock (core/host/deploy.c,
+    store records it under the deploy lock (core/reload/deploy.c,
     vmac_deploy_rolled_back): during another deploy it waits for that to
     end, so the two never interleave their writes."""
     pause_ms = 6000  # the failure, its event and a look at the store all fall within it, even under ASan

@@ -9,7 +9,7 @@
 #include <stddef.h>
 
 #include "../driver/driver.h"
-#include "config.h"
+#include "../host/config.h"
 
 /* Load driver `driver` for board `device`. Returns 0 and *out; or -ENOENT
  * (no such file) or another negative errno, with text saying why in words a

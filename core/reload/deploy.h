@@ -12,8 +12,8 @@
 #include <stdint.h>
 
 #include "../store/store.h"
-#include "bus.h"
-#include "config.h"
+#include "../host/bus.h"
+#include "../host/config.h"
 
 #define VMAC_DEPLOY_MACHINES 64 /* machines reported one by one */
 

@@ -15,11 +15,11 @@
 #include "../api/http.h"
 #include "../common/paths.h"
 #include "../store/store.h"
-#include "deploy.h"
-#include "bus.h"
-#include "config.h"
-#include "events.h"
-#include "loader.h"
+#include "../reload/deploy.h"
+#include "../host/bus.h"
+#include "../host/config.h"
+#include "../host/events.h"
+#include "../reload/loader.h"
 
 struct host {
 	struct vmac_config cfg;
