@@ -15,6 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../common/value.h"
 #include "../proto/proto.h"
 
 #define VMAC_DRIVER_ERR_MAX 512
@@ -23,7 +24,7 @@
 #define VMAC_DRIVER_MAX_IO 32
 #define VMAC_DRIVER_MAX_PARAMS 32
 #define VMAC_DRIVER_NAME_MAX 31  /* names of io, params, variables, commands */
-#define VMAC_DRIVER_STR_MAX 63   /* a string variable's value */
+#define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value */
 #define VMAC_DRIVER_VERSION_MAX 31
 #define VMAC_DRIVER_LOAD_FACTOR 50 /* loading the file gets this many budgets */
 
@@ -60,13 +61,7 @@ struct vmac_driver_host {
 	void *ctx;
 };
 
-/* A published variable's value as the status shows it. */
-enum vmac_value_type { VMAC_VALUE_NONE, VMAC_VALUE_NUMBER, VMAC_VALUE_BOOL, VMAC_VALUE_STRING };
-struct vmac_value {
-	enum vmac_value_type type;
-	double number; /* also the boolean (0/1) */
-	char str[VMAC_DRIVER_STR_MAX + 1];
-};
+/* A published variable (struct vmac_value: core/common/value.h) as the status shows it. */
 struct vmac_variable {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
 	char unit[16];

@@ -22,7 +22,7 @@
 #include <stdint.h>
 
 #include "../common/errors.h"
-#include "../driver/driver.h"
+#include "../common/value.h"
 
 #define VMAC_TOKEN_ID_LEN 16
 #define VMAC_TOKEN_LEN (5 + VMAC_TOKEN_ID_LEN + 1 + 64) /* without the NUL */
