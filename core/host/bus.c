@@ -232,12 +232,12 @@ static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 		return;
 	}
 	d->pending = 0;
-	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > d->deadline_ns) {
+	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > d->reply_window_ns) {
 		char why[120];
 		bus->counters.late_replies++;
 		snprintf(why, sizeof(why), "reply to %s seq %u came %.3g ms after the bus_request (deadline %.3g ms)",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)m.seq,
-		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)d->deadline_ns / 1e6);
+		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)d->reply_window_ns / 1e6);
 		if (!bus->stopping)
 			bus_miss(bus, d, why);
 		return;
@@ -298,7 +298,7 @@ static void service_registration(struct vmac_bus *bus)
 		m.u.reg.minor = d->ann.minor;
 		m.u.reg.watchdog_ms = d->state == DEV_REGISTERING ? d->watchdog_ms : (uint16_t)bus->cfg.watchdog_ms;
 		d->register_sent = 1;
-		d->deadline_ns = bus->deadline_ns;
+		d->reply_window_ns = bus->reply_deadline_ns;
 		bus_queue(bus, d, &m, 1);
 	}
 }
@@ -314,7 +314,7 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 		struct vmac_msg m;
 		if (d->state != DEV_RUNNING || d->pending)
 			continue;
-		d->deadline_ns = bus->deadline_ns < period ? bus->deadline_ns : period;
+		d->reply_window_ns = bus->reply_deadline_ns < period ? bus->reply_deadline_ns : period;
 		if (d->want_watchdog) {
 			memset(&m, 0, sizeof(m));
 			m.op = VMAC_OP_WATCHDOG;
@@ -335,7 +335,7 @@ void bus_begin_stop(struct vmac_bus *bus, int64_t now)
 {
 	uint32_t i;
 	bus->stopping = 1;
-	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->period_ns;
+	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->slot_ns;
 	if (bus->stop_deadline_ns < now + 100000000)
 		bus->stop_deadline_ns = now + 100000000; /* at least 100 ms for the acks */
 	for (i = 0; i < bus->nused; i++)
@@ -346,7 +346,7 @@ void bus_begin_stop(struct vmac_bus *bus, int64_t now)
 		if (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP) {
 			d->pending = 0;
 			bus_send_shutdown(bus, d, VMAC_SHUT_HOST_STOP, 1);
-			d->deadline_ns = bus->stop_deadline_ns - now;
+			d->reply_window_ns = bus->stop_deadline_ns - now;
 			d->state = DEV_ERRANT;
 		}
 		bus_unschedule(bus, d);
@@ -377,7 +377,7 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 	bus->tick_index += expirations;
 	bus->counters.ticks++;
 	bus->counters.ticks_skipped += expirations - 1;
-	scheduled = bus->start_ns + (int64_t)bus->tick_index * bus->period_ns;
+	scheduled = bus->start_ns + (int64_t)bus->tick_index * bus->slot_ns;
 	vmac_hist_add(&bus->lateness, (now - scheduled) / 1000);
 	if (!bus->virt) {
 		vmac_transport_clock_sync(&bus->tr);
@@ -476,10 +476,10 @@ static void *bus_main(void *arg)
 	/* Absolute periodic timer: ticks fall on start + k * period however
 	 * late any one of them was handled. */
 	memset(&its, 0, sizeof(its));
-	its.it_value.tv_sec = (bus->start_ns + bus->period_ns) / 1000000000;
-	its.it_value.tv_nsec = (bus->start_ns + bus->period_ns) % 1000000000;
-	its.it_interval.tv_sec = bus->period_ns / 1000000000;
-	its.it_interval.tv_nsec = bus->period_ns % 1000000000;
+	its.it_value.tv_sec = (bus->start_ns + bus->slot_ns) / 1000000000;
+	its.it_value.tv_nsec = (bus->start_ns + bus->slot_ns) % 1000000000;
+	its.it_interval.tv_sec = bus->slot_ns / 1000000000;
+	its.it_interval.tv_nsec = bus->slot_ns % 1000000000;
 	bus->tick_index = 0;
 	timerfd_settime(bus->tfd, TFD_TIMER_ABSTIME, &its, NULL);
 	bus->next_discover_ns = bus->start_ns;
@@ -502,8 +502,7 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->tr.fd = -1;
 	bus->ndev = cfg->max_devices;
 	bus->slot_ns = (int64_t)vmac_config_slot_us(cfg) * 1000;
-	bus->period_ns = bus->slot_ns;
-	bus->deadline_ns = (int64_t)cfg->reply_deadline_us * 1000;
+	bus->reply_deadline_ns = (int64_t)cfg->reply_deadline_us * 1000;
 	bus->dev = calloc(bus->ndev, sizeof(*bus->dev));
 	bus->mach = calloc(bus->ndev, sizeof(*bus->mach));
 	/* Per flush at most: one request per device, a WATCHDOG beside it, a DISCOVER. */
@@ -587,7 +586,7 @@ struct vmac_bus *vmac_bus_new_virtual(const struct vmac_config *cfg, const struc
 
 int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns)
 {
-	uint64_t index = (uint64_t)(now_ns / bus->period_ns);
+	uint64_t index = (uint64_t)(now_ns / bus->slot_ns);
 	bus->virt_now_ns = now_ns;
 	if (index <= bus->tick_index)
 		return 0;
@@ -596,7 +595,7 @@ int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns)
 
 int64_t vmac_bus_virtual_next_tick(const struct vmac_bus *bus)
 {
-	return (int64_t)(bus->tick_index + 1) * bus->period_ns;
+	return (int64_t)(bus->tick_index + 1) * bus->slot_ns;
 }
 
 void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p)

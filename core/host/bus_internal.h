@@ -53,7 +53,7 @@ struct device {
 	enum dev_state state;
 	int mach;          /* index into bus->mach, -1 when none */
 	int scheduled;     /* admitted to the schedule */
-	int64_t deadline_ns;    /* reply deadline at the device's level */
+	int64_t reply_window_ns; /* its reply deadline: the configured one, at most its period */
 	uint16_t aside_seq;     /* a request sent without awaiting its answer (WATCHDOG) */
 	uint16_t watchdog_ms;   /* what the board was told */
 	uint16_t want_watchdog; /* a longer one to send before the next UPDATE (slower level) */
@@ -107,7 +107,8 @@ struct vmac_bus {
 	ev_async cmd_w;
 	pthread_t thread;
 	int tfd;
-	int64_t period_ns, deadline_ns, start_ns; /* period_ns: one slot */
+	int64_t reply_deadline_ns; /* the configured reply deadline (reply_deadline_us) */
+	int64_t start_ns;
 	uint64_t tick_index;
 	struct device *dev;
 	uint32_t ndev;
@@ -115,7 +116,7 @@ struct vmac_bus {
 	struct machine *mach;
 	struct vmac_sched *sched;
 	struct vmac_sched_entry *slot_entries;
-	int64_t slot_ns;
+	int64_t slot_ns;        /* one slot: the tick's period */
 	uint64_t slots_done;    /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;

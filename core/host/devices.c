@@ -129,7 +129,7 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		char why[120];
-		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->deadline_ns)
+		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->reply_window_ns)
 			continue;
 		d->pending = 0;
 		d->missed_seq = d->seq;
@@ -137,7 +137,7 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 			continue;
 		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)d->seq,
-		         (double)d->deadline_ns / 1e6);
+		         (double)d->reply_window_ns / 1e6);
 		bus_miss(bus, d, why);
 	}
 }
