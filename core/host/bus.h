@@ -134,6 +134,13 @@ void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx
 int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
 int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd);
 
+/* The answer to a VMAC_MSG_LOAD: the driver loaded for load's device (drv,
+ * now the bus's), or NULL with rc (-ENOENT: no driver file) and text saying
+ * why. 0, or -1 when the command ring is full: drv is freed, and the board
+ * is tried again at its next announce. */
+int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int rc, struct vmac_driver *drv,
+                    const char *text);
+
 /* Copy the latest published status (taken at most 100 ms ago) into *out,
  * whose devices array has room for max_devices and slot_load for
  * 1 << max_level entries. */

@@ -271,3 +271,21 @@ int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*n
 	}
 	return req.rc;
 }
+
+int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int rc, struct vmac_driver *drv,
+                    const char *text)
+{
+	struct vmac_host_cmd c;
+	memset(&c, 0, sizeof(c));
+	c.kind = VMAC_CMD_LOADED;
+	c.slot = load->slot;
+	c.generation = load->generation;
+	c.drv = drv;
+	c.missing = rc == -ENOENT;
+	snprintf(c.text, sizeof(c.text), "%s", text);
+	if (vmac_bus_send_cmd(bus, &c) != 0) {
+		vmac_driver_free(drv);
+		return -1;
+	}
+	return 0;
+}

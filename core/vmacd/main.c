@@ -97,21 +97,10 @@ struct load {
 static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *text)
 {
 	struct load *l = ctx;
-	struct vmac_host_cmd c;
-
-	memset(&c, 0, sizeof(c));
-	c.kind = VMAC_CMD_LOADED;
-	c.slot = l->m->slot;
-	c.generation = l->m->generation;
-	c.drv = drv;
-	c.missing = rc == -ENOENT;
-	snprintf(c.text, sizeof(c.text), "%s", text);
-	if (c.drv)
-		restore_params(l->h, c.drv, l->m->device);
-	if (vmac_bus_send_cmd(l->h->bus, &c) != 0) {
-		vmac_driver_free(c.drv);
+	if (drv)
+		restore_params(l->h, drv, l->m->device);
+	if (vmac_bus_loaded(l->h->bus, l->m, rc, drv, text) != 0)
 		vmac_event_log_add(&l->h->log, "warning", l->m->device, "command ring full; device will retry on discovery");
-	}
 }
 
 static void load_driver(struct host *h, const struct vmac_bus_msg *m)

@@ -156,19 +156,17 @@ static void pump(struct vt_world *w)
 	struct vmac_bus_msg m;
 	int loaded = 0;
 	while (vmac_bus_poll_msg(w->bus, &m)) {
-		struct vmac_host_cmd c;
+		struct vmac_driver *drv = NULL;
+		char text[VMAC_EVENT_TEXT];
+		int rc;
 		switch (m.kind) {
 		case VMAC_MSG_EVENT:
 			record_event(w, &m);
 			break;
 		case VMAC_MSG_LOAD:
-			memset(&c, 0, sizeof(c));
-			c.kind = VMAC_CMD_LOADED;
-			c.slot = m.slot;
-			c.generation = m.generation;
-			c.missing = vmac_load_driver(&w->cfg, m.driver, m.device, &c.drv, c.text, sizeof(c.text)) == -ENOENT;
-			if (vmac_bus_send_cmd(w->bus, &c) != 0)
-				vmac_driver_free(c.drv);
+			text[0] = 0;
+			rc = vmac_load_driver(&w->cfg, m.driver, m.device, &drv, text, sizeof(text));
+			vmac_bus_loaded(w->bus, &m, rc, drv, text);
 			loaded = 1;
 			break;
 		case VMAC_MSG_UNLOAD:
