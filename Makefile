@@ -44,7 +44,7 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
 # The driver sandbox (core/driver/internal.h says which file owns what).
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c
-HOST_SRC     := core/common/paths.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
+HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
                 core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/console.c core/sched/sched.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
@@ -91,7 +91,8 @@ $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cl
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
-$(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/core/transport/transport_udp.o $(portable_obj)
+$(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/core/transport/transport_udp.o $(OBJ)/core/common/addr.o \
+                          $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) -lm
 
@@ -215,7 +216,8 @@ test: deps
 		echo "################################################################################"; \
 	else echo "make test: every suite passed"; fi
 
-$(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/transport/transport_udp.o $(OBJ)/core/proto/proto.o
+$(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/transport/transport_udp.o $(OBJ)/core/common/addr.o \
+                          $(OBJ)/core/proto/proto.o
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL)
 

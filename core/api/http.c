@@ -14,6 +14,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../common/addr.h"
 #include "../common/errors.h"
 #include "../reload/deploy.h"
 #include "../reload/loader.h"
@@ -1115,26 +1116,16 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 {
 	struct vmac_http *h;
 	struct sockaddr_in sin;
-	char host[64];
-	const char *colon = strrchr(listen, ':');
-	char *end;
-	long port;
+	uint16_t port;
 	const union MHD_DaemonInfo *info;
 
 	memset(&sin, 0, sizeof(sin));
 	sin.sin_family = AF_INET;
-	if (!colon || (size_t)(colon - listen) >= sizeof(host)) {
-		snprintf(err, errlen, "http '%s': expected ADDR:PORT, e.g. 127.0.0.1:8080", listen);
-		return NULL;
-	}
-	memcpy(host, listen, (size_t)(colon - listen));
-	host[colon - listen] = '\0';
-	port = strtol(colon + 1, &end, 10);
-	if (*end || end == colon + 1 || port < 0 || port > 65535 || inet_pton(AF_INET, host, &sin.sin_addr) != 1) {
+	if (vmac_addr_parse(listen, &sin.sin_addr, &port) != 0) {
 		snprintf(err, errlen, "http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:8080", listen);
 		return NULL;
 	}
-	sin.sin_port = htons((uint16_t)port);
+	sin.sin_port = htons(port);
 	h = calloc(1, sizeof(*h));
 	if (!h) {
 		snprintf(err, errlen, "out of memory");

@@ -4,6 +4,7 @@
  * endless file is an error with its reason, never a panic or a hang. */
 #include "config.h"
 
+#include "../common/addr.h"
 #include "../transport/transport.h"
 
 #include <arpa/inet.h>
@@ -279,16 +280,9 @@ int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t 
 /* "IPv4:PORT" with port 0..65535. */
 static int listen_ok(const char *text)
 {
-	char host[64], *end;
-	const char *colon = strrchr(text, ':');
 	struct in_addr a;
-	long port;
-	if (!colon || (size_t)(colon - text) >= sizeof(host))
-		return 0;
-	memcpy(host, text, (size_t)(colon - text));
-	host[colon - text] = '\0';
-	port = strtol(colon + 1, &end, 10);
-	return *end == '\0' && end != colon + 1 && port >= 0 && port <= 65535 && inet_pton(AF_INET, host, &a) == 1;
+	uint16_t port;
+	return vmac_addr_parse(text, &a, &port) == 0;
 }
 
 int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)

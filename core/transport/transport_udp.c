@@ -12,6 +12,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../common/addr.h"
+
 #define BATCH_MAX 64
 
 int64_t vmac_now_ns(void)
@@ -35,26 +37,9 @@ void vmac_transport_clock_sync(struct vmac_transport *t)
 
 int vmac_bus_spec_parse(const char *text, struct vmac_bus_spec *spec)
 {
-	char host[64];
-	const char *colon = strrchr(text, ':');
-	char *end;
-	long port;
-	size_t n;
-
-	if (!colon || colon == text)
+	if (vmac_addr_parse(text, &spec->group, &spec->port) != 0 || spec->port == 0 ||
+	    !IN_MULTICAST(ntohl(spec->group.s_addr)))
 		return -EINVAL;
-	n = (size_t)(colon - text);
-	if (n >= sizeof(host))
-		return -EINVAL;
-	memcpy(host, text, n);
-	host[n] = '\0';
-	errno = 0;
-	port = strtol(colon + 1, &end, 10);
-	if (errno || *end || end == colon + 1 || port < 1 || port > 65535)
-		return -EINVAL;
-	if (inet_pton(AF_INET, host, &spec->group) != 1 || !IN_MULTICAST(ntohl(spec->group.s_addr)))
-		return -EINVAL;
-	spec->port = (uint16_t)port;
 	return 0;
 }
 
