@@ -366,3 +366,11 @@ const char *vmac_proto_opname(uint8_t channel, uint8_t op)
 	default: return "?";
 	}
 }
+
+uint32_t vmac_proto_default_major(const char *board)
+{
+	uint32_t h = 2166136261u;
+	while (*board)
+		h = (h ^ (uint8_t)*board++) * 16777619u;
+	return h;
+}

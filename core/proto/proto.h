@@ -137,4 +137,9 @@ const char *vmac_proto_strerror(int err);
 /* Name of an op for logs ("UPDATE", "DISCOVER"); "?" when unknown. */
 const char *vmac_proto_opname(uint8_t channel, uint8_t op);
 
+/* A board's major id when none is given: the 32-bit FNV-1a hash of its
+ * name, so that boards named alike in a test or a simulator get the same
+ * identity every run. */
+uint32_t vmac_proto_default_major(const char *board);
+
 #endif

@@ -52,14 +52,6 @@ static struct vt_board *check_board(lua_State *L, struct lworld *lw, int i)
 	return b;
 }
 
-static uint32_t fnv1a(const char *s)
-{
-	uint32_t h = 2166136261u;
-	for (; *s; s++)
-		h = (h ^ (uint8_t)*s) * 16777619u;
-	return h;
-}
-
 /* world.new(settings, seed): settings is a list of {key, value} strings
  * applied over the test defaults with the host's own config keys. */
 static int l_new(lua_State *L)
@@ -127,7 +119,7 @@ static int l_board(lua_State *L)
 	const char *driver = luaL_optstring(L, 4, NULL);
 	enum vmac_plant_kind kind;
 	char err[256];
-	uint32_t major = lua_isnoneornil(L, 5) ? fnv1a(name) : (uint32_t)luaL_checknumber(L, 5);
+	uint32_t major = lua_isnoneornil(L, 5) ? vmac_proto_default_major(name) : (uint32_t)luaL_checknumber(L, 5);
 	uint32_t minor = (uint32_t)luaL_optnumber(L, 6, 0);
 	struct vt_board *b;
 	if (vmac_plant_kind_from_name(plant, &kind) != 0)

@@ -40,14 +40,6 @@ static uint64_t now_ms(void)
 	return (uint64_t)(vmac_now_ns() / 1000000);
 }
 
-static uint32_t fnv1a(const char *s)
-{
-	uint32_t h = 2166136261u;
-	while (*s)
-		h = (h ^ (uint8_t)*s++) * 16777619u;
-	return h;
-}
-
 static void usage(FILE *f)
 {
 	fprintf(f,
@@ -233,7 +225,7 @@ int main(int argc, char **argv)
 		}
 		memcpy(id.board, full, strlen(full) + 1);
 		memcpy(id.driver, driver, strlen(driver) + 1);
-		id.major = major >= 0 ? (uint32_t)major : fnv1a(id.board);
+		id.major = major >= 0 ? (uint32_t)major : vmac_proto_default_major(id.board);
 		id.minor = (uint32_t)minor;
 		id.caps = vmac_plant_caps(kind);
 		{ /* refuse at start what the protocol would refuse on every announce */
