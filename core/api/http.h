@@ -1,8 +1,10 @@
-/* The host's HTTP server (libmicrohttpd, its own thread): GET /api/status,
- * GET /api/health. Reads only the bus's published status and the event log,
- * never the bus thread's live tables. Every request but the health check
- * needs a bearer token of the store with the endpoint's scope; failed
- * attempts are rate-limited per client address. Endpoints: docs/API.md. */
+/* The host's HTTP server (libmicrohttpd, its own threads): the API (every
+ * endpoint is in docs/API.md) and the web UI (docs/UI.md). It reads the
+ * bus's published status and the event log, never the bus thread's live
+ * tables; what must reach a driver (input, a hot reload) goes through the
+ * bus's request slots. Every request but the health check and the UI's
+ * files needs a bearer token of the store with the endpoint's scope;
+ * failed attempts are rate-limited per client address. */
 #ifndef VMAC_HTTP_H
 #define VMAC_HTTP_H
 
