@@ -21,7 +21,7 @@ With no PATH: the project's own tests under tests/ and scripts/.
   --junit FILE       also write JUnit XML to FILE
   --trace FILE       write every board service as CSV (test,time_s,board,io,value)
   --time-limit S     virtual seconds a test may run (default 21600 = 6 h)
-  --timeout S        wall-clock seconds a test may take (default 120): catches endless loops
+  --timeout S        wall-clock seconds a test or a file's top level may take (default 120): catches endless loops
   --history N        services per board shown when a test fails (default 8)
   -h, --help         this text
 Exit status: 0 every test passed, 1 a test failed, 2 bad usage.
@@ -151,6 +151,9 @@ local function where(level)
 	end
 end
 
+-- Every check a test makes is counted: a test that made none fails.
+local function checked() current.checks = current.checks + 1 end
+
 local function fail(message, extra)
 	local f = setmetatable({ message = message, where = where(2) }, Failure)
 	if extra then for k, v in pairs(extra) do f[k] = v end end
@@ -241,6 +244,7 @@ function Board:try_input(name, value)
 end
 
 function Board:input(name, value)
+	checked()
 	local rc, reply = current.world:input(self.name, name, value)
 	if rc ~= 0 then
 		fail(string.format("%s: input %s(%s) %s: %s", self.name, name, value == nil and "" or show(value),
@@ -302,6 +306,7 @@ local function run_for(seconds)
 end
 
 local function wait_for(verb, cond, timeout, what)
+	checked()
 	if type(cond) ~= "function" then fail(verb .. "(condition, timeout): the condition must be a function") end
 	if type(timeout) ~= "number" or timeout < 0 then fail(verb .. "(condition, timeout): timeout must be seconds") end
 	local start = now()
@@ -320,6 +325,7 @@ local function eventually(cond, within, what) return wait_for("eventually", cond
 local function always(what, fn)
 	if type(what) == "function" then what, fn = fn, what end
 	if type(fn) ~= "function" then fail("always(description, condition): the condition must be a function") end
+	checked()
 	local inv = { what = what or "condition", fn = fn, where = where(2) or "?" }
 	current.always[#current.always + 1] = inv
 	if current.world then check_invariants() end
@@ -329,10 +335,12 @@ end
 -- ---- expectations ----
 
 local function expect(cond, what)
+	checked()
 	if not cond then fail("expected " .. (what or "the condition to hold") .. string.format(" (at %.3f s)", now())) end
 end
 
 local function expect_eq(actual, expected, what)
+	checked()
 	if actual ~= expected then
 		fail(string.format("%s: expected %s, got %s (at %.3f s)", what or "value", show(expected), show(actual), now()),
 			{ expected = expected, actual = actual })
@@ -340,6 +348,7 @@ local function expect_eq(actual, expected, what)
 end
 
 local function expect_near(actual, expected, tolerance, what)
+	checked()
 	if type(actual) ~= "number" or math.abs(actual - expected) > tolerance then
 		fail(string.format("%s: expected %s +/- %s, got %s (at %.3f s)", what or "value", show(expected),
 			show(tolerance), show(actual), now()), { expected = expected, actual = actual })
@@ -360,6 +369,7 @@ local function events(filter)
 end
 
 local function expect_event(filter, what)
+	checked()
 	if type(filter) == "string" then filter = { kind = filter } end
 	local got = events(filter)
 	if #got == 0 then
@@ -437,10 +447,20 @@ local function load_file(file)
 	local chunk, err = loadfile(file)
 	if not chunk then return cannot_load(err) end
 	setfenv(chunk, env)
+	-- The top level of a file is held to --timeout as a test is.
+	local deadline = world.wall() + opts.timeout
+	debug.sethook(function()
+		if world.wall() > deadline then
+			debug.sethook()
+			error(string.format("loading the file took more than %g s of wall time (--timeout): an endless loop "
+				.. "at its top level?", opts.timeout), 2)
+		end
+	end, "", 100000)
 	local ok, lerr = xpcall(chunk, function(e)
 		local frames = test_frames(debug.traceback("", 2), file)
 		return tostring(e) .. (#frames > 0 and "\n  from " .. table.concat(frames, "\n  from ") or "")
 	end)
+	debug.sethook()
 	if not ok then return cannot_load(lerr) end
 	if #found == 0 then return cannot_load(file .. ": defines no test (call test(name, function() ... end))") end
 	for _, t in ipairs(found) do tests[#tests + 1] = t end
@@ -521,7 +541,7 @@ local function details()
 end
 
 local function run_test(t)
-	current = { file = t.file, settings = {}, boards = {}, always = {},
+	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0,
 		trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
 	if opts.drivers then current.settings[1] = { "drivers", opts.drivers } end
 	local wall0 = world.wall()
@@ -533,7 +553,10 @@ local function run_test(t)
 				opts.timeout))
 		end
 	end, "", 100000)
-	local ok, err = xpcall(t.fn, function(e)
+	-- finished says the body ran to its end: an error that never reached
+	-- the handler (lost on its way out) must not read as a pass.
+	local finished = false
+	local ok, err = xpcall(function() t.fn() finished = true end, function(e)
 		if getmetatable(e) == Failure then return e end
 		local msg = tostring(e)
 		local inv = current.checking
@@ -549,6 +572,14 @@ local function run_test(t)
 		return f
 	end)
 	debug.sethook()
+	if ok and not finished then
+		ok, err = false, setmetatable({ message = "the test's body did not run to its end, and no error said why "
+			.. "(an error was lost on its way out)", where = t.file .. ":" .. t.line }, Failure)
+	elseif ok and current.checks == 0 then
+		ok, err = false, setmetatable({ message = "the test checked nothing: no expect, expect_eq, expect_near, "
+			.. "expect_event, eventually, run_until, always or board:input ran", where = t.file .. ":" .. t.line },
+			Failure)
+	end
 	local r = { file = t.file, name = t.name, wall = world.wall() - wall0, virtual = now(),
 		frames = current.world and current.world:frames() or 0 }
 	if not ok then

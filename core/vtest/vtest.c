@@ -1,6 +1,11 @@
 /* `vmac test`: a LuaJIT state running core/vtest/runner.lua (the test API,
  * discovery of test files, reports) over the module "vmac.world" defined
- * here, a thin binding of world.h. Options and the API: docs/TESTING.md. */
+ * here, a thin binding of world.h. Options and the API: docs/TESTING.md.
+ *
+ * Protection: every use of the runner's state happens inside the one
+ * lua_pcall that runs runner.lua (the world's C functions here are called
+ * from it), so no error on it can reach LuaJIT's panic; the drivers under
+ * test run in states of their own, protected by core/driver/ as in vmacd. */
 #include "vtest.h"
 
 #include <lauxlib.h>

@@ -82,6 +82,53 @@ def test_runaway_tests_are_stopped(t):
     assert re.search(r"virtual time 30\.0+ s", out), "the test did not stop at the limit:\n%s" % out
 
 
+def test_what_did_not_run_does_not_pass(t):
+    """A test that checked nothing fails and says so; a file whose top level
+    never ends is stopped by --timeout and reported as that file's failure."""
+    rc, out, err = vtest(t, "vtest-nothing", case("checks_nothing"))
+    assert rc == 1, "a test that checks nothing: exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"FAIL\s+only runs the clock\n\s+at \S*checks_nothing\.lua:2\n\s+the test checked nothing", out), (
+        "the test that checks nothing is not reported as such:\n%s" % out)
+    assert re.search(r"ok\s+checks one thing", out), "the test that checks something did not pass:\n%s" % out
+
+    rc, out, err = vtest(t, "vtest-endless-file", "--timeout", "1", case("endless_file"), case("expect"),
+                         timeout_s=60)
+    assert rc == 1, "a file that never loads: exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"FAIL\s+\(loading the file\)[\s\S]*loading the file took more than 1 s of wall time", out), (
+        "the endless top level is not reported:\n%s" % out)
+    assert re.search(r"^\S*expect\.lua$", out, re.M), "the next file's tests did not run:\n%s" % out
+
+
+def test_a_creeping_driver_fails_alone(t):
+    """The driver that filled its heap catching every refusal used to end
+    vmac test (and report ok for a body that never finished): now it fails
+    by itself, the test goes on to its end, and the next test runs."""
+    home = os.path.join(t.logdir, "creep")
+    os.makedirs(os.path.join(home, "drivers"))
+    os.makedirs(os.path.join(home, "tests"))
+    with open(os.path.join(home, "drivers", "creep.lua"), "w") as f:
+        f.write("""return { name = "creep", version = "1.0.0", io = { do0 = "do0", di0 = "di0" },
+  tick = function(dev, inputs) G = G or {} N = (N or 0) + 1
+    for i = 1, 400 do if not pcall(function() G[#G+1] = {N, i} end) then break end end end }
+""")
+    with open(os.path.join(home, "tests", "creep_test.lua"), "w") as f:
+        f.write("""test("the creeping driver is dropped for its memory", function()
+	local b = board { name = "creep-1", plant = "generic", driver = "creep" }
+	run_until(function() return b.state == "running" end, 5, "creep attached")
+	run_until(function() return b.state ~= "running" end, 120, "creep dropped")
+	expect_event({ kind = "driver_error", text = "memory cap exceeded" }, "the reason")
+	LAST = "the body ran to its end"
+end)
+test("the next test runs", function()
+	expect(LAST == nil, "a fresh file environment per test file is not required; this only has to run")
+end)
+""")
+    rc, out, err = vtest(t, "vtest-creep", "--drivers", os.path.join(home, "drivers"), os.path.join(home, "tests"))
+    assert re.search(r"ok\s+the creeping driver is dropped for its memory", out), (
+        "the creeping driver's test did not pass (exit %d):\n%s%s" % (rc, out, err))
+    assert re.search(r"(ok|FAIL)\s+the next test runs", out), "the next test did not run:\n%s" % out
+
+
 def test_output_formats(t):
     rc, out, err = vtest(t, "vtest-tap", "--tap", case("expect"))
     assert rc == 1, "--tap with a failing test: exit %d" % rc
