@@ -117,16 +117,16 @@ def test_a_creeping_driver_fails_alone(t):
 	run_until(function() return b.state == "running" end, 5, "creep attached")
 	run_until(function() return b.state ~= "running" end, 120, "creep dropped")
 	expect_event({ kind = "driver_error", text = "memory cap exceeded" }, "the reason")
-	LAST = "the body ran to its end"
 end)
 test("the next test runs", function()
-	expect(LAST == nil, "a fresh file environment per test file is not required; this only has to run")
+	expect(true, "this test ran")
 end)
 """)
     rc, out, err = vtest(t, "vtest-creep", "--drivers", os.path.join(home, "drivers"), os.path.join(home, "tests"))
     assert re.search(r"ok\s+the creeping driver is dropped for its memory", out), (
         "the creeping driver's test did not pass (exit %d):\n%s%s" % (rc, out, err))
-    assert re.search(r"(ok|FAIL)\s+the next test runs", out), "the next test did not run:\n%s" % out
+    assert re.search(r"ok\s+the next test runs", out), "the next test did not run:\n%s" % out
+    assert rc == 0, "vmac test exit %d with both tests passing:\n%s%s" % (rc, out, err)
 
 
 def test_output_formats(t):
