@@ -18,8 +18,8 @@ void vmac_board_safe(struct vmac_board *b)
 	b->device_id = 0;
 }
 
-void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
-                     const struct vmac_board_io *io, void *io_ctx, uint64_t now_ms)
+void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id, const struct vmac_board_io *io,
+                     void *io_ctx, uint64_t now_ms)
 {
 	memset(b, 0, sizeof(*b));
 	b->id = *id;
@@ -52,8 +52,7 @@ static int answer(struct vmac_msg *r, const struct vmac_msg *req, uint8_t *reply
 	return n > 0 ? n : 0;
 }
 
-static int answer_error(const struct vmac_msg *req, uint32_t device_id, uint8_t code, uint8_t *reply,
-                        size_t cap)
+static int answer_error(const struct vmac_msg *req, uint32_t device_id, uint8_t code, uint8_t *reply, size_t cap)
 {
 	struct vmac_msg r;
 	memset(&r, 0, sizeof(r));
@@ -101,8 +100,7 @@ static int on_discover(struct vmac_board *b, const struct vmac_msg *req, uint8_t
 	return answer(&r, req, reply, cap);
 }
 
-static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply,
-                       size_t cap)
+static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply, size_t cap)
 {
 	static const struct vmac_outputs off = {0, 0};
 	if (req->u.reg.major != b->id.major || req->u.reg.minor != b->id.minor)
@@ -118,8 +116,8 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	return answer_ack(req, b->device_id, reply, cap);
 }
 
-int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms,
-                       uint8_t *reply, size_t cap)
+int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint8_t *reply,
+                       size_t cap)
 {
 	struct vmac_msg req;
 	uint32_t id;
@@ -148,24 +146,16 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 	b->counters.frames_ok++;
 	id = b->device_id;
 	switch (req.op) {
-	case VMAC_OP_UPDATE:
-		drive(b, &req.u.outputs);
-		return answer_inputs(b, &req, reply, cap);
-	case VMAC_OP_IDLE:
-		return answer_inputs(b, &req, reply, cap);
-	case VMAC_OP_SHUTDOWN:
-		vmac_board_safe(b);
-		return answer_ack(&req, id, reply, cap);
+	case VMAC_OP_UPDATE: drive(b, &req.u.outputs); return answer_inputs(b, &req, reply, cap);
+	case VMAC_OP_IDLE: return answer_inputs(b, &req, reply, cap);
+	case VMAC_OP_SHUTDOWN: vmac_board_safe(b); return answer_ack(&req, id, reply, cap);
 	case VMAC_OP_SLEEP:
 		vmac_board_safe(b);
 		b->state = VMAC_BOARD_SLEEPING;
 		b->sleep_until_ms = now_ms + 1000u * req.u.sleep_s;
 		return answer_ack(&req, id, reply, cap);
-	case VMAC_OP_WATCHDOG:
-		b->watchdog_ms = req.u.watchdog_ms;
-		return answer_ack(&req, id, reply, cap);
-	default:
-		return answer_error(&req, id, VMAC_BERR_BAD_REQUEST, reply, cap);
+	case VMAC_OP_WATCHDOG: b->watchdog_ms = req.u.watchdog_ms; return answer_ack(&req, id, reply, cap);
+	default: return answer_error(&req, id, VMAC_BERR_BAD_REQUEST, reply, cap);
 	}
 }
 

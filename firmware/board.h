@@ -42,9 +42,9 @@ struct vmac_board_counters {
 struct vmac_board {
 	struct vmac_board_identity id;
 	enum vmac_board_state state;
-	uint32_t device_id;       /* session id from REGISTER; 0 when unknown */
-	uint16_t watchdog_ms;     /* comm-loss period while KNOWN */
-	uint64_t last_valid_ms;   /* time of the last valid frame of our session */
+	uint32_t device_id;     /* session id from REGISTER; 0 when unknown */
+	uint16_t watchdog_ms;   /* comm-loss period while KNOWN */
+	uint64_t last_valid_ms; /* time of the last valid frame of our session */
 	uint64_t sleep_until_ms;
 	struct vmac_outputs outputs; /* what we drive now */
 	struct vmac_board_counters counters;
@@ -53,8 +53,8 @@ struct vmac_board {
 };
 
 /* Start in UNKNOWN with outputs off. */
-void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
-                     const struct vmac_board_io *io, void *io_ctx, uint64_t now_ms);
+void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id, const struct vmac_board_io *io,
+                     void *io_ctx, uint64_t now_ms);
 
 /* Enforce the watchdog and the end of sleep. Call before every receive and
  * at least every few ms. Returns 1 when this call turned the outputs off
@@ -65,8 +65,8 @@ int vmac_board_poll(struct vmac_board *b, uint64_t now_ms);
  * VMAC_FRAME_MAX is always enough) and returns its length, or 0 when the
  * board stays silent (malformed frame, not addressed to it, or a discovery it
  * need not answer). Never reads past frame + len. */
-int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms,
-                       uint8_t *reply, size_t cap);
+int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint8_t *reply,
+                       size_t cap);
 
 /* Outputs off, session forgotten: what SHUTDOWN, comm loss and a board
  * process exiting all do. */

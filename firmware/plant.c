@@ -15,10 +15,10 @@ static const struct {
 	enum vmac_plant_kind kind;
 	const char *name;
 } kinds[] = {
-	{VMAC_PLANT_GENERIC, "generic"},
-	{VMAC_PLANT_WASHER, "washer"},
-	{VMAC_PLANT_DISHWASHER, "dishwasher"},
-	{VMAC_PLANT_LIGHTS, "lights"},
+    {VMAC_PLANT_GENERIC, "generic"},
+    {VMAC_PLANT_WASHER, "washer"},
+    {VMAC_PLANT_DISHWASHER, "dishwasher"},
+    {VMAC_PLANT_LIGHTS, "lights"},
 };
 
 #define KIND_COUNT (sizeof(kinds) / sizeof(kinds[0]))
@@ -113,19 +113,11 @@ void vmac_plant_init(struct vmac_plant *p, enum vmac_plant_kind kind)
 static void step_once(struct vmac_plant *p, double dt_s)
 {
 	switch (p->kind) {
-	case VMAC_PLANT_WASHER:
-		vmac_washer_step(&p->s.washer, dt_s);
-		break;
-	case VMAC_PLANT_DISHWASHER:
-		vmac_dishwasher_step(&p->s.dishwasher, dt_s);
-		break;
-	case VMAC_PLANT_LIGHTS:
-		vmac_lights_step(&p->s.lights, dt_s);
-		break;
+	case VMAC_PLANT_WASHER: vmac_washer_step(&p->s.washer, dt_s); break;
+	case VMAC_PLANT_DISHWASHER: vmac_dishwasher_step(&p->s.dishwasher, dt_s); break;
+	case VMAC_PLANT_LIGHTS: vmac_lights_step(&p->s.lights, dt_s); break;
 	case VMAC_PLANT_GENERIC:
-	default:
-		vmac_generic_step(&p->s.generic, dt_s);
-		break;
+	default: vmac_generic_step(&p->s.generic, dt_s); break;
 	}
 }
 
@@ -144,38 +136,22 @@ void vmac_plant_step(struct vmac_plant *p, double dt_s)
 void vmac_plant_sense(const struct vmac_plant *p, struct vmac_inputs *in)
 {
 	switch (p->kind) {
-	case VMAC_PLANT_WASHER:
-		vmac_washer_sense(&p->s.washer, in);
-		break;
-	case VMAC_PLANT_DISHWASHER:
-		vmac_dishwasher_sense(&p->s.dishwasher, in);
-		break;
-	case VMAC_PLANT_LIGHTS:
-		vmac_lights_sense(&p->s.lights, in);
-		break;
+	case VMAC_PLANT_WASHER: vmac_washer_sense(&p->s.washer, in); break;
+	case VMAC_PLANT_DISHWASHER: vmac_dishwasher_sense(&p->s.dishwasher, in); break;
+	case VMAC_PLANT_LIGHTS: vmac_lights_sense(&p->s.lights, in); break;
 	case VMAC_PLANT_GENERIC:
-	default:
-		vmac_generic_sense(&p->s.generic, in);
-		break;
+	default: vmac_generic_sense(&p->s.generic, in); break;
 	}
 }
 
 void vmac_plant_actuate(struct vmac_plant *p, const struct vmac_outputs *out)
 {
 	switch (p->kind) {
-	case VMAC_PLANT_WASHER:
-		vmac_washer_actuate(&p->s.washer, out);
-		break;
-	case VMAC_PLANT_DISHWASHER:
-		vmac_dishwasher_actuate(&p->s.dishwasher, out);
-		break;
-	case VMAC_PLANT_LIGHTS:
-		vmac_lights_actuate(&p->s.lights, out);
-		break;
+	case VMAC_PLANT_WASHER: vmac_washer_actuate(&p->s.washer, out); break;
+	case VMAC_PLANT_DISHWASHER: vmac_dishwasher_actuate(&p->s.dishwasher, out); break;
+	case VMAC_PLANT_LIGHTS: vmac_lights_actuate(&p->s.lights, out); break;
 	case VMAC_PLANT_GENERIC:
-	default:
-		vmac_generic_actuate(&p->s.generic, out);
-		break;
+	default: vmac_generic_actuate(&p->s.generic, out); break;
 	}
 }
 
@@ -184,15 +160,11 @@ int vmac_plant_set(struct vmac_plant *p, const char *name, double value)
 	if (name == NULL)
 		return -1;
 	switch (p->kind) {
-	case VMAC_PLANT_WASHER:
-		return vmac_washer_set(&p->s.washer, name, value);
-	case VMAC_PLANT_DISHWASHER:
-		return vmac_dishwasher_set(&p->s.dishwasher, name, value);
-	case VMAC_PLANT_LIGHTS:
-		return vmac_lights_set(&p->s.lights, name, value);
+	case VMAC_PLANT_WASHER: return vmac_washer_set(&p->s.washer, name, value);
+	case VMAC_PLANT_DISHWASHER: return vmac_dishwasher_set(&p->s.dishwasher, name, value);
+	case VMAC_PLANT_LIGHTS: return vmac_lights_set(&p->s.lights, name, value);
 	case VMAC_PLANT_GENERIC:
-	default:
-		return vmac_generic_set(&p->s.generic, name, value);
+	default: return vmac_generic_set(&p->s.generic, name, value);
 	}
 }
 

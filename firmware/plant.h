@@ -11,37 +11,37 @@
 #include "../core/proto/proto.h"
 
 struct vmac_washer {
-	double drum_rpm;        /* signed, + = forward */
-	double encoder_pos;     /* encoder counts, fractional accumulator */
-	double water_l;         /* litres in the tub */
-	double water_c;         /* water temperature, Celsius */
-	double load_kg;         /* laundry in the drum */
-	double fill_rate_lps;   /* flow of each open valve, litres/second */
-	int door_closed;        /* 1 = closed (operator action) */
-	int door_locked;        /* follows the lock solenoid output, only when closed */
-	double start_left_s;    /* start button held down for this much longer */
-	double cancel_left_s;   /* cancel button held down for this much longer */
+	double drum_rpm;      /* signed, + = forward */
+	double encoder_pos;   /* encoder counts, fractional accumulator */
+	double water_l;       /* litres in the tub */
+	double water_c;       /* water temperature, Celsius */
+	double load_kg;       /* laundry in the drum */
+	double fill_rate_lps; /* flow of each open valve, litres/second */
+	int door_closed;      /* 1 = closed (operator action) */
+	int door_locked;      /* follows the lock solenoid output, only when closed */
+	double start_left_s;  /* start button held down for this much longer */
+	double cancel_left_s; /* cancel button held down for this much longer */
 	struct vmac_outputs out;
 };
 
 struct vmac_dishwasher {
 	double water_l;
-	double wash_time_s;     /* how long the wash motor has run with water */
-	double fill_rate_lps;   /* flow of the open fill valve, litres/second */
+	double wash_time_s;   /* how long the wash motor has run with water */
+	double fill_rate_lps; /* flow of the open fill valve, litres/second */
 	int door_closed;
-	double start_left_s;    /* start button held down for this much longer */
-	double cancel_left_s;   /* cancel button held down for this much longer */
+	double start_left_s;  /* start button held down for this much longer */
+	double cancel_left_s; /* cancel button held down for this much longer */
 	struct vmac_outputs out;
 };
 
 struct vmac_lights {
-	int switch_pos[2];      /* wall switch positions, toggled by the operator */
-	double on_seconds[5];   /* time each relay has been on, for inspection */
+	int switch_pos[2];    /* wall switch positions, toggled by the operator */
+	double on_seconds[5]; /* time each relay has been on, for inspection */
 	struct vmac_outputs out;
 };
 
 struct vmac_generic {
-	uint8_t digital_in;     /* set by the operator */
+	uint8_t digital_in; /* set by the operator */
 	uint16_t analog_in[VMAC_ANALOG_INPUTS];
 	int32_t encoder;
 	struct vmac_outputs out;

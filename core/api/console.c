@@ -148,9 +148,9 @@ static int submessage(const struct vmac_console_ops *ops, const char *m, struct 
 	char device[VMAC_NAME_MAX + 1], name[VMAC_NAME_MAX + 1], what[2 * VMAC_NAME_MAX + 2];
 	size_t nd, nn;
 	int rc;
-	if (!dot || !op || (nd = (size_t)(dot - m)) >= sizeof(device) || (nn = (size_t)(op - dot - 1)) >= sizeof(name) ||
-	    !valid_name(m, nd) || !valid_name(dot + 1, nn) || ((*op == '?' || *op == '!') && op[1] != 0) ||
-	    ((*op == ':' || *op == '>') && op[1] == 0)) {
+	if (!dot || !op || (nd = (size_t)(dot - m)) >= sizeof(device) ||
+	    (nn = (size_t)(op - dot - 1)) >= sizeof(name) || !valid_name(m, nd) || !valid_name(dot + 1, nn) ||
+	    ((*op == '?' || *op == '!') && op[1] != 0) || ((*op == ':' || *op == '>') && op[1] == 0)) {
 		put(a, "%.*s#%d", (int)strcspn(m, "?:>!"), m, VMAC_CON_SYNTAX);
 		put(e, "%s: expected DEVICE.NAME? DEVICE.NAME:VALUE DEVICE.NAME>VALUE or DEVICE.NAME!\n", m);
 		return VMAC_CON_SYNTAX;
@@ -160,7 +160,8 @@ static int submessage(const struct vmac_console_ops *ops, const char *m, struct 
 	memcpy(name, dot + 1, nn);
 	name[nn] = 0;
 	snprintf(what, sizeof(what), "%s.%s", device, name);
-	rc = *op == '?' ? read_value(ops, device, name, a, e, what) : write_value(ops, device, name, *op, op + 1, a, e, what);
+	rc = *op == '?' ? read_value(ops, device, name, a, e, what)
+	                : write_value(ops, device, name, *op, op + 1, a, e, what);
 	if (rc)
 		put(a, "%s#%d", what, rc);
 	return rc;

@@ -4,13 +4,13 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
-#include <stdatomic.h>
 #include <jansson.h>
 #include <microhttpd.h>
+#include <sodium.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sodium.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -90,17 +90,17 @@ static json_t *device_json(const struct vmac_device_status *d)
 		json_object_set_new(vars, d->vars[i].name, value_json(&d->vars[i].value));
 	for (i = 0; i < d->nparams; i++)
 		json_object_set_new(params, d->params[i].name, value_json(&d->params[i].value));
-	json_t *in = json_pack("{s:o, s:[i,i], s:I}", "digital", bools(d->inputs.digital, VMAC_DIGITAL_INPUTS),
-	                       "analog", (int)d->inputs.analog[0], (int)d->inputs.analog[1], "encoder",
-	                       (json_int_t)d->inputs.encoder);
+	json_t *in =
+	    json_pack("{s:o, s:[i,i], s:I}", "digital", bools(d->inputs.digital, VMAC_DIGITAL_INPUTS), "analog",
+	              (int)d->inputs.analog[0], (int)d->inputs.analog[1], "encoder", (json_int_t)d->inputs.encoder);
 	json_t *out = json_pack("{s:o, s:i}", "digital", bools(d->outputs.digital, VMAC_DIGITAL_OUTPUTS), "pwm",
 	                        (int)d->outputs.pwm);
 	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:I, s:o, s:o, s:o, s:I}", "name", d->name,
 	              "driver", d->driver, "driver_version", d->driver_version, "state", d->state, "address",
-	              d->address, "id", (json_int_t)d->id, "major", (json_int_t)d->major, "minor",
-	              (json_int_t)d->minor, "period_us", (json_int_t)d->period_us, "misses", (json_int_t)d->misses,
-	              "served", (json_int_t)d->served, "inputs", in, "outputs", out, "variables", vars,
-	              "driver_memory", (json_int_t)d->driver_memory);
+	              d->address, "id", (json_int_t)d->id, "major", (json_int_t)d->major, "minor", (json_int_t)d->minor,
+	              "period_us", (json_int_t)d->period_us, "misses", (json_int_t)d->misses, "served",
+	              (json_int_t)d->served, "inputs", in, "outputs", out, "variables", vars, "driver_memory",
+	              (json_int_t)d->driver_memory);
 	if (!o)
 		return NULL;
 	json_object_set_new(o, "level", d->scheduled || d->level ? json_integer(d->level) : json_null());
@@ -134,14 +134,15 @@ static json_t *status_json(struct vmac_http *h)
 	    " s:{s:I, s:o, s:I, s:I, s:I, s:I, s:I, s:I}}",
 	    "version", VMAC_VERSION_STRING, "uptime_s",
 	    s->started_ns ? (double)(s->time_ns - s->started_ns) / 1e9 : 0.0, "bus", "group", h->cfg.bus, "iface",
-	    h->cfg.iface, "host_addr", s->host_addr, "slot_us", (json_int_t)vmac_config_slot_us(&h->cfg), "reply_deadline_us",
-	    (json_int_t)h->cfg.reply_deadline_us, "discovery_period_ms", (json_int_t)h->cfg.discovery_period_ms,
-	    "watchdog_ms", (json_int_t)h->cfg.watchdog_ms, "miss_limit", (json_int_t)h->cfg.miss_limit, "realtime",
-	    s->realtime, "devices", devices, "tick", "count", (json_int_t)s->counters.ticks, "skipped",
-	    (json_int_t)s->counters.ticks_skipped, "lateness_us", "p50",
-	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.50), "p99", (json_int_t)vmac_hist_quantile(&s->lateness, 0.99),
-	    "p999", (json_int_t)vmac_hist_quantile(&s->lateness, 0.999), "max", (json_int_t)s->lateness.max_us,
-	    "counters", "malformed_frames", (json_int_t)s->counters.malformed_frames, "malformed_by_reason", reasons,
+	    h->cfg.iface, "host_addr", s->host_addr, "slot_us", (json_int_t)vmac_config_slot_us(&h->cfg),
+	    "reply_deadline_us", (json_int_t)h->cfg.reply_deadline_us, "discovery_period_ms",
+	    (json_int_t)h->cfg.discovery_period_ms, "watchdog_ms", (json_int_t)h->cfg.watchdog_ms, "miss_limit",
+	    (json_int_t)h->cfg.miss_limit, "realtime", s->realtime, "devices", devices, "tick", "count",
+	    (json_int_t)s->counters.ticks, "skipped", (json_int_t)s->counters.ticks_skipped, "lateness_us", "p50",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.50), "p99",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.99), "p999",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.999), "max", (json_int_t)s->lateness.max_us, "counters",
+	    "malformed_frames", (json_int_t)s->counters.malformed_frames, "malformed_by_reason", reasons,
 	    "late_replies", (json_int_t)s->counters.late_replies, "misses", (json_int_t)s->counters.misses, "drops",
 	    (json_int_t)s->counters.drops, "discoveries", (json_int_t)s->counters.discoveries, "announces",
 	    (json_int_t)s->counters.announces, "events_lost", (json_int_t)s->counters.events_lost, "table_full",
@@ -152,22 +153,22 @@ static json_t *status_json(struct vmac_http *h)
 			json_array_append_new(load, json_integer(s->slot_load[i]));
 		json_object_set_new(json_object_get(root, "counters"), "schedule_full",
 		                    json_integer((json_int_t)s->counters.schedule_full));
-		json_object_set_new(root, "schedule",
-		                    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",
-		                              (json_int_t)s->slices_per_slot, "slots_per_block",
-		                              (json_int_t)s->slots_per_block, "slot_us", (json_int_t)s->slot_us, "slice_us",
-		                              (json_int_t)h->cfg.slice_us, "max_level", (json_int_t)h->cfg.max_level,
-		                              "capacity_used", (json_int_t)s->capacity_used, "capacity_total",
-		                              (json_int_t)s->capacity_total, "slot_load", load));
+		json_object_set_new(
+		    root, "schedule",
+		    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",
+		              (json_int_t)s->slices_per_slot, "slots_per_block", (json_int_t)s->slots_per_block,
+		              "slot_us", (json_int_t)s->slot_us, "slice_us", (json_int_t)h->cfg.slice_us, "max_level",
+		              (json_int_t)h->cfg.max_level, "capacity_used", (json_int_t)s->capacity_used,
+		              "capacity_total", (json_int_t)s->capacity_total, "slot_load", load));
 	}
 	pthread_mutex_unlock(&h->status_lock);
 
 	events = json_array();
 	n = vmac_event_log_latest(h->log, ev, STATUS_EVENTS);
 	for (i = 0; i < n; i++)
-		json_array_append_new(events, json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)ev[i].seq, "time",
-		                                        (double)ev[i].time_ns / 1e9, "kind", ev[i].kind, "device",
-		                                        ev[i].device, "text", ev[i].text));
+		json_array_append_new(events, json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)ev[i].seq,
+		                                        "time", (double)ev[i].time_ns / 1e9, "kind", ev[i].kind,
+		                                        "device", ev[i].device, "text", ev[i].text));
 	if (root)
 		json_object_set_new(root, "events", events);
 	else
@@ -254,7 +255,8 @@ static enum vmac_scope authorized(struct vmac_http *h, struct MHD_Connection *c,
 		wait_s = FAIL_WINDOW_S - (now - f->window_start);
 	pthread_mutex_unlock(&h->fails_lock);
 	if (locked) {
-		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s", wait_s + 0.5);
+		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s",
+		         wait_s + 0.5);
 		*ret = reply(c, MHD_HTTP_TOO_MANY_REQUESTS, error_body(msg));
 		return VMAC_SCOPE_NONE;
 	}
@@ -264,10 +266,11 @@ static enum vmac_scope authorized(struct vmac_http *h, struct MHD_Connection *c,
 		pthread_mutex_lock(&h->fails_lock);
 		fails_of(h, c, now)->fails++; /* the record again: another thread may have reused it */
 		pthread_mutex_unlock(&h->fails_lock);
-		*ret = reply_with(c, MHD_HTTP_UNAUTHORIZED,
-		                  error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
-		                                  : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
-		                  MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
+		*ret =
+		    reply_with(c, MHD_HTTP_UNAUTHORIZED,
+		               error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
+		                               : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
+		               MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
 		return VMAC_SCOPE_NONE;
 	}
 	if (have < need) {
@@ -356,7 +359,8 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 	name = json_object_get(body, "name");
 	value = json_object_get(body, "value");
 	persist = json_object_get(body, "persist");
-	if (!json_is_object(body) || !json_is_string(name) || (persist && !json_is_boolean(persist)) || !valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
+	if (!json_is_object(body) || !json_is_string(name) || (persist && !json_is_boolean(persist)) ||
+	    !valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
 	    (value && !json_is_string(value) && !json_is_number(value) && !json_is_boolean(value) &&
 	     !json_is_null(value)) ||
 	    (json_is_string(value) && strlen(json_string_value(value)) > VMAC_DRIVER_STR_MAX)) {
@@ -385,8 +389,8 @@ static enum MHD_Result device_input(struct vmac_http *h, struct MHD_Connection *
 		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("a value to persist is needed"));
 	code = run_input(h, &req, msg, sizeof(msg));
 	if (code == MHD_HTTP_OK)
-		return reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted",
-		                                       req.persist));
+		return reply(c, MHD_HTTP_OK,
+		             json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted", req.persist));
 	return reply(c, code, error_body(msg));
 }
 
@@ -472,7 +476,8 @@ static enum MHD_Result event_log(struct vmac_http *h, struct MHD_Connection *c)
 	if (after_s) {
 		after = strtoull(after_s, &end, 10);
 		if (!*after_s || *end || after_s[0] == '-')
-			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("after must be an event's seq (a whole number)"));
+			return reply(c, MHD_HTTP_BAD_REQUEST,
+			             error_body("after must be an event's seq (a whole number)"));
 	}
 	if (limit_s) {
 		limit = strtol(limit_s, &end, 10);
@@ -564,8 +569,8 @@ static json_t *version_json(const struct vmac_driver_version *v)
 {
 	return json_pack("{s:I, s:s, s:s, s:s, s:f, s:s, s:s, s:I, s:s, s:I}", "id", (json_int_t)v->id, "driver",
 	                 v->driver, "version", v->version, "hash", v->hash, "deployed", v->deployed, "deployed_by",
-	                 v->deployed_by, "state", v->state, "previous", (json_int_t)v->previous, "note", v->note, "size",
-	                 (json_int_t)v->size);
+	                 v->deployed_by, "state", v->state, "previous", (json_int_t)v->previous, "note", v->note,
+	                 "size", (json_int_t)v->size);
 }
 
 static void append_version(void *ctx, const struct vmac_driver_version *v)
@@ -596,8 +601,8 @@ static enum MHD_Result driver_versions(struct vmac_http *h, struct MHD_Connectio
 	return reply(c, MHD_HTTP_OK, body);
 }
 
-static enum MHD_Result deploy_reply(struct MHD_Connection *c, const char *driver,
-                                    const struct vmac_deploy_result *r, double probation_s)
+static enum MHD_Result deploy_reply(struct MHD_Connection *c, const char *driver, const struct vmac_deploy_result *r,
+                                    double probation_s)
 {
 	json_t *machines = json_array(), *body;
 	int i;
@@ -622,8 +627,7 @@ static void token_id(struct MHD_Connection *c, char *id, size_t len)
 
 /* ?probation=S into *ms (default: the host's reload_probation_s): 0, or -1
  * with the 400 answer queued into *ret. */
-static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned *ms, double *s,
-                         enum MHD_Result *ret)
+static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned *ms, double *s, enum MHD_Result *ret)
 {
 	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
 	char *end;
@@ -652,7 +656,8 @@ static enum MHD_Result driver_upload(struct vmac_http *h, struct MHD_Connection 
 	if (k->too_big)
 		return reply(c, MHD_HTTP_CONTENT_TOO_LARGE, error_body("a driver file is at most 1 MiB"));
 	if (!k->len)
-		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("the request body must be the driver's source (Lua text)"));
+		return reply(c, MHD_HTTP_BAD_REQUEST,
+		             error_body("the request body must be the driver's source (Lua text)"));
 	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
 		return ret;
 	r = malloc(sizeof(*r));
@@ -677,7 +682,8 @@ static enum MHD_Result driver_activate(struct vmac_http *h, struct MHD_Connectio
 	long long id = id_s ? strtoll(id_s, &end, 10) : 0;
 	enum MHD_Result ret;
 	if (!id_s || !*id_s || *end || id < 1)
-		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("id must be a version's id (vmac drivers lists them)"));
+		return reply(c, MHD_HTTP_BAD_REQUEST,
+		             error_body("id must be a version's id (vmac drivers lists them)"));
 	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
 		return ret;
 	r = malloc(sizeof(*r));
@@ -775,11 +781,12 @@ static ssize_t sse_read(void *cls, uint64_t pos, char *out, size_t max)
 		}
 		for (i = 0; i < got; i++) {
 			json_t *j = json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)ev[i].seq, "time",
-			                      (double)ev[i].time_ns / 1e9, "kind", ev[i].kind, "device", ev[i].device, "text",
-			                      ev[i].text);
+			                      (double)ev[i].time_ns / 1e9, "kind", ev[i].kind, "device", ev[i].device,
+			                      "text", ev[i].text);
 			char *data = j ? json_dumps(j, JSON_COMPACT) : NULL;
 			json_decref(j);
-			snprintf(line, sizeof(line), "id: %llu\nevent: %s\ndata: ", (unsigned long long)ev[i].seq, ev[i].kind);
+			snprintf(line, sizeof(line), "id: %llu\nevent: %s\ndata: ", (unsigned long long)ev[i].seq,
+			         ev[i].kind);
 			sse_append(e, line);
 			sse_append(e, data ? data : "{}");
 			sse_append(e, "\n\n");
@@ -827,7 +834,8 @@ static enum MHD_Result events_stream(struct vmac_http *h, struct MHD_Connection 
 		errno = 0;
 		seq = strtoull(from, &end, 10);
 		if (errno || end == from || *end)
-			return reply(c, MHD_HTTP_BAD_REQUEST, error_body("after (or Last-Event-ID) must be an event's seq"));
+			return reply(c, MHD_HTTP_BAD_REQUEST,
+			             error_body("after (or Last-Event-ID) must be an event's seq"));
 	}
 	e = calloc(1, sizeof(*e));
 	if (!e)
@@ -848,9 +856,9 @@ static enum MHD_Result events_stream(struct vmac_http *h, struct MHD_Connection 
 struct live {
 	struct vmac_http *h;
 	double last_sent, next;
-	char *text;   /* what is being sent */
+	char *text; /* what is being sent */
 	size_t len, off;
-	char *last;   /* the last status sent (not sent again unchanged) */
+	char *last; /* the last status sent (not sent again unchanged) */
 };
 
 static void live_free(void *cls)
@@ -950,12 +958,14 @@ static enum MHD_Result driver_manifest(struct MHD_Connection *c, const char *dri
 	json_error_t jerr;
 	json_t *body;
 	if (!version)
-		return reply(c, MHD_HTTP_BAD_REQUEST, error_body("version is needed: ?version=V (a device's driver_version)"));
+		return reply(c, MHD_HTTP_BAD_REQUEST,
+		             error_body("version is needed: ?version=V (a device's driver_version)"));
 	if (!json)
 		return reply(c, MHD_HTTP_NOT_FOUND, error_body("that driver version has not been loaded on this host"));
 	body = json_loads(json, 0, &jerr);
 	free(json);
-	return body ? reply(c, MHD_HTTP_OK, body) : reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("bad manifest"));
+	return body ? reply(c, MHD_HTTP_OK, body)
+	            : reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, error_body("bad manifest"));
 }
 
 /* "/api/devices/NAME" SUFFIX */
@@ -988,8 +998,7 @@ static enum MHD_Result ui_asset(struct MHD_Connection *c, const char *name)
 }
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
-                                  const char *version, const char *upload_data, size_t *upload_size,
-                                  void **con_cls)
+                                  const char *version, const char *upload_data, size_t *upload_size, void **con_cls)
 {
 	struct vmac_http *h = cls;
 	struct conn *k = *con_cls;
@@ -1036,8 +1045,9 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return ret;
 		return device_cycle(h, c, device, k);
 	}
-	if (post && (driver_path(url, "/rollback", device, sizeof(device)) ||
-	             driver_path(url, "/activate", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
+	if (post &&
+	    (driver_path(url, "/rollback", device, sizeof(device)) ||
+	     driver_path(url, "/activate", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
 		if (!authorized(h, c, VMAC_SCOPE_DEPLOY, &ret))
 			return ret;
 		if (driver_path(url, "/rollback", device, sizeof(device)))
@@ -1075,9 +1085,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return events_stream(h, c);
 	if (get && strcmp(url, "/api") == 0)
 		return reply(c, MHD_HTTP_OK,
-		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints", "/api/status",
-		                       "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
-		                       "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
+		             json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING,
+		                       "endpoints", "/api/status", "/api/health", "/api/events",
+		                       "/api/devices/NAME/input", "/api/drivers", "/api/drivers/NAME",
+		                       "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
 		                       "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
 		                       "/api/drivers/NAME/activate"));
 	return reply(c, MHD_HTTP_NOT_FOUND, error_body("no such endpoint (see docs/API.md)"));
@@ -1111,8 +1122,7 @@ static char *read_pem(const char *path, const char *what, char *err, size_t errl
 }
 
 struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, struct vmac_event_log *log,
-                                  struct vmac_store *store, const struct vmac_config *cfg, char *err,
-                                  size_t errlen)
+                                  struct vmac_store *store, const struct vmac_config *cfg, char *err, size_t errlen)
 {
 	struct vmac_http *h;
 	struct sockaddr_in sin;
@@ -1168,9 +1178,8 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION |
 	                                 MHD_USE_ERROR_LOG | (h->tls_cert ? MHD_USE_TLS : 0),
 	                             0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, NULL,
-	                             MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin,
-	                             MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)30, MHD_OPTION_CONNECTION_LIMIT,
-	                             (unsigned)256,
+	                             MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin, MHD_OPTION_CONNECTION_TIMEOUT,
+	                             (unsigned)30, MHD_OPTION_CONNECTION_LIMIT, (unsigned)256,
 	                             /* the certificate and key, or nothing */
 	                             h->tls_cert ? MHD_OPTION_HTTPS_MEM_CERT : MHD_OPTION_END, h->tls_cert,
 	                             MHD_OPTION_HTTPS_MEM_KEY, h->tls_key, MHD_OPTION_END);

@@ -19,8 +19,7 @@ struct vmac_http; /* opaque */
 /* Listen on "ADDR:PORT" (port 0: the kernel picks; see vmac_http_port).
  * Returns NULL with err set. */
 struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, struct vmac_event_log *log,
-                                  struct vmac_store *store, const struct vmac_config *cfg, char *err,
-                                  size_t errlen);
+                                  struct vmac_store *store, const struct vmac_config *cfg, char *err, size_t errlen);
 unsigned vmac_http_port(const struct vmac_http *h);
 /* Whether it serves HTTPS (settings tls_cert and tls_key). */
 int vmac_http_tls(const struct vmac_http *h);

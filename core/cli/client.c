@@ -20,7 +20,8 @@ int vmac_client_token(const char *token, const char *file)
 	} else if (file) {
 		FILE *f = fopen(file, "r");
 		if (!f || !fgets(bearer, sizeof(bearer), f)) {
-			fprintf(stderr, "vmac: cannot read a token from %s: %s\n", file, f ? "empty file" : strerror(errno));
+			fprintf(stderr, "vmac: cannot read a token from %s: %s\n", file,
+			        f ? "empty file" : strerror(errno));
 			if (f)
 				fclose(f);
 			return -1;
@@ -79,7 +80,8 @@ static void trust(CURL *c)
 int vmac_client_call(const char *method, const char *url, const char *body, struct vmac_buffer *out, long *code,
                      char *err, size_t errlen)
 {
-	return call(method, url, body, body ? strlen(body) : 0, "Content-Type: application/json", out, code, err, errlen);
+	return call(method, url, body, body ? strlen(body) : 0, "Content-Type: application/json", out, code, err,
+	            errlen);
 }
 
 int vmac_client_upload(const char *url, const char *body, size_t len, struct vmac_buffer *out, long *code, char *err,
@@ -123,8 +125,9 @@ static int call(const char *method, const char *url, const char *body, size_t le
 	curl_easy_cleanup(c);
 	curl_slist_free_all(headers);
 	if (rc != CURLE_OK) {
-		snprintf(err, errlen, "cannot reach the host at %s: %s (is vmacd running? pick it with --http ADDR:PORT)",
-		         url, curl_easy_strerror(rc));
+		snprintf(err, errlen,
+		         "cannot reach the host at %s: %s (is vmacd running? pick it with --http ADDR:PORT)", url,
+		         curl_easy_strerror(rc));
 		return -1;
 	}
 	return 0;
@@ -142,8 +145,8 @@ static size_t stream_chunk(char *ptr, size_t size, size_t nmemb, void *ud)
 	return st->on_data(st->ctx, ptr, n) == 0 ? n : 0;
 }
 
-int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *data, size_t len), void *ctx,
-                       long *code, char *err, size_t errlen)
+int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *data, size_t len), void *ctx, long *code,
+                       char *err, size_t errlen)
 {
 	CURL *c = curl_easy_init();
 	CURLcode rc;

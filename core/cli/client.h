@@ -34,8 +34,8 @@ int vmac_client_upload(const char *url, const char *body, size_t len, struct vma
 /* GET url as a stream: on_data gets the bytes as they come, until the host
  * ends the answer (or on_data returns nonzero). 0 with the HTTP code, or -1
  * when the host cannot be reached (err says why). */
-int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *data, size_t len), void *ctx,
-                       long *code, char *err, size_t errlen);
+int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *data, size_t len), void *ctx, long *code,
+                       char *err, size_t errlen);
 
 /* What to tell a person about a 401 or 403. */
 const char *vmac_client_auth_hint(void);

@@ -86,7 +86,8 @@ static void line(struct session *s, const char *text)
 
 static int setup(struct session *s, int argc, char **argv, const char *usage, int *first_arg)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
+	                                     {"host", required_argument, 0, 'H'},
 	                                     {"token", required_argument, 0, 't'},
 	                                     {"token-file", required_argument, 0, 'f'},
 	                                     {"quiet", no_argument, 0, 'q'},
@@ -112,8 +113,8 @@ static int setup(struct session *s, int argc, char **argv, const char *usage, in
 	return vmac_client_token(token, file) != 0 ? 2 : 0;
 }
 
-#define COMMON_OPTIONS                                                                                              \
-	"  --http ADDR:PORT   the host (default $VMAC_HTTP or 127.0.0.1:8080)\n"                                        \
+#define COMMON_OPTIONS                                                                                                 \
+	"  --http ADDR:PORT   the host (default $VMAC_HTTP or 127.0.0.1:8080)\n"                                       \
 	"  --token T, --token-file F   the token (default $VMAC_TOKEN, $VMAC_TOKEN_FILE): read for ?, operate for\n"   \
 	"                     : and !\n"                                                                               \
 	"  --quiet            no messages on stderr, only the answers\n"                                               \
@@ -176,15 +177,17 @@ static int one_line(int argc, char **argv, const char *usage, int get)
 
 int vmac_get_main(int argc, char **argv)
 {
-	static const char usage[] = "usage: vmac get [options] DEVICE.NAME...\n"
-	                            "Print published variables, e.g. vmac get washer-1.state washer-1.drum_rpm\n" COMMON_OPTIONS;
+	static const char usage[] =
+	    "usage: vmac get [options] DEVICE.NAME...\n"
+	    "Print published variables, e.g. vmac get washer-1.state washer-1.drum_rpm\n" COMMON_OPTIONS;
 	return one_line(argc, argv, usage, 1);
 }
 
 int vmac_set_main(int argc, char **argv)
 {
-	static const char usage[] = "usage: vmac set [options] DEVICE.NAME:VALUE|DEVICE.NAME!...\n"
-	                            "Operator input, e.g. vmac set lights-1.kitchen:true, vmac set washer-1.start:quick,\n"
-	                            "vmac set washer-1.cancel!\n" COMMON_OPTIONS;
+	static const char usage[] =
+	    "usage: vmac set [options] DEVICE.NAME:VALUE|DEVICE.NAME!...\n"
+	    "Operator input, e.g. vmac set lights-1.kitchen:true, vmac set washer-1.start:quick,\n"
+	    "vmac set washer-1.cancel!\n" COMMON_OPTIONS;
 	return one_line(argc, argv, usage, 0);
 }

@@ -74,11 +74,15 @@ static int on_data(void *ctx, const char *data, size_t len)
 
 int vmac_events_main(int argc, char **argv)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},  {"host", required_argument, 0, 'H'},
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
+	                                     {"host", required_argument, 0, 'H'},
 	                                     {"token", required_argument, 0, 't'},
-	                                     {"token-file", required_argument, 0, 'f'}, {"after", required_argument, 0, 'a'},
-	                                     {"count", required_argument, 0, 'n'}, {"json", no_argument, 0, 'j'},
-	                                     {"help", no_argument, 0, 'h'},         {0, 0, 0, 0}};
+	                                     {"token-file", required_argument, 0, 'f'},
+	                                     {"after", required_argument, 0, 'a'},
+	                                     {"count", required_argument, 0, 'n'},
+	                                     {"json", no_argument, 0, 'j'},
+	                                     {"help", no_argument, 0, 'h'},
+	                                     {0, 0, 0, 0}};
 	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080", *token = NULL, *file = NULL;
 	struct follow *f = calloc(1, sizeof(*f));
 	unsigned long long after = 0;
@@ -111,12 +115,15 @@ int vmac_events_main(int argc, char **argv)
 			}
 			break;
 		case 'h':
-			printf("usage: vmac events [--http ADDR:PORT] [--token T | --token-file F] [--after SEQ] [--count N]"
+			printf("usage: vmac events [--http ADDR:PORT] [--token T | --token-file F] [--after SEQ] "
+			       "[--count N]"
 			       " [--json]\n"
-			       "Follow the host's events (attached, dropped, driver errors, ...) as they happen: the ones it\n"
+			       "Follow the host's events (attached, dropped, driver errors, ...) as they happen: the "
+			       "ones it\n"
 			       "still keeps after SEQ (default 0: all of them), then every new one, one line each.\n"
 			       "  --count N   stop after N events     --json   print each event's JSON\n"
-			       "Exit 0 when --count is reached or the host ends the stream, 1 when it cannot be followed.\n");
+			       "Exit 0 when --count is reached or the host ends the stream, 1 when it cannot be "
+			       "followed.\n");
 			free(f);
 			return 0;
 		default: free(f); return 2;
@@ -138,7 +145,8 @@ int vmac_events_main(int argc, char **argv)
 		fprintf(stderr, "vmac events: %s\n", err);
 		rc = 1;
 	} else if (code != 200) {
-		fprintf(stderr, "vmac events: the host answered HTTP %ld%s%s\n", code, code == 401 || code == 403 ? "\n" : "",
+		fprintf(stderr, "vmac events: the host answered HTTP %ld%s%s\n", code,
+		        code == 401 || code == 403 ? "\n" : "",
 		        code == 401 || code == 403 ? vmac_client_auth_hint() : "");
 		rc = 1;
 	} else if (!f->count || f->seen < f->count) {

@@ -122,9 +122,10 @@ static void show_versions(json_t *a)
 		const char *note = json_string_value(json_object_get(v, "note"));
 		strftime(when, sizeof(when), "%Y-%m-%d %H:%M:%S", localtime(&t));
 		printf("%5lld %-14s %-10s %-12s %-19s %-16s %.12s\n", json_integer_value(json_object_get(v, "id")),
-		       json_string_value(json_object_get(v, "driver")), json_string_value(json_object_get(v, "version")),
-		       json_string_value(json_object_get(v, "state")), when,
-		       json_string_value(json_object_get(v, "deployed_by")), json_string_value(json_object_get(v, "hash")));
+		       json_string_value(json_object_get(v, "driver")),
+		       json_string_value(json_object_get(v, "version")), json_string_value(json_object_get(v, "state")),
+		       when, json_string_value(json_object_get(v, "deployed_by")),
+		       json_string_value(json_object_get(v, "hash")));
 		if (note && note[0])
 			printf("      %s\n", note);
 	}
@@ -165,10 +166,13 @@ static char *read_all(const char *path, size_t *len)
 	return buf;
 }
 
-#define COMMON_OPTS                                                                                                \
-	{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},                                    \
-	    {"token", required_argument, 0, 't'}, {"token-file", required_argument, 0, 'f'},                         \
-	    {"json", no_argument, 0, 'j'}, {"help", no_argument, 0, 'h'}
+#define COMMON_OPTS                                                                                                    \
+	{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},                                      \
+	    {"token", required_argument, 0, 't'}, {"token-file", required_argument, 0, 'f'},                           \
+	    {"json", no_argument, 0, 'j'},                                                                             \
+	{                                                                                                              \
+		"help", no_argument, 0, 'h'                                                                            \
+	}
 
 static void common_init(struct common *o)
 {
@@ -178,8 +182,8 @@ static void common_init(struct common *o)
 
 int vmac_reload_main(int argc, char **argv)
 {
-	static const struct option opts[] = {COMMON_OPTS, {"probation", required_argument, 0, 'p'},
-	                                     {"driver", required_argument, 0, 'd'}, {0, 0, 0, 0}};
+	static const struct option opts[] = {
+	    COMMON_OPTS, {"probation", required_argument, 0, 'p'}, {"driver", required_argument, 0, 'd'}, {0, 0, 0, 0}};
 	struct common o;
 	const char *probation = NULL, *driver = NULL;
 	char name[64], path[256];
@@ -195,16 +199,17 @@ int vmac_reload_main(int argc, char **argv)
 		case 'p': probation = optarg; break;
 		case 'd': driver = optarg; break;
 		case 'h':
-			printf("usage: vmac reload [options] FILE.lua\n"
-			       "Upload a new version of a driver to a running vmacd: the host compiles it in a fresh\n"
-			       "sandbox, refuses it with the error and line if it does not compile or its manifest is\n"
-			       "wrong, and otherwise switches every running machine of that driver at a slot boundary,\n"
-			       "handing the old state to the new version's migrate(). A version that fails within its\n"
-			       "probation is rolled back by the host. Needs a token of scope deploy.\n"
-			       "  --driver NAME      the driver's name (default: FILE's name without .lua)\n"
-			       "  --probation S      seconds of probation (default: the host's reload_probation_s, 30)\n"
-			       "%s",
-			       COMMON_HELP);
+			printf(
+			    "usage: vmac reload [options] FILE.lua\n"
+			    "Upload a new version of a driver to a running vmacd: the host compiles it in a fresh\n"
+			    "sandbox, refuses it with the error and line if it does not compile or its manifest is\n"
+			    "wrong, and otherwise switches every running machine of that driver at a slot boundary,\n"
+			    "handing the old state to the new version's migrate(). A version that fails within its\n"
+			    "probation is rolled back by the host. Needs a token of scope deploy.\n"
+			    "  --driver NAME      the driver's name (default: FILE's name without .lua)\n"
+			    "  --probation S      seconds of probation (default: the host's reload_probation_s, 30)\n"
+			    "%s",
+			    COMMON_HELP);
 			return 0;
 		default: return 2;
 		}
@@ -213,8 +218,8 @@ int vmac_reload_main(int argc, char **argv)
 		fprintf(stderr, "usage: vmac reload [options] FILE.lua (vmac reload --help)\n");
 		return 2;
 	}
-	if (driver ? snprintf(name, sizeof(name), "%s", driver) >= (int)sizeof(name) : name_of(argv[optind], name,
-	                                                                                         sizeof(name)) != 0) {
+	if (driver ? snprintf(name, sizeof(name), "%s", driver) >= (int)sizeof(name)
+	           : name_of(argv[optind], name, sizeof(name)) != 0) {
 		fprintf(stderr, "vmac reload: cannot take a driver name from '%s' (use --driver NAME)\n", argv[optind]);
 		return 2;
 	}
@@ -300,12 +305,14 @@ int vmac_activate_main(int argc, char **argv)
 			continue;
 		}
 		if (opt == 'h') {
-			printf("usage: vmac activate [options] DRIVER ID\n"
-			       "Make version ID of DRIVER (vmac drivers lists them) the active one again: its source is\n"
-			       "deployed as vmac reload would (a new entry in the list, the same hash), with migrate()\n"
-			       "and probation. Needs a token of scope deploy.\n"
-			       "  --probation S      seconds of probation (default: the host's reload_probation_s, 30)\n%s",
-			       COMMON_HELP);
+			printf(
+			    "usage: vmac activate [options] DRIVER ID\n"
+			    "Make version ID of DRIVER (vmac drivers lists them) the active one again: its source is\n"
+			    "deployed as vmac reload would (a new entry in the list, the same hash), with migrate()\n"
+			    "and probation. Needs a token of scope deploy.\n"
+			    "  --probation S      seconds of probation (default: the host's reload_probation_s, "
+			    "30)\n%s",
+			    COMMON_HELP);
 			return 0;
 		}
 		return 2;
@@ -318,7 +325,8 @@ int vmac_activate_main(int argc, char **argv)
 	if (vmac_client_token(o.token, o.token_file) != 0)
 		return 2;
 	if (probation)
-		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld&probation=%s", argv[optind], id, probation);
+		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld&probation=%s", argv[optind], id,
+		         probation);
 	else
 		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld", argv[optind], id);
 	return run(&o, "POST", path, NULL, 0, show_deploy);

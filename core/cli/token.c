@@ -16,13 +16,14 @@
 
 static void usage(FILE *f)
 {
-	fprintf(f, "usage: vmac token create --scope read|operate|deploy [--note TEXT] [--state DIR]\n"
-	           "       vmac token list [--state DIR]\n"
-	           "       vmac token revoke ID [--state DIR]\n"
-	           "Access tokens of the host whose state folder is DIR (default $VMAC_STATE, else %s).\n"
-	           "Scopes: read (status, devices, events), operate (+ operator input, cycles, parameters),\n"
-	           "deploy (+ drivers). create prints the new token once on standard output; the host keeps\n"
-	           "only its hash. revoke takes effect at once, host running or not.\n",
+	fprintf(f,
+	        "usage: vmac token create --scope read|operate|deploy [--note TEXT] [--state DIR]\n"
+	        "       vmac token list [--state DIR]\n"
+	        "       vmac token revoke ID [--state DIR]\n"
+	        "Access tokens of the host whose state folder is DIR (default $VMAC_STATE, else %s).\n"
+	        "Scopes: read (status, devices, events), operate (+ operator input, cycles, parameters),\n"
+	        "deploy (+ drivers). create prints the new token once on standard output; the host keeps\n"
+	        "only its hash. revoke takes effect at once, host running or not.\n",
 	        DEFAULT_STATE);
 }
 
@@ -39,11 +40,13 @@ static void print_token(void *ctx, const struct vmac_token_info *t)
 
 int vmac_token_main(int argc, char **argv)
 {
-	static const struct option opts[] = {{"state", required_argument, 0, 's'}, {"scope", required_argument, 0, 'c'},
-	                                     {"note", required_argument, 0, 'n'},  {"help", no_argument, 0, 'h'},
+	static const struct option opts[] = {{"state", required_argument, 0, 's'},
+	                                     {"scope", required_argument, 0, 'c'},
+	                                     {"note", required_argument, 0, 'n'},
+	                                     {"help", no_argument, 0, 'h'},
 	                                     {0, 0, 0, 0}};
-	const char *state = getenv("VMAC_STATE") ? getenv("VMAC_STATE") : DEFAULT_STATE, *scope_name = NULL,
-	           *note = "", *action;
+	const char *state = getenv("VMAC_STATE") ? getenv("VMAC_STATE") : DEFAULT_STATE, *scope_name = NULL, *note = "",
+	           *action;
 	struct vmac_store *store;
 	char err[1024];
 	int opt, rc = 0;
@@ -80,7 +83,8 @@ int vmac_token_main(int argc, char **argv)
 			return 2;
 		}
 		if (strlen(note) > VMAC_TOKEN_NOTE_MAX) {
-			fprintf(stderr, "vmac token create: --note is longer than %d characters\n", VMAC_TOKEN_NOTE_MAX);
+			fprintf(stderr, "vmac token create: --note is longer than %d characters\n",
+			        VMAC_TOKEN_NOTE_MAX);
 			return 2;
 		}
 		if (vmac_store_open(state, &store, err, sizeof(err)) != 0) {
@@ -92,8 +96,8 @@ int vmac_token_main(int argc, char **argv)
 			rc = 1;
 		} else {
 			printf("%s\n", token);
-			fprintf(stderr, "vmac token: created %s (scope %s) in %s; this is the only time it is shown\n", id,
-			        vmac_scope_name(scope), state);
+			fprintf(stderr, "vmac token: created %s (scope %s) in %s; this is the only time it is shown\n",
+			        id, vmac_scope_name(scope), state);
 		}
 	} else if (strcmp(action, "list") == 0) {
 		if (optind < argc) {

@@ -20,7 +20,6 @@
 #include "reload.h"
 #include "token.h"
 
-
 /* GET url into *out. Returns 0, or prints why and returns 1. */
 static int http_get(const char *url, struct vmac_buffer *out)
 {
@@ -83,8 +82,8 @@ static void print_status(json_t *s)
 	       json_integer_value(json_object_get(lat, "max")), json_integer_value(json_object_get(tick, "count")));
 	printf("malformed frames %lld, late replies %lld, misses %lld, drops %lld\n\n",
 	       json_integer_value(json_object_get(cnt, "malformed_frames")),
-	       json_integer_value(json_object_get(cnt, "late_replies")), json_integer_value(json_object_get(cnt, "misses")),
-	       json_integer_value(json_object_get(cnt, "drops")));
+	       json_integer_value(json_object_get(cnt, "late_replies")),
+	       json_integer_value(json_object_get(cnt, "misses")), json_integer_value(json_object_get(cnt, "drops")));
 	if (json_array_size(devices) == 0)
 		printf("no devices (start a board: vmac-board --plant lights)\n");
 	else
@@ -104,13 +103,16 @@ static void print_status(json_t *s)
 		snprintf(drv, sizeof(drv), "%s%s%s", json_string_value(json_object_get(d, "driver")),
 		         ver && ver[0] ? " " : "", ver ? ver : "");
 		if (json_is_integer(json_object_get(d, "slot")))
-			snprintf(where, sizeof(where), "%lld/%lld.%lld", json_integer_value(json_object_get(d, "level")),
-			         json_integer_value(json_object_get(d, "slot")), json_integer_value(json_object_get(d, "slice")));
+			snprintf(where, sizeof(where), "%lld/%lld.%lld",
+			         json_integer_value(json_object_get(d, "level")),
+			         json_integer_value(json_object_get(d, "slot")),
+			         json_integer_value(json_object_get(d, "slice")));
 		else
 			snprintf(where, sizeof(where), "-");
 		printf("%-16s %-18s %-10s %-10s %7lld %9lld  %-8s %-11s %-8lld  %-7s %lld\n",
-		       json_string_value(json_object_get(d, "name")), drv, json_string_value(json_object_get(d, "state")),
-		       where, json_integer_value(json_object_get(d, "misses")),
+		       json_string_value(json_object_get(d, "name")), drv,
+		       json_string_value(json_object_get(d, "state")), where,
+		       json_integer_value(json_object_get(d, "misses")),
 		       json_integer_value(json_object_get(d, "served")), din, analog,
 		       json_integer_value(json_object_get(in, "encoder")), dout,
 		       json_integer_value(json_object_get(out, "pwm")));
@@ -146,7 +148,8 @@ static void print_status(json_t *s)
 
 static int cmd_status(int argc, char **argv)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},
+	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
+	                                     {"host", required_argument, 0, 'H'},
 	                                     {"json", no_argument, 0, 'j'},
 	                                     {"token", required_argument, 0, 't'},
 	                                     {"token-file", required_argument, 0, 'f'},
@@ -218,14 +221,16 @@ static int cmd_bench(int argc, char **argv)
 	ssize_t len;
 	int i, n = 0;
 	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf("usage: vmac bench [--seconds N] [--only lateness,cost,capacity,vtest,reload,ui] [--max-boards N]\n"
-		       "                  [--out FILE]\n"
-		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
-		       "per device per tick (next to a bare sendmmsg loop), the speed of vmac test (wall time of a\n"
-		       "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
-		       "same window without), and tick lateness with 50 web UI clients (next to none). Figures are ratios to baselines run in the same run on the same\n"
-		       "machine. Needs cyclictest (Debian rt-tests) and the bare loop built by 'make bench'\n"
-		       "(build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
+		printf(
+		    "usage: vmac bench [--seconds N] [--only lateness,cost,capacity,vtest,reload,ui] [--max-boards N]\n"
+		    "                  [--out FILE]\n"
+		    "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
+		    "per device per tick (next to a bare sendmmsg loop), the speed of vmac test (wall time of a\n"
+		    "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
+		    "same window without), and tick lateness with 50 web UI clients (next to none). Figures are ratios "
+		    "to baselines run in the same run on the same\n"
+		    "machine. Needs cyclictest (Debian rt-tests) and the bare loop built by 'make bench'\n"
+		    "(build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
 		return 0;
 	}
 	vmac_root_dir(root, sizeof(root));

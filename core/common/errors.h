@@ -9,13 +9,13 @@
 
 enum vmac_err {
 	VMAC_OK = 0,
-	VMAC_EFAIL = 1,    /* anything without a code of its own: the message says what */
-	VMAC_ENOTRUNNING,  /* no running machine of that name (or the host is stopping) */
-	VMAC_EDRIVER,      /* the driver failed in the call: its machine was dropped or rolled back */
-	VMAC_EREFUSED,     /* refused: a new version a machine would not take over */
-	VMAC_EBUSY,        /* the bus thread took no request, or did not take it in time */
-	VMAC_ESTORE,       /* the store could not read or write (not a full disk) */
-	VMAC_ESTOREFULL,   /* the store could not write: its disk is full */
+	VMAC_EFAIL = 1,   /* anything without a code of its own: the message says what */
+	VMAC_ENOTRUNNING, /* no running machine of that name (or the host is stopping) */
+	VMAC_EDRIVER,     /* the driver failed in the call: its machine was dropped or rolled back */
+	VMAC_EREFUSED,    /* refused: a new version a machine would not take over */
+	VMAC_EBUSY,       /* the bus thread took no request, or did not take it in time */
+	VMAC_ESTORE,      /* the store could not read or write (not a full disk) */
+	VMAC_ESTOREFULL,  /* the store could not write: its disk is full */
 };
 
 /* A short text for code (or -code), for people. */

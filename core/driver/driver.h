@@ -23,27 +23,27 @@
 #define VMAC_DRIVER_MAX_VARS 24
 #define VMAC_DRIVER_MAX_IO 32
 #define VMAC_DRIVER_MAX_PARAMS 32
-#define VMAC_DRIVER_NAME_MAX 31  /* names of io, params, variables, commands */
+#define VMAC_DRIVER_NAME_MAX 31                /* names of io, params, variables, commands */
 #define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value */
 #define VMAC_DRIVER_VERSION_MAX 31
 #define VMAC_DRIVER_LOAD_FACTOR 50 /* loading the file gets this many budgets */
 
 /* Per-driver overrides from the host's settings (driver.NAME.KEY). */
 struct vmac_driver_setting {
-	char key[48];   /* "memory_kib", "instructions", "budget_us", "param.fill_l" */
+	char key[48]; /* "memory_kib", "instructions", "budget_us", "param.fill_l" */
 	char value[64];
 };
 
 struct vmac_driver_limits {
-	size_t memory_bytes;        /* cap on the state's heap (default 4 MiB) */
-	uint64_t instructions;      /* VM instructions per call (default 200,000) */
-	uint32_t budget_us;         /* wall-clock microseconds per call; 0 = no wall-clock limit */
-	unsigned default_level;     /* level when the manifest names none */
-	unsigned max_level;         /* highest level the scheduler has */
-	int allow_jit;              /* honour a manifest's jit = true */
-	const char *stdlib_dir;     /* where the driver's require() looks; NULL: no require */
-	const char *cycles_dir;     /* vmac.cycles() reads the .lua files here; NULL: none */
-	const char *expect_name;    /* the driver name the board announced; NULL: any */
+	size_t memory_bytes;                        /* cap on the state's heap (default 4 MiB) */
+	uint64_t instructions;                      /* VM instructions per call (default 200,000) */
+	uint32_t budget_us;                         /* wall-clock microseconds per call; 0 = no wall-clock limit */
+	unsigned default_level;                     /* level when the manifest names none */
+	unsigned max_level;                         /* highest level the scheduler has */
+	int allow_jit;                              /* honour a manifest's jit = true */
+	const char *stdlib_dir;                     /* where the driver's require() looks; NULL: no require */
+	const char *cycles_dir;                     /* vmac.cycles() reads the .lua files here; NULL: none */
+	const char *expect_name;                    /* the driver name the board announced; NULL: any */
 	const struct vmac_driver_setting *settings; /* overrides for this driver */
 	int nsettings;
 	/* Bus time in seconds, for os.clock(); NULL: 0. */
@@ -89,8 +89,8 @@ struct vmac_driver; /* opaque */
  * Returns 0 and *out, or a negative errno with err set
  * ("washer.lua:12: unexpected symbol near 'x'",
  *  "washer.lua: manifest: io.lamp: unknown channel 'do9' ..."). */
-int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
-                     char *err, size_t errlen);
+int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out, char *err,
+                     size_t errlen);
 
 /* The same from a text in memory (hot reload: a driver uploaded to the
  * host); file names it in messages ("washer.lua"). */
@@ -112,12 +112,12 @@ unsigned vmac_driver_level(const struct vmac_driver *d);
  * machine by the driver's names; docs/TESTING.md). */
 enum vmac_io_kind { VMAC_IO_DI, VMAC_IO_AI, VMAC_IO_ENCODER, VMAC_IO_DO, VMAC_IO_PWM };
 struct vmac_driver_io {
-	const char *name;      /* valid while the driver is */
+	const char *name; /* valid while the driver is */
 	enum vmac_io_kind kind;
-	unsigned channel;      /* bit of digital in/out, analog input index */
-	int has_minor;         /* 0: the primary board; 1: the board with this minor id */
+	unsigned channel; /* bit of digital in/out, analog input index */
+	int has_minor;    /* 0: the primary board; 1: the board with this minor id */
 	uint32_t minor;
-	double scale, offset;  /* analog inputs: counts * scale + offset */
+	double scale, offset; /* analog inputs: counts * scale + offset */
 };
 int vmac_driver_nio(const struct vmac_driver *d);
 void vmac_driver_io_info(const struct vmac_driver *d, int i, struct vmac_driver_io *out);

@@ -169,15 +169,16 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 				if (o && lua_toboolean(L, -1))
 					o->digital |= (uint8_t)(1u << io->channel);
 			} else if (!lua_isnil(L, -1)) {
-				snprintf(err, errlen, "%s: dev.out.%s must be true, false or nil, got %s", d->file, io->name,
-				         luaL_typename(L, -1));
+				snprintf(err, errlen, "%s: dev.out.%s must be true, false or nil, got %s", d->file,
+				         io->name, luaL_typename(L, -1));
 				rc = -1;
 			}
 		} else if (!lua_isnil(L, -1)) {
 			double pwm = lua_tonumber(L, -1);
 			if (lua_type(L, -1) != LUA_TNUMBER || !(pwm >= -VMAC_PWM_MAX && pwm <= VMAC_PWM_MAX)) {
 				snprintf(err, errlen, "%s: dev.out.%s must be a number in -1000..1000, got %s", d->file,
-				         io->name, lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1) : luaL_typename(L, -1));
+				         io->name,
+				         lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1) : luaL_typename(L, -1));
 				rc = -1;
 			} else if (o) {
 				o->pwm = (int16_t)pwm;
@@ -198,9 +199,7 @@ static int to_value(lua_State *L, struct vmac_value *v)
 	size_t n;
 	const char *s;
 	switch (lua_type(L, -1)) {
-	case LUA_TNIL:
-		v->type = VMAC_VALUE_NONE;
-		return 0;
+	case LUA_TNIL: v->type = VMAC_VALUE_NONE; return 0;
 	case LUA_TNUMBER:
 		v->type = VMAC_VALUE_NUMBER;
 		v->number = lua_tonumber(L, -1);
@@ -217,8 +216,7 @@ static int to_value(lua_State *L, struct vmac_value *v)
 		memcpy(v->str, s, n);
 		v->str[n] = 0;
 		return 0;
-	default:
-		return -1;
+	default: return -1;
 	}
 }
 
@@ -254,8 +252,8 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 		lua_rawgeti(L, keys, key_var(d, i));
 		lua_rawget(L, t);
 		if (to_value(L, &now[i]) != 0) {
-			snprintf(err, errlen, "%s: dev.vars.%s must be a number, boolean, string or nil, got %s", d->file,
-			         v->pub.name, luaL_typename(L, -1));
+			snprintf(err, errlen, "%s: dev.vars.%s must be a number, boolean, string or nil, got %s",
+			         d->file, v->pub.name, luaL_typename(L, -1));
 			lua_pop(L, 4);
 			return -1;
 		}
@@ -499,7 +497,8 @@ static int restore_param_work(struct vmac_driver *d, void *args, char *err, size
 	drv_raw_getfield(L, params, name);
 	type = lua_type(L, -1);
 	lua_pop(L, 1);
-	if ((type == LUA_TNUMBER && v->type != VMAC_VALUE_NUMBER) || (type == LUA_TBOOLEAN && v->type != VMAC_VALUE_BOOL) ||
+	if ((type == LUA_TNUMBER && v->type != VMAC_VALUE_NUMBER) ||
+	    (type == LUA_TBOOLEAN && v->type != VMAC_VALUE_BOOL) ||
 	    (type == LUA_TSTRING && v->type != VMAC_VALUE_STRING)) {
 		snprintf(a->why, a->whylen, "%s: the stored value is not a %s", name, lua_typename(L, type));
 		return 1;
@@ -523,7 +522,8 @@ int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const str
 	char err[VMAC_DRIVER_ERR_MAX];
 	int i = param_index(d, name), rc;
 	if (i < 0 || !d->params[i].persist) {
-		snprintf(why, whylen, "%s is %s", name, i < 0 ? "no longer a param of the driver" : "not persist = true");
+		snprintf(why, whylen, "%s is %s", name,
+		         i < 0 ? "no longer a param of the driver" : "not persist = true");
 		return -1;
 	}
 	memset(&a, 0, sizeof(a));

@@ -21,15 +21,15 @@
 
 #include <lauxlib.h>
 #include <lua.h>
-#include <lualib.h>
 #include <luajit.h>
+#include <lualib.h>
 #include <setjmp.h>
 #include <stddef.h>
 #include <stdint.h>
 
 #define HOOK_EVERY 1000 /* instructions between budget checks */
 #define FILE_MAX (1 << 20)
-#define REP_MAX 65536              /* bytes string.rep may build */
+#define REP_MAX 65536               /* bytes string.rep may build */
 #define PATTERN_STEPS_MAX (1 << 24) /* worst-case steps of one pattern call */
 #define EVENTS_PER_S 10
 #define HOST_RESERVE (64 * 1024) /* bytes past the cap the host's own work may use */
@@ -44,43 +44,43 @@ struct io {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
 	enum vmac_io_kind kind;
 	unsigned channel;
-	uint32_t minor;  /* board of the machine; has_minor = 0: the primary */
+	uint32_t minor; /* board of the machine; has_minor = 0: the primary */
 	int has_minor;
-	int board;       /* index into boards, -1 when that board is not attached */
+	int board; /* index into boards, -1 when that board is not attached */
 	double scale, offset;
 };
 
 struct var {
 	struct vmac_variable pub;
-	double every_s;  /* timer:N; 0 = auto */
-	int group;       /* index of the group's first variable + 1; 0 = none */
-	int settable;    /* set = true: an operator may set it */
+	double every_s; /* timer:N; 0 = auto */
+	int group;      /* index of the group's first variable + 1; 0 = none */
+	int settable;   /* set = true: an operator may set it */
 	int due;
 };
 
 struct vmac_driver {
 	lua_State *L;
 	char stdlib_dir[512], cycles_dir[600];
-	int loading;             /* require() and vmac.cycles() read files only while loading */
-	size_t used, cap;        /* heap accounting of the counting allocator */
-	uint64_t budget_hooks;   /* hook calls allowed per guarded call */
-	uint64_t hooks;          /* hook calls so far in this call */
+	int loading;                    /* require() and vmac.cycles() read files only while loading */
+	size_t used, cap;               /* heap accounting of the counting allocator */
+	uint64_t budget_hooks;          /* hook calls allowed per guarded call */
+	uint64_t hooks;                 /* hook calls so far in this call */
 	int64_t budget_ns, deadline_ns; /* wall-clock budget per call; 0 = none */
-	int overrun;             /* budget exceeded: keep raising until the call unwinds */
+	int overrun;                    /* budget exceeded: keep raising until the call unwinds */
 	char overrun_msg[96];
-	int in_driver;           /* driver code runs now: the cap holds without the host's reserve */
-	int mem_refused;         /* an allocation was refused while driver code ran (sticky for the call) */
+	int in_driver;              /* driver code runs now: the cap holds without the host's reserve */
+	int mem_refused;            /* an allocation was refused while driver code ran (sticky for the call) */
 	int ref_job, ref_traceback; /* drv_protect()'s entry and the traceback handler, made once */
-	jmp_buf panic_jmp;       /* where the atpanic handler returns to (panic_armed) */
+	jmp_buf panic_jmp;          /* where the atpanic handler returns to (panic_armed) */
 	int panic_armed;
-	int broken;              /* an error escaped protection: the state is never touched again */
+	int broken; /* an error escaped protection: the state is never touched again */
 	char broken_msg[200];
-	int failed;              /* the host's work on it failed where no caller hears (failure says why): */
+	int failed;                        /* the host's work on it failed where no caller hears (failure says why): */
 	char failure[VMAC_DRIVER_ERR_MAX]; /* the next call that reports errors fails with it */
 	int ref_tick, ref_attach, ref_input, ref_detach, ref_migrate; /* registry refs, LUA_NOREF if absent */
 	int ref_manifest, ref_dev, ref_inputs, ref_out, ref_vars, ref_params;
-	int ref_keys; /* the names a tick reads and writes, interned once (key_*) */
-	char file[64];           /* file name, for messages */
+	int ref_keys;  /* the names a tick reads and writes, interned once (key_*) */
+	char file[64]; /* file name, for messages */
 	char name[VMAC_NAME_MAX + 1];
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
 	unsigned level, max_level;
@@ -100,10 +100,10 @@ struct vmac_driver {
 	struct vmac_driver_host host;
 	double (*clock)(void *ctx);
 	void *clock_ctx;
-	double now_s;            /* bus time of the current call */
-	double event_window_s;   /* dev:event rate limit */
-	int64_t tag;             /* the host's (vmac_driver_set_tag) */
-	char *describe;          /* the manifest's declarations as JSON (vmac_driver_describe) */
+	double now_s;          /* bus time of the current call */
+	double event_window_s; /* dev:event rate limit */
+	int64_t tag;           /* the host's (vmac_driver_set_tag) */
+	char *describe;        /* the manifest's declarations as JSON (vmac_driver_describe) */
 	int events_in_window;
 };
 
@@ -112,12 +112,31 @@ struct vmac_driver {
 typedef int (*host_work)(struct vmac_driver *d, void *args, char *err, size_t errlen);
 
 /* The keys of a tick, by index into the keys table (load.c, make_keys). */
-static inline int key_io(const struct vmac_driver *d, int i) { (void)d; return i + 1; }
-static inline int key_var(const struct vmac_driver *d, int i) { return d->nio + i + 1; }
-static inline int key_time(const struct vmac_driver *d) { return d->nio + d->nvars + 1; }
-static inline int key_out(const struct vmac_driver *d) { return d->nio + d->nvars + 2; }
-static inline int key_vars(const struct vmac_driver *d) { return d->nio + d->nvars + 3; }
-static inline int key_state(const struct vmac_driver *d) { return d->nio + d->nvars + 4; }
+static inline int key_io(const struct vmac_driver *d, int i)
+{
+	(void)d;
+	return i + 1;
+}
+static inline int key_var(const struct vmac_driver *d, int i)
+{
+	return d->nio + i + 1;
+}
+static inline int key_time(const struct vmac_driver *d)
+{
+	return d->nio + d->nvars + 1;
+}
+static inline int key_out(const struct vmac_driver *d)
+{
+	return d->nio + d->nvars + 2;
+}
+static inline int key_vars(const struct vmac_driver *d)
+{
+	return d->nio + d->nvars + 3;
+}
+static inline int key_state(const struct vmac_driver *d)
+{
+	return d->nio + d->nvars + 4;
+}
 
 /* protect.c */
 int64_t drv_mono_ns(void);

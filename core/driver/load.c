@@ -119,8 +119,8 @@ static void make_dev(struct vmac_driver *d)
 	make_keys(d);
 }
 
-int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out,
-                     char *err, size_t errlen)
+int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, struct vmac_driver **out, char *err,
+                     size_t errlen)
 {
 	const char *base = strrchr(path, '/');
 	size_t len = 0;
@@ -181,7 +181,7 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	}
 	if (drv_parse_manifest(d, a->limits, err, errlen) != 0)
 		return -1;
-	make_dev(d);                                     /* consumes params */
+	make_dev(d);                                      /* consumes params */
 	d->ref_manifest = luaL_ref(L, LUA_REGISTRYINDEX); /* the driver table */
 	d->describe = drv_describe(d);
 	if (d->jit)
@@ -226,8 +226,10 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 		else if (strcmp(k, "budget_us") == 0 && *end == 0 && x >= 0 && x <= 1e7)
 			d->budget_ns = (int64_t)x * 1000;
 		else if (strncmp(k, "param.", 6) != 0) {
-			snprintf(err, errlen, "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
-			         "instructions, budget_us, param.NAME)", limits->expect_name ? limits->expect_name : "?", k, v);
+			snprintf(err, errlen,
+			         "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
+			         "instructions, budget_us, param.NAME)",
+			         limits->expect_name ? limits->expect_name : "?", k, v);
 			free(d);
 			return -EINVAL;
 		}

@@ -121,10 +121,11 @@ static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
 			lua_pop(L, 1); /* the string stays alive in the spec table */
 			if (!chan)
 				BAD("io.%s: the first element must be the channel (%s)", io->name, CHANNELS_TEXT);
-			if (opt_number(L, spec, "scale", 1, &io->scale) || opt_number(L, spec, "offset", 0, &io->offset))
+			if (opt_number(L, spec, "scale", 1, &io->scale) ||
+			    opt_number(L, spec, "offset", 0, &io->offset))
 				BAD("io.%s: scale and offset must be numbers", io->name);
-			if (opt_number(L, spec, "board", -1, &minor) || (minor != -1 && (minor < 0 || minor > 4294967295.0 ||
-			                                                                  minor != floor(minor))))
+			if (opt_number(L, spec, "board", -1, &minor) ||
+			    (minor != -1 && (minor < 0 || minor > 4294967295.0 || minor != floor(minor))))
 				BAD("io.%s: board must be the minor id of a board of this machine", io->name);
 			if (minor >= 0) {
 				io->has_minor = 1;
@@ -140,8 +141,8 @@ static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
 			BAD("io.%s: outputs take no scale or offset", io->name);
 		for (j = 0; j < d->nio; j++) {
 			struct io *o = &d->io[j];
-			if ((io->kind == IO_DO || io->kind == IO_PWM) && o->kind == io->kind && o->channel == io->channel &&
-			    o->has_minor == io->has_minor && o->minor == io->minor)
+			if ((io->kind == IO_DO || io->kind == IO_PWM) && o->kind == io->kind &&
+			    o->channel == io->channel && o->has_minor == io->has_minor && o->minor == io->minor)
 				BAD("io.%s: output %s is already io.%s", io->name, chan, o->name);
 		}
 		d->nio++;
@@ -210,8 +211,7 @@ int drv_check_value(lua_State *L, int s, char *why, size_t len)
 
 /* params -> the dev.params table (on top on success): defaults, then the
  * host's overrides, each checked against its range. */
-static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_limits *lim, char *err,
-                        size_t errlen)
+static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_limits *lim, char *err, size_t errlen)
 {
 	lua_State *L = d->L;
 	int values, n = 0;
@@ -248,12 +248,13 @@ static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_l
 			if (type == LUA_TNUMBER) {
 				x = strtod(over, &end);
 				if (end == over || *end || x != x)
-					BAD("params.%s: host setting driver.%s.%s = '%s' is not a number", name, d->name, key, over);
+					BAD("params.%s: host setting driver.%s.%s = '%s' is not a number", name,
+					    d->name, key, over);
 				lua_pushnumber(L, x);
 			} else if (type == LUA_TBOOLEAN) {
 				if (strcmp(over, "true") && strcmp(over, "false"))
-					BAD("params.%s: host setting driver.%s.%s = '%s' is not true or false", name, d->name, key,
-					    over);
+					BAD("params.%s: host setting driver.%s.%s = '%s' is not true or false", name,
+					    d->name, key, over);
 				lua_pushboolean(L, over[0] == 't');
 			} else {
 				lua_pushstring(L, over);
@@ -272,18 +273,17 @@ static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_l
 		lua_pop(L, 2);
 	}
 	lua_pop(L, 1);
-overrides:
-	{
-		int i;
-		for (i = 0; i < lim->nsettings; i++)
-			if (strncmp(lim->settings[i].key, "param.", 6) == 0) {
-				lua_getfield(L, values, lim->settings[i].key + 6);
-				if (lua_isnil(L, -1))
-					BAD("host setting driver.%s.%s: the driver has no param '%s'", d->name,
-					    lim->settings[i].key, lim->settings[i].key + 6);
-				lua_pop(L, 1);
-			}
-	}
+overrides : {
+	int i;
+	for (i = 0; i < lim->nsettings; i++)
+		if (strncmp(lim->settings[i].key, "param.", 6) == 0) {
+			lua_getfield(L, values, lim->settings[i].key + 6);
+			if (lua_isnil(L, -1))
+				BAD("host setting driver.%s.%s: the driver has no param '%s'", d->name,
+				    lim->settings[i].key, lim->settings[i].key + 6);
+			lua_pop(L, 1);
+		}
+}
 	return 0;
 }
 
@@ -321,7 +321,8 @@ static int parse_variables(struct vmac_driver *d, int t, char *err, size_t errle
 			char *end;
 			if (strncmp(update, "timer:", 6) != 0 || (v->every_s = strtod(update + 6, &end), *end) ||
 			    !(v->every_s > 0 && v->every_s <= 86400))
-				BAD("variables.%s: update must be \"auto\" or \"timer:N\" with 0 < N <= 86400 seconds, not '%s'",
+				BAD("variables.%s: update must be \"auto\" or \"timer:N\" with 0 < N <= 86400 seconds, "
+				    "not '%s'",
 				    v->pub.name, update);
 		}
 		if (opt_string(L, s, "group", group, sizeof(group)) || (group[0] && !valid_name(group)))
@@ -432,8 +433,8 @@ static int callback_ref(struct vmac_driver *d, int t, const char *name, int requ
 
 int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *lim, char *err, size_t errlen)
 {
-	static const char *const known[] = {"name", "version", "level", "description", "io", "params", "variables",
-	                                    "commands", "ui", "jit", NULL};
+	static const char *const known[] = {"name",      "version",  "level", "description", "io", "params",
+	                                    "variables", "commands", "ui",    "jit",         NULL};
 	lua_State *L = d->L;
 	int t = lua_gettop(L), params;
 	double level;
@@ -470,13 +471,13 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 			for (k = known; *k && !ok; k++)
 				ok = strcmp(*k, lua_tostring(L, -2)) == 0;
 		if (!ok)
-			BAD("unknown field '%s' (manifest fields: name, version, level, description, io, params, variables, "
+			BAD("unknown field '%s' (manifest fields: name, version, level, description, io, params, "
+			    "variables, "
 			    "commands, ui, jit; and functions)",
 			    lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : luaL_typename(L, -2));
 		lua_pop(L, 1);
 	}
-	if (parse_io(d, t, err, errlen) || parse_variables(d, t, err, errlen) ||
-	    parse_params(d, t, lim, err, errlen))
+	if (parse_io(d, t, err, errlen) || parse_variables(d, t, err, errlen) || parse_params(d, t, lim, err, errlen))
 		return -1;
 	params = lua_gettop(L);
 	if (check_names(d, t, params, err, errlen) || callback_ref(d, t, "tick", 1, err, errlen, &d->ref_tick) ||

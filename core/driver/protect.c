@@ -126,7 +126,8 @@ int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned fa
 	if (rc != 0 || d->overrun || d->mem_refused) {
 		/* The traceback names the file and line; when the driver swallowed
 		 * the error (rc 0) there is none, only what happened. */
-		const char *trace = rc != 0 && rc != LUA_ERRMEM && lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
+		const char *trace =
+		    rc != 0 && rc != LUA_ERRMEM && lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
 		if (rc == LUA_ERRMEM || d->mem_refused) {
 			char what[160];
 			memory_message(d, what, sizeof(what));
@@ -216,12 +217,15 @@ int drv_protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, 
 	d->in_driver = 0;
 	if (rc != 0) {
 		if (rc == LUA_ERRMEM)
-			snprintf(err, errlen, "%s: memory cap exceeded while the host worked on its state (the cap is %zu "
-			         "KiB)", d->file, d->cap / 1024);
+			snprintf(err, errlen,
+			         "%s: memory cap exceeded while the host worked on its state (the cap is %zu "
+			         "KiB)",
+			         d->file, d->cap / 1024);
 		else if (d->overrun)
 			snprintf(err, errlen, "%s", d->overrun_msg);
 		else
-			snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "unknown error");
+			snprintf(err, errlen, "%s",
+			         lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "unknown error");
 		job.rc = -1;
 	}
 	lua_settop(L, 0);

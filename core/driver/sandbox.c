@@ -101,8 +101,9 @@ static int safe_pattern(lua_State *L)
 	p = luaL_checklstring(L, 2, &plen);
 	if (!(lua_gettop(L) >= 4 && lua_toboolean(L, 4) && lua_tocfunction(L, lua_upvalueindex(2)) != NULL) &&
 	    pattern_cost(p, plen, n) > PATTERN_STEPS_MAX)
-		return luaL_error(L, "pattern too costly for a %d-byte subject (worst case over %d steps): "
-		                     "use fewer '*', '+', '-' or a shorter string",
+		return luaL_error(L,
+		                  "pattern too costly for a %d-byte subject (worst case over %d steps): "
+		                  "use fewer '*', '+', '-' or a shorter string",
 		                  (int)n, PATTERN_STEPS_MAX);
 	lua_pushvalue(L, lua_upvalueindex(1));
 	lua_insert(L, 1);
@@ -240,8 +241,8 @@ static int sandbox_require(lua_State *L)
 	if (strlen(name) != nlen || !drv_valid_module_name(name, 40))
 		return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_], at most 40)", name);
 	if (!d->loading)
-		return luaL_error(L, "require '%s': modules can only be required when the driver loads (top of the file)",
-		                  name);
+		return luaL_error(
+		    L, "require '%s': modules can only be required when the driver loads (top of the file)", name);
 	if (!d->stdlib_dir[0])
 		return luaL_error(L, "require '%s': no standard library configured", name);
 	snprintf(path, sizeof(path), "%s/%s.lua", d->stdlib_dir, name);
@@ -313,8 +314,8 @@ static void copy_fields(lua_State *L, int src, const char *const *names)
 /* Replace the table on top with a read-only view of it: [-1, +1]. */
 static void make_read_only(lua_State *L)
 {
-	lua_newtable(L);                 /* lib, proxy */
-	lua_createtable(L, 0, 3);        /* lib, proxy, mt */
+	lua_newtable(L);          /* lib, proxy */
+	lua_createtable(L, 0, 3); /* lib, proxy, mt */
 	lua_pushvalue(L, -3);
 	lua_setfield(L, -2, "__index");
 	lua_pushcfunction(L, read_only);
@@ -357,19 +358,19 @@ static void wrap_field(lua_State *L, const char *lib, const char *name, lua_CFun
  * list to luacheck (vmac_driver_allowed). A name LuaJIT lacks (rawlen,
  * without its 5.2 extensions) is copied as nil. Adding a name here is
  * widening the sandbox: the escape corpus (tests/escape) must still fail. */
-static const char *const allow_base[] = {"assert", "error", "ipairs", "pairs", "next", "select", "tonumber",
-                                         "tostring", "type", "unpack", "rawequal", "rawget", "rawlen",
-                                         "setmetatable", "getmetatable", NULL};
+static const char *const allow_base[] = {"assert",   "error",        "ipairs",       "pairs",  "next",     "select",
+                                         "tonumber", "tostring",     "type",         "unpack", "rawequal", "rawget",
+                                         "rawlen",   "setmetatable", "getmetatable", NULL};
 static const char *const allow_base_own[] = {"pcall", "xpcall", "rawset", "require", "_G", NULL};
 static const char *const allow_str[] = {"byte", "char", "format", "len", "lower", "reverse", "sub", "upper", NULL};
 static const char *const allow_str_own[] = {"rep", "find", "match", "gmatch", "gsub", NULL}; /* bounded */
 static const char *const allow_tab[] = {"concat", "insert", "remove", "sort", "maxn", NULL};
-static const char *const allow_math[] = {"abs", "ceil", "floor", "max", "min", "sqrt", "exp", "log", "log10",
-                                         "pow", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "fmod",
-                                         "modf", "huge", "pi", "random", "randomseed", "frexp", "ldexp", "sinh",
-                                         "cosh", "tanh", "deg", "rad", NULL};
-static const char *const allow_bit[] = {"tobit", "tohex", "bnot", "band", "bor", "bxor", "lshift", "rshift",
-                                        "arshift", "rol", "ror", "bswap", NULL};
+static const char *const allow_math[] = {"abs",   "ceil", "floor", "max",  "min", "sqrt",   "exp",        "log",
+                                         "log10", "pow",  "sin",   "cos",  "tan", "asin",   "acos",       "atan",
+                                         "atan2", "fmod", "modf",  "huge", "pi",  "random", "randomseed", "frexp",
+                                         "ldexp", "sinh", "cosh",  "tanh", "deg", "rad",    NULL};
+static const char *const allow_bit[] = {"tobit",  "tohex",   "bnot", "band", "bor",   "bxor", "lshift",
+                                        "rshift", "arshift", "rol",  "ror",  "bswap", NULL};
 /* resume is the host's: like pcall it catches errors, so it must re-raise a
  * budget overrun. wrap re-raises every error by itself. */
 static const char *const allow_co[] = {"create", "yield", "status", "wrap", "running", NULL};
@@ -379,15 +380,9 @@ static const char *const allow_vmac_own[] = {"cycles", "version", NULL};
 static const char *const allow_none[] = {NULL};
 
 const struct vmac_driver_lib vmac_driver_allowed[] = {
-    {NULL, allow_base, allow_base_own},
-    {"string", allow_str, allow_str_own},
-    {"table", allow_tab, allow_none},
-    {"math", allow_math, allow_none},
-    {"bit", allow_bit, allow_none},
-    {"coroutine", allow_co, allow_co_own},
-    {"os", allow_none, allow_os_own},
-    {"vmac", allow_none, allow_vmac_own},
-    {NULL, NULL, NULL},
+    {NULL, allow_base, allow_base_own}, {"string", allow_str, allow_str_own}, {"table", allow_tab, allow_none},
+    {"math", allow_math, allow_none},   {"bit", allow_bit, allow_none},       {"coroutine", allow_co, allow_co_own},
+    {"os", allow_none, allow_os_own},   {"vmac", allow_none, allow_vmac_own}, {NULL, NULL, NULL},
 };
 
 /* Build the driver's global table from nothing, exactly vmac_driver_allowed:

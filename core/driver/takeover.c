@@ -26,10 +26,10 @@ enum { COPY_PARAMS, COPY_STATE };
  * through the other's protected call. */
 struct copy {
 	struct vmac_driver *from, *to;
-	int what;     /* COPY_PARAMS, or COPY_STATE: dev.out and dev.state */
-	int seen;     /* index in to: a table old table -> new table */
+	int what; /* COPY_PARAMS, or COPY_STATE: dev.out and dev.state */
+	int seen; /* index in to: a table old table -> new table */
 	int entries;
-	int ref;      /* COPY_STATE: the copy of dev.state, in to's registry */
+	int ref; /* COPY_STATE: the copy of dev.state, in to's registry */
 	char why[120];
 };
 
@@ -91,20 +91,14 @@ static int copy_value(struct copy *c, int i, int depth)
 	size_t n;
 	const char *s;
 	switch (lua_type(F, i)) {
-	case LUA_TBOOLEAN:
-		lua_pushboolean(T, lua_toboolean(F, i));
-		return 0;
-	case LUA_TNUMBER:
-		lua_pushnumber(T, lua_tonumber(F, i));
-		return 0;
+	case LUA_TBOOLEAN: lua_pushboolean(T, lua_toboolean(F, i)); return 0;
+	case LUA_TNUMBER: lua_pushnumber(T, lua_tonumber(F, i)); return 0;
 	case LUA_TSTRING:
 		s = lua_tolstring(F, i, &n);
 		lua_pushlstring(T, s, n);
 		return 0;
-	case LUA_TTABLE:
-		return copy_table(c, i, depth);
-	default:
-		return 1;
+	case LUA_TTABLE: return copy_table(c, i, depth);
+	default: return 1;
 	}
 }
 
@@ -131,7 +125,8 @@ static void copy_fields_typed(struct copy *c, int ref_from, int ref_to, int outp
 	lua_pushnil(F);
 	while (lua_next(F, f)) {
 		int type = lua_type(F, -1);
-		if (lua_type(F, -2) == LUA_TSTRING && (type == LUA_TBOOLEAN || type == LUA_TNUMBER || type == LUA_TSTRING)) {
+		if (lua_type(F, -2) == LUA_TSTRING &&
+		    (type == LUA_TBOOLEAN || type == LUA_TNUMBER || type == LUA_TSTRING)) {
 			const char *k = lua_tostring(F, -2);
 			int ok;
 			if (outputs) {

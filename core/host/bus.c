@@ -27,9 +27,9 @@
 #include "../common/errors.h"
 #include "../sched/sched.h"
 
-const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS] = {
-    "short", "magic", "version", "length", "op", "payload", "name", "value",
-    "not_reply", "stale_seq", "unknown_sender"};
+const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS] = {"short",     "magic",     "version",       "length",
+                                                                   "op",        "payload",   "name",          "value",
+                                                                   "not_reply", "stale_seq", "unknown_sender"};
 
 /* The bus clock: CLOCK_MONOTONIC, or the caller's in virtual mode. */
 int64_t bus_now(const struct vmac_bus *bus)
@@ -114,8 +114,8 @@ static void malformed(struct vmac_bus *bus, const struct vmac_packet *p, int rea
 		return;
 	}
 	bus_event(bus, NULL, "malformed", "malformed frame from %s: %s (%llu more since the last report)",
-	      vmac_addr_format(&p->addr, addr, sizeof(addr)), vmac_malformed_reason_names[reason],
-	      (unsigned long long)bus->malformed_suppressed);
+	          vmac_addr_format(&p->addr, addr, sizeof(addr)), vmac_malformed_reason_names[reason],
+	          (unsigned long long)bus->malformed_suppressed);
 	bus->malformed_suppressed = 0;
 	bus->last_malformed_log_ns = now;
 }
@@ -143,8 +143,8 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 		snprintf(why, sizeof(why), "board refused %s (error %u: %s)",
 		         vmac_proto_opname(VMAC_CH_DEVICE, m->u.error.op), (unsigned)m->u.error.code,
 		         m->u.error.code == VMAC_BERR_NOT_REGISTERED ? "session lost"
-		         : m->u.error.code == VMAC_BERR_IDENTITY    ? "identity mismatch"
-		                                                   : "bad request");
+		         : m->u.error.code == VMAC_BERR_IDENTITY     ? "identity mismatch"
+		                                                     : "bad request");
 		bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", why);
 		return;
 	}
@@ -153,9 +153,10 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 		if (m->op != VMAC_OP_REGISTER)
 			return;
 		d->state = DEV_RUNNING;
-		bus_event(bus, d, "attached", "%s attached: driver %s %s, major %u minor %u, level %u, at %s", d->ann.board,
-		      d->ann.driver, vmac_driver_version(bus->mach[d->mach].drv), (unsigned)d->ann.major,
-		      (unsigned)d->ann.minor, bus->mach[d->mach].level, vmac_addr_format(&d->addr, why, sizeof(why)));
+		bus_event(bus, d, "attached", "%s attached: driver %s %s, major %u minor %u, level %u, at %s",
+		          d->ann.board, d->ann.driver, vmac_driver_version(bus->mach[d->mach].drv),
+		          (unsigned)d->ann.major, (unsigned)d->ann.minor, bus->mach[d->mach].level,
+		          vmac_addr_format(&d->addr, why, sizeof(why)));
 		if (bus_slot_of(bus, d) == bus->mach[d->mach].primary && !bus->mach[d->mach].attached) {
 			struct machine *mm = &bus->mach[d->mach];
 			char err[VMAC_DRIVER_ERR_MAX];
@@ -179,12 +180,12 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 	case DEV_RUNNING:
 		if (m->op == VMAC_OP_UPDATE) {
 			d->inputs = m->u.inputs;
-			if (d->mach >= 0 && bus->mach[d->mach].primary == bus_slot_of(bus, d) && bus->mach[d->mach].attached)
+			if (d->mach >= 0 && bus->mach[d->mach].primary == bus_slot_of(bus, d) &&
+			    bus->mach[d->mach].attached)
 				bus_run_machine(bus, &bus->mach[d->mach]);
 		}
 		break;
-	default:
-		break;
+	default: break;
 	}
 }
 
@@ -460,8 +461,10 @@ static void try_realtime(struct vmac_bus *bus)
 	}
 #endif
 	if (what)
-		bus_event(bus, NULL, "warning", "real-time setup refused (%s: %s); running with normal scheduling, "
-		      "tick lateness will be higher", what, strerror(rc));
+		bus_event(bus, NULL, "warning",
+		          "real-time setup refused (%s: %s); running with normal scheduling, "
+		          "tick lateness will be higher",
+		          what, strerror(rc));
 }
 
 static void *bus_main(void *arg)

@@ -10,8 +10,8 @@
 #include <stdint.h>
 
 #include "../common/errors.h"
-#include "../transport/transport.h"
 #include "../driver/driver.h"
+#include "../transport/transport.h"
 #include "config.h"
 #include "hist.h"
 #include "ring.h"
@@ -20,29 +20,29 @@
 
 /* Bus thread -> main thread. */
 enum vmac_bus_msg_kind {
-	VMAC_MSG_EVENT,    /* something to record and show */
-	VMAC_MSG_LOAD,     /* please load driver `driver` for device slot/generation */
-	VMAC_MSG_UNLOAD,   /* free this driver (closing a Lua state is slow) */
-	VMAC_MSG_STOPPED,  /* every board told to go safe; the bus thread is done */
+	VMAC_MSG_EVENT,   /* something to record and show */
+	VMAC_MSG_LOAD,    /* please load driver `driver` for device slot/generation */
+	VMAC_MSG_UNLOAD,  /* free this driver (closing a Lua state is slow) */
+	VMAC_MSG_STOPPED, /* every board told to go safe; the bus thread is done */
 };
 
 /* What the main thread does with a VMAC_MSG_EVENT beyond recording it; the
  * event's kind (text) is for people and the event log. */
 enum vmac_event_code {
-	VMAC_EVENT_RECORD = 0,   /* only recorded */
-	VMAC_EVENT_ROLLED_BACK,  /* a version on probation failed and went back: the store records it (version_id) */
+	VMAC_EVENT_RECORD = 0,  /* only recorded */
+	VMAC_EVENT_ROLLED_BACK, /* a version on probation failed and went back: the store records it (version_id) */
 };
 
 struct vmac_bus_msg {
 	enum vmac_bus_msg_kind kind;
-	enum vmac_event_code code;    /* VMAC_MSG_EVENT */
+	enum vmac_event_code code; /* VMAC_MSG_EVENT */
 	int64_t time_ns;
 	uint32_t slot, generation;
 	struct vmac_driver *drv;
 	char device[VMAC_NAME_MAX + 1];
 	char driver[VMAC_NAME_MAX + 1];
-	char event_kind[24];          /* attached, dropped, driver_missing, ... */
-	int64_t version_id;           /* rolled_back: the store's id of the version that failed */
+	char event_kind[24]; /* attached, dropped, driver_missing, ... */
+	int64_t version_id;  /* rolled_back: the store's id of the version that failed */
 	char text[VMAC_EVENT_TEXT];
 };
 
@@ -65,14 +65,14 @@ struct vmac_device_status {
 	char name[VMAC_NAME_MAX + 1];
 	char driver[VMAC_NAME_MAX + 1];
 	char driver_version[VMAC_DRIVER_VERSION_MAX + 1]; /* "" when no driver runs it */
-	char machine[VMAC_NAME_MAX + 1]; /* the primary board's name ("" when none) */
-	char note[200];    /* why it is not running, e.g. "schedule full: ..." */
-	const char *state; /* attaching, running, sleeping, errant */
-	int scheduled;     /* level, slot, slice are valid */
+	char machine[VMAC_NAME_MAX + 1];                  /* the primary board's name ("" when none) */
+	char note[200];                                   /* why it is not running, e.g. "schedule full: ..." */
+	const char *state;                                /* attaching, running, sleeping, errant */
+	int scheduled;                                    /* level, slot, slice are valid */
 	unsigned level, slot, slice;
-	int nvars;         /* published variables (primary board only) */
+	int nvars; /* published variables (primary board only) */
 	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
-	int nparams;       /* the driver's params and their values now (primary board only) */
+	int nparams; /* the driver's params and their values now (primary board only) */
 	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
 	char address[48];
 	uint32_t id, major, minor;
@@ -86,18 +86,27 @@ struct vmac_device_status {
 struct vmac_bus_counters {
 	uint64_t malformed_frames; /* every datagram dropped as malformed, all reasons */
 	uint64_t malformed_by_reason[12];
-	uint64_t late_replies;     /* right sequence, but after the deadline (a miss) */
+	uint64_t late_replies; /* right sequence, but after the deadline (a miss) */
 	uint64_t misses, drops, discoveries, announces;
 	uint64_t ticks, ticks_skipped;
-	uint64_t events_lost;      /* event ring full */
+	uint64_t events_lost; /* event ring full */
 	uint64_t table_full;
 	uint64_t schedule_full; /* devices refused by admission control */
 };
 
 /* Indexes of malformed_by_reason. */
 enum vmac_malformed_reason {
-	VMAC_BAD_SHORT, VMAC_BAD_MAGIC, VMAC_BAD_VERSION, VMAC_BAD_LENGTH, VMAC_BAD_OP, VMAC_BAD_PAYLOAD,
-	VMAC_BAD_NAME, VMAC_BAD_VALUE, VMAC_BAD_NOT_REPLY, VMAC_BAD_STALE_SEQ, VMAC_BAD_UNKNOWN_SENDER,
+	VMAC_BAD_SHORT,
+	VMAC_BAD_MAGIC,
+	VMAC_BAD_VERSION,
+	VMAC_BAD_LENGTH,
+	VMAC_BAD_OP,
+	VMAC_BAD_PAYLOAD,
+	VMAC_BAD_NAME,
+	VMAC_BAD_VALUE,
+	VMAC_BAD_NOT_REPLY,
+	VMAC_BAD_STALE_SEQ,
+	VMAC_BAD_UNKNOWN_SENDER,
 	VMAC_BAD_REASONS
 };
 extern const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS];
@@ -114,7 +123,7 @@ struct vmac_status {
 	/* The schedule (docs/SCHEDULER.md). */
 	unsigned slices_per_slot, slots_per_block, slot_us;
 	unsigned capacity_used, capacity_total; /* slice-slots per block */
-	uint16_t *slot_load; /* slots_per_block entries: devices serviced in each slot */
+	uint16_t *slot_load;                    /* slots_per_block entries: devices serviced in each slot */
 };
 
 struct vmac_bus; /* opaque */

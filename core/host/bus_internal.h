@@ -14,20 +14,20 @@
 
 #define RX_BATCH 64
 
-#define STATUS_EVERY_NS 100000000LL   /* publish status at most every 100 ms */
+#define STATUS_EVERY_NS 100000000LL /* publish status at most every 100 ms */
 
 #define MALFORMED_LOG_EVERY_NS 1000000000LL
 
-#define STOP_GRACE_PERIODS 3          /* wait this long for SHUTDOWN acks */
+#define STOP_GRACE_PERIODS 3 /* wait this long for SHUTDOWN acks */
 
 enum dev_state {
 	DEV_FREE,
 	DEV_LOADING,     /* announce seen, driver being loaded on the main thread */
 	DEV_REGISTERING, /* REGISTER sent or to be sent */
 	DEV_RUNNING,
-	DEV_TO_SLEEP,    /* registered only to be told to SLEEP (no driver) */
+	DEV_TO_SLEEP, /* registered only to be told to SLEEP (no driver) */
 	DEV_SLEEPING,
-	DEV_ERRANT,      /* dropped; waits for the board to announce again */
+	DEV_ERRANT, /* dropped; waits for the board to announce again */
 };
 
 /* A machine: the boards that share a driver name and major id, run by one
@@ -37,11 +37,11 @@ struct machine {
 	struct vmac_driver *drv; /* NULL while loading */
 	char driver[VMAC_NAME_MAX + 1];
 	uint32_t major;
-	uint32_t primary;        /* device slot of the primary board */
+	uint32_t primary;                       /* device slot of the primary board */
 	uint32_t board[VMAC_DRIVER_MAX_BOARDS]; /* device slots, in the driver's board order */
 	int nboards;
 	unsigned level;
-	int attached;            /* attach() has run */
+	int attached; /* attach() has run */
 	/* Hot reload: the instance drv took over from, kept while drv is on
 	 * probation (until probation_end_ns) to roll back to if drv fails. */
 	struct vmac_driver *prev;
@@ -51,13 +51,13 @@ struct machine {
 
 struct device {
 	enum dev_state state;
-	int mach;          /* index into bus->mach, -1 when none */
-	int scheduled;     /* admitted to the schedule */
+	int mach;                /* index into bus->mach, -1 when none */
+	int scheduled;           /* admitted to the schedule */
 	int64_t reply_window_ns; /* its reply deadline: the configured one, at most its period */
-	uint16_t aside_seq;     /* a request sent without awaiting its answer (WATCHDOG) */
-	uint16_t watchdog_ms;   /* what the board was told */
-	uint16_t want_watchdog; /* a longer one to send before the next UPDATE (slower level) */
-	char note[200];         /* why it is not running ("schedule full: ...") */
+	uint16_t aside_seq;      /* a request sent without awaiting its answer (WATCHDOG) */
+	uint16_t watchdog_ms;    /* what the board was told */
+	uint16_t want_watchdog;  /* a longer one to send before the next UPDATE (slower level) */
+	char note[200];          /* why it is not running ("schedule full: ...") */
 	uint16_t generation;
 	uint32_t id; /* generation << 16 | slot */
 	struct vmac_announce ann;
@@ -67,7 +67,7 @@ struct device {
 	uint16_t seq;
 	uint16_t missed_seq;   /* the request whose deadline passed last (its late reply is no stranger) */
 	uint16_t courtesy_seq; /* the SHUTDOWN/SLEEP sent on dropping, whose answer nobody awaits */
-	int pending;       /* a request is out, no reply yet */
+	int pending;           /* a request is out, no reply yet */
 	uint8_t pending_op;
 	int64_t sent_ns;
 	uint32_t consecutive_misses;
@@ -116,8 +116,8 @@ struct vmac_bus {
 	struct machine *mach;
 	struct vmac_sched *sched;
 	struct vmac_sched_entry *slot_entries;
-	int64_t slot_ns;        /* one slot: the tick's period */
-	uint64_t slots_done;    /* slots handed to the scheduler so far */
+	int64_t slot_ns;     /* one slot: the tick's period */
+	uint64_t slots_done; /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;
 	int64_t next_probation_ns; /* next look for reloads whose probation is over */
@@ -147,7 +147,6 @@ struct vmac_bus {
 	struct vmac_bus_link link;
 };
 
-
 /* bus.c */
 int64_t bus_now(const struct vmac_bus *bus);
 double bus_time(const struct vmac_bus *bus);
@@ -164,7 +163,8 @@ void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, c
 void bus_requests(struct vmac_bus *bus);
 void bus_commands(struct vmac_bus *bus);
 void bus_on_cmd(struct ev_loop *loop, ev_async *w, int revents);
-int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv, int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms);
+int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
+                int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms);
 
 /* devices.c */
 void bus_unload(struct vmac_bus *bus, struct vmac_driver *drv);
@@ -184,7 +184,8 @@ struct device *bus_find_by_name(struct vmac_bus *bus, const char *name);
 
 /* ../reload/swap.c */
 int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why);
-int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply, size_t replylen);
+int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
+             size_t replylen);
 void bus_end_probations(struct vmac_bus *bus, int64_t now);
 
 /* status.c */

@@ -98,8 +98,10 @@ static int set_driver(struct vmac_config *c, const char *name, const char *value
 	size_t dlen = dot ? (size_t)(dot - drv) : 0;
 	int i;
 	if (!dot || dlen == 0 || dlen > VMAC_NAME_MAX || !dot[1] || strlen(dot + 1) >= sizeof(x->s.key)) {
-		snprintf(err, errlen, "'%s': expected driver.NAME.KEY (KEY: memory_kib, instructions, budget_us, "
-		         "param.NAME)", name);
+		snprintf(err, errlen,
+		         "'%s': expected driver.NAME.KEY (KEY: memory_kib, instructions, budget_us, "
+		         "param.NAME)",
+		         name);
 		return -1;
 	}
 	if (strlen(value) >= sizeof(x->s.value)) {
@@ -171,7 +173,8 @@ int vmac_config_set(struct vmac_config *c, const char *name, const char *value, 
 		errno = 0;
 		v = strtoul(value, &end, 10);
 		if (errno || *end || end == value || value[0] == '-' || v < k->min || v > k->max) {
-			snprintf(err, errlen, "%s: expected a whole number %u..%u, got '%s'", name, k->min, k->max, value);
+			snprintf(err, errlen, "%s: expected a whole number %u..%u, got '%s'", name, k->min, k->max,
+			         value);
 			return -1;
 		}
 		*(uint32_t *)field = (uint32_t)v;
@@ -182,8 +185,8 @@ int vmac_config_set(struct vmac_config *c, const char *name, const char *value, 
 
 /* Apply the settings in the table on top; nested tables (only under
  * driver = {...}) become dotted keys: driver.washer.param.fill_l. */
-static int apply_table(struct vmac_config *c, lua_State *L, const char *path, const char *prefix, int depth,
-                       char *err, size_t errlen)
+static int apply_table(struct vmac_config *c, lua_State *L, const char *path, const char *prefix, int depth, char *err,
+                       size_t errlen)
 {
 	lua_pushnil(L);
 	while (lua_next(L, -2)) {
@@ -302,7 +305,8 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 		return -1;
 	}
 	if (c->default_level > c->max_level) {
-		snprintf(err, errlen, "default_level (%u) must not exceed max_level (%u)", c->default_level, c->max_level);
+		snprintf(err, errlen, "default_level (%u) must not exceed max_level (%u)", c->default_level,
+		         c->max_level);
 		return -1;
 	}
 	if ((uint64_t)c->slice_us * c->slices_per_slot > 10000000) {

@@ -17,24 +17,25 @@ struct vmac_config_driver_setting {
 };
 
 struct vmac_config {
-	char bus[64];            /* "GROUP:PORT" */
-	char iface[64];          /* local interface address */
-	char http[64];           /* "ADDR:PORT" of the status/API server */
+	char bus[64];                    /* "GROUP:PORT" */
+	char iface[64];                  /* local interface address */
+	char http[64];                   /* "ADDR:PORT" of the status/API server */
 	char drivers_dir[VMAC_PATH_MAX]; /* searched first for NAME.lua ("" = none) */
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ below it) */
 	char stdlib_dir[VMAC_PATH_MAX];  /* the Lua standard library drivers require() from */
 	char state_dir[VMAC_PATH_MAX];
-	char tls_cert[VMAC_PATH_MAX];    /* PEM certificate (chain): the API serves HTTPS ("" = plain HTTP) */
-	char tls_key[VMAC_PATH_MAX];     /* its PEM private key */
-	uint32_t slice_us;           /* one time slice; a slot is slices_per_slot of them */
-	uint32_t slices_per_slot;    /* S: devices one slot can serve */
-	uint32_t max_level;          /* K: a block is 2^K slots; levels are 0..K */
-	uint32_t default_level;      /* a driver's level when its manifest names none */
-	uint32_t reply_deadline_us;  /* a reply later than this after the send is a miss (capped at the device's period) */
+	char tls_cert[VMAC_PATH_MAX]; /* PEM certificate (chain): the API serves HTTPS ("" = plain HTTP) */
+	char tls_key[VMAC_PATH_MAX];  /* its PEM private key */
+	uint32_t slice_us;            /* one time slice; a slot is slices_per_slot of them */
+	uint32_t slices_per_slot;     /* S: devices one slot can serve */
+	uint32_t max_level;           /* K: a block is 2^K slots; levels are 0..K */
+	uint32_t default_level;       /* a driver's level when its manifest names none */
+	uint32_t
+	    reply_deadline_us; /* a reply later than this after the send is a miss (capped at the device's period) */
 	uint32_t discovery_period_ms;
-	uint32_t watchdog_ms;        /* board comm-loss period set at REGISTER */
-	uint32_t miss_limit;         /* consecutive misses that drop a device (1 = zero tolerance) */
-	uint32_t sleep_s;            /* how long a board without a driver sleeps */
+	uint32_t watchdog_ms; /* board comm-loss period set at REGISTER */
+	uint32_t miss_limit;  /* consecutive misses that drop a device (1 = zero tolerance) */
+	uint32_t sleep_s;     /* how long a board without a driver sleeps */
 	uint32_t max_devices;
 	uint32_t driver_memory_kib;
 	uint32_t driver_instructions;

@@ -104,8 +104,8 @@ void bus_drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char
 				o->mach = -1;
 				continue;
 			}
-			bus_event(bus, o, kind, "%s dropped: %s, a board of the same machine, was dropped", o->ann.board,
-			      d->ann.board);
+			bus_event(bus, o, kind, "%s dropped: %s, a board of the same machine, was dropped",
+			          o->ann.board, d->ann.board);
 			bus->counters.drops++;
 			set_aside(bus, o, reason);
 		}
@@ -185,7 +185,8 @@ static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
 {
 	char why[200];
 	if (m->nboards == VMAC_DRIVER_MAX_BOARDS || vmac_driver_add_board(m->drv, d->ann.minor, d->ann.board) != 0) {
-		snprintf(d->note, sizeof(d->note), "machine full: at most %d boards per machine", VMAC_DRIVER_MAX_BOARDS);
+		snprintf(d->note, sizeof(d->note), "machine full: at most %d boards per machine",
+		         VMAC_DRIVER_MAX_BOARDS);
 		bus_event(bus, d, "machine_full", "%s not attached: %s", d->ann.board, d->note);
 		return -1;
 	}
@@ -274,17 +275,15 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 	bus->counters.announces++;
 	if (d) {
 		switch (d->state) {
-		case DEV_LOADING:
-			d->addr = p->addr;
-			return;
+		case DEV_LOADING: d->addr = p->addr; return;
 		case DEV_REGISTERING:
 		case DEV_RUNNING:
 		case DEV_TO_SLEEP:
 			/* The board has lost our session (reset, or its watchdog ran out). */
-			bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", "board announced itself again (it lost its session)");
+			bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped",
+			         "board announced itself again (it lost its session)");
 			break;
-		default:
-			break;
+		default: break;
 		}
 	} else {
 		d = new_slot(bus);
@@ -340,7 +339,7 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
 {
 	struct device *primary = &bus->dev[m->primary];
 	bus_event(bus, primary, "driver_error", "%s: driver %s %s failed%s: %s", primary->ann.board, m->driver,
-	      vmac_driver_version(m->drv), where, err);
+	          vmac_driver_version(m->drv), where, err);
 	if (m->prev) {
 		int64_t tag = vmac_driver_tag(m->drv);
 		uint32_t i;
@@ -353,7 +352,8 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
 				    strcmp(o->driver, m->driver) != 0)
 					continue;
 				if (bus_roll_back(bus, o, "the same version failed on another machine") != 0)
-					bus_drop(bus, &bus->dev[o->primary], VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+					bus_drop(bus, &bus->dev[o->primary], VMAC_SHUT_DRIVER, "dropped",
+					         "its driver failed");
 			}
 			return;
 		}
@@ -403,7 +403,7 @@ static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen)
 			d->want_watchdog = wd; /* sent before its next UPDATE */
 	}
 	bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u (period %.6g ms)", m->driver, old, level,
-	      (double)(bus->slot_ns << level) / 1e6);
+	          (double)(bus->slot_ns << level) / 1e6);
 	return 0;
 }
 
@@ -423,7 +423,7 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 	if (!c->drv) {
 		bus_event(bus, d, c->missing ? "driver_missing" : "driver_error", "%s", c->text);
 		bus_event(bus, d, "sleeping", "%s told to sleep for %u s: no usable driver '%s'", d->ann.board,
-		      (unsigned)bus->cfg.sleep_s, d->ann.driver);
+		          (unsigned)bus->cfg.sleep_s, d->ann.driver);
 		snprintf(d->note, sizeof(d->note), "%s", c->text);
 		machine_to_sleep(bus, mi);
 		return;
@@ -434,7 +434,8 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 	if (admit(bus, m, d) != 0) {
 		char note[sizeof(d->note)];
 		memcpy(note, d->note, sizeof(note));
-		bus_event(bus, d, "sleeping", "%s told to sleep for %u s: %s", d->ann.board, (unsigned)bus->cfg.sleep_s, note);
+		bus_event(bus, d, "sleeping", "%s told to sleep for %u s: %s", d->ann.board, (unsigned)bus->cfg.sleep_s,
+		          note);
 		machine_to_sleep(bus, mi);
 		memcpy(d->note, note, sizeof(note));
 		return;

@@ -55,8 +55,8 @@ int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, in
 	return n;
 }
 
-int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac_event *out, int max,
-                         int timeout_ms, uint64_t *lost)
+int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac_event *out, int max, int timeout_ms,
+                         uint64_t *lost)
 {
 	struct timespec until;
 	uint64_t first, s;

@@ -13,8 +13,8 @@
 #define VMAC_EVENT_LOG_SIZE 100
 
 struct vmac_event {
-	uint64_t seq;        /* 1, 2, ... in order of recording */
-	int64_t time_ns;     /* CLOCK_REALTIME */
+	uint64_t seq;    /* 1, 2, ... in order of recording */
+	int64_t time_ns; /* CLOCK_REALTIME */
 	char kind[24];
 	char device[VMAC_NAME_MAX + 1];
 	char text[VMAC_EVENT_TEXT];
@@ -38,7 +38,7 @@ int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, in
  * none yet, waits up to timeout_ms for one. Returns how many (0: none came).
  * *lost: how many after `after` had already been overwritten (the log keeps
  * the last VMAC_EVENT_LOG_SIZE). For the event stream (GET /api/events). */
-int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac_event *out, int max,
-                         int timeout_ms, uint64_t *lost);
+int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac_event *out, int max, int timeout_ms,
+                         uint64_t *lost);
 
 #endif

@@ -5,8 +5,8 @@
 
 #include <stdint.h>
 
-#define VMAC_HIST_FINE 1000   /* 0..999 us, 1 us buckets */
-#define VMAC_HIST_COARSE 990  /* 1000..99999 us, 100 us buckets */
+#define VMAC_HIST_FINE 1000  /* 0..999 us, 1 us buckets */
+#define VMAC_HIST_COARSE 990 /* 1000..99999 us, 100 us buckets */
 #define VMAC_HIST_BUCKETS (VMAC_HIST_FINE + VMAC_HIST_COARSE + 1)
 
 struct vmac_hist {

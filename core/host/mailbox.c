@@ -66,7 +66,8 @@ static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
 		                      ? "only params persist, and the driver has no such param"
 		                      : "this param does not persist (the driver does not declare it persist = true)";
 		size_t n = strlen(r->name);
-		memcpy(r->reply, r->name, n); /* name and reply are parts of one struct: no snprintf of one into the other */
+		memcpy(r->reply, r->name,
+		       n); /* name and reply are parts of one struct: no snprintf of one into the other */
 		snprintf(r->reply + n, sizeof(r->reply) - n, ": %s", why);
 		return VMAC_REFUSED_NOT_PERSIST;
 	}
@@ -159,7 +160,8 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
 	int rc;
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
-		snprintf(reply, replylen, "%s is not running (%s)", device, d ? bus_state_name(d->state) : "no such device");
+		snprintf(reply, replylen, "%s is not running (%s)", device,
+		         d ? bus_state_name(d->state) : "no such device");
 		return -VMAC_ENOTRUNNING;
 	}
 	rc = vmac_driver_input(m->drv, bus_time(bus), name, value, reply, replylen, err, sizeof(err));
@@ -192,7 +194,7 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
 }
 
 int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
-                   int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms)
+                int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms)
 {
 	struct request *q = NULL;
 	struct timespec until;

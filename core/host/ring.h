@@ -8,9 +8,9 @@
 
 struct vmac_ring {
 	size_t elem_size;
-	size_t mask;            /* capacity - 1; capacity is a power of two */
-	_Atomic size_t head;    /* next slot the producer writes */
-	_Atomic size_t tail;    /* next slot the consumer reads */
+	size_t mask;         /* capacity - 1; capacity is a power of two */
+	_Atomic size_t head; /* next slot the producer writes */
+	_Atomic size_t tail; /* next slot the consumer reads */
 	unsigned char *buf;
 };
 

@@ -37,8 +37,8 @@ static int name_ok(const uint8_t *s, size_t len)
 		return 0;
 	for (i = 0; i < len; i++) {
 		uint8_t c = s[i];
-		int ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
-		         c == '_' || c == '-';
+		int ok =
+		    (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
 		if (!ok)
 			return 0;
 	}
@@ -174,8 +174,7 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 
 	n = want;
 	switch (m->channel == VMAC_CH_SYSTEM ? 0x100 | m->op : (reply << 8) | m->op) {
-	case 0x100 | VMAC_SYS_DISCOVER:
-		break;
+	case 0x100 | VMAC_SYS_DISCOVER: break;
 	case 0x100 | VMAC_SYS_ANNOUNCE: {
 		size_t room = cap - VMAC_HDR_LEN;
 		n = encode_announce(&m->u.announce, d, room > VMAC_DATA_MAX ? VMAC_DATA_MAX : room);
@@ -190,9 +189,7 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		put32(d + 4, m->u.reg.minor);
 		put16(d + 8, m->u.reg.watchdog_ms);
 		break;
-	case VMAC_OP_SHUTDOWN:
-		d[0] = m->u.shutdown_reason;
-		break;
+	case VMAC_OP_SHUTDOWN: d[0] = m->u.shutdown_reason; break;
 	case VMAC_OP_UPDATE:
 		if (!outputs_ok(&m->u.outputs))
 			return VMAC_EPROTO_VALUE;
@@ -228,8 +225,7 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		d[0] = m->u.error.code;
 		d[1] = m->u.error.op;
 		break;
-	default: /* zero-length replies: REGISTER, SHUTDOWN, SLEEP, WATCHDOG acks; IDLE request */
-		break;
+	default: /* zero-length replies: REGISTER, SHUTDOWN, SLEEP, WATCHDOG acks; IDLE request */ break;
 	}
 
 	buf[0] = VMAC_MAGIC0;
@@ -279,8 +275,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		return VMAC_EPROTO_PAYLOAD;
 
 	switch (m->channel == VMAC_CH_SYSTEM ? 0x100 | m->op : (reply << 8) | m->op) {
-	case 0x100 | VMAC_SYS_ANNOUNCE:
-		return decode_announce(d, n, &m->u.announce);
+	case 0x100 | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
 	case VMAC_OP_REGISTER:
 		m->u.reg.major = get32(d);
 		m->u.reg.minor = get32(d + 4);
@@ -288,9 +283,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		if (m->u.reg.watchdog_ms < 1 || m->u.reg.watchdog_ms > 60000)
 			return VMAC_EPROTO_VALUE;
 		break;
-	case VMAC_OP_SHUTDOWN:
-		m->u.shutdown_reason = d[0];
-		break;
+	case VMAC_OP_SHUTDOWN: m->u.shutdown_reason = d[0]; break;
 	case VMAC_OP_UPDATE:
 		m->u.outputs.digital = d[0];
 		m->u.outputs.pwm = (int16_t)get16(d + 1);
@@ -326,8 +319,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		if (!error_code_ok(m->u.error.code))
 			return VMAC_EPROTO_VALUE;
 		break;
-	default:
-		break;
+	default: break;
 	}
 	return 0;
 }

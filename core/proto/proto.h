@@ -52,21 +52,21 @@ enum vmac_shutdown_reason {
 
 /* Decoder and encoder errors, always negative. */
 enum vmac_proto_err {
-	VMAC_EPROTO_SHORT = -1,     /* fewer bytes than a header */
-	VMAC_EPROTO_MAGIC = -2,     /* not a vmac frame */
-	VMAC_EPROTO_VERSION = -3,   /* protocol version we do not speak */
-	VMAC_EPROTO_LENGTH = -4,    /* len byte disagrees with the datagram size */
-	VMAC_EPROTO_OP = -5,        /* unknown channel/op, or op not valid in this direction */
-	VMAC_EPROTO_PAYLOAD = -6,   /* data size wrong for the op */
-	VMAC_EPROTO_NAME = -7,      /* empty, oversize or non-printable name */
-	VMAC_EPROTO_VALUE = -8,     /* a field out of its documented range */
-	VMAC_EPROTO_SPACE = -9,     /* encode: buffer too small */
+	VMAC_EPROTO_SHORT = -1,   /* fewer bytes than a header */
+	VMAC_EPROTO_MAGIC = -2,   /* not a vmac frame */
+	VMAC_EPROTO_VERSION = -3, /* protocol version we do not speak */
+	VMAC_EPROTO_LENGTH = -4,  /* len byte disagrees with the datagram size */
+	VMAC_EPROTO_OP = -5,      /* unknown channel/op, or op not valid in this direction */
+	VMAC_EPROTO_PAYLOAD = -6, /* data size wrong for the op */
+	VMAC_EPROTO_NAME = -7,    /* empty, oversize or non-printable name */
+	VMAC_EPROTO_VALUE = -8,   /* a field out of its documented range */
+	VMAC_EPROTO_SPACE = -9,   /* encode: buffer too small */
 };
 
 #define VMAC_DIGITAL_OUTPUTS 7
 #define VMAC_DIGITAL_INPUTS 8
 #define VMAC_ANALOG_INPUTS 2
-#define VMAC_PWM_MAX 1000 /* pwm is signed per-mille of full drive, -1000..1000 */
+#define VMAC_PWM_MAX 1000    /* pwm is signed per-mille of full drive, -1000..1000 */
 #define VMAC_ANALOG_MAX 4095 /* 12-bit converter counts */
 
 struct vmac_caps {
@@ -82,8 +82,8 @@ struct vmac_announce {
 };
 
 struct vmac_register {
-	uint32_t major, minor;   /* must equal the board's own, or it answers IDENTITY */
-	uint16_t watchdog_ms;    /* 1..60000 */
+	uint32_t major, minor; /* must equal the board's own, or it answers IDENTITY */
+	uint16_t watchdog_ms;  /* 1..60000 */
 };
 
 struct vmac_outputs {
@@ -92,15 +92,15 @@ struct vmac_outputs {
 };
 
 struct vmac_inputs {
-	uint8_t digital;                   /* bit i = digital input i (0..7) */
+	uint8_t digital;                     /* bit i = digital input i (0..7) */
 	uint16_t analog[VMAC_ANALOG_INPUTS]; /* 0..4095 */
-	int32_t encoder;                   /* counts, wraps */
-	struct vmac_outputs applied;       /* what the board drives right now */
+	int32_t encoder;                     /* counts, wraps */
+	struct vmac_outputs applied;         /* what the board drives right now */
 };
 
 struct vmac_error {
-	uint8_t code;   /* enum vmac_board_error */
-	uint8_t op;     /* the op of the request that failed */
+	uint8_t code; /* enum vmac_board_error */
+	uint8_t op;   /* the op of the request that failed */
 };
 
 /* One decoded frame. Which member of u is valid depends on channel, op and

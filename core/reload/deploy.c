@@ -39,7 +39,8 @@ static void test_pause(const char *driver)
 		return;
 	if (ms > 60000)
 		ms = 60000;
-	fprintf(stderr, "vmacd: deploy of %s paused %ld ms between its steps (VMAC_TEST_DEPLOY_PAUSE_MS)\n", driver, ms);
+	fprintf(stderr, "vmacd: deploy of %s paused %ld ms between its steps (VMAC_TEST_DEPLOY_PAUSE_MS)\n", driver,
+	        ms);
 	usleep((useconds_t)ms * 1000);
 }
 
@@ -62,8 +63,8 @@ static void store_failed(struct vmac_deploy_result *out, int code, const char *e
  * the bus thread has them now: running ones, and ones handed their driver
  * whose boards are still registering. Returns how many, or -1 (the bus
  * thread took no request) with out's status 503. */
-static int machines_of(const struct vmac_deploy_ctx *x, const char *driver, char (*names)[VMAC_NAME_MAX + 1],
-                       int max, struct vmac_deploy_result *out)
+static int machines_of(const struct vmac_deploy_ctx *x, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
+                       struct vmac_deploy_result *out)
 {
 	char why[VMAC_EVENT_TEXT];
 	int n = vmac_bus_request_machines(x->bus, driver, names, max, SWAP_TIMEOUT_MS, why, sizeof(why));
@@ -166,8 +167,8 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char
 	if (n < 0)
 		goto done;
 	have_prev = rc = vmac_store_driver_active(x->store, driver, &prev, &prev_src, &prev_len, err, sizeof(err));
-	if (rc < 0 || (rc = vmac_store_driver_add(x->store, driver, out->version, src, len, by, &id, err,
-	                                          sizeof(err))) != 0) {
+	if (rc < 0 ||
+	    (rc = vmac_store_driver_add(x->store, driver, out->version, src, len, by, &id, err, sizeof(err))) != 0) {
 		store_failed(out, rc, err);
 		goto done;
 	}
@@ -194,8 +195,8 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char
 			continue;
 		memcpy(one[0], names[i], sizeof(one[0]));
 		memset(&back, 0, sizeof(back));
-		if (swap_all(x, driver, have_prev == 1 ? prev_src : NULL, prev_len, have_prev == 1 ? prev.id : 0, 0, one, 1,
-		             &sw, &back) != 0)
+		if (swap_all(x, driver, have_prev == 1 ? prev_src : NULL, prev_len, have_prev == 1 ? prev.id : 0, 0,
+		             one, 1, &sw, &back) != 0)
 			snprintf(out->machines[i].text, sizeof(out->machines[i].text),
 			         "took the new version, but going back failed: %s", back.machines[0].text);
 		else
@@ -228,8 +229,9 @@ void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, i
 			store_failed(out, rc, err);
 		} else {
 			out->status = 404;
-			snprintf(out->error, sizeof(out->error), "driver %s has no version %lld (vmac drivers %s lists them)",
-			         driver, (long long)id, driver);
+			snprintf(out->error, sizeof(out->error),
+			         "driver %s has no version %lld (vmac drivers %s lists them)", driver, (long long)id,
+			         driver);
 		}
 		free(src);
 		return;
@@ -256,8 +258,8 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 	}
 	if (rc == 0) {
 		out->status = 409;
-		snprintf(out->error, sizeof(out->error), "driver %s runs its file: there is no earlier version to go back to",
-		         driver);
+		snprintf(out->error, sizeof(out->error),
+		         "driver %s runs its file: there is no earlier version to go back to", driver);
 		goto done;
 	}
 	if (cur.previous) {

@@ -11,9 +11,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../store/store.h"
 #include "../host/bus.h"
 #include "../host/config.h"
+#include "../store/store.h"
 
 #define VMAC_DEPLOY_MACHINES 64 /* machines reported one by one */
 
@@ -24,9 +24,9 @@ struct vmac_deploy_machine {
 };
 
 struct vmac_deploy_result {
-	int status;          /* HTTP status: 200, 400 bad source, 409 refused, 500/507 store, 503 busy */
+	int status;                  /* HTTP status: 200, 400 bad source, 409 refused, 500/507 store, 503 busy */
 	char error[VMAC_EVENT_TEXT]; /* when status is not 200 */
-	int64_t id;          /* the version now active (0: the driver's file) */
+	int64_t id;                  /* the version now active (0: the driver's file) */
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
 	char hash[65];
 	int nmachines;

@@ -3,8 +3,8 @@
 
 #include <errno.h>
 #include <pthread.h>
-#include <stdlib.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
@@ -101,8 +101,8 @@ static void limits_for(const struct vmac_config *cfg, const char *driver, struct
 	limits->nsettings = vmac_config_driver_settings(cfg, driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
 }
 
-int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device,
-                     struct vmac_driver **out, char *text, size_t textlen)
+int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_driver **out,
+                     char *text, size_t textlen)
 {
 	struct vmac_driver_limits limits;
 	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];

@@ -14,8 +14,8 @@
 /* Load driver `driver` for board `device`. Returns 0 and *out; or -ENOENT
  * (no such file) or another negative errno, with text saying why in words a
  * person can act on ("no driver 'washer' for washer-1 (looked in ...)"). */
-int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device,
-                     struct vmac_driver **out, char *text, size_t textlen);
+int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_driver **out,
+                     char *text, size_t textlen);
 
 /* The same from a text in memory (a version uploaded for hot reload); its
  * messages call it DRIVER.lua. */

@@ -33,8 +33,8 @@ int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
 	m->prev = NULL;
 	bus_give_boards(bus, m, prev);
 	if (vmac_driver_take_over(prev, failed, bus_time(bus), err, sizeof(err)) != 0) {
-		bus_event(bus, primary, "driver_error", "%s: rolling back to driver %s %s failed too: %s", primary->ann.board,
-		      m->driver, vmac_driver_version(prev), err);
+		bus_event(bus, primary, "driver_error", "%s: rolling back to driver %s %s failed too: %s",
+		          primary->ann.board, m->driver, vmac_driver_version(prev), err);
 		bus_unload(bus, prev);
 		return -1;
 	}
@@ -60,14 +60,15 @@ int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
  * attach/migrate, and reply says why: -VMAC_ENOTRUNNING (no running
  * machine of that name), -VMAC_EREFUSED (it would not take nd). */
 int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
-                size_t replylen)
+             size_t replylen)
 {
 	char err[VMAC_DRIVER_ERR_MAX];
 	struct device *d = bus_find_by_name(bus, device);
 	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
 	struct vmac_driver *od;
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
-		snprintf(reply, replylen, "%s is not running (%s)", device, d ? bus_state_name(d->state) : "no such device");
+		snprintf(reply, replylen, "%s is not running (%s)", device,
+		         d ? bus_state_name(d->state) : "no such device");
 		return -VMAC_ENOTRUNNING;
 	}
 	if (strcmp(vmac_driver_name(nd), m->driver) != 0) {
@@ -80,14 +81,14 @@ int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, i
 	if (vmac_driver_take_over(nd, od, bus_time(bus), err, sizeof(err)) != 0) {
 		snprintf(reply, replylen, "the new version failed to take over %s: %s", device, err);
 		bus_event(bus, d, "reload_refused", "%s: driver %s %s not taken: %s", device, m->driver,
-		      vmac_driver_version(nd), err);
+		          vmac_driver_version(nd), err);
 		return -VMAC_EREFUSED;
 	}
 	m->drv = nd;
 	/* Said before od is handed over: the main thread may free it at once. */
-	bus_event(bus, &bus->dev[m->primary], "reloaded", "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)",
-	      bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(od), vmac_driver_version(nd),
-	      (double)probation_ns / 1e9);
+	bus_event(bus, &bus->dev[m->primary], "reloaded",
+	          "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)", bus->dev[m->primary].ann.board,
+	          m->driver, vmac_driver_version(od), vmac_driver_version(nd), (double)probation_ns / 1e9);
 	snprintf(reply, replylen, "%s: driver %s %s -> %s", device, m->driver, vmac_driver_version(od),
 	         vmac_driver_version(nd));
 	if (m->prev) /* a version still on probation: the one just replaced is what a rollback goes back to */
@@ -114,6 +115,6 @@ void bus_end_probations(struct vmac_bus *bus, int64_t now)
 		bus_unload(bus, m->prev);
 		m->prev = NULL;
 		bus_event(bus, &bus->dev[m->primary], "probation_passed", "%s: driver %s %s passed its probation",
-		      bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(m->drv));
+		          bus->dev[m->primary].ann.board, m->driver, vmac_driver_version(m->drv));
 	}
 }

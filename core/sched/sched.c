@@ -67,12 +67,12 @@ struct search {
 	int32_t *sorted_tmp;
 	struct frame *frames;
 	int32_t *item_of_rec;
-	uint32_t *count;    /* counting sort */
-	int32_t *cap;       /* capacity profile of the current level */
-	int32_t *unplaced;  /* items of the current level not placed yet, by deadline */
-	int32_t *taken;     /* last level: items given to each slot */
-	int32_t *below;     /* scratch: items with deadline < r */
-	uint32_t *reserve;  /* [2^n + t]: deeper items that must start by t < 2^n */
+	uint32_t *count;                  /* counting sort */
+	int32_t *cap;                     /* capacity profile of the current level */
+	int32_t *unplaced;                /* items of the current level not placed yet, by deadline */
+	int32_t *taken;                   /* last level: items given to each slot */
+	int32_t *below;                   /* scratch: items with deadline < r */
+	uint32_t *reserve;                /* [2^n + t]: deeper items that must start by t < 2^n */
 	uint32_t *deep_avail, *deep_hall; /* [n * N + t]: see fill_reach */
 	uint64_t *memo_key;
 	uint32_t *memo_epoch;
@@ -84,7 +84,7 @@ enum { MODE_ALL = 0, MODE_ONE = 1 };
 /* What is known about switching at a row of the block (for the current
  * s->gen: the answer for a row cannot change while nothing else does). */
 #define ROW_HOPELESS(mode) (1u << (mode))    /* no table exists */
-#define ROW_HARD(mode) (1u << (2 + (mode))) /* the quick search ran out */
+#define ROW_HARD(mode) (1u << (2 + (mode)))  /* the quick search ran out */
 #define ROW_TRIED(mode) (1u << (4 + (mode))) /* deep had its turn this round */
 
 struct vmac_sched {
@@ -110,7 +110,7 @@ struct vmac_sched {
 	uint8_t *rows;
 	uint64_t rows_gen;
 	uint64_t deep_cap, deep_steps; /* steps a deep search may take this round, taken */
-	uint64_t *zobrist; /* [2^n + r]: profile hashing */
+	uint64_t *zobrist;             /* [2^n + r]: profile hashing */
 	uint16_t *row_load;
 	uint32_t *new_offset, *new_slice; /* install, per item */
 };
@@ -306,8 +306,8 @@ struct vmac_sched *vmac_sched_new(unsigned slices_per_slot, unsigned max_level, 
 	s->row_load = calloc(n, sizeof(*s->row_load));
 	s->new_offset = calloc(s->nrec + 1, sizeof(*s->new_offset));
 	s->new_slice = calloc(s->nrec + 1, sizeof(*s->new_slice));
-	if (!s->rec || !s->free_recs || !s->hash || !s->cell || !s->load || !s->rows || !s->zobrist ||
-	    !s->row_load || !s->new_offset || !s->new_slice || !search_alloc(&s->quick, s->nrec, max_level) ||
+	if (!s->rec || !s->free_recs || !s->hash || !s->cell || !s->load || !s->rows || !s->zobrist || !s->row_load ||
+	    !s->new_offset || !s->new_slice || !search_alloc(&s->quick, s->nrec, max_level) ||
 	    !search_alloc(&s->deep, s->nrec, max_level)) {
 		vmac_sched_free(s);
 		return NULL;
@@ -1087,7 +1087,7 @@ static void plan(struct vmac_sched *s, uint64_t slot)
 				break;
 			/* every hard row had its turn: next round, twice the steps */
 			for (d = 0; d < N; d++)
-				s->rows[d] &= (uint8_t)~(ROW_TRIED(MODE_ALL) | ROW_TRIED(MODE_ONE));
+				s->rows[d] &= (uint8_t) ~(ROW_TRIED(MODE_ALL) | ROW_TRIED(MODE_ONE));
 			s->deep_cap = s->deep_cap < UINT32_MAX / 2 ? 2 * s->deep_cap : UINT32_MAX;
 		}
 	}

@@ -127,7 +127,8 @@ static int migrate(struct vmac_store *s, char *err, size_t errlen)
 		version = sqlite3_column_int(st, 0);
 	sqlite3_finalize(st);
 	if (version > n) {
-		snprintf(err, errlen, "store: the database is of a newer vmac (schema %d, this one knows %d)", version, n);
+		snprintf(err, errlen, "store: the database is of a newer vmac (schema %d, this one knows %d)", version,
+		         n);
 		return -1;
 	}
 	for (; version < n; version++) {
@@ -225,8 +226,8 @@ static int is_hex(const char *s, size_t n)
 	return 1;
 }
 
-int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id,
-                      char *err, size_t errlen)
+int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id, char *err,
+                      size_t errlen)
 {
 	unsigned char rid[VMAC_TOKEN_ID_LEN / 2], secret[SECRET_LEN / 2], h[HASH_LEN];
 	char id_hex[VMAC_TOKEN_ID_LEN + 1], secret_hex[SECRET_LEN + 1];
@@ -288,8 +289,8 @@ int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t er
 	return changed == 1 ? 0 : 1;
 }
 
-int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx,
-                    char *err, size_t errlen)
+int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx, char *err,
+                    size_t errlen)
 {
 	sqlite3_stmt *st;
 	int rc, n = 0;
@@ -400,8 +401,8 @@ static int64_t active_id(struct vmac_store *s, const char *driver)
 	return rc == SQLITE_ROW || rc == SQLITE_DONE ? id : -1;
 }
 
-int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src,
-                          size_t len, const char *by, int64_t *id, char *err, size_t errlen)
+int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src, size_t len,
+                          const char *by, int64_t *id, char *err, size_t errlen)
 {
 	unsigned char h[32];
 	char hash[65];
@@ -414,10 +415,11 @@ int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *
 	prev = active_id(s, driver);
 	if (prev < 0)
 		return fail_unlock(s, "reading driver versions", err, errlen);
-	if (sqlite3_prepare_v2(s->db,
-	                       "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
-	                       "previous) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?)",
-	                       -1, &st, NULL) != SQLITE_OK)
+	if (sqlite3_prepare_v2(
+	        s->db,
+	        "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
+	        "previous) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?)",
+	        -1, &st, NULL) != SQLITE_OK)
 		return fail_unlock(s, "storing a driver version", err, errlen);
 	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 2, version, -1, SQLITE_TRANSIENT);
@@ -722,7 +724,8 @@ int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
 	sqlite3_stmt *st;
 	int rc, n = 0;
 	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db, "SELECT seq, time, kind, device, text FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
+	if (sqlite3_prepare_v2(s->db,
+	                       "SELECT seq, time, kind, device, text FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
 	                       -1, &st, NULL) != SQLITE_OK)
 		return fail_unlock(s, "reading the event log", err, errlen);
 	sqlite3_bind_int64(st, 1, (sqlite3_int64)after);

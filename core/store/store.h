@@ -51,20 +51,20 @@ void vmac_store_close(struct vmac_store *s);
 struct vmac_token_info {
 	char id[VMAC_TOKEN_ID_LEN + 1];
 	enum vmac_scope scope;
-	double created;  /* Unix time */
-	double revoked;  /* Unix time, 0 while valid */
+	double created; /* Unix time */
+	double revoked; /* Unix time, 0 while valid */
 	char note[VMAC_TOKEN_NOTE_MAX + 1];
 };
 
 /* A new token of this scope: writes it to token (VMAC_TOKEN_LEN + 1 bytes)
  * and its ID to id (may be NULL). 0, or < 0 with err (nothing stored). */
-int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id,
-                      char *err, size_t errlen);
+int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id, char *err,
+                      size_t errlen);
 /* Revoke by ID: 0 done, 1 no such token (or already revoked), < 0 err. */
 int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t errlen);
 /* Every token, oldest first. Returns how many, or < 0 with err. */
-int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx,
-                    char *err, size_t errlen);
+int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx, char *err,
+                    size_t errlen);
 /* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
  * revoked, or when the store cannot be read. */
 enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
@@ -125,8 +125,8 @@ struct vmac_driver_version {
 
 /* Store a new version, state pending: 0 and *id, or < 0 with err (nothing
  * stored: e.g. the disk is full). */
-int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src,
-                          size_t len, const char *by, int64_t *id, char *err, size_t errlen);
+int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src, size_t len,
+                          const char *by, int64_t *id, char *err, size_t errlen);
 /* Make version id the active one of driver (the one active before becomes
  * replaced), in one transaction. 0, or < 0 with err. */
 int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t id, char *err, size_t errlen);

@@ -35,9 +35,9 @@ struct vmac_bus_spec {
 };
 
 struct vmac_transport {
-	int fd;                  /* unicast socket: cyclic traffic and discovery sends */
-	struct vmac_addr group;  /* where DISCOVER goes */
-	struct vmac_addr local;  /* our own unicast address */
+	int fd;                   /* unicast socket: cyclic traffic and discovery sends */
+	struct vmac_addr group;   /* where DISCOVER goes */
+	struct vmac_addr local;   /* our own unicast address */
 	int64_t rt_minus_mono_ns; /* realtime - monotonic, to convert kernel stamps */
 };
 
@@ -46,13 +46,11 @@ int vmac_bus_spec_parse(const char *text, struct vmac_bus_spec *spec);
 
 /* Host side: open the unicast socket on spec->iface, ready to send to the
  * group. Returns 0 or a negative errno; err gets a readable reason. */
-int vmac_transport_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err,
-                             size_t errlen);
+int vmac_transport_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen);
 
 /* Board side: a unicast socket of its own on spec->iface (port chosen by the
  * kernel). Discovery arrives on a separate listener, vmac_transport_listen. */
-int vmac_transport_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err,
-                              size_t errlen);
+int vmac_transport_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen);
 
 /* Board side: a socket joined to the discovery group (shared by every board
  * of one process). Returns the fd or a negative errno. */

@@ -95,14 +95,12 @@ static int open_unicast(struct vmac_transport *t, const struct vmac_bus_spec *sp
 	return 0;
 }
 
-int vmac_transport_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err,
-                             size_t errlen)
+int vmac_transport_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
 {
 	return open_unicast(t, spec, err, errlen);
 }
 
-int vmac_transport_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err,
-                              size_t errlen)
+int vmac_transport_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
 {
 	return open_unicast(t, spec, err, errlen);
 }

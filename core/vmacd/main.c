@@ -14,12 +14,12 @@
 
 #include "../api/http.h"
 #include "../common/paths.h"
-#include "../store/store.h"
-#include "../reload/deploy.h"
 #include "../host/bus.h"
 #include "../host/config.h"
 #include "../host/events.h"
+#include "../reload/deploy.h"
 #include "../reload/loader.h"
+#include "../store/store.h"
 
 struct host {
 	struct vmac_config cfg;
@@ -100,7 +100,8 @@ static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *te
 	if (drv)
 		restore_params(l->h, drv, l->m->device);
 	if (vmac_bus_loaded(l->h->bus, l->m, rc, drv, text) != 0)
-		vmac_event_log_add(&l->h->log, "warning", l->m->device, "command ring full; device will retry on discovery");
+		vmac_event_log_add(&l->h->log, "warning", l->m->device,
+		                   "command ring full; device will retry on discovery");
 }
 
 static void load_driver(struct host *h, const struct vmac_bus_msg *m)
@@ -169,15 +170,9 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 			if (m.code == VMAC_EVENT_ROLLED_BACK && m.version_id)
 				roll_back_version(h, &m);
 			break;
-		case VMAC_MSG_LOAD:
-			load_driver(h, &m);
-			break;
-		case VMAC_MSG_UNLOAD:
-			vmac_driver_free(m.drv);
-			break;
-		case VMAC_MSG_STOPPED:
-			ev_break(loop, EVBREAK_ALL);
-			break;
+		case VMAC_MSG_LOAD: load_driver(h, &m); break;
+		case VMAC_MSG_UNLOAD: vmac_driver_free(m.drv); break;
+		case VMAC_MSG_STOPPED: ev_break(loop, EVBREAK_ALL); break;
 		}
 	}
 	store_events(h);
@@ -203,12 +198,17 @@ static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
 
 static int parse_args(struct host *h, int argc, char **argv)
 {
-	static const struct option opts[] = {
-	    {"config", required_argument, 0, 'c'}, {"bus", required_argument, 0, 'b'},
-	    {"iface", required_argument, 0, 'i'}, {"http", required_argument, 0, 'H'},
-	    {"drivers", required_argument, 0, 'd'}, {"scripts", required_argument, 0, 'S'},
-	    {"state", required_argument, 0, 's'}, {"set", required_argument, 0, 'o'},
-	    {"help", no_argument, 0, 'h'}, {"version", no_argument, 0, 'V'}, {0, 0, 0, 0}};
+	static const struct option opts[] = {{"config", required_argument, 0, 'c'},
+	                                     {"bus", required_argument, 0, 'b'},
+	                                     {"iface", required_argument, 0, 'i'},
+	                                     {"http", required_argument, 0, 'H'},
+	                                     {"drivers", required_argument, 0, 'd'},
+	                                     {"scripts", required_argument, 0, 'S'},
+	                                     {"state", required_argument, 0, 's'},
+	                                     {"set", required_argument, 0, 'o'},
+	                                     {"help", no_argument, 0, 'h'},
+	                                     {"version", no_argument, 0, 'V'},
+	                                     {0, 0, 0, 0}};
 	char err[VMAC_PATH_MAX + 256], root[VMAC_PATH_MAX];
 	int opt, i;
 
@@ -337,8 +337,7 @@ int main(int argc, char **argv)
 	        h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
 	        h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us, h->cfg.drivers_dir,
 	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, vmac_http_tls(h->http) ? "https" : "http",
-	        (int)(strrchr(h->cfg.http, ':') - h->cfg.http),
-	        h->cfg.http, vmac_http_port(h->http));
+	        (int)(strrchr(h->cfg.http, ':') - h->cfg.http), h->cfg.http, vmac_http_port(h->http));
 	ev_run(h->loop, 0);
 	vmac_bus_join(h->bus);
 	on_wake(h->loop, &h->wake_w, 0); /* the last events */

@@ -24,8 +24,8 @@
 struct lworld {
 	struct vt_world *w;
 	lua_State *L;
-	int check_ref;      /* the Lua function vt_run calls after each delivery */
-	int check_failed;   /* it raised: its error is on the stack */
+	int check_ref;    /* the Lua function vt_run calls after each delivery */
+	int check_failed; /* it raised: its error is on the stack */
 };
 
 /* The world's metatable, by reference: checks run at every tick, and
@@ -72,8 +72,8 @@ static int l_new(lua_State *L)
 	snprintf(cfg.scripts_dir, sizeof(cfg.scripts_dir), "%s/scripts", root);
 	snprintf(cfg.stdlib_dir, sizeof(cfg.stdlib_dir), "%s/stdlib", root);
 	cfg.realtime = 0;
-	cfg.max_devices = 64;      /* a scene, not a plant floor: keeps each tick short */
-	cfg.driver_budget_us = 0;  /* the instruction budget only: deterministic */
+	cfg.max_devices = 64;     /* a scene, not a plant floor: keeps each tick short */
+	cfg.driver_budget_us = 0; /* the instruction budget only: deterministic */
 	n = (int)lua_objlen(L, 1);
 	for (i = 1; i <= n; i++) {
 		const char *k, *v;
@@ -330,8 +330,8 @@ static int l_set(lua_State *L)
 	const char *name = luaL_checkstring(L, 3);
 	double v = lua_isboolean(L, 4) ? lua_toboolean(L, 4) : luaL_optnumber(L, 4, 1);
 	if (vmac_plant_set(&b->plant, name, v) != 0)
-		return luaL_error(L, "%s: the %s plant refuses %s = %g (names and ranges: docs/BOARD.md)", b->fw.id.board,
-		                  vmac_plant_name(b->plant.kind), name, v);
+		return luaL_error(L, "%s: the %s plant refuses %s = %g (names and ranges: docs/BOARD.md)",
+		                  b->fw.id.board, vmac_plant_name(b->plant.kind), name, v);
 	return 0;
 }
 
@@ -347,27 +347,38 @@ static int l_plant(lua_State *L)
 	const struct vmac_lights *li = &b->plant.s.lights;
 	switch (b->plant.kind) {
 	case VMAC_PLANT_WASHER:
-		if (!strcmp(f, "drum_rpm")) lua_pushnumber(L, wa->drum_rpm);
-		else if (!strcmp(f, "water_l")) lua_pushnumber(L, wa->water_l);
-		else if (!strcmp(f, "water_c")) lua_pushnumber(L, wa->water_c);
-		else if (!strcmp(f, "load_kg")) lua_pushnumber(L, wa->load_kg);
-		else if (!strcmp(f, "door_closed")) lua_pushboolean(L, wa->door_closed);
-		else if (!strcmp(f, "door_locked")) lua_pushboolean(L, wa->door_locked);
-		else break;
+		if (!strcmp(f, "drum_rpm"))
+			lua_pushnumber(L, wa->drum_rpm);
+		else if (!strcmp(f, "water_l"))
+			lua_pushnumber(L, wa->water_l);
+		else if (!strcmp(f, "water_c"))
+			lua_pushnumber(L, wa->water_c);
+		else if (!strcmp(f, "load_kg"))
+			lua_pushnumber(L, wa->load_kg);
+		else if (!strcmp(f, "door_closed"))
+			lua_pushboolean(L, wa->door_closed);
+		else if (!strcmp(f, "door_locked"))
+			lua_pushboolean(L, wa->door_locked);
+		else
+			break;
 		return 1;
 	case VMAC_PLANT_DISHWASHER:
-		if (!strcmp(f, "water_l")) lua_pushnumber(L, dw->water_l);
-		else if (!strcmp(f, "wash_time_s")) lua_pushnumber(L, dw->wash_time_s);
-		else if (!strcmp(f, "door_closed")) lua_pushboolean(L, dw->door_closed);
-		else break;
+		if (!strcmp(f, "water_l"))
+			lua_pushnumber(L, dw->water_l);
+		else if (!strcmp(f, "wash_time_s"))
+			lua_pushnumber(L, dw->wash_time_s);
+		else if (!strcmp(f, "door_closed"))
+			lua_pushboolean(L, dw->door_closed);
+		else
+			break;
 		return 1;
 	case VMAC_PLANT_LIGHTS:
 		if (!strncmp(f, "on_seconds", 10) && f[10] >= '0' && f[10] <= '4' && !f[11])
 			lua_pushnumber(L, li->on_seconds[f[10] - '0']);
-		else break;
+		else
+			break;
 		return 1;
-	default:
-		break;
+	default: break;
 	}
 	return luaL_error(L, "%s: the %s plant has no field '%s' (docs/TESTING.md lists them)", b->fw.id.board,
 	                  vmac_plant_name(b->plant.kind), f);
@@ -411,7 +422,8 @@ static int l_faults(lua_State *L)
 		const char *k = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : "?";
 		if (strcmp(k, "drop") && strcmp(k, "corrupt") && strcmp(k, "delay") && strcmp(k, "delay_fraction") &&
 		    strcmp(k, "late"))
-			return luaL_error(L, "faults: unknown key '%s' (drop, corrupt, delay, delay_fraction, late)", k);
+			return luaL_error(L, "faults: unknown key '%s' (drop, corrupt, delay, delay_fraction, late)",
+			                  k);
 		lua_pop(L, 1);
 	}
 	f.drop = opt_field(L, 3, "drop", 0, 1);
@@ -541,12 +553,12 @@ static int l_wall(lua_State *L)
 static int open_world(lua_State *L)
 {
 	static const luaL_Reg methods[] = {
-	    {"board", l_board},     {"run", l_run},         {"now", l_now},         {"io", l_io},
-	    {"io_names", l_io_names}, {"state", l_state},   {"var", l_var},         {"device", l_device},
-	    {"input", l_input},     {"set", l_set},         {"plant", l_plant},     {"connect", l_connect},
-	    {"faults", l_faults},   {"events", l_events},   {"history", l_history}, {"trace", l_trace},
-	    {"stop_host", l_stop_host}, {"frames", l_frames}, {"free", l_gc},       {"config", l_config},
-	    {"slot", l_slot},       {NULL, NULL}};
+	    {"board", l_board},         {"run", l_run},       {"now", l_now},         {"io", l_io},
+	    {"io_names", l_io_names},   {"state", l_state},   {"var", l_var},         {"device", l_device},
+	    {"input", l_input},         {"set", l_set},       {"plant", l_plant},     {"connect", l_connect},
+	    {"faults", l_faults},       {"events", l_events}, {"history", l_history}, {"trace", l_trace},
+	    {"stop_host", l_stop_host}, {"frames", l_frames}, {"free", l_gc},         {"config", l_config},
+	    {"slot", l_slot},           {NULL, NULL}};
 	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {NULL, NULL}};
 	luaL_newmetatable(L, WORLD_MT);
 	lua_pushvalue(L, -1);

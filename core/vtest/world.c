@@ -11,8 +11,8 @@
 struct vt_pkt {
 	int64_t at;
 	uint64_t order;
-	int to_host;     /* else to board `board` (-1: every board, the group) */
-	int board;       /* sender when to_host */
+	int to_host; /* else to board `board` (-1: every board, the group) */
+	int board;   /* sender when to_host */
 	struct vmac_packet p;
 };
 
@@ -160,20 +160,15 @@ static void pump(struct vt_world *w)
 		char text[VMAC_EVENT_TEXT];
 		int rc;
 		switch (m.kind) {
-		case VMAC_MSG_EVENT:
-			record_event(w, &m);
-			break;
+		case VMAC_MSG_EVENT: record_event(w, &m); break;
 		case VMAC_MSG_LOAD:
 			text[0] = 0;
 			rc = vmac_load_driver(&w->cfg, m.driver, m.device, &drv, text, sizeof(text));
 			vmac_bus_loaded(w->bus, &m, rc, drv, text);
 			loaded = 1;
 			break;
-		case VMAC_MSG_UNLOAD:
-			vmac_driver_free(m.drv);
-			break;
-		default:
-			break;
+		case VMAC_MSG_UNLOAD: vmac_driver_free(m.drv); break;
+		default: break;
 		}
 		if (loaded) {
 			vmac_bus_virtual_commands(w->bus);
@@ -197,7 +192,8 @@ static void record_service(struct vt_world *w, struct vt_board *b, int64_t t)
 		double v;
 		int is_bool;
 		vt_io_value(w, b, b->io[i].name, &v, &is_bool);
-		fprintf(w->trace, "%s,%.6f,%s,%s,%.6g\n", w->trace_test, (double)t / 1e9, b->fw.id.board, b->io[i].name, v);
+		fprintf(w->trace, "%s,%.6f,%s,%s,%.6g\n", w->trace_test, (double)t / 1e9, b->fw.id.board, b->io[i].name,
+		        v);
 	}
 }
 
@@ -393,11 +389,8 @@ int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, 
 		*is_bool = 1;
 		*value = (b->fw.outputs.digital >> b->io[i].channel) & 1;
 		return 0;
-	case VMAC_IO_PWM:
-		*value = b->fw.outputs.pwm;
-		return 0;
-	default:
-		break;
+	case VMAC_IO_PWM: *value = b->fw.outputs.pwm; return 0;
+	default: break;
 	}
 	w->reads_plant = 1;
 	vmac_plant_sense(&b->plant, &in);

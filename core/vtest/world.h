@@ -44,21 +44,21 @@ struct vt_faults {
 	double corrupt;        /* fraction of frames with one byte changed */
 	double delay_fraction; /* fraction of frames delayed by delay_ns */
 	int64_t delay_ns;
-	int64_t late_ns;       /* every answer of the board leaves this much later */
+	int64_t late_ns; /* every answer of the board leaves this much later */
 };
 
 struct vt_board {
 	struct vmac_board fw;
 	struct vmac_plant plant;
-	struct vmac_addr addr;   /* synthetic, 10.77.0.N:5870 */
-	int plugged;             /* 0: frames to and from it are lost (its watchdog runs on) */
-	int powered;             /* 0: the board is off: silent, outputs off */
+	struct vmac_addr addr; /* synthetic, 10.77.0.N:5870 */
+	int plugged;           /* 0: frames to and from it are lost (its watchdog runs on) */
+	int powered;           /* 0: the board is off: silent, outputs off */
 	struct vt_faults faults;
 	struct vt_service hist[VT_HISTORY];
-	unsigned nhist;          /* services recorded so far (the last VT_HISTORY kept) */
+	unsigned nhist; /* services recorded so far (the last VT_HISTORY kept) */
 	struct vt_io io[VMAC_DRIVER_MAX_IO];
 	int nio;
-	char io_note[200];       /* why there are no names (driver missing, failed to load) */
+	char io_note[200]; /* why there are no names (driver missing, failed to load) */
 };
 
 struct vt_event {
@@ -78,13 +78,13 @@ struct vt_world {
 	int64_t next_plant_ns;
 	struct vt_board *boards[VT_MAX_BOARDS];
 	int nboards;
-	struct vt_pkt *q;        /* binary heap by (at, order) */
+	struct vt_pkt *q; /* binary heap by (at, order) */
 	size_t nq, capq;
-	uint64_t order;          /* send order, for ties */
-	uint64_t rng;            /* xorshift64* state (the seed) */
+	uint64_t order; /* send order, for ties */
+	uint64_t rng;   /* xorshift64* state (the seed) */
 	struct vt_event *events;
 	size_t nevents, capevents;
-	uint64_t frames;         /* frames delivered, for the summary */
+	uint64_t frames; /* frames delivered, for the summary */
 	/* When checks run (vt_run): `moved` is set by what can change any value a
 	 * check reads (a frame delivered, an event, a board's watchdog trip);
 	 * `plant_moved` by a plant step, which changes only plant-side values.
@@ -93,8 +93,8 @@ struct vt_world {
 	 * alone, so it is not run for one. */
 	int moved, plant_moved;
 	int reads_plant, check_reads_plant;
-	FILE *trace;             /* CSV of every service, or NULL */
-	char trace_test[128];    /* the running test's name, the CSV's first column */
+	FILE *trace;                      /* CSV of every service, or NULL */
+	char trace_test[128];             /* the running test's name, the CSV's first column */
 	struct vmac_device_status status; /* scratch for vt_device */
 };
 

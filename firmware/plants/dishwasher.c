@@ -15,8 +15,8 @@
 #define IN_START_BUTTON 2
 #define IN_CANCEL_BUTTON 3
 
-#define TANK_MAX_L 6.0           /* overflow: the level never rises above this */
-#define LEVEL_SWITCH_L 3.0       /* level switch made at or above this */
+#define TANK_MAX_L 6.0     /* overflow: the level never rises above this */
+#define LEVEL_SWITCH_L 3.0 /* level switch made at or above this */
 #define DEFAULT_FILL_LPS 0.25
 #define MAX_FILL_LPS 5.0
 #define DRAIN_LPS 0.5

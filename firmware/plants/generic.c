@@ -40,8 +40,8 @@ static int is_integer(double value)
  * analog and encoder values must be whole numbers. */
 int vmac_generic_set(struct vmac_generic *g, const char *name, double value)
 {
-	if (name[0] == 'd' && name[1] == 'i' && name[2] >= '0' &&
-	    name[2] < '0' + VMAC_DIGITAL_INPUTS && name[3] == '\0') {
+	if (name[0] == 'd' && name[1] == 'i' && name[2] >= '0' && name[2] < '0' + VMAC_DIGITAL_INPUTS &&
+	    name[3] == '\0') {
 		uint8_t bit = (uint8_t)(1u << (name[2] - '0'));
 		if (!vmac_plant_is_bit(value))
 			return -1;
@@ -51,8 +51,8 @@ int vmac_generic_set(struct vmac_generic *g, const char *name, double value)
 			g->digital_in &= (uint8_t)~bit;
 		return 0;
 	}
-	if (name[0] == 'a' && name[1] == 'i' && name[2] >= '0' &&
-	    name[2] < '0' + VMAC_ANALOG_INPUTS && name[3] == '\0') {
+	if (name[0] == 'a' && name[1] == 'i' && name[2] >= '0' && name[2] < '0' + VMAC_ANALOG_INPUTS &&
+	    name[3] == '\0') {
 		if (!vmac_plant_in_range(value, 0.0, VMAC_ANALOG_MAX) || !is_integer(value))
 			return -1;
 		g->analog_in[name[2] - '0'] = (uint16_t)value;

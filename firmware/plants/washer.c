@@ -20,17 +20,17 @@
 #define IN_CANCEL_BUTTON 4
 
 /* Water. */
-#define TUB_MAX_L 40.0            /* overflow: the level never rises above this */
-#define TUB_EMPTY_BELOW_L 0.5     /* "tub empty" input threshold */
-#define DEFAULT_FILL_LPS 0.5      /* per open valve */
+#define TUB_MAX_L 40.0        /* overflow: the level never rises above this */
+#define TUB_EMPTY_BELOW_L 0.5 /* "tub empty" input threshold */
+#define DEFAULT_FILL_LPS 0.5  /* per open valve */
 #define MAX_FILL_LPS 5.0
 #define DRAIN_LPS 1.0
 #define HOT_WATER_C 60.0
 #define COLD_WATER_C 15.0
 #define AMBIENT_C 20.0
-#define COOLING_TAU_S 600.0       /* tub water relaxes toward ambient */
-#define LEVEL_COUNTS_PER_L 100.0  /* analog0 */
-#define TEMP_COUNTS_PER_C 40.0    /* analog1 */
+#define COOLING_TAU_S 600.0      /* tub water relaxes toward ambient */
+#define LEVEL_COUNTS_PER_L 100.0 /* analog0 */
+#define TEMP_COUNTS_PER_C 40.0   /* analog1 */
 
 /* Drum. The motor is first order: rpm moves toward drive / drag with time
  * constant inertia / drag. Drag is 1 while the motor is enabled (the drive
@@ -38,14 +38,14 @@
  * inertia grows with laundry and water. Dry and empty: 1 RPM per pwm unit,
  * tau 1.5 s. */
 #define RPM_PER_PWM 1.0
-#define DRUM_TAU_S 1.5            /* empty, dry, motor enabled */
-#define LOAD_TAU_S_PER_KG 0.25    /* 3 kg: 2.25 s */
+#define DRUM_TAU_S 1.5         /* empty, dry, motor enabled */
+#define LOAD_TAU_S_PER_KG 0.25 /* 3 kg: 2.25 s */
 #define WATER_TAU_S_PER_L 0.05
-#define WATER_DRAG_PER_L 0.005    /* 15 l: steady rpm about 7 % lower */
-#define COAST_DRAG 0.3            /* mechanical friction alone, motor disabled */
+#define WATER_DRAG_PER_L 0.005 /* 15 l: steady rpm about 7 % lower */
+#define COAST_DRAG 0.3         /* mechanical friction alone, motor disabled */
 #define DEFAULT_LOAD_KG 3.0
 #define MAX_LOAD_KG 10.0
-#define STILL_RPM 1e-6            /* below this a coasting drum has stopped */
+#define STILL_RPM 1e-6 /* below this a coasting drum has stopped */
 #define COUNTS_PER_REV 360.0
 #define ENCODER_SPAN 4294967296.0 /* 2^32: the accumulator wraps like int32 */
 
@@ -131,11 +131,11 @@ void vmac_washer_step(struct vmac_washer *w, double dt_s)
 
 void vmac_washer_sense(const struct vmac_washer *w, struct vmac_inputs *in)
 {
-	in->digital = (uint8_t)((w->door_closed ? 1u << IN_DOOR_CLOSED : 0u) |
-	                        (w->door_locked ? 1u << IN_DOOR_LOCKED : 0u) |
-	                        (w->water_l < TUB_EMPTY_BELOW_L ? 1u << IN_TUB_EMPTY : 0u) |
-	                        (w->start_left_s > 0.0 ? 1u << IN_START_BUTTON : 0u) |
-	                        (w->cancel_left_s > 0.0 ? 1u << IN_CANCEL_BUTTON : 0u));
+	in->digital =
+	    (uint8_t)((w->door_closed ? 1u << IN_DOOR_CLOSED : 0u) | (w->door_locked ? 1u << IN_DOOR_LOCKED : 0u) |
+	              (w->water_l < TUB_EMPTY_BELOW_L ? 1u << IN_TUB_EMPTY : 0u) |
+	              (w->start_left_s > 0.0 ? 1u << IN_START_BUTTON : 0u) |
+	              (w->cancel_left_s > 0.0 ? 1u << IN_CANCEL_BUTTON : 0u));
 	in->analog[0] = vmac_plant_analog_counts(w->water_l * LEVEL_COUNTS_PER_L);
 	in->analog[1] = vmac_plant_analog_counts(w->water_c * TEMP_COUNTS_PER_C);
 	in->encoder = (int32_t)floor(w->encoder_pos);

@@ -42,22 +42,21 @@ static uint64_t now_ms(void)
 
 static void usage(FILE *f)
 {
-	fprintf(f,
-	        "usage: vmac-board [options]\n"
-	        "Run generic vmac I/O boards with simulated plants (see docs/BOARD.md).\n\n"
-	        "  --plant KIND      washer, dishwasher, lights or generic (default generic)\n"
-	        "  --name NAME       board name, [A-Za-z0-9_-], at most 31 (default: the plant's name)\n"
-	        "  --driver NAME     driver the board announces (default: the plant's driver)\n"
-	        "  --bus GROUP:PORT  discovery group and port (default 239.255.86.77:5870)\n"
-	        "  --iface ADDR      local interface address (default 127.0.0.1)\n"
-	        "  --count N         run N independent boards, named NAME-1..NAME-N (default 1)\n"
-	        "  --major N         major id (default: hash of the name); --minor N (default 0)\n"
-	        "  --commands        read operator actions from stdin: 'NAME ACTION VALUE'\n"
-	        "                    (e.g. 'lights-1 toggle1 1', 'washer-1 door 0')\n"
-	        "  --quiet           print only errors and safety events\n"
-	        "  --help            this text\n\n"
-	        "Prints one line per state change and output change on stdout. On SIGINT or\n"
-	        "SIGTERM every board turns its outputs off before the process exits.\n");
+	fprintf(f, "usage: vmac-board [options]\n"
+	           "Run generic vmac I/O boards with simulated plants (see docs/BOARD.md).\n\n"
+	           "  --plant KIND      washer, dishwasher, lights or generic (default generic)\n"
+	           "  --name NAME       board name, [A-Za-z0-9_-], at most 31 (default: the plant's name)\n"
+	           "  --driver NAME     driver the board announces (default: the plant's driver)\n"
+	           "  --bus GROUP:PORT  discovery group and port (default 239.255.86.77:5870)\n"
+	           "  --iface ADDR      local interface address (default 127.0.0.1)\n"
+	           "  --count N         run N independent boards, named NAME-1..NAME-N (default 1)\n"
+	           "  --major N         major id (default: hash of the name); --minor N (default 0)\n"
+	           "  --commands        read operator actions from stdin: 'NAME ACTION VALUE'\n"
+	           "                    (e.g. 'lights-1 toggle1 1', 'washer-1 door 0')\n"
+	           "  --quiet           print only errors and safety events\n"
+	           "  --help            this text\n\n"
+	           "Prints one line per state change and output change on stdout. On SIGINT or\n"
+	           "SIGTERM every board turns its outputs off before the process exits.\n");
 }
 
 static void report(struct posix_board *pb)
@@ -65,8 +64,8 @@ static void report(struct posix_board *pb)
 	struct vmac_board *b = &pb->board;
 	if (b->state != pb->reported_state) {
 		if (!quiet || b->state != VMAC_BOARD_KNOWN)
-			printf("%s: state %s device 0x%08x watchdog %u ms\n", b->id.board, vmac_board_state_name(b->state),
-			       (unsigned)b->device_id, (unsigned)b->watchdog_ms);
+			printf("%s: state %s device 0x%08x watchdog %u ms\n", b->id.board,
+			       vmac_board_state_name(b->state), (unsigned)b->device_id, (unsigned)b->watchdog_ms);
 		pb->reported_state = b->state;
 	}
 	if (b->outputs.digital != pb->reported.digital || b->outputs.pwm != pb->reported.pwm) {
@@ -114,12 +113,12 @@ static void operator_command(struct posix_board *boards, int count, char *line)
 int main(int argc, char **argv)
 {
 	static const struct option opts[] = {
-	    {"plant", required_argument, 0, 'p'}, {"name", required_argument, 0, 'n'},
+	    {"plant", required_argument, 0, 'p'},  {"name", required_argument, 0, 'n'},
 	    {"driver", required_argument, 0, 'd'}, {"bus", required_argument, 0, 'b'},
-	    {"iface", required_argument, 0, 'i'}, {"count", required_argument, 0, 'c'},
-	    {"major", required_argument, 0, 'M'}, {"minor", required_argument, 0, 'm'},
-	    {"commands", no_argument, 0, 'C'}, {"quiet", no_argument, 0, 'q'},
-	    {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
+	    {"iface", required_argument, 0, 'i'},  {"count", required_argument, 0, 'c'},
+	    {"major", required_argument, 0, 'M'},  {"minor", required_argument, 0, 'm'},
+	    {"commands", no_argument, 0, 'C'},     {"quiet", no_argument, 0, 'q'},
+	    {"help", no_argument, 0, 'h'},         {0, 0, 0, 0}};
 	enum vmac_plant_kind kind = VMAC_PLANT_GENERIC;
 	const char *name = NULL, *driver = NULL, *bus = "239.255.86.77:5870", *iface = "127.0.0.1";
 	long count = 1, major = -1, minor = 0;
@@ -136,7 +135,9 @@ int main(int argc, char **argv)
 		switch (opt) {
 		case 'p':
 			if (vmac_plant_kind_from_name(optarg, &kind) != 0) {
-				fprintf(stderr, "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic)\n", optarg);
+				fprintf(stderr,
+				        "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic)\n",
+				        optarg);
 				return 2;
 			}
 			break;
@@ -180,7 +181,8 @@ int main(int argc, char **argv)
 	if (!driver)
 		driver = vmac_plant_default_driver(kind);
 	if (vmac_bus_spec_parse(bus, &spec) != 0) {
-		fprintf(stderr, "vmac-board: --bus wants MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870, got '%s'\n", bus);
+		fprintf(stderr, "vmac-board: --bus wants MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870, got '%s'\n",
+		        bus);
 		return 2;
 	}
 	if (inet_pton(AF_INET, iface, &spec.iface) != 1) {
@@ -239,8 +241,10 @@ int main(int argc, char **argv)
 			memcpy(probe.u.announce.board, id.board, sizeof(id.board));
 			probe.u.announce.caps = id.caps;
 			if (vmac_proto_encode(&probe, frame, sizeof(frame)) < 0) {
-				fprintf(stderr, "vmac-board: invalid name '%s' or driver '%s': names are 1..%d characters of "
-				        "A-Z a-z 0-9 _ -\n", id.board, id.driver, VMAC_NAME_MAX);
+				fprintf(stderr,
+				        "vmac-board: invalid name '%s' or driver '%s': names are 1..%d characters of "
+				        "A-Z a-z 0-9 _ -\n",
+				        id.board, id.driver, VMAC_NAME_MAX);
 				rc = 2;
 				goto out;
 			}

@@ -120,8 +120,8 @@ int main(int argc, char **argv)
 					m.u.reg.watchdog_ms = 2000;
 					send_msg(&t, &b->addr, &m);
 					nb++;
-				} else if (r.channel == VMAC_CH_DEVICE && r.op == VMAC_OP_REGISTER && r.device_id >= 1 &&
-				           r.device_id <= (uint32_t)nb) {
+				} else if (r.channel == VMAC_CH_DEVICE && r.op == VMAC_OP_REGISTER &&
+				           r.device_id >= 1 && r.device_id <= (uint32_t)nb) {
 					boards[r.device_id - 1].registered = 1;
 				}
 			}

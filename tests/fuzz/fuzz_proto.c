@@ -73,8 +73,7 @@ static void check_codec(const uint8_t *data, size_t size)
 		abort();
 }
 
-static void deliver(struct vmac_board *b, struct fake_io *io, const uint8_t *frame, size_t len,
-                    uint64_t now_ms)
+static void deliver(struct vmac_board *b, struct fake_io *io, const uint8_t *frame, size_t len, uint64_t now_ms)
 {
 	uint8_t reply[VMAC_FRAME_MAX]; /* exactly the documented bound, so ASan sees overflow */
 	struct vmac_msg request, answer;

@@ -162,7 +162,7 @@ static int case_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
 		return -1;
 	}
-	drv_make_env(L);                    /* chunk, env */
+	drv_make_env(L);                /* chunk, env */
 	lua_pushvalue(L, -1);           /* chunk, env, env */
 	lua_getfield(L, -1, "require"); /* chunk, env, env, the driver's require */
 	lua_pushcclosure(L, test_require, 2);

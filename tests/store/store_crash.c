@@ -37,7 +37,8 @@ static int writer(const char *dir)
 			char version[32];
 			snprintf(version, sizeof(version), "%ld", n);
 			snprintf(src, sizeof(src), "return { name = 'd', version = '%ld' }", n);
-			if (vmac_store_driver_add(s, "d", version, src, strlen(src), "crashtest", &id, err, sizeof(err)) != 0 ||
+			if (vmac_store_driver_add(s, "d", version, src, strlen(src), "crashtest", &id, err,
+			                          sizeof(err)) != 0 ||
 			    vmac_store_driver_activate(s, "d", id, err, sizeof(err)) != 0) {
 				fprintf(stderr, "store_crash: %s\n", err);
 				return 1;
@@ -78,8 +79,8 @@ static int checker(const char *dir, long acked)
 		fprintf(stderr, "store_crash: cannot open %s: %s\n", path, sqlite3_errmsg(db));
 		return 1;
 	}
-	if (sqlite3_prepare_v2(db, "PRAGMA integrity_check", -1, &st, NULL) != SQLITE_OK || sqlite3_step(st) != SQLITE_ROW ||
-	    strcmp((const char *)sqlite3_column_text(st, 0), "ok") != 0) {
+	if (sqlite3_prepare_v2(db, "PRAGMA integrity_check", -1, &st, NULL) != SQLITE_OK ||
+	    sqlite3_step(st) != SQLITE_ROW || strcmp((const char *)sqlite3_column_text(st, 0), "ok") != 0) {
 		fprintf(stderr, "store_crash: integrity check failed: %s\n",
 		        st ? (const char *)sqlite3_column_text(st, 0) : sqlite3_errmsg(db));
 		return 1;

@@ -100,8 +100,8 @@ static void expect_no_write_since(int n_writes, const char *when)
 
 static void expect_state(enum vmac_board_state want, const char *when)
 {
-	ck_assert_msg(rig.board.state == want, "%s: board is %s, want %s", when,
-	              vmac_board_state_name(rig.board.state), vmac_board_state_name(want));
+	ck_assert_msg(rig.board.state == want, "%s: board is %s, want %s", when, vmac_board_state_name(rig.board.state),
+	              vmac_board_state_name(want));
 }
 
 /* Deliver raw bytes at rig.now_ms; decode any reply into rig.answer. */
@@ -127,8 +127,7 @@ static int send_msg(const struct vmac_msg *m)
 {
 	uint8_t frame[VMAC_FRAME_MAX];
 	int n = vmac_proto_encode(m, frame, sizeof(frame));
-	ck_assert_msg(n > 0, "test bug: cannot encode request op 0x%02x: %d (%s)", m->op, n,
-	              vmac_proto_strerror(n));
+	ck_assert_msg(n > 0, "test bug: cannot encode request op 0x%02x: %d (%s)", m->op, n, vmac_proto_strerror(n));
 	return deliver(frame, (size_t)n);
 }
 
@@ -182,8 +181,8 @@ static void register_board(uint16_t watchdog_ms)
 {
 	int n = send_register(100, SESSION_ID, BOARD_MAJOR, BOARD_MINOR, watchdog_ms);
 	ck_assert_msg(n > 0 && rig.answer.op == VMAC_OP_REGISTER,
-	              "REGISTER at %llu ms: reply length %d op 0x%02x, want a REGISTER ack", (unsigned long long)rig.now_ms,
-	              n, rig.answer.op);
+	              "REGISTER at %llu ms: reply length %d op 0x%02x, want a REGISTER ack",
+	              (unsigned long long)rig.now_ms, n, rig.answer.op);
 	expect_state(VMAC_BOARD_KNOWN, "after REGISTER");
 }
 
@@ -299,8 +298,8 @@ START_TEST(register_makes_board_known_with_outputs_off)
 	/* IDLE reports what the board drives: still nothing. */
 	writes_before = rig.io.n_writes;
 	send_msg(&(struct vmac_msg){.seq = 1, .device_id = SESSION_ID, .channel = VMAC_CH_DEVICE, .op = VMAC_OP_IDLE});
-	ck_assert_msg(rig.reply_len > 0 && rig.answer.op == VMAC_OP_IDLE, "IDLE got length %d op 0x%02x",
-	              rig.reply_len, rig.answer.op);
+	ck_assert_msg(rig.reply_len > 0 && rig.answer.op == VMAC_OP_IDLE, "IDLE got length %d op 0x%02x", rig.reply_len,
+	              rig.answer.op);
 	ck_assert_msg(rig.answer.u.inputs.applied.digital == 0 && rig.answer.u.inputs.applied.pwm == 0,
 	              "IDLE after REGISTER reports applied 0x%02x/%d, want 0/0", rig.answer.u.inputs.applied.digital,
 	              rig.answer.u.inputs.applied.pwm);
@@ -318,8 +317,8 @@ START_TEST(update_drives_outputs_and_replies_inputs)
 	send_update(0x7777, SESSION_ID, 0x5A, -750);
 
 	w = last_write();
-	ck_assert_msg(w->digital == 0x5A && w->pwm == -750, "UPDATE 0x5a/-750 wrote 0x%02x/%d to the pins",
-	              w->digital, w->pwm);
+	ck_assert_msg(w->digital == 0x5A && w->pwm == -750, "UPDATE 0x5a/-750 wrote 0x%02x/%d to the pins", w->digital,
+	              w->pwm);
 	ck_assert_msg(rig.reply_len > 0 && rig.answer.op == VMAC_OP_UPDATE, "UPDATE got length %d op 0x%02x",
 	              rig.reply_len, rig.answer.op);
 	ck_assert_msg(rig.answer.seq == 0x7777 && rig.answer.device_id == SESSION_ID,
@@ -387,7 +386,8 @@ START_TEST(watchdog_trips_after_period_without_valid_frame)
 	writes_before = rig.io.n_writes;
 
 	rig.now_ms = 1200;
-	ck_assert_msg(vmac_board_poll(&rig.board, rig.now_ms) == 1, "poll 200 ms after the last frame returned 0, want 1");
+	ck_assert_msg(vmac_board_poll(&rig.board, rig.now_ms) == 1,
+	              "poll 200 ms after the last frame returned 0, want 1");
 	ck_assert_msg(rig.io.n_writes == writes_before + 1, "watchdog trip made %d output writes, want 1",
 	              rig.io.n_writes - writes_before);
 	expect_outputs_off("after watchdog trip");
@@ -416,7 +416,8 @@ START_TEST(watchdog_does_not_trip_one_ms_early)
 	              "outputs 0x%02x/%d 199 ms after the last frame, want 0x5a/-750", rig.board.outputs.digital,
 	              rig.board.outputs.pwm);
 	rig.now_ms = 1150 + 200;
-	ck_assert_msg(vmac_board_poll(&rig.board, rig.now_ms) == 1, "watchdog did not trip 200 ms after the last frame");
+	ck_assert_msg(vmac_board_poll(&rig.board, rig.now_ms) == 1,
+	              "watchdog did not trip 200 ms after the last frame");
 }
 END_TEST
 
@@ -436,7 +437,8 @@ START_TEST(outputs_stay_off_after_reregister_until_update)
 
 	send_update(5, SESSION_ID, 0x01, 10);
 	ck_assert_msg(last_write()->digital == 0x01 && last_write()->pwm == 10,
-	              "UPDATE after re-REGISTER wrote 0x%02x/%d, want 0x01/10", last_write()->digital, last_write()->pwm);
+	              "UPDATE after re-REGISTER wrote 0x%02x/%d, want 0x01/10", last_write()->digital,
+	              last_write()->pwm);
 }
 END_TEST
 
@@ -505,7 +507,8 @@ START_TEST(shutdown_turns_outputs_off_and_forgets_session)
 	              (unsigned)rig.answer.device_id, SESSION_ID);
 	expect_outputs_off("after SHUTDOWN");
 	expect_state(VMAC_BOARD_UNKNOWN, "after SHUTDOWN");
-	ck_assert_msg(rig.board.device_id == 0, "device id 0x%08x after SHUTDOWN, want 0", (unsigned)rig.board.device_id);
+	ck_assert_msg(rig.board.device_id == 0, "device id 0x%08x after SHUTDOWN, want 0",
+	              (unsigned)rig.board.device_id);
 
 	send_discover(1);
 	expect_announce(1, "after SHUTDOWN");

@@ -95,22 +95,22 @@ START_TEST(take_over_hands_plain_state_params_and_outputs)
 {
 	/* The old version: state with shared tables, a cycle, a function, a
 	 * coroutine and an object with a metatable; a param set; outputs on. */
-	struct vmac_driver *od = load_ok(
-	    "return { name = 't', version = '1', io = { lamp = 'do0', pump = 'do1', motor = 'pwm' },\n"
-	    "  params = { fill_l = { default = 8, min = 1, max = 20 }, mode = { default = 'eco' } },\n"
-	    "  attach = function(dev)\n"
-	    "    local shared = { n = 1 }\n"
-	    "    local s = dev.state\n"
-	    "    s.a, s.b, s.count, s.name, s.flag = shared, shared, 41, 'wash', true\n"
-	    "    s.self = s\n"
-	    "    s.fn = function() end\n"
-	    "    s.co = coroutine and coroutine.create(s.fn) or nil\n"
-	    "    s.obj = setmetatable({ x = 2 }, { __index = function() return 'm' end })\n"
-	    "    s[1], s[2] = 'one', 'two'\n"
-	    "    dev.params.fill_l = 12\n"
-	    "    dev.params.mode = 'hot'\n"
-	    "  end,\n"
-	    "  tick = function(dev) dev.out.lamp = true; dev.out.motor = 300 end }\n");
+	struct vmac_driver *od =
+	    load_ok("return { name = 't', version = '1', io = { lamp = 'do0', pump = 'do1', motor = 'pwm' },\n"
+	            "  params = { fill_l = { default = 8, min = 1, max = 20 }, mode = { default = 'eco' } },\n"
+	            "  attach = function(dev)\n"
+	            "    local shared = { n = 1 }\n"
+	            "    local s = dev.state\n"
+	            "    s.a, s.b, s.count, s.name, s.flag = shared, shared, 41, 'wash', true\n"
+	            "    s.self = s\n"
+	            "    s.fn = function() end\n"
+	            "    s.co = coroutine and coroutine.create(s.fn) or nil\n"
+	            "    s.obj = setmetatable({ x = 2 }, { __index = function() return 'm' end })\n"
+	            "    s[1], s[2] = 'one', 'two'\n"
+	            "    dev.params.fill_l = 12\n"
+	            "    dev.params.mode = 'hot'\n"
+	            "  end,\n"
+	            "  tick = function(dev) dev.out.lamp = true; dev.out.motor = 300 end }\n");
 	/* The new version checks what it got. */
 	struct vmac_driver *nd = load_ok(
 	    "return { name = 't', version = '2', io = { lamp = 'do0', motor = 'pwm', fan = 'do2' },\n"
@@ -167,9 +167,11 @@ START_TEST(take_over_refuses_what_it_cannot_copy)
 		nd = load_ok("return { name = 't', version = '2', io = { lamp = 'do0' }, tick = function() end,\n"
 		             "  migrate = function() error('must not run') end }");
 		limits.memory_bytes = 1 << 20;
-		ck_assert_msg(vmac_driver_attach(od, 0, err, sizeof(err)) == 0, "old attach (%s): %s", cases[i][0], err);
+		ck_assert_msg(vmac_driver_attach(od, 0, err, sizeof(err)) == 0, "old attach (%s): %s", cases[i][0],
+		              err);
 		err[0] = 0;
-		ck_assert_msg(vmac_driver_take_over(nd, od, 0, err, sizeof(err)) != 0, "took over with %s", cases[i][0]);
+		ck_assert_msg(vmac_driver_take_over(nd, od, 0, err, sizeof(err)) != 0, "took over with %s",
+		              cases[i][0]);
 		ck_assert_msg(strstr(err, cases[i][1]) != NULL, "'%s': error '%s' does not say '%s'", cases[i][0], err,
 		              cases[i][1]);
 		vmac_driver_free(od);
@@ -286,7 +288,8 @@ START_TEST(replaced_tables_and_bad_variables_fail_by_name)
 		vmac_driver_add_board(d, 0, "b0");
 		memset(&in, 0, sizeof(in));
 		in.digital = 1;
-		ck_assert_msg(tick1(d, 0.5, &in, &out, err, sizeof(err)) == 0, "%s: a good tick failed: %s", cases[i][0], err);
+		ck_assert_msg(tick1(d, 0.5, &in, &out, err, sizeof(err)) == 0, "%s: a good tick failed: %s",
+		              cases[i][0], err);
 		ck_assert_msg(out.digital == 1, "%s: output a not driven from input s", cases[i][0]);
 		ck_assert_msg(var(d, "v")->value.number == 0.5, "%s: v not published from inputs.time", cases[i][0]);
 		ck_assert_int_ne(tick1(d, 1, &in, &out, err, sizeof(err)), 0);
@@ -300,13 +303,14 @@ END_TEST
 
 START_TEST(two_boards_one_machine)
 {
-	struct vmac_driver *d = load_ok("return { name = 't', version = '1',\n"
-	                                "  io = { lamp = 'do0', switch = { 'di0', board = 2 }, far = { 'do1', board = 9 } },\n"
-	                                "  variables = { n = {}, who = {} },\n"
-	                                "  tick = function(dev, i)\n"
-	                                "    dev.vars.n = #dev.boards; dev.vars.who = dev.name\n"
-	                                "    dev.out.lamp = i.switch == true; dev.out.far = true\n"
-	                                "  end }\n");
+	struct vmac_driver *d =
+	    load_ok("return { name = 't', version = '1',\n"
+	            "  io = { lamp = 'do0', switch = { 'di0', board = 2 }, far = { 'do1', board = 9 } },\n"
+	            "  variables = { n = {}, who = {} },\n"
+	            "  tick = function(dev, i)\n"
+	            "    dev.vars.n = #dev.boards; dev.vars.who = dev.name\n"
+	            "    dev.out.lamp = i.switch == true; dev.out.far = true\n"
+	            "  end }\n");
 	struct vmac_inputs in0, in1;
 	struct vmac_outputs out0, out1;
 	const struct vmac_inputs *ins[2] = {&in0, &in1};
@@ -384,20 +388,20 @@ static void fake_event(void *ctx, const char *text)
 
 START_TEST(input_and_host_hooks)
 {
-	struct vmac_driver *d = load_ok(
-	    "return { name = 't', version = '1', io = {},\n"
-	    "  params = { speed = { default = 10, min = 0, max = 100 } },\n"
-	    "  variables = { lamp = { set = true }, ro = {}, answer = {} },\n"
-	    "  commands = { go = { arg = 'speed' }, fail = {} },\n"
-	    "  tick = function(dev)\n"
-	    "    local ok, why = dev:set_level(9); dev.vars.answer = why\n"
-	    "    for n = 1, 20 do dev:event('hello ' .. n) end\n"
-	    "  end,\n"
-	    "  input = function(dev, name, value)\n"
-	    "    if name == 'fail' then error('input boom') end\n"
-	    "    if name == 'go' and value > dev.params.speed then return nil, 'too fast' end\n"
-	    "    dev.vars[name] = value; return true\n"
-	    "  end }\n");
+	struct vmac_driver *d =
+	    load_ok("return { name = 't', version = '1', io = {},\n"
+	            "  params = { speed = { default = 10, min = 0, max = 100 } },\n"
+	            "  variables = { lamp = { set = true }, ro = {}, answer = {} },\n"
+	            "  commands = { go = { arg = 'speed' }, fail = {} },\n"
+	            "  tick = function(dev)\n"
+	            "    local ok, why = dev:set_level(9); dev.vars.answer = why\n"
+	            "    for n = 1, 20 do dev:event('hello ' .. n) end\n"
+	            "  end,\n"
+	            "  input = function(dev, name, value)\n"
+	            "    if name == 'fail' then error('input boom') end\n"
+	            "    if name == 'go' and value > dev.params.speed then return nil, 'too fast' end\n"
+	            "    dev.vars[name] = value; return true\n"
+	            "  end }\n");
 	struct vmac_driver_host host = {fake_set_level, fake_event, NULL};
 	struct vmac_value v;
 	struct vmac_inputs in;
@@ -410,19 +414,23 @@ START_TEST(input_and_host_hooks)
 	v.number = 1;
 	ck_assert_msg(vmac_driver_input(d, 0, "lamp", &v, reply, sizeof(reply), err, sizeof(err)) == 0,
 	              "settable variable refused: %s %s", reply, err);
-	ck_assert_int_eq(vmac_driver_input(d, 0, "ro", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_READ_ONLY);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "ro", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_READ_ONLY);
 	ck_assert_msg(strstr(reply, "read-only") != NULL, "read-only variable reply: %s", reply);
-	ck_assert_int_eq(vmac_driver_input(d, 0, "nosuch", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_NAME);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "nosuch", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_NAME);
 	v.type = VMAC_VALUE_NUMBER;
 	v.number = 500;
-	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_VALUE);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_VALUE);
 	ck_assert_msg(strstr(reply, "out of range 0..100") != NULL, "range reply: %s", reply);
 	v.number = 50;
 	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), 0);
 	v.number = 40;
 	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), 0);
 	v.number = 60;
-	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)), VMAC_REFUSED_BY_DRIVER);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "go", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_BY_DRIVER);
 	ck_assert_msg(strcmp(reply, "too fast") == 0, "the driver's refusal not passed on: %s", reply);
 	ck_assert_int_eq(vmac_driver_input(d, 0, "fail", &v, reply, sizeof(reply), err, sizeof(err)), -1);
 	ck_assert_msg(strstr(err, "input boom") != NULL && strstr(err, "traceback") != NULL, "input error: %s", err);
@@ -437,11 +445,18 @@ END_TEST
 
 START_TEST(sandbox_bounds)
 {
-	static const char *const refused[] = {
-	    "string.format = nil", "rawset(string, 'x', 1)", "setmetatable(math, {})", "('x'):rep(1e9)",
-	    "string.find(string.rep('a', 5000), '.-.-.-.-b')", "getfenv(0)", "os.execute('true')", "io.open('x')",
-	    "require('pid')", "vmac.cycles()", "while true do pcall(function() while true do end end) end",
-	    "local t = {} for i = 1, 1e7 do t[i] = {} end"};
+	static const char *const refused[] = {"string.format = nil",
+	                                      "rawset(string, 'x', 1)",
+	                                      "setmetatable(math, {})",
+	                                      "('x'):rep(1e9)",
+	                                      "string.find(string.rep('a', 5000), '.-.-.-.-b')",
+	                                      "getfenv(0)",
+	                                      "os.execute('true')",
+	                                      "io.open('x')",
+	                                      "require('pid')",
+	                                      "vmac.cycles()",
+	                                      "while true do pcall(function() while true do end end) end",
+	                                      "local t = {} for i = 1, 1e7 do t[i] = {} end"};
 	static const char *const allowed[] = {
 	    "assert(('x 12 y'):match('%d+') == '12')",
 	    "assert(('  hi  '):match('^%s*(.-)%s*$') == 'hi')",
@@ -460,7 +475,8 @@ START_TEST(sandbox_bounds)
 		d = load_ok(src);
 		vmac_driver_add_board(d, 0, "b0");
 		memset(&in, 0, sizeof(in));
-		ck_assert_msg(tick1(d, 7.25, &in, &out, err, sizeof(err)) != 0, "sandbox let this through: %s", refused[i]);
+		ck_assert_msg(tick1(d, 7.25, &in, &out, err, sizeof(err)) != 0, "sandbox let this through: %s",
+		              refused[i]);
 		vmac_driver_free(d);
 	}
 	for (i = 0; i < sizeof(allowed) / sizeof(allowed[0]); i++) {
@@ -473,7 +489,8 @@ START_TEST(sandbox_bounds)
 		d = load_ok(src);
 		vmac_driver_add_board(d, 0, "b0");
 		memset(&in, 0, sizeof(in));
-		ck_assert_msg(tick1(d, 7.25, &in, &out, err, sizeof(err)) == 0, "sandbox refused '%s': %s", allowed[i], err);
+		ck_assert_msg(tick1(d, 7.25, &in, &out, err, sizeof(err)) == 0, "sandbox refused '%s': %s", allowed[i],
+		              err);
 		vmac_driver_free(d);
 	}
 }
@@ -538,7 +555,8 @@ START_TEST(sandbox_is_exactly_the_allow_list)
 					continue;
 				checked++;
 				add(src, sizeof(src), &n, "if %s['%s'] == nil then error('missing %s%s%s') end\n",
-				    lib->lib ? lib->lib : "_G", *name, lib->lib ? lib->lib : "", lib->lib ? "." : "", *name);
+				    lib->lib ? lib->lib : "_G", *name, lib->lib ? lib->lib : "", lib->lib ? "." : "",
+				    *name);
 			}
 	add(src, sizeof(src), &n, "return { name = 't', version = '1', io = {}, tick = function() end }\n");
 	lua_close(plain);

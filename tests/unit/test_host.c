@@ -47,7 +47,8 @@ START_TEST(config_file_sets_keys)
 {
 	struct vmac_config c;
 	char err[256] = "";
-	char *path = write_temp("slice_us = 2000\nreply_deadline_us = 5000\nrealtime = false\nbus = \"239.1.2.3:999\"\n");
+	char *path =
+	    write_temp("slice_us = 2000\nreply_deadline_us = 5000\nrealtime = false\nbus = \"239.1.2.3:999\"\n");
 	vmac_config_defaults(&c);
 	ck_assert_msg(vmac_config_load(&c, path, err, sizeof(err)) == 0, "load failed: %s", err);
 	unlink(path);
@@ -130,7 +131,8 @@ START_TEST(config_driver_settings)
 	              "param.time_scale not overridden to 0.5");
 	ck_assert_int_eq(vmac_config_driver_settings(&c, "lights", got, 8), 1);
 	ck_assert_int_eq(vmac_config_driver_settings(&c, "dishwasher", got, 8), 0);
-	ck_assert_msg(vmac_config_set(&c, "driver.washer", "1", err, sizeof(err)) != 0, "driver.NAME without KEY accepted");
+	ck_assert_msg(vmac_config_set(&c, "driver.washer", "1", err, sizeof(err)) != 0,
+	              "driver.NAME without KEY accepted");
 	ck_assert_msg(strstr(err, "driver.NAME.KEY") != NULL, "unclear message: %s", err);
 }
 END_TEST
@@ -145,7 +147,8 @@ START_TEST(hist_quantiles)
 	ck_assert_int_eq(vmac_hist_quantile(&h, 0.5), 0);
 	for (i = 1; i <= 100; i++)
 		vmac_hist_add(&h, i);
-	ck_assert_msg(vmac_hist_quantile(&h, 0.5) == 51, "p50 of 1..100 is %lld", (long long)vmac_hist_quantile(&h, 0.5));
+	ck_assert_msg(vmac_hist_quantile(&h, 0.5) == 51, "p50 of 1..100 is %lld",
+	              (long long)vmac_hist_quantile(&h, 0.5));
 	ck_assert_int_eq(vmac_hist_quantile(&h, 0.99), 100);
 	ck_assert_int_eq(h.max_us, 100);
 	vmac_hist_add(&h, 5000);

@@ -29,7 +29,7 @@ static void setup(void)
 /* Creeps up to the cap, catching every refused allocation: the pattern of
  * the driver that used to kill vmacd. */
 #define CREEP                                                                                                          \
-	"local function creep() G = G or {} for i = 1, 1e7 do "                                                         \
+	"local function creep() G = G or {} for i = 1, 1e7 do "                                                        \
 	"if not pcall(function() G[#G + 1] = { i, i, i } end) then break end end end\n"
 
 static int load_text(const char *text, struct vmac_driver **d, char *err, size_t errlen)
@@ -134,7 +134,8 @@ START_TEST(every_way_of_catching_the_refusal_is_refused)
 		snprintf(src, sizeof(src), "return { name = 't', version = '1', io = {}, tick = function() %s end }",
 		         catchers[i]);
 		d = load_ok(src);
-		ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) != 0, "the driver caught the refusal: %s", catchers[i]);
+		ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) != 0, "the driver caught the refusal: %s",
+		              catchers[i]);
 		says(err, "memory cap exceeded", catchers[i]);
 		says(err, "t.lua:1:", catchers[i]); /* the refusal re-raised where it was caught: a traceback */
 		vmac_driver_free(d);
@@ -186,9 +187,7 @@ START_TEST(a_state_at_its_cap_fails_as_a_driver_not_the_host)
 			vmac_driver_add_board(d, 7, "b7");
 			ck_assert_int_ne(vmac_driver_attach(d, 0, err, sizeof(err)), 0);
 			break;
-		case 2:
-			ck_assert_int_ne(tick1(d, 0, &out, err, sizeof(err)), 0);
-			break;
+		case 2: ck_assert_int_ne(tick1(d, 0, &out, err, sizeof(err)), 0); break;
 		case 3:
 			ck_assert_int_ne(vmac_driver_input(d, 0, "p", &v, reply, sizeof(reply), err, sizeof(err)), 0);
 			ck_assert_msg(err[0] || reply[0], "input at the cap said nothing");
@@ -220,14 +219,18 @@ START_TEST(error_objects_with_metamethods)
 	    "setmetatable({}, { __tostring = function() while true do end end })",
 	    "setmetatable({}, { __tostring = function() error('inner') end, __index = function() error('x') end })",
 	    "setmetatable({}, { __concat = function() while true do end end, __eq = function() return true end })",
-	    "coroutine.create(function() end)", "function() end", "nil", "42", "true"};
+	    "coroutine.create(function() end)",
+	    "function() end",
+	    "nil",
+	    "42",
+	    "true"};
 	size_t i;
 	for (i = 0; i < sizeof(objects) / sizeof(objects[0]); i++) {
 		char src[400], err[VMAC_DRIVER_ERR_MAX] = "";
 		struct vmac_outputs out;
 		struct vmac_driver *d;
-		snprintf(src, sizeof(src), "return { name = 't', version = '1', io = {}, tick = function() error(%s) end }",
-		         objects[i]);
+		snprintf(src, sizeof(src),
+		         "return { name = 't', version = '1', io = {}, tick = function() error(%s) end }", objects[i]);
 		d = load_ok(src);
 		ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) != 0, "error(%s) did not fail the tick", objects[i]);
 		ck_assert_msg(err[0] != 0, "error(%s) gave no message", objects[i]);
@@ -262,10 +265,11 @@ START_TEST(metamethods_the_host_could_reach)
 	char err[VMAC_DRIVER_ERR_MAX] = "";
 	struct vmac_driver *d;
 	/* A manifest whose absent fields loop when read. */
-	ck_assert_int_ne(load_text("return setmetatable({ name = 't', version = '1', io = {}, tick = function() end },\n"
-	                           "  { __index = function() while true do end end })",
-	                           &d, err, sizeof(err)),
-	                 0);
+	ck_assert_int_ne(
+	    load_text("return setmetatable({ name = 't', version = '1', io = {}, tick = function() end },\n"
+	              "  { __index = function() while true do end end })",
+	              &d, err, sizeof(err)),
+	    0);
 	d = load_ok("local loop = { __index = function() while true do end end,\n"
 	            "  __newindex = function() while true do end end }\n"
 	            "return { name = 't', version = '1', io = { lamp = 'do0', a = 'ai0' }, variables = { v = {} },\n"

@@ -74,19 +74,18 @@ static void roundtrip(const struct vmac_msg *in, struct vmac_msg *out, const cha
 	int n = vmac_proto_encode(in, buf, sizeof(buf));
 	int rc;
 
-	ck_assert_msg(n >= VMAC_HDR_LEN, "%s: encode returned %s, want a frame of >= %d bytes", what,
-	              errname(n), VMAC_HDR_LEN);
-	ck_assert_msg(buf[12] == n - VMAC_HDR_LEN, "%s: len byte %u but frame has %d data bytes", what,
-	              buf[12], n - VMAC_HDR_LEN);
+	ck_assert_msg(n >= VMAC_HDR_LEN, "%s: encode returned %s, want a frame of >= %d bytes", what, errname(n),
+	              VMAC_HDR_LEN);
+	ck_assert_msg(buf[12] == n - VMAC_HDR_LEN, "%s: len byte %u but frame has %d data bytes", what, buf[12],
+	              n - VMAC_HDR_LEN);
 	rc = vmac_proto_decode(buf, (size_t)n, out);
 	ck_assert_msg(rc == 0, "%s: decode of own %d-byte frame returned %s", what, n, errname(rc));
-	ck_assert_msg(out->flags == in->flags, "%s: flags 0x%02x came back as 0x%02x", what, in->flags,
-	              out->flags);
+	ck_assert_msg(out->flags == in->flags, "%s: flags 0x%02x came back as 0x%02x", what, in->flags, out->flags);
 	ck_assert_msg(out->seq == in->seq, "%s: seq %u came back as %u", what, in->seq, out->seq);
 	ck_assert_msg(out->device_id == in->device_id, "%s: device_id 0x%08x came back as 0x%08x", what,
 	              (unsigned)in->device_id, (unsigned)out->device_id);
-	ck_assert_msg(out->channel == in->channel, "%s: channel 0x%02x came back as 0x%02x", what,
-	              in->channel, out->channel);
+	ck_assert_msg(out->channel == in->channel, "%s: channel 0x%02x came back as 0x%02x", what, in->channel,
+	              out->channel);
 	ck_assert_msg(out->op == in->op, "%s: op 0x%02x came back as 0x%02x", what, in->op, out->op);
 }
 
@@ -125,8 +124,8 @@ static void expect_decode_err(const uint8_t *frame, size_t len, int want, const 
 /* Build a raw frame byte by byte, bypassing the encoder's checks, so the
  * decoder can be shown frames the encoder would refuse to make. The len byte
  * is data_len; the caller may corrupt it afterwards. */
-static size_t raw_frame(uint8_t *buf, uint8_t flags, uint16_t seq, uint32_t device_id, uint8_t channel,
-                        uint8_t op, const uint8_t *data, size_t data_len)
+static size_t raw_frame(uint8_t *buf, uint8_t flags, uint16_t seq, uint32_t device_id, uint8_t channel, uint8_t op,
+                        const uint8_t *data, size_t data_len)
 {
 	buf[0] = VMAC_MAGIC0;
 	buf[1] = VMAC_MAGIC1;
@@ -259,11 +258,10 @@ START_TEST(register_request_roundtrips)
 	in.u.reg.minor = 0xA0B0C0D0u;
 	in.u.reg.watchdog_ms = 60000;
 	roundtrip(&in, &out, "REGISTER request");
-	ck_assert_msg(out.u.reg.major == in.u.reg.major && out.u.reg.minor == in.u.reg.minor &&
-	                  out.u.reg.watchdog_ms == 60000,
-	              "REGISTER 0x%08x/0x%08x/60000 ms came back as 0x%08x/0x%08x/%u ms", (unsigned)in.u.reg.major,
-	              (unsigned)in.u.reg.minor, (unsigned)out.u.reg.major, (unsigned)out.u.reg.minor,
-	              out.u.reg.watchdog_ms);
+	ck_assert_msg(
+	    out.u.reg.major == in.u.reg.major && out.u.reg.minor == in.u.reg.minor && out.u.reg.watchdog_ms == 60000,
+	    "REGISTER 0x%08x/0x%08x/60000 ms came back as 0x%08x/0x%08x/%u ms", (unsigned)in.u.reg.major,
+	    (unsigned)in.u.reg.minor, (unsigned)out.u.reg.major, (unsigned)out.u.reg.minor, out.u.reg.watchdog_ms);
 
 	in.u.reg.watchdog_ms = 1;
 	roundtrip(&in, &out, "REGISTER request, 1 ms watchdog");
@@ -283,8 +281,8 @@ START_TEST(shutdown_request_and_ack_roundtrip)
 	struct vmac_msg in = request(VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, 9, 3), out;
 	in.u.shutdown_reason = VMAC_SHUT_DRIVER;
 	roundtrip(&in, &out, "SHUTDOWN request");
-	ck_assert_msg(out.u.shutdown_reason == VMAC_SHUT_DRIVER, "shutdown reason %d came back as %u",
-	              VMAC_SHUT_DRIVER, out.u.shutdown_reason);
+	ck_assert_msg(out.u.shutdown_reason == VMAC_SHUT_DRIVER, "shutdown reason %d came back as %u", VMAC_SHUT_DRIVER,
+	              out.u.shutdown_reason);
 
 	in = reply(VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, 9, 3);
 	roundtrip(&in, &out, "SHUTDOWN ack");
@@ -311,8 +309,7 @@ static void check_inputs_reply_roundtrips(uint8_t op, const char *what)
 {
 	struct vmac_msg in = sample_inputs_reply(op), out;
 	roundtrip(&in, &out, what);
-	ck_assert_msg(out.u.inputs.digital == 0xA5, "%s: digital 0xa5 came back as 0x%02x", what,
-	              out.u.inputs.digital);
+	ck_assert_msg(out.u.inputs.digital == 0xA5, "%s: digital 0xa5 came back as 0x%02x", what, out.u.inputs.digital);
 	ck_assert_msg(out.u.inputs.analog[0] == 0 && out.u.inputs.analog[1] == VMAC_ANALOG_MAX,
 	              "%s: analog 0/4095 came back as %u/%u", what, out.u.inputs.analog[0], out.u.inputs.analog[1]);
 	ck_assert_msg(out.u.inputs.encoder == -123456789, "%s: encoder -123456789 came back as %ld", what,
@@ -404,11 +401,11 @@ static void expect_bytes(const uint8_t *got, int got_len, const uint8_t *want, i
 START_TEST(update_request_has_pinned_wire_bytes)
 {
 	static const uint8_t want[] = {
-		'V', 'M', 1, 0x00,      /* magic, version, flags */
-		0x12, 0x34,             /* seq, big-endian */
-		0xA1, 0xB2, 0xC3, 0xD4, /* device id, big-endian */
-		0x00, 0x02, 0x03,       /* device channel, UPDATE, 3 data bytes */
-		0x55, 0xFF, 0x06,       /* digital, pwm -250 big-endian */
+	    'V',  'M',  1,    0x00, /* magic, version, flags */
+	    0x12, 0x34,             /* seq, big-endian */
+	    0xA1, 0xB2, 0xC3, 0xD4, /* device id, big-endian */
+	    0x00, 0x02, 0x03,       /* device channel, UPDATE, 3 data bytes */
+	    0x55, 0xFF, 0x06,       /* digital, pwm -250 big-endian */
 	};
 	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_UPDATE, 0xA1B2C3D4u, 0x1234), back;
 	uint8_t buf[VMAC_FRAME_MAX];
@@ -431,10 +428,10 @@ END_TEST
 START_TEST(discover_request_has_pinned_wire_bytes)
 {
 	static const uint8_t want[] = {
-		'V', 'M', 1, 0x00, /* magic, version, flags */
-		0xBE, 0xEF,        /* seq */
-		0, 0, 0, 0,        /* device id: none on the system channel */
-		0xFF, 0x01, 0x00,  /* system channel, DISCOVER, no data */
+	    'V',  'M',  1,    0x00, /* magic, version, flags */
+	    0xBE, 0xEF,             /* seq */
+	    0,    0,    0,    0,    /* device id: none on the system channel */
+	    0xFF, 0x01, 0x00,       /* system channel, DISCOVER, no data */
 	};
 	struct vmac_msg m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0xBEEF), back;
 	uint8_t buf[VMAC_FRAME_MAX];
@@ -442,8 +439,7 @@ START_TEST(discover_request_has_pinned_wire_bytes)
 
 	expect_bytes(buf, n, want, (int)sizeof(want), "DISCOVER request");
 	rc = vmac_proto_decode(want, sizeof(want), &back);
-	ck_assert_msg(rc == 0 && back.seq == 0xBEEF && back.channel == VMAC_CH_SYSTEM &&
-	                  back.op == VMAC_SYS_DISCOVER,
+	ck_assert_msg(rc == 0 && back.seq == 0xBEEF && back.channel == VMAC_CH_SYSTEM && back.op == VMAC_SYS_DISCOVER,
 	              "pinned DISCOVER decoded as rc %d seq 0x%04x channel 0x%02x op 0x%02x", rc, back.seq,
 	              back.channel, back.op);
 }
@@ -615,22 +611,22 @@ START_TEST(payload_size_wrong_for_op_is_rejected)
 		size_t bad_len;
 		const char *what;
 	} cases[] = {
-		{0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 1, "DISCOVER with 1 data byte"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 9, "REGISTER with 9 data bytes"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 11, "REGISTER with 11 data bytes"},
-		{VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 1, "REGISTER ack with 1 data byte"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, 0, "SHUTDOWN with no reason"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 2, "UPDATE request with 2 data bytes"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 4, "UPDATE request with 4 data bytes"},
-		{VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 11, "UPDATE reply with 11 data bytes"},
-		{VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 13, "UPDATE reply with 13 data bytes"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_IDLE, 1, "IDLE request with 1 data byte"},
-		{VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_IDLE, 3, "IDLE reply with 3 data bytes"},
-		{VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_ERROR, 1, "ERROR reply with 1 data byte"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 3, "SLEEP with 3 data bytes"},
-		{VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 2, "SLEEP ack with 2 data bytes"},
-		{0, VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, 1, "WATCHDOG with 1 data byte"},
-		{VMAC_FLAG_REPLY, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, 16, "ANNOUNCE with 16 data bytes"},
+	    {0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 1, "DISCOVER with 1 data byte"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 9, "REGISTER with 9 data bytes"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 11, "REGISTER with 11 data bytes"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 1, "REGISTER ack with 1 data byte"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, 0, "SHUTDOWN with no reason"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 2, "UPDATE request with 2 data bytes"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 4, "UPDATE request with 4 data bytes"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 11, "UPDATE reply with 11 data bytes"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 13, "UPDATE reply with 13 data bytes"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_IDLE, 1, "IDLE request with 1 data byte"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_IDLE, 3, "IDLE reply with 3 data bytes"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_ERROR, 1, "ERROR reply with 1 data byte"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 3, "SLEEP with 3 data bytes"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 2, "SLEEP ack with 2 data bytes"},
+	    {0, VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, 1, "WATCHDOG with 1 data byte"},
+	    {VMAC_FLAG_REPLY, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, 16, "ANNOUNCE with 16 data bytes"},
 	};
 	uint8_t buf[VMAC_FRAME_MAX], data[VMAC_DATA_MAX];
 	size_t i, n;
@@ -702,8 +698,13 @@ START_TEST(bad_names_are_rejected)
 		const char *name;
 		const char *what;
 	} bad[] = {
-		{"", "empty"},           {"a.b", "containing '.'"}, {"a/b", "containing '/'"},
-		{"a b", "containing ' '"}, {"a\x80" "b", "containing 0x80"},
+	    {"", "empty"},
+	    {"a.b", "containing '.'"},
+	    {"a/b", "containing '/'"},
+	    {"a b", "containing ' '"},
+	    {"a\x80"
+	     "b",
+	     "containing 0x80"},
 	};
 	uint8_t long_name[VMAC_NAME_MAX + 1];
 	size_t i;
@@ -723,8 +724,8 @@ START_TEST(announce_caps_beyond_the_board_are_rejected)
 {
 	uint8_t buf[VMAC_FRAME_MAX], data[VMAC_DATA_MAX];
 	size_t dn = raw_announce_data(data, (const uint8_t *)"drv", 3, (const uint8_t *)"brd", 3), n, i;
-	static const uint8_t too_many[5] = {VMAC_DIGITAL_INPUTS + 1, VMAC_DIGITAL_OUTPUTS + 1,
-	                                    VMAC_ANALOG_INPUTS + 1, 2, 2};
+	static const uint8_t too_many[5] = {VMAC_DIGITAL_INPUTS + 1, VMAC_DIGITAL_OUTPUTS + 1, VMAC_ANALOG_INPUTS + 1,
+	                                    2, 2};
 	for (i = 0; i < 5; i++) {
 		uint8_t saved = data[dn - 5 + i];
 		data[dn - 5 + i] = too_many[i];
@@ -923,8 +924,8 @@ START_TEST(every_prefix_of_an_announce_is_rejected)
 	ck_assert_msg(n > VMAC_HDR_LEN, "encode ANNOUNCE returned %s", errname(n));
 	for (len = 0; len < (size_t)n; len++) {
 		rc = decode_exact(buf, len, &out);
-		ck_assert_msg(rc < 0, "decode of the first %zu of %d ANNOUNCE bytes returned %d, want an error", len,
-		              n, rc);
+		ck_assert_msg(rc < 0, "decode of the first %zu of %d ANNOUNCE bytes returned %d, want an error", len, n,
+		              rc);
 	}
 	rc = decode_exact(buf, (size_t)n, &out);
 	ck_assert_msg(rc == 0, "decode of the whole %d-byte ANNOUNCE returned %s", n, errname(rc));
@@ -935,9 +936,9 @@ END_TEST
 
 START_TEST(strerror_has_text_for_every_error)
 {
-	static const int errs[] = {VMAC_EPROTO_SHORT,   VMAC_EPROTO_MAGIC,   VMAC_EPROTO_VERSION,
-	                           VMAC_EPROTO_LENGTH,  VMAC_EPROTO_OP,      VMAC_EPROTO_PAYLOAD,
-	                           VMAC_EPROTO_NAME,    VMAC_EPROTO_VALUE,   VMAC_EPROTO_SPACE};
+	static const int errs[] = {VMAC_EPROTO_SHORT,  VMAC_EPROTO_MAGIC, VMAC_EPROTO_VERSION,
+	                           VMAC_EPROTO_LENGTH, VMAC_EPROTO_OP,    VMAC_EPROTO_PAYLOAD,
+	                           VMAC_EPROTO_NAME,   VMAC_EPROTO_VALUE, VMAC_EPROTO_SPACE};
 	const char *unknown = vmac_proto_strerror(-1000);
 	size_t i, j;
 
@@ -961,12 +962,12 @@ START_TEST(opname_names_every_op)
 		uint8_t channel, op;
 		const char *name;
 	} ops[] = {
-		{VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, "DISCOVER"}, {VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, "ANNOUNCE"},
-		{VMAC_CH_DEVICE, VMAC_OP_REGISTER, "REGISTER"},  {VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, "SHUTDOWN"},
-		{VMAC_CH_DEVICE, VMAC_OP_UPDATE, "UPDATE"},      {VMAC_CH_DEVICE, VMAC_OP_ERROR, "ERROR"},
-		{VMAC_CH_DEVICE, VMAC_OP_IDLE, "IDLE"},          {VMAC_CH_DEVICE, VMAC_OP_SLEEP, "SLEEP"},
-		{VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, "WATCHDOG"},  {VMAC_CH_DEVICE, 0x07, "?"},
-		{VMAC_CH_SYSTEM, VMAC_OP_UPDATE, "?"},           {0x01, VMAC_OP_UPDATE, "?"},
+	    {VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, "DISCOVER"}, {VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, "ANNOUNCE"},
+	    {VMAC_CH_DEVICE, VMAC_OP_REGISTER, "REGISTER"},  {VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, "SHUTDOWN"},
+	    {VMAC_CH_DEVICE, VMAC_OP_UPDATE, "UPDATE"},      {VMAC_CH_DEVICE, VMAC_OP_ERROR, "ERROR"},
+	    {VMAC_CH_DEVICE, VMAC_OP_IDLE, "IDLE"},          {VMAC_CH_DEVICE, VMAC_OP_SLEEP, "SLEEP"},
+	    {VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, "WATCHDOG"},  {VMAC_CH_DEVICE, 0x07, "?"},
+	    {VMAC_CH_SYSTEM, VMAC_OP_UPDATE, "?"},           {0x01, VMAC_OP_UPDATE, "?"},
 	};
 	size_t i;
 	for (i = 0; i < sizeof(ops) / sizeof(ops[0]); i++) {

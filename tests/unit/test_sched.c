@@ -444,8 +444,9 @@ START_TEST(negative_control_greedy_without_moves_breaks_the_bound)
 			if (vmac_sched_add(s, i, rng_below(&rng, K + 1), err, sizeof(err)) != 0)
 				break;
 			t = settle(s, t, 8 * N);
-			ck_assert_msg(spread(s, NULL, NULL) <= 1, "scheduler spread %u after arrival %u of seed %" PRIu64,
-			              spread(s, NULL, NULL), i, worst_seed);
+			ck_assert_msg(spread(s, NULL, NULL) <= 1,
+			              "scheduler spread %u after arrival %u of seed %" PRIu64, spread(s, NULL, NULL), i,
+			              worst_seed);
 		}
 		vmac_sched_free(s);
 	}
@@ -509,26 +510,26 @@ static void prop_slot(struct prop *p)
 	struct vmac_sched_entry e[MAX_S + 1];
 	int n = vmac_sched_slot(p->s, p->slot, e, (int)p->S), k;
 	CHECK(n >= 0 && n <= (int)p->S, "seed %" PRIu64 " step %u slot %" PRIu64 ": vmac_sched_slot returned %d (S %u)",
-	              p->seed, p->step, p->slot, n, p->S);
+	      p->seed, p->step, p->slot, n, p->S);
 	for (k = 0; k < n; k++) {
 		unsigned i = idx_of(p, e[k].device);
 		struct pdev *d;
 		CHECK(i < p->ndev, "seed %" PRIu64 " step %u slot %" PRIu64 ": unknown device %u served", p->seed,
-		              p->step, p->slot, (unsigned)e[k].device);
+		      p->step, p->slot, (unsigned)e[k].device);
 		d = &p->dev[i];
 		CHECK(e[k].slice < p->S && (k == 0 || e[k].slice > e[k - 1].slice),
-		              "seed %" PRIu64 " step %u slot %" PRIu64 ": slice %u of entry %d (previous %d, S %u)", p->seed,
-		              p->step, p->slot, e[k].slice, k, k ? e[k - 1].slice : -1, p->S);
-		CHECK(d->live, "seed %" PRIu64 " step %u slot %" PRIu64 ": device %u served after its removal",
-		              p->seed, p->step, p->slot, i);
+		      "seed %" PRIu64 " step %u slot %" PRIu64 ": slice %u of entry %d (previous %d, S %u)", p->seed,
+		      p->step, p->slot, e[k].slice, k, k ? e[k - 1].slice : -1, p->S);
+		CHECK(d->live, "seed %" PRIu64 " step %u slot %" PRIu64 ": device %u served after its removal", p->seed,
+		      p->step, p->slot, i);
 		CHECK(!d->has_last || d->last != p->slot,
-		              "seed %" PRIu64 " step %u slot %" PRIu64 ": device %u served twice in one slot", p->seed,
-		              p->step, p->slot, i);
+		      "seed %" PRIu64 " step %u slot %" PRIu64 ": device %u served twice in one slot", p->seed, p->step,
+		      p->slot, i);
 		CHECK(!d->has_last || p->slot - d->last <= (1u << d->last_level),
-		              "seed %" PRIu64 " step %u: device %u waited %" PRIu64 " slots (served at %" PRIu64
-		              " at level %u, period %u, next at %" PRIu64 " at level %u)",
-		              p->seed, p->step, i, p->slot - d->last, d->last, d->last_level, 1u << d->last_level,
-		              p->slot, e[k].level);
+		      "seed %" PRIu64 " step %u: device %u waited %" PRIu64 " slots (served at %" PRIu64
+		      " at level %u, period %u, next at %" PRIu64 " at level %u)",
+		      p->seed, p->step, i, p->slot - d->last, d->last, d->last_level, 1u << d->last_level, p->slot,
+		      e[k].level);
 		d->has_last = 1;
 		d->last = p->slot;
 		d->last_level = e[k].level;
@@ -545,8 +546,8 @@ static void prop_add(struct prop *p, unsigned level)
 		return;
 	rc = vmac_sched_add(p->s, id_of(p, p->ndev), level, err, sizeof(err));
 	CHECK(fits ? rc == 0 : rc == -ENOSPC,
-	              "seed %" PRIu64 " step %u: add at level %u (needs %u, used %u of %u) returned %d (%s)", p->seed,
-	              p->step, level, w, p->used, p->total, rc, err);
+	      "seed %" PRIu64 " step %u: add at level %u (needs %u, used %u of %u) returned %d (%s)", p->seed, p->step,
+	      level, w, p->used, p->total, rc, err);
 	if (rc == 0) {
 		struct pdev *d = &p->dev[p->ndev];
 		memset(d, 0, sizeof(*d));
@@ -556,8 +557,8 @@ static void prop_add(struct prop *p, unsigned level)
 		p->nlive++;
 		p->ndev++;
 	} else {
-		CHECK(strncmp(err, "schedule full: need level", 25) == 0,
-		              "seed %" PRIu64 " step %u: refusal text '%s'", p->seed, p->step, err);
+		CHECK(strncmp(err, "schedule full: need level", 25) == 0, "seed %" PRIu64 " step %u: refusal text '%s'",
+		      p->seed, p->step, err);
 		p->ndev++; /* the id is spent either way */
 		p->dev[p->ndev - 1].live = 0;
 		p->dev[p->ndev - 1].has_last = 0;
@@ -604,8 +605,8 @@ static void prop_set_level(struct prop *p, unsigned level)
 	fits = p->used - w_old + w_new <= p->total;
 	rc = vmac_sched_set_level(p->s, id_of(p, i), level, err, sizeof(err));
 	CHECK(fits ? rc == 0 : rc == -ENOSPC,
-	              "seed %" PRIu64 " step %u: device %u level %u -> %u (used %u of %u) returned %d (%s)", p->seed,
-	              p->step, i, p->dev[i].want, level, p->used, p->total, rc, err);
+	      "seed %" PRIu64 " step %u: device %u level %u -> %u (used %u of %u) returned %d (%s)", p->seed, p->step,
+	      i, p->dev[i].want, level, p->used, p->total, rc, err);
 	if (rc == 0) {
 		p->used = p->used - w_old + w_new;
 		p->dev[i].want = level;
@@ -622,50 +623,50 @@ static void prop_check_table(struct prop *p)
 	int n;
 	vmac_sched_capacity(p->s, &used, &total);
 	CHECK(used == p->used && total == p->total,
-	              "seed %" PRIu64 " step %u: capacity used %u of %u, model says %u of %u", p->seed, p->step, used,
-	              total, p->used, p->total);
+	      "seed %" PRIu64 " step %u: capacity used %u of %u, model says %u of %u", p->seed, p->step, used, total,
+	      p->used, p->total);
 	CHECK(spread(p->s, &lo, &hi) <= 1,
-	              "seed %" PRIu64 " step %u: fullest slot holds %u devices, emptiest %u (S %u, K %u)", p->seed,
-	              p->step, hi, lo, p->S, p->K);
+	      "seed %" PRIu64 " step %u: fullest slot holds %u devices, emptiest %u (S %u, K %u)", p->seed, p->step, hi,
+	      lo, p->S, p->K);
 	for (k = 0; k < p->N * p->S; k++)
 		owner[k] = -1;
 	n = vmac_sched_devices(p->s, list, PMAX);
 	for (k = 0; k < (unsigned)n; k++) {
 		const struct vmac_sched_device *d = &list[k];
 		unsigned i = idx_of(p, d->device);
-		CHECK(i < p->ndev && p->dev[i].live, "seed %" PRIu64 " step %u: listed device %u is not live",
-		              p->seed, p->step, i);
+		CHECK(i < p->ndev && p->dev[i].live, "seed %" PRIu64 " step %u: listed device %u is not live", p->seed,
+		      p->step, i);
 		CHECK(d->state == VMAC_SCHED_RUNNING && d->level == p->dev[i].want && d->want_level == d->level,
-		              "seed %" PRIu64 " step %u: device %u state %d level %u want %u, asked for %u", p->seed,
-		              p->step, i, d->state, d->level, d->want_level, p->dev[i].want);
+		      "seed %" PRIu64 " step %u: device %u state %d level %u want %u, asked for %u", p->seed, p->step,
+		      i, d->state, d->level, d->want_level, p->dev[i].want);
 		CHECK(d->slice < p->S && d->offset < (1u << d->level),
-		              "seed %" PRIu64 " step %u: device %u slice %u offset %u level %u", p->seed, p->step, i,
-		              d->slice, d->offset, d->level);
+		      "seed %" PRIu64 " step %u: device %u slice %u offset %u level %u", p->seed, p->step, i, d->slice,
+		      d->offset, d->level);
 		for (row = d->offset; row < p->N; row += 1u << d->level) {
 			int32_t *o = &owner[row * p->S + d->slice];
-			CHECK(*o < 0, "seed %" PRIu64 " step %u: devices %d and %u share slice %u of row %u",
-			              p->seed, p->step, *o, i, d->slice, row);
+			CHECK(*o < 0, "seed %" PRIu64 " step %u: devices %d and %u share slice %u of row %u", p->seed,
+			      p->step, *o, i, d->slice, row);
 			*o = (int32_t)i;
 		}
 		CHECK(p->dev[i].has_last && p->dev[i].last + p->N >= p->slot,
-		              "seed %" PRIu64 " step %u: device %u not served during the last block (slot %" PRIu64 ")",
-		              p->seed, p->step, i, p->slot);
+		      "seed %" PRIu64 " step %u: device %u not served during the last block (slot %" PRIu64 ")",
+		      p->seed, p->step, i, p->slot);
 		weight_sum += p->N >> d->level;
 		nlive++;
 	}
-	CHECK(nlive == p->nlive, "seed %" PRIu64 " step %u: %u devices listed, %u live", p->seed, p->step,
-	              nlive, p->nlive);
+	CHECK(nlive == p->nlive, "seed %" PRIu64 " step %u: %u devices listed, %u live", p->seed, p->step, nlive,
+	      p->nlive);
 	for (row = 0; row < p->N; row++) {
 		unsigned cnt = 0;
 		for (k = 0; k < p->S; k++)
 			cnt += owner[row * p->S + k] >= 0;
 		CHECK(cnt == vmac_sched_load(p->s, row),
-		              "seed %" PRIu64 " step %u: row %u load %u but %u devices placed there", p->seed, p->step,
-		              row, vmac_sched_load(p->s, row), cnt);
+		      "seed %" PRIu64 " step %u: row %u load %u but %u devices placed there", p->seed, p->step, row,
+		      vmac_sched_load(p->s, row), cnt);
 		load_sum += cnt;
 	}
-	CHECK(load_sum == weight_sum, "seed %" PRIu64 " step %u: loads sum %" PRIu64 ", devices need %" PRIu64,
-	              p->seed, p->step, load_sum, weight_sum);
+	CHECK(load_sum == weight_sum, "seed %" PRIu64 " step %u: loads sum %" PRIu64 ", devices need %" PRIu64, p->seed,
+	      p->step, load_sum, weight_sum);
 }
 
 static void prop_run(uint64_t seed)
@@ -708,18 +709,17 @@ static void prop_run(uint64_t seed)
 		start = p.slot;
 		while (vmac_sched_pending(p.s, &waited) > 0) {
 			CHECK(p.slot - start <= (uint64_t)(burst + 1) * p.N + 1,
-			              "seed %" PRIu64 " step %u: %u changes still pending after %" PRIu64
-			              " slots (S %u, K %u, oldest waited %" PRIu64 ")",
-			              p.seed, p.step, vmac_sched_pending(p.s, NULL), p.slot - start, p.S, p.K, waited);
+			      "seed %" PRIu64 " step %u: %u changes still pending after %" PRIu64
+			      " slots (S %u, K %u, oldest waited %" PRIu64 ")",
+			      p.seed, p.step, vmac_sched_pending(p.s, NULL), p.slot - start, p.S, p.K, waited);
 			prop_slot(&p);
 		}
 		if (p.slot - start > p.max_wait_slots)
 			p.max_wait_slots = p.slot - start;
 		if (burst && (p.slot - start) * 100 / (burst * p.N) > prop_worst_wait_x100)
 			prop_worst_wait_x100 = (p.slot - start) * 100 / (burst * p.N);
-		CHECK(spread(p.s, NULL, NULL) <= 1,
-		              "seed %" PRIu64 " step %u: spread %u right after the switch", p.seed, p.step,
-		              spread(p.s, NULL, NULL));
+		CHECK(spread(p.s, NULL, NULL) <= 1, "seed %" PRIu64 " step %u: spread %u right after the switch",
+		      p.seed, p.step, spread(p.s, NULL, NULL));
 		for (k = 0; k < p.N; k++)
 			prop_slot(&p);
 		prop_check_table(&p);
@@ -745,11 +745,10 @@ START_TEST(property_random_sequences)
 	unsigned long first = env_number("VMAC_SCHED_PROPERTY_SEED", 1), i;
 	for (i = 0; i < runs; i++)
 		prop_run(first + i);
-	printf("property: %lu random sequences (seeds %lu..%lu), %" PRIu64
-	       " settled tables checked; slowest burst came in force after %" PRIu64 ".%02" PRIu64
-	       " blocks per change\n",
-	       runs, first, first + runs - 1, prop_switch_checks, prop_worst_wait_x100 / 100,
-	       prop_worst_wait_x100 % 100);
+	printf(
+	    "property: %lu random sequences (seeds %lu..%lu), %" PRIu64
+	    " settled tables checked; slowest burst came in force after %" PRIu64 ".%02" PRIu64 " blocks per change\n",
+	    runs, first, first + runs - 1, prop_switch_checks, prop_worst_wait_x100 / 100, prop_worst_wait_x100 % 100);
 }
 END_TEST
 

@@ -170,19 +170,19 @@ static void count_event(void *ctx, const struct vmac_stored_event *e)
 	++*(int *)ctx;
 }
 
-#define HAMMER_CHECK(cond, ...)                                                                              \
-	do {                                                                                                 \
-		if (!(cond)) {                                                                               \
-			snprintf(h->problem, sizeof(h->problem), __VA_ARGS__);                               \
-			return NULL;                                                                         \
-		}                                                                                            \
+#define HAMMER_CHECK(cond, ...)                                                                                        \
+	do {                                                                                                           \
+		if (!(cond)) {                                                                                         \
+			snprintf(h->problem, sizeof(h->problem), __VA_ARGS__);                                         \
+			return NULL;                                                                                   \
+		}                                                                                                      \
 	} while (0)
 
 static void *hammer(void *arg)
 {
 	struct hammer *h = arg;
-	char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1], err[512] = "", driver[16], machine[16],
-	    version[32], src[64];
+	char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1], err[512] = "", driver[16], machine[16], version[32],
+	                                                           src[64];
 	int i;
 	snprintf(driver, sizeof(driver), "drv%d", h->index);
 	snprintf(machine, sizeof(machine), "machine-%d", h->index);
@@ -199,12 +199,14 @@ static void *hammer(void *arg)
 
 		rc = vmac_token_create(store, VMAC_SCOPE_OPERATE, "test", token, id, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: token create: %d %s", i, rc, err);
-		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_OPERATE, "round %d: a new token is refused", i);
+		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_OPERATE, "round %d: a new token is refused",
+		             i);
 		rc = vmac_token_revoke(store, id, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: revoking a valid token answered %d (%s)", i, rc, err);
 		rc = vmac_token_revoke(store, id, err, sizeof(err));
 		HAMMER_CHECK(rc == 1, "round %d: revoking it again answered %d, not 1 (%s)", i, rc, err);
-		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_NONE, "round %d: a revoked token is valid", i);
+		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_NONE, "round %d: a revoked token is valid",
+		             i);
 		rc = vmac_token_list(store, count_token, &n, err, sizeof(err));
 		HAMMER_CHECK(rc > i && rc == n, "round %d: token list: %d (%d seen) %s", i, rc, n, err);
 
@@ -215,8 +217,8 @@ static void *hammer(void *arg)
 		rc = vmac_store_driver_get(store, vid, &v, &back, &len, err, sizeof(err));
 		HAMMER_CHECK(rc == 1 && strcmp(v.driver, driver) == 0 && strcmp(v.version, version) == 0 && back &&
 		                 strcmp(back, src) == 0,
-		             "round %d: version %s of %s was stored as id %lld, which holds %d %s %s", i, version, driver,
-		             (long long)vid, rc, rc == 1 ? v.driver : "-", rc == 1 ? v.version : err);
+		             "round %d: version %s of %s was stored as id %lld, which holds %d %s %s", i, version,
+		             driver, (long long)vid, rc, rc == 1 ? v.driver : "-", rc == 1 ? v.version : err);
 		free(back);
 		rc = vmac_store_driver_activate(store, driver, vid, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: activate: %d %s", i, rc, err);
@@ -225,8 +227,8 @@ static void *hammer(void *arg)
 		             (long long)v.id, (long long)vid);
 		n = 0;
 		rc = vmac_store_driver_list(store, driver, count_version, &n, err, sizeof(err));
-		HAMMER_CHECK(rc == i + 1 && n == i + 1, "round %d: %s has %d versions listed (%d seen) %s", i, driver, rc,
-		             n, err);
+		HAMMER_CHECK(rc == i + 1 && n == i + 1, "round %d: %s has %d versions listed (%d seen) %s", i, driver,
+		             rc, n, err);
 		if (i % 3 == 2) {
 			rc = vmac_store_driver_roll_back(store, driver, vid, "test", err, sizeof(err));
 			HAMMER_CHECK(rc == 0, "round %d: roll back: %d %s", i, rc, err);
@@ -246,7 +248,8 @@ static void *hammer(void *arg)
 		rc = vmac_store_events_add(store, &ev, 1, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: events add: %d %s", i, rc, err);
 		rc = vmac_store_events_last(store, &last, err, sizeof(err));
-		HAMMER_CHECK(rc == 0 && last >= ev.seq, "round %d: events last: %d, %llu", i, rc, (unsigned long long)last);
+		HAMMER_CHECK(rc == 0 && last >= ev.seq, "round %d: events last: %d, %llu", i, rc,
+		             (unsigned long long)last);
 		n = 0;
 		rc = vmac_store_events_list(store, ev.seq - 1, 1, count_event, &n, err, sizeof(err));
 		HAMMER_CHECK(rc == 1 && n == 1, "round %d: events list: %d %s", i, rc, err);
@@ -267,7 +270,8 @@ START_TEST(two_threads_at_once_get_their_own_answers)
 	for (i = 0; i < 2; i++)
 		pthread_join(th[i], NULL);
 	for (i = 0; i < 2; i++)
-		ck_assert_msg(h[i].problem[0] == 0, "thread %d, after %d good rounds: %s", i, h[i].rounds, h[i].problem);
+		ck_assert_msg(h[i].problem[0] == 0, "thread %d, after %d good rounds: %s", i, h[i].rounds,
+		              h[i].problem);
 	ck_assert_int_eq(h[0].rounds + h[1].rounds, 2 * HAMMER_ROUNDS);
 }
 END_TEST
@@ -298,8 +302,8 @@ static int full_read(sqlite3_file *f, void *buf, int n, sqlite3_int64 off)
 static int full_write(sqlite3_file *f, const void *buf, int n, sqlite3_int64 off)
 {
 	return disk_full == 1 ? SQLITE_FULL
-	       : disk_full   ? SQLITE_IOERR_WRITE
-	                     : REAL(f)->pMethods->xWrite(REAL(f), buf, n, off);
+	       : disk_full    ? SQLITE_IOERR_WRITE
+	                      : REAL(f)->pMethods->xWrite(REAL(f), buf, n, off);
 }
 static int full_truncate(sqlite3_file *f, sqlite3_int64 size)
 {
@@ -375,11 +379,11 @@ static void install_full_vfs(void)
 	full_vfs.zName = "vmac-full-disk";
 	full_vfs.szOsFile = (int)sizeof(struct full_file) + real_vfs->szOsFile;
 	full_vfs.xOpen = full_open;
-	full_methods = (sqlite3_io_methods){2,           full_close,   full_read,      full_write,
-	                                    full_truncate, full_sync,    full_size,      full_lock,
-	                                    full_unlock,   full_reserved, full_control,  full_sector,
-	                                    full_device,   full_shm_map, full_shm_lock, full_shm_barrier,
-	                                    full_shm_unmap, NULL,        NULL};
+	full_methods = (sqlite3_io_methods){
+	    2,           full_close,   full_read,     full_write,       full_truncate,  full_sync,
+	    full_size,   full_lock,    full_unlock,   full_reserved,    full_control,   full_sector,
+	    full_device, full_shm_map, full_shm_lock, full_shm_barrier, full_shm_unmap, NULL,
+	    NULL};
 	ck_assert_int_eq(sqlite3_vfs_register(&full_vfs, 1), SQLITE_OK);
 }
 
