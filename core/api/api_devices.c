@@ -1,0 +1,429 @@
+/* The endpoints of machines (docs/API.md): GET /api/status and
+ * /api/devices[/NAME], operator input and cycles (through the bus's
+ * request slots), the line console, and GET /api/live for the web UI. */
+#include "http_internal.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <jansson.h>
+#include <microhttpd.h>
+#include <sodium.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../common/addr.h"
+#include "../common/errors.h"
+#include "../reload/deploy.h"
+#include "../reload/loader.h"
+#include "console.h"
+#include "ui_assets.h"
+
+static json_t *bools(uint32_t bits, int n)
+{
+	json_t *a = json_array();
+	int i;
+	for (i = 0; i < n; i++)
+		json_array_append_new(a, json_boolean((bits >> i) & 1));
+	return a;
+}
+
+static json_t *value_json(const struct vmac_value *v)
+{
+	switch (v->type) {
+	case VMAC_VALUE_NUMBER: return json_real(v->number);
+	case VMAC_VALUE_BOOL: return json_boolean(v->number != 0);
+	case VMAC_VALUE_STRING: return json_string(v->str);
+	default: return json_null();
+	}
+}
+
+static json_t *device_json(const struct vmac_device_status *d)
+{
+	json_t *o, *vars = json_object(), *params = json_object();
+	int i;
+	for (i = 0; i < d->nvars; i++)
+		json_object_set_new(vars, d->vars[i].name, value_json(&d->vars[i].value));
+	for (i = 0; i < d->nparams; i++)
+		json_object_set_new(params, d->params[i].name, value_json(&d->params[i].value));
+	json_t *in =
+	    json_pack("{s:o, s:[i,i], s:I}", "digital", bools(d->inputs.digital, VMAC_DIGITAL_INPUTS), "analog",
+	              (int)d->inputs.analog[0], (int)d->inputs.analog[1], "encoder", (json_int_t)d->inputs.encoder);
+	json_t *out = json_pack("{s:o, s:i}", "digital", bools(d->outputs.digital, VMAC_DIGITAL_OUTPUTS), "pwm",
+	                        (int)d->outputs.pwm);
+	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:I, s:o, s:o, s:o, s:I}", "name", d->name,
+	              "driver", d->driver, "driver_version", d->driver_version, "state", d->state, "address",
+	              d->address, "id", (json_int_t)d->id, "major", (json_int_t)d->major, "minor", (json_int_t)d->minor,
+	              "period_us", (json_int_t)d->period_us, "misses", (json_int_t)d->misses, "served",
+	              (json_int_t)d->served, "inputs", in, "outputs", out, "variables", vars, "driver_memory",
+	              (json_int_t)d->driver_memory);
+	if (!o)
+		return NULL;
+	json_object_set_new(o, "level", d->scheduled || d->level ? json_integer(d->level) : json_null());
+	json_object_set_new(o, "slot", d->scheduled ? json_integer(d->slot) : json_null());
+	json_object_set_new(o, "slice", d->scheduled ? json_integer(d->slice) : json_null());
+	json_object_set_new(o, "machine", d->machine[0] ? json_string(d->machine) : json_null());
+	json_object_set_new(o, "note", d->note[0] ? json_string(d->note) : json_null());
+	json_object_set_new(o, "params", params);
+	return o;
+}
+
+json_t *http_status_json(struct vmac_http *h)
+{
+	struct vmac_status *s = &h->status;
+	struct vmac_event ev[STATUS_EVENTS];
+	json_t *root, *devices, *events, *reasons;
+	int i, n;
+
+	pthread_mutex_lock(&h->status_lock);
+	vmac_bus_status(h->bus, s);
+	devices = json_array();
+	for (i = 0; i < s->ndevices; i++)
+		json_array_append_new(devices, device_json(&s->devices[i]));
+	reasons = json_object();
+	for (i = 0; i < VMAC_BAD_REASONS; i++)
+		json_object_set_new(reasons, vmac_malformed_reason_names[i],
+		                    json_integer((json_int_t)s->counters.malformed_by_reason[i]));
+	root = json_pack(
+	    "{s:s, s:f, s:{s:s, s:s, s:s, s:I, s:I, s:I, s:I, s:I, s:b}, s:o,"
+	    " s:{s:I, s:I, s:{s:I, s:I, s:I, s:I}},"
+	    " s:{s:I, s:o, s:I, s:I, s:I, s:I, s:I, s:I}}",
+	    "version", VMAC_VERSION_STRING, "uptime_s",
+	    s->started_ns ? (double)(s->time_ns - s->started_ns) / 1e9 : 0.0, "bus", "group", h->cfg.bus, "iface",
+	    h->cfg.iface, "host_addr", s->host_addr, "slot_us", (json_int_t)vmac_config_slot_us(&h->cfg),
+	    "reply_deadline_us", (json_int_t)h->cfg.reply_deadline_us, "discovery_period_ms",
+	    (json_int_t)h->cfg.discovery_period_ms, "watchdog_ms", (json_int_t)h->cfg.watchdog_ms, "miss_limit",
+	    (json_int_t)h->cfg.miss_limit, "realtime", s->realtime, "devices", devices, "tick", "count",
+	    (json_int_t)s->counters.ticks, "skipped", (json_int_t)s->counters.ticks_skipped, "lateness_us", "p50",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.50), "p99",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.99), "p999",
+	    (json_int_t)vmac_hist_quantile(&s->lateness, 0.999), "max", (json_int_t)s->lateness.max_us, "counters",
+	    "malformed_frames", (json_int_t)s->counters.malformed_frames, "malformed_by_reason", reasons,
+	    "late_replies", (json_int_t)s->counters.late_replies, "misses", (json_int_t)s->counters.misses, "drops",
+	    (json_int_t)s->counters.drops, "discoveries", (json_int_t)s->counters.discoveries, "announces",
+	    (json_int_t)s->counters.announces, "events_lost", (json_int_t)s->counters.events_lost, "table_full",
+	    (json_int_t)s->counters.table_full);
+	if (root) {
+		json_t *load = json_array();
+		for (i = 0; i < (int)s->slots_per_block; i++)
+			json_array_append_new(load, json_integer(s->slot_load[i]));
+		json_object_set_new(json_object_get(root, "counters"), "schedule_full",
+		                    json_integer((json_int_t)s->counters.schedule_full));
+		json_object_set_new(
+		    root, "schedule",
+		    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",
+		              (json_int_t)s->slices_per_slot, "slots_per_block", (json_int_t)s->slots_per_block,
+		              "slot_us", (json_int_t)s->slot_us, "slice_us", (json_int_t)h->cfg.slice_us, "max_level",
+		              (json_int_t)h->cfg.max_level, "capacity_used", (json_int_t)s->capacity_used,
+		              "capacity_total", (json_int_t)s->capacity_total, "slot_load", load));
+	}
+	pthread_mutex_unlock(&h->status_lock);
+
+	events = json_array();
+	n = vmac_event_log_latest(h->log, ev, STATUS_EVENTS);
+	for (i = 0; i < n; i++)
+		json_array_append_new(events, json_pack("{s:I, s:f, s:s, s:s, s:s}", "seq", (json_int_t)ev[i].seq,
+		                                        "time", (double)ev[i].time_ns / 1e9, "kind", ev[i].kind,
+		                                        "device", ev[i].device, "text", ev[i].text));
+	if (root)
+		json_object_set_new(root, "events", events);
+	else
+		json_decref(events);
+	return root;
+}
+
+/* Operator input through the bus thread, and into the store when it
+ * persists. Returns the HTTP status; msg says why on anything but 200. */
+static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *req, char *msg, size_t msglen)
+{
+	char err[512];
+	int rc;
+	if (vmac_bus_request_input(h->bus, req, INPUT_TIMEOUT_MS) != 0) {
+		snprintf(msg, msglen, "%s", req->reply);
+		return MHD_HTTP_SERVICE_UNAVAILABLE;
+	}
+	if (req->rc == 0 && req->persist &&
+	    (rc = vmac_store_param_set(h->store, req->machine, req->name, &req->value, err, sizeof(err))) != 0) {
+		snprintf(msg, msglen, "%s.%s is set, but it could not be persisted: %s", req->machine, req->name, err);
+		return rc == -VMAC_ESTOREFULL ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR;
+	}
+	if (req->rc == 0)
+		return MHD_HTTP_OK;
+	snprintf(msg, msglen, "%s", req->reply);
+	if (req->rc > 0) /* refused (a vmac_refusal) */
+		return MHD_HTTP_CONFLICT;
+	return req->rc == -VMAC_ENOTRUNNING ? MHD_HTTP_NOT_FOUND : MHD_HTTP_BAD_GATEWAY; /* else -VMAC_EDRIVER */
+}
+
+/* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input
+ * to the device's driver, through the bus thread. */
+enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
+                                    const struct conn *k)
+{
+	struct vmac_bus_input_request req;
+	json_error_t jerr;
+	json_t *body, *name, *value, *persist;
+	char msg[VMAC_EVENT_TEXT + 200];
+	unsigned code;
+	memset(&req, 0, sizeof(req));
+	if (k->too_big || k->len > INPUT_MAX)
+		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("the request body is over 64 KiB"));
+	if (!http_valid_name(device, VMAC_NAME_MAX))
+		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such device"));
+	body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr);
+	name = json_object_get(body, "name");
+	value = json_object_get(body, "value");
+	persist = json_object_get(body, "persist");
+	if (!json_is_object(body) || !json_is_string(name) || (persist && !json_is_boolean(persist)) ||
+	    !http_valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
+	    (value && !json_is_string(value) && !json_is_number(value) && !json_is_boolean(value) &&
+	     !json_is_null(value)) ||
+	    (json_is_string(value) && strlen(json_string_value(value)) > VMAC_DRIVER_STR_MAX)) {
+		json_decref(body);
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		             http_error_body("expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
+		                        "boolean or null, \"persist\": true or false (optional)}"));
+	}
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	snprintf(req.name, sizeof(req.name), "%s", json_string_value(name));
+	if (json_is_string(value)) {
+		req.value.type = VMAC_VALUE_STRING;
+		snprintf(req.value.str, sizeof(req.value.str), "%s", json_string_value(value));
+	} else if (json_is_number(value)) {
+		req.value.type = VMAC_VALUE_NUMBER;
+		req.value.number = json_number_value(value);
+	} else if (json_is_boolean(value)) {
+		req.value.type = VMAC_VALUE_BOOL;
+		req.value.number = json_is_true(value);
+	} else {
+		req.value.type = VMAC_VALUE_NONE; /* a command without a value */
+	}
+	req.persist = json_is_true(persist);
+	json_decref(body);
+	if (req.persist && req.value.type == VMAC_VALUE_NONE)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("a value to persist is needed"));
+	code = run_input(h, &req, msg, sizeof(msg));
+	if (code == MHD_HTTP_OK)
+		return http_reply(c, MHD_HTTP_OK,
+		             json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted", req.persist));
+	return http_reply(c, code, http_error_body(msg));
+}
+
+/* POST /api/devices/NAME/cycle {"action": "start", "program": "quick"}:
+ * start (a programme, or the driver's default), pause, resume or cancel a
+ * cycle: the commands of the same names of the driver (the stdlib's
+ * appliance offers them), through the same way as input. */
+enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
+                                    const struct conn *k)
+{
+	static const char *const actions[] = {"start", "pause", "resume", "cancel"};
+	struct vmac_bus_input_request req;
+	char msg[VMAC_EVENT_TEXT + 200];
+	json_error_t jerr;
+	json_t *body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr), *action, *program;
+	unsigned code, i;
+	if (k->too_big || k->len > INPUT_MAX) {
+		json_decref(body);
+		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("the request body is over 64 KiB"));
+	}
+	action = json_object_get(body, "action");
+	program = json_object_get(body, "program");
+	for (i = 0; i < 4 && !(json_is_string(action) && strcmp(json_string_value(action), actions[i]) == 0); i++)
+		;
+	if (i == 4 || (program && (i != 0 || !json_is_string(program) ||
+	                           strlen(json_string_value(program)) > VMAC_DRIVER_STR_MAX))) {
+		json_decref(body);
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		             http_error_body("expected {\"action\": \"start\", \"pause\", \"resume\" or \"cancel\", "
+		                        "\"program\": a programme's name (start only, optional)}"));
+	}
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	snprintf(req.name, sizeof(req.name), "%s", actions[i]);
+	if (program) {
+		req.value.type = VMAC_VALUE_STRING;
+		snprintf(req.value.str, sizeof(req.value.str), "%s", json_string_value(program));
+	}
+	json_decref(body);
+	code = run_input(h, &req, msg, sizeof(msg));
+	if (code == MHD_HTTP_OK)
+		return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "reply", req.reply));
+	return http_reply(c, code, http_error_body(msg));
+}
+
+/* GET /api/devices and /api/devices/NAME: the devices of the status. */
+enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const char *name)
+{
+	struct vmac_status *s = &h->status;
+	json_t *list = json_array(), *one = NULL;
+	int i;
+	pthread_mutex_lock(&h->status_lock);
+	vmac_bus_status(h->bus, s);
+	for (i = 0; i < s->ndevices; i++)
+		if (!name)
+			json_array_append_new(list, device_json(&s->devices[i]));
+		else if (!one && strcmp(s->devices[i].name, name) == 0)
+			one = device_json(&s->devices[i]);
+	pthread_mutex_unlock(&h->status_lock);
+	if (!name)
+		return http_reply(c, MHD_HTTP_OK, json_pack("{s:o}", "devices", list));
+	json_decref(list);
+	if (!one)
+		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such device"));
+	return http_reply(c, MHD_HTTP_OK, one);
+}
+
+static const struct vmac_device_status *console_device(void *ctx, const char *name)
+{
+	struct console_ctx *x = ctx;
+	struct vmac_status *s = &x->h->status;
+	int i, found = 0;
+	pthread_mutex_lock(&x->h->status_lock);
+	if (!x->fresh) {
+		vmac_bus_status(x->h->bus, s);
+		x->fresh = 1;
+	}
+	for (i = 0; i < s->ndevices && !found; i++)
+		if (strcmp(s->devices[i].name, name) == 0 && strcmp(s->devices[i].state, "running") == 0) {
+			x->dev = s->devices[i];
+			found = 1;
+		}
+	pthread_mutex_unlock(&x->h->status_lock);
+	return found ? &x->dev : NULL;
+}
+
+static unsigned console_input(void *ctx, struct vmac_bus_input_request *req, char *msg, size_t msglen)
+{
+	struct console_ctx *x = ctx;
+	return run_input(x->h, req, msg, msglen);
+}
+
+/* The body: lines of submessages. The answer: each line's answer and the
+ * messages of its errors. */
+enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate)
+{
+	struct console_ctx *x = malloc(sizeof(*x));
+	struct vmac_console_ops ops;
+	char answer[4096], errors[8192];
+	json_t *lines = json_array();
+	const char *p = k->body ? k->body : "";
+	int nerr = 0;
+	if (!x)
+		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
+	ops.device = console_device;
+	ops.input = console_input;
+	ops.ctx = x;
+	ops.may_operate = operate;
+	x->h = h;
+	while (*p) {
+		size_t n = strcspn(p, "\n");
+		char *line = strndup(p, n), *e, *save = NULL;
+		json_t *errs = json_array();
+		x->fresh = 0;
+		nerr += line ? vmac_console_line(&ops, line, answer, sizeof(answer), errors, sizeof(errors)) : 0;
+		for (e = strtok_r(errors, "\n", &save); line && e; e = strtok_r(NULL, "\n", &save))
+			json_array_append_new(errs, json_string(e));
+		if (line && strspn(line, " \t\r") < n)
+			json_array_append_new(lines, json_pack("{s:s, s:o}", "answer", answer, "errors", errs));
+		else
+			json_decref(errs);
+		free(line);
+		p += n;
+		if (*p)
+			p++;
+	}
+	free(x);
+	return http_reply(c, MHD_HTTP_OK, json_pack("{s:o, s:i}", "lines", lines, "errors", nerr));
+}
+
+static void live_free(void *cls)
+{
+	struct live *l = cls;
+	free(l->text);
+	free(l->last);
+	free(l);
+}
+
+/* The stream's next bytes: every LIVE_PERIOD_MS the latest status, if it
+ * changed. A slow client is asked nothing until it has read what it got,
+ * and then gets the newest status: it never backs anything up. */
+/* The newest status as JSON for the live streams, a malloc'd copy: built
+ * at most once a period however many clients read it. */
+static char *live_snapshot(struct vmac_http *h)
+{
+	double now = http_mono_s();
+	char *copy;
+	pthread_mutex_lock(&h->live_lock);
+	if (!h->live_json || now - h->live_at >= LIVE_PERIOD_MS / 1000.0 * 0.8) {
+		json_t *s = http_status_json(h);
+		char *data = s ? json_dumps(s, JSON_COMPACT) : NULL;
+		json_decref(s);
+		if (data) {
+			free(h->live_json);
+			h->live_json = data;
+			h->live_at = now;
+		}
+	}
+	copy = h->live_json ? strdup(h->live_json) : NULL;
+	pthread_mutex_unlock(&h->live_lock);
+	return copy;
+}
+
+static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
+{
+	struct live *l = cls;
+	size_t n;
+	(void)pos;
+	while (l->off == l->len) {
+		double now = http_mono_s();
+		char *data;
+		if (atomic_load(&l->h->stopping))
+			return MHD_CONTENT_READER_END_OF_STREAM;
+		if (now < l->next) {
+			usleep((useconds_t)((l->next - now) * 1e6));
+			continue;
+		}
+		l->next = now + LIVE_PERIOD_MS / 1000.0;
+		free(l->text);
+		l->text = NULL;
+		l->len = l->off = 0;
+		data = live_snapshot(l->h);
+		if (data && (!l->last || strcmp(data, l->last) != 0)) {
+			size_t dn = strlen(data);
+			l->text = malloc(dn + 16);
+			if (l->text) {
+				memcpy(l->text, "data: ", 6);
+				memcpy(l->text + 6, data, dn);
+				memcpy(l->text + 6 + dn, "\n\n", 2);
+				l->len = dn + 8;
+			}
+			free(l->last);
+			l->last = data;
+			l->last_sent = now;
+		} else {
+			free(data);
+			if (now - l->last_sent >= SSE_KEEPALIVE_S) {
+				l->text = strdup(": keep-alive\n\n");
+				l->len = l->text ? strlen(l->text) : 0;
+				l->last_sent = now;
+			}
+		}
+	}
+	n = l->len - l->off < max ? l->len - l->off : max;
+	memcpy(out, l->text + l->off, n);
+	l->off += n;
+	return (ssize_t)n;
+}
+
+enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c)
+{
+	struct live *l = calloc(1, sizeof(*l));
+	if (!l)
+		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body("out of memory"));
+	l->h = h;
+	l->last_sent = http_mono_s();
+	return http_stream_response(c, live_read, l, live_free);
+}

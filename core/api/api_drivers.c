@@ -1,0 +1,190 @@
+/* The endpoints of drivers (docs/API.md "Drivers: hot reload"): the
+ * versions kept, an upload (compiled and switched by core/reload/deploy.c),
+ * activate, rollback, and a version's manifest for user interfaces. */
+#include "http_internal.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <jansson.h>
+#include <microhttpd.h>
+#include <sodium.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../common/addr.h"
+#include "../common/errors.h"
+#include "../reload/deploy.h"
+#include "../reload/loader.h"
+#include "console.h"
+#include "ui_assets.h"
+
+/* ---- drivers: versions, upload (hot reload), rollback ---- */
+
+static json_t *version_json(const struct vmac_driver_version *v)
+{
+	return json_pack("{s:I, s:s, s:s, s:s, s:f, s:s, s:s, s:I, s:s, s:I}", "id", (json_int_t)v->id, "driver",
+	                 v->driver, "version", v->version, "hash", v->hash, "deployed", v->deployed, "deployed_by",
+	                 v->deployed_by, "state", v->state, "previous", (json_int_t)v->previous, "note", v->note,
+	                 "size", (json_int_t)v->size);
+}
+
+static void append_version(void *ctx, const struct vmac_driver_version *v)
+{
+	json_array_append_new(ctx, version_json(v));
+}
+
+/* GET /api/drivers and /api/drivers/NAME: the versions kept. */
+enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+{
+	char err[512];
+	json_t *list = json_array(), *body;
+	struct vmac_driver_version active;
+	int rc;
+	if (vmac_store_driver_list(h->store, driver, append_version, list, err, sizeof(err)) < 0) {
+		json_decref(list);
+		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body(err));
+	}
+	if (!driver)
+		return http_reply(c, MHD_HTTP_OK, json_pack("{s:o}", "versions", list));
+	rc = vmac_store_driver_active(h->store, driver, &active, NULL, NULL, err, sizeof(err));
+	if (rc < 0) {
+		json_decref(list);
+		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body(err));
+	}
+	body = json_pack("{s:s, s:I, s:o}", "driver", driver, "active", (json_int_t)(rc == 1 ? active.id : 0),
+	                 "versions", list);
+	return http_reply(c, MHD_HTTP_OK, body);
+}
+
+static enum MHD_Result deploy_reply(struct MHD_Connection *c, const char *driver, const struct vmac_deploy_result *r,
+                                    double probation_s)
+{
+	json_t *machines = json_array(), *body;
+	int i;
+	for (i = 0; i < r->nmachines; i++)
+		json_array_append_new(machines, json_pack("{s:s, s:b, s:s}", "device", r->machines[i].device, "ok",
+		                                          r->machines[i].ok, "text", r->machines[i].text));
+	if (r->status != 200) {
+		body = json_pack("{s:s, s:o}", "error", r->error, "machines", machines);
+		return http_reply(c, (unsigned)r->status, body);
+	}
+	body = json_pack("{s:b, s:s, s:I, s:s, s:s, s:f, s:o}", "ok", 1, "driver", driver, "id", (json_int_t)r->id,
+	                 "version", r->version, "hash", r->hash, "probation_s", probation_s, "machines", machines);
+	return http_reply(c, MHD_HTTP_OK, body);
+}
+
+/* The id of the token a request was authorized by ("vmac_ID_..."). */
+static void token_id(struct MHD_Connection *c, char *id, size_t len)
+{
+	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+	snprintf(id, len, "%.*s", VMAC_TOKEN_ID_LEN, auth && strlen(auth) > 12 ? auth + 12 : "?");
+}
+
+/* ?probation=S into *ms (default: the host's reload_probation_s): 0, or -1
+ * with the 400 answer queued into *ret. */
+static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned *ms, double *s, enum MHD_Result *ret)
+{
+	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
+	char *end;
+	*s = h->cfg.reload_probation_s;
+	if (arg) {
+		*s = strtod(arg, &end);
+		if (!*arg || *end || !(*s >= 0 && *s <= 86400)) {
+			*ret = http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("probation must be seconds, 0..86400"));
+			return -1;
+		}
+	}
+	*ms = (unsigned)(*s * 1000 + 0.5);
+	return 0;
+}
+
+/* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
+enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
+                                     const struct conn *k)
+{
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_result *r;
+	double probation_s;
+	unsigned probation_ms;
+	char by[VMAC_TOKEN_ID_LEN + 1];
+	enum MHD_Result ret;
+	if (k->too_big)
+		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("a driver file is at most 1 MiB"));
+	if (!k->len)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		             http_error_body("the request body must be the driver's source (Lua text)"));
+	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
+		return ret;
+	r = malloc(sizeof(*r));
+	if (!r)
+		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
+	token_id(c, by, sizeof(by));
+	vmac_deploy(&x, driver, k->body, k->len, by, probation_ms, r);
+	ret = deploy_reply(c, driver, r, probation_s);
+	free(r);
+	return ret;
+}
+
+/* POST /api/drivers/NAME/activate?id=N[&probation=S] */
+enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+{
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_result *r;
+	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
+	double probation_s;
+	unsigned probation_ms;
+	char by[VMAC_TOKEN_ID_LEN + 1], *end;
+	long long id = id_s ? strtoll(id_s, &end, 10) : 0;
+	enum MHD_Result ret;
+	if (!id_s || !*id_s || *end || id < 1)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		             http_error_body("id must be a version's id (vmac drivers lists them)"));
+	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
+		return ret;
+	r = malloc(sizeof(*r));
+	if (!r)
+		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
+	token_id(c, by, sizeof(by));
+	vmac_deploy_activate(&x, driver, id, by, probation_ms, r);
+	ret = deploy_reply(c, driver, r, probation_s);
+	free(r);
+	return ret;
+}
+
+/* POST /api/drivers/NAME/rollback */
+enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+{
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_result *r = malloc(sizeof(*r));
+	char by[VMAC_TOKEN_ID_LEN + 1];
+	enum MHD_Result ret;
+	if (!r)
+		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
+	token_id(c, by, sizeof(by));
+	vmac_deploy_rollback(&x, driver, by, r);
+	ret = deploy_reply(c, driver, r, 0);
+	free(r);
+	return ret;
+}
+
+/* GET /api/drivers/NAME/manifest?version=V: a loaded version's declarations. */
+enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *driver)
+{
+	const char *version = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "version");
+	char *json = version ? vmac_loaded_manifest(driver, version) : NULL;
+	json_error_t jerr;
+	json_t *body;
+	if (!version)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		             http_error_body("version is needed: ?version=V (a device's driver_version)"));
+	if (!json)
+		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("that driver version has not been loaded on this host"));
+	body = json_loads(json, 0, &jerr);
+	free(json);
+	return body ? http_reply(c, MHD_HTTP_OK, body)
+	            : http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body("bad manifest"));
+}

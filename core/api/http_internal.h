@@ -1,0 +1,128 @@
+/* The HTTP server's insides, shared by http.c and the api_*.c files that
+ * serve its endpoints; the rest of the host sees only http.h. Names shared
+ * between the files carry the prefix http_. */
+#ifndef VMAC_HTTP_INTERNAL_H
+#define VMAC_HTTP_INTERNAL_H
+
+#include "http.h"
+
+#include <jansson.h>
+#include <microhttpd.h>
+#include <stdatomic.h>
+
+#define VMAC_VERSION_STRING "0.1.0"
+
+#define STATUS_EVENTS 20
+
+/* Failed attempts: at most FAIL_LIMIT per client address in FAIL_WINDOW_S;
+ * past that, every request from there gets 429 until the window ends. The
+ * table is small and reused oldest first: it only has to slow a guesser
+ * down (a token has 256 random bits), not remember everyone. */
+#define FAIL_LIMIT 10
+
+#define FAIL_WINDOW_S 60.0
+
+#define FAIL_CLIENTS 64
+
+struct fail_count {
+	struct in_addr addr;
+	double window_start;
+	unsigned fails;
+};
+
+struct vmac_http {
+	struct MHD_Daemon *daemon;
+	struct vmac_bus *bus;
+	struct vmac_event_log *log;
+	struct vmac_config cfg;
+	pthread_mutex_t status_lock; /* guards the status copy below */
+	struct vmac_status status;
+	unsigned port;
+	struct vmac_store *store;
+	char *tls_cert, *tls_key;   /* PEM texts while the daemon runs (TLS) */
+	pthread_mutex_t live_lock;  /* the live streams' shared message: */
+	double live_at;             /* when it was built */
+	char *live_json;            /* the newest status as JSON */
+	_Atomic int stopping;       /* event streams end */
+	pthread_mutex_t fails_lock; /* connection threads share the table */
+	struct fail_count fails[FAIL_CLIENTS];
+};
+
+/* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
+ * upload); other requests take at most INPUT_MAX. */
+#define BODY_MAX (1 << 20)
+
+#define INPUT_MAX 65536
+
+#define INPUT_TIMEOUT_MS 2000 /* the bus thread answers within a tick; this bounds a stuck host */
+
+struct conn {
+	char *body;
+	size_t len;
+	int too_big;
+};
+
+/* ---- POST /api/console: the line console ---- */
+
+struct console_ctx {
+	struct vmac_http *h;
+	int fresh; /* the status was read for this line */
+	struct vmac_device_status dev;
+};
+
+/* ---- GET /api/events: Server-Sent Events ---- */
+
+#define SSE_WAIT_MS 1000     /* how often a waiting stream looks at `stopping` */
+
+#define SSE_KEEPALIVE_S 15.0 /* a comment line when nothing else was sent */
+
+#define SSE_BATCH 8
+
+struct sse {
+	struct vmac_http *h;
+	uint64_t after; /* the last event sent */
+	double last_sent;
+	size_t len, off;
+	char buf[SSE_BATCH * (2 * VMAC_EVENT_TEXT + 256)];
+};
+
+/* ---- GET /api/live: the status pushed, for the web UI ---- */
+
+#define LIVE_PERIOD_MS 250 /* how often a client gets the latest status (if it changed) */
+
+struct live {
+	struct vmac_http *h;
+	double last_sent, next;
+	char *text; /* what is being sent */
+	size_t len, off;
+	char *last; /* the last status sent (not sent again unchanged) */
+};
+
+/* http.c */
+double http_mono_s(void);
+enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body);
+json_t *http_error_body(const char *msg);
+enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need, enum MHD_Result *ret);
+int http_valid_name(const char *s, size_t max);
+enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls, MHD_ContentReaderFreeCallback done);
+
+/* api_devices.c */
+json_t *http_status_json(struct vmac_http *h);
+enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device, const struct conn *k);
+enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device, const struct conn *k);
+enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const char *name);
+enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate);
+enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c);
+
+/* api_events.c */
+enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c);
+enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c);
+
+/* api_drivers.c */
+enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
+enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver, const struct conn *k);
+enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
+enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
+enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *driver);
+
+#endif
