@@ -161,7 +161,7 @@ static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *re
 /* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input
  * to the device's driver, through the bus thread. */
 enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
-                                    const struct conn *k)
+                                  const struct conn *k)
 {
 	struct vmac_bus_input_request req;
 	json_error_t jerr;
@@ -183,9 +183,10 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
 	     !json_is_null(value)) ||
 	    (json_is_string(value) && strlen(json_string_value(value)) > VMAC_DRIVER_STR_MAX)) {
 		json_decref(body);
-		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		             http_error_body("expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
-		                        "boolean or null, \"persist\": true or false (optional)}"));
+		return http_reply(
+		    c, MHD_HTTP_BAD_REQUEST,
+		    http_error_body("expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
+		                    "boolean or null, \"persist\": true or false (optional)}"));
 	}
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", json_string_value(name));
@@ -208,7 +209,7 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
 	code = run_input(h, &req, msg, sizeof(msg));
 	if (code == MHD_HTTP_OK)
 		return http_reply(c, MHD_HTTP_OK,
-		             json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted", req.persist));
+		                  json_pack("{s:b, s:s, s:b}", "ok", 1, "reply", req.reply, "persisted", req.persist));
 	return http_reply(c, code, http_error_body(msg));
 }
 
@@ -217,7 +218,7 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
  * cycle: the commands of the same names of the driver (the stdlib's
  * appliance offers them), through the same way as input. */
 enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
-                                    const struct conn *k)
+                                  const struct conn *k)
 {
 	static const char *const actions[] = {"start", "pause", "resume", "cancel"};
 	struct vmac_bus_input_request req;
@@ -236,9 +237,10 @@ enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c,
 	if (i == 4 || (program && (i != 0 || !json_is_string(program) ||
 	                           strlen(json_string_value(program)) > VMAC_DRIVER_STR_MAX))) {
 		json_decref(body);
-		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		             http_error_body("expected {\"action\": \"start\", \"pause\", \"resume\" or \"cancel\", "
-		                        "\"program\": a programme's name (start only, optional)}"));
+		return http_reply(
+		    c, MHD_HTTP_BAD_REQUEST,
+		    http_error_body("expected {\"action\": \"start\", \"pause\", \"resume\" or \"cancel\", "
+		                    "\"program\": a programme's name (start only, optional)}"));
 	}
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);

@@ -94,7 +94,8 @@ static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned
 	if (arg) {
 		*s = strtod(arg, &end);
 		if (!*arg || *end || !(*s >= 0 && *s <= 86400)) {
-			*ret = http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("probation must be seconds, 0..86400"));
+			*ret =
+			    http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("probation must be seconds, 0..86400"));
 			return -1;
 		}
 	}
@@ -104,7 +105,7 @@ static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned
 
 /* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
 enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
-                                     const struct conn *k)
+                                   const struct conn *k)
 {
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r;
@@ -116,7 +117,7 @@ enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c
 		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("a driver file is at most 1 MiB"));
 	if (!k->len)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		             http_error_body("the request body must be the driver's source (Lua text)"));
+		                  http_error_body("the request body must be the driver's source (Lua text)"));
 	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
 		return ret;
 	r = malloc(sizeof(*r));
@@ -142,7 +143,7 @@ enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection 
 	enum MHD_Result ret;
 	if (!id_s || !*id_s || *end || id < 1)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		             http_error_body("id must be a version's id (vmac drivers lists them)"));
+		                  http_error_body("id must be a version's id (vmac drivers lists them)"));
 	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
 		return ret;
 	r = malloc(sizeof(*r));
@@ -180,9 +181,10 @@ enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *drive
 	json_t *body;
 	if (!version)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		             http_error_body("version is needed: ?version=V (a device's driver_version)"));
+		                  http_error_body("version is needed: ?version=V (a device's driver_version)"));
 	if (!json)
-		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("that driver version has not been loaded on this host"));
+		return http_reply(c, MHD_HTTP_NOT_FOUND,
+		                  http_error_body("that driver version has not been loaded on this host"));
 	body = json_loads(json, 0, &jerr);
 	free(json);
 	return body ? http_reply(c, MHD_HTTP_OK, body)

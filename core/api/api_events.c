@@ -41,7 +41,7 @@ enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c)
 		after = strtoull(after_s, &end, 10);
 		if (!*after_s || *end || after_s[0] == '-')
 			return http_reply(c, MHD_HTTP_BAD_REQUEST,
-			             http_error_body("after must be an event's seq (a whole number)"));
+			                  http_error_body("after must be an event's seq (a whole number)"));
 	}
 	if (limit_s) {
 		limit = strtol(limit_s, &end, 10);
@@ -126,7 +126,7 @@ enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c
 		seq = strtoull(from, &end, 10);
 		if (errno || end == from || *end)
 			return http_reply(c, MHD_HTTP_BAD_REQUEST,
-			             http_error_body("after (or Last-Event-ID) must be an event's seq"));
+			                  http_error_body("after (or Last-Event-ID) must be an event's seq"));
 	}
 	e = calloc(1, sizeof(*e));
 	if (!e)

@@ -72,7 +72,7 @@ struct console_ctx {
 
 /* ---- GET /api/events: Server-Sent Events ---- */
 
-#define SSE_WAIT_MS 1000     /* how often a waiting stream looks at `stopping` */
+#define SSE_WAIT_MS 1000 /* how often a waiting stream looks at `stopping` */
 
 #define SSE_KEEPALIVE_S 15.0 /* a comment line when nothing else was sent */
 
@@ -102,14 +102,18 @@ struct live {
 double http_mono_s(void);
 enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body);
 json_t *http_error_body(const char *msg);
-enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need, enum MHD_Result *ret);
+enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
+                                enum MHD_Result *ret);
 int http_valid_name(const char *s, size_t max);
-enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls, MHD_ContentReaderFreeCallback done);
+enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
+                                     MHD_ContentReaderFreeCallback done);
 
 /* api_devices.c */
 json_t *http_status_json(struct vmac_http *h);
-enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device, const struct conn *k);
-enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device, const struct conn *k);
+enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
+                                  const struct conn *k);
+enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
+                                  const struct conn *k);
 enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const char *name);
 enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate);
 enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c);
@@ -120,7 +124,8 @@ enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c
 
 /* api_drivers.c */
 enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
-enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver, const struct conn *k);
+enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
+                                   const struct conn *k);
 enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
 enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
 enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *driver);
