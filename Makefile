@@ -45,7 +45,7 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport_udp.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
-                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/console.c core/sched/sched.c \
+                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/console.c core/sched/sched.c core/sched/search.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
@@ -122,7 +122,7 @@ $(BUILD)/tests/test_isolation: $(OBJ)/tests/unit/test_isolation.o $(driver_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
-$(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sched.o
+$(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sched.o $(OBJ)/core/sched/search.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
 
