@@ -30,6 +30,20 @@ static int safe_rep(lua_State *L)
 	return 1;
 }
 
+/* The index just past the set [...] that starts at p[i]: a ^ and a ] right
+ * after the [ belong to the set, %x escapes one character. */
+static size_t skip_set(const char *p, size_t plen, size_t i)
+{
+	i++;
+	if (i < plen && p[i] == '^')
+		i++;
+	if (i < plen && p[i] == ']')
+		i++;
+	while (i < plen && p[i] != ']')
+		i += p[i] == '%' ? 2 : 1;
+	return i + 1;
+}
+
 /* Worst-case steps of matching pattern p against a subject of n bytes: Lua
  * patterns backtrack, so each unbounded quantifier (*, +, -) can multiply
  * the work by n, each ? by 2, and an unanchored search tries n starts. One
@@ -55,29 +69,14 @@ static double pattern_cost(const char *p, size_t plen, size_t n)
 		}
 		if (c == '%' && i + 1 < plen && p[i + 1] == 'f') {
 			i += 2; /* %f[set]: a frontier, zero width */
-			if (i < plen && p[i] == '[') {
-				i++;
-				if (i < plen && p[i] == '^')
-					i++;
-				if (i < plen && p[i] == ']')
-					i++;
-				while (i < plen && p[i] != ']')
-					i += p[i] == '%' ? 2 : 1;
-				i++;
-			}
+			if (i < plen && p[i] == '[')
+				i = skip_set(p, plen, i);
 			continue;
 		}
 		if (c == '%') {
 			i += 2;
 		} else if (c == '[') {
-			i++;
-			if (i < plen && p[i] == '^')
-				i++;
-			if (i < plen && p[i] == ']')
-				i++;
-			while (i < plen && p[i] != ']')
-				i += p[i] == '%' ? 2 : 1;
-			i++;
+			i = skip_set(p, plen, i);
 		} else {
 			i++;
 		}
