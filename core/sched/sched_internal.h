@@ -81,9 +81,9 @@ enum { MODE_ALL = 0, MODE_ONE = 1 };
 
 /* What is known about switching at a row of the block (for the current
  * s->gen: the answer for a row cannot change while nothing else does). */
-#define ROW_HOPELESS(mode) (1u << (mode))    /* no table exists */
+#define ROW_HOPELESS(mode) (1u << (mode)) /* no table exists */
 
-#define ROW_HARD(mode) (1u << (2 + (mode)))  /* the quick search ran out */
+#define ROW_HARD(mode) (1u << (2 + (mode))) /* the quick search ran out */
 
 #define ROW_TRIED(mode) (1u << (4 + (mode))) /* deep had its turn this round */
 
