@@ -223,6 +223,11 @@ $(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/transport/transpor
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL)
 
+# One driver tick through the driver API, in microseconds (tests/bench/driver_tick.c).
+$(BUILD)/bench/driver_tick: tests/bench/driver_tick.c $(driver_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+
 BENCH_SECONDS ?= 60
 bench:
 	@$(MAKE) --no-print-directory deps EXTRA_DEBS="$(BENCH_DEBS)"
