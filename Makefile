@@ -61,7 +61,7 @@ UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests
               $(BUILD)/tests/test_sched $(BUILD)/tests/test_store
 
 
-.PHONY: format format-check
+.PHONY: format format-check test-build asan-build
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-ui test-asan bench clean
 all: $(BINS)
 
@@ -200,17 +200,41 @@ test-integration: $(BINS) $(BUILD)/tests/store_crash
 	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/integration/run.py --bin $(BUILD)/bin
 
 # The whole unit and integration suite again, built with AddressSanitizer
-# and UndefinedBehaviorSanitizer, any report fatal.
-test-asan:
-	@$(MAKE) --no-print-directory BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" \
-		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all" all test-unit test-drivers test-integration
+# and UndefinedBehaviorSanitizer, any report fatal. asan-build builds that
+# tree quietly (its log in build/asan-build.log), so make test can run it
+# beside the plain integration tests, which mostly wait.
+ASAN := BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" SAN="-fsanitize=address,undefined -fno-sanitize-recover=all"
+test-build: $(BINS) $(UNIT_TESTS) $(BUILD)/tests/store_crash
 
-# Ends with every suite that was skipped, if any: what did not run did not pass.
+asan-build:
+	@mkdir -p build
+	@if $(MAKE) --no-print-directory -j2 $(ASAN) test-build > build/asan-build.log 2>&1; then \
+		echo "== the AddressSanitizer build is ready (build/asan)"; \
+	else tail -40 build/asan-build.log; echo "the AddressSanitizer build failed: build/asan-build.log"; exit 1; fi
+
+test-asan: asan-build
+	@$(MAKE) --no-print-directory $(ASAN) test-unit
+	@$(MAKE) --no-print-directory $(ASAN) test-drivers
+	@$(MAKE) --no-print-directory $(ASAN) test-integration
+
+# Every suite, each timed: $(TIMES) lists how long each took, printed at
+# the end with what was skipped (if anything): what did not run did not pass.
+TIMES ?= $(BUILD)/times
+timed = t0=$$(date +%s); $(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) $(2) $(1) || exit 1; \
+	echo "$(1): $$(( $$(date +%s) - t0 )) s" >> $(abspath $(TIMES))
+
 test: deps
-	@mkdir -p $(BUILD) && rm -f $(SKIPPED)
-	@$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) all test-unit test-lua test-drivers test-fuzz \
-		test-integration test-ui
-	@$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) VMAC_SCHED_PROPERTY_RUNS=10000 test-asan
+	@mkdir -p $(BUILD) && rm -f $(SKIPPED) $(TIMES)
+	@$(call timed,format-check)
+	@$(call timed,test-build,-j2)
+	@$(call timed,test-unit)
+	@$(call timed,test-lua)
+	@$(call timed,test-drivers)
+	@$(call timed,test-fuzz)
+	@$(call timed,test-integration asan-build,-j2)
+	@$(call timed,test-ui)
+	@$(call timed,test-asan,VMAC_SCHED_PROPERTY_RUNS=10000)
+	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \
 		echo "make test: every suite that ran passed, but these were SKIPPED (not run, not passed):"; \

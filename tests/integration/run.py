@@ -3,7 +3,12 @@
 tests/integration/test_*.py against the real programs, each with fresh
 processes on its own bus, and kills whatever a test started however it ends.
 
-    python3 tests/integration/run.py --bin build/bin [--filter NAME]
+    python3 tests/integration/run.py --bin build/bin [--filter NAME] [-j N]
+
+Tests run N at a time (default 4: they mostly wait on the programs they
+start, and each has its own bus, ports and state folder), each in a worker
+process of its own; a test file that must have the machine to itself says
+SERIAL = True and its tests run one at a time after the others.
 
 Prints one PASS/FAIL/SKIP line per test and ends with 'N passed, N failed,
 N skipped'; the exit code is 1 when any test failed. A failed test keeps its
@@ -17,11 +22,14 @@ environment a skip is a failure: a CI run must not pass what it did not run."""
 
 import argparse
 import glob
+import json
+import selectors
 import importlib.util
 import os
 import shutil
 import signal
 import sys
+import subprocess
 import tempfile
 import time
 import traceback
@@ -46,7 +54,8 @@ def on_terminate(signum, frame):
 
 
 def collect(name_filter):
-    """(name, function) of every test, in file order then definition order."""
+    """(name, function, serial) of every test, in file order then definition
+    order; serial: its file says SERIAL = True."""
     tests = []
     for path in sorted(glob.glob(os.path.join(HERE, "test_*.py"))):
         module_name = os.path.splitext(os.path.basename(path))[0]
@@ -58,8 +67,9 @@ def collect(name_filter):
             for name, fn in vars(module).items()
             if name.startswith("test_") and callable(fn) and getattr(fn, "__module__", None) == module_name
         ]
-        tests += [(name, fn) for _, name, fn in sorted(found)]
-    return [(n, f) for n, f in tests if not name_filter or name_filter in n]
+        serial = bool(getattr(module, "SERIAL", False))
+        tests += [(name, fn, serial) for _, name, fn in sorted(found)]
+    return [t for t in tests if not name_filter or name_filter in t[0]]
 
 
 def reason_of(exc):
@@ -103,15 +113,88 @@ def run_one(name, fn, bindir, limit_s, keep):
     return "pass", ""
 
 
+def run_worker(name, bindir, limit_s, keep):
+    """Worker mode: run the one test named exactly name and print its result
+    as one JSON line (the parent prints the report)."""
+    signal.signal(signal.SIGALRM, on_alarm)
+    signal.signal(signal.SIGTERM, on_terminate)
+    fn = next(f for n, f, _ in collect(name) if n == name)
+    t0 = time.monotonic()
+    outcome, reason = run_one(name, fn, bindir, limit_s, keep)
+    print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": time.monotonic() - t0}), flush=True)
+    return 0
+
+
+def run_all(tests, args, bindir):
+    """Run tests in worker processes, args.jobs at a time, the serial ones
+    alone at the end; yields (name, outcome, reason, seconds) as each ends."""
+    parallel = [t[0] for t in tests if not t[2]]
+    serial = [t[0] for t in tests if t[2]]
+    running = {}  # Popen -> [name, start, output so far]
+    sel = selectors.DefaultSelector()
+
+    def start(name):
+        argv = [sys.executable, os.path.abspath(__file__), "--bin", bindir, "--worker", name,
+                "--time-limit", str(args.time_limit)] + (["--keep"] if args.keep else [])
+        p = subprocess.Popen(argv, stdout=subprocess.PIPE, start_new_session=True)
+        os.set_blocking(p.stdout.fileno(), False)
+        running[p] = [name, time.monotonic(), b""]
+        sel.register(p.stdout, selectors.EVENT_READ, p)
+
+    def finish(p):
+        name, t0, raw = running.pop(p)
+        sel.unregister(p.stdout)
+        p.stdout.close()
+        p.wait()
+        out = raw.decode(errors="replace")
+        try:
+            r = json.loads(out.strip().splitlines()[-1])
+            return name, r["outcome"], r["reason"], r["took"]
+        except (ValueError, IndexError, KeyError):
+            return name, "fail", "its worker ended (exit %s) without a result: %s" % (p.returncode, out[-500:]), (
+                time.monotonic() - t0)
+
+    try:
+        for batch, width in ((parallel, max(1, args.jobs)), (serial, 1)):
+            queue = list(batch)
+            while queue or running:
+                while queue and len(running) < width:
+                    start(queue.pop(0))
+                done = None
+                while done is None:  # a worker is done when its output ends
+                    for key, _ in sel.select():
+                        p = key.data
+                        chunk = p.stdout.read()
+                        if chunk is None:  # nothing to read after all
+                            continue
+                        if chunk:
+                            running[p][2] += chunk
+                        elif done is None:
+                            done = p
+                yield finish(done)
+    finally:
+        for p in list(running):  # interrupted: every worker and what it started goes
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            p.wait()
+
+
 def main():
     ap = argparse.ArgumentParser(description="Run the vmac integration tests.")
     ap.add_argument("--bin", required=True, help="folder with vmacd, vmac-board and vmac")
     ap.add_argument("--filter", default="", help="run only tests whose name contains this text")
     ap.add_argument("--keep", action="store_true", help="keep the logs of passed tests too")
     ap.add_argument("--time-limit", type=float, default=300, help="seconds one test may take (default 300)")
+    ap.add_argument("-j", "--jobs", type=int, default=int(os.environ.get("VMAC_TEST_JOBS", "4")),
+                    help="tests run at a time (default 4, or $VMAC_TEST_JOBS)")
+    ap.add_argument("--worker", metavar="NAME", help=argparse.SUPPRESS)
     args = ap.parse_args()
 
     bindir = os.path.abspath(args.bin)
+    if args.worker:
+        return run_worker(args.worker, bindir, args.time_limit, args.keep)
     for program in ("vmacd", "vmac-board", "vmac"):
         if not os.access(os.path.join(bindir, program), os.X_OK):
             print("run.py: no executable %s in %s (build first: make all)" % (program, bindir), file=sys.stderr)
@@ -121,17 +204,13 @@ def main():
         print("run.py: no test matches %r" % args.filter, file=sys.stderr)
         return 2
 
-    signal.signal(signal.SIGALRM, on_alarm)
     signal.signal(signal.SIGTERM, on_terminate)
     ci = os.environ.get("CI") == "true"
     skip_file = os.environ.get("VMAC_SKIP_FILE")
     passed = failed = 0
     skips = []
     started = time.monotonic()
-    for name, fn in tests:
-        t0 = time.monotonic()
-        outcome, reason = run_one(name, fn, bindir, args.time_limit, args.keep)
-        took = time.monotonic() - t0
+    for name, outcome, reason, took in run_all(tests, args, bindir):
         if outcome == "skip" and ci:
             outcome, reason = "fail", "could not run, and CI=true makes that a failure: %s" % reason
         if outcome == "pass":
