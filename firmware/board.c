@@ -16,6 +16,7 @@ void vmac_board_safe(struct vmac_board *b)
 	drive(b, &off);
 	b->state = VMAC_BOARD_UNKNOWN;
 	b->device_id = 0;
+	b->offset = VMAC_OFFSET_NONE;
 }
 
 void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id, const struct vmac_board_io *io,
@@ -23,6 +24,8 @@ void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
 {
 	memset(b, 0, sizeof(*b));
 	b->id = *id;
+	if (b->id.protocol == 0 || b->id.protocol > VMAC_PROTO_VERSION)
+		b->id.protocol = VMAC_PROTO_VERSION;
 	b->io = io;
 	b->io_ctx = io_ctx;
 	b->watchdog_ms = VMAC_BOARD_DEFAULT_WATCHDOG_MS;
@@ -45,6 +48,7 @@ int vmac_board_poll(struct vmac_board *b, uint64_t now_ms)
 static int answer(struct vmac_msg *r, const struct vmac_msg *req, uint8_t *reply, size_t cap)
 {
 	int n;
+	r->version = req->version; /* a reply speaks the request's version */
 	r->flags = VMAC_FLAG_REPLY;
 	r->seq = req->seq;
 	r->channel = req->channel;
@@ -97,7 +101,54 @@ static int on_discover(struct vmac_board *b, const struct vmac_msg *req, uint8_t
 	r.u.announce.firmware_major = VMAC_FIRMWARE_MAJOR;
 	r.u.announce.firmware_minor = VMAC_FIRMWARE_MINOR;
 	r.u.announce.caps = b->id.caps;
-	return answer(&r, req, reply, cap);
+	/* The announce says which version the board speaks at most, whatever
+	 * the DISCOVER's (sent as 1, so boards of every version answer it). */
+	r.version = b->id.protocol;
+	r.flags = VMAC_FLAG_REPLY;
+	r.seq = req->seq;
+	r.channel = VMAC_CH_SYSTEM;
+	{
+		int n = vmac_proto_encode(&r, reply, cap);
+		return n > 0 ? n : 0;
+	}
+}
+
+/* v2: the record at our offset, if it is our session's. Due: answer with
+ * the inputs, as to an UPDATE (its seq, our session). */
+static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply, size_t cap)
+{
+	struct vmac_cyclic_record rec;
+	struct vmac_msg r;
+	int rc;
+	if (b->state != VMAC_BOARD_KNOWN || b->offset == VMAC_OFFSET_NONE)
+		return 0;
+	rc = vmac_proto_cyclic_record(req, b->offset, &rec);
+	/* rec is filled even when rc says its values are bad: the tag decides
+	 * whose it is. Tag 0 is an empty record, never a session's. */
+	if (rc == 1 || rec.tag == 0 || rec.tag != (uint16_t)(b->device_id >> 16)) {
+		b->counters.frames_ignored++; /* not ours: no outputs, no watchdog */
+		return 0;
+	}
+	if (rc != 0) {
+		b->counters.frames_malformed++; /* our record, but out of range: never driven */
+		return 0;
+	}
+	b->last_valid_ms = now_ms;
+	b->counters.frames_ok++;
+	drive(b, &rec.outputs);
+	if (!(rec.flags & VMAC_CYCLIC_DUE))
+		return 0;
+	memset(&r, 0, sizeof(r));
+	r.version = req->version;
+	r.flags = VMAC_FLAG_REPLY;
+	r.seq = req->seq;
+	r.device_id = b->device_id;
+	r.channel = VMAC_CH_DEVICE;
+	r.op = VMAC_OP_UPDATE;
+	b->io->read_inputs(b->io_ctx, &r.u.inputs);
+	r.u.inputs.applied = b->outputs;
+	rc = vmac_proto_encode(&r, reply, cap);
+	return rc > 0 ? rc : 0;
 }
 
 static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply, size_t cap)
@@ -111,6 +162,7 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	b->state = VMAC_BOARD_KNOWN;
 	b->device_id = req->device_id;
 	b->watchdog_ms = req->u.reg.watchdog_ms;
+	b->offset = VMAC_OFFSET_NONE; /* a v2 host tells it again */
 	b->last_valid_ms = now_ms;
 	b->counters.frames_ok++;
 	return answer_ack(req, b->device_id, reply, cap);
@@ -123,7 +175,8 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 	uint32_t id;
 
 	vmac_board_poll(b, now_ms);
-	if (vmac_proto_decode(frame, len, &req) != 0) {
+	/* A board of version 1 knows no later frame: it is malformed to it. */
+	if (vmac_proto_decode(frame, len, &req) != 0 || req.version > b->id.protocol) {
 		b->counters.frames_malformed++;
 		return 0;
 	}
@@ -136,7 +189,8 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 		return 0;
 	}
 	if (req.channel == VMAC_CH_SYSTEM)
-		return on_discover(b, &req, reply, cap);
+		return req.op == VMAC_SYS_CYCLIC ? on_cyclic(b, &req, now_ms, reply, cap)
+		                                 : on_discover(b, &req, reply, cap);
 	if (req.op == VMAC_OP_REGISTER)
 		return on_register(b, &req, now_ms, reply, cap);
 	if (b->state != VMAC_BOARD_KNOWN || req.device_id != b->device_id)
@@ -155,6 +209,25 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 		b->sleep_until_ms = now_ms + 1000u * req.u.sleep_s;
 		return answer_ack(&req, id, reply, cap);
 	case VMAC_OP_WATCHDOG: b->watchdog_ms = req.u.watchdog_ms; return answer_ack(&req, id, reply, cap);
+	case VMAC_OP_SIZE: {
+		struct vmac_msg r;
+		memset(&r, 0, sizeof(r));
+		r.device_id = id;
+		r.op = VMAC_OP_SIZE;
+		r.u.record_size = VMAC_CYCLIC_RECORD_LEN; /* the generic board's outputs */
+		return answer(&r, &req, reply, cap);
+	}
+	case VMAC_OP_OFFSET:
+	case VMAC_OP_OFFSET_GET: {
+		struct vmac_msg r;
+		if (req.op == VMAC_OP_OFFSET)
+			b->offset = req.u.offset;
+		memset(&r, 0, sizeof(r));
+		r.device_id = id;
+		r.op = req.op;
+		r.u.offset = b->offset; /* the echo is the confirmation (seed 004's 0x02) */
+		return answer(&r, &req, reply, cap);
+	}
 	default: return answer_error(&req, id, VMAC_BERR_BAD_REQUEST, reply, cap);
 	}
 }

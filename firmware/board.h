@@ -33,6 +33,7 @@ struct vmac_board_identity {
 	char board[VMAC_NAME_MAX + 1];
 	uint32_t major, minor;
 	struct vmac_caps caps;
+	uint8_t protocol; /* the highest protocol version it speaks: 1, or 2 (0 means VMAC_PROTO_VERSION) */
 };
 
 struct vmac_board_counters {
@@ -46,6 +47,7 @@ struct vmac_board {
 	uint16_t watchdog_ms;   /* comm-loss period while KNOWN */
 	uint64_t last_valid_ms; /* time of the last valid frame of our session */
 	uint64_t sleep_until_ms;
+	uint16_t offset;             /* v2: our record's offset in CYCLIC frames; VMAC_OFFSET_NONE until told */
 	struct vmac_outputs outputs; /* what we drive now */
 	struct vmac_board_counters counters;
 	const struct vmac_board_io *io;
@@ -64,7 +66,9 @@ int vmac_board_poll(struct vmac_board *b, uint64_t now_ms);
 /* Handle one received datagram. Writes the reply frame into reply (cap bytes,
  * VMAC_FRAME_MAX is always enough) and returns its length, or 0 when the
  * board stays silent (malformed frame, not addressed to it, or a discovery it
- * need not answer). Never reads past frame + len. */
+ * need not answer). A CYCLIC frame is answered only when the record at the
+ * board's offset is its session's and due; reading it costs O(1) however
+ * many records the frame carries. Never reads past frame + len. */
 int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint8_t *reply,
                        size_t cap);
 

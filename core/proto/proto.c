@@ -52,16 +52,24 @@ static int outputs_ok(const struct vmac_outputs *o)
 
 /* Expected data length of a request/reply, or -1 when the op is not valid in
  * that direction. ANNOUNCE is variable and checked by its own decoder. */
-static int data_len_for(uint8_t channel, uint8_t op, int reply)
+#define LEN_ANNOUNCE -2 /* variable: checked by decode_announce */
+#define LEN_CYCLIC -3   /* len counts records: checked on its own */
+#define SYS_KEY 0x200   /* switch key of a system-channel op (0x100 marks replies) */
+
+static int data_len_for(uint8_t version, uint8_t channel, uint8_t op, int reply)
 {
 	if (channel == VMAC_CH_SYSTEM) {
 		if (op == VMAC_SYS_DISCOVER && !reply)
 			return 0;
 		if (op == VMAC_SYS_ANNOUNCE && reply)
-			return -2; /* variable */
+			return LEN_ANNOUNCE;
+		if (op == VMAC_SYS_CYCLIC && !reply && version >= 2)
+			return LEN_CYCLIC;
 		return -1;
 	}
 	if (channel != VMAC_CH_DEVICE)
+		return -1;
+	if (version < 2 && op >= VMAC_OP_SIZE)
 		return -1;
 	switch (op) {
 	case VMAC_OP_REGISTER: return reply ? 0 : 10;
@@ -71,6 +79,9 @@ static int data_len_for(uint8_t channel, uint8_t op, int reply)
 	case VMAC_OP_ERROR: return reply ? 2 : -1;
 	case VMAC_OP_SLEEP: return reply ? 0 : 2;
 	case VMAC_OP_WATCHDOG: return reply ? 0 : 2;
+	case VMAC_OP_SIZE: return reply ? 1 : 0;
+	case VMAC_OP_OFFSET: return 2;
+	case VMAC_OP_OFFSET_GET: return reply ? 2 : 0;
 	default: return -1;
 	}
 }
@@ -159,11 +170,15 @@ static int decode_announce(const uint8_t *d, size_t len, struct vmac_announce *a
 int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 {
 	int reply = (m->flags & VMAC_FLAG_REPLY) != 0;
-	int want = data_len_for(m->channel, m->op, reply);
+	uint8_t version = m->version ? m->version : 1;
+	int want = data_len_for(version, m->channel, m->op, reply);
 	uint8_t *d = buf + VMAC_HDR_LEN;
 	int n;
 
-	if (want == -1 || (m->flags & ~VMAC_FLAG_REPLY) != 0)
+	if (version < VMAC_PROTO_VERSION_MIN || version > VMAC_PROTO_VERSION)
+		return VMAC_EPROTO_VERSION;
+	/* CYCLIC is built in place (vmac_proto_cyclic_begin), never from a msg. */
+	if (want == -1 || want == LEN_CYCLIC || (m->flags & ~VMAC_FLAG_REPLY) != 0)
 		return VMAC_EPROTO_OP;
 	if (cap < VMAC_HDR_LEN)
 		return VMAC_EPROTO_SPACE;
@@ -173,9 +188,9 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		return VMAC_EPROTO_SPACE;
 
 	n = want;
-	switch (m->channel == VMAC_CH_SYSTEM ? 0x100 | m->op : (reply << 8) | m->op) {
-	case 0x100 | VMAC_SYS_DISCOVER: break;
-	case 0x100 | VMAC_SYS_ANNOUNCE: {
+	switch (m->channel == VMAC_CH_SYSTEM ? SYS_KEY | m->op : (reply << 8) | m->op) {
+	case SYS_KEY | VMAC_SYS_DISCOVER: break;
+	case SYS_KEY | VMAC_SYS_ANNOUNCE: {
 		size_t room = cap - VMAC_HDR_LEN;
 		n = encode_announce(&m->u.announce, d, room > VMAC_DATA_MAX ? VMAC_DATA_MAX : room);
 		if (n < 0)
@@ -206,6 +221,14 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 			return VMAC_EPROTO_VALUE;
 		put16(d, m->u.watchdog_ms);
 		break;
+	case VMAC_OP_OFFSET:
+	case 0x100 | VMAC_OP_OFFSET:
+	case 0x100 | VMAC_OP_OFFSET_GET: put16(d, m->u.offset); break;
+	case 0x100 | VMAC_OP_SIZE:
+		if (m->u.record_size == 0)
+			return VMAC_EPROTO_VALUE;
+		d[0] = m->u.record_size;
+		break;
 	case 0x100 | VMAC_OP_UPDATE:
 	case 0x100 | VMAC_OP_IDLE: {
 		const struct vmac_inputs *in = &m->u.inputs;
@@ -225,12 +248,12 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		d[0] = m->u.error.code;
 		d[1] = m->u.error.op;
 		break;
-	default: /* zero-length replies: REGISTER, SHUTDOWN, SLEEP, WATCHDOG acks; IDLE request */ break;
+	default: /* zero-length: REGISTER, SHUTDOWN, SLEEP, WATCHDOG acks; IDLE, SIZE, OFFSET_GET requests */ break;
 	}
 
 	buf[0] = VMAC_MAGIC0;
 	buf[1] = VMAC_MAGIC1;
-	buf[2] = VMAC_PROTO_VERSION;
+	buf[2] = version;
 	buf[3] = m->flags;
 	put16(buf + 4, m->seq);
 	put32(buf + 6, m->device_id);
@@ -250,15 +273,21 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		return VMAC_EPROTO_SHORT;
 	if (buf[0] != VMAC_MAGIC0 || buf[1] != VMAC_MAGIC1)
 		return VMAC_EPROTO_MAGIC;
-	if (buf[2] != VMAC_PROTO_VERSION)
+	if (buf[2] < VMAC_PROTO_VERSION_MIN || buf[2] > VMAC_PROTO_VERSION)
 		return VMAC_EPROTO_VERSION;
 	n = buf[12];
-	if (n > VMAC_DATA_MAX || VMAC_HDR_LEN + n != len)
+	if (buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC) {
+		/* len counts records; the frame has room for them and their first offset */
+		if (n < 1 || n > VMAC_CYCLIC_RECORDS_MAX || VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * n != len)
+			return VMAC_EPROTO_LENGTH;
+	} else if (n > VMAC_DATA_MAX || VMAC_HDR_LEN + n != len) {
 		return VMAC_EPROTO_LENGTH;
+	}
 	if ((buf[3] & ~VMAC_FLAG_REPLY) != 0)
 		return VMAC_EPROTO_OP;
 
 	memset(m, 0, sizeof(*m));
+	m->version = buf[2];
 	m->flags = buf[3];
 	m->seq = get16(buf + 4);
 	m->device_id = get32(buf + 6);
@@ -266,7 +295,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	m->op = buf[11];
 	reply = (m->flags & VMAC_FLAG_REPLY) != 0;
 
-	want = data_len_for(m->channel, m->op, reply);
+	want = data_len_for(m->version, m->channel, m->op, reply);
 	if (want == -1)
 		return VMAC_EPROTO_OP;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
@@ -274,8 +303,25 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	if (want >= 0 && (size_t)want != n)
 		return VMAC_EPROTO_PAYLOAD;
 
-	switch (m->channel == VMAC_CH_SYSTEM ? 0x100 | m->op : (reply << 8) | m->op) {
-	case 0x100 | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
+	switch (m->channel == VMAC_CH_SYSTEM ? SYS_KEY | m->op : (reply << 8) | m->op) {
+	case SYS_KEY | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
+	case SYS_KEY | VMAC_SYS_CYCLIC:
+		/* Records are checked one by one when read (a board reads only its
+		 * own): decoding stays O(1) however many the frame carries. */
+		m->u.cyclic.first = get16(d);
+		m->u.cyclic.count = (uint8_t)n;
+		m->u.cyclic.records = d + 2;
+		if ((unsigned)m->u.cyclic.first + n > 0xFFFF) /* 0xFFFF is VMAC_OFFSET_NONE */
+			return VMAC_EPROTO_VALUE;
+		break;
+	case VMAC_OP_OFFSET:
+	case 0x100 | VMAC_OP_OFFSET:
+	case 0x100 | VMAC_OP_OFFSET_GET: m->u.offset = get16(d); break;
+	case 0x100 | VMAC_OP_SIZE:
+		m->u.record_size = d[0];
+		if (m->u.record_size == 0)
+			return VMAC_EPROTO_VALUE;
+		break;
 	case VMAC_OP_REGISTER:
 		m->u.reg.major = get32(d);
 		m->u.reg.minor = get32(d + 4);
@@ -324,6 +370,62 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	return 0;
 }
 
+int vmac_proto_frame_length(const uint8_t *buf, size_t len)
+{
+	if (len < VMAC_HDR_LEN)
+		return VMAC_EPROTO_SHORT;
+	if (buf[0] != VMAC_MAGIC0 || buf[1] != VMAC_MAGIC1)
+		return VMAC_EPROTO_MAGIC;
+	if (buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC)
+		return VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * buf[12];
+	return VMAC_HDR_LEN + buf[12];
+}
+
+int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count)
+{
+	size_t n = VMAC_HDR_LEN + 2 + (size_t)VMAC_CYCLIC_RECORD_LEN * count;
+	if (count < 1 || count > VMAC_CYCLIC_RECORDS_MAX || (unsigned)first + count > 0xFFFF)
+		return VMAC_EPROTO_VALUE;
+	if (n > cap)
+		return VMAC_EPROTO_SPACE;
+	buf[0] = VMAC_MAGIC0;
+	buf[1] = VMAC_MAGIC1;
+	buf[2] = 2;
+	buf[3] = 0;
+	put16(buf + 4, seq);
+	put32(buf + 6, 0);
+	buf[10] = VMAC_CH_SYSTEM;
+	buf[11] = VMAC_SYS_CYCLIC;
+	buf[12] = (uint8_t)count;
+	put16(buf + VMAC_HDR_LEN, first);
+	memset(buf + VMAC_HDR_LEN + 2, 0, n - VMAC_HDR_LEN - 2);
+	return (int)n;
+}
+
+void vmac_proto_cyclic_put(uint8_t *frame, unsigned index, uint16_t tag, uint8_t flags, const struct vmac_outputs *out)
+{
+	uint8_t *r = frame + VMAC_HDR_LEN + 2 + (size_t)VMAC_CYCLIC_RECORD_LEN * index;
+	put16(r, tag);
+	r[2] = flags;
+	r[3] = out->digital;
+	put16(r + 4, (uint16_t)out->pwm);
+}
+
+int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct vmac_cyclic_record *rec)
+{
+	const uint8_t *r;
+	if (offset < m->u.cyclic.first || offset - m->u.cyclic.first >= m->u.cyclic.count)
+		return 1;
+	r = m->u.cyclic.records + (size_t)VMAC_CYCLIC_RECORD_LEN * (offset - m->u.cyclic.first);
+	rec->tag = get16(r);
+	rec->flags = r[2];
+	rec->outputs.digital = r[3];
+	rec->outputs.pwm = (int16_t)get16(r + 4);
+	if ((rec->flags & ~VMAC_CYCLIC_DUE) != 0 || !outputs_ok(&rec->outputs))
+		return VMAC_EPROTO_VALUE;
+	return 0;
+}
+
 const char *vmac_proto_strerror(int err)
 {
 	switch (err) {
@@ -344,7 +446,10 @@ const char *vmac_proto_strerror(int err)
 const char *vmac_proto_opname(uint8_t channel, uint8_t op)
 {
 	if (channel == VMAC_CH_SYSTEM)
-		return op == VMAC_SYS_DISCOVER ? "DISCOVER" : op == VMAC_SYS_ANNOUNCE ? "ANNOUNCE" : "?";
+		return op == VMAC_SYS_DISCOVER   ? "DISCOVER"
+		       : op == VMAC_SYS_ANNOUNCE ? "ANNOUNCE"
+		       : op == VMAC_SYS_CYCLIC   ? "CYCLIC"
+		                                 : "?";
 	if (channel != VMAC_CH_DEVICE)
 		return "?";
 	switch (op) {
@@ -355,6 +460,9 @@ const char *vmac_proto_opname(uint8_t channel, uint8_t op)
 	case VMAC_OP_IDLE: return "IDLE";
 	case VMAC_OP_SLEEP: return "SLEEP";
 	case VMAC_OP_WATCHDOG: return "WATCHDOG";
+	case VMAC_OP_SIZE: return "SIZE";
+	case VMAC_OP_OFFSET: return "OFFSET";
+	case VMAC_OP_OFFSET_GET: return "OFFSET_GET";
 	default: return "?";
 	}
 }

@@ -7,15 +7,27 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define VMAC_PROTO_VERSION 1
-#define VMAC_MAGIC0 0x56 /* 'V' */
-#define VMAC_MAGIC1 0x4D /* 'M' */
-#define VMAC_HDR_LEN 13  /* magic(2) version flags seq(2) device_id(4) channel op len */
+#define VMAC_PROTO_VERSION 2     /* the highest version spoken here */
+#define VMAC_PROTO_VERSION_MIN 1 /* still served: boards of version 1 */
+#define VMAC_MAGIC0 0x56         /* 'V' */
+#define VMAC_MAGIC1 0x4D         /* 'M' */
+#define VMAC_HDR_LEN 13          /* magic(2) version flags seq(2) device_id(4) channel op len */
 #define VMAC_DATA_MAX 96
-#define VMAC_FRAME_MAX (VMAC_HDR_LEN + VMAC_DATA_MAX)
-#define VMAC_NAME_MAX 31 /* printable ASCII bytes, no NUL on the wire */
+#define VMAC_FRAME_MAX (VMAC_HDR_LEN + VMAC_DATA_MAX) /* every frame but CYCLIC */
+#define VMAC_NAME_MAX 31                              /* printable ASCII bytes, no NUL on the wire */
 
 #define VMAC_FLAG_REPLY 0x01 /* set on every frame a board sends */
+
+/* Version 2: the cyclic frame (docs/PROTOCOL.md, "Version 2"). One CYCLIC
+ * frame carries fixed-size records at the offsets the host gave each board
+ * in its registration; a frame holds at most VMAC_CYCLIC_RECORDS_MAX of
+ * them, so it fits one Ethernet payload (1500 bytes). */
+#define VMAC_CYCLIC_RECORD_LEN 6 /* tag u16, flags u8, digital u8, pwm i16 */
+#define VMAC_CYCLIC_RECORDS_MAX 240
+#define VMAC_CYCLIC_FRAME_MAX (VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * VMAC_CYCLIC_RECORDS_MAX) /* 1455 */
+#define VMAC_CYCLIC_DUE 0x01    /* record flag: answer this frame with your inputs */
+#define VMAC_OFFSET_NONE 0xFFFF /* OFFSET_GET's answer from a board that has none */
+#define VMAC_PACKET_MAX 1500    /* the largest frame of any version: one Ethernet payload */
 
 /* Channel byte: 0xFF marks a network-system frame (discovery, from the host's
  * network manager itself, as in the thesis); 0x00 a frame of a device session. */
@@ -23,17 +35,21 @@ enum vmac_channel { VMAC_CH_DEVICE = 0x00, VMAC_CH_SYSTEM = 0xFF };
 
 enum vmac_sys_op {
 	VMAC_SYS_DISCOVER = 0x01, /* host -> group: who is unknown? */
+	VMAC_SYS_CYCLIC = 0x04,   /* v2, host -> group: outputs of every device due, at their offsets */
 	VMAC_SYS_ANNOUNCE = 0x10, /* board -> host: driver name, major, minor, ... */
 };
 
 enum vmac_dev_op {
-	VMAC_OP_REGISTER = 0x00, /* assign device id, confirm identity, set watchdog */
-	VMAC_OP_SHUTDOWN = 0x01, /* outputs off, forget the session (safe state) */
-	VMAC_OP_UPDATE = 0x02,   /* outputs down; reply carries inputs up */
-	VMAC_OP_ERROR = 0x03,    /* board -> host only: the request could not be served */
-	VMAC_OP_IDLE = 0x04,     /* keep-alive, outputs unchanged; reply carries inputs */
-	VMAC_OP_SLEEP = 0x05,    /* outputs off, ignore discovery for N seconds */
-	VMAC_OP_WATCHDOG = 0x06, /* set the comm-loss watchdog period */
+	VMAC_OP_REGISTER = 0x00,   /* assign device id, confirm identity, set watchdog */
+	VMAC_OP_SHUTDOWN = 0x01,   /* outputs off, forget the session (safe state) */
+	VMAC_OP_UPDATE = 0x02,     /* outputs down; reply carries inputs up */
+	VMAC_OP_ERROR = 0x03,      /* board -> host only: the request could not be served */
+	VMAC_OP_IDLE = 0x04,       /* keep-alive, outputs unchanged; reply carries inputs */
+	VMAC_OP_SLEEP = 0x05,      /* outputs off, ignore discovery for N seconds */
+	VMAC_OP_WATCHDOG = 0x06,   /* set the comm-loss watchdog period */
+	VMAC_OP_SIZE = 0x07,       /* v2: how many bytes a cyclic record of yours has? */
+	VMAC_OP_OFFSET = 0x08,     /* v2: your record's offset in every cyclic frame; echoed */
+	VMAC_OP_OFFSET_GET = 0x09, /* v2: which offset do you hold? */
 };
 
 /* Error codes carried by VMAC_OP_ERROR replies. */
@@ -98,6 +114,21 @@ struct vmac_inputs {
 	struct vmac_outputs applied;         /* what the board drives right now */
 };
 
+/* One record of a CYCLIC frame, as a board reads it at its offset. */
+struct vmac_cyclic_record {
+	uint16_t tag;  /* the session it is for: device_id >> 16 (never 0); 0 = no record here */
+	uint8_t flags; /* VMAC_CYCLIC_DUE; other bits 0 */
+	struct vmac_outputs outputs;
+};
+
+/* A decoded CYCLIC frame: records first..first+count-1, still in the
+ * frame's bytes (read one with vmac_proto_cyclic_record). */
+struct vmac_cyclic {
+	uint16_t first;         /* offset of the first record */
+	uint8_t count;          /* 1..VMAC_CYCLIC_RECORDS_MAX */
+	const uint8_t *records; /* into the decoded buffer: valid while it is */
+};
+
 struct vmac_error {
 	uint8_t code; /* enum vmac_board_error */
 	uint8_t op;   /* the op of the request that failed */
@@ -106,6 +137,7 @@ struct vmac_error {
 /* One decoded frame. Which member of u is valid depends on channel, op and
  * whether VMAC_FLAG_REPLY is set; see vmac_proto_decode. */
 struct vmac_msg {
+	uint8_t version; /* decode: the frame's; encode: 0 means 1, the version every board speaks */
 	uint8_t flags;
 	uint16_t seq;       /* host's sequence number, echoed in the reply */
 	uint32_t device_id; /* session id the host gave in REGISTER; 0 before */
@@ -120,6 +152,9 @@ struct vmac_msg {
 		uint16_t sleep_s;              /* SLEEP request, 1..3600 */
 		uint16_t watchdog_ms;          /* WATCHDOG request, 1..60000 */
 		uint8_t shutdown_reason;       /* SHUTDOWN request */
+		uint8_t record_size;           /* v2 SIZE reply: bytes per cyclic record */
+		uint16_t offset;               /* v2 OFFSET request and reply, OFFSET_GET reply */
+		struct vmac_cyclic cyclic;     /* v2 CYCLIC (decode only; build with vmac_proto_cyclic_*) */
 	} u;
 };
 
@@ -130,6 +165,25 @@ int vmac_proto_encode(const struct vmac_msg *msg, uint8_t *buf, size_t cap);
 /* Decode exactly len bytes of buf into msg. Returns 0 or a negative
  * enum vmac_proto_err; never reads past buf + len. */
 int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *msg);
+
+/* The total length a frame's header declares (for a transport that pads
+ * short frames, e.g. Ethernet to 46 bytes): the frame is buf[0..n). Returns
+ * n, or a negative enum vmac_proto_err when the header cannot tell. */
+int vmac_proto_frame_length(const uint8_t *buf, size_t len);
+
+/* Start a CYCLIC frame in buf (cap bytes) carrying count records from
+ * offset first, every record empty (tag 0). Returns the frame's length or a
+ * negative enum vmac_proto_err. */
+int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count);
+
+/* Write record index (0..count-1) of a frame made by vmac_proto_cyclic_begin.
+ * The caller keeps outputs in range (the board refuses a bad record). */
+void vmac_proto_cyclic_put(uint8_t *frame, unsigned index, uint16_t tag, uint8_t flags, const struct vmac_outputs *out);
+
+/* Read the record at offset from a decoded CYCLIC message. Returns 0, 1 when
+ * the frame holds no record at that offset, or VMAC_EPROTO_VALUE for a
+ * record with reserved flag bits or outputs out of range. */
+int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct vmac_cyclic_record *r);
 
 /* A short English text for a negative vmac_proto_err. Never NULL. */
 const char *vmac_proto_strerror(int err);

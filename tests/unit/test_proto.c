@@ -129,7 +129,7 @@ static size_t raw_frame(uint8_t *buf, uint8_t flags, uint16_t seq, uint32_t devi
 {
 	buf[0] = VMAC_MAGIC0;
 	buf[1] = VMAC_MAGIC1;
-	buf[2] = VMAC_PROTO_VERSION;
+	buf[2] = 1;
 	buf[3] = flags;
 	buf[4] = (uint8_t)(seq >> 8);
 	buf[5] = (uint8_t)seq;
@@ -474,12 +474,12 @@ END_TEST
 
 START_TEST(wrong_version_is_rejected)
 {
-	static const uint8_t versions[] = {0, 2, 0xFF};
+	static const uint8_t versions[] = {0, 3, 0xFF};
 	uint8_t buf[VMAC_FRAME_MAX];
 	size_t n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0), i;
 	for (i = 0; i < sizeof(versions); i++) {
 		buf[2] = versions[i];
-		expect_decode_err(buf, n, VMAC_EPROTO_VERSION, "version byte 0/2/255");
+		expect_decode_err(buf, n, VMAC_EPROTO_VERSION, "version byte 0/3/255");
 	}
 }
 END_TEST
@@ -966,7 +966,9 @@ START_TEST(opname_names_every_op)
 	    {VMAC_CH_DEVICE, VMAC_OP_REGISTER, "REGISTER"},  {VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, "SHUTDOWN"},
 	    {VMAC_CH_DEVICE, VMAC_OP_UPDATE, "UPDATE"},      {VMAC_CH_DEVICE, VMAC_OP_ERROR, "ERROR"},
 	    {VMAC_CH_DEVICE, VMAC_OP_IDLE, "IDLE"},          {VMAC_CH_DEVICE, VMAC_OP_SLEEP, "SLEEP"},
-	    {VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, "WATCHDOG"},  {VMAC_CH_DEVICE, 0x07, "?"},
+	    {VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, "WATCHDOG"},  {VMAC_CH_DEVICE, VMAC_OP_SIZE, "SIZE"},
+	    {VMAC_CH_DEVICE, VMAC_OP_OFFSET, "OFFSET"},      {VMAC_CH_DEVICE, VMAC_OP_OFFSET_GET, "OFFSET_GET"},
+	    {VMAC_CH_SYSTEM, VMAC_SYS_CYCLIC, "CYCLIC"},     {VMAC_CH_DEVICE, 0x0A, "?"},
 	    {VMAC_CH_SYSTEM, VMAC_OP_UPDATE, "?"},           {0x01, VMAC_OP_UPDATE, "?"},
 	};
 	size_t i;
