@@ -1,53 +1,29 @@
 /* UDP transport: discovery by multicast to GROUP:PORT, cyclic traffic by
  * unicast. Works on loopback (IP_MULTICAST_IF 127.0.0.1) and on a LAN with
- * the interface chosen. Receive times come from the kernel (SO_TIMESTAMPNS). */
+ * the interface chosen. Receive times come from the kernel (SO_TIMESTAMPNS).
+ * Reached through transport.c, which also holds the clocks and addresses. */
 #include "transport.h"
 
 #include <arpa/inet.h>
 #include <errno.h>
-#include <fcntl.h>
-#include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "../common/addr.h"
 
-#define BATCH_MAX 64
+#define BATCH_MAX VMAC_TRANSPORT_BATCH
 
-int64_t vmac_now_ns(void)
+int vmac_udp_bus_spec_parse(const char *text, struct vmac_bus_spec *spec)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-}
-
-static int64_t realtime_ns(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-}
-
-void vmac_transport_clock_sync(struct vmac_transport *t)
-{
-	t->rt_minus_mono_ns = realtime_ns() - vmac_now_ns();
-}
-
-int vmac_bus_spec_parse(const char *text, struct vmac_bus_spec *spec)
-{
-	if (vmac_addr_parse(text, &spec->group, &spec->port) != 0 || spec->port == 0 ||
-	    !IN_MULTICAST(ntohl(spec->group.s_addr)))
+	struct in_addr group;
+	uint16_t port;
+	if (vmac_addr_parse(text, &group, &port) != 0 || port == 0 || !IN_MULTICAST(ntohl(group.s_addr)))
 		return -EINVAL;
+	spec->kind = VMAC_TRANSPORT_UDP;
+	spec->group = group;
+	spec->port = port;
+	memset(spec->ifname, 0, sizeof(spec->ifname));
 	return 0;
-}
-
-static int fail(char *err, size_t errlen, const char *what)
-{
-	int e = errno ? errno : EINVAL;
-	snprintf(err, errlen, "%s: %s", what, strerror(e));
-	return -e;
 }
 
 static void set_addr(struct vmac_addr *a, struct in_addr ip, uint16_t port)
@@ -67,12 +43,13 @@ static int open_unicast(struct vmac_transport *t, const struct vmac_bus_spec *sp
 	int fd = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 
 	memset(t, 0, sizeof(*t));
+	t->kind = VMAC_TRANSPORT_UDP;
 	t->fd = -1;
 	if (fd < 0)
-		return fail(err, errlen, "socket");
+		return vmac_transport_fail(err, errlen, "socket");
 	set_addr(&t->local, spec->iface, 0);
 	if (bind(fd, (struct sockaddr *)&t->local.ss, t->local.len) < 0) {
-		int r = fail(err, errlen, "bind to interface address");
+		int r = vmac_transport_fail(err, errlen, "bind to interface address");
 		close(fd);
 		return r;
 	}
@@ -85,7 +62,7 @@ static int open_unicast(struct vmac_transport *t, const struct vmac_bus_spec *sp
 	if (setsockopt(fd, IPPROTO_IP, IP_MULTICAST_IF, &spec->iface, sizeof(spec->iface)) < 0 ||
 	    setsockopt(fd, IPPROTO_IP, IP_MULTICAST_TTL, &ttl, sizeof(ttl)) < 0 ||
 	    setsockopt(fd, IPPROTO_IP, IP_MULTICAST_LOOP, &loop, sizeof(loop)) < 0) {
-		int r = fail(err, errlen, "multicast options");
+		int r = vmac_transport_fail(err, errlen, "multicast options");
 		close(fd);
 		return r;
 	}
@@ -95,17 +72,17 @@ static int open_unicast(struct vmac_transport *t, const struct vmac_bus_spec *sp
 	return 0;
 }
 
-int vmac_transport_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
+int vmac_udp_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
 {
 	return open_unicast(t, spec, err, errlen);
 }
 
-int vmac_transport_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
+int vmac_udp_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen)
 {
 	return open_unicast(t, spec, err, errlen);
 }
 
-int vmac_transport_listen(const struct vmac_bus_spec *spec, char *err, size_t errlen)
+int vmac_udp_listen(const struct vmac_bus_spec *spec, char *err, size_t errlen)
 {
 	struct ip_mreq mreq;
 	struct vmac_addr a;
@@ -113,35 +90,28 @@ int vmac_transport_listen(const struct vmac_bus_spec *spec, char *err, size_t er
 	int fd = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 
 	if (fd < 0)
-		return fail(err, errlen, "socket");
+		return vmac_transport_fail(err, errlen, "socket");
 	setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &on, sizeof(on));
 	setsockopt(fd, SOL_SOCKET, SO_REUSEPORT, &on, sizeof(on));
 	setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
 	/* Bound to the group address, so only this group's traffic arrives. */
 	set_addr(&a, spec->group, spec->port);
 	if (bind(fd, (struct sockaddr *)&a.ss, a.len) < 0) {
-		int r = fail(err, errlen, "bind to discovery group");
+		int r = vmac_transport_fail(err, errlen, "bind to discovery group");
 		close(fd);
 		return r;
 	}
 	mreq.imr_multiaddr = spec->group;
 	mreq.imr_interface = spec->iface;
 	if (setsockopt(fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &mreq, sizeof(mreq)) < 0) {
-		int r = fail(err, errlen, "join discovery group");
+		int r = vmac_transport_fail(err, errlen, "join discovery group");
 		close(fd);
 		return r;
 	}
 	return fd;
 }
 
-void vmac_transport_close(struct vmac_transport *t)
-{
-	if (t->fd >= 0)
-		close(t->fd);
-	t->fd = -1;
-}
-
-int vmac_transport_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
+int vmac_udp_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
 {
 	struct mmsghdr msgs[BATCH_MAX];
 	struct iovec iov[BATCH_MAX];
@@ -180,11 +150,11 @@ int vmac_transport_send(struct vmac_transport *t, struct vmac_packet *pkts, int 
 	return sent;
 }
 
-int vmac_transport_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max)
+int vmac_udp_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max)
 {
 	struct mmsghdr msgs[BATCH_MAX];
 	struct iovec iov[BATCH_MAX];
-	char ctrl[BATCH_MAX][CMSG_SPACE(sizeof(struct timespec))];
+	char ctrl[BATCH_MAX][VMAC_TRANSPORT_CMSG_SPACE];
 	int i, r, n = max > BATCH_MAX ? BATCH_MAX : max;
 	int64_t now = vmac_now_ns();
 
@@ -205,39 +175,13 @@ int vmac_transport_recv(struct vmac_transport *t, int fd, struct vmac_packet *pk
 	if (r < 0)
 		return (errno == EAGAIN || errno == EWOULDBLOCK || errno == ECONNREFUSED) ? 0 : -errno;
 	for (i = 0; i < r; i++) {
-		struct cmsghdr *c;
 		struct vmac_packet *p = &pkts[i];
 		p->len = msgs[i].msg_len;
 		if (msgs[i].msg_hdr.msg_flags & MSG_TRUNC)
 			p->len = sizeof(p->data); /* oversize: decoder rejects it */
 		p->addr.len = msgs[i].msg_hdr.msg_namelen;
-		p->rx_ns = now;
-		for (c = CMSG_FIRSTHDR(&msgs[i].msg_hdr); c; c = CMSG_NXTHDR(&msgs[i].msg_hdr, c)) {
-			if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
-				struct timespec ts;
-				int64_t mono;
-				memcpy(&ts, CMSG_DATA(c), sizeof(ts));
-				mono = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec - t->rt_minus_mono_ns;
-				/* Guard against a realtime step: never later than now. */
-				if (mono <= now)
-					p->rx_ns = mono;
-			}
-		}
+		memset(p->mac, 0, sizeof(p->mac));
+		p->rx_ns = vmac_transport_rx_stamp(t, &msgs[i].msg_hdr, now);
 	}
 	return r;
-}
-
-int vmac_addr_equal(const struct vmac_addr *a, const struct vmac_addr *b)
-{
-	const struct sockaddr_in *x = (const struct sockaddr_in *)&a->ss, *y = (const struct sockaddr_in *)&b->ss;
-	return x->sin_family == y->sin_family && x->sin_port == y->sin_port && x->sin_addr.s_addr == y->sin_addr.s_addr;
-}
-
-char *vmac_addr_format(const struct vmac_addr *a, char *buf, size_t len)
-{
-	const struct sockaddr_in *sin = (const struct sockaddr_in *)&a->ss;
-	char ip[INET_ADDRSTRLEN] = "?";
-	inet_ntop(AF_INET, &sin->sin_addr, ip, sizeof(ip));
-	snprintf(buf, len, "%s:%u", ip, (unsigned)ntohs(sin->sin_port));
-	return buf;
 }
