@@ -68,6 +68,10 @@ static json_t *device_json(const struct vmac_device_status *d)
 	json_object_set_new(o, "machine", d->machine[0] ? json_string(d->machine) : json_null());
 	json_object_set_new(o, "note", d->note[0] ? json_string(d->note) : json_null());
 	json_object_set_new(o, "params", params);
+	json_object_set_new(o, "misses_host", json_integer((json_int_t)d->misses_host));
+	json_object_set_new(o, "protocol", json_integer(d->protocol));
+	json_object_set_new(o, "service", json_string(d->cyclic ? "cyclic" : "unicast"));
+	json_object_set_new(o, "offset", d->cyclic ? json_integer(d->offset) : json_null());
 	return o;
 }
 
@@ -112,6 +116,8 @@ json_t *http_status_json(struct vmac_http *h)
 			json_array_append_new(load, json_integer(s->slot_load[i]));
 		json_object_set_new(json_object_get(root, "counters"), "schedule_full",
 		                    json_integer((json_int_t)s->counters.schedule_full));
+		json_object_set_new(json_object_get(root, "counters"), "misses_host",
+		                    json_integer((json_int_t)s->counters.misses_host));
 		json_object_set_new(
 		    root, "schedule",
 		    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",

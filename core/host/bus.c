@@ -27,9 +27,9 @@
 #include "../common/errors.h"
 #include "../sched/sched.h"
 
-const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS] = {"short",     "magic",     "version",       "length",
-                                                                   "op",        "payload",   "name",          "value",
-                                                                   "not_reply", "stale_seq", "unknown_sender"};
+const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS] = {
+    "short", "magic",     "version",   "length",         "op",    "payload", "name",
+    "value", "not_reply", "stale_seq", "unknown_sender", "offset"};
 
 /* The bus clock: CLOCK_MONOTONIC, or the caller's in virtual mode. */
 int64_t bus_now(const struct vmac_bus *bus)
@@ -42,9 +42,16 @@ double bus_time(const struct vmac_bus *bus)
 	return (double)(bus_now(bus) - bus->start_ns) / 1e9;
 }
 
+/* Per flush at most: one request per device, a WATCHDOG beside it, a
+ * DISCOVER, and a CYCLIC frame per chunk of offsets. */
+static int tx_max(const struct vmac_bus *bus)
+{
+	return 2 * (int)bus->ndev + 2 + (int)bus->nchunks;
+}
+
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
 {
-	if (bus->ntx >= 2 * (int)bus->ndev + 2)
+	if (bus->ntx >= tx_max(bus))
 		bus_flush(bus); /* cannot happen: see the size in vmac_bus_new */
 	return &bus->tx[bus->ntx++];
 }
@@ -56,6 +63,7 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 	int n;
 	if (!p)
 		return;
+	m->version = d->version;
 	m->seq = ++d->seq;
 	m->device_id = d->id;
 	m->channel = VMAC_CH_DEVICE;
@@ -69,6 +77,7 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 	if (expect_reply) {
 		d->pending = 1;
 		d->pending_op = m->op;
+		d->tx_index = bus->ntx - 1;
 		d->sent_ns = 0; /* stamped when the batch has left */
 	}
 }
@@ -77,18 +86,26 @@ void bus_flush(struct vmac_bus *bus)
 {
 	int64_t sent_ns;
 	uint32_t i;
+	int sent;
 	if (bus->ntx == 0)
 		return;
-	if (bus->virt)
+	if (bus->virt) {
 		bus->link.send(bus->link.ctx, bus->tx, bus->ntx);
-	else
-		vmac_transport_send(&bus->tr, bus->tx, bus->ntx);
+		sent = bus->ntx;
+	} else {
+		sent = vmac_transport_send(&bus->tr, bus->tx, bus->ntx);
+	}
 	/* The deadline runs from when the request actually left the host, so a
-	 * tick the machine delayed never counts against a board. */
+	 * tick the machine delayed never counts against a board. A request the
+	 * kernel did not take is marked: its miss is the host's, not the board's. */
 	sent_ns = bus_now(bus);
-	for (i = 0; i < bus->nused; i++)
-		if (bus->dev[i].pending && bus->dev[i].sent_ns == 0)
-			bus->dev[i].sent_ns = sent_ns;
+	for (i = 0; i < bus->nused; i++) {
+		struct device *d = &bus->dev[i];
+		if (d->pending && d->sent_ns == 0) {
+			d->sent_ns = sent_ns;
+			d->unsent = d->tx_index >= sent;
+		}
+	}
 	bus->ntx = 0;
 }
 
@@ -134,6 +151,38 @@ static int reason_of(int proto_err)
 	}
 }
 
+/* A reply to a registration step: 1 when the board is now registered, 0
+ * when another step follows (or it was dropped). */
+static int registered(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m)
+{
+	static const uint8_t step_op[] = {VMAC_OP_REGISTER, VMAC_OP_SIZE, VMAC_OP_OFFSET};
+	char why[120];
+	if (m->op != step_op[d->reg_step])
+		return 0;
+	if (!d->cyclic || d->reg_step == REG_OFFSET) {
+		if (d->cyclic && m->u.offset != bus_slot_of(bus, d)) {
+			bus->counters.malformed_frames++;
+			bus->counters.malformed_by_reason[VMAC_BAD_OFFSET]++;
+			snprintf(why, sizeof(why), "board confirmed offset %u, but was given %u", (unsigned)m->u.offset,
+			         (unsigned)bus_slot_of(bus, d));
+			bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", why);
+			return 0;
+		}
+		return 1;
+	}
+	if (d->reg_step == REG_SIZE && m->u.record_size != VMAC_CYCLIC_RECORD_LEN) {
+		bus->counters.malformed_frames++;
+		bus->counters.malformed_by_reason[VMAC_BAD_OFFSET]++;
+		snprintf(why, sizeof(why), "board wants %u-byte cyclic records; this host sends %d",
+		         (unsigned)m->u.record_size, VMAC_CYCLIC_RECORD_LEN);
+		bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", why);
+		return 0;
+	}
+	d->reg_step++;
+	d->register_sent = 0; /* service_registration sends the next step */
+	return 0;
+}
+
 static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m)
 {
 	char why[120];
@@ -150,7 +199,7 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 	}
 	switch (d->state) {
 	case DEV_REGISTERING:
-		if (m->op != VMAC_OP_REGISTER)
+		if (!registered(bus, d, m))
 			return;
 		d->state = DEV_RUNNING;
 		bus_event(bus, d, "attached", "%s attached: driver %s %s, major %u minor %u, level %u, at %s",
@@ -270,6 +319,7 @@ static void send_discover(struct vmac_bus *bus)
 	if (!p)
 		return;
 	memset(&m, 0, sizeof(m));
+	m.version = 1; /* boards of every version answer it, each in its own */
 	m.channel = VMAC_CH_SYSTEM;
 	m.op = VMAC_SYS_DISCOVER;
 	m.seq = ++bus->discover_seq;
@@ -294,20 +344,71 @@ static void service_registration(struct vmac_bus *bus)
 		if (d->pending || d->register_sent || (d->state != DEV_REGISTERING && d->state != DEV_TO_SLEEP))
 			continue;
 		memset(&m, 0, sizeof(m));
-		m.op = VMAC_OP_REGISTER;
-		m.u.reg.major = d->ann.major;
-		m.u.reg.minor = d->ann.minor;
-		m.u.reg.watchdog_ms = d->state == DEV_REGISTERING ? d->watchdog_ms : (uint16_t)bus->cfg.watchdog_ms;
+		if (d->state == DEV_TO_SLEEP || d->reg_step == REG_REGISTER) {
+			m.op = VMAC_OP_REGISTER;
+			m.u.reg.major = d->ann.major;
+			m.u.reg.minor = d->ann.minor;
+			m.u.reg.watchdog_ms =
+			    d->state == DEV_REGISTERING ? d->watchdog_ms : (uint16_t)bus->cfg.watchdog_ms;
+		} else if (d->reg_step == REG_SIZE) {
+			m.op = VMAC_OP_SIZE;
+		} else {
+			m.op = VMAC_OP_OFFSET;
+			m.u.offset = (uint16_t)i; /* its slot: unique while it holds the slot */
+		}
 		d->register_sent = 1;
 		d->reply_window_ns = bus->reply_deadline_ns;
 		bus_queue(bus, d, &m, 1);
 	}
 }
 
-/* The UPDATEs the schedule puts in this slot, in slice order. */
+/* Put d's outputs, due, at its offset in this slot's CYCLIC frame of its
+ * chunk (started on first use). The frame's seq is the slot's. */
+static void cyclic_put(struct vmac_bus *bus, struct device *d)
+{
+	uint32_t offset = bus_slot_of(bus, d), c = offset / VMAC_CYCLIC_RECORDS_MAX;
+	struct vmac_packet *p;
+	if (bus->chunk_tx[c] < 0) {
+		uint32_t first = c * VMAC_CYCLIC_RECORDS_MAX, count = bus->nused - first;
+		int n;
+		p = tx_slot(bus);
+		if (!p)
+			return;
+		if (count > VMAC_CYCLIC_RECORDS_MAX)
+			count = VMAC_CYCLIC_RECORDS_MAX;
+		n = vmac_proto_cyclic_begin(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count);
+		if (n <= 0) {
+			bus->ntx--;
+			return;
+		}
+		p->len = (size_t)n;
+		p->addr = bus->tr.group;
+		memset(p->mac, 0, sizeof(p->mac));
+		bus->chunk_tx[c] = (int)(p - bus->tx);
+	}
+	p = &bus->tx[bus->chunk_tx[c]];
+	vmac_proto_cyclic_put(p->data, offset % VMAC_CYCLIC_RECORDS_MAX, (uint16_t)(d->id >> 16), VMAC_CYCLIC_DUE,
+	                      &d->outputs);
+	d->seq = bus->cyclic_seq;
+	d->pending = 1;
+	d->tx_index = bus->chunk_tx[c];
+	d->pending_op = VMAC_OP_UPDATE;
+	d->sent_ns = 0; /* stamped when the batch has left */
+}
+
+/* The UPDATEs the schedule puts in this slot, in slice order: unicast to
+ * version-1 boards, in the slot's CYCLIC frames for the others. */
 static void service_slot(struct vmac_bus *bus, uint64_t slot)
 {
 	int i, n = vmac_sched_slot(bus->sched, slot, bus->slot_entries, (int)bus->cfg.slices_per_slot);
+	uint32_t c;
+	/* Room for this slot's requests, its WATCHDOGs and its CYCLIC frames
+	 * without a flush in between (a flush would move the frames). */
+	if (bus->ntx + (int)bus->nchunks + 2 * n > tx_max(bus))
+		bus_flush(bus);
+	for (c = 0; c < bus->nchunks; c++)
+		bus->chunk_tx[c] = -1;
+	bus->cyclic_seq++;
 	for (i = 0; i < n; i++) {
 		const struct vmac_sched_entry *e = &bus->slot_entries[i];
 		struct device *d = &bus->dev[e->device];
@@ -324,6 +425,10 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 			d->aside_seq = d->seq;
 			d->watchdog_ms = d->want_watchdog;
 			d->want_watchdog = 0;
+		}
+		if (d->cyclic) {
+			cyclic_put(bus, d);
+			continue;
 		}
 		memset(&m, 0, sizeof(m));
 		m.op = VMAC_OP_UPDATE;
@@ -508,13 +613,14 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->reply_deadline_ns = (int64_t)cfg->reply_deadline_us * 1000;
 	bus->dev = calloc(bus->ndev, sizeof(*bus->dev));
 	bus->mach = calloc(bus->ndev, sizeof(*bus->mach));
-	/* Per flush at most: one request per device, a WATCHDOG beside it, a DISCOVER. */
-	bus->tx = calloc(2 * bus->ndev + 2, sizeof(*bus->tx));
+	bus->nchunks = (bus->ndev + VMAC_CYCLIC_RECORDS_MAX - 1) / VMAC_CYCLIC_RECORDS_MAX;
+	bus->chunk_tx = calloc(bus->nchunks, sizeof(*bus->chunk_tx));
+	bus->tx = calloc((size_t)tx_max(bus), sizeof(*bus->tx));
 	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
 	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
-	if (!bus->dev || !bus->mach || !bus->tx || !bus->status.devices || !bus->status.slot_load ||
+	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->status.devices || !bus->status.slot_load ||
 	    !bus->slot_entries || !bus->sched || vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), 1024) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024)) {
 		snprintf(err, errlen, "out of memory");
@@ -534,10 +640,13 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 	struct vmac_bus *bus;
 	struct vmac_bus_spec spec;
 	if (vmac_bus_spec_parse(cfg->bus, &spec) != 0) {
-		snprintf(err, errlen, "bus '%s': expected MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870", cfg->bus);
+		snprintf(err, errlen,
+		         "bus '%s': expected MULTICAST_GROUP:PORT (UDP, e.g. 239.255.86.77:5870) or eth:IFACE (raw "
+		         "Ethernet, e.g. eth:eth0)",
+		         cfg->bus);
 		return NULL;
 	}
-	if (inet_pton(AF_INET, cfg->iface, &spec.iface) != 1) {
+	if (spec.kind == VMAC_TRANSPORT_UDP && inet_pton(AF_INET, cfg->iface, &spec.iface) != 1) {
 		snprintf(err, errlen, "iface '%s': expected an IPv4 address", cfg->iface);
 		return NULL;
 	}
@@ -634,6 +743,7 @@ void vmac_bus_free(struct vmac_bus *bus)
 	free(bus->dev);
 	free(bus->mach);
 	free(bus->tx);
+	free(bus->chunk_tx);
 	free(bus->status.devices);
 	free(bus->status.slot_load);
 	free(bus->slot_entries);

@@ -78,6 +78,10 @@ struct vmac_device_status {
 	uint32_t id, major, minor;
 	uint32_t period_us;
 	uint64_t misses, served;
+	uint64_t misses_host; /* of misses: the host's own fault */
+	unsigned protocol;    /* the version the board speaks (1 or 2) */
+	int cyclic;           /* served by the cyclic frame, at offset (else unicast UPDATEs) */
+	unsigned offset;
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs;
 	size_t driver_memory;
@@ -85,9 +89,10 @@ struct vmac_device_status {
 
 struct vmac_bus_counters {
 	uint64_t malformed_frames; /* every datagram dropped as malformed, all reasons */
-	uint64_t malformed_by_reason[12];
+	uint64_t malformed_by_reason[16];
 	uint64_t late_replies; /* right sequence, but after the deadline (a miss) */
 	uint64_t misses, drops, discoveries, announces;
+	uint64_t misses_host; /* of misses: the host's own (a request the kernel refused to send) */
 	uint64_t ticks, ticks_skipped;
 	uint64_t events_lost; /* event ring full */
 	uint64_t table_full;
@@ -107,6 +112,7 @@ enum vmac_malformed_reason {
 	VMAC_BAD_NOT_REPLY,
 	VMAC_BAD_STALE_SEQ,
 	VMAC_BAD_UNKNOWN_SENDER,
+	VMAC_BAD_OFFSET, /* v2: a board confirmed another offset, or wants another record size */
 	VMAC_BAD_REASONS
 };
 extern const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS];

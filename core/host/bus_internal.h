@@ -30,6 +30,11 @@ enum dev_state {
 	DEV_ERRANT, /* dropped; waits for the board to announce again */
 };
 
+/* The steps of registering a board (DEV_REGISTERING): REGISTER, then for a
+ * board served by the cyclic frame, SIZE and OFFSET (docs/PROTOCOL.md,
+ * "Version 2"). */
+enum reg_step { REG_REGISTER, REG_SIZE, REG_OFFSET };
+
 /* A machine: the boards that share a driver name and major id, run by one
  * driver instance. Board 0 is the primary: its reply runs the tick. */
 struct machine {
@@ -61,6 +66,9 @@ struct device {
 	uint16_t generation;
 	uint32_t id; /* generation << 16 | slot */
 	struct vmac_announce ann;
+	uint8_t version;  /* the protocol version the board announced: every request to it speaks it */
+	uint8_t cyclic;   /* served by the cyclic frame at its offset (its slot); else unicast UPDATEs */
+	uint8_t reg_step; /* enum reg_step, while DEV_REGISTERING */
 	struct vmac_addr addr;
 	struct vmac_driver *drv;
 	int register_sent;
@@ -68,10 +76,13 @@ struct device {
 	uint16_t missed_seq;   /* the request whose deadline passed last (its late reply is no stranger) */
 	uint16_t courtesy_seq; /* the SHUTDOWN/SLEEP sent on dropping, whose answer nobody awaits */
 	int pending;           /* a request is out, no reply yet */
+	int tx_index;          /* the pending request's packet in bus->tx until the flush */
+	uint8_t unsent;        /* the kernel refused the pending request: a miss of the host's own */
 	uint8_t pending_op;
 	int64_t sent_ns;
 	uint32_t consecutive_misses;
 	uint64_t misses, served;
+	uint64_t misses_host; /* of misses: caused by the host (its request never left) */
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs; /* sent with the next UPDATE */
 	int64_t last_seen_ns;
@@ -117,6 +128,9 @@ struct vmac_bus {
 	struct vmac_sched *sched;
 	struct vmac_sched_entry *slot_entries;
 	int64_t slot_ns;     /* one slot: the tick's period */
+	uint16_t cyclic_seq; /* seq of the latest CYCLIC frames */
+	int *chunk_tx;       /* per VMAC_CYCLIC_RECORDS_MAX offsets: its CYCLIC frame in tx this slot, or -1 */
+	uint32_t nchunks;
 	uint64_t slots_done; /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;

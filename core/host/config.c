@@ -54,6 +54,7 @@ static const struct key keys[] = {
     {U(reload_probation_s, 0, 86400)},
     {B(allow_jit)},
     {B(realtime)},
+    {B(cyclic)},
 };
 
 void vmac_config_defaults(struct vmac_config *c)
@@ -78,6 +79,7 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->driver_budget_us = 2000;
 	c->reload_probation_s = 30;
 	c->realtime = 1;
+	c->cyclic = 1;
 }
 
 static const struct key *find_key(const char *name)
@@ -293,10 +295,13 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 	struct vmac_bus_spec spec;
 	struct in_addr a;
 	if (vmac_bus_spec_parse(c->bus, &spec) != 0) {
-		snprintf(err, errlen, "bus '%s': expected MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870", c->bus);
+		snprintf(err, errlen,
+		         "bus '%s': expected MULTICAST_GROUP:PORT (UDP, e.g. 239.255.86.77:5870) or eth:IFACE (raw "
+		         "Ethernet, e.g. eth:eth0)",
+		         c->bus);
 		return -1;
 	}
-	if (inet_pton(AF_INET, c->iface, &a) != 1) {
+	if (spec.kind == VMAC_TRANSPORT_UDP && inet_pton(AF_INET, c->iface, &a) != 1) {
 		snprintf(err, errlen, "iface '%s': expected an IPv4 address of this machine, e.g. 127.0.0.1", c->iface);
 		return -1;
 	}

@@ -17,8 +17,8 @@ struct vmac_config_driver_setting {
 };
 
 struct vmac_config {
-	char bus[64];                    /* "GROUP:PORT" */
-	char iface[64];                  /* local interface address */
+	char bus[64];                    /* "GROUP:PORT" (UDP) or "eth:IFACE" (raw Ethernet) */
+	char iface[64];                  /* UDP: the local interface address */
 	char http[64];                   /* "ADDR:PORT" of the status/API server */
 	char drivers_dir[VMAC_PATH_MAX]; /* searched first for NAME.lua ("" = none) */
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ below it) */
@@ -43,6 +43,7 @@ struct vmac_config {
 	uint32_t reload_probation_s; /* hot reload: a new version failing within this goes back (0 = none) */
 	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
+	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */
 	struct vmac_config_driver_setting driver[VMAC_CONFIG_DRIVER_SETTINGS];
 	int ndriver;
 };

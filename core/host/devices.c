@@ -119,6 +119,10 @@ void bus_miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)
 	d->misses++;
 	d->consecutive_misses++;
 	bus->counters.misses++;
+	if (d->unsent) {
+		d->misses_host++;
+		bus->counters.misses_host++;
+	}
 	if (d->consecutive_misses >= bus->cfg.miss_limit || d->state != DEV_RUNNING)
 		bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", fmt_why);
 }
@@ -135,9 +139,10 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 		d->missed_seq = d->seq;
 		if (bus->stopping)
 			continue;
-		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms",
+		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms%s",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)d->seq,
-		         (double)d->reply_window_ns / 1e6);
+		         (double)d->reply_window_ns / 1e6,
+		         d->unsent ? " (the host's fault: the kernel refused the request)" : "");
 		bus_miss(bus, d, why);
 	}
 }
@@ -199,6 +204,7 @@ static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
 	d->scheduled = 1;
 	m->board[m->nboards++] = bus_slot_of(bus, d);
 	d->state = DEV_REGISTERING;
+	d->reg_step = REG_REGISTER;
 	d->register_sent = 0;
 	d->watchdog_ms = watchdog_for(bus, m->level);
 	d->want_watchdog = 0;
@@ -295,8 +301,11 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 	if (bus_slot_of(bus, d) >= bus->nused)
 		bus->nused = bus_slot_of(bus, d) + 1;
 	d->ann = m->u.announce;
+	d->version = m->version;
+	d->cyclic = m->version >= 2 && bus->cfg.cyclic;
 	d->addr = p->addr;
-	d->generation = (uint16_t)(d->generation + 1 ? d->generation + 1 : 1);
+	/* Never 0: a CYCLIC record's tag is the generation, and tag 0 is empty. */
+	d->generation = (uint16_t)(d->generation + 1) ? (uint16_t)(d->generation + 1) : 1;
 	d->id = (uint32_t)d->generation << 16 | bus_slot_of(bus, d);
 	d->state = DEV_LOADING;
 	d->pending = 0;

@@ -58,6 +58,10 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->period_us = (uint32_t)((bus->slot_ns << o->level) / 1000);
 	o->misses = d->misses;
 	o->served = d->served;
+	o->misses_host = d->misses_host;
+	o->protocol = d->version;
+	o->cyclic = d->cyclic;
+	o->offset = i;
 	o->inputs = d->inputs;
 	o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
 	o->driver_memory = m && m->drv && m->primary == i ? vmac_driver_memory(m->drv) : 0;
