@@ -283,11 +283,16 @@ static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 	}
 	d->pending = 0;
 	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > d->reply_window_ns) {
-		char why[120];
+		char why[200];
 		bus->counters.late_replies++;
-		snprintf(why, sizeof(why), "reply to %s seq %u came %.3g ms after the bus_request (deadline %.3g ms)",
+		/* The times are CLOCK_MONOTONIC, so a board on the same machine can
+		 * be lined up with them (vmac-board's late-reply lines). */
+		snprintf(why, sizeof(why),
+		         "reply to %s seq %u came %.3g ms after the request (deadline %.3g ms; sent at %lld ns, "
+		         "received at %lld ns)",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)m.seq,
-		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)d->reply_window_ns / 1e6);
+		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)d->reply_window_ns / 1e6, (long long)d->sent_ns,
+		         (long long)p->rx_ns);
 		if (!bus->stopping)
 			bus_miss(bus, d, why);
 		return;

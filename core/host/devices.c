@@ -132,17 +132,17 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 	uint32_t i;
 	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
-		char why[120];
+		char why[200];
 		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->reply_window_ns)
 			continue;
 		d->pending = 0;
 		d->missed_seq = d->seq;
 		if (bus->stopping)
 			continue;
-		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms%s",
+		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms (sent at %lld ns)%s",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)d->seq,
-		         (double)d->reply_window_ns / 1e6,
-		         d->unsent ? " (the host's fault: the kernel refused the request)" : "");
+		         (double)d->reply_window_ns / 1e6, (long long)d->sent_ns,
+		         d->unsent ? "; the host's fault: the kernel refused the request" : "");
 		bus_miss(bus, d, why);
 	}
 }
