@@ -1,34 +1,32 @@
 /* vmac-board: the generic peripheral board on POSIX. Runs one or more
- * boards (each with its own simulated plant and its own UDP endpoint) in one
- * process; the board logic itself is firmware/board.c, untouched by any OS. */
+ * boards, each with its own simulated plant, in one process on one socket
+ * (UDP: plus the discovery listener); the board logic itself is
+ * firmware/board.c, untouched by any OS. This file: options, set-up, the
+ * loop and the exit; boards.c and dispatch.c do the rest. */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <getopt.h>
+#include <inttypes.h>
 #include <poll.h>
+#include <sched.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/resource.h>
 #include <unistd.h>
 
-#include "../../core/transport/transport.h"
-#include "../board.h"
-#include "../plant.h"
+#include "boards.h"
 
-#define PLANT_STEP_MAX_S 0.01 /* physics sub-step */
+/* The watchdogs, the plants and the printed lines are looked at this often
+ * (and no more often, however many frames arrive): resolution enough for
+ * watchdogs of tens of ms and for the physics. */
+#define HOUSEKEEP_NS 5000000
+#define CLOCK_SYNC_NS 1000000000 /* resample realtime - monotonic for the kernel's stamps */
+#define DEFAULT_BUS "239.255.86.77:5870"
+#define DEFAULT_LATE_US 1000
+#define LATE_US_MAX 60000000
 
-struct posix_board {
-	struct vmac_board board;
-	struct vmac_plant plant;
-	struct vmac_transport transport;
-	struct vmac_outputs reported; /* last outputs printed */
-	enum vmac_board_state reported_state;
-};
-
-static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
 static volatile sig_atomic_t stop_signal;
-static int quiet;
 
 static void on_signal(int sig)
 {
@@ -47,124 +45,198 @@ static void usage(FILE *f)
 	           "  --plant KIND      washer, dishwasher, lights or generic (default generic)\n"
 	           "  --name NAME       board name, [A-Za-z0-9_-], at most 31 (default: the plant's name)\n"
 	           "  --driver NAME     driver the board announces (default: the plant's driver)\n"
-	           "  --bus GROUP:PORT  discovery group and port (default 239.255.86.77:5870)\n"
-	           "  --iface ADDR      local interface address (default 127.0.0.1)\n"
-	           "  --count N         run N independent boards, named NAME-1..NAME-N (default 1)\n"
+	           "  --bus GROUP:PORT  UDP: discovery multicast group and port (default " DEFAULT_BUS ")\n"
+	           "  --bus eth:IFACE   raw Ethernet on interface IFACE (EtherType 0x88B5; needs CAP_NET_RAW);\n"
+	           "                    each board has its own MAC 02:xx:xx:xx:hi:lo (printed at start)\n"
+	           "  --iface ADDR      UDP: local interface address (default 127.0.0.1)\n"
+	           "  --count N         run N independent boards, named NAME-1..NAME-N, on one socket\n"
+	           "                    (1..65535, default 1)\n"
 	           "  --major N         major id (default: hash of the name); --minor N (default 0)\n"
+	           "  --protocol V      highest protocol version the boards speak: 1 or 2 (default 2)\n"
+	           "  --cpu K           run on CPU K only\n"
+	           "  --late-us N       print each reply that left more than N us after its request\n"
+	           "                    came in (default 1000; 0: never)\n"
 	           "  --commands        read operator actions from stdin: 'NAME ACTION VALUE'\n"
 	           "                    (e.g. 'lights-1 toggle1 1', 'washer-1 door 0')\n"
-	           "  --quiet           print only errors and safety events\n"
+	           "  --quiet           print only state changes other than \"known\", safety events\n"
+	           "                    and late replies\n"
 	           "  --help            this text\n\n"
 	           "Prints one line per state change and output change on stdout. On SIGINT or\n"
 	           "SIGTERM every board turns its outputs off before the process exits.\n");
 }
 
-static void report(struct posix_board *pb)
+/* A whole number in min..max from text, or -1 with an error printed. */
+static int parse_number(const char *option, const char *text, long min, long max, int base, long *out)
 {
-	struct vmac_board *b = &pb->board;
-	if (b->state != pb->reported_state) {
-		if (!quiet || b->state != VMAC_BOARD_KNOWN)
-			printf("%s: state %s device 0x%08x watchdog %u ms\n", b->id.board,
-			       vmac_board_state_name(b->state), (unsigned)b->device_id, (unsigned)b->watchdog_ms);
-		pb->reported_state = b->state;
+	char *end;
+	long v;
+	errno = 0;
+	v = strtol(text, &end, base);
+	if (!*text || *end || errno || v < min || v > max) {
+		fprintf(stderr, "vmac-board: %s takes %ld..%ld, got '%s'\n", option, min, max, text);
+		return -1;
 	}
-	if (b->outputs.digital != pb->reported.digital || b->outputs.pwm != pb->reported.pwm) {
-		if (!quiet)
-			printf("%s: outputs digital=0x%02x pwm=%d\n", b->id.board, (unsigned)b->outputs.digital,
-			       (int)b->outputs.pwm);
-		pb->reported = b->outputs;
-	}
+	*out = v;
+	return 0;
 }
 
-/* Hand one datagram to a board and send its answer, if any, back to the
- * sender from the board's own socket. */
-static void serve(struct posix_board *pb, const struct vmac_packet *in)
+/* --cpu K: 2 for a K this machine cannot run us on, 1 for another failure. */
+static int pin_to_cpu(long cpu)
 {
-	struct vmac_packet out;
-	int len = vmac_board_receive(&pb->board, in->data, in->len, now_ms(), out.data, sizeof(out.data));
-	if (len > 0) {
-		out.len = (size_t)len;
-		out.addr = in->addr;
-		vmac_transport_send(&pb->transport, &out, 1);
+	cpu_set_t set;
+	long cpus = sysconf(_SC_NPROCESSORS_CONF);
+	CPU_ZERO(&set);
+	CPU_SET((int)cpu, &set);
+	if (sched_setaffinity(0, sizeof(set), &set) != 0) {
+		if (errno == EINVAL) {
+			fprintf(stderr,
+			        "vmac-board: --cpu %ld: no such CPU, or not one this process may use "
+			        "(this machine has CPUs 0..%ld)\n",
+			        cpu, cpus - 1);
+			return 2;
+		}
+		fprintf(stderr, "vmac-board: --cpu %ld: %s\n", cpu, strerror(errno));
+		return 1;
 	}
+	return 0;
 }
 
-static void operator_command(struct posix_board *boards, int count, char *line)
+/* The start-up line: what runs, where, and on Ethernet each board's MAC
+ * (a long run of boards: the first and the last, the rest follow from the
+ * rule: the last two bytes are the board's number). */
+static void print_start(const struct board_set *s, const struct boards_config *cfg, const char *bus, const char *iface,
+                        const struct vmac_transport *t, long cpu)
 {
-	char name[64], action[64];
-	double value = 0;
-	int i, fields = sscanf(line, "%63s %63s %lf", name, action, &value);
-	if (fields < 2) {
-		fprintf(stderr, "vmac-board: expected 'NAME ACTION VALUE', got: %s", line);
+	char mac[24], cpu_text[32] = "";
+	int32_t i;
+	if (cpu >= 0)
+		snprintf(cpu_text, sizeof(cpu_text), ", CPU %ld", cpu);
+	printf("vmac-board: %ld %s board%s on bus %s", cfg->count, vmac_plant_name(cfg->kind),
+	       cfg->count == 1 ? "" : "s", bus);
+	if (!s->eth) {
+		printf(" (UDP), interface %s, protocol %u%s\n", iface, (unsigned)cfg->protocol, cpu_text);
 		return;
 	}
-	for (i = 0; i < count; i++) {
-		if (strcmp(boards[i].board.id.board, name) == 0) {
-			if (vmac_plant_set(&boards[i].plant, action, value) != 0)
-				printf("%s: refused %s %g\n", name, action, value);
-			else
-				printf("%s: %s %g\n", name, action, value);
-			return;
-		}
+	printf(" (raw Ethernet, interface MAC %s), protocol %u%s, MAC", boards_mac_format(t->mac, mac, sizeof(mac)),
+	       (unsigned)cfg->protocol, cpu_text);
+	if (s->count <= BOARDS_LIST_MACS_MAX) {
+		for (i = 0; i < s->count; i++)
+			printf("%s %s %s", i ? "," : "", s->boards[i].board.id.board,
+			       boards_mac_format(s->boards[i].mac, mac, sizeof(mac)));
+		printf("\n");
+		return;
 	}
-	fprintf(stderr, "vmac-board: no board named %s\n", name);
+	printf(" %s %s", s->boards[0].board.id.board, boards_mac_format(s->boards[0].mac, mac, sizeof(mac)));
+	printf(" .. %s %s (NAME-N has the last two bytes N)\n", s->boards[s->count - 1].board.id.board,
+	       boards_mac_format(s->boards[s->count - 1].mac, mac, sizeof(mac)));
+}
+
+/* --commands: stdin read without stdio's buffer, so that a line waiting in
+ * it never hides from poll. Returns 0, or -1 at end of input. */
+static int read_commands(struct board_set *s)
+{
+	static char buf[512];
+	static size_t used;
+	ssize_t n = read(STDIN_FILENO, buf + used, sizeof(buf) - 1 - used);
+	char *line, *nl;
+	if (n < 0)
+		return errno == EINTR || errno == EAGAIN ? 0 : -1;
+	if (n == 0) {
+		if (used > 0) { /* a last line without its newline */
+			buf[used] = '\0';
+			boards_command(s, buf);
+			used = 0;
+		}
+		return -1;
+	}
+	used += (size_t)n;
+	buf[used] = '\0';
+	line = buf;
+	while ((nl = strchr(line, '\n')) != NULL) {
+		*nl = '\0';
+		if (nl > line)
+			boards_command(s, line);
+		line = nl + 1;
+	}
+	used = (size_t)(buf + used - line);
+	memmove(buf, line, used);
+	if (used == sizeof(buf) - 1) { /* a line longer than any command: drop it */
+		buf[used] = '\0';
+		boards_command(s, buf);
+		used = 0;
+	}
+	return 0;
 }
 
 int main(int argc, char **argv)
 {
-	static const struct option opts[] = {
-	    {"plant", required_argument, 0, 'p'},  {"name", required_argument, 0, 'n'},
-	    {"driver", required_argument, 0, 'd'}, {"bus", required_argument, 0, 'b'},
-	    {"iface", required_argument, 0, 'i'},  {"count", required_argument, 0, 'c'},
-	    {"major", required_argument, 0, 'M'},  {"minor", required_argument, 0, 'm'},
-	    {"commands", no_argument, 0, 'C'},     {"quiet", no_argument, 0, 'q'},
-	    {"help", no_argument, 0, 'h'},         {0, 0, 0, 0}};
-	enum vmac_plant_kind kind = VMAC_PLANT_GENERIC;
-	const char *name = NULL, *driver = NULL, *bus = "239.255.86.77:5870", *iface = "127.0.0.1";
-	long count = 1, major = -1, minor = 0;
-	int commands = 0, opt, i, listen_fd = -1, nfds, rc = 0;
+	static const struct option opts[] = {{"plant", required_argument, 0, 'p'},
+	                                     {"name", required_argument, 0, 'n'},
+	                                     {"driver", required_argument, 0, 'd'},
+	                                     {"bus", required_argument, 0, 'b'},
+	                                     {"iface", required_argument, 0, 'i'},
+	                                     {"count", required_argument, 0, 'c'},
+	                                     {"major", required_argument, 0, 'M'},
+	                                     {"minor", required_argument, 0, 'm'},
+	                                     {"protocol", required_argument, 0, 'P'},
+	                                     {"cpu", required_argument, 0, 'u'},
+	                                     {"late-us", required_argument, 0, 'l'},
+	                                     {"commands", no_argument, 0, 'C'},
+	                                     {"quiet", no_argument, 0, 'q'},
+	                                     {"help", no_argument, 0, 'h'},
+	                                     {0, 0, 0, 0}};
+	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0};
+	const char *bus = DEFAULT_BUS, *iface = NULL;
+	long cpu = -1, late_us = DEFAULT_LATE_US, number;
+	int commands = 0, quiet = 0, opt, listen_fd = -1, nsock = 1, nfds, k, rc = 0;
 	struct vmac_bus_spec spec;
-	struct posix_board *boards;
-	struct pollfd *pfds;
-	struct vmac_packet pkt[16];
-	char err[160];
-	uint64_t last_step_ms;
-	char *end;
+	struct vmac_transport transport;
+	struct board_set set;
+	struct pollfd pfds[3];
+	struct vmac_packet *pkts;
+	struct sigaction sa;
+	char err[256];
+	int64_t last_housekeep_ns, last_sync_ns, last_error_ns = 0;
 
 	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
 		switch (opt) {
 		case 'p':
-			if (vmac_plant_kind_from_name(optarg, &kind) != 0) {
+			if (vmac_plant_kind_from_name(optarg, &cfg.kind) != 0) {
 				fprintf(stderr,
 				        "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic)\n",
 				        optarg);
 				return 2;
 			}
 			break;
-		case 'n': name = optarg; break;
-		case 'd': driver = optarg; break;
+		case 'n': cfg.name = optarg; break;
+		case 'd': cfg.driver = optarg; break;
 		case 'b': bus = optarg; break;
 		case 'i': iface = optarg; break;
 		case 'c':
-			count = strtol(optarg, &end, 10);
-			if (*end || count < 1 || count > 4096) {
-				fprintf(stderr, "vmac-board: --count takes 1..4096\n");
+			if (parse_number("--count", optarg, 1, BOARDS_MAX, 10, &cfg.count) != 0)
 				return 2;
-			}
 			break;
 		case 'M':
-			major = strtol(optarg, &end, 0);
-			if (*end || major < 0 || major > 0xFFFFFFFFL) {
-				fprintf(stderr, "vmac-board: --major takes 0..4294967295\n");
+			if (parse_number("--major", optarg, 0, 0xFFFFFFFFL, 0, &cfg.major) != 0)
 				return 2;
-			}
 			break;
 		case 'm':
-			minor = strtol(optarg, &end, 0);
-			if (*end || minor < 0 || minor > 0xFFFFFFFFL) {
-				fprintf(stderr, "vmac-board: --minor takes 0..4294967295\n");
+			if (parse_number("--minor", optarg, 0, 0xFFFFFFFFL, 0, &cfg.minor) != 0)
 				return 2;
-			}
+			break;
+		case 'P':
+			if (parse_number("--protocol", optarg, VMAC_PROTO_VERSION_MIN, VMAC_PROTO_VERSION, 10,
+			                 &number) != 0)
+				return 2;
+			cfg.protocol = (uint8_t)number;
+			break;
+		case 'u':
+			if (parse_number("--cpu", optarg, 0, CPU_SETSIZE - 1, 10, &cpu) != 0)
+				return 2;
+			break;
+		case 'l':
+			if (parse_number("--late-us", optarg, 0, LATE_US_MAX, 10, &late_us) != 0)
+				return 2;
 			break;
 		case 'C': commands = 1; break;
 		case 'q': quiet = 1; break;
@@ -176,173 +248,141 @@ int main(int argc, char **argv)
 		fprintf(stderr, "vmac-board: unexpected argument '%s'\n", argv[optind]);
 		return 2;
 	}
-	if (!name)
-		name = vmac_plant_name(kind);
-	if (!driver)
-		driver = vmac_plant_default_driver(kind);
+	if (!cfg.name)
+		cfg.name = vmac_plant_name(cfg.kind);
+	if (!cfg.driver)
+		cfg.driver = vmac_plant_default_driver(cfg.kind);
+	memset(&spec, 0, sizeof(spec));
 	if (vmac_bus_spec_parse(bus, &spec) != 0) {
-		fprintf(stderr, "vmac-board: --bus wants MULTICAST_GROUP:PORT, e.g. 239.255.86.77:5870, got '%s'\n",
+		fprintf(stderr,
+		        "vmac-board: --bus wants MULTICAST_GROUP:PORT (e.g. " DEFAULT_BUS ") or eth:IFACE (e.g. "
+		        "eth:eth0), got '%s'\n",
 		        bus);
 		return 2;
 	}
-	if (inet_pton(AF_INET, iface, &spec.iface) != 1) {
+	cfg.eth = spec.kind == VMAC_TRANSPORT_ETH;
+	if (cfg.eth && iface) {
+		fprintf(stderr, "vmac-board: --iface is for a UDP bus; on raw Ethernet the interface is the one "
+		                "in --bus eth:IFACE\n");
+		return 2;
+	}
+	if (!iface)
+		iface = "127.0.0.1";
+	if (!cfg.eth && inet_pton(AF_INET, iface, &spec.iface) != 1) {
 		fprintf(stderr, "vmac-board: --iface wants an IPv4 address, got '%s'\n", iface);
 		return 2;
 	}
+	if (cpu >= 0 && (rc = pin_to_cpu(cpu)) != 0)
+		return rc;
 
 	setvbuf(stdout, NULL, _IOLBF, 0);
-	if (count > 200) { /* two fds a board at most; raise the soft limit */
-		struct rlimit rl;
-		if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < (rlim_t)count + 64) {
-			rl.rlim_cur = rl.rlim_max < (rlim_t)count + 64 ? rl.rlim_max : (rlim_t)count + 64;
-			setrlimit(RLIMIT_NOFILE, &rl);
-		}
+	rc = boards_init(&set, &cfg, now_ms(), err, sizeof(err));
+	if (rc != 0) {
+		fprintf(stderr, "vmac-board: %s\n", err);
+		return rc == -2 ? 2 : 1;
 	}
-	boards = calloc((size_t)count, sizeof(*boards));
-	pfds = calloc((size_t)count + 2, sizeof(*pfds));
-	if (!boards || !pfds) {
-		fprintf(stderr, "vmac-board: out of memory for %ld boards\n", count);
+	set.quiet = quiet;
+	set.late_ns = (int64_t)late_us * 1000;
+	set.transport = &transport;
+	pkts = malloc(VMAC_TRANSPORT_BATCH * sizeof(*pkts));
+	if (!pkts) {
+		fprintf(stderr, "vmac-board: out of memory\n");
+		boards_fini(&set);
 		return 1;
 	}
-	listen_fd = vmac_transport_listen(&spec, err, sizeof(err));
-	if (listen_fd < 0) {
+	/* One socket for every board; on UDP the discovery listener beside it. */
+	if (vmac_transport_open_board(&transport, &spec, err, sizeof(err)) < 0) {
 		fprintf(stderr, "vmac-board: %s\n", err);
 		rc = 1;
-		goto out;
+		goto out_boards;
 	}
-	for (i = 0; i < count; i++) {
-		struct vmac_board_identity id;
-		struct posix_board *pb = &boards[i];
-		memset(&id, 0, sizeof(id));
-		char full[80];
-		if (count == 1)
-			snprintf(full, sizeof(full), "%.40s", name);
-		else
-			snprintf(full, sizeof(full), "%.40s-%d", name, i + 1);
-		if (strlen(full) > VMAC_NAME_MAX || strlen(driver) > VMAC_NAME_MAX) {
-			fprintf(stderr, "vmac-board: board and driver names are at most %d characters ('%s')\n",
-			        VMAC_NAME_MAX, full);
-			rc = 2;
-			goto out;
-		}
-		memcpy(id.board, full, strlen(full) + 1);
-		memcpy(id.driver, driver, strlen(driver) + 1);
-		id.major = major >= 0 ? (uint32_t)major : vmac_proto_default_major(id.board);
-		id.minor = (uint32_t)minor;
-		id.caps = vmac_plant_caps(kind);
-		{ /* refuse at start what the protocol would refuse on every announce */
-			struct vmac_msg probe;
-			uint8_t frame[VMAC_FRAME_MAX];
-			memset(&probe, 0, sizeof(probe));
-			probe.flags = VMAC_FLAG_REPLY;
-			probe.channel = VMAC_CH_SYSTEM;
-			probe.op = VMAC_SYS_ANNOUNCE;
-			memcpy(probe.u.announce.driver, id.driver, sizeof(id.driver));
-			memcpy(probe.u.announce.board, id.board, sizeof(id.board));
-			probe.u.announce.caps = id.caps;
-			if (vmac_proto_encode(&probe, frame, sizeof(frame)) < 0) {
-				fprintf(stderr,
-				        "vmac-board: invalid name '%s' or driver '%s': names are 1..%d characters of "
-				        "A-Z a-z 0-9 _ -\n",
-				        id.board, id.driver, VMAC_NAME_MAX);
-				rc = 2;
-				goto out;
-			}
-		}
-		vmac_plant_init(&pb->plant, kind);
-		vmac_board_init(&pb->board, &id, &plant_io, &pb->plant, now_ms());
-		pb->reported_state = pb->board.state;
-		if (vmac_transport_open_board(&pb->transport, &spec, err, sizeof(err)) < 0) {
-			fprintf(stderr, "vmac-board: %s: %s\n", id.board, err);
+	pfds[0].fd = transport.fd;
+	pfds[0].events = POLLIN;
+	if (!cfg.eth) {
+		listen_fd = vmac_transport_listen(&spec, err, sizeof(err));
+		if (listen_fd < 0) {
+			fprintf(stderr, "vmac-board: %s\n", err);
 			rc = 1;
 			goto out;
 		}
-		pfds[i].fd = pb->transport.fd;
-		pfds[i].events = POLLIN;
+		pfds[nsock].fd = listen_fd;
+		pfds[nsock].events = POLLIN;
+		nsock++;
 	}
-	pfds[count].fd = listen_fd;
-	pfds[count].events = POLLIN;
-	nfds = (int)count + 1;
+	nfds = nsock;
 	if (commands) {
 		pfds[nfds].fd = STDIN_FILENO;
 		pfds[nfds].events = POLLIN;
 		nfds++;
 	}
-	signal(SIGINT, on_signal);
-	signal(SIGTERM, on_signal);
+	memset(&sa, 0, sizeof(sa));
+	sa.sa_handler = on_signal;
+	sigemptyset(&sa.sa_mask);
+	sigaction(SIGINT, &sa, NULL);
+	sigaction(SIGTERM, &sa, NULL);
 	signal(SIGPIPE, SIG_IGN);
 	if (!quiet)
-		printf("vmac-board: %ld %s board%s on bus %s, interface %s\n", count, vmac_plant_name(kind),
-		       count == 1 ? "" : "s", bus, iface);
+		print_start(&set, &cfg, bus, iface, &transport, cpu);
 
-	last_step_ms = now_ms();
+	last_housekeep_ns = last_sync_ns = vmac_now_ns();
 	while (!stop_signal) {
-		uint64_t t;
-		/* Frames wake us at once; otherwise every 5 ms for the watchdog and the
-		 * plant physics, which is resolution enough for both. */
-		int ready = poll(pfds, (nfds_t)nfds, 5);
+		int64_t t = vmac_now_ns(), wait_ns = last_housekeep_ns + HOUSEKEEP_NS - t;
+		int ready = poll(pfds, (nfds_t)nfds, wait_ns <= 0 ? 0 : (int)((wait_ns + 999999) / 1000000));
 		if (ready < 0 && errno != EINTR) {
 			perror("vmac-board: poll");
+			rc = 1;
 			break;
 		}
-		/* Watchdog first: frames that queued up while we were stopped must
-		 * not revive a session that has already timed out. */
-		t = now_ms();
-		for (i = 0; i < count; i++) {
-			if (vmac_board_poll(&boards[i].board, t))
-				printf("%s: watchdog: no frame for %u ms, outputs off\n", boards[i].board.id.board,
-				       (unsigned)boards[i].board.watchdog_ms);
-		}
-		if (ready > 0) {
-			for (i = 0; i < count; i++) {
-				struct posix_board *pb = &boards[i];
-				int n, k;
-				if (!(pfds[i].revents & POLLIN))
-					continue;
-				n = vmac_transport_recv(&pb->transport, pb->transport.fd, pkt, 16);
-				for (k = 0; k < n; k++)
-					serve(pb, &pkt[k]);
-			}
-			if (pfds[count].revents & POLLIN) {
-				int n = vmac_transport_recv(&boards[0].transport, listen_fd, pkt, 16), k;
-				for (k = 0; k < n; k++)
-					for (i = 0; i < count; i++)
-						serve(&boards[i], &pkt[k]);
-			}
-			if (commands && (pfds[count + 1].revents & (POLLIN | POLLHUP))) {
-				char line[256];
-				if (fgets(line, sizeof(line), stdin))
-					operator_command(boards, (int)count, line);
-				else
-					pfds[count + 1].fd = -1; /* EOF: stop reading */
+		/* Watchdogs first: frames that queued up while the process could
+		 * not run (stopped, starved) must not revive a session that has
+		 * already timed out. */
+		t = vmac_now_ns();
+		if (t - last_housekeep_ns >= HOUSEKEEP_NS) {
+			boards_housekeep(&set, (uint64_t)(t / 1000000));
+			last_housekeep_ns = t;
+			if (t - last_sync_ns >= CLOCK_SYNC_NS) {
+				vmac_transport_clock_sync(&transport);
+				last_sync_ns = t;
 			}
 		}
-		t = now_ms();
-		if (t > last_step_ms) {
-			double dt = (double)(t - last_step_ms) / 1000.0;
-			while (dt > 0) {
-				double step = dt > PLANT_STEP_MAX_S ? PLANT_STEP_MAX_S : dt;
-				for (i = 0; i < count; i++)
-					vmac_plant_step(&boards[i].plant, step);
-				dt -= step;
+		if (ready <= 0)
+			continue;
+		/* One batch per socket per wake-up: a flood cannot hold off the
+		 * watchdogs, and a batch's replies leave together. */
+		for (k = 0; k < nsock; k++) {
+			int n;
+			if (!(pfds[k].revents & (POLLIN | POLLERR)))
+				continue;
+			n = vmac_transport_recv(&transport, pfds[k].fd, pkts, VMAC_TRANSPORT_BATCH);
+			if (n > 0) {
+				boards_dispatch(&set, pkts, n, now_ms());
+				boards_flush(&set);
+			} else if (n < 0 && t - last_error_ns >= CLOCK_SYNC_NS) {
+				fprintf(stderr, "vmac-board: receive: %s\n", strerror(-n));
+				last_error_ns = t;
 			}
-			last_step_ms = t;
 		}
-		for (i = 0; i < count; i++)
-			report(&boards[i]);
+		if (commands && (pfds[nsock].revents & (POLLIN | POLLHUP)) && read_commands(&set) != 0)
+			pfds[nsock].fd = -1; /* end of input: stop reading */
 	}
-	for (i = 0; i < count; i++) {
-		vmac_board_safe(&boards[i].board);
-		report(&boards[i]);
+	for (k = 0; k < set.count; k++) {
+		vmac_board_safe(&set.boards[k].board);
+		boards_report(&set, k);
 	}
+	if (set.late_ns > 0)
+		printf("vmac-board: %" PRIu64 " late replies (board-side delay over %ld us)\n", set.late_replies,
+		       late_us);
+	if (set.unroutable > 0)
+		printf("vmac-board: %" PRIu64 " frames for no board of this process, ignored\n", set.unroutable);
+	if (set.unsent > 0)
+		printf("vmac-board: %" PRIu64 " replies the kernel did not take\n", set.unsent);
 	printf("vmac-board: stopped by signal %d, all outputs off\n", (int)stop_signal);
 out:
-	for (i = 0; i < count; i++)
-		if (boards[i].transport.fd > 0)
-			vmac_transport_close(&boards[i].transport);
 	if (listen_fd >= 0)
 		close(listen_fd);
-	free(boards);
-	free(pfds);
+	vmac_transport_close(&transport);
+out_boards:
+	free(pkts);
+	boards_fini(&set);
 	return rc;
 }

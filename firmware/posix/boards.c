@@ -1,0 +1,255 @@
+/* vmac-board's boards: making them (names, identities, MACs, plants), the
+ * routing tables that dispatch.c reads, the periodic watchdog and plant
+ * step, the lines printed for people and tests, and operator commands. */
+#include "boards.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PLANT_STEP_MAX_S 0.01 /* physics sub-step */
+#define SESSIONS 65536        /* device_id & 0xFFFF: the host's slot of the device */
+
+static uint32_t identity_hash(uint32_t major, uint32_t minor)
+{
+	uint32_t h = major * 0x9E3779B1u ^ minor * 0x85EBCA77u;
+	return h ^ (h >> 15);
+}
+
+/* REGISTER arrives, on UDP, at the one socket every board shares: it is
+ * routed by the identity it names. Boards never change identity, so the
+ * table is filled once; boards of one identity (--major with --count) sit
+ * side by side on the probe sequence. */
+static void identity_add(struct board_set *s, int32_t i)
+{
+	const struct vmac_board_identity *id = &s->boards[i].board.id;
+	uint32_t h = identity_hash(id->major, id->minor) & s->identity_mask;
+	while (s->by_identity[h] != BOARD_NONE)
+		h = (h + 1) & s->identity_mask;
+	s->by_identity[h] = i;
+}
+
+int32_t boards_by_identity(const struct board_set *s, uint32_t major, uint32_t minor)
+{
+	int32_t found = BOARD_NONE, i;
+	uint32_t h = identity_hash(major, minor) & s->identity_mask;
+	for (; (i = s->by_identity[h]) != BOARD_NONE; h = (h + 1) & s->identity_mask) {
+		const struct vmac_board *b = &s->boards[i].board;
+		if (b->id.major != major || b->id.minor != minor)
+			continue;
+		if (found == BOARD_NONE)
+			found = i;
+		if (b->state == VMAC_BOARD_UNKNOWN)
+			return i;
+	}
+	return found;
+}
+
+char *boards_mac_format(const uint8_t mac[6], char *buf, size_t len)
+{
+	snprintf(buf, len, "%02x:%02x:%02x:%02x:%02x:%02x", mac[0], mac[1], mac[2], mac[3], mac[4], mac[5]);
+	return buf;
+}
+
+/* Refuse at start what the protocol would refuse on every announce. */
+static int identity_valid(const struct vmac_board_identity *id)
+{
+	struct vmac_msg probe;
+	uint8_t frame[VMAC_FRAME_MAX];
+	memset(&probe, 0, sizeof(probe));
+	probe.flags = VMAC_FLAG_REPLY;
+	probe.channel = VMAC_CH_SYSTEM;
+	probe.op = VMAC_SYS_ANNOUNCE;
+	memcpy(probe.u.announce.driver, id->driver, sizeof(id->driver));
+	memcpy(probe.u.announce.board, id->board, sizeof(id->board));
+	probe.u.announce.caps = id->caps;
+	return vmac_proto_encode(&probe, frame, sizeof(frame)) > 0;
+}
+
+static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
+
+int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen)
+{
+	uint32_t hash = vmac_proto_default_major(cfg->name), slots = 2;
+	int32_t i;
+
+	memset(s, 0, sizeof(*s));
+	s->count = (int32_t)cfg->count;
+	s->eth = cfg->eth;
+	/* Locally administered, unicast (first byte 0x02); then 3 bytes of the
+	 * base name's hash, so processes with other names on one link differ;
+	 * then the board's number, so a frame's MAC names its board. */
+	s->mac_prefix[0] = 0x02;
+	s->mac_prefix[1] = (uint8_t)(hash >> 16);
+	s->mac_prefix[2] = (uint8_t)(hash >> 8);
+	s->mac_prefix[3] = (uint8_t)hash;
+	while (slots < 2u * (uint32_t)cfg->count)
+		slots <<= 1;
+	s->identity_mask = slots - 1;
+	s->boards = calloc((size_t)cfg->count, sizeof(*s->boards));
+	s->by_offset = malloc(VMAC_OFFSET_NONE * sizeof(*s->by_offset));
+	s->by_session = malloc(SESSIONS * sizeof(*s->by_session));
+	s->by_identity = malloc(slots * sizeof(*s->by_identity));
+	s->replies = malloc(BOARDS_REPLY_MAX * sizeof(*s->replies));
+	s->reply_board = malloc(BOARDS_REPLY_MAX * sizeof(*s->reply_board));
+	if (!s->boards || !s->by_offset || !s->by_session || !s->by_identity || !s->replies || !s->reply_board) {
+		snprintf(err, errlen, "out of memory for %ld boards", cfg->count);
+		boards_fini(s);
+		return -1;
+	}
+	for (i = 0; i < VMAC_OFFSET_NONE; i++)
+		s->by_offset[i] = BOARD_NONE;
+	for (i = 0; i < SESSIONS; i++)
+		s->by_session[i] = BOARD_NONE;
+	for (i = 0; i < (int32_t)slots; i++)
+		s->by_identity[i] = BOARD_NONE;
+
+	for (i = 0; i < s->count; i++) {
+		struct posix_board *pb = &s->boards[i];
+		struct vmac_board_identity id;
+		char full[80];
+		memset(&id, 0, sizeof(id));
+		if (cfg->count == 1)
+			snprintf(full, sizeof(full), "%.40s", cfg->name);
+		else
+			snprintf(full, sizeof(full), "%.40s-%ld", cfg->name, (long)i + 1);
+		if (strlen(full) > VMAC_NAME_MAX || strlen(cfg->driver) > VMAC_NAME_MAX) {
+			snprintf(err, errlen, "board and driver names are at most %d characters ('%s')", VMAC_NAME_MAX,
+			         full);
+			boards_fini(s);
+			return -2;
+		}
+		memcpy(id.board, full, strlen(full) + 1);
+		memcpy(id.driver, cfg->driver, strlen(cfg->driver) + 1);
+		id.major = cfg->major >= 0 ? (uint32_t)cfg->major : vmac_proto_default_major(id.board);
+		id.minor = (uint32_t)cfg->minor;
+		id.caps = vmac_plant_caps(cfg->kind);
+		id.protocol = cfg->protocol;
+		if (!identity_valid(&id)) {
+			snprintf(err, errlen,
+			         "invalid name '%s' or driver '%s': names are 1..%d characters of A-Z a-z 0-9 _ -",
+			         id.board, id.driver, VMAC_NAME_MAX);
+			boards_fini(s);
+			return -2;
+		}
+		vmac_plant_init(&pb->plant, cfg->kind);
+		vmac_board_init(&pb->board, &id, &plant_io, &pb->plant, now_ms);
+		pb->reported_state = pb->board.state;
+		pb->routed_offset = VMAC_OFFSET_NONE;
+		memcpy(pb->mac, s->mac_prefix, sizeof(s->mac_prefix));
+		pb->mac[4] = (uint8_t)((i + 1) >> 8);
+		pb->mac[5] = (uint8_t)(i + 1);
+		identity_add(s, i);
+	}
+	s->last_step_ms = now_ms;
+	return 0;
+}
+
+void boards_fini(struct board_set *s)
+{
+	free(s->boards);
+	free(s->by_offset);
+	free(s->by_session);
+	free(s->by_identity);
+	free(s->replies);
+	free(s->reply_board);
+	s->boards = NULL;
+	s->by_offset = s->by_session = s->by_identity = s->reply_board = NULL;
+	s->replies = NULL;
+	s->count = 0;
+}
+
+void boards_track(struct board_set *s, int32_t i)
+{
+	struct posix_board *pb = &s->boards[i];
+	const struct vmac_board *b = &pb->board;
+	uint16_t offset = b->state == VMAC_BOARD_KNOWN ? b->offset : VMAC_OFFSET_NONE;
+
+	if (offset != pb->routed_offset) {
+		/* Another board may have been given the old offset since (a new
+		 * host, a new session): then the entry is its, not ours. */
+		if (pb->routed_offset != VMAC_OFFSET_NONE && s->by_offset[pb->routed_offset] == i)
+			s->by_offset[pb->routed_offset] = BOARD_NONE;
+		if (offset != VMAC_OFFSET_NONE)
+			s->by_offset[offset] = i;
+		pb->routed_offset = offset;
+	}
+	/* The session entry is set when a registration gives the board a new
+	 * device id, and left in place when the board forgets it: a request of
+	 * the old session still reaches this board, which answers it ERROR 1
+	 * (not registered) as a board with a socket of its own would. */
+	if (b->device_id != pb->routed_device_id) {
+		if (b->state == VMAC_BOARD_KNOWN && b->device_id != 0)
+			s->by_session[b->device_id & 0xFFFF] = i;
+		pb->routed_device_id = b->device_id;
+	}
+}
+
+void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms)
+{
+	struct vmac_board *b = &s->boards[i].board;
+	if (vmac_board_poll(b, now_ms))
+		printf("%s: watchdog: no frame for %u ms, outputs off\n", b->id.board, (unsigned)b->watchdog_ms);
+	boards_track(s, i);
+}
+
+void boards_report(struct board_set *s, int32_t i)
+{
+	struct posix_board *pb = &s->boards[i];
+	const struct vmac_board *b = &pb->board;
+	if (b->state != pb->reported_state) {
+		if (!s->quiet || b->state != VMAC_BOARD_KNOWN)
+			printf("%s: state %s device 0x%08x watchdog %u ms\n", b->id.board,
+			       vmac_board_state_name(b->state), (unsigned)b->device_id, (unsigned)b->watchdog_ms);
+		pb->reported_state = b->state;
+	}
+	if (b->outputs.digital != pb->reported.digital || b->outputs.pwm != pb->reported.pwm) {
+		if (!s->quiet)
+			printf("%s: outputs digital=0x%02x pwm=%d\n", b->id.board, (unsigned)b->outputs.digital,
+			       (int)b->outputs.pwm);
+		pb->reported = b->outputs;
+	}
+}
+
+void boards_housekeep(struct board_set *s, uint64_t now_ms)
+{
+	double dt_s = now_ms > s->last_step_ms ? (double)(now_ms - s->last_step_ms) / 1000.0 : 0.0;
+	int32_t i;
+
+	for (i = 0; i < s->count; i++) {
+		struct posix_board *pb = &s->boards[i];
+		double left_s = dt_s;
+		boards_poll_one(s, i, now_ms);
+		while (left_s > 0) {
+			double step_s = left_s > PLANT_STEP_MAX_S ? PLANT_STEP_MAX_S : left_s;
+			vmac_plant_step(&pb->plant, step_s);
+			left_s -= step_s;
+		}
+		boards_report(s, i);
+	}
+	if (now_ms > s->last_step_ms)
+		s->last_step_ms = now_ms;
+}
+
+void boards_command(struct board_set *s, const char *line)
+{
+	char name[64], action[64];
+	double value = 0;
+	int32_t i;
+	int fields = sscanf(line, "%63s %63s %lf", name, action, &value);
+	if (fields < 2) {
+		fprintf(stderr, "vmac-board: expected 'NAME ACTION VALUE', got: %s\n", line);
+		return;
+	}
+	for (i = 0; i < s->count; i++) {
+		struct posix_board *pb = &s->boards[i];
+		if (strcmp(pb->board.id.board, name) == 0) {
+			if (vmac_plant_set(&pb->plant, action, value) != 0)
+				printf("%s: refused %s %g\n", name, action, value);
+			else
+				printf("%s: %s %g\n", name, action, value);
+			return;
+		}
+	}
+	fprintf(stderr, "vmac-board: no board named %s\n", name);
+}

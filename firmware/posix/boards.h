@@ -1,0 +1,109 @@
+/* vmac-board's set of simulated boards, shared by main.c (options, the
+ * loop), boards.c (making the boards, their printed lines, the periodic
+ * watchdog and plant step, operator commands) and dispatch.c (routing each
+ * received frame to the one board it is for, in O(1), and sending the
+ * replies of a batch together). Not portable firmware: POSIX only. */
+#ifndef VMAC_POSIX_BOARDS_H
+#define VMAC_POSIX_BOARDS_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include "../../core/transport/transport.h"
+#include "../board.h"
+#include "../plant.h"
+
+#define BOARD_NONE (-1)        /* an empty entry of a routing table */
+#define BOARDS_MAX 65535       /* a board's number (1-based) is the last 16 bits of its MAC */
+#define BOARDS_REPLY_MAX 1024  /* replies collected before they are sent at most */
+#define BOARDS_LIST_MACS_MAX 8 /* the start-up line lists each MAC up to this many boards */
+
+struct posix_board {
+	struct vmac_board board;
+	struct vmac_plant plant;
+	struct vmac_outputs reported;         /* last outputs printed */
+	enum vmac_board_state reported_state; /* last state printed */
+	uint16_t routed_offset;               /* the by_offset entry held for it; VMAC_OFFSET_NONE */
+	uint32_t routed_device_id;            /* the session by_session points to it for; 0 none */
+	uint8_t mac[6];                       /* Ethernet: the source MAC of its replies */
+};
+
+/* What every board of the process is made from (main.c's options). */
+struct boards_config {
+	enum vmac_plant_kind kind;
+	const char *name;   /* base name: NAME, or NAME-1..NAME-N with count > 1 */
+	const char *driver; /* announced driver */
+	long count;         /* 1..BOARDS_MAX */
+	long major;         /* -1: hash of each board's name */
+	long minor;
+	uint8_t protocol; /* 1 or 2 */
+	int eth;          /* raw Ethernet: each board has a MAC of its own */
+};
+
+struct board_set {
+	struct posix_board *boards;
+	int32_t count;
+	int quiet; /* print only state changes other than "known", and safety events */
+	int eth;
+	uint8_t mac_prefix[4]; /* 02:xx:xx:xx, the first four bytes of every board's MAC */
+
+	/* Routing tables, made once; kept true by boards_track after anything a
+	 * board does (dispatch.c reads them, never searches). */
+	int32_t *by_offset;   /* [VMAC_OFFSET_NONE]: the board holding each cyclic offset */
+	int32_t *by_session;  /* [65536], UDP: device_id & 0xFFFF -> the board last registered with it */
+	int32_t *by_identity; /* UDP: open-addressed (major, minor) -> board, for REGISTER */
+	uint32_t identity_mask;
+
+	struct vmac_transport *transport;
+	struct vmac_packet *replies; /* [BOARDS_REPLY_MAX]: rx_ns holds the request's receive time */
+	int32_t *reply_board;        /* [BOARDS_REPLY_MAX]: which board each reply is from */
+	int nreplies;
+
+	int64_t late_ns; /* report a reply later than this after its request; 0: never */
+	uint64_t late_replies, unroutable, unsent;
+	uint64_t last_step_ms; /* plant time */
+};
+
+/* Make cfg->count boards (names, identities, MACs, plants) and the routing
+ * tables. Returns 0, or -1 with a readable reason in err (a name the
+ * protocol refuses, or out of memory). */
+int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen);
+void boards_fini(struct board_set *s);
+
+/* The board of identity (major, minor), for a REGISTER on UDP; an unknown
+ * one first when several share it (--major with --count). BOARD_NONE when
+ * none has it. */
+int32_t boards_by_identity(const struct board_set *s, uint32_t major, uint32_t minor);
+
+/* "02:12:34:56:00:01" into buf (18 bytes at least); returns buf. */
+char *boards_mac_format(const uint8_t mac[6], char *buf, size_t len);
+
+/* Make the routing tables agree with board i after anything it did: drop the
+ * offset it no longer holds, add the one it holds now, and point its session
+ * at it. O(1). */
+void boards_track(struct board_set *s, int32_t i);
+
+/* Check board i's watchdog (printing the trip) and keep the tables true. */
+void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms);
+
+/* The periodic work, at most once per few ms of wall time: every watchdog,
+ * the plants stepped to now (sub-steps of at most PLANT_STEP_MAX_S), and the
+ * state and output lines. */
+void boards_housekeep(struct board_set *s, uint64_t now_ms);
+
+/* Print board i's state and output changes since it was last reported. */
+void boards_report(struct board_set *s, int32_t i);
+
+/* An operator line 'NAME ACTION VALUE' (--commands). */
+void boards_command(struct board_set *s, const char *line);
+
+/* Route one batch of received frames to their boards (dispatch.c). The
+ * replies collect in s->replies; boards_flush sends them. */
+void boards_dispatch(struct board_set *s, struct vmac_packet *pkts, int n, uint64_t now_ms);
+
+/* Send the collected replies, one sendmmsg per VMAC_TRANSPORT_BATCH, and
+ * report those that left later than s->late_ns after their request came
+ * in. */
+void boards_flush(struct board_set *s);
+
+#endif
