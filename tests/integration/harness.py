@@ -276,15 +276,22 @@ def describe(status):
 
 
 def undisturbed(names):
-    """An invariant for wait_status: every device of names is running and
-    has never missed a reply."""
+    """An invariant for wait_status: every device of names is running, and
+    none of its misses is the host's own (misses_host: a request the host
+    failed to send). A miss the host did not cause (a reply the kernel
+    stamped after the deadline, or none, because this shared machine did
+    not run the board's process in time) is tolerated while the device runs
+    on (miss_limit > 1), and named as the board's when it drops it."""
 
     def check(s):
         for n in names:
             d = next((d for d in s["devices"] if d["name"] == n), None)
             assert d is not None, "%s vanished from the status" % n
-            assert d["state"] == "running", "%s left running: now %s" % (n, d["state"])
-            assert d["misses"] == 0, "%s missed %d replies though it is healthy" % (n, d["misses"])
+            assert d.get("misses_host", 0) == 0, "%s missed %d replies by the host's own fault" % (
+                n, d["misses_host"])
+            assert d["state"] == "running", "%s left running: now %s (%s)" % (
+                n, d["state"], "after %d misses of its board or the wire, none the host's" % d["misses"]
+                if d["misses"] else d.get("note") or "no miss")
 
     return check
 
@@ -303,6 +310,7 @@ class Context:
         rnd = random.SystemRandom()
         self.bus = "239.255.%d.%d:%d" % (rnd.randint(1, 254), rnd.randint(1, 254), rnd.randint(20000, 60000))
         self.procs = []
+        self.cleanups = []  # callables run after every process is killed (namespaces, links)
         self.counter = 0
         self.token = None  # made by the first host(): scope deploy, in this test's state folder
 
@@ -313,7 +321,33 @@ class Context:
         self.counter += 1
         return "%02d-%s" % (self.counter, base)
 
-    def host(self, drivers=None, settings=None, extra=(), wrapper=()):
+    def eth_link(self):
+        """A raw-Ethernet bus of this test's own: a veth pair, one end in
+        this namespace for vmacd, the other in a new network namespace for
+        the boards. Returns (host_iface, namespace, board_iface); both are
+        removed at cleanup. Raises Skip where namespaces cannot be made."""
+        if os.geteuid() != 0:
+            raise Skip("raw Ethernet tests need root (network namespaces, veth, CAP_NET_RAW)")
+        tag = "%05x" % random.SystemRandom().randint(0, 0xFFFFF)
+        ns, host_if, board_if = "vmac-" + tag, "vmh" + tag, "vmb" + tag
+
+        def ip(*argv):
+            p = subprocess.run(["ip"] + list(argv), capture_output=True, text=True, timeout=30)
+            if p.returncode != 0:
+                raise Skip("cannot make a network namespace and veth pair here (ip %s: %s)" % (
+                    " ".join(argv), p.stderr.strip()))
+
+        ip("netns", "add", ns)
+        self.cleanups.append(lambda: subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30))
+        ip("link", "add", host_if, "type", "veth", "peer", "name", board_if)
+        self.cleanups.append(lambda: subprocess.run(["ip", "link", "del", host_if], capture_output=True, timeout=30))
+        ip("link", "set", board_if, "netns", ns)
+        ip("link", "set", host_if, "up")
+        ip("netns", "exec", ns, "ip", "link", "set", board_if, "up")
+        ip("netns", "exec", ns, "ip", "link", "set", "lo", "up")
+        return host_if, ns, board_if
+
+    def host(self, drivers=None, settings=None, extra=(), wrapper=(), bus=None):
         """Start vmacd on this test's bus with relaxed timing; returns once its
         status server is up. The HTTP port is chosen by the kernel. wrapper:
         a command vmacd runs under (e.g. setpriv to drop privileges)."""
@@ -321,7 +355,8 @@ class Context:
             self.token = self.make_token("deploy")
         values = dict(TIMING, realtime="false")
         values.update(settings or {})
-        argv = list(wrapper) + [self.path("vmacd"), "--bus", self.bus, "--http", "127.0.0.1:0", "--state", self.logdir]
+        argv = list(wrapper) + [self.path("vmacd"), "--bus", bus or self.bus, "--http", "127.0.0.1:0", "--state",
+                                self.logdir]
         if drivers:
             argv += ["--drivers", drivers]
         for k, v in values.items():
@@ -332,8 +367,13 @@ class Context:
         h.ready()
         return h
 
-    def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None, wrapper=()):
-        argv = list(wrapper) + [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", self.bus]
+    def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None, wrapper=(), bus=None,
+              extra=()):
+        # Late-reply lines only for replies that took a quarter of the tests'
+        # reply deadline (TIMING): the ones that matter here.
+        argv = list(wrapper) + [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", bus or self.bus,
+                                "--late-us", str(TIMING["reply_deadline_us"] // 4)]
+        argv += list(extra)
         if driver:
             argv += ["--driver", driver]
         if major is not None:
@@ -397,4 +437,7 @@ class Context:
             r = p.sanitizer_report()
             if r and not report:
                 report = "%s: %s" % (p.name, r)
+        for f in reversed(self.cleanups):
+            f()
+        self.cleanups = []
         return report
