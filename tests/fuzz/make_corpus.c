@@ -15,6 +15,7 @@
 #include "fuzz_session.h"
 
 #define SESSION_ID 0x00000101u
+#define SESSION_V2 0x00030005u /* generation 3, offset 5 */
 
 static const char *out_dir;
 
@@ -149,6 +150,43 @@ int main(int argc, char **argv)
 	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 8);
 	append(&s, 1, &m);
 	write_file("session_watchdog", s.bytes, s.len);
+
+	/* Version 2: the registration steps and the cyclic frame. */
+	reg.version = 2;
+	reg.device_id = SESSION_V2;
+	seed("register_v2", &reg);
+	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SIZE, 11);
+	m.version = 2;
+	m.device_id = SESSION_V2;
+	seed("size", &m);
+	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_OFFSET, 12);
+	m.version = 2;
+	m.device_id = SESSION_V2;
+	m.u.offset = SESSION_V2 & 0xFFFF;
+	seed("offset", &m);
+	{
+		struct vmac_msg offset = m, get = msg(0, VMAC_CH_DEVICE, VMAC_OP_OFFSET_GET, 13);
+		uint8_t frame[VMAC_PACKET_MAX];
+		int n = vmac_proto_cyclic_begin(frame, sizeof(frame), 14, 0, 8);
+		struct vmac_outputs out = {0x15, 300};
+		get.version = 2;
+		get.device_id = SESSION_V2;
+		seed("offset_get", &get);
+		vmac_proto_cyclic_put(frame, SESSION_V2 & 0xFFFF, SESSION_V2 >> 16, VMAC_CYCLIC_DUE, &out);
+		vmac_proto_cyclic_put(frame, 2, 7, 0, &out);
+		write_file("cyclic", frame, (size_t)n);
+		/* Register, take the offset, be served by two cyclic frames, then
+		 * go quiet past the watchdog. */
+		memset(&s, 0, sizeof(s));
+		append(&s, 0, &reg);
+		append(&s, 1, &offset);
+		s.bytes[s.len++] = 5;
+		s.bytes[s.len++] = (uint8_t)n;
+		memcpy(s.bytes + s.len, frame, (size_t)n);
+		s.len += (size_t)n;
+		append(&s, 60, &get);
+		write_file("session_cyclic", s.bytes, s.len);
+	}
 
 	/* Register, drive, sleep a second, wake and rediscover. */
 	memset(&s, 0, sizeof(s));
