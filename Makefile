@@ -58,8 +58,9 @@ host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
-UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_board $(BUILD)/tests/test_host $(BUILD)/tests/test_driver $(BUILD)/tests/test_isolation \
-              $(BUILD)/tests/test_sched $(BUILD)/tests/test_store $(BUILD)/tests/test_cyclic \
+UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD)/tests/test_board $(BUILD)/tests/test_host \
+              $(BUILD)/tests/test_driver $(BUILD)/tests/test_isolation $(BUILD)/tests/test_sched $(BUILD)/tests/test_store \
+              $(BUILD)/tests/test_proto_v2 $(BUILD)/tests/test_cyclic $(BUILD)/tests/test_board_v2 $(BUILD)/tests/test_board_cyclic \
               $(BUILD)/tests/test_transport
 
 
@@ -113,7 +114,23 @@ $(BUILD)/tests/test_board: $(OBJ)/tests/unit/test_board.o $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
 
-$(BUILD)/tests/test_cyclic: $(OBJ)/tests/unit/test_cyclic.o $(portable_obj)
+$(BUILD)/tests/test_proto_reject: $(OBJ)/tests/unit/test_proto_reject.o $(OBJ)/core/proto/proto.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
+
+$(BUILD)/tests/test_proto_v2: $(OBJ)/tests/unit/test_proto_v2.o $(OBJ)/core/proto/proto.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
+
+$(BUILD)/tests/test_cyclic: $(OBJ)/tests/unit/test_cyclic.o $(OBJ)/core/proto/proto.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
+
+$(BUILD)/tests/test_board_v2: $(OBJ)/tests/unit/test_board_v2.o $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
+
+$(BUILD)/tests/test_board_cyclic: $(OBJ)/tests/unit/test_board_cyclic.o $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
 
