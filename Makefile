@@ -1,8 +1,10 @@
 # vmac: one Makefile, meant to be read top to bottom.
 #
 #   make            build build/bin/{vmacd,vmac,vmac-board}
+#   make firmware   the board firmware for a Cortex-M3 (LM3S6965): build/firmware/vmac-board-lm3s6965.{elf,bin}
 #   make deps       install missing Debian packages (apt-get; sudo when not root)
 #   make run        deps + build + the demo kitchen (host and three mock boards)
+#   make run-qemu   deps + build + firmware + the kitchen with boards in QEMU on raw Ethernet (root)
 #   make test       deps + build + every test (unit, fuzz, integration, the web UI in chromium,
 #                   then again under ASan+UBSan)
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
@@ -18,10 +20,11 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # (LuaJIT, libev, libmicrohttpd, jansson, libcurl, SQLite, libsodium), Check for unit tests,
 # clang + its runtime for the libFuzzer harness, python3 for integration tests,
 # luajit for the escape corpus's bytecode driver, lua-check for vmac lint, openssl for the
-# TLS test's certificate.
+# TLS test's certificate; the Arm cross compiler, picolibc and QEMU for the firmware on a
+# microcontroller and its tests (make firmware, tests/integration/test_qemu.py).
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
-        openssl clang-format
+        openssl clang-format gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
@@ -66,6 +69,7 @@ UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD
 
 .PHONY: format format-check test-build asan-build
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-ui test-asan bench clean
+.PHONY: firmware run-qemu
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
@@ -102,6 +106,48 @@ $(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/firmware/posix/boar
                           $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) -lm
+
+# ---- the board firmware on a microcontroller ----
+# The same portable files (PORTABLE_SRC, unchanged) on a Cortex-M3, the TI
+# Stellaris LM3S6965 (QEMU's lm3s6965evb), with its HAL in MCU_DIR; picolibc
+# for memcpy and the plants' exp/expm1/floor, double precision in software
+# (the M3 has no FPU). docs/BOARD.md, "Firmware on a microcontroller".
+MCU_CC      := arm-none-eabi-gcc
+MCU_DIR     := firmware/mcu/lm3s6965
+MCU_ARCH    := -mcpu=cortex-m3 -mthumb -mfloat-abi=soft --specs=picolibc.specs --picolibc-buildtype=release
+MCU_CFLAGS  := $(MCU_ARCH) -std=c99 -pedantic $(WARN) -Os -g -ffunction-sections -fdata-sections
+MCU_SRC     := $(PORTABLE_SRC) $(MCU_DIR)/startup.c $(MCU_DIR)/clock.c $(MCU_DIR)/uart.c $(MCU_DIR)/enet.c \
+               $(MCU_DIR)/config.c $(MCU_DIR)/main.c
+mcu_obj     = $(MCU_SRC:%.c=$(OBJ)/mcu/%.o)
+FIRMWARE    = $(BUILD)/firmware/vmac-board-lm3s6965
+# The tests boot the firmware in QEMU; without the cross compiler they say SKIPPED.
+FIRMWARE_IF_TOOLS = $(if $(shell command -v $(MCU_CC)),$(FIRMWARE).elf $(FIRMWARE).bin)
+
+$(mcu_obj): $(OBJ)/mcu/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(MCU_CC) $(MCU_CFLAGS) -MMD -MP -c $< -o $@
+
+$(FIRMWARE).elf: $(mcu_obj) $(MCU_DIR)/lm3s6965.ld
+	@mkdir -p $(dir $@)
+	$(MCU_CC) $(MCU_ARCH) -nostartfiles -T $(MCU_DIR)/lm3s6965.ld -Wl,--gc-sections -Wl,-Map=$(FIRMWARE).map \
+		$(mcu_obj) -lm -o $@
+
+$(FIRMWARE).bin: $(FIRMWARE).elf
+	arm-none-eabi-objcopy -O binary $< $@
+
+# Flash: code, constants and the initial values of .data; RAM: .data, .bss
+# and the stack (lm3s6965.ld), all of it, no heap.
+firmware: $(FIRMWARE).elf $(FIRMWARE).bin
+	@arm-none-eabi-size $(FIRMWARE).elf
+	@stack=$$(arm-none-eabi-size -A $(FIRMWARE).elf | awk '$$1 == ".stack" { print $$2 }'); \
+	arm-none-eabi-size $(FIRMWARE).elf | awk -v stack=$$stack 'NR == 2 { \
+		printf "firmware: %s.elf: flash %d bytes (%.1f KiB), RAM %d bytes (%.1f KiB, %d of them stack)\n", \
+		"$(FIRMWARE)", $$1 + $$2, ($$1 + $$2) / 1024, $$2 + $$3, ($$2 + $$3) / 1024, stack }'
+
+# The kitchen with its boards in QEMU on raw Ethernet (root: tap devices, a bridge).
+run-qemu: deps
+	@$(MAKE) --no-print-directory all firmware
+	@exec ./scripts/run-qemu-kitchen.sh $(BUILD)/bin $(FIRMWARE).elf
 
 # ---- tests ----
 CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
@@ -229,7 +275,7 @@ SKIPPED ?= $(BUILD)/skipped
 test-ui: $(BINS)
 	@VMAC_SKIP_FILE=$(SKIPPED) tests/ui/run.sh $(BUILD)/bin $(BUILD)/ui
 
-test-integration: $(BINS) $(BUILD)/tests/store_crash
+test-integration: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS)
 	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/integration/run.py --bin $(BUILD)/bin
 
 # The whole unit and integration suite again, built with AddressSanitizer
@@ -237,7 +283,7 @@ test-integration: $(BINS) $(BUILD)/tests/store_crash
 # tree quietly (its log in build/asan-build.log), so make test can run it
 # beside the plain integration tests, which mostly wait.
 ASAN := BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" SAN="-fsanitize=address,undefined -fno-sanitize-recover=all"
-test-build: $(BINS) $(UNIT_TESTS) $(BUILD)/tests/store_crash
+test-build: $(BINS) $(UNIT_TESTS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS)
 
 asan-build:
 	@mkdir -p build

@@ -1,0 +1,51 @@
+/* The system clock (PLL, 50 MHz) and the millisecond time the board logic
+ * and the plant run on (SysTick). */
+#include "lm3s6965.h"
+#include "mcu.h"
+
+#define SYSCLK_HZ 50000000u /* PLL 400 MHz / 2 / SYSDIV 4 */
+#define TICK_HZ 1000u
+
+static volatile uint32_t ticks_ms; /* written by the interrupt only */
+static uint32_t seen_ticks;        /* the main loop's last look at it */
+static uint64_t now_ms;
+
+void vmac_mcu_systick_handler(void)
+{
+	ticks_ms++;
+}
+
+/* The data sheet's sequence: bypass the PLL, set the crystal, power the
+ * PLL up, wait for its lock, then divide it down to the system clock. */
+static void pll_init(void)
+{
+	uint32_t rcc = SYSCTL_RCC;
+	int spins;
+	rcc |= RCC_BYPASS;
+	rcc &= ~RCC_USESYSDIV;
+	SYSCTL_RCC = rcc;
+	rcc &= ~(RCC_XTAL_MASK | RCC_OSCSRC_MASK | RCC_MOSCDIS | RCC_PWRDN);
+	rcc |= RCC_XTAL_8MHZ; /* main oscillator */
+	SYSCTL_RCC = rcc;
+	rcc = (rcc & ~RCC_SYSDIV_MASK) | RCC_SYSDIV(3) | RCC_USESYSDIV;
+	SYSCTL_RCC = rcc;
+	for (spins = 0; spins < 100000 && !(SYSCTL_RIS & SYSCTL_RIS_PLLLRIS); spins++)
+		;
+	SYSCTL_RCC = rcc & ~RCC_BYPASS;
+}
+
+void vmac_mcu_clock_init(void)
+{
+	pll_init();
+	SYST_RVR = SYSCLK_HZ / TICK_HZ - 1;
+	SYST_CVR = 0;
+	SYST_CSR = SYST_CSR_CLKSOURCE | SYST_CSR_TICKINT | SYST_CSR_ENABLE;
+}
+
+uint64_t vmac_mcu_now_ms(void)
+{
+	uint32_t t = ticks_ms;
+	now_ms += (uint32_t)(t - seen_ticks);
+	seen_ticks = t;
+	return now_ms;
+}

@@ -1,0 +1,297 @@
+/* vmac-board on the LM3S6965: one generic board (firmware/board.c) with its
+ * simulated plant (firmware/plant.c), on raw Ethernet through the chip's
+ * MAC, its log and operator input on UART0. The loop is vmac-board's
+ * (firmware/posix/) for one board: the watchdog, the plant and the log
+ * every 5 ms, the watchdog again before every frame, one reply per request,
+ * and the processor asleep in between. */
+#include <string.h>
+
+#include "lm3s6965.h"
+#include "mcu.h"
+
+#define HOUSEKEEP_MS 5        /* watchdog, plant step and log lines this often */
+#define PLANT_STEP_MAX_S 0.01 /* physics sub-step, as vmac-board */
+#define FRAMES_PER_TURN 8     /* frames handled before the housekeeping looks again */
+#define LINE_MAX 80           /* an operator line */
+
+static struct vmac_mcu_settings settings;
+static struct vmac_plant plant;
+static struct vmac_board board;
+static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
+
+static struct vmac_outputs reported; /* the outputs the log last named */
+static enum vmac_board_state reported_state;
+static uint64_t last_step_ms, last_housekeep_ms;
+
+static void put_name(void)
+{
+	vmac_mcu_uart_puts(board.id.board);
+	vmac_mcu_uart_puts(": ");
+}
+
+/* The state and output lines of vmac-board, for what changed since the last. */
+static void report(void)
+{
+	if (board.state != reported_state) {
+		if (!settings.quiet || board.state != VMAC_BOARD_KNOWN) {
+			put_name();
+			vmac_mcu_uart_puts("state ");
+			vmac_mcu_uart_puts(vmac_board_state_name(board.state));
+			vmac_mcu_uart_puts(" device 0x");
+			vmac_mcu_uart_puthex(board.device_id, 8);
+			vmac_mcu_uart_puts(" watchdog ");
+			vmac_mcu_uart_putu(board.watchdog_ms);
+			vmac_mcu_uart_puts(" ms\n");
+		}
+		reported_state = board.state;
+	}
+	if (board.outputs.digital != reported.digital || board.outputs.pwm != reported.pwm) {
+		if (!settings.quiet) {
+			put_name();
+			vmac_mcu_uart_puts("outputs digital=0x");
+			vmac_mcu_uart_puthex(board.outputs.digital, 2);
+			vmac_mcu_uart_puts(" pwm=");
+			vmac_mcu_uart_putd(board.outputs.pwm);
+			vmac_mcu_uart_puts("\n");
+		}
+		reported = board.outputs;
+	}
+}
+
+static void poll_watchdog(uint64_t now_ms)
+{
+	if (vmac_board_poll(&board, now_ms)) {
+		put_name();
+		vmac_mcu_uart_puts("watchdog: no frame for ");
+		vmac_mcu_uart_putu(board.watchdog_ms);
+		vmac_mcu_uart_puts(" ms, outputs off\n");
+	}
+}
+
+/* The watchdog, the plant stepped to now, the log. */
+static void housekeep(uint64_t now_ms)
+{
+	double left_s = now_ms > last_step_ms ? (double)(now_ms - last_step_ms) / 1000.0 : 0.0;
+	poll_watchdog(now_ms);
+	while (left_s > 0) {
+		double step_s = left_s > PLANT_STEP_MAX_S ? PLANT_STEP_MAX_S : left_s;
+		vmac_plant_step(&plant, step_s);
+		left_s -= step_s;
+	}
+	if (now_ms > last_step_ms)
+		last_step_ms = now_ms;
+	report();
+}
+
+/* One received vmac frame: the watchdog first (a frame that waited while
+ * the board could not run never revives a session already timed out),
+ * then the board, then its reply, if any, back to the sender. */
+static void handle_frame(const uint8_t *frame, size_t len, const uint8_t src[6], uint64_t now_ms)
+{
+	static uint8_t reply[VMAC_FRAME_MAX];
+	int n;
+	poll_watchdog(now_ms);
+	n = vmac_board_receive(&board, frame, len, now_ms, reply, sizeof(reply));
+	if (n > 0)
+		vmac_mcu_enet_send(src, reply, (size_t)n);
+}
+
+/* A decimal number ("1", "-0.5", "3.5e1") into *value; -1 when text is not one. */
+static int parse_number(const char *text, double *value)
+{
+	double v = 0.0, scale = 1.0;
+	int negative = 0, digits = 0, exponent = 0, exp_negative = 0;
+	if (*text == '-' || *text == '+')
+		negative = *text++ == '-';
+	for (; *text >= '0' && *text <= '9'; text++, digits++)
+		v = v * 10.0 + (*text - '0');
+	if (*text == '.') {
+		for (text++; *text >= '0' && *text <= '9'; text++, digits++) {
+			scale /= 10.0;
+			v += (*text - '0') * scale;
+		}
+	}
+	if (digits == 0)
+		return -1;
+	if (*text == 'e' || *text == 'E') {
+		text++;
+		if (*text == '-' || *text == '+')
+			exp_negative = *text++ == '-';
+		if (!(*text >= '0' && *text <= '9'))
+			return -1;
+		for (; *text >= '0' && *text <= '9' && exponent < 400; text++)
+			exponent = exponent * 10 + (*text - '0');
+	}
+	if (*text != '\0')
+		return -1;
+	while (exponent-- > 0)
+		v = exp_negative ? v / 10.0 : v * 10.0;
+	*value = negative ? -v : v;
+	return 0;
+}
+
+/* Split line in place into at most max words separated by blanks. */
+static int split_words(char *line, char **words, int max)
+{
+	int n = 0;
+	while (*line) {
+		while (*line == ' ' || *line == '\t')
+			*line++ = '\0';
+		if (!*line)
+			break;
+		if (n == max)
+			return max + 1;
+		words[n++] = line;
+		while (*line && *line != ' ' && *line != '\t')
+			line++;
+	}
+	return n;
+}
+
+static void print_counters(void)
+{
+	const struct vmac_mcu_enet_counters *e = vmac_mcu_enet_counters();
+	put_name();
+	vmac_mcu_uart_puts("frames ok ");
+	vmac_mcu_uart_putu(board.counters.frames_ok);
+	vmac_mcu_uart_puts(", malformed ");
+	vmac_mcu_uart_putu(board.counters.frames_malformed);
+	vmac_mcu_uart_puts(", ignored ");
+	vmac_mcu_uart_putu(board.counters.frames_ignored);
+	vmac_mcu_uart_puts(", watchdog trips ");
+	vmac_mcu_uart_putu(board.counters.watchdog_trips);
+	vmac_mcu_uart_puts("; Ethernet received ");
+	vmac_mcu_uart_putu(e->received);
+	vmac_mcu_uart_puts(", sent ");
+	vmac_mcu_uart_putu(e->sent);
+	vmac_mcu_uart_puts(", not ours ");
+	vmac_mcu_uart_putu(e->not_ours);
+	vmac_mcu_uart_puts(", oversize ");
+	vmac_mcu_uart_putu(e->oversize);
+	vmac_mcu_uart_puts(", overruns ");
+	vmac_mcu_uart_putu(e->overruns);
+	vmac_mcu_uart_puts("; stack used ");
+	vmac_mcu_uart_putu(vmac_mcu_stack_used());
+	vmac_mcu_uart_puts(" bytes\n");
+}
+
+/* An operator line, as vmac-board --commands takes it: 'NAME ACTION VALUE'
+ * (e.g. 'lights-1 toggle1 1'); the value may be left out (0). 'status' (or
+ * 'NAME status') prints the board's and the MAC's counters. */
+static void command(char *line)
+{
+	char *words[3];
+	double value = 0.0;
+	int n = split_words(line, words, 3);
+	if (n == 0)
+		return;
+	if ((n == 1 && strcmp(words[0], "status") == 0) ||
+	    (n == 2 && strcmp(words[0], board.id.board) == 0 && strcmp(words[1], "status") == 0)) {
+		print_counters();
+		return;
+	}
+	if (n < 2 || n > 3 || (n == 3 && parse_number(words[2], &value) != 0)) {
+		vmac_mcu_uart_puts("vmac-board: expected 'NAME ACTION VALUE' or 'status'\n");
+		return;
+	}
+	if (strcmp(words[0], board.id.board) != 0) {
+		vmac_mcu_uart_puts("vmac-board: no board named ");
+		vmac_mcu_uart_puts(words[0]);
+		vmac_mcu_uart_puts("\n");
+		return;
+	}
+	put_name();
+	if (vmac_plant_set(&plant, words[1], value) != 0)
+		vmac_mcu_uart_puts("refused ");
+	vmac_mcu_uart_puts(words[1]);
+	vmac_mcu_uart_puts(" ");
+	vmac_mcu_uart_puts(n == 3 ? words[2] : "0");
+	vmac_mcu_uart_puts("\n");
+}
+
+static void print_start(void)
+{
+	vmac_mcu_uart_puts("vmac-board: 1 ");
+	vmac_mcu_uart_puts(vmac_plant_name(settings.kind));
+	vmac_mcu_uart_puts(" board on bus eth:lm3s6965 (raw Ethernet, interface MAC ");
+	vmac_mcu_uart_putmac(settings.mac);
+	vmac_mcu_uart_puts("), protocol ");
+	vmac_mcu_uart_putu(board.id.protocol);
+	vmac_mcu_uart_puts(", MAC ");
+	vmac_mcu_uart_puts(board.id.board);
+	vmac_mcu_uart_puts(" ");
+	vmac_mcu_uart_putmac(settings.mac);
+	vmac_mcu_uart_puts("\nvmac-board: firmware ");
+	vmac_mcu_uart_putu(VMAC_FIRMWARE_MAJOR);
+	vmac_mcu_uart_puts(".");
+	vmac_mcu_uart_putu(VMAC_FIRMWARE_MINOR);
+	vmac_mcu_uart_puts(" on LM3S6965, driver ");
+	vmac_mcu_uart_puts(board.id.driver);
+	vmac_mcu_uart_puts(", major 0x");
+	vmac_mcu_uart_puthex(board.id.major, 8);
+	vmac_mcu_uart_puts(", minor ");
+	vmac_mcu_uart_putu(board.id.minor);
+	vmac_mcu_uart_puts(", identity block at 0x");
+	vmac_mcu_uart_puthex(VMAC_MCU_CONFIG_ADDR, 8);
+	vmac_mcu_uart_puts("\n");
+}
+
+/* A block that cannot be used keeps the board off the bus, its outputs off
+ * as at power-on; it says why once, then sleeps. */
+static void halt(const char *why)
+{
+	vmac_mcu_uart_puts("vmac-board: identity block refused: ");
+	vmac_mcu_uart_puts(why);
+	vmac_mcu_uart_puts("; not joining the bus (scripts/qemu-board-config.py writes one)\n");
+	for (;;) {
+		vmac_mcu_uart_poll();
+		lm3s_wait_for_interrupt();
+	}
+}
+
+int main(void)
+{
+	const char *why = NULL;
+	uint64_t now_ms;
+	char line[LINE_MAX];
+
+	vmac_mcu_clock_init();
+	vmac_mcu_uart_init();
+	lm3s_irq_enable();
+	if (vmac_mcu_config_load(&settings, &why) != 0)
+		halt(why);
+	now_ms = vmac_mcu_now_ms();
+	vmac_plant_init(&plant, settings.kind);
+	vmac_board_init(&board, &settings.id, &plant_io, &plant, now_ms);
+	reported_state = board.state;
+	last_step_ms = last_housekeep_ms = now_ms;
+	vmac_mcu_enet_init(settings.mac);
+	print_start();
+
+	for (;;) {
+		const uint8_t *frame;
+		uint8_t src[6];
+		int frames, len;
+
+		now_ms = vmac_mcu_now_ms();
+		if (now_ms - last_housekeep_ms >= HOUSEKEEP_MS) {
+			housekeep(now_ms);
+			last_housekeep_ms = now_ms;
+		}
+		for (frames = 0; frames < FRAMES_PER_TURN && (len = vmac_mcu_enet_receive(&frame, src)) >= 0;
+		     frames++) {
+			if (len > 0)
+				handle_frame(frame, (size_t)len, src, vmac_mcu_now_ms());
+		}
+		while (vmac_mcu_uart_getline(line, sizeof(line)) >= 0)
+			command(line);
+		vmac_mcu_uart_poll();
+		/* Sleep until the next interrupt (the millisecond tick at the
+		 * latest), unless work came in since the looks above: masked,
+		 * an interrupt still ends the sleep, and is taken after it. */
+		lm3s_irq_disable();
+		if (!vmac_mcu_enet_pending() && !vmac_mcu_uart_pending())
+			lm3s_wait_for_interrupt();
+		lm3s_irq_enable();
+	}
+}

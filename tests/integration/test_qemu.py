@@ -1,0 +1,239 @@
+"""The board firmware on a microcontroller: the same firmware/board.c,
+core/proto/proto.c and plants, built for the Cortex-M3 of a TI Stellaris
+LM3S6965 (make firmware), booted in QEMU's lm3s6965evb machine, speaking raw
+Ethernet through QEMU's model of the chip's MAC to a real vmacd
+(docs/BOARD.md, "Firmware on a microcontroller").
+
+The link: a Linux bridge of the test's own, one tap device per QEMU board
+enslaved to it, vmacd on the bridge (--bus eth:BRIDGE); a POSIX vmac-board
+joins through a veth pair whose other end is in a network namespace. Each
+board's UART0 is QEMU's stdio: the harness reads its log lines from QEMU's
+stdout and writes operator actions ('lights-1 toggle1 1') to its stdin.
+
+Needs root (tap devices, a bridge, CAP_NET_RAW), qemu-system-arm and the
+firmware image (build/firmware/, or $VMAC_FIRMWARE); where one is missing
+each test is SKIPPED, which CI=true makes a failure."""
+
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import harness
+from harness import TIMING, Skip, undisturbed
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CONFIG_SCRIPT = os.path.join(HERE, "..", "..", "scripts", "qemu-board-config.py")
+BANNER = r"^vmac-board: 1 \S+ board on bus eth:lm3s6965"
+
+
+def firmware_image(t):
+    """The firmware's ELF image, or Skip saying what is missing."""
+    path = os.environ.get("VMAC_FIRMWARE") or os.path.join(t.bindir, "..", "firmware",
+                                                           "vmac-board-lm3s6965.elf")
+    path = os.path.abspath(path)
+    if os.geteuid() != 0:
+        raise Skip("the QEMU boards need root (tap devices, a bridge, CAP_NET_RAW)")
+    if not shutil.which("qemu-system-arm"):
+        raise Skip("no qemu-system-arm (make deps installs it)")
+    if not os.path.exists(path):
+        raise Skip("no firmware image %s (make firmware; needs gcc-arm-none-eabi and picolibc-arm-none-eabi)"
+                   % path)
+    return path
+
+
+class Link:
+    """A bridge of this test's own with a tap per QEMU board; removed at
+    cleanup, after every process."""
+
+    def __init__(self, t):
+        self.t = t
+        self.tag = "%05x" % random.SystemRandom().randint(0, 0xFFFFF)
+        self.bridge = "vqb" + self.tag
+        self.taps = 0
+        self.ip("link", "add", self.bridge, "type", "bridge", "stp_state", "0", "forward_delay", "0")
+        t.cleanups.append(lambda: self.quiet_ip("link", "del", self.bridge))
+        # A fixed address: a bridge takes its lowest port's otherwise, and
+        # vmacd sends from the address it read at start.
+        self.ip("link", "set", self.bridge, "address", "02:00:00:%s:%s:%s" % (
+            self.tag[0:2].rjust(2, "0"), self.tag[2:4], self.tag[4:].rjust(2, "0")))
+        self.no_ipv6(self.bridge)
+        self.ip("link", "set", self.bridge, "up")
+
+    def ip(self, *argv):
+        p = subprocess.run(["ip"] + list(argv), capture_output=True, text=True, timeout=30)
+        if p.returncode != 0:
+            raise Skip("cannot make the test's bridge and tap devices here (ip %s: %s)" % (
+                " ".join(argv), p.stderr.strip()))
+
+    @staticmethod
+    def quiet_ip(*argv):
+        subprocess.run(["ip"] + list(argv), capture_output=True, timeout=30)
+
+    @staticmethod
+    def no_ipv6(ifname):
+        """No router solicitations and the like on the board's wire."""
+        try:
+            with open("/proc/sys/net/ipv6/conf/%s/disable_ipv6" % ifname, "w") as f:
+                f.write("1")
+        except OSError:
+            pass
+
+    def tap(self):
+        self.taps += 1
+        name = "vqt%s%d" % (self.tag, self.taps)
+        self.ip("tuntap", "add", "dev", name, "mode", "tap")
+        self.t.cleanups.append(lambda: self.quiet_ip("link", "del", name))
+        self.no_ipv6(name)
+        self.ip("link", "set", name, "master", self.bridge)
+        self.ip("link", "set", name, "up")
+        return name
+
+    def namespace_port(self):
+        """A veth pair, one end in the bridge, the other in a new network
+        namespace: (namespace, interface) for a POSIX vmac-board."""
+        ns, near, far = "vqn" + self.tag, "vqh" + self.tag, "vqp" + self.tag
+        self.ip("netns", "add", ns)
+        self.t.cleanups.append(lambda: self.quiet_ip("netns", "del", ns))
+        self.ip("link", "add", near, "type", "veth", "peer", "name", far)
+        self.t.cleanups.append(lambda: self.quiet_ip("link", "del", near))
+        self.no_ipv6(near)
+        self.ip("link", "set", far, "netns", ns)
+        self.ip("link", "set", near, "master", self.bridge)
+        self.ip("link", "set", near, "up")
+        self.ip("netns", "exec", ns, "ip", "link", "set", far, "up")
+        return ns, far
+
+
+def qemu_board(t, image, link, plant, name):
+    """A QEMU LM3S6965 running a copy of image patched to (plant, name), on
+    a tap of link; returns its Proc once the firmware's banner is out."""
+    copy = os.path.join(t.logdir, "%s.elf" % name)
+    p = subprocess.run([sys.executable, CONFIG_SCRIPT, image, "-o", copy, "--plant", plant, "--name", name],
+                       capture_output=True, text=True, timeout=30)
+    assert p.returncode == 0, "qemu-board-config.py refused %s: %s" % (name, p.stderr.strip())
+    mac = [kv.split()[1] for kv in p.stdout.strip().split(", ") if kv.startswith("mac ")][0]
+    argv = ["qemu-system-arm", "-M", "lm3s6965evb", "-display", "none", "-monitor", "none", "-serial", "stdio",
+            "-nic", "tap,ifname=%s,script=no,downscript=no,model=stellaris,mac=%s" % (link.tap(), mac),
+            "-kernel", copy]
+    board = harness.Proc(t._name("qemu-" + name), argv, t.logdir, stdin=True)
+    t.procs.append(board)
+    line = board.wait_line(BANNER, 30, what="the firmware's banner on UART0")
+    assert "MAC %s %s" % (name, mac) in line.text, "the board announces another MAC than %s: %r" % (mac, line.text)
+    return board
+
+
+def test_a_qemu_washer_is_discovered_and_served(t):
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "washer", "washer-1")
+    host = t.host(bus="eth:" + link.bridge)
+    s = host.wait_running(["washer-1"], timeout_s=30)
+    d = host.device("washer-1", s)
+    assert d["driver"] == "washer", "the QEMU washer runs driver %r" % d["driver"]
+    assert d["protocol"] == 2 and d["service"] == "cyclic", "served %s with protocol %s, expected cyclic v2" % (
+        d["service"], d["protocol"])
+    assert d["address"] == board.find_lines(BANNER)[0].text.split()[-1], "the host knows it at another MAC"
+    board.wait_line(r"^washer-1: state known device 0x%08x " % d["id"], 30, what="the board's session")
+    # 10 s at the driver's own period: running throughout, no miss the host caused.
+    period_us, served, t0 = d["period_us"], d["served"], time.monotonic()
+    s = host.wait_status(lambda s: time.monotonic() - t0 >= 10, 30, "10 s of service", undisturbed(["washer-1"]))
+    d = host.device("washer-1", s)
+    assert d["period_us"] == period_us, "the period changed from %d to %d us" % (period_us, d["period_us"])
+    expected = 10e6 / period_us
+    assert d["served"] - served >= 0.8 * expected, "served %d times in 10 s at a period of %d us (expected %d)" % (
+        d["served"] - served, period_us, expected)
+    assert d["misses"] == 0, "the QEMU washer missed %d replies" % d["misses"]
+    # The washer's sensors as the plant has them at rest: door closed, tub empty, 20 C.
+    assert d["inputs"]["digital"][0] and d["inputs"]["digital"][2], "door closed and tub empty not read: %r" % (
+        d["inputs"],)
+    assert d["inputs"]["analog"][1] == 800, "water temperature %r counts, expected 800 (20 C)" % (
+        d["inputs"]["analog"][1],)
+
+
+def test_the_wall_switch_of_a_qemu_lights_board_reaches_the_driver(t):
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "lights-1")
+    host = t.host(bus="eth:" + link.bridge)
+    host.wait_running(["lights-1"], timeout_s=30)
+    mark = board.mark()
+    board.send("lights-1 toggle1 1")
+    board.wait_line(r"^lights-1: toggle1 1$", 30, since=mark, what="the action taken on UART0")
+    host.wait_status(lambda s: host.device("lights-1", s)["inputs"]["digital"][0] is True, 10,
+                     "the switch's new position in the host's status", undisturbed(["lights-1"]))
+    host.wait_status(lambda s: host.device("lights-1", s)["outputs"]["digital"][0] is True, 10,
+                     "the driver switching the kitchen light on", undisturbed(["lights-1"]))
+    board.wait_line(r"^lights-1: outputs digital=0x01 pwm=0$", 30, since=mark, what="the light on, on UART0")
+    # Flipped back: the driver toggles again, the light goes off.
+    mark = board.mark()
+    board.send("lights-1 toggle1 1")
+    board.wait_line(r"^lights-1: outputs digital=0x00 pwm=0$", 30, since=mark, what="the light off, on UART0")
+    host.wait_status(lambda s: host.device("lights-1", s)["outputs"]["digital"][0] is False, 10,
+                     "the host's status with the light off", undisturbed(["lights-1"]))
+    # An unknown board name and a refused action change nothing, for as
+    # many periods as it takes the driver to see and act on a change.
+    board.send("nobody-1 toggle1 1")
+    board.send("lights-1 switch1 7")
+    board.wait_line(r"^lights-1: refused switch1 7$", 30, since=mark, what="the refusal")
+    board.wait_line(r"^vmac-board: no board named nobody-1$", 30, since=mark, what="the unknown name")
+    served = host.device("lights-1", host.status())["served"]
+
+    def unchanged(s):
+        undisturbed(["lights-1"])(s)
+        d = host.device("lights-1", s)
+        assert d["inputs"]["digital"][0] is False, "a refused action moved the wall switch"
+        assert d["outputs"]["digital"][0] is False, "a refused action switched the light"
+
+    host.wait_status(lambda s: host.device("lights-1", s)["served"] > served + 10, 30, "10 more periods", unchanged)
+    assert not board.find_lines(r"^lights-1: outputs digital=0x01", since=mark), "the light came on again"
+
+
+def test_a_stopped_qemu_board_is_dropped_and_comes_back(t):
+    image = firmware_image(t)
+    link = Link(t)
+    ns, port = link.namespace_port()
+    board = qemu_board(t, image, link, "lights", "qlights-1")
+    host = t.host(bus="eth:" + link.bridge)
+    t.board("lights", "plights-1", bus="eth:" + port, wrapper=("ip", "netns", "exec", ns))
+    host.wait_running(["qlights-1", "plights-1"], timeout_s=30)
+    since = host.last_event_seq()
+    board.signal(signal.SIGSTOP)
+    try:
+        dropped = host.wait_event("dropped", "qlights-1", after_seq=since, invariant=undisturbed(["plights-1"]))
+        assert "qlights-1" in dropped["text"] and len(dropped["text"]) > len("qlights-1") + 5, \
+            "the drop gives no reason: %r" % dropped["text"]
+        served = host.device("plights-1")["served"]
+        host.wait_status(lambda s: host.device("plights-1", s)["served"] > served + 25, 30,
+                         "the POSIX board served on while the QEMU one is stopped", undisturbed(["plights-1"]))
+        assert host.device("plights-1")["misses"] == 0, "the POSIX board missed while its neighbour was stopped"
+    finally:
+        board.signal(signal.SIGCONT)
+    host.wait_event("attached", "qlights-1", after_seq=dropped["seq"], timeout_s=60,
+                    invariant=undisturbed(["plights-1"]))
+    host.wait_running(["qlights-1", "plights-1"], invariant=undisturbed(["plights-1"]))
+
+
+def test_the_host_killed_turns_a_qemu_boards_outputs_off(t):
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "lights-1")
+    host = t.host(bus="eth:" + link.bridge)
+    host.wait_running(["lights-1"], timeout_s=30)
+    mark = board.mark()
+    board.send("lights-1 toggle1 1")
+    board.wait_line(r"^lights-1: outputs digital=0x01 pwm=0$", 30, since=mark, what="the light on")
+    mark = board.mark()
+    killed = time.monotonic()
+    host.signal(signal.SIGKILL)
+    limit_s = (TIMING["watchdog_ms"] + 2000) / 1000.0
+    trip = board.wait_line(r"^lights-1: watchdog: no frame for %d ms, outputs off$" % TIMING["watchdog_ms"], 30,
+                           since=mark, what="the watchdog's trip on UART0")
+    off = board.wait_line(r"^lights-1: outputs digital=0x00 pwm=0$", 30, since=mark, what="the light off")
+    assert trip.time_s - killed < limit_s, "the watchdog tripped %.2f s after the host died (period %d ms)" % (
+        trip.time_s - killed, TIMING["watchdog_ms"])
+    assert off.time_s - killed < limit_s, "the light still on %.2f s after the host died" % (off.time_s - killed)
+    board.wait_line(r"^lights-1: state unknown device 0x00000000 ", 30, since=mark, what="back to discovery")
