@@ -24,7 +24,7 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # microcontroller and its tests (make firmware, tests/integration/test_qemu.py).
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
-        openssl clang-format gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm
+        openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests

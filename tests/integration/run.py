@@ -105,11 +105,11 @@ def run_one(name, fn, bindir, limit_s, keep):
         failure = "%s%ssanitizer report from %s" % (failure or "", "; " if failure else "", report)
     if failure:
         return "fail", "%s [logs: %s]" % (failure, logdir)
+    if keep:
+        return ("skip", skipped) if skipped else ("pass", " [logs: %s]" % logdir)
     shutil.rmtree(logdir, ignore_errors=True)
     if skipped:
         return "skip", skipped
-    if keep:
-        return "pass", " [logs: %s]" % logdir
     return "pass", ""
 
 
