@@ -600,6 +600,17 @@ static void *bus_main(void *arg)
 	return NULL;
 }
 
+/* The ring to the main thread carries events and driver-load requests: room
+ * for a load request and two events per device besides the usual traffic,
+ * so a whole bus announcing at once is not turned away. A power of two. */
+static uint32_t ring_size(const struct vmac_config *cfg)
+{
+	uint32_t n = 1024;
+	while (n < 3 * cfg->max_devices + 1024)
+		n <<= 1;
+	return n;
+}
+
 /* Everything both modes use: the device, machine and packet tables, the
  * schedule, the rings. Every byte the bus thread will ever use is here. */
 static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size_t errlen)
@@ -626,7 +637,8 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
 	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->status.devices || !bus->status.slot_load ||
-	    !bus->slot_entries || !bus->sched || vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), 1024) ||
+	    !bus->slot_entries || !bus->sched ||
+	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024)) {
 		snprintf(err, errlen, "out of memory");
 		vmac_bus_free(bus);

@@ -271,7 +271,16 @@ static void join_or_load(struct vmac_bus *bus, struct device *d)
 	load.generation = d->generation;
 	memcpy(load.device, d->ann.board, sizeof(load.device));
 	memcpy(load.driver, d->ann.driver, sizeof(load.driver));
-	bus_post(bus, &load);
+	if (bus_post(bus, &load) != 0) {
+		/* The main thread is behind (a crowd announcing at once): nothing
+		 * waits for a load that was never asked for. The board is still
+		 * unknown and announces again at the next discovery. */
+		m->used = 0;
+		d->mach = -1;
+		d->state = DEV_ERRANT;
+		snprintf(d->note, sizeof(d->note),
+		         "host busy: its driver load is asked for again at its next announce");
+	}
 }
 
 void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p)

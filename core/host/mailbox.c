@@ -27,14 +27,15 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 
 /* ---- messages to the main thread (no allocation: fixed ring slots) ---- */
 
-void bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m)
+int bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m)
 {
 	if (vmac_ring_push(&bus->to_main, m) != 0) {
 		bus->counters.events_lost++;
-		return;
+		return -1;
 	}
 	if (bus->wakeup)
 		bus->wakeup(bus->wakeup_ctx);
+	return 0;
 }
 
 void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
