@@ -154,12 +154,21 @@ def test_a_qemu_washer_is_discovered_and_served(t):
         d["inputs"]["analog"][1],)
 
 
+def first_tick(host):
+    """The lights driver toggles a light on a switch's change between two of
+    its ticks: a switch flipped before its first tick is its starting
+    position, no change. Its first tick publishes the lights, off."""
+    host.wait_status(lambda s: host.device("lights-1", s)["variables"].get("kitchen") is False, 10,
+                     "the lights driver's first tick")
+
+
 def test_the_wall_switch_of_a_qemu_lights_board_reaches_the_driver(t):
     image = firmware_image(t)
     link = Link(t)
     board = qemu_board(t, image, link, "lights", "lights-1")
     host = t.host(bus="eth:" + link.bridge)
     host.wait_running(["lights-1"], timeout_s=30)
+    first_tick(host)
     mark = board.mark()
     board.send("lights-1 toggle1 1")
     board.wait_line(r"^lights-1: toggle1 1$", 30, since=mark, what="the action taken on UART0")
@@ -223,6 +232,7 @@ def test_the_host_killed_turns_a_qemu_boards_outputs_off(t):
     board = qemu_board(t, image, link, "lights", "lights-1")
     host = t.host(bus="eth:" + link.bridge)
     host.wait_running(["lights-1"], timeout_s=30)
+    first_tick(host)
     mark = board.mark()
     board.send("lights-1 toggle1 1")
     board.wait_line(r"^lights-1: outputs digital=0x01 pwm=0$", 30, since=mark, what="the light on")
