@@ -232,6 +232,20 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 	}
 }
 
+int vmac_board_identity_valid(const struct vmac_board_identity *id)
+{
+	struct vmac_msg probe;
+	uint8_t frame[VMAC_FRAME_MAX];
+	memset(&probe, 0, sizeof(probe));
+	probe.flags = VMAC_FLAG_REPLY;
+	probe.channel = VMAC_CH_SYSTEM;
+	probe.op = VMAC_SYS_ANNOUNCE;
+	memcpy(probe.u.announce.driver, id->driver, sizeof(id->driver));
+	memcpy(probe.u.announce.board, id->board, sizeof(id->board));
+	probe.u.announce.caps = id->caps;
+	return vmac_proto_encode(&probe, frame, sizeof(frame)) > 0;
+}
+
 const char *vmac_board_state_name(enum vmac_board_state s)
 {
 	switch (s) {

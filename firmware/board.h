@@ -76,6 +76,11 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
  * process exiting all do. */
 void vmac_board_safe(struct vmac_board *b);
 
+/* 1 when every ANNOUNCE of this identity would be valid (names of 1..31
+ * [A-Za-z0-9_-], capabilities in range), else 0: a board refuses to start
+ * with an identity the host would refuse on every announce. */
+int vmac_board_identity_valid(const struct vmac_board_identity *id);
+
 const char *vmac_board_state_name(enum vmac_board_state s);
 
 #endif

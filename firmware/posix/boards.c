@@ -51,21 +51,6 @@ char *boards_mac_format(const uint8_t mac[6], char *buf, size_t len)
 	return buf;
 }
 
-/* Refuse at start what the protocol would refuse on every announce. */
-static int identity_valid(const struct vmac_board_identity *id)
-{
-	struct vmac_msg probe;
-	uint8_t frame[VMAC_FRAME_MAX];
-	memset(&probe, 0, sizeof(probe));
-	probe.flags = VMAC_FLAG_REPLY;
-	probe.channel = VMAC_CH_SYSTEM;
-	probe.op = VMAC_SYS_ANNOUNCE;
-	memcpy(probe.u.announce.driver, id->driver, sizeof(id->driver));
-	memcpy(probe.u.announce.board, id->board, sizeof(id->board));
-	probe.u.announce.caps = id->caps;
-	return vmac_proto_encode(&probe, frame, sizeof(frame)) > 0;
-}
-
 static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
 
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen)
@@ -125,7 +110,7 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 		id.minor = (uint32_t)cfg->minor;
 		id.caps = vmac_plant_caps(cfg->kind);
 		id.protocol = cfg->protocol;
-		if (!identity_valid(&id)) {
+		if (!vmac_board_identity_valid(&id)) {
 			snprintf(err, errlen,
 			         "invalid name '%s' or driver '%s': names are 1..%d characters of A-Z a-z 0-9 _ -",
 			         id.board, id.driver, VMAC_NAME_MAX);

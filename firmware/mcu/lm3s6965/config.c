@@ -44,22 +44,6 @@ static int copy_text(char *out, const char *field, size_t cap)
 	return 0;
 }
 
-/* The names go by the codec's own rule: the block is refused for a name
- * every ANNOUNCE would be refused for. */
-static int identity_valid(const struct vmac_board_identity *id)
-{
-	struct vmac_msg probe;
-	uint8_t frame[VMAC_FRAME_MAX];
-	memset(&probe, 0, sizeof(probe));
-	probe.flags = VMAC_FLAG_REPLY;
-	probe.channel = VMAC_CH_SYSTEM;
-	probe.op = VMAC_SYS_ANNOUNCE;
-	memcpy(probe.u.announce.driver, id->driver, sizeof(id->driver));
-	memcpy(probe.u.announce.board, id->board, sizeof(id->board));
-	probe.u.announce.caps = id->caps;
-	return vmac_proto_encode(&probe, frame, sizeof(frame)) > 0;
-}
-
 int vmac_mcu_config_load(struct vmac_mcu_settings *s, const char **why)
 {
 	static const uint8_t no_mac[6] = {0, 0, 0, 0, 0, 0};
@@ -83,7 +67,7 @@ int vmac_mcu_config_load(struct vmac_mcu_settings *s, const char **why)
 		return -1;
 	}
 	s->id.caps = vmac_plant_caps(s->kind);
-	if (!identity_valid(&s->id)) {
+	if (!vmac_board_identity_valid(&s->id)) {
 		*why = "board or driver name not 1..31 of A-Z a-z 0-9 _ -";
 		return -1;
 	}
