@@ -7,6 +7,7 @@
 #   make run-qemu   deps + build + firmware + the kitchen with boards in QEMU on raw Ethernet (root)
 #   make test       deps + build + every test (unit, fuzz, integration, the web UI in chromium,
 #                   then again under ASan+UBSan)
+#   make fuzz       every libFuzzer harness FUZZ_SECONDS each (default 60), executions per target
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
 #   make clean
 
@@ -49,7 +50,7 @@ DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest
                 core/driver/instance.c core/driver/takeover.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
                 core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
-                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/console.c core/sched/sched.c core/sched/search.c \
+                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/console.c core/sched/sched.c core/sched/search.c \
                 core/store/store.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
@@ -68,7 +69,7 @@ UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD
 
 
 .PHONY: format format-check test-build asan-build
-.PHONY: all deps run test test-unit test-lua test-drivers test-fuzz test-integration test-ui test-asan bench clean
+.PHONY: all deps run test test-unit test-lua test-drivers test-fuzz fuzz test-integration test-ui test-asan bench clean
 .PHONY: firmware run-qemu
 all: $(BINS)
 
@@ -220,11 +221,78 @@ $(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/s
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
+# ---- fuzzing (docs/TESTING.md, "Fuzzing") ----
+# One libFuzzer harness per parser, tests/fuzz/fuzz_NAME.c, its seeds in
+# tests/fuzz/corpus-NAME/ (and a dictionary tests/fuzz/NAME.dict where one
+# helps). Everything a harness links is built again with clang, libFuzzer's
+# coverage and ASan+UBSan, under $(BUILD)/fuzz/obj; what the fuzzer finds
+# goes to $(BUILD)/fuzz/work-NAME, never to the committed seeds.
+FUZZ_TARGETS := proto config console manifest values http
+FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=all
+FUZZ_CFLAGS   = -std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer $(WARN) -Wno-unknown-warning-option $(FUZZ_SAN) \
+                -fsanitize=fuzzer-no-link $(PKG_CFLAGS)
+FUZZ_LINK     = clang $(FUZZ_SAN) -fsanitize=fuzzer $^ -o $@
+FOBJ          = $(BUILD)/fuzz/obj
+fuzz_obj      = $(1:%.c=$(FOBJ)/%.o)
+
+$(FOBJ)/%.o: %.c
+	@mkdir -p $(dir $@)
+	clang $(FUZZ_CFLAGS) -MMD -MP -c $< -o $@
+
+# The wire codec and the board (portable C99).
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
 	@mkdir -p $(dir $@)
 	clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
 
-FUZZ_SECONDS ?= 20
+# The config file and key=value settings (vmac_config_load/set/check).
+$(BUILD)/fuzz/fuzz_config: $(call fuzz_obj,tests/fuzz/fuzz_config.c core/host/config.c core/common/addr.c \
+                            core/transport/transport.c core/transport/transport_udp.c core/transport/transport_eth.c \
+                            core/proto/proto.c)
+	$(FUZZ_LINK) $(PKG_LIBS)
+
+# The line console's grammar (core/api/console.c), the host behind fakes.
+$(BUILD)/fuzz/fuzz_console: $(call fuzz_obj,tests/fuzz/fuzz_console.c core/api/console.c)
+	$(FUZZ_LINK)
+
+# A driver's source through load and manifest validation, then one run.
+$(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c $(DRIVER_SRC) core/api/api_request.c \
+                              core/api/console.c)
+	$(FUZZ_LINK) $(PKG_LIBS)
+
+# Lua values to outputs, variables and params and back (core/driver/instance.c).
+$(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c $(DRIVER_SRC))
+	$(FUZZ_LINK) $(PKG_LIBS)
+
+# The HTTP API's routing, request bodies and arguments, and the console's
+# body (core/api/api_request.c), no sockets.
+$(BUILD)/fuzz/fuzz_http: $(call fuzz_obj,tests/fuzz/fuzz_http.c core/api/api_request.c core/api/console.c)
+	$(FUZZ_LINK) $(PKG_LIBS)
+
+FUZZ_BINS := $(FUZZ_TARGETS:%=$(BUILD)/fuzz/fuzz_%)
+
+# Run every target $(1) seconds; print each one's executions and the total.
+# A failure (crash, leak, timeout, out of memory) is printed with the
+# input's file, and fails the run after the other targets have had theirs.
+fuzz_all = total=0; failed=; \
+	for t in $(FUZZ_TARGETS); do \
+		mkdir -p $(BUILD)/fuzz/work-$$t; \
+		dict=; [ -f tests/fuzz/$$t.dict ] && dict=-dict=tests/fuzz/$$t.dict; \
+		if $(BUILD)/fuzz/fuzz_$$t -max_total_time=$(1) -timeout=10 -artifact_prefix=$(BUILD)/fuzz/$$t- $$dict \
+			$(BUILD)/fuzz/work-$$t tests/fuzz/corpus-$$t > $(BUILD)/fuzz/$$t.log 2>&1; then \
+			runs=$$(sed -n 's/^Done \([0-9]*\) runs.*/\1/p' $(BUILD)/fuzz/$$t.log); \
+			printf '  %-9s %10s executions in %s s\n' $$t "$$runs" $(1); \
+			total=$$((total + $${runs:-0})); \
+		else \
+			tail -n 60 $(BUILD)/fuzz/$$t.log; \
+			echo "fuzz_$$t found a failure: the input is $(BUILD)/fuzz/$$t-*, the log $(BUILD)/fuzz/$$t.log"; \
+			failed="$$failed $$t"; \
+		fi; \
+	done; \
+	printf '  %-9s %10s executions\n' total $$total; \
+	if [ -n "$$failed" ]; then echo "fuzzing failed:$$failed"; exit 1; fi
+
+FUZZ_SECONDS ?= 60
+FUZZ_TEST_SECONDS ?= 4
 
 deps:
 	@if ! command -v dpkg-query >/dev/null; then \
@@ -256,14 +324,15 @@ test-drivers: $(BUILD)/bin/vmac
 	@echo "== vmac test: the shipped drivers in virtual time"
 	@$(BUILD)/bin/vmac test
 
-# New inputs go to the build folder; tests/fuzz/corpus holds only the seeds.
-test-fuzz: $(BUILD)/fuzz/fuzz_proto
-	@mkdir -p $(BUILD)/fuzz/corpus
-	@echo "== fuzzing the frame decoder and the board for $(FUZZ_SECONDS) s"
-	@if $(BUILD)/fuzz/fuzz_proto -max_total_time=$(FUZZ_SECONDS) -artifact_prefix=$(BUILD)/fuzz/ \
-		$(BUILD)/fuzz/corpus tests/fuzz/corpus > $(BUILD)/fuzz/log 2>&1; then \
-		grep -E '^Done' $(BUILD)/fuzz/log; \
-	else cat $(BUILD)/fuzz/log; echo "fuzzing found a failure; the input is in $(BUILD)/fuzz/"; exit 1; fi
+# Every fuzz target for a few seconds (make fuzz for longer runs).
+test-fuzz: $(FUZZ_BINS)
+	@echo "== fuzzing every parser $(FUZZ_TEST_SECONDS) s each ($(FUZZ_TARGETS))"
+	@$(call fuzz_all,$(FUZZ_TEST_SECONDS))
+
+# Every fuzz target FUZZ_SECONDS each (default 60).
+fuzz: $(FUZZ_BINS)
+	@echo "== fuzzing every parser $(FUZZ_SECONDS) s each ($(FUZZ_TARGETS))"
+	@$(call fuzz_all,$(FUZZ_SECONDS))
 
 # A suite (or test) that cannot run on this machine (no chromium, no root
 # for a mount namespace) appends its reason to SKIPPED and passes; make test
@@ -353,4 +422,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/fuzz/obj -name '*.d' 2>/dev/null)

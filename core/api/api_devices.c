@@ -170,48 +170,11 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
                                   const struct conn *k)
 {
 	struct vmac_bus_input_request req;
-	json_error_t jerr;
-	json_t *body, *name, *value, *persist;
 	char msg[VMAC_EVENT_TEXT + 200];
-	unsigned code;
-	memset(&req, 0, sizeof(req));
-	if (k->too_big || k->len > INPUT_MAX)
-		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("the request body is over 64 KiB"));
-	if (!http_valid_name(device, VMAC_NAME_MAX))
-		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such device"));
-	body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr);
-	name = json_object_get(body, "name");
-	value = json_object_get(body, "value");
-	persist = json_object_get(body, "persist");
-	if (!json_is_object(body) || !json_is_string(name) || (persist && !json_is_boolean(persist)) ||
-	    !http_valid_name(json_string_value(name), VMAC_DRIVER_NAME_MAX) ||
-	    (value && !json_is_string(value) && !json_is_number(value) && !json_is_boolean(value) &&
-	     !json_is_null(value)) ||
-	    (json_is_string(value) && strlen(json_string_value(value)) > VMAC_DRIVER_STR_MAX)) {
-		json_decref(body);
-		return http_reply(
-		    c, MHD_HTTP_BAD_REQUEST,
-		    http_error_body("expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
-		                    "boolean or null, \"persist\": true or false (optional)}"));
-	}
-	snprintf(req.device, sizeof(req.device), "%s", device);
-	snprintf(req.name, sizeof(req.name), "%s", json_string_value(name));
-	if (json_is_string(value)) {
-		req.value.type = VMAC_VALUE_STRING;
-		snprintf(req.value.str, sizeof(req.value.str), "%s", json_string_value(value));
-	} else if (json_is_number(value)) {
-		req.value.type = VMAC_VALUE_NUMBER;
-		req.value.number = json_number_value(value);
-	} else if (json_is_boolean(value)) {
-		req.value.type = VMAC_VALUE_BOOL;
-		req.value.number = json_is_true(value);
-	} else {
-		req.value.type = VMAC_VALUE_NONE; /* a command without a value */
-	}
-	req.persist = json_is_true(persist);
-	json_decref(body);
-	if (req.persist && req.value.type == VMAC_VALUE_NONE)
-		return http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("a value to persist is needed"));
+	const char *why;
+	unsigned code = http_parse_input(device, k->body, k->len, k->too_big, &req, &why);
+	if (code)
+		return http_reply(c, code, http_error_body(why));
 	code = run_input(h, &req, msg, sizeof(msg));
 	if (code == MHD_HTTP_OK)
 		return http_reply(c, MHD_HTTP_OK,
@@ -226,36 +189,12 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
 enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
                                   const struct conn *k)
 {
-	static const char *const actions[] = {"start", "pause", "resume", "cancel"};
 	struct vmac_bus_input_request req;
 	char msg[VMAC_EVENT_TEXT + 200];
-	json_error_t jerr;
-	json_t *body = json_loadb(k->body ? k->body : "", k->len, 0, &jerr), *action, *program;
-	unsigned code, i;
-	if (k->too_big || k->len > INPUT_MAX) {
-		json_decref(body);
-		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("the request body is over 64 KiB"));
-	}
-	action = json_object_get(body, "action");
-	program = json_object_get(body, "program");
-	for (i = 0; i < 4 && !(json_is_string(action) && strcmp(json_string_value(action), actions[i]) == 0); i++)
-		;
-	if (i == 4 || (program && (i != 0 || !json_is_string(program) ||
-	                           strlen(json_string_value(program)) > VMAC_DRIVER_STR_MAX))) {
-		json_decref(body);
-		return http_reply(
-		    c, MHD_HTTP_BAD_REQUEST,
-		    http_error_body("expected {\"action\": \"start\", \"pause\", \"resume\" or \"cancel\", "
-		                    "\"program\": a programme's name (start only, optional)}"));
-	}
-	memset(&req, 0, sizeof(req));
-	snprintf(req.device, sizeof(req.device), "%s", device);
-	snprintf(req.name, sizeof(req.name), "%s", actions[i]);
-	if (program) {
-		req.value.type = VMAC_VALUE_STRING;
-		snprintf(req.value.str, sizeof(req.value.str), "%s", json_string_value(program));
-	}
-	json_decref(body);
+	const char *why;
+	unsigned code = http_parse_cycle(device, k->body, k->len, k->too_big, &req, &why);
+	if (code)
+		return http_reply(c, code, http_error_body(why));
 	code = run_input(h, &req, msg, sizeof(msg));
 	if (code == MHD_HTTP_OK)
 		return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "reply", req.reply));
@@ -309,16 +248,20 @@ static unsigned console_input(void *ctx, struct vmac_bus_input_request *req, cha
 	return run_input(x->h, req, msg, msglen);
 }
 
+/* A new line: the status is read again for it. */
+static void console_new_line(void *ctx)
+{
+	struct console_ctx *x = ctx;
+	x->fresh = 0;
+}
+
 /* The body: lines of submessages. The answer: each line's answer and the
- * messages of its errors. */
+ * messages of its errors (api_request.c). */
 enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate)
 {
 	struct console_ctx *x = malloc(sizeof(*x));
 	struct vmac_console_ops ops;
-	char answer[4096], errors[8192];
-	json_t *lines = json_array();
-	const char *p = k->body ? k->body : "";
-	int nerr = 0;
+	json_t *answer;
 	if (!x)
 		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
 	ops.device = console_device;
@@ -326,25 +269,9 @@ enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, cons
 	ops.ctx = x;
 	ops.may_operate = operate;
 	x->h = h;
-	while (*p) {
-		size_t n = strcspn(p, "\n");
-		char *line = strndup(p, n), *e, *save = NULL;
-		json_t *errs = json_array();
-		x->fresh = 0;
-		nerr += line ? vmac_console_line(&ops, line, answer, sizeof(answer), errors, sizeof(errors)) : 0;
-		for (e = strtok_r(errors, "\n", &save); line && e; e = strtok_r(NULL, "\n", &save))
-			json_array_append_new(errs, json_string(e));
-		if (line && strspn(line, " \t\r") < n)
-			json_array_append_new(lines, json_pack("{s:s, s:o}", "answer", answer, "errors", errs));
-		else
-			json_decref(errs);
-		free(line);
-		p += n;
-		if (*p)
-			p++;
-	}
+	answer = http_console_answer(&ops, console_new_line, k->body);
 	free(x);
-	return http_reply(c, MHD_HTTP_OK, json_pack("{s:o, s:i}", "lines", lines, "errors", nerr));
+	return http_reply(c, MHD_HTTP_OK, answer);
 }
 
 static void live_free(void *cls)

@@ -89,17 +89,10 @@ static void token_id(struct MHD_Connection *c, char *id, size_t len)
 static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned *ms, double *s, enum MHD_Result *ret)
 {
 	const char *arg = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "probation");
-	char *end;
-	*s = h->cfg.reload_probation_s;
-	if (arg) {
-		*s = strtod(arg, &end);
-		if (!*arg || *end || !(*s >= 0 && *s <= 86400)) {
-			*ret =
-			    http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("probation must be seconds, 0..86400"));
-			return -1;
-		}
+	if (http_parse_probation(arg, h->cfg.reload_probation_s, ms, s) != 0) {
+		*ret = http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("probation must be seconds, 0..86400"));
+		return -1;
 	}
-	*ms = (unsigned)(*s * 1000 + 0.5);
 	return 0;
 }
 
@@ -138,10 +131,10 @@ enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection 
 	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
 	double probation_s;
 	unsigned probation_ms;
-	char by[VMAC_TOKEN_ID_LEN + 1], *end;
-	long long id = id_s ? strtoll(id_s, &end, 10) : 0;
+	char by[VMAC_TOKEN_ID_LEN + 1];
+	long long id;
 	enum MHD_Result ret;
-	if (!id_s || !*id_s || *end || id < 1)
+	if (http_parse_id(id_s, &id) != 0)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
 		                  http_error_body("id must be a version's id (vmac drivers lists them)"));
 	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
@@ -177,7 +170,6 @@ enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *drive
 {
 	const char *version = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "version");
 	char *json = version ? vmac_loaded_manifest(driver, version) : NULL;
-	json_error_t jerr;
 	json_t *body;
 	if (!version)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
@@ -185,7 +177,7 @@ enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *drive
 	if (!json)
 		return http_reply(c, MHD_HTTP_NOT_FOUND,
 		                  http_error_body("that driver version has not been loaded on this host"));
-	body = json_loads(json, 0, &jerr);
+	body = http_manifest_json(json);
 	free(json);
 	return body ? http_reply(c, MHD_HTTP_OK, body)
 	            : http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body("bad manifest"));

@@ -33,21 +33,13 @@ enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c)
 {
 	const char *after_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
 	const char *limit_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "limit");
-	unsigned long long after = 0;
-	long limit = 100;
-	char *end, err[512];
+	unsigned long long after;
+	long limit;
+	const char *why;
+	char err[512];
 	json_t *list;
-	if (after_s) {
-		after = strtoull(after_s, &end, 10);
-		if (!*after_s || *end || after_s[0] == '-')
-			return http_reply(c, MHD_HTTP_BAD_REQUEST,
-			                  http_error_body("after must be an event's seq (a whole number)"));
-	}
-	if (limit_s) {
-		limit = strtol(limit_s, &end, 10);
-		if (!*limit_s || *end || limit < 1 || limit > 1000)
-			return http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body("limit must be 1..1000"));
-	}
+	if (http_parse_event_log(after_s, limit_s, &after, &limit, &why) != 0)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body(why));
 	list = json_array();
 	if (vmac_store_events_list(h->store, after, (int)limit, append_event, list, err, sizeof(err)) < 0) {
 		json_decref(list);
@@ -118,16 +110,10 @@ enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c
 	const char *after = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
 	const char *resume = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Last-Event-ID");
 	struct sse *e;
-	char *end;
-	const char *from = resume ? resume : after;
-	unsigned long long seq = 0;
-	if (from) {
-		errno = 0;
-		seq = strtoull(from, &end, 10);
-		if (errno || end == from || *end)
-			return http_reply(c, MHD_HTTP_BAD_REQUEST,
-			                  http_error_body("after (or Last-Event-ID) must be an event's seq"));
-	}
+	unsigned long long seq;
+	if (http_parse_events_from(after, resume, &seq) != 0)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		                  http_error_body("after (or Last-Event-ID) must be an event's seq"));
 	e = calloc(1, sizeof(*e));
 	if (!e)
 		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body("out of memory"));

@@ -1,8 +1,8 @@
 /* The HTTP server (see http.h): libmicrohttpd with its own threads, TLS
  * when configured, bearer tokens checked against the store with failed
  * attempts rate-limited per client, and the routing of every request to
- * its endpoint (docs/API.md): api_devices.c, api_drivers.c, api_events.c.
- * http_internal.h holds what they share. */
+ * its endpoint (docs/API.md; which one, api_request.c): api_devices.c,
+ * api_drivers.c, api_events.c. http_internal.h holds what they share. */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -150,37 +150,6 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
 	*con_cls = NULL;
 }
 
-int http_valid_name(const char *s, size_t max)
-{
-	size_t n = 0;
-	for (; *s; s++, n++)
-		if (n >= max || !((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ||
-		                  *s == '-' || *s == '_' || *s == '.'))
-			return 0;
-	return n > 0;
-}
-
-/* PREFIX NAME SUFFIX: NAME into name (at most len - 1 bytes, no slash, a
- * valid name); 0 when url is not of that form. */
-static int named_path(const char *url, const char *prefix, const char *suffix, char *name, size_t len)
-{
-	size_t np = strlen(prefix), ns = strlen(suffix), n = strlen(url);
-	if (n <= np + ns || strncmp(url, prefix, np) != 0 || strcmp(url + n - ns, suffix) != 0)
-		return 0;
-	n -= np + ns;
-	if (n >= len || memchr(url + np, '/', n))
-		return 0;
-	memcpy(name, url + np, n);
-	name[n] = 0;
-	return http_valid_name(name, VMAC_NAME_MAX);
-}
-
-/* "/api/drivers/NAME" SUFFIX */
-static int driver_path(const char *url, const char *suffix, char *driver, size_t len)
-{
-	return named_path(url, "/api/drivers/", suffix, driver, len);
-}
-
 /* A Server-Sent Events answer whose bytes come from read(cls); cls is
  * freed with done(cls) when the stream ends, or now if it cannot start. */
 enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
@@ -197,12 +166,6 @@ enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReader
 	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
 	MHD_destroy_response(r);
 	return ret;
-}
-
-/* "/api/devices/NAME" SUFFIX */
-static int device_path(const char *url, const char *suffix, char *device, size_t len)
-{
-	return named_path(url, "/api/devices/", suffix, device, len);
 }
 
 /* GET / and /ui/NAME: the web UI's files (docs/UI.md), from the binary. */
@@ -235,8 +198,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	struct conn *k = *con_cls;
 	enum MHD_Result ret;
 	enum vmac_scope scope;
-	char device[VMAC_NAME_MAX + 2];
-	int get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0, post = strcmp(method, "POST") == 0;
+	struct http_route r;
 	(void)version;
 	if (!k) { /* first call: headers only */
 		k = calloc(1, sizeof(*k));
@@ -260,63 +222,38 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		*upload_size = 0;
 		return MHD_YES;
 	}
-	if (!get && !post)
+	http_route(method, url, &r); /* which endpoint, and the scope it needs (api_request.c) */
+	if (r.endpoint == HTTP_BAD_METHOD)
 		return http_reply(c, MHD_HTTP_METHOD_NOT_ALLOWED,
 		                  http_error_body("only GET, HEAD and POST are used here"));
-	if (get && (strcmp(url, "/") == 0 || strncmp(url, "/ui/", 4) == 0)) /* the web UI: no token, nothing secret */
-		return ui_asset(c, strcmp(url, "/") == 0 ? "index.html" : url + 4);
-	if (get && strcmp(url, "/api/health") == 0) /* the one request without a token */
+	if (r.endpoint == HTTP_UI) /* the web UI: no token, nothing secret */
+		return ui_asset(c, r.file);
+	if (r.endpoint == HTTP_HEALTH) /* the one request without a token */
 		return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
-	if (post && device_path(url, "/input", device, sizeof(device))) {
-		if (!http_authorized(h, c, VMAC_SCOPE_OPERATE, &ret))
-			return ret;
-		return http_device_input(h, c, device, k);
-	}
-	if (post && device_path(url, "/cycle", device, sizeof(device))) {
-		if (!http_authorized(h, c, VMAC_SCOPE_OPERATE, &ret))
-			return ret;
-		return http_device_cycle(h, c, device, k);
-	}
-	if (post &&
-	    (driver_path(url, "/rollback", device, sizeof(device)) ||
-	     driver_path(url, "/activate", device, sizeof(device)) || driver_path(url, "", device, sizeof(device)))) {
-		if (!http_authorized(h, c, VMAC_SCOPE_DEPLOY, &ret))
-			return ret;
-		if (driver_path(url, "/rollback", device, sizeof(device)))
-			return http_driver_rollback(h, c, device);
-		if (driver_path(url, "/activate", device, sizeof(device)))
-			return http_driver_activate(h, c, device);
-		return http_driver_upload(h, c, device, k);
-	}
-	if (!(scope = http_authorized(h, c, VMAC_SCOPE_READ, &ret)))
+	if (!(scope = http_authorized(h, c, r.need, &ret)))
 		return ret;
-	if (post && strcmp(url, "/api/console") == 0) {
+	switch (r.endpoint) {
+	case HTTP_INPUT: return http_device_input(h, c, r.name, k);
+	case HTTP_CYCLE: return http_device_cycle(h, c, r.name, k);
+	case HTTP_ROLLBACK: return http_driver_rollback(h, c, r.name);
+	case HTTP_ACTIVATE: return http_driver_activate(h, c, r.name);
+	case HTTP_UPLOAD: return http_driver_upload(h, c, r.name, k);
+	case HTTP_CONSOLE:
 		if (k->too_big || k->len > INPUT_MAX)
 			return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE,
 			                  http_error_body("the request body is over 64 KiB"));
 		return http_console(h, c, k, scope >= VMAC_SCOPE_OPERATE);
-	}
-	if (get && strcmp(url, "/api/devices") == 0)
-		return http_devices(h, c, NULL);
-	if (get && device_path(url, "", device, sizeof(device)))
-		return http_devices(h, c, device);
-	if (get && strcmp(url, "/api/drivers") == 0)
-		return http_driver_versions(h, c, NULL);
-	if (get && driver_path(url, "", device, sizeof(device)))
-		return http_driver_versions(h, c, device);
-	if (get && strcmp(url, "/api/status") == 0)
-		return http_reply(c, MHD_HTTP_OK, http_status_json(h));
-	if (get && strcmp(url, "/api/live") == 0)
-		return http_live_stream(h, c);
-	if (get && strcmp(url, "/api/whoami") == 0)
-		return http_reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(scope)));
-	if (get && driver_path(url, "/manifest", device, sizeof(device)))
-		return http_driver_manifest(c, device);
-	if (get && strcmp(url, "/api/events/log") == 0)
-		return http_event_log(h, c);
-	if (get && strcmp(url, "/api/events") == 0)
-		return http_events_stream(h, c);
-	if (get && strcmp(url, "/api") == 0)
+	case HTTP_DEVICES: return http_devices(h, c, NULL);
+	case HTTP_DEVICE: return http_devices(h, c, r.name);
+	case HTTP_DRIVERS: return http_driver_versions(h, c, NULL);
+	case HTTP_DRIVER: return http_driver_versions(h, c, r.name);
+	case HTTP_STATUS: return http_reply(c, MHD_HTTP_OK, http_status_json(h));
+	case HTTP_LIVE: return http_live_stream(h, c);
+	case HTTP_WHOAMI: return http_reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(scope)));
+	case HTTP_MANIFEST: return http_driver_manifest(c, r.name);
+	case HTTP_EVENT_LOG: return http_event_log(h, c);
+	case HTTP_EVENTS: return http_events_stream(h, c);
+	case HTTP_INDEX:
 		return http_reply(c, MHD_HTTP_OK,
 		                  json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING,
 		                            "endpoints", "/api/status", "/api/health", "/api/events",
@@ -324,7 +261,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		                            "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
 		                            "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
 		                            "/api/drivers/NAME/activate"));
-	return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
+	default: return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
+	}
 }
 
 /* A PEM file's text (at most 64 KiB), or NULL with err. */

@@ -4,6 +4,7 @@
 #ifndef VMAC_HTTP_INTERNAL_H
 #define VMAC_HTTP_INTERNAL_H
 
+#include "api_request.h"
 #include "http.h"
 
 #include <jansson.h>
@@ -104,7 +105,6 @@ enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body
 json_t *http_error_body(const char *msg);
 enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
                                 enum MHD_Result *ret);
-int http_valid_name(const char *s, size_t max);
 enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
                                      MHD_ContentReaderFreeCallback done);
 

@@ -193,11 +193,14 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 	return rc;
 }
 
-/* The value on top as a vmac_value; -1 if it has a type a variable cannot. */
+/* The value on top as a vmac_value; -1 if it has a type a variable cannot.
+ * str is "" but for a string: no stack bytes go out with the status (found
+ * by tests/fuzz/fuzz_manifest.c). */
 static int to_value(lua_State *L, struct vmac_value *v)
 {
 	size_t n;
 	const char *s;
+	v->str[0] = 0;
 	switch (lua_type(L, -1)) {
 	case LUA_TNIL: v->type = VMAC_VALUE_NONE; return 0;
 	case LUA_TNUMBER:
@@ -338,7 +341,7 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 	const struct vmac_value *value = a->value;
 	char *reply = a->reply;
 	size_t replylen = a->replylen;
-	int i, top = lua_gettop(L), kind = 0; /* 1 variable, 2 param, 3 command */
+	int i, top = lua_gettop(L), kind = 0, old = 0; /* kind: 1 variable, 2 param, 3 command */
 	char why[160];
 
 	for (i = 0; i < d->nvars; i++)
@@ -370,8 +373,22 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		lua_settop(L, top);
 		return VMAC_REFUSED_NAME;
 	}
+	if (kind == 2) { /* the param's value now, below the manifest: its type, and what a refusal puts back */
+		lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+		drv_raw_getfield(L, lua_gettop(L), name);
+		lua_remove(L, -2);
+		lua_insert(L, -2);
+		old = lua_gettop(L) - 1;
+	}
 	/* Push the value, then check it against the declaration. */
 	push_value(L, value);
+	if (kind == 2 && lua_type(L, -1) != lua_type(L, old) &&
+	    (lua_type(L, old) == LUA_TNUMBER || lua_type(L, old) == LUA_TBOOLEAN || lua_type(L, old) == LUA_TSTRING)) {
+		snprintf(reply, replylen, "%s: expected a %s, got a %s", name, luaL_typename(L, old),
+		         luaL_typename(L, -1));
+		lua_settop(L, top);
+		return VMAC_REFUSED_VALUE;
+	}
 	if (kind != 3) {
 		lua_getfield(L, -2, kind == 1 ? "variables" : "params");
 		lua_getfield(L, -1, name);
@@ -411,6 +428,11 @@ static int input_work(struct vmac_driver *d, void *args, char *err, size_t errle
 	snprintf(reply, replylen, "%s",
 	         lua_type(L, -1) == LUA_TSTRING || lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1)
 	                                                                          : "refused by the driver");
+	if (kind == 2) { /* refused: the param is as it was */
+		lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
+		lua_pushvalue(L, old);
+		drv_raw_setfield(L, lua_gettop(L) - 1, name);
+	}
 	lua_settop(L, top);
 	return VMAC_REFUSED_BY_DRIVER;
 }

@@ -30,6 +30,16 @@ static int valid_name(const char *s)
 	return i <= VMAC_DRIVER_NAME_MAX;
 }
 
+/* s is UTF-8 (what JSON carries): a name or version that is not would
+ * make the description, the status and the versions' list leave the whole
+ * driver out (found by tests/fuzz/fuzz_manifest.c). */
+static int utf8_text(const char *s)
+{
+	json_t *j = json_string(s);
+	json_decref(j);
+	return j != NULL;
+}
+
 static const char *const CHANNELS_TEXT = "do0..do6, di0..di7, ai0, ai1, pwm, encoder";
 
 static int parse_channel(const char *s, struct io *io)
@@ -196,7 +206,10 @@ int drv_check_value(lua_State *L, int s, char *why, size_t len)
 			lua_pop(L, 1);
 		}
 		if (!found) {
-			snprintf(why, len, "'%s' is not one of the allowed values", lua_tostring(L, -2));
+			snprintf(why, len, "'%s' is not one of the allowed values",
+			         lua_isstring(L, -2)    ? lua_tostring(L, -2)
+			         : lua_isboolean(L, -2) ? (lua_toboolean(L, -2) ? "true" : "false")
+			                                : luaL_typename(L, -2));
 			lua_pop(L, 1);
 			return -1;
 		}
@@ -439,12 +452,12 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 	int t = lua_gettop(L), params;
 	double level;
 
-	if (opt_string(L, t, "name", d->name, sizeof(d->name)) || !d->name[0])
-		BAD("name (the driver's name, a string) is required");
+	if (opt_string(L, t, "name", d->name, sizeof(d->name)) || !d->name[0] || !utf8_text(d->name))
+		BAD("name (the driver's name, a string of UTF-8 text) is required");
 	if (lim->expect_name && strcmp(d->name, lim->expect_name) != 0)
 		BAD("name is '%s' but the board announced driver '%s'", d->name, lim->expect_name);
-	if (opt_string(L, t, "version", d->version, sizeof(d->version)) || !d->version[0])
-		BAD("version (a string of at most %d bytes) is required", VMAC_DRIVER_VERSION_MAX);
+	if (opt_string(L, t, "version", d->version, sizeof(d->version)) || !d->version[0] || !utf8_text(d->version))
+		BAD("version (a string of UTF-8 text, at most %d bytes) is required", VMAC_DRIVER_VERSION_MAX);
 	if (opt_number(L, t, "level", lim->default_level, &level) || level != floor(level) || level < 0 ||
 	    level > lim->max_level)
 		BAD("level must be a whole number 0..%u (the host's max_level)", lim->max_level);

@@ -1,7 +1,8 @@
 /* Host configuration: defaults, Lua config file, key=value overrides. The
  * config file runs in a Lua state of its own, all of it inside one
- * protected call (lua_cpcall) with an instruction limit, so a broken or
- * endless file is an error with its reason, never a panic or a hang. */
+ * protected call (lua_cpcall) with an instruction limit and a memory cap,
+ * so a broken, endless or greedy file is an error with its reason, never a
+ * panic, a hang or the machine's memory. */
 #include "config.h"
 
 #include "../common/addr.h"
@@ -226,6 +227,30 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
 }
 
 #define CONFIG_INSTRUCTIONS 10000000 /* a settings file needs a few thousand */
+#define CONFIG_MEMORY (16u << 20)    /* bytes of the file's Lua state; a settings file needs a few KiB */
+
+/* The state's allocator: refuses to grow past CONFIG_MEMORY (LuaJIT then
+ * raises "not enough memory" inside the protected call). ud: the bytes in
+ * use. Without it `s = s .. s` forty times took all the memory there was
+ * (found by tests/fuzz/fuzz_config.c). */
+static void *config_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
+{
+	size_t *used = ud;
+	void *p;
+	if (!ptr)
+		osize = 0;
+	if (nsize == 0) {
+		free(ptr);
+		*used -= osize;
+		return NULL;
+	}
+	if (nsize > osize && *used - osize + nsize > CONFIG_MEMORY)
+		return NULL;
+	p = realloc(ptr, nsize);
+	if (p)
+		*used = *used - osize + nsize;
+	return p;
+}
 
 static void config_too_long(lua_State *L, lua_Debug *ar)
 {
@@ -246,8 +271,10 @@ struct config_load {
 static int config_load_protected(lua_State *L)
 {
 	struct config_load *a = lua_touserdata(L, 1);
-	/* The file runs with an empty environment: plain assignments only. */
-	if (luaL_loadfile(L, a->path) != 0)
+	/* The file runs with an empty environment: plain assignments only.
+	 * Text only: LuaJIT's bytecode loader trusts its input, and a damaged
+	 * bytecode file would crash the host (found by tests/fuzz/fuzz_config.c). */
+	if (luaL_loadfilex(L, a->path, "t") != 0)
 		return lua_error(L);
 	lua_newtable(L);
 	lua_pushvalue(L, -1);
@@ -262,15 +289,19 @@ static int config_load_protected(lua_State *L)
 
 int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
 {
-	lua_State *L = luaL_newstate();
+	size_t used = 0;
+	lua_State *L = lua_newstate(config_alloc, &used);
 	struct config_load a = {c, path, err, errlen, -1};
+	int rc;
 
 	if (!L) {
 		snprintf(err, errlen, "%s: cannot create Lua state", path);
 		return -1;
 	}
-	if (lua_cpcall(L, config_load_protected, &a) != 0) {
-		const char *msg = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "error object is not a string";
+	if ((rc = lua_cpcall(L, config_load_protected, &a)) != 0) {
+		const char *msg = rc == LUA_ERRMEM ? "the file needs more than 16 MiB (settings are plain assignments)"
+		                  : lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1)
+		                                                   : "error object is not a string";
 		size_t n = strlen(path);
 		if (strncmp(msg, path, n) == 0)
 			snprintf(err, errlen, "%s", msg);

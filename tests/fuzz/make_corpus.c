@@ -2,11 +2,11 @@
  * session inputs (fuzz_session.h) that register, drive and lose the watchdog.
  * Run once after a wire-format change:
  *   cc -std=c99 tests/fuzz/make_corpus.c core/proto/proto.c -o /tmp/make_corpus
- *   /tmp/make_corpus tests/fuzz/corpus
+ *   /tmp/make_corpus tests/fuzz/corpus-proto
  * Fuzz (new finds go to the first directory, not the committed seeds):
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined tests/fuzz/fuzz_proto.c \
  *     core/proto/proto.c firmware/board.c -o /tmp/fuzz_proto
- *   mkdir -p /tmp/fuzz_work && /tmp/fuzz_proto -max_total_time=30 /tmp/fuzz_work tests/fuzz/corpus */
+ *   mkdir -p /tmp/fuzz_work && /tmp/fuzz_proto -max_total_time=30 /tmp/fuzz_work tests/fuzz/corpus-proto */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

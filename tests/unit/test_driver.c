@@ -187,6 +187,10 @@ START_TEST(manifest_errors_name_the_field)
 	load_fails("return { name = 'other', version = '1', io = {}, tick = function() end }\n",
 	           "board announced driver 't'");
 	load_fails("return { name = 't', io = {}, tick = function() end }\n", "version");
+	/* Not UTF-8: JSON could not carry it, and the status and the manifest
+	 * left the whole driver out (found by tests/fuzz/fuzz_manifest.c). */
+	load_fails("return { name = 't', version = '1.\\138', io = {}, tick = function() end }\n",
+	           "version (a string of UTF-8 text");
 	load_fails("return { name = 't', version = '1', tick = function() end }\n", "io must be a table");
 	load_fails("return { name = 't', version = '1', io = {} }\n", "tick must be a function");
 	load_fails("return { name = 't', version = '1', level = 11, io = {}, tick = function() end }\n",
@@ -443,6 +447,77 @@ START_TEST(input_and_host_hooks)
 }
 END_TEST
 
+/* The value of param name now. */
+static struct vmac_value param_value(struct vmac_driver *d, const char *name)
+{
+	struct vmac_variable p;
+	int i;
+	for (i = 0; i < vmac_driver_nparams(d); i++) {
+		vmac_driver_param(d, i, &p);
+		if (strcmp(p.name, name) == 0)
+			return p.value;
+	}
+	ck_abort_msg("no param %s", name);
+	return p.value;
+}
+
+/* Operator input to params: a value of another type than the param's is
+ * refused (as restoring a persisted one is), a refusal by the driver leaves
+ * the param as it was, and a refusal's message never shows a missing text.
+ * All three found by tests/fuzz/fuzz_values.c. */
+START_TEST(input_to_params_checks_type_and_refusals_change_nothing)
+{
+	struct vmac_driver *d =
+	    load_ok("return { name = 't', version = '1', io = {},\n"
+	            "  params = { speed = { default = 10, min = 0, max = 100 }, mode = { default = 'eco' },\n"
+	            "             step = { default = 1, values = { 1, 2 } }, on = { default = false } },\n"
+	            "  variables = { pick = { set = true, values = { 'a', 'b' } } },\n"
+	            "  tick = function() end,\n"
+	            "  input = function(dev, name, value)\n"
+	            "    if value == 13 or value == 'never' then return nil, 'not that one' end\n"
+	            "    return true\n"
+	            "  end }\n");
+	struct vmac_value v;
+	char reply[200], err[VMAC_DRIVER_ERR_MAX] = "";
+	vmac_driver_add_board(d, 0, "b0");
+	memset(&v, 0, sizeof(v));
+	v.type = VMAC_VALUE_STRING;
+	snprintf(v.str, sizeof(v.str), "fast");
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_VALUE);
+	ck_assert_msg(strstr(reply, "expected a number, got a string") != NULL, "type refusal: %s", reply);
+	v.type = VMAC_VALUE_NONE; /* JSON null: true, no number either */
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_VALUE);
+	v.type = VMAC_VALUE_NUMBER;
+	v.number = 3;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "mode", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_VALUE);
+	ck_assert_msg(param_value(d, "speed").number == 10 && param_value(d, "mode").type == VMAC_VALUE_STRING,
+	              "a refused value of another type was set");
+
+	v.number = 13; /* in range, refused by the driver */
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_BY_DRIVER);
+	ck_assert_msg(param_value(d, "speed").number == 10, "the driver refused 13, yet speed is %g",
+	              param_value(d, "speed").number);
+	v.number = 42;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "speed", &v, reply, sizeof(reply), err, sizeof(err)), 0);
+	ck_assert_msg(param_value(d, "speed").number == 42, "speed taken but not set");
+
+	v.type = VMAC_VALUE_BOOL;
+	v.number = 1;
+	ck_assert_int_eq(vmac_driver_input(d, 0, "on", &v, reply, sizeof(reply), err, sizeof(err)), 0);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "step", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_VALUE);
+	ck_assert_int_eq(vmac_driver_input(d, 0, "pick", &v, reply, sizeof(reply), err, sizeof(err)),
+	                 VMAC_REFUSED_VALUE);
+	ck_assert_msg(strstr(reply, "'true' is not one of the allowed values") != NULL,
+	              "a boolean refused by a list of values: %s", reply);
+	vmac_driver_free(d);
+}
+END_TEST
+
 START_TEST(sandbox_bounds)
 {
 	static const char *const refused[] = {"string.format = nil",
@@ -610,6 +685,7 @@ int main(void)
 	tcase_add_test(tc, two_boards_one_machine);
 	tcase_add_test(tc, variables_publish_by_their_rules);
 	tcase_add_test(tc, input_and_host_hooks);
+	tcase_add_test(tc, input_to_params_checks_type_and_refusals_change_nothing);
 	tcase_add_test(tc, sandbox_bounds);
 	tcase_add_test(tc, sandbox_is_exactly_the_allow_list);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);

@@ -1,0 +1,1 @@
+bus = function() end

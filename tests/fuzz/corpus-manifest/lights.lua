@@ -1,0 +1,98 @@
+-- Lights: the kitchen and dining lights, the TV and the garbage disposal on
+-- relays. The wall switches are toggle switches: every change of a switch's
+-- position flips its light (switch 1: kitchen, switch 2: dining). An
+-- operator may set any of the four from the UI or the API; the state is
+-- published. A hot reload keeps every relay as it was. Board I/O:
+-- docs/BOARD.md, "Lights".
+
+local driver = {
+	name = "lights",
+	version = "1.1.0",
+	level = 4, -- 16 ms with 1 ms slots: a switch feels instant
+	description = "kitchen and dining lights, TV and disposal relays, two wall switches",
+	io = {
+		switch1 = "di0",
+		switch2 = "di1",
+		kitchen = "do0",
+		dining = "do1",
+		tv = "do2",
+		disposal = "do3",
+	},
+	variables = {
+		kitchen = { set = true, label = "Kitchen light" },
+		dining = { set = true, label = "Dining light" },
+		tv = { set = true, label = "TV" },
+		disposal = { set = true, label = "Garbage disposal" },
+	},
+	commands = {
+		all_off = { label = "All off" },
+	},
+	ui = { title = "Lights", icon = "light", plots = { { "kitchen", "dining", "tv", "disposal" } } },
+}
+
+local RELAYS = { "kitchen", "dining", "tv", "disposal" }
+local SWITCHES = { "switch1", "switch2" }
+-- The state, in dev.state for a hot reload: relay name -> on, and switch
+-- name -> its position at the previous tick (nil before the first).
+local relays = { kitchen = false, dining = false, tv = false, disposal = false }
+local switches = {}
+
+local function show(dev)
+	for _, r in ipairs(RELAYS) do
+		dev.vars[r] = relays[r]
+	end
+end
+
+function driver.attach(dev)
+	for _, r in ipairs(RELAYS) do
+		relays[r] = false
+	end
+	dev.state.relays, dev.state.switches = relays, switches
+	show(dev)
+end
+
+function driver.tick(dev, inputs)
+	if switches.switch1 ~= nil and inputs.switch1 ~= switches.switch1 then
+		relays.kitchen = not relays.kitchen
+	end
+	if switches.switch2 ~= nil and inputs.switch2 ~= switches.switch2 then
+		relays.dining = not relays.dining
+	end
+	switches.switch1, switches.switch2 = inputs.switch1, inputs.switch2
+	show(dev)
+	for _, r in ipairs(RELAYS) do
+		dev.out[r] = relays[r]
+	end
+end
+
+function driver.input(dev, name, value)
+	if name == "all_off" then
+		for _, r in ipairs(RELAYS) do
+			relays[r] = false
+		end
+	else
+		relays[name] = value == true
+	end
+	show(dev)
+	return true
+end
+
+-- Hot reload (docs/DRIVERS.md): the relays as the old version had them
+-- (from dev.out, its outputs, when it kept no dev.state: 1.0.0), and the
+-- switch positions, so a flip between the two versions' ticks still counts.
+function driver.migrate(dev, old)
+	local old_relays = type(old.relays) == "table" and old.relays or dev.out
+	for _, r in ipairs(RELAYS) do
+		relays[r] = old_relays[r] == true
+	end
+	if type(old.switches) == "table" then
+		for _, name in ipairs(SWITCHES) do
+			if type(old.switches[name]) == "boolean" then
+				switches[name] = old.switches[name]
+			end
+		end
+	end
+	show(dev)
+end
+
+return driver

@@ -1,0 +1,1 @@
+return { name = "m", version = "1", tick = function() end }

@@ -1,0 +1,274 @@
+/* libFuzzer harness for loading a driver (core/driver/load.c) and checking
+ * its manifest (core/driver/manifest.c): the input is a driver's source,
+ * loaded with vmac_driver_load_source into a sandboxed state as the host
+ * loads an upload. Leading lines "--!KEY=VALUE" (Lua comments) become the
+ * host's driver.NAME.KEY settings (memory_kib, instructions, budget_us,
+ * param.NAME; --!name=X: the board announced driver X). A refused load
+ * must say why; an accepted one must have a manifest inside every bound
+ * of driver.h and a description that is a JSON object as the API decodes
+ * it (http_manifest_json, core/api/api_request.c), and then runs as a
+ * machine: its boards added, attach, two ticks, and operator input of each
+ * declared name, with outputs only on declared channels.
+ * Seeds: tests/fuzz/corpus-manifest/ (the shipped drivers among them). */
+#include <jansson.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../core/api/api_request.h"
+#include "../../core/driver/driver.h"
+#include "fuzz.h"
+
+#ifndef FUZZ_STDLIB_DIR
+#define FUZZ_STDLIB_DIR "stdlib"
+#endif
+#ifndef FUZZ_CYCLES_DIR
+#define FUZZ_CYCLES_DIR "scripts/cycles"
+#endif
+
+#define SETTINGS_MAX 8
+
+static int manifest_name_ok(const char *s)
+{
+	size_t n = strlen(s);
+	return n > 0 && n <= VMAC_DRIVER_NAME_MAX && s[0] >= 'a' && s[0] <= 'z' &&
+	       strspn(s, "abcdefghijklmnopqrstuvwxyz0123456789_") == n;
+}
+
+static int value_ok(const struct vmac_value *v)
+{
+	return v->type <= VMAC_VALUE_STRING && memchr(v->str, 0, sizeof(v->str)) != NULL &&
+	       (v->type != VMAC_VALUE_BOOL || v->number == 0 || v->number == 1);
+}
+
+/* What each board may have on: the bits of its declared digital outputs,
+ * and whether it has a pwm output. */
+struct board_outputs {
+	uint32_t minor;
+	uint8_t digital;
+	int pwm;
+};
+
+static void check_loaded(struct vmac_driver *d, struct board_outputs *boards, int *nboards)
+{
+	json_t *desc = http_manifest_json(vmac_driver_describe(d)); /* as GET /api/drivers/NAME/manifest has it */
+	struct vmac_variable p;
+	int i, j;
+	if (!json_is_object(desc) || !json_is_string(json_object_get(desc, "name")) ||
+	    !json_is_string(json_object_get(desc, "version")) || !json_is_integer(json_object_get(desc, "level")))
+		abort();
+	json_decref(desc);
+	if (!vmac_driver_name(d)[0] || strlen(vmac_driver_name(d)) > VMAC_NAME_MAX || !vmac_driver_version(d)[0] ||
+	    strlen(vmac_driver_version(d)) > VMAC_DRIVER_VERSION_MAX || vmac_driver_level(d) > 10)
+		abort();
+	if (vmac_driver_nio(d) < 0 || vmac_driver_nio(d) > VMAC_DRIVER_MAX_IO || vmac_driver_nvars(d) < 0 ||
+	    vmac_driver_nvars(d) > VMAC_DRIVER_MAX_VARS || vmac_driver_nparams(d) < 0 ||
+	    vmac_driver_nparams(d) > VMAC_DRIVER_MAX_PARAMS)
+		abort();
+	*nboards = 1;
+	boards[0].minor = 0;
+	for (i = 0; i < vmac_driver_nio(d); i++) {
+		struct vmac_driver_io io;
+		struct board_outputs *b = NULL;
+		vmac_driver_io_info(d, i, &io);
+		if (!manifest_name_ok(io.name) || io.kind > VMAC_IO_PWM)
+			abort();
+		if ((io.kind == VMAC_IO_DI && io.channel >= VMAC_DIGITAL_INPUTS) ||
+		    (io.kind == VMAC_IO_DO && io.channel >= VMAC_DIGITAL_OUTPUTS) ||
+		    (io.kind == VMAC_IO_AI && io.channel >= VMAC_ANALOG_INPUTS))
+			abort();
+		if (i > 0) {
+			struct vmac_driver_io prev;
+			vmac_driver_io_info(d, i - 1, &prev);
+			if (strcmp(prev.name, io.name) >= 0)
+				abort(); /* in name order, each name once */
+		}
+		for (j = 0; j < *nboards; j++)
+			if (boards[j].minor == (io.has_minor ? io.minor : 0))
+				b = &boards[j];
+		if (!b && *nboards < VMAC_DRIVER_MAX_BOARDS) {
+			b = &boards[(*nboards)++];
+			b->minor = io.minor;
+		}
+		if (b && io.kind == VMAC_IO_DO)
+			b->digital |= (uint8_t)(1u << io.channel);
+		if (b && io.kind == VMAC_IO_PWM)
+			b->pwm = 1;
+	}
+	for (i = 0; i < vmac_driver_nvars(d); i++)
+		if (!manifest_name_ok(vmac_driver_variable(d, i)->name))
+			abort();
+	for (i = 0; i < vmac_driver_nparams(d); i++) {
+		if (vmac_driver_param(d, i, &p) != 0 || !manifest_name_ok(p.name) || !value_ok(&p.value) ||
+		    !memchr(p.unit, 0, sizeof(p.unit)) || vmac_driver_param_persists(d, p.name) < 0)
+			abort();
+	}
+	if (vmac_driver_param(d, vmac_driver_nparams(d), &p) != -1)
+		abort();
+}
+
+static int tick(struct vmac_driver *d, const struct board_outputs *boards, int nboards, double time_s, uint32_t seed)
+{
+	struct vmac_inputs in[VMAC_DRIVER_MAX_BOARDS];
+	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS];
+	const struct vmac_inputs *ins[VMAC_DRIVER_MAX_BOARDS];
+	struct vmac_outputs *outs[VMAC_DRIVER_MAX_BOARDS];
+	char err[VMAC_DRIVER_ERR_MAX];
+	int i, rc;
+	for (i = 0; i < nboards; i++) {
+		memset(&in[i], 0, sizeof(in[i]));
+		in[i].digital = (uint8_t)(seed >> i);
+		in[i].analog[0] = (uint16_t)(seed % 4096);
+		in[i].analog[1] = (uint16_t)(seed / 7 % 4096);
+		in[i].encoder = (int32_t)seed;
+		ins[i] = &in[i];
+		outs[i] = &out[i];
+	}
+	err[0] = 0;
+	rc = vmac_driver_tick(d, time_s, ins, outs, err, sizeof(err));
+	for (i = 0; i < nboards; i++) {
+		if (out[i].digital & ~boards[i].digital)
+			abort(); /* an output the manifest does not declare */
+		if (out[i].pwm < -VMAC_PWM_MAX || out[i].pwm > VMAC_PWM_MAX || (!boards[i].pwm && out[i].pwm))
+			abort();
+		if (rc != 0 && (out[i].digital || out[i].pwm))
+			abort(); /* a failed tick drives nothing */
+	}
+	if (rc != 0 && (rc != -1 || !err[0]))
+		abort();
+	for (i = 0; rc == 0 && i < vmac_driver_nvars(d); i++)
+		if (!value_ok(&vmac_driver_variable(d, i)->value))
+			abort();
+	return rc;
+}
+
+/* Operator input of name with value: 0, a refusal with its reason, or -1
+ * (the driver failed: it is not called again). */
+static int input(struct vmac_driver *d, const char *name, const struct vmac_value *v)
+{
+	char reply[640], err[VMAC_DRIVER_ERR_MAX]; /* as the bus thread gives them (VMAC_EVENT_TEXT) */
+	int rc;
+	err[0] = 0;
+	rc = vmac_driver_input(d, 2.0, name, v, reply, sizeof(reply), err, sizeof(err));
+	if (rc < -1 || rc > VMAC_REFUSED_NOT_PERSIST || (rc > 0 && !reply[0] && rc != VMAC_REFUSED_BY_DRIVER) ||
+	    (rc == -1 && !err[0]) || !memchr(reply, 0, sizeof(reply)))
+		abort();
+	return rc;
+}
+
+/* The machine runs: its boards, attach, a tick, input of every declared
+ * name, another tick. Stops at the first failure, as the host does. */
+static void run(struct vmac_driver *d, uint32_t seed)
+{
+	struct board_outputs boards[VMAC_DRIVER_MAX_BOARDS];
+	struct vmac_value v;
+	json_t *desc, *commands;
+	const char *name;
+	json_t *decl;
+	char err[VMAC_DRIVER_ERR_MAX];
+	int i, nboards, failed = 0;
+	memset(boards, 0, sizeof(boards));
+	check_loaded(d, boards, &nboards);
+	for (i = 0; i < nboards; i++) {
+		char board[16];
+		snprintf(board, sizeof(board), "b%d", i);
+		if (vmac_driver_add_board(d, boards[i].minor, board) != 0)
+			abort();
+	}
+	if (vmac_driver_add_board(d, boards[0].minor, "again") != -1)
+		abort();
+	err[0] = 0;
+	if (vmac_driver_attach(d, 1.0, err, sizeof(err)) != 0) {
+		if (!err[0])
+			abort();
+		return;
+	}
+	if (tick(d, boards, nboards, 1.0, seed) != 0)
+		return;
+	memset(&v, 0, sizeof(v));
+	for (i = 0; i < vmac_driver_nvars(d) && !failed; i++) {
+		v.type = VMAC_VALUE_NUMBER;
+		v.number = seed % 100;
+		failed = input(d, vmac_driver_variable(d, i)->name, &v) < 0;
+	}
+	for (i = 0; i < vmac_driver_nparams(d) && !failed; i++) {
+		struct vmac_variable p;
+		vmac_driver_param(d, i, &p);
+		failed = input(d, p.name, &p.value) < 0;
+	}
+	desc = http_manifest_json(vmac_driver_describe(d));
+	commands = json_object_get(desc, "commands");
+	v.type = VMAC_VALUE_NONE;
+	json_object_foreach(commands, name, decl)
+	{
+		if (!failed)
+			failed = input(d, name, &v) < 0;
+	}
+	json_decref(desc);
+	if (!failed && input(d, "no_such_name", &v) != VMAC_REFUSED_NAME)
+		abort();
+	if (!failed)
+		tick(d, boards, nboards, 3.0, seed * 2654435761u);
+	vmac_driver_detach(d, "fuzz");
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+	struct vmac_driver_setting settings[SETTINGS_MAX];
+	struct vmac_driver_limits limits;
+	struct vmac_driver *d = NULL;
+	char err[VMAC_DRIVER_ERR_MAX], expect[VMAC_NAME_MAX + 1] = "";
+	const char *src = (const char *)data, *end = src + size;
+	uint32_t seed = 2166136261u;
+	int nsettings = 0, rc;
+	size_t i;
+
+	if (size > 65536)
+		return 0;
+	/* --!KEY=VALUE lines first: the host's settings of this driver. */
+	while (end - src > 3 && memcmp(src, "--!", 3) == 0) {
+		const char *nl = memchr(src, '\n', (size_t)(end - src)), *eq;
+		size_t n = (size_t)((nl ? nl : end) - src - 3);
+		char line[128];
+		snprintf(line, sizeof(line), "%.*s", (int)(n < sizeof(line) ? n : sizeof(line) - 1), src + 3);
+		eq = strchr(line, '=');
+		if (eq && strncmp(line, "name=", 5) == 0) {
+			snprintf(expect, sizeof(expect), "%s", eq + 1);
+		} else if (eq && nsettings < SETTINGS_MAX) {
+			struct vmac_driver_setting *s = &settings[nsettings++];
+			snprintf(s->key, sizeof(s->key), "%.*s", (int)(eq - line), line);
+			snprintf(s->value, sizeof(s->value), "%s", eq + 1);
+		}
+		if (!nl)
+			break;
+		src = nl + 1;
+	}
+	for (i = 0; i < size; i++)
+		seed = (seed ^ data[i]) * 16777619u;
+
+	memset(&limits, 0, sizeof(limits));
+	limits.memory_bytes = 1 << 20;
+	limits.instructions = 200000;
+	limits.budget_us = 0; /* instructions bound a run; wall clock would make runs differ */
+	limits.max_level = 10;
+	limits.default_level = 4;
+	limits.stdlib_dir = FUZZ_STDLIB_DIR;
+	limits.cycles_dir = FUZZ_CYCLES_DIR;
+	limits.expect_name = expect[0] ? expect : NULL;
+	limits.settings = settings;
+	limits.nsettings = nsettings;
+	err[0] = 0;
+	/* The whole input (settings lines too: they are comments) is the source. */
+	rc = vmac_driver_load_source("fuzz.lua", (const char *)data, size, &limits, &d, err, sizeof(err));
+	if (rc != 0) {
+		if (rc > 0 || d || !err[0] || !memchr(err, 0, sizeof(err)))
+			abort(); /* refused without a reason, or with a driver anyway */
+		return 0;
+	}
+	if (!d)
+		abort();
+	run(d, seed);
+	vmac_driver_free(d);
+	return 0;
+}
