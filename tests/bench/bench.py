@@ -25,9 +25,13 @@ same run on the same machine, reported as ratios.
             tick next to bare_loop, capacity at 1 kHz and 100 Hz next to the
             thesis's Table 3 (misses the host caused told apart from the
             boards'), and eth-cyclic's tick lateness next to cyclictest
+  qemu      the firmware on a Cortex-M3 in QEMU (tests/bench/qemu_board.py;
+            needs root, qemu-system-arm and make firmware, else SKIPPED): its
+            reply time next to vmac-board's on the same raw-Ethernet bridge,
+            and the highest rate one QEMU board holds with zero misses
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -371,7 +375,7 @@ def main():
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu")
     p.add_argument("--max-boards", type=int, default=None,
                    help="most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)")
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
@@ -425,6 +429,11 @@ def main():
     if "fieldbus" in only:
         print("fieldbus: protocol version 2, %s" % ", ".join(FIELDBUS_MODES), flush=True)
         results["fieldbus"] = fieldbus(args)
+
+    if "qemu" in only:
+        from qemu_board import qemu
+        print("qemu: the firmware in QEMU, reply time and highest rate, %d s windows" % args.seconds, flush=True)
+        results["qemu"] = qemu(args)
 
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
@@ -493,6 +502,9 @@ def report(r):
     if fb:
         from fieldbus import report_fieldbus
         report_fieldbus(fb)
+    if r.get("qemu"):
+        from qemu_board import report_qemu
+        report_qemu(r["qemu"])
 
 
 if __name__ == "__main__":
