@@ -104,6 +104,8 @@ int vmac_transport_listen(const struct vmac_bus_spec *spec, char *err, size_t er
 
 void vmac_transport_close(struct vmac_transport *t)
 {
+	if (t->kind == VMAC_TRANSPORT_ETH)
+		vmac_eth_close(t);
 	if (t->fd >= 0)
 		close(t->fd);
 	t->fd = -1;

@@ -54,6 +54,10 @@ struct vmac_transport {
 	int64_t rt_minus_mono_ns; /* realtime - monotonic, to convert kernel stamps */
 	int ifindex;              /* Ethernet */
 	uint8_t mac[6];           /* Ethernet: the interface's MAC */
+	uint8_t *rx_ring;         /* Ethernet: the receive ring the kernel writes frames into (PACKET_RX_RING,
+	                           * mmap'd; unmapped by vmac_transport_close), NULL when frames are read with
+	                           * recvmmsg instead */
+	uint32_t rx_next;         /* Ethernet: the ring slot to read next, where the last receive stopped */
 };
 
 /* The EtherType of vmac frames on raw Ethernet (IEEE local experimental). */
@@ -95,7 +99,10 @@ int vmac_transport_send(struct vmac_transport *t, struct vmac_packet *pkts, int 
  * waits) or a negative errno. Ethernet skips our own frames looped back,
  * frames of another EtherType and frames the kernel took a VLAN tag off, and
  * trims the zero padding of a short frame to the length its header declares
- * (anything else, garbage included, comes as it was, for the decoder). */
+ * (anything else, garbage included, comes as it was, for the decoder); it
+ * reads from a ring the kernel writes frames into, without a system call,
+ * where the kernel allows one (else with recvmmsg), and a frame that does
+ * not fit in pkts waits there for the next call. */
 int vmac_transport_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max);
 
 /* Resample the realtime/monotonic offset used to convert kernel stamps. */
@@ -122,6 +129,7 @@ int vmac_eth_open_host(struct vmac_transport *t, const struct vmac_bus_spec *spe
 int vmac_eth_open_board(struct vmac_transport *t, const struct vmac_bus_spec *spec, char *err, size_t errlen);
 int vmac_eth_send(struct vmac_transport *t, struct vmac_packet *pkts, int n);
 int vmac_eth_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max);
+void vmac_eth_close(struct vmac_transport *t);
 
 /* Batch size of one sendmmsg or recvmmsg. */
 #define VMAC_TRANSPORT_BATCH 64

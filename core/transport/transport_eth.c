@@ -1,7 +1,9 @@
 /* Raw-Ethernet transport: vmac frames as the payload of Ethernet frames of
  * EtherType 0x88B5 (AF_PACKET), discovery and cyclic frames broadcast, the
  * rest unicast MAC to MAC. Pads short payloads to the 46-byte minimum and
- * trims them back by the length the vmac header declares. Needs
+ * trims them back by the length the vmac header declares. Receives from a
+ * ring the kernel writes frames into (PACKET_MMAP), so that a batch costs no
+ * system call, or with recvmmsg where the kernel refuses the ring. Needs
  * CAP_NET_RAW. Reached through transport.c. */
 #include "transport.h"
 
@@ -11,15 +13,34 @@
 #include <linux/if_ether.h>
 #include <linux/if_packet.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/ioctl.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #define BATCH_MAX VMAC_TRANSPORT_BATCH
 #define ETH_PAYLOAD_MIN (ETH_ZLEN - ETH_HLEN) /* 46 */
 /* recvmmsg calls one vmac_eth_recv makes at most, so a flood of frames it
- * skips (other EtherTypes, our own sends) cannot hold it for long. */
+ * skips (other EtherTypes, our own sends) cannot hold it for long; from the
+ * ring, as many frames as those calls would read. */
 #define RECV_ROUNDS_MAX 4
+#define RING_LOOK_MAX (RECV_ROUNDS_MAX * BATCH_MAX)
+
+/* The receive ring: TPACKET_V2, one fixed slot per frame, which the kernel
+ * hands over alone (TP_STATUS_USER) and wakes the reader for as soon as the
+ * frame is in. Not TPACKET_V3: it hands over whole blocks of frames, only
+ * when a block is full or its timer (1 ms at the least) retires it, so a
+ * reply would wait up to a millisecond to be seen: a whole reply window at
+ * 1 kHz. A slot holds the slot header, the sender's sockaddr_ll and, from
+ * offset 66, up to 1,982 bytes of the frame: a whole Ethernet frame of 1,514
+ * bytes (a CYCLIC frame can be that long), and of a longer one the kernel
+ * keeps the start and says how long it was. 4,096 slots, 8 MiB: a burst of
+ * thousands of frames (a big bus announcing at once) waits without loss. */
+#define RING_FRAME_BYTES 2048u
+#define RING_BLOCK_BYTES (64u << 10) /* a multiple of every page size: slots never straddle a block */
+#define RING_FRAMES 4096u
+#define RING_BYTES ((size_t)RING_FRAMES * RING_FRAME_BYTES)
 
 static const uint8_t zero_padding[ETH_PAYLOAD_MIN];
 
@@ -35,9 +56,57 @@ static void set_ll(struct vmac_addr *a, int ifindex, const uint8_t mac[6])
 	a->len = sizeof(*sll);
 }
 
-static int close_fail(int fd, char *err, size_t errlen, const char *what)
+/* Set up the receive ring on fd (a socket not bound yet): t->rx_ring, or
+ * NULL when the kernel refuses it (said on stderr, once per process), and
+ * frames are read with recvmmsg. VMAC_ETH_RECVMMSG=1 in the environment
+ * asks for recvmmsg: the tests' way to keep that path tried. */
+static void ring_open(struct vmac_transport *t, int fd, const char *ifname)
+{
+	static int refusal_said;
+	struct tpacket_req req;
+	int version = TPACKET_V2;
+	const char *what = "PACKET_VERSION", *force = getenv("VMAC_ETH_RECVMMSG");
+	void *ring;
+
+	t->rx_ring = NULL;
+	t->rx_next = 0;
+	if (force && strcmp(force, "1") == 0)
+		return;
+	memset(&req, 0, sizeof(req));
+	req.tp_block_size = RING_BLOCK_BYTES;
+	req.tp_block_nr = (unsigned)(RING_BYTES / RING_BLOCK_BYTES);
+	req.tp_frame_size = RING_FRAME_BYTES;
+	req.tp_frame_nr = RING_FRAMES;
+	if (setsockopt(fd, SOL_PACKET, PACKET_VERSION, &version, sizeof(version)) == 0) {
+		what = "PACKET_RX_RING";
+		if (setsockopt(fd, SOL_PACKET, PACKET_RX_RING, &req, sizeof(req)) == 0) {
+			what = "mmap";
+			ring = mmap(NULL, RING_BYTES, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+			if (ring != MAP_FAILED) {
+				t->rx_ring = ring;
+				return;
+			}
+		}
+	}
+	if (!refusal_said) {
+		fprintf(stderr, "vmac: raw Ethernet on %s: no receive ring (%s: %s); receiving with recvmmsg\n", ifname,
+		        what, strerror(errno));
+		refusal_said = 1;
+	}
+}
+
+void vmac_eth_close(struct vmac_transport *t)
+{
+	if (t->rx_ring)
+		munmap(t->rx_ring, RING_BYTES);
+	t->rx_ring = NULL;
+}
+
+/* A failed open: what failed into err, the ring and the socket gone. */
+static int close_fail(struct vmac_transport *t, int fd, char *err, size_t errlen, const char *what)
 {
 	int r = vmac_transport_fail(err, errlen, what);
+	vmac_eth_close(t);
 	close(fd);
 	return r;
 }
@@ -60,7 +129,8 @@ static int open_eth(struct vmac_transport *t, const struct vmac_bus_spec *spec, 
 		snprintf(err, errlen, "no network interface '%s'", spec->ifname);
 		return -ENODEV;
 	}
-	fd = socket(AF_PACKET, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, htons(VMAC_ETHERTYPE));
+	/* Protocol 0: nothing arrives until the bind names our EtherType. */
+	fd = socket(AF_PACKET, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 	if (fd < 0) {
 		int e = errno;
 		if (e == EPERM || e == EACCES) {
@@ -76,7 +146,7 @@ static int open_eth(struct vmac_transport *t, const struct vmac_bus_spec *spec, 
 	memset(&ifr, 0, sizeof(ifr));
 	memcpy(ifr.ifr_name, spec->ifname, strnlen(spec->ifname, IF_NAMESIZE - 1));
 	if (ioctl(fd, SIOCGIFHWADDR, &ifr) < 0)
-		return close_fail(fd, err, errlen, "reading the interface's MAC address");
+		return close_fail(t, fd, err, errlen, "reading the interface's MAC address");
 	if (ifr.ifr_hwaddr.sa_family != ARPHRD_ETHER && ifr.ifr_hwaddr.sa_family != ARPHRD_LOOPBACK) {
 		snprintf(err, errlen, "network interface '%s' is not Ethernet (link type %u)", spec->ifname,
 		         (unsigned)ifr.ifr_hwaddr.sa_family);
@@ -86,26 +156,31 @@ static int open_eth(struct vmac_transport *t, const struct vmac_bus_spec *spec, 
 	memcpy(t->mac, ifr.ifr_hwaddr.sa_data, 6);
 	t->ifindex = (int)ifindex;
 
+	/* As for UDP: a larger buffer rides out a burst without losing the
+	 * replies we wait for (the ring, when there is one, has its own). */
+	setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
+	/* Stamps on arrival, for the ring's headers as for recvmmsg's. */
+	setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
+	/* Our own sends are skipped in vmac_eth_recv anyway; this spares the
+	 * copies where the kernel can (Linux 4.20 and later). */
+	setsockopt(fd, SOL_PACKET, PACKET_IGNORE_OUTGOING, &on, sizeof(on));
+	/* Before the bind: the socket receives nothing yet, so no frame can
+	 * wait in its queue beside the ring, where nobody would read it. */
+	ring_open(t, fd, spec->ifname);
+
 	memset(&sll, 0, sizeof(sll));
 	sll.sll_family = AF_PACKET;
 	sll.sll_protocol = htons(VMAC_ETHERTYPE);
 	sll.sll_ifindex = t->ifindex;
 	if (bind(fd, (struct sockaddr *)&sll, sizeof(sll)) < 0)
-		return close_fail(fd, err, errlen, "bind to the network interface");
-	/* As for UDP: a larger buffer rides out a burst without losing the
-	 * replies we wait for. */
-	setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
-	setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
-	/* Our own sends are skipped in vmac_eth_recv anyway; this spares the
-	 * copies where the kernel can (Linux 4.20 and later). */
-	setsockopt(fd, SOL_PACKET, PACKET_IGNORE_OUTGOING, &on, sizeof(on));
+		return close_fail(t, fd, err, errlen, "bind to the network interface");
 	if (promisc) {
 		struct packet_mreq mr;
 		memset(&mr, 0, sizeof(mr));
 		mr.mr_ifindex = t->ifindex;
 		mr.mr_type = PACKET_MR_PROMISC;
 		if (setsockopt(fd, SOL_PACKET, PACKET_ADD_MEMBERSHIP, &mr, sizeof(mr)) < 0)
-			return close_fail(fd, err, errlen, "promiscuous mode on the network interface");
+			return close_fail(t, fd, err, errlen, "promiscuous mode on the network interface");
 	}
 	set_ll(&t->local, t->ifindex, t->mac);
 	set_ll(&t->group, t->ifindex, broadcast);
@@ -197,6 +272,15 @@ static int was_vlan_tagged(const struct vmac_transport *t, const struct sockaddr
 	return from->sll_pkttype == PACKET_OTHERHOST && ((hdr[0] & 1) || memcmp(hdr, t->mac, 6) == 0);
 }
 
+/* Whether a received frame (len bytes with its Ethernet header hdr, from
+ * the sender the kernel names) is for us: not our own send looped back, from
+ * our interface, of our EtherType and not from a VLAN. */
+static int is_ours(const struct vmac_transport *t, const struct sockaddr_ll *from, const uint8_t *hdr, size_t len)
+{
+	return len >= ETH_HLEN && from->sll_pkttype != PACKET_OUTGOING && from->sll_ifindex == t->ifindex &&
+	       hdr[12] == (VMAC_ETHERTYPE >> 8) && hdr[13] == (VMAC_ETHERTYPE & 0xff) && !was_vlan_tagged(t, from, hdr);
+}
+
 /* Fill p from a received frame already in p->data (payload) and hdr (its
  * Ethernet header); payload_len is how much of the payload came. */
 static void take_frame(struct vmac_transport *t, struct vmac_packet *p, const uint8_t *hdr, size_t payload_len,
@@ -217,7 +301,61 @@ static void take_frame(struct vmac_transport *t, struct vmac_packet *p, const ui
 	memcpy(p->mac, hdr, 6);
 }
 
-int vmac_eth_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max)
+/* A frame the kernel left in the ring at frame (snap_len bytes of its
+ * wire_len, header included; from is its sockaddr_ll): into p when it is
+ * ours, with its stamp in CLOCK_MONOTONIC ns as vmac_transport_rx_stamp
+ * converts it (never later than *now_ns, which is read again when a frame
+ * seems to have come after it). Returns 1 when p was filled, 0 when the
+ * frame is skipped. */
+static int ring_take(struct vmac_transport *t, struct vmac_packet *p, const uint8_t *frame, size_t snap_len,
+                     size_t wire_len, const struct sockaddr_ll *from, uint32_t sec, uint32_t nsec, int64_t *now_ns)
+{
+	size_t payload;
+	int64_t mono;
+	if (!is_ours(t, from, frame, snap_len))
+		return 0;
+	payload = snap_len - ETH_HLEN;
+	if (payload > sizeof(p->data))
+		payload = sizeof(p->data);
+	memcpy(p->data, frame + ETH_HLEN, payload);
+	take_frame(t, p, frame, payload, wire_len > ETH_HLEN + payload);
+	mono = (int64_t)sec * 1000000000 + nsec - t->rt_minus_mono_ns;
+	if (mono > *now_ns)
+		*now_ns = vmac_now_ns();
+	p->rx_ns = mono <= *now_ns ? mono : *now_ns;
+	return 1;
+}
+
+/* Frames from the ring, in the order they came: each slot the kernel has
+ * handed over (TP_STATUS_USER) is read, given back (TP_STATUS_KERNEL) and
+ * passed; the first slot still the kernel's ends the call, and so does pkts
+ * being full, before the next slot is touched: that frame is the first of
+ * the next call. No system call. */
+static int ring_recv(struct vmac_transport *t, struct vmac_packet *pkts, int max)
+{
+	int filled = 0, looked;
+	int64_t now = 0; /* read when the first frame needs it */
+	for (looked = 0; filled < max && looked < RING_LOOK_MAX; looked++) {
+		uint8_t *slot = t->rx_ring + (size_t)t->rx_next * RING_FRAME_BYTES;
+		struct tpacket2_hdr *h = (struct tpacket2_hdr *)slot;
+		const struct sockaddr_ll *from =
+		    (const struct sockaddr_ll *)(slot + TPACKET_ALIGN(sizeof(struct tpacket2_hdr)));
+		/* Acquire: the frame's bytes are read only after its status. */
+		if (!(__atomic_load_n(&h->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER))
+			break;
+		if (h->tp_mac <= RING_FRAME_BYTES && h->tp_snaplen <= RING_FRAME_BYTES - h->tp_mac)
+			filled += ring_take(t, &pkts[filled], slot + h->tp_mac, h->tp_snaplen, h->tp_len, from,
+			                    h->tp_sec, h->tp_nsec, &now);
+		/* Release: the kernel may write the slot again only after we
+		 * have read it. */
+		__atomic_store_n(&h->tp_status, TP_STATUS_KERNEL, __ATOMIC_RELEASE);
+		t->rx_next = (t->rx_next + 1) % RING_FRAMES;
+	}
+	return filled;
+}
+
+/* Frames read with recvmmsg, where there is no ring. */
+static int mmsg_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max)
 {
 	struct mmsghdr msgs[BATCH_MAX];
 	struct iovec iov[BATCH_MAX][2]; /* header, payload */
@@ -258,9 +396,7 @@ int vmac_eth_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, in
 		for (i = 0; i < r; i++) {
 			struct vmac_packet *p = &pkts[filled];
 			size_t got = msgs[i].msg_len;
-			if (got < ETH_HLEN || from[i].sll_pkttype == PACKET_OUTGOING ||
-			    from[i].sll_ifindex != t->ifindex || hdr[i][12] != (VMAC_ETHERTYPE >> 8) ||
-			    hdr[i][13] != (VMAC_ETHERTYPE & 0xff) || was_vlan_tagged(t, &from[i], hdr[i]))
+			if (!is_ours(t, &from[i], hdr[i], got))
 				continue;
 			if (p != &pkts[base + i])
 				memcpy(p->data, pkts[base + i].data, got - ETH_HLEN);
@@ -272,4 +408,11 @@ int vmac_eth_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, in
 			break; /* the socket is drained */
 	}
 	return filled;
+}
+
+int vmac_eth_recv(struct vmac_transport *t, int fd, struct vmac_packet *pkts, int max)
+{
+	if (t->rx_ring && fd == t->fd)
+		return ring_recv(t, pkts, max);
+	return mmsg_recv(t, fd, pkts, max);
 }

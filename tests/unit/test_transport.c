@@ -3,10 +3,12 @@
  * MACs; UDP still carries a frame over loopback; raw Ethernet carries frames
  * both ways over a veth pair in a network namespace of its own (addresses,
  * destination MACs, padding trimmed, kernel stamps, other EtherTypes and our
- * own sends skipped, batches above one system call); and without
- * CAP_NET_RAW it says so in one line. The veth test needs root and network
- * namespaces: elsewhere it is SKIPPED loudly and its reason appended to
- * $VMAC_SKIP_FILE (make test lists it), or it fails when CI=true. */
+ * own sends skipped, batches above one system call, a burst of 500 read in
+ * order 64 at a time), once from the receive ring and once with recvmmsg
+ * (VMAC_ETH_RECVMMSG=1, what it falls back to); and without CAP_NET_RAW it
+ * says so in one line. The veth tests need root and network namespaces:
+ * elsewhere they are SKIPPED loudly and the reason appended to
+ * $VMAC_SKIP_FILE (make test lists it), or they fail when CI=true. */
 #include <arpa/inet.h>
 #include <check.h>
 #include <errno.h>
@@ -343,8 +345,101 @@ static void expect_fresh(const struct vmac_packet *p, const char *what)
 }
 
 #define BATCH_TEST 100 /* more than one sendmmsg/recvmmsg batch */
+#define BURST 500      /* replies in one burst: many receive calls' worth */
+#define BURST_CHUNKS 5 /* sends of the burst, with frames to skip between them */
 
-static void veth_round_trip(void)
+/* A burst of BURST replies from the board to the host, sent in chunks with
+ * frames the host must skip between them (another EtherType, a VLAN tag,
+ * the host's own broadcast), all in the host's receive queue before it
+ * reads: they come out in order, each with its kernel stamp, 64 per call
+ * (what does not fit in one call waits for the next), and then nothing. */
+static void burst_in_order(struct vmac_transport *host, struct vmac_transport *board)
+{
+	static struct vmac_packet out[BURST], in[BURST + VMAC_TRANSPORT_BATCH];
+	struct vmac_packet own;
+	struct pollfd pfd = {.fd = host->fd, .events = POLLIN};
+	struct vmac_msg m;
+	struct vmac_addr expected = mac_addr(board_mac, host->ifindex);
+	int64_t sent_ns, read_ns, deadline;
+	size_t len = 0;
+	int i, got = 0, calls = 0, first = -1;
+
+	for (i = 0; i < BURST; i++) {
+		memset(&m, 0, sizeof(m));
+		m.flags = VMAC_FLAG_REPLY;
+		m.seq = (uint16_t)(i + 1);
+		m.device_id = 0x00070001;
+		m.channel = VMAC_CH_DEVICE;
+		m.op = VMAC_OP_ERROR;
+		m.u.error.code = VMAC_BERR_NOT_REGISTERED;
+		m.u.error.op = VMAC_OP_UPDATE;
+		memset(&out[i], 0, sizeof(out[i]));
+		len = encode(&m, &out[i]);
+		out[i].addr = mac_addr(host->mac, board->ifindex);
+		memcpy(out[i].mac, board_mac, 6);
+	}
+	memset(&own, 0, sizeof(own));
+	memset(&m, 0, sizeof(m));
+	m.channel = VMAC_CH_SYSTEM;
+	m.op = VMAC_SYS_DISCOVER;
+	encode(&m, &own);
+	own.addr = host->group;
+
+	vmac_transport_clock_sync(host);
+	sent_ns = vmac_now_ns();
+	for (i = 0; i < BURST_CHUNKS; i++) {
+		struct vmac_packet *chunk = &out[i * (BURST / BURST_CHUNKS)];
+		EXPECT(vmac_transport_send(board, chunk, BURST / BURST_CHUNKS) == BURST / BURST_CHUNKS,
+		       "sending chunk %d of the burst", i);
+		send_foreign("vt1", host->mac, board_mac, 0, 0x88B6, chunk->data, len);
+		send_foreign("vt1", host->mac, board_mac, 5, VMAC_ETHERTYPE, chunk->data, len);
+		EXPECT(vmac_transport_send(host, &own, 1) == 1, "the host's own broadcast");
+	}
+	EXPECT(poll(&pfd, 1, 2000) == 1 && (pfd.revents & POLLIN), "no POLLIN for a burst of %d frames", BURST);
+	usleep(100000); /* the whole burst is in before the first read */
+
+	read_ns = vmac_now_ns();
+	deadline = read_ns + 2000000000;
+	while (got < BURST && vmac_now_ns() < deadline) {
+		int n = vmac_transport_recv(host, host->fd, in + got, VMAC_TRANSPORT_BATCH);
+		EXPECT(n >= 0 && n <= VMAC_TRANSPORT_BATCH, "receive call %d returned %d", calls, n);
+		if (calls++ == 0) {
+			first = n;
+			pfd.revents = 0;
+			EXPECT(poll(&pfd, 1, 0) == 1 && (pfd.revents & POLLIN),
+			       "no POLLIN while %d frames of the burst still wait", BURST - n);
+		}
+		got += n;
+		if (n == 0)
+			usleep(1000);
+	}
+	EXPECT(got == BURST, "the host received %d of a burst of %d in %d calls", got, BURST, calls);
+	EXPECT(first == VMAC_TRANSPORT_BATCH, "the first call of 64 took %d frames with %d waiting", first, BURST);
+	EXPECT(calls >= (BURST + VMAC_TRANSPORT_BATCH - 1) / VMAC_TRANSPORT_BATCH, "%d frames in %d calls of 64", got,
+	       calls);
+	for (i = 0; i < got; i++) {
+		struct vmac_msg r;
+		char a[32];
+		EXPECT(vmac_proto_decode(in[i].data, in[i].len, &r) == 0 && r.seq == i + 1,
+		       "frame %d of the burst is out of order, damaged or foreign (%zu bytes)", i, in[i].len);
+		EXPECT(in[i].len == len, "frame %d of the burst: padding not trimmed (%zu bytes)", i, in[i].len);
+		EXPECT(vmac_addr_equal(&in[i].addr, &expected), "frame %d of the burst from %s", i,
+		       vmac_addr_format(&in[i].addr, a, sizeof(a)));
+		EXPECT(memcmp(in[i].mac, host->mac, 6) == 0, "frame %d of the burst: destination MAC", i);
+		/* The kernel's stamp: before the reads began, 100 ms after
+		 * the burst was in. */
+		EXPECT(in[i].rx_ns >= sent_ns - 1000000 && in[i].rx_ns < read_ns,
+		       "frame %d of the burst stamped %lld ns, not between the send (%lld) and the first read (%lld)",
+		       i, (long long)in[i].rx_ns, (long long)sent_ns, (long long)read_ns);
+		EXPECT(i == 0 || in[i].rx_ns >= in[i - 1].rx_ns, "frame %d of the burst stamped before frame %d", i,
+		       i - 1);
+	}
+	EXPECT(vmac_transport_recv(host, host->fd, in, VMAC_TRANSPORT_BATCH) == 0, "something after the burst");
+	pfd.revents = 0;
+	EXPECT(poll(&pfd, 1, 0) == 0, "POLLIN (revents 0x%x) with nothing left to read", (unsigned)pfd.revents);
+}
+
+static void veth_round_trip(int recvmmsg)
 {
 	static struct vmac_packet out[BATCH_TEST], in[BATCH_TEST + 8];
 	struct vmac_bus_spec host_spec, board_spec;
@@ -355,6 +450,8 @@ static void veth_round_trip(void)
 	size_t discover_len, error_len, wire_len;
 	int n, i, sniffer;
 
+	if (recvmmsg)
+		setenv("VMAC_ETH_RECVMMSG", "1", 1);
 	if (unshare(CLONE_NEWNET) != 0)
 		child_report("SKIP", "unshare(CLONE_NEWNET): %s", strerror(errno));
 	if (system("ip link add vt0 type veth peer name vt1 && ip link set vt0 up && ip link set vt1 up") != 0)
@@ -367,6 +464,9 @@ static void veth_round_trip(void)
 	EXPECT(vmac_transport_open_board(&board, &board_spec, err, sizeof(err)) == 0, "board on vt1: %s", err);
 	EXPECT(host.kind == VMAC_TRANSPORT_ETH && host.ifindex == (int)if_nametoindex("vt0"), "host transport");
 	EXPECT(memcmp(host.mac, board.mac, 6) != 0, "the two ends of the veth pair have one MAC");
+	EXPECT((host.rx_ring != NULL) == !recvmmsg && (board.rx_ring != NULL) == !recvmmsg,
+	       "receive rings: host %p, board %p, with VMAC_ETH_RECVMMSG %s", (void *)host.rx_ring,
+	       (void *)board.rx_ring, recvmmsg ? "set" : "unset");
 	expected = mac_addr(host.mac, host.ifindex);
 	EXPECT(vmac_addr_equal(&host.local, &expected), "host.local is not the interface's MAC");
 	EXPECT(strcmp(vmac_addr_format(&host.group, a, sizeof(a)), "ff:ff:ff:ff:ff:ff") == 0, "group is %s", a);
@@ -470,6 +570,8 @@ static void veth_round_trip(void)
 		       "frame %d of the batch out of order or damaged", i);
 	}
 
+	burst_in_order(&host, &board);
+
 	/* A destination that is no MAC is refused, not sent somewhere. */
 	out[0].addr = host.local;
 	((struct sockaddr_ll *)&out[0].addr.ss)->sll_family = AF_INET;
@@ -477,6 +579,7 @@ static void veth_round_trip(void)
 
 	vmac_transport_close(&host);
 	vmac_transport_close(&board);
+	EXPECT(host.rx_ring == NULL && host.fd == -1, "the host's transport not closed");
 	child_report("OK", "%s", "");
 }
 
@@ -501,7 +604,8 @@ static void cannot_run(const char *reason)
 	}
 }
 
-START_TEST(ethernet_round_trip_over_veth)
+/* The veth round trip in a child; recvmmsg: without the receive ring. */
+static void run_veth_round_trip(int recvmmsg)
 {
 	char text[700] = "";
 	int pipefd[2], status;
@@ -518,7 +622,7 @@ START_TEST(ethernet_round_trip_over_veth)
 	if (pid == 0) {
 		close(pipefd[0]);
 		report_fd = pipefd[1];
-		veth_round_trip();
+		veth_round_trip(recvmmsg);
 		_exit(4);
 	}
 	close(pipefd[1]);
@@ -532,7 +636,19 @@ START_TEST(ethernet_round_trip_over_veth)
 		return;
 	}
 	ck_assert_msg(strncmp(text, "OK", 2) == 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0,
-	              "the veth round trip: %s (exit status %d)", total ? text : "(the child said nothing)", status);
+	              "the veth round trip%s: %s (exit status %d)", recvmmsg ? " with recvmmsg" : "",
+	              total ? text : "(the child said nothing)", status);
+}
+
+START_TEST(ethernet_round_trip_over_veth)
+{
+	run_veth_round_trip(0);
+}
+END_TEST
+
+START_TEST(ethernet_round_trip_over_veth_with_recvmmsg)
+{
+	run_veth_round_trip(1);
 }
 END_TEST
 
@@ -548,6 +664,7 @@ int main(void)
 	tcase_add_test(tc, ethernet_refuses_a_missing_interface_and_a_listener);
 	tcase_add_test(tc, ethernet_without_cap_net_raw_says_so_in_one_line);
 	tcase_add_test(tc, ethernet_round_trip_over_veth);
+	tcase_add_test(tc, ethernet_round_trip_over_veth_with_recvmmsg);
 	tcase_set_timeout(tc, 30);
 	suite_add_tcase(s, tc);
 	r = srunner_create(s);
