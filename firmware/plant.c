@@ -178,6 +178,91 @@ void vmac_plant_io_write(void *ctx, const struct vmac_outputs *out)
 	vmac_plant_actuate((struct vmac_plant *)ctx, out);
 }
 
+uint32_t vmac_plant_unsafe_episodes(const struct vmac_plant *p)
+{
+	return p->kind == VMAC_PLANT_WASHER ? p->s.washer.unsafe_episodes : 0;
+}
+
+/* A line being written into a caller's buffer: whatever does not fit is
+ * dropped, the text stays NUL-terminated. */
+struct text {
+	char *buf;
+	size_t cap, len;
+};
+
+static void text_putc(struct text *t, char c)
+{
+	if (t->len + 1 < t->cap)
+		t->buf[t->len++] = c;
+	if (t->cap > 0)
+		t->buf[t->len] = '\0';
+}
+
+static void text_put(struct text *t, const char *s)
+{
+	for (; *s; s++)
+		text_putc(t, *s);
+}
+
+/* value rounded to `decimals` places (0..3) in decimal, with "-" when it
+ * rounds to below 0; magnitudes beyond 4e9 / 10^decimals are clipped. */
+static void text_put_fixed(struct text *t, double value, int decimals)
+{
+	char digits[16];
+	double scale = 1.0, scaled;
+	uint32_t whole, frac;
+	int i, n = 0;
+
+	for (i = 0; i < decimals; i++)
+		scale *= 10.0;
+	scaled = value == value ? floor(fabs(value) * scale + 0.5) : 0.0; /* NaN reads 0 */
+	if (scaled > 4e9)
+		scaled = 4e9;
+	if (value < 0.0 && scaled > 0.0)
+		text_putc(t, '-');
+	whole = (uint32_t)(scaled / scale);
+	frac = (uint32_t)(scaled - (double)whole * scale);
+	do {
+		digits[n++] = (char)('0' + whole % 10);
+		whole /= 10;
+	} while (whole > 0);
+	while (n > 0)
+		text_putc(t, digits[--n]);
+	if (decimals > 0) {
+		for (i = 0; i < decimals; i++, frac /= 10)
+			digits[i] = (char)('0' + frac % 10);
+		text_putc(t, '.');
+		while (i > 0)
+			text_putc(t, digits[--i]);
+	}
+}
+
+size_t vmac_plant_unsafe_text(const struct vmac_plant *p, const char *board_name, char *buf, size_t cap)
+{
+	struct text t;
+	t.buf = buf;
+	t.cap = cap;
+	t.len = 0;
+	text_put(&t, vmac_plant_name(p->kind));
+	text_put(&t, " UNSAFE: ");
+	if (board_name != NULL && board_name[0] != '\0') {
+		text_put(&t, board_name);
+		text_put(&t, " ");
+	}
+	if (p->kind == VMAC_PLANT_WASHER) {
+		const struct vmac_washer *w = &p->s.washer;
+		text_put(&t, "door closed and not locked, drum ");
+		text_put_fixed(&t, w->unsafe_rpm, 0);
+		text_put(&t, " rpm, water ");
+		text_put_fixed(&t, w->unsafe_water_l, 1);
+		text_put(&t, " l, episode ");
+		text_put_fixed(&t, (double)w->unsafe_episodes, 0);
+	} else {
+		text_put(&t, "no safety monitor");
+	}
+	return t.len;
+}
+
 void vmac_plant_button_step(double *left_s, double dt_s)
 {
 	*left_s = *left_s > dt_s ? *left_s - dt_s : 0.0;

@@ -6,21 +6,31 @@
 #ifndef VMAC_PLANT_H
 #define VMAC_PLANT_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "../core/proto/proto.h"
 
 struct vmac_washer {
-	double drum_rpm;      /* signed, + = forward */
-	double encoder_pos;   /* encoder counts, fractional accumulator */
-	double water_l;       /* litres in the tub */
-	double water_c;       /* water temperature, Celsius */
-	double load_kg;       /* laundry in the drum */
-	double fill_rate_lps; /* flow of each open valve, litres/second */
-	int door_closed;      /* 1 = closed (operator action) */
-	int door_locked;      /* follows the lock solenoid output, only when closed */
-	double start_left_s;  /* start button held down for this much longer */
-	double cancel_left_s; /* cancel button held down for this much longer */
+	double drum_rpm;       /* signed, + = forward */
+	double encoder_pos;    /* encoder counts, fractional accumulator */
+	double water_l;        /* litres in the tub */
+	double water_c;        /* water temperature, Celsius */
+	double load_kg;        /* laundry in the drum */
+	double fill_rate_lps;  /* flow of each open valve, litres/second */
+	int door_closed;       /* 1 = closed (operator action) */
+	int door_locked;       /* PTC lock: engaged while closed and the solenoid is on, and for
+	                          lock_release_s after the solenoid goes off */
+	double lock_release_s; /* how long the lock stays engaged after the solenoid goes off, seconds */
+	double lock_left_s;    /* solenoid off, lock still engaged: it releases when this reaches 0 */
+	double start_left_s;   /* start button held down for this much longer */
+	double cancel_left_s;  /* cancel button held down for this much longer */
+	/* Safety monitor: an unsafe episode is a closed door not locked while the
+	 * drum turns or the water is above the door. */
+	int unsafe;               /* 1 while an episode lasts */
+	uint32_t unsafe_episodes; /* episodes entered since init */
+	double unsafe_rpm;        /* drum speed when the last episode began */
+	double unsafe_water_l;    /* water level when the last episode began */
 	struct vmac_outputs out;
 };
 
@@ -80,6 +90,20 @@ void vmac_plant_actuate(struct vmac_plant *p, const struct vmac_outputs *out);
  * ("switch1", 1), ("load_kg", 3.5). Returns 0, or -1 for an unknown name or
  * a value out of range. The names are listed in docs/BOARD.md. */
 int vmac_plant_set(struct vmac_plant *p, const char *name, double value);
+
+/* Unsafe episodes of the plant's own safety monitor since init (the washer:
+ * a closed door not locked while the drum turns or the water is above the
+ * door); 0 for a plant without one. The owner compares it with the count it
+ * last reported and reports a new episode with vmac_plant_unsafe_text: the
+ * plant itself prints nothing. */
+uint32_t vmac_plant_unsafe_episodes(const struct vmac_plant *p);
+/* The line for the last unsafe episode, without a newline, into buf (cap
+ * bytes, truncated to fit, always NUL-terminated when cap > 0):
+ * "washer UNSAFE: BOARD door closed and not locked, drum 45 rpm, water 12.3 l,
+ * episode 1", with BOARD the board_name given (left out when NULL or empty).
+ * The numbers are those of the moment the episode began. Returns the length
+ * written. No stdio: the same text on POSIX and on the MCU. */
+size_t vmac_plant_unsafe_text(const struct vmac_plant *p, const char *board_name, char *buf, size_t cap);
 
 /* A momentary button pressed by an operator action stays down this long (of
  * plant time), long enough for any service period to see it. */

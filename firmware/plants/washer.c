@@ -1,6 +1,7 @@
 /* Simulated washing machine: tub with hot/cold fill and drain, a drum motor
- * with inertia and an encoder, and a door with a lock solenoid. The I/O map
- * is the contract of the "washer" Lua driver (docs/BOARD.md). */
+ * with inertia and an encoder, a door with a PTC lock, and a safety monitor
+ * that counts the moments the door is unlocked when it must not be. The I/O
+ * map is the contract of the "washer" Lua driver (docs/BOARD.md). */
 #include <math.h>
 #include <string.h>
 
@@ -49,15 +50,64 @@
 #define COUNTS_PER_REV 360.0
 #define ENCODER_SPAN 4294967296.0 /* 2^32: the accumulator wraps like int32 */
 
+/* Door lock. A real front-loader's PTC lock stays engaged while its PTC
+ * cools, 1-2 minutes after the solenoid goes off; the default here is short
+ * so that demos and tests stay quick. */
+#define DEFAULT_LOCK_RELEASE_S 2.0
+#define MAX_LOCK_RELEASE_S 600.0
+#define LOCK_TIME_EPSILON_S 1e-9 /* rounding of summed steps: 200 x 0.01 s is 2 s */
+
+/* Safety monitor: the door must stay locked while the drum turns faster than
+ * UNSAFE_RPM or the water is above DOOR_LEVEL_L (the washer driver's default
+ * door_level_l). */
+#define UNSAFE_RPM 2.0
+#define DOOR_LEVEL_L 5.0
+
 static int output_on(const struct vmac_washer *w, int bit)
 {
 	return (w->out.digital >> bit) & 1;
 }
 
-/* The lock engages and releases at once with the solenoid, only on a closed door. */
-static void update_lock(struct vmac_washer *w)
+/* The PTC lock after dt_s more seconds: engaged at once on a closed door
+ * with the solenoid on; with the solenoid off it holds for lock_release_s,
+ * then releases; an open door is never locked. dt_s 0 applies a change of
+ * outputs or door at once (lock_release_s 0: the solenoid off releases it). */
+static void update_lock(struct vmac_washer *w, double dt_s)
 {
-	w->door_locked = w->door_closed && output_on(w, OUT_DOOR_LOCK);
+	if (!w->door_closed) {
+		w->door_locked = 0;
+		w->lock_left_s = 0.0;
+	} else if (output_on(w, OUT_DOOR_LOCK)) {
+		w->door_locked = 1;
+		w->lock_left_s = w->lock_release_s; /* the countdown starts when the solenoid goes off */
+	} else if (w->door_locked) {
+		w->lock_left_s -= dt_s;
+		if (w->lock_left_s <= LOCK_TIME_EPSILON_S) {
+			w->door_locked = 0;
+			w->lock_left_s = 0.0;
+		}
+	}
+}
+
+/* Count an unsafe episode on entering one: a closed door not locked while the
+ * drum turns or the water is above the door. An open door (the emergency
+ * release) is not counted. */
+static void monitor_safety(struct vmac_washer *w)
+{
+	int unsafe = w->door_closed && !w->door_locked && (fabs(w->drum_rpm) > UNSAFE_RPM || w->water_l > DOOR_LEVEL_L);
+	if (unsafe && !w->unsafe) {
+		w->unsafe_episodes++;
+		w->unsafe_rpm = w->drum_rpm;
+		w->unsafe_water_l = w->water_l;
+	}
+	w->unsafe = unsafe;
+}
+
+/* After an action or new outputs: the lock and the monitor at once. */
+static void settle(struct vmac_washer *w)
+{
+	update_lock(w, 0.0);
+	monitor_safety(w);
 }
 
 void vmac_washer_init(struct vmac_washer *w)
@@ -68,6 +118,7 @@ void vmac_washer_init(struct vmac_washer *w)
 	w->fill_rate_lps = DEFAULT_FILL_LPS;
 	w->door_closed = 1;
 	w->door_locked = 0;
+	w->lock_release_s = DEFAULT_LOCK_RELEASE_S;
 }
 
 /* Fill (mixing temperature by volume), cool toward ambient, drain, clamp. */
@@ -124,7 +175,8 @@ void vmac_washer_step(struct vmac_washer *w, double dt_s)
 {
 	step_drum(w, dt_s);
 	step_water(w, dt_s);
-	update_lock(w);
+	update_lock(w, dt_s);
+	monitor_safety(w);
 	vmac_plant_button_step(&w->start_left_s, dt_s);
 	vmac_plant_button_step(&w->cancel_left_s, dt_s);
 }
@@ -144,13 +196,15 @@ void vmac_washer_sense(const struct vmac_washer *w, struct vmac_inputs *in)
 void vmac_washer_actuate(struct vmac_washer *w, const struct vmac_outputs *out)
 {
 	w->out = *out;
-	update_lock(w);
+	settle(w);
 }
 
 /* "door" 0/1 (opening a locked door is refused), "load_kg" 0..10,
  * "water_l" 0..40 (temperature unchanged), "fill_rate_lps" 0..5 per valve,
- * "start" and "cancel" (any value) press a button for VMAC_PLANT_BUTTON_S,
- * "door_release" (any value) opens the door even when locked. */
+ * "lock_release_s" 0..600 (a lock already counting down releases no later
+ * than the new delay from now), "start" and "cancel" (any value) press a
+ * button for VMAC_PLANT_BUTTON_S, "door_release" (any value) opens the door
+ * even when locked. */
 int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
 {
 	if (strcmp(name, "start") == 0 || strcmp(name, "cancel") == 0) {
@@ -159,7 +213,7 @@ int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
 	}
 	if (strcmp(name, "door_release") == 0) { /* the emergency release: opens even a locked door */
 		w->door_closed = 0;
-		update_lock(w);
+		settle(w);
 		return 0;
 	}
 	if (strcmp(name, "door") == 0) {
@@ -168,7 +222,7 @@ int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
 		if (value == 0.0 && w->door_locked)
 			return -1;
 		w->door_closed = value == 1.0;
-		update_lock(w);
+		settle(w);
 		return 0;
 	}
 	if (strcmp(name, "load_kg") == 0) {
@@ -181,6 +235,16 @@ int vmac_washer_set(struct vmac_washer *w, const char *name, double value)
 		if (!vmac_plant_in_range(value, 0.0, TUB_MAX_L))
 			return -1;
 		w->water_l = value;
+		monitor_safety(w);
+		return 0;
+	}
+	if (strcmp(name, "lock_release_s") == 0) {
+		if (!vmac_plant_in_range(value, 0.0, MAX_LOCK_RELEASE_S))
+			return -1;
+		w->lock_release_s = value;
+		if (w->lock_left_s > value)
+			w->lock_left_s = value;
+		settle(w);
 		return 0;
 	}
 	if (strcmp(name, "fill_rate_lps") == 0) {

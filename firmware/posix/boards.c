@@ -194,6 +194,14 @@ void boards_report(struct board_set *s, int32_t i)
 			       (int)b->outputs.pwm);
 		pb->reported = b->outputs;
 	}
+	if (vmac_plant_unsafe_episodes(&pb->plant) != pb->reported_unsafe) {
+		/* A safety event: printed even with --quiet. Episodes entered
+		 * within one housekeeping turn share the line of the last. */
+		char text[160];
+		vmac_plant_unsafe_text(&pb->plant, b->id.board, text, sizeof(text));
+		printf("%s\n", text);
+		pb->reported_unsafe = vmac_plant_unsafe_episodes(&pb->plant);
+	}
 }
 
 void boards_housekeep(struct board_set *s, uint64_t now_ms)
@@ -233,6 +241,7 @@ void boards_command(struct board_set *s, const char *line)
 				printf("%s: refused %s %g\n", name, action, value);
 			else
 				printf("%s: %s %g\n", name, action, value);
+			boards_report(s, i); /* an action may have begun an unsafe episode */
 			return;
 		}
 	}

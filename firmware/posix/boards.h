@@ -26,6 +26,7 @@ struct posix_board {
 	uint16_t routed_offset;               /* the by_offset entry held for it; VMAC_OFFSET_NONE */
 	uint32_t routed_device_id;            /* the session by_session points to it for; 0 none */
 	uint8_t mac[6];                       /* Ethernet: the source MAC of its replies */
+	uint32_t reported_unsafe;             /* the plant's unsafe episodes already printed */
 };
 
 /* What every board of the process is made from (main.c's options). */
@@ -91,7 +92,8 @@ void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms);
  * state and output lines. */
 void boards_housekeep(struct board_set *s, uint64_t now_ms);
 
-/* Print board i's state and output changes since it was last reported. */
+/* Print board i's state and output changes since it was last reported, and
+ * a line for each unsafe episode its plant entered (even with --quiet). */
 void boards_report(struct board_set *s, int32_t i);
 
 /* An operator line 'NAME ACTION VALUE' (--commands). */

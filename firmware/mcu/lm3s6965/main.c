@@ -21,6 +21,7 @@ static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_
 
 static struct vmac_outputs reported; /* the outputs the log last named */
 static enum vmac_board_state reported_state;
+static uint32_t reported_unsafe; /* the plant's unsafe episodes the log already named */
 static uint64_t last_step_ms, last_housekeep_ms;
 
 static void put_name(void)
@@ -29,7 +30,7 @@ static void put_name(void)
 	vmac_mcu_uart_puts(": ");
 }
 
-/* The state and output lines of vmac-board, for what changed since the last. */
+/* The state, output and unsafe lines of vmac-board, for what changed since the last. */
 static void report(void)
 {
 	if (board.state != reported_state) {
@@ -55,6 +56,14 @@ static void report(void)
 			vmac_mcu_uart_puts("\n");
 		}
 		reported = board.outputs;
+	}
+	if (vmac_plant_unsafe_episodes(&plant) != reported_unsafe) {
+		/* A safety event: logged even when quiet. */
+		char text[128];
+		vmac_plant_unsafe_text(&plant, board.id.board, text, sizeof(text));
+		vmac_mcu_uart_puts(text);
+		vmac_mcu_uart_puts("\n");
+		reported_unsafe = vmac_plant_unsafe_episodes(&plant);
 	}
 }
 
@@ -207,6 +216,7 @@ static void command(char *line)
 	vmac_mcu_uart_puts(" ");
 	vmac_mcu_uart_puts(n == 3 ? words[2] : "0");
 	vmac_mcu_uart_puts("\n");
+	report(); /* an action may have begun an unsafe episode */
 }
 
 static void print_start(void)
