@@ -47,11 +47,11 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 # The driver sandbox (core/driver/internal.h says which file owns what).
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
-                core/driver/instance.c core/driver/takeover.c
+                core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
-                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
+                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
                 core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/console.c core/sched/sched.c core/sched/search.c \
-                core/store/store.c
+                core/store/store.c core/store/store_checkpoint.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
 OBJ = $(BUILD)/obj
@@ -62,10 +62,11 @@ host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
-UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD)/tests/test_board $(BUILD)/tests/test_host \
+UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD)/tests/test_board $(BUILD)/tests/test_plant \
+              $(BUILD)/tests/test_host \
               $(BUILD)/tests/test_driver $(BUILD)/tests/test_isolation $(BUILD)/tests/test_sched $(BUILD)/tests/test_store \
               $(BUILD)/tests/test_proto_v2 $(BUILD)/tests/test_cyclic $(BUILD)/tests/test_board_v2 $(BUILD)/tests/test_board_cyclic \
-              $(BUILD)/tests/test_transport
+              $(BUILD)/tests/test_transport $(BUILD)/tests/test_checkpoint
 
 
 .PHONY: format format-check test-build asan-build
@@ -161,6 +162,10 @@ $(BUILD)/tests/test_board: $(OBJ)/tests/unit/test_board.o $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
 
+$(BUILD)/tests/test_plant: $(OBJ)/tests/unit/test_plant.o $(portable_obj)
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
+
 $(BUILD)/tests/test_proto_reject: $(OBJ)/tests/unit/test_proto_reject.o $(OBJ)/core/proto/proto.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
@@ -198,7 +203,14 @@ $(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sche
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
 
-$(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/store.o
+$(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
+
+# Checkpoints: dev.state through the driver's encoder and decoder, and the
+# store's table of them (white-box: core/driver/internal.h).
+$(BUILD)/tests/test_checkpoint: $(OBJ)/tests/unit/test_checkpoint.o $(driver_obj) $(OBJ)/core/store/store.o \
+                                $(OBJ)/core/store/store_checkpoint.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
@@ -217,7 +229,7 @@ $(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o $(driver_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
 # The store killed mid-write (tests/integration/test_store.py).
-$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o
+$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
@@ -227,7 +239,7 @@ $(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/s
 # helps). Everything a harness links is built again with clang, libFuzzer's
 # coverage and ASan+UBSan, under $(BUILD)/fuzz/obj; what the fuzzer finds
 # goes to $(BUILD)/fuzz/work-NAME, never to the committed seeds.
-FUZZ_TARGETS := proto config console manifest values http
+FUZZ_TARGETS := proto config console manifest values http checkpoint
 FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=all
 FUZZ_CFLAGS   = -std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer $(WARN) -Wno-unknown-warning-option $(FUZZ_SAN) \
                 -fsanitize=fuzzer-no-link $(PKG_CFLAGS)
@@ -266,6 +278,10 @@ $(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c $(DRIVER_SRC
 # The HTTP API's routing, request bodies and arguments, and the console's
 # body (core/api/api_request.c), no sockets.
 $(BUILD)/fuzz/fuzz_http: $(call fuzz_obj,tests/fuzz/fuzz_http.c core/api/api_request.c core/api/console.c)
+	$(FUZZ_LINK) $(PKG_LIBS)
+
+# A checkpoint of dev.state offered to a driver (core/driver/checkpoint.c).
+$(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c $(DRIVER_SRC))
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 FUZZ_BINS := $(FUZZ_TARGETS:%=$(BUILD)/fuzz/fuzz_%)

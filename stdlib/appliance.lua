@@ -3,8 +3,10 @@
 -- cancel, the machine's start and cancel buttons, a faster service level
 -- while a programme runs, and the programme's status as published variables.
 -- The programme itself is a `cycle`; the driver keeps its outputs and its
--- safety (interlocks, guards). restore() continues the appliance of the old
--- instance of the driver after a hot reload.
+-- safety (interlocks, guards). publish() asks the host for a checkpoint of
+-- dev.state at every change of the programme's state or step; restore()
+-- continues the appliance of the old instance of the driver after a hot
+-- reload, or of a checkpoint after a restart.
 
 local type, error, tostring = type, error, tostring
 
@@ -44,6 +46,9 @@ function appliance.new(spec)
 		last_start = false,    -- button states at the previous tick: a button
 		last_cancel = false,   -- held as the machine attaches counts as a press
 		was_active = false,
+		published_state = nil, -- state and step at the last publish: a change
+		published_step = nil,  -- asks for a checkpoint (nil: none published yet)
+		level_pending = false, -- restore(old, now): ask for run_level at the next publish
 	}, Appliance)
 end
 
@@ -87,11 +92,18 @@ function Appliance:buttons(dev, start_pressed, cancel_pressed)
 end
 
 -- Once per tick, after the cycle's tick: back to the idle level when the
--- programme has ended, and the status variables (cycle, state, step,
--- running, paused_by, error, time_left_s).
+-- programme has ended (to the running level after a recovery), and the
+-- status variables (cycle, state, step, running, paused_by, error,
+-- time_left_s). At the first publish and whenever the state or the step
+-- changed since the last one, dev:checkpoint(), so the host's checkpoint
+-- says where the programme is (a host without checkpoints: nothing).
 function Appliance:publish(dev)
 	local c, v = self.cycle, dev.vars
 	local active = c:active()
+	if self.level_pending then
+		self.level_pending = false
+		if active then dev:set_level(self.run_level) end
+	end
 	if self.was_active and not active then
 		dev:set_level(self.idle_level)
 	end
@@ -100,6 +112,10 @@ function Appliance:publish(dev)
 	v.state, v.step, v.running = c.state, c.step_name or "-", active
 	v.paused_by, v.error = c.pause_reasons[1] or "", c.error or ""
 	v.time_left_s = c:wait_left() or 0
+	if v.state ~= self.published_state or v.step ~= self.published_step then
+		self.published_state, self.published_step = v.state, v.step
+		if dev.checkpoint then dev:checkpoint() end
+	end
 end
 
 -- The operator commands start (value: a programme name, or true for the
@@ -125,12 +141,20 @@ end
 -- programme chosen last, the buttons' states at the old instance's last
 -- tick (a button held across the reload is no new press), whether a
 -- programme was running (so the idle level comes back when it ends), and the
--- cycle (cycle:restore). Returns true, or nil and a message when the
--- programme cannot go on: the running one is not among this version's
--- programmes, or the cycle's own refusal. Nothing is changed then.
-function Appliance:restore(old)
+-- cycle (cycle:restore). now (optional): recovery from a checkpoint after a
+-- restart (docs/STDLIB.md "Recovery"): the bus time to go on from, passed to
+-- cycle:restore; the buttons start afresh (held at the first tick is a
+-- press, as at any attach), and the next publish asks for run_level while
+-- the programme is active (the machine attached at its idle level).
+-- Returns true, or nil and a message when the programme cannot go on: the
+-- running one is not among this version's programmes, or the cycle's own
+-- refusal. Nothing is changed then.
+function Appliance:restore(old, now)
 	if type(old) ~= "table" or type(old.cycle) ~= "table" then
 		error("appliance:restore: old must be a copy of an appliance (a table with its cycle)", 2)
+	end
+	if now ~= nil and (type(now) ~= "number" or now ~= now) then
+		error("appliance:restore: now must be a number (bus time, seconds) or nil", 2)
 	end
 	local chosen = old.chosen
 	if type(chosen) ~= "string" then
@@ -140,12 +164,17 @@ function Appliance:restore(old)
 		return nil, "appliance:restore: programme '" .. tostring(chosen)
 			.. "' is running, but this version has no programme of that name"
 	end
-	local ok, err = self.cycle:restore(old.cycle)
+	local ok, err = self.cycle:restore(old.cycle, now)
 	if not ok then
 		return nil, err
 	end
 	self.chosen = chosen
-	self.last_start, self.last_cancel = old.last_start == true, old.last_cancel == true
+	if now == nil then
+		self.last_start, self.last_cancel = old.last_start == true, old.last_cancel == true
+	else
+		self.last_start, self.last_cancel = false, false
+		self.level_pending = true
+	end
 	self.was_active = old.was_active == true
 	return true
 end

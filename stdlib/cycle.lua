@@ -3,9 +3,10 @@
 -- pause/resume, cancel with a cleanup, interlocks and failure by step.
 -- Needs `coroutine` in the sandbox. Time comes only from tick(now, ...): the
 -- cycle clock counts running time in seconds and stands still while paused.
--- restore() continues in a new instance of the driver (hot reload) a cycle
--- of the old one, from a plain copy of it: the body runs again, skipping the
--- steps the old instance had finished.
+-- restore() continues in a new instance of the driver (hot reload, or
+-- recovery from a checkpoint after a restart) a cycle of the old one, from a
+-- plain copy of it: the body runs again, skipping the steps the old instance
+-- had finished.
 
 local timer = require "timer"
 
@@ -669,11 +670,20 @@ end
 -- status is taken over. Running: the body starts again and replays to where
 -- the old one was (docs/STDLIB.md "cycle", "Hot reload"). Cancelling: the
 -- cleanup runs again from its start. Call it before the first tick of the
--- new instance. Returns true, or nil and a message when the copy does not
--- say where a running cycle was (this object is then unchanged).
-function Cycle:restore(old)
+-- new instance. now (optional, seconds): the bus time the new instance goes
+-- on from when it is not the old one's, after a restart (docs/STDLIB.md
+-- "Recovery"): the clock continues its elapsed running time from now, the
+-- bus times taken over move by now - old.time, and the interlocks' states
+-- count from now (il:restore). Without it the bus clock is the old one's
+-- (hot reload). Returns true, or nil and a message
+-- when the copy does not say where a running cycle was (this object is then
+-- unchanged).
+function Cycle:restore(old, now)
 	if type(old) ~= "table" or not PHASES[old.phase] then
 		error("cycle:restore: old must be a copy of a cycle (a table with its phase)", 2)
+	end
+	if now ~= nil and not is_number(now) then
+		error("cycle:restore: now must be a number (bus time, seconds) or nil", 2)
 	end
 	if self.co ~= nil and running() == self.co then
 		error("cycle:restore: call it from the driver (migrate), not from the cycle's steps", 2)
@@ -688,15 +698,20 @@ function Cycle:restore(old)
 		end
 	end
 
-	-- The clock goes on from the old one's elapsed time at its last tick.
+	-- The clock goes on from the old one's elapsed time at its last tick,
+	-- at the old bus time or at now. Waits, the step's start and the replay
+	-- position are on the cycle clock and need no moving; the bus times
+	-- (time, started_at) move with it.
 	local elapsed = copied_elapsed(old)
 	if elapsed ~= nil then
-		self.time = old.time
-		self.clock = timer.new(old.time, elapsed)
+		local at = now or old.time
+		self.time = at
+		self.clock = timer.new(at, elapsed)
 		if old.clock.running ~= true then
-			self.clock:pause(old.time)
+			self.clock:pause(at)
 		end
-		self.started_at = number_or(old.started_at, nil)
+		local started_at = number_or(old.started_at, nil)
+		self.started_at = started_at and started_at + (at - old.time)
 	else
 		self.time, self.clock, self.started_at = nil, nil, nil
 	end
@@ -728,7 +743,7 @@ function Cycle:restore(old)
 		for _, il in ipairs(self.interlocks) do
 			for _, old_il in ipairs(old.interlocks) do
 				if type(old_il) == "table" and old_il.name == il.name then
-					il:restore(old_il)
+					il:restore(old_il, now)
 					break
 				end
 			end

@@ -70,13 +70,23 @@ local STATES = { clear = true, tripped = true, rearming = true, fault = true }
 -- Take over the state of the same interlock in another instance of the
 -- driver (hot reload): old is a plain copy of it, its functions dropped.
 -- One that held goes on holding, so a door being locked again must still
--- report locked before a guarded cycle goes on.
-function Interlock:restore(old)
+-- report locked before a guarded cycle goes on. now (optional): the bus
+-- time of a new clock (recovery after a restart, where the old bus time
+-- means nothing): the state counts as entered at now, so a re-arm gets its
+-- whole rearm_timeout again.
+function Interlock:restore(old, now)
 	if type(old) ~= "table" or not STATES[old.state] then
 		error("interlock:restore: old must be a copy of an interlock (a table with its state)", 2)
 	end
+	if now ~= nil and (type(now) ~= "number" or now ~= now) then
+		error("interlock:restore: now must be a number (bus time, seconds) or nil", 2)
+	end
 	self.state = old.state
-	self.since = type(old.since) == "number" and old.since or nil
+	if now ~= nil then
+		self.since = now
+	else
+		self.since = type(old.since) == "number" and old.since or nil
+	end
 	self.message = type(old.message) == "string" and old.message or nil
 	self.rearmed = old.rearmed == true
 end

@@ -174,6 +174,42 @@ int vmac_driver_input(struct vmac_driver *d, double time_s, const char *name, co
  * 0, or -1 with err: nd must then not run; od is as it was. */
 int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double time_s, char *err, size_t errlen);
 
+/* ---- checkpoints and recovery (docs/DRIVERS.md "Recovery after a
+ * restart"; checkpoint.c) ---- */
+#define VMAC_CHECKPOINT_ENTRIES 10000
+#define VMAC_CHECKPOINT_DEPTH 32
+
+/* Whether dev:checkpoint() was called since the last checkpoint. */
+int vmac_driver_checkpoint_asked(const struct vmac_driver *d);
+
+/* Bus thread: a plain-data copy of dev.state, encoded into buf (at most cap
+ * bytes; *len of them used). Allocates only in the driver's heap. 0, or -1
+ * with err (too large, too deep, a failed driver); the driver runs on
+ * either way. Clears the checkpoint_asked flag. */
+int vmac_driver_checkpoint(struct vmac_driver *d, uint8_t *buf, size_t cap, size_t *len, char *err, size_t errlen);
+
+/* What the host says of a checkpoint it offers. */
+struct vmac_checkpoint_info {
+	double time;  /* when it was written (Unix time) */
+	double age_s; /* from then to now */
+	const char *version;
+	int restarted; /* the host has restarted since */
+};
+
+/* Main thread, after loading and before the hand over: checkpoint buf
+ * (len bytes, as vmac_driver_checkpoint wrote it) decoded into the
+ * instance, for its recover(dev, saved). 0, or -1 with err ("checkpoint
+ * damaged: ..."): nothing is offered then. */
+int vmac_driver_offer_checkpoint(struct vmac_driver *d, const uint8_t *buf, size_t len,
+                                 const struct vmac_checkpoint_info *info, char *err, size_t errlen);
+
+/* After attach: recover(dev, saved) with the checkpoint offered. Returns
+ * VMAC_RECOVER_NONE (none offered), VMAC_RECOVER_UNUSED (the driver has no
+ * recover; the checkpoint is dropped), VMAC_RECOVER_DONE, or -1 with err (a
+ * driver failure). */
+enum { VMAC_RECOVER_NONE = 0, VMAC_RECOVER_UNUSED = 1, VMAC_RECOVER_DONE = 2 };
+int vmac_driver_recover(struct vmac_driver *d, double time_s, char *err, size_t errlen);
+
 /* detach(dev, reason) if the driver has one; errors are ignored (the
  * machine is going away). */
 void vmac_driver_detach(struct vmac_driver *d, const char *reason);

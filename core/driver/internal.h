@@ -12,6 +12,7 @@
  *   instance.c  a running machine: boards, level, attach/detach, tick I/O,
  *               operator input, params
  *   takeover.c  hot reload: one instance takes over from another
+ *   checkpoint.c  dev.state saved and recovered across a restart
  *
  * Internal names carry the prefix drv_. */
 #ifndef VMAC_DRIVER_INTERNAL_H
@@ -77,7 +78,10 @@ struct vmac_driver {
 	char broken_msg[200];
 	int failed;                        /* the host's work on it failed where no caller hears (failure says why): */
 	char failure[VMAC_DRIVER_ERR_MAX]; /* the next call that reports errors fails with it */
-	int ref_tick, ref_attach, ref_input, ref_detach, ref_migrate; /* registry refs, LUA_NOREF if absent */
+	int ref_tick, ref_attach, ref_input, ref_detach, ref_migrate,
+	    ref_recover;      /* registry refs, LUA_NOREF if absent */
+	int ref_saved;        /* a checkpoint offered (saved), until recover runs; LUA_NOREF: none */
+	int checkpoint_asked; /* dev:checkpoint() was called since the last checkpoint */
 	int ref_manifest, ref_dev, ref_inputs, ref_out, ref_vars, ref_params;
 	int ref_keys;  /* the names a tick reads and writes, interned once (key_*) */
 	char file[64]; /* file name, for messages */
@@ -157,6 +161,9 @@ void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const 
 int drv_valid_module_name(const char *name, size_t maxlen);
 void drv_make_env(lua_State *L);
 int drv_open_lib(lua_State *L, lua_CFunction f, const char *name);
+
+/* checkpoint.c */
+int drv_dev_checkpoint(lua_State *L);
 
 /* manifest.c */
 int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *lim, char *err, size_t errlen);

@@ -110,6 +110,8 @@ static void make_dev(struct vmac_driver *d)
 	lua_setfield(L, -2, "set_level");
 	lua_pushcfunction(L, dev_event);
 	lua_setfield(L, -2, "event");
+	lua_pushcfunction(L, drv_dev_checkpoint);
+	lua_setfield(L, -2, "checkpoint");
 	d->ref_dev = luaL_ref(L, LUA_REGISTRYINDEX);
 	lua_settop(L, params - 1);
 	/* The inputs table, reused every tick: every name present from the
@@ -214,7 +216,8 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 	d->budget_ns = (int64_t)limits->budget_us * 1000;
 	d->clock = limits->clock;
 	d->clock_ctx = limits->clock_ctx;
-	d->ref_tick = d->ref_attach = d->ref_input = d->ref_detach = d->ref_migrate = LUA_NOREF;
+	d->ref_tick = d->ref_attach = d->ref_input = d->ref_detach = d->ref_migrate = d->ref_recover = LUA_NOREF;
+	d->ref_saved = LUA_NOREF;
 	for (i = 0; i < limits->nsettings; i++) {
 		const char *k = limits->settings[i].key, *v = limits->settings[i].value;
 		char *end;

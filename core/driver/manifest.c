@@ -497,7 +497,8 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 	    callback_ref(d, t, "attach", 0, err, errlen, &d->ref_attach) ||
 	    callback_ref(d, t, "input", 0, err, errlen, &d->ref_input) ||
 	    callback_ref(d, t, "detach", 0, err, errlen, &d->ref_detach) ||
-	    callback_ref(d, t, "migrate", 0, err, errlen, &d->ref_migrate))
+	    callback_ref(d, t, "migrate", 0, err, errlen, &d->ref_migrate) ||
+	    callback_ref(d, t, "recover", 0, err, errlen, &d->ref_recover))
 		return -1;
 	return 0; /* leaves the params table on top */
 }

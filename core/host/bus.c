@@ -206,13 +206,8 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 		          d->ann.board, d->ann.driver, vmac_driver_version(bus->mach[d->mach].drv),
 		          (unsigned)d->ann.major, (unsigned)d->ann.minor, bus->mach[d->mach].level,
 		          vmac_addr_format(&d->addr, why, sizeof(why)));
-		if (bus_slot_of(bus, d) == bus->mach[d->mach].primary && !bus->mach[d->mach].attached) {
-			struct machine *mm = &bus->mach[d->mach];
-			char err[VMAC_DRIVER_ERR_MAX];
-			mm->attached = 1;
-			if (vmac_driver_attach(mm->drv, bus_time(bus), err, sizeof(err)) != 0)
-				bus_driver_failed(bus, mm, " in attach", err);
-		}
+		if (bus_slot_of(bus, d) == bus->mach[d->mach].primary && !bus->mach[d->mach].attached)
+			bus_attached(bus, &bus->mach[d->mach], bus_now(bus));
 		break;
 	case DEV_TO_SLEEP:
 		if (m->op == VMAC_OP_REGISTER) {
@@ -449,6 +444,7 @@ void bus_begin_stop(struct vmac_bus *bus, int64_t now)
 	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->slot_ns;
 	if (bus->stop_deadline_ns < now + 100000000)
 		bus->stop_deadline_ns = now + 100000000; /* at least 100 ms for the acks */
+	bus_checkpoint_all(bus, now);                    /* what each machine was doing, for the next start */
 	for (i = 0; i < bus->nused; i++)
 		if (bus->mach[i].used && bus->mach[i].drv && bus->mach[i].attached)
 			vmac_driver_detach(bus->mach[i].drv, "host stopping");
@@ -639,7 +635,7 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->status.devices || !bus->status.slot_load ||
 	    !bus->slot_entries || !bus->sched ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
-	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024)) {
+	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus)) {
 		snprintf(err, errlen, "out of memory");
 		vmac_bus_free(bus);
 		return NULL;
@@ -715,16 +711,23 @@ struct vmac_bus *vmac_bus_new_virtual(const struct vmac_config *cfg, const struc
 
 int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns)
 {
-	uint64_t index = (uint64_t)(now_ns / bus->slot_ns);
+	uint64_t index = (uint64_t)((now_ns - bus->start_ns) / bus->slot_ns);
 	bus->virt_now_ns = now_ns;
 	if (index <= bus->tick_index)
 		return 0;
 	return bus_tick(bus, now_ns, index - bus->tick_index);
 }
 
+void vmac_bus_virtual_start_at(struct vmac_bus *bus, int64_t now_ns)
+{
+	bus->virt_now_ns = now_ns;
+	bus->start_ns = now_ns; /* bus time 0, slot 0: as a host that starts now */
+	bus->next_discover_ns = now_ns;
+}
+
 int64_t vmac_bus_virtual_next_tick(const struct vmac_bus *bus)
 {
-	return (int64_t)(bus->tick_index + 1) * bus->slot_ns;
+	return bus->start_ns + (int64_t)(bus->tick_index + 1) * bus->slot_ns;
 }
 
 void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p)
@@ -755,6 +758,7 @@ void vmac_bus_free(struct vmac_bus *bus)
 		close(bus->tfd);
 	vmac_ring_fini(&bus->to_main);
 	vmac_ring_fini(&bus->to_bus);
+	bus_checkpoints_fini(bus);
 	for (i = 0; i < VMAC_BUS_REQUESTS; i++)
 		sem_destroy(&bus->req[i].done);
 	free(bus->dev);

@@ -18,6 +18,18 @@
 
 #define VMAC_EVENT_TEXT 640
 
+/* A checkpoint of a machine's dev.state, bus thread -> main thread (docs/
+ * DRIVERS.md "Recovery after a restart"): in a ring of its own, each slot
+ * followed by checkpoint_kib KiB for the data. */
+struct vmac_bus_checkpoint {
+	char machine[VMAC_NAME_MAX + 1];
+	char driver[VMAC_NAME_MAX + 1];
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	int64_t time_ns; /* CLOCK_MONOTONIC (virtual time in vmac test) */
+	size_t len;
+	uint8_t data[]; /* len bytes used */
+};
+
 /* Bus thread -> main thread. */
 enum vmac_bus_msg_kind {
 	VMAC_MSG_EVENT,   /* something to record and show */
@@ -96,7 +108,9 @@ struct vmac_bus_counters {
 	uint64_t ticks, ticks_skipped;
 	uint64_t events_lost; /* event ring full */
 	uint64_t table_full;
-	uint64_t schedule_full; /* devices refused by admission control */
+	uint64_t schedule_full;        /* devices refused by admission control */
+	uint64_t checkpoints;          /* machine checkpoints handed to the main thread */
+	uint64_t checkpoints_deferred; /* ... put off a tick: the ring was full */
 };
 
 /* Indexes of malformed_by_reason. */
@@ -147,6 +161,10 @@ void vmac_bus_join(struct vmac_bus *bus);
  * thread) after pushing to the main ring; set it before start. */
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx);
 int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
+/* The oldest checkpoint not yet taken (NULL: none), valid until
+ * vmac_bus_checkpoint_release; main thread (the one consumer). */
+const struct vmac_bus_checkpoint *vmac_bus_checkpoint_peek(struct vmac_bus *bus);
+void vmac_bus_checkpoint_release(struct vmac_bus *bus);
 int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd);
 
 /* The answer to a VMAC_MSG_LOAD: the driver loaded for load's device (drv,
@@ -231,6 +249,9 @@ struct vmac_bus *vmac_bus_new_virtual(const struct vmac_config *cfg, const struc
  * fall on multiples of the slot). Returns 1 once stopped, else 0. */
 int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns);
 /* The earliest time after now_ns at which the next tick falls. */
+/* The virtual host starts at now_ns: its bus time 0 and first slot there
+ * (a host started again after vt_crash_host). */
+void vmac_bus_virtual_start_at(struct vmac_bus *bus, int64_t now_ns);
 int64_t vmac_bus_virtual_next_tick(const struct vmac_bus *bus);
 /* A frame reaching the host at p->rx_ns. */
 void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p);

@@ -46,7 +46,9 @@ struct machine {
 	uint32_t board[VMAC_DRIVER_MAX_BOARDS]; /* device slots, in the driver's board order */
 	int nboards;
 	unsigned level;
-	int attached; /* attach() has run */
+	int attached;               /* attach() has run */
+	int64_t next_checkpoint_ns; /* checkpoint_s: the next periodic checkpoint */
+	int checkpoint_failing;     /* the last one was refused (said once) */
 	/* Hot reload: the instance drv took over from, kept while drv is on
 	 * probation (until probation_end_ns) to roll back to if drv fails. */
 	struct vmac_driver *prev;
@@ -147,6 +149,7 @@ struct vmac_bus {
 	int64_t last_malformed_log_ns;
 	uint64_t malformed_suppressed;
 	struct vmac_ring to_main, to_bus;
+	struct vmac_ring checkpoints; /* struct vmac_bus_checkpoint + checkpoint_kib KiB each, to the main thread */
 	struct request req[VMAC_BUS_REQUESTS];
 	_Atomic int req_queued; /* requests QUEUED since the bus thread last looked */
 	void (*wakeup)(void *);
@@ -202,6 +205,17 @@ int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why);
 int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
              size_t replylen);
 void bus_end_probations(struct vmac_bus *bus, int64_t now);
+
+/* checkpoint.c */
+int bus_checkpoints_init(struct vmac_bus *bus);
+void bus_checkpoints_fini(struct vmac_bus *bus);
+/* After a tick of m: a checkpoint when asked or due. */
+void bus_checkpoint_due(struct vmac_bus *bus, struct machine *m, int64_t now);
+/* Every attached machine's, now (the host stopping). */
+void bus_checkpoint_all(struct vmac_bus *bus, int64_t now);
+/* m's primary is registered: attach(), then recover() with the checkpoint
+ * offered; a failure of either fails the driver. */
+void bus_attached(struct vmac_bus *bus, struct machine *m, int64_t now);
 
 /* status.c */
 const char *bus_state_name(enum dev_state s);

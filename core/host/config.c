@@ -53,6 +53,8 @@ static const struct key keys[] = {
     {U(driver_instructions, 1000, 1000000000)},
     {U(driver_budget_us, 0, 10000000)},
     {U(reload_probation_s, 0, 86400)},
+    {U(checkpoint_s, 0, 3600)},
+    {U(checkpoint_kib, 1, 1024)},
     {B(allow_jit)},
     {B(realtime)},
     {B(cyclic)},
@@ -79,6 +81,8 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->driver_instructions = 200000;
 	c->driver_budget_us = 2000;
 	c->reload_probation_s = 30;
+	c->checkpoint_s = 5;
+	c->checkpoint_kib = 16;
 	c->realtime = 1;
 	c->cyclic = 1;
 }

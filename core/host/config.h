@@ -41,6 +41,8 @@ struct vmac_config {
 	uint32_t driver_instructions;
 	uint32_t driver_budget_us;   /* wall-clock per driver call; 0 = none */
 	uint32_t reload_probation_s; /* hot reload: a new version failing within this goes back (0 = none) */
+	uint32_t checkpoint_s;       /* a machine's dev.state saved at least this often (0 = only when asked) */
+	uint32_t checkpoint_kib;     /* largest checkpoint (encoded dev.state) */
 	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
 	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */

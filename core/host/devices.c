@@ -391,8 +391,10 @@ void bus_run_machine(struct vmac_bus *bus, struct machine *m)
 		in[i] = &bus->dev[m->board[i]].inputs;
 		out[i] = &bus->dev[m->board[i]].outputs;
 	}
-	if (vmac_driver_tick(m->drv, bus_time(bus), in, out, err, sizeof(err)) == 0)
+	if (vmac_driver_tick(m->drv, bus_time(bus), in, out, err, sizeof(err)) == 0) {
+		bus_checkpoint_due(bus, m, bus_now(bus));
 		return;
+	}
 	(void)primary;
 	bus_driver_failed(bus, m, "", err);
 }

@@ -48,3 +48,33 @@ int vmac_ring_pop(struct vmac_ring *r, void *elem)
 	atomic_store_explicit(&r->tail, tail + 1, memory_order_release);
 	return 1;
 }
+
+void *vmac_ring_reserve(struct vmac_ring *r)
+{
+	size_t head = atomic_load_explicit(&r->head, memory_order_relaxed);
+	size_t tail = atomic_load_explicit(&r->tail, memory_order_acquire);
+	if (head - tail > r->mask)
+		return NULL;
+	return r->buf + (head & r->mask) * r->elem_size;
+}
+
+void vmac_ring_commit(struct vmac_ring *r)
+{
+	size_t head = atomic_load_explicit(&r->head, memory_order_relaxed);
+	atomic_store_explicit(&r->head, head + 1, memory_order_release);
+}
+
+void *vmac_ring_peek(struct vmac_ring *r)
+{
+	size_t tail = atomic_load_explicit(&r->tail, memory_order_relaxed);
+	size_t head = atomic_load_explicit(&r->head, memory_order_acquire);
+	if (tail == head)
+		return NULL;
+	return r->buf + (tail & r->mask) * r->elem_size;
+}
+
+void vmac_ring_release(struct vmac_ring *r)
+{
+	size_t tail = atomic_load_explicit(&r->tail, memory_order_relaxed);
+	atomic_store_explicit(&r->tail, tail + 1, memory_order_release);
+}

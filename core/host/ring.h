@@ -22,4 +22,13 @@ int vmac_ring_push(struct vmac_ring *r, const void *elem);
 /* Consumer side. Returns 1 with *elem filled, or 0 when empty. */
 int vmac_ring_pop(struct vmac_ring *r, void *elem);
 
+/* In place, for large elements: the producer writes into the slot
+ * vmac_ring_reserve returns (NULL: full) and publishes it with
+ * vmac_ring_commit; the consumer reads the slot vmac_ring_peek returns
+ * (NULL: empty) and gives it back with vmac_ring_release. */
+void *vmac_ring_reserve(struct vmac_ring *r);
+void vmac_ring_commit(struct vmac_ring *r);
+void *vmac_ring_peek(struct vmac_ring *r);
+void vmac_ring_release(struct vmac_ring *r);
+
 #endif

@@ -1,5 +1,5 @@
 /* The persistent store on SQLite, tokens hashed with libsodium: see store.h. */
-#include "store.h"
+#include "store_internal.h"
 
 #include <errno.h>
 #include <pthread.h>
@@ -14,17 +14,6 @@
 #define SECRET_LEN 64 /* hex digits */
 #define HASH_LEN crypto_generichash_BYTES
 #define BUSY_MS 5000 /* another process (vmac token, a second reader) holding the lock */
-
-struct vmac_store {
-	sqlite3 *db;
-	/* Held by every function below from its first statement until its
-	 * error text is written: the one connection is shared by the host's
-	 * threads, and what it says about the last statement
-	 * (sqlite3_changes, sqlite3_last_insert_rowid, sqlite3_errmsg) or
-	 * which transaction a statement joins is only true while no other
-	 * thread's statement runs in between. */
-	pthread_mutex_t lock;
-};
 
 /* Schema versions, applied in order; PRAGMA user_version says how many ran. */
 static const char *const migrations[] = {
@@ -61,6 +50,12 @@ static const char *const migrations[] = {
     " kind TEXT NOT NULL,"
     " device TEXT NOT NULL,"
     " text TEXT NOT NULL)",
+    "CREATE TABLE checkpoints ("
+    " machine TEXT PRIMARY KEY,"
+    " driver TEXT NOT NULL,"
+    " version TEXT NOT NULL,"
+    " time REAL NOT NULL,"
+    " data BLOB NOT NULL)",
 };
 
 static const char *const scope_names[] = {"none", "read", "operate", "deploy"};
@@ -81,7 +76,7 @@ int vmac_scope_parse(const char *name, enum vmac_scope *scope)
 	return -1;
 }
 
-static double now_s(void)
+double store_now_s(void)
 {
 	struct timespec ts;
 	clock_gettime(CLOCK_REALTIME, &ts);
@@ -90,17 +85,17 @@ static double now_s(void)
 
 /* err says what failed and SQLite's why; returns the code of it: the disk
  * is full (SQLITE_FULL), or any other failure. */
-static int fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
+int store_fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
 {
 	snprintf(err, errlen, "store: %s: %s", what, s && s->db ? sqlite3_errmsg(s->db) : "cannot open");
 	return s && s->db && (sqlite3_extended_errcode(s->db) & 0xff) == SQLITE_FULL ? -VMAC_ESTOREFULL : -VMAC_ESTORE;
 }
 
-/* fail(), then let the other threads in: the message is the one of this
+/* store_fail(), then let the other threads in: the message is the one of this
  * thread's statement. */
-static int fail_unlock(struct vmac_store *s, const char *what, char *err, size_t errlen)
+int store_fail_unlock(struct vmac_store *s, const char *what, char *err, size_t errlen)
 {
-	int rc = fail(s, what, err, errlen);
+	int rc = store_fail(s, what, err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return rc;
 }
@@ -122,7 +117,7 @@ static int migrate(struct vmac_store *s, char *err, size_t errlen)
 	int version = 0, n = (int)(sizeof(migrations) / sizeof(migrations[0]));
 	char sql[64];
 	if (sqlite3_prepare_v2(s->db, "PRAGMA user_version", -1, &st, NULL) != SQLITE_OK)
-		return fail(s, "reading the schema version", err, errlen);
+		return store_fail(s, "reading the schema version", err, errlen);
 	if (sqlite3_step(st) == SQLITE_ROW)
 		version = sqlite3_column_int(st, 0);
 	sqlite3_finalize(st);
@@ -247,12 +242,12 @@ int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *n
 	                       &st, NULL) != SQLITE_OK) {
 		sodium_memzero(secret, sizeof(secret));
 		sodium_memzero(secret_hex, sizeof(secret_hex));
-		return fail_unlock(s, "creating a token", err, errlen);
+		return store_fail_unlock(s, "creating a token", err, errlen);
 	}
 	sqlite3_bind_text(st, 1, id_hex, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_blob(st, 2, h, HASH_LEN, SQLITE_TRANSIENT);
 	sqlite3_bind_int(st, 3, (int)scope);
-	sqlite3_bind_double(st, 4, now_s());
+	sqlite3_bind_double(st, 4, store_now_s());
 	sqlite3_bind_text(st, 5, note ? note : "", note ? (int)strnlen(note, VMAC_TOKEN_NOTE_MAX) : 0,
 	                  SQLITE_TRANSIENT);
 	rc = sqlite3_step(st);
@@ -260,7 +255,7 @@ int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *n
 	sodium_memzero(secret, sizeof(secret));
 	if (rc != SQLITE_DONE) {
 		sodium_memzero(secret_hex, sizeof(secret_hex));
-		return fail_unlock(s, "creating a token", err, errlen);
+		return store_fail_unlock(s, "creating a token", err, errlen);
 	}
 	pthread_mutex_unlock(&s->lock);
 	snprintf(token, VMAC_TOKEN_LEN + 1, "vmac_%s_%s", id_hex, secret_hex);
@@ -277,13 +272,13 @@ int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t er
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "UPDATE tokens SET revoked = ? WHERE id = ? AND revoked IS NULL", -1, &st,
 	                       NULL) != SQLITE_OK)
-		return fail_unlock(s, "revoking a token", err, errlen);
-	sqlite3_bind_double(st, 1, now_s());
+		return store_fail_unlock(s, "revoking a token", err, errlen);
+	sqlite3_bind_double(st, 1, store_now_s());
 	sqlite3_bind_text(st, 2, id, -1, SQLITE_TRANSIENT);
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "revoking a token", err, errlen);
+		return store_fail_unlock(s, "revoking a token", err, errlen);
 	changed = sqlite3_changes(s->db); /* of this statement: no other ran since */
 	pthread_mutex_unlock(&s->lock);
 	return changed == 1 ? 0 : 1;
@@ -297,7 +292,7 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT id, scope, created, revoked, note FROM tokens ORDER BY created, id", -1,
 	                       &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "listing tokens", err, errlen);
+		return store_fail_unlock(s, "listing tokens", err, errlen);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
 		struct vmac_token_info t;
 		const unsigned char *text;
@@ -314,7 +309,7 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 	}
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "listing tokens", err, errlen);
+		return store_fail_unlock(s, "listing tokens", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return n;
 }
@@ -363,7 +358,7 @@ enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
 
 #define VERSION_COLUMNS "id, driver, version, hash, deployed, deployed_by, state, previous, note, length(source)"
 
-static void text_col(sqlite3_stmt *st, int i, char *out, size_t len)
+void store_text_col(sqlite3_stmt *st, int i, char *out, size_t len)
 {
 	const unsigned char *t = sqlite3_column_text(st, i);
 	snprintf(out, len, "%s", t ? (const char *)t : "");
@@ -373,14 +368,14 @@ static void version_row(sqlite3_stmt *st, struct vmac_driver_version *v)
 {
 	memset(v, 0, sizeof(*v));
 	v->id = sqlite3_column_int64(st, 0);
-	text_col(st, 1, v->driver, sizeof(v->driver));
-	text_col(st, 2, v->version, sizeof(v->version));
-	text_col(st, 3, v->hash, sizeof(v->hash));
+	store_text_col(st, 1, v->driver, sizeof(v->driver));
+	store_text_col(st, 2, v->version, sizeof(v->version));
+	store_text_col(st, 3, v->hash, sizeof(v->hash));
 	v->deployed = sqlite3_column_double(st, 4);
-	text_col(st, 5, v->deployed_by, sizeof(v->deployed_by));
-	text_col(st, 6, v->state, sizeof(v->state));
+	store_text_col(st, 5, v->deployed_by, sizeof(v->deployed_by));
+	store_text_col(st, 6, v->state, sizeof(v->state));
 	v->previous = sqlite3_column_int64(st, 7);
-	text_col(st, 8, v->note, sizeof(v->note));
+	store_text_col(st, 8, v->note, sizeof(v->note));
 	v->size = (size_t)sqlite3_column_int64(st, 9);
 }
 
@@ -414,24 +409,24 @@ int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *
 	pthread_mutex_lock(&s->lock);
 	prev = active_id(s, driver);
 	if (prev < 0)
-		return fail_unlock(s, "reading driver versions", err, errlen);
+		return store_fail_unlock(s, "reading driver versions", err, errlen);
 	if (sqlite3_prepare_v2(
 	        s->db,
 	        "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
 	        "previous) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?)",
 	        -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "storing a driver version", err, errlen);
+		return store_fail_unlock(s, "storing a driver version", err, errlen);
 	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 2, version, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 3, hash, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_blob(st, 4, src, (int)len, SQLITE_TRANSIENT);
-	sqlite3_bind_double(st, 5, now_s());
+	sqlite3_bind_double(st, 5, store_now_s());
 	sqlite3_bind_text(st, 6, by, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_int64(st, 7, prev);
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "storing a driver version", err, errlen);
+		return store_fail_unlock(s, "storing a driver version", err, errlen);
 	*id = sqlite3_last_insert_rowid(s->db); /* of this statement: no other ran since */
 	pthread_mutex_unlock(&s->lock);
 	return 0;
@@ -461,7 +456,7 @@ static int set_state(struct vmac_store *s, int64_t id, const char *state, const 
 
 /* Take the lock and open a write transaction: 0, or -1 still holding the
  * lock (the caller says why with fail_unlock). */
-static int begin(struct vmac_store *s)
+int store_begin(struct vmac_store *s)
 {
 	pthread_mutex_lock(&s->lock);
 	return sqlite3_exec(s->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) == SQLITE_OK ? 0 : -1;
@@ -469,14 +464,14 @@ static int begin(struct vmac_store *s)
 
 /* Commit when ok, else roll back; let the other threads in. 0, or < 0
  * with err. */
-static int end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen)
+int store_end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen)
 {
 	int rc;
 	if (ok && sqlite3_exec(s->db, "COMMIT", NULL, NULL, NULL) == SQLITE_OK) {
 		pthread_mutex_unlock(&s->lock);
 		return 0;
 	}
-	rc = fail(s, what, err, errlen); /* before the ROLLBACK: SQLite's why is the failed statement's */
+	rc = store_fail(s, what, err, errlen); /* before the ROLLBACK: SQLite's why is the failed statement's */
 	sqlite3_exec(s->db, "ROLLBACK", NULL, NULL, NULL);
 	pthread_mutex_unlock(&s->lock);
 	return rc;
@@ -486,19 +481,19 @@ int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t
 {
 	int64_t prev;
 	int ok;
-	if (begin(s) != 0)
-		return fail_unlock(s, "activating a driver version", err, errlen);
+	if (store_begin(s) != 0)
+		return store_fail_unlock(s, "activating a driver version", err, errlen);
 	prev = active_id(s, driver);
 	ok = prev >= 0 && (prev == 0 || prev == id || set_state(s, prev, "replaced", NULL) == 0) &&
 	     set_state(s, id, "active", NULL) == 0;
-	return end(s, ok, "activating a driver version", err, errlen);
+	return store_end(s, ok, "activating a driver version", err, errlen);
 }
 
 int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, char *err, size_t errlen)
 {
 	pthread_mutex_lock(&s->lock);
 	if (set_state(s, id, "refused", why) != 0)
-		return fail_unlock(s, "marking a driver version refused", err, errlen);
+		return store_fail_unlock(s, "marking a driver version refused", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -509,10 +504,10 @@ int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_
 	sqlite3_stmt *st;
 	int64_t prev = 0;
 	int ok, rc;
-	if (begin(s) != 0)
-		return fail_unlock(s, "rolling back a driver version", err, errlen);
+	if (store_begin(s) != 0)
+		return store_fail_unlock(s, "rolling back a driver version", err, errlen);
 	if (active_id(s, driver) != id) { /* already rolled back, or replaced meanwhile */
-		end(s, 1, "", err, errlen);
+		store_end(s, 1, "", err, errlen);
 		return 1;
 	}
 	ok = sqlite3_prepare_v2(s->db, "SELECT previous FROM driver_versions WHERE id = ?", -1, &st, NULL) == SQLITE_OK;
@@ -525,7 +520,7 @@ int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_
 		ok = rc == SQLITE_ROW;
 	}
 	ok = ok && set_state(s, id, "rolled_back", why) == 0 && (prev == 0 || set_state(s, prev, "active", NULL) == 0);
-	return end(s, ok, "rolling back a driver version", err, errlen);
+	return store_end(s, ok, "rolling back a driver version", err, errlen);
 }
 
 /* One version by a WHERE clause with one parameter; with its source when
@@ -539,7 +534,7 @@ static int version_where(struct vmac_store *s, const char *where, const char *te
 	snprintf(sql, sizeof(sql), "SELECT " VERSION_COLUMNS ", source FROM driver_versions WHERE %s", where);
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, sql, -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "reading driver versions", err, errlen);
+		return store_fail_unlock(s, "reading driver versions", err, errlen);
 	if (text_arg)
 		sqlite3_bind_text(st, 1, text_arg, -1, SQLITE_TRANSIENT);
 	else
@@ -567,7 +562,7 @@ static int version_where(struct vmac_store *s, const char *where, const char *te
 		return -1;
 	}
 	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
-		return fail_unlock(s, "reading driver versions", err, errlen);
+		return store_fail_unlock(s, "reading driver versions", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return found;
 }
@@ -595,7 +590,7 @@ int vmac_store_driver_list(struct vmac_store *s, const char *driver,
 	                       driver ? "SELECT " VERSION_COLUMNS " FROM driver_versions WHERE driver = ? ORDER BY id"
 	                              : "SELECT " VERSION_COLUMNS " FROM driver_versions ORDER BY driver, id",
 	                       -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "listing driver versions", err, errlen);
+		return store_fail_unlock(s, "listing driver versions", err, errlen);
 	if (driver)
 		sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
@@ -606,7 +601,7 @@ int vmac_store_driver_list(struct vmac_store *s, const char *driver,
 	}
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "listing driver versions", err, errlen);
+		return store_fail_unlock(s, "listing driver versions", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return n;
 }
@@ -623,17 +618,17 @@ int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *
 	                       "INSERT OR REPLACE INTO params (machine, name, type, number, string, updated) "
 	                       "VALUES (?, ?, ?, ?, ?, ?)",
 	                       -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "persisting a param", err, errlen);
+		return store_fail_unlock(s, "persisting a param", err, errlen);
 	sqlite3_bind_text(st, 1, machine, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 2, name, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_int(st, 3, (int)v->type);
 	sqlite3_bind_double(st, 4, v->type == VMAC_VALUE_STRING ? 0 : v->number);
 	sqlite3_bind_text(st, 5, v->type == VMAC_VALUE_STRING ? v->str : "", -1, SQLITE_TRANSIENT);
-	sqlite3_bind_double(st, 6, now_s());
+	sqlite3_bind_double(st, 6, store_now_s());
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "persisting a param", err, errlen);
+		return store_fail_unlock(s, "persisting a param", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -647,22 +642,22 @@ int vmac_store_param_list(struct vmac_store *s, const char *machine,
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT name, type, number, string FROM params WHERE machine = ? ORDER BY name",
 	                       -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "reading persisted params", err, errlen);
+		return store_fail_unlock(s, "reading persisted params", err, errlen);
 	sqlite3_bind_text(st, 1, machine, -1, SQLITE_TRANSIENT);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
 		struct vmac_value v;
 		char name[64];
 		memset(&v, 0, sizeof(v));
-		text_col(st, 0, name, sizeof(name));
+		store_text_col(st, 0, name, sizeof(name));
 		v.type = (enum vmac_value_type)sqlite3_column_int(st, 1);
 		v.number = sqlite3_column_double(st, 2);
-		text_col(st, 3, v.str, sizeof(v.str));
+		store_text_col(st, 3, v.str, sizeof(v.str));
 		fn(ctx, name, &v);
 		n++;
 	}
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "reading persisted params", err, errlen);
+		return store_fail_unlock(s, "reading persisted params", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return n;
 }
@@ -675,8 +670,8 @@ int vmac_store_events_add(struct vmac_store *s, const struct vmac_stored_event *
 	int i, ok;
 	if (n <= 0)
 		return 0;
-	if (begin(s) != 0)
-		return fail_unlock(s, "recording events", err, errlen);
+	if (store_begin(s) != 0)
+		return store_fail_unlock(s, "recording events", err, errlen);
 	ok = sqlite3_prepare_v2(s->db,
 	                        "INSERT OR REPLACE INTO events (seq, time, kind, device, text) VALUES (?, ?, ?, ?, ?)",
 	                        -1, &st, NULL) == SQLITE_OK;
@@ -696,7 +691,7 @@ int vmac_store_events_add(struct vmac_store *s, const struct vmac_stored_event *
 		         (unsigned long long)(ev[n - 1].seq - VMAC_STORE_EVENTS));
 		ok = sqlite3_exec(s->db, sql, NULL, NULL, NULL) == SQLITE_OK;
 	}
-	return end(s, ok, "recording events", err, errlen);
+	return store_end(s, ok, "recording events", err, errlen);
 }
 
 int vmac_store_events_last(struct vmac_store *s, uint64_t *seq, char *err, size_t errlen)
@@ -706,13 +701,13 @@ int vmac_store_events_last(struct vmac_store *s, uint64_t *seq, char *err, size_
 	*seq = 0;
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT max(seq) FROM events", -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "reading the event log", err, errlen);
+		return store_fail_unlock(s, "reading the event log", err, errlen);
 	rc = sqlite3_step(st);
 	if (rc == SQLITE_ROW && sqlite3_column_type(st, 0) != SQLITE_NULL)
 		*seq = (uint64_t)sqlite3_column_int64(st, 0);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_ROW)
-		return fail_unlock(s, "reading the event log", err, errlen);
+		return store_fail_unlock(s, "reading the event log", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -727,7 +722,7 @@ int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
 	if (sqlite3_prepare_v2(s->db,
 	                       "SELECT seq, time, kind, device, text FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
 	                       -1, &st, NULL) != SQLITE_OK)
-		return fail_unlock(s, "reading the event log", err, errlen);
+		return store_fail_unlock(s, "reading the event log", err, errlen);
 	sqlite3_bind_int64(st, 1, (sqlite3_int64)after);
 	sqlite3_bind_int(st, 2, limit);
 	while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
@@ -742,7 +737,7 @@ int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
 	}
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return fail_unlock(s, "reading the event log", err, errlen);
+		return store_fail_unlock(s, "reading the event log", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return n;
 }

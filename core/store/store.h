@@ -150,4 +150,26 @@ int vmac_store_driver_list(struct vmac_store *s, const char *driver,
                            void (*fn)(void *ctx, const struct vmac_driver_version *v), void *ctx, char *err,
                            size_t errlen);
 
+/* ---- checkpoints of machine state (docs/DRIVERS.md "Recovery after a
+ * restart"; store_checkpoint.c) ----
+ * One per machine (its primary board's name), the newest: the encoded
+ * dev.state (core/driver/checkpoint.c), the driver and version that wrote
+ * it, and when (Unix time). */
+struct vmac_checkpoint {
+	const char *machine, *driver, *version;
+	double time;
+	const uint8_t *data;
+	size_t len;
+};
+
+/* Store n checkpoints in one transaction (one disk sync), each replacing
+ * its machine's. 0, or < 0 with err (nothing stored). */
+int vmac_store_checkpoints_put(struct vmac_store *s, const struct vmac_checkpoint *cp, int n, char *err, size_t errlen);
+/* machine's checkpoint: 1 with *data (malloc'd, the caller frees), *len,
+ * driver, version (VMAC_NAME_MAX + 1 and 32 bytes) and *time; 0 when there
+ * is none; < 0 with err. */
+int vmac_store_checkpoint_get(struct vmac_store *s, const char *machine, uint8_t **data, size_t *len, char *driver,
+                              size_t driverlen, char *version, size_t versionlen, double *time, char *err,
+                              size_t errlen);
+
 #endif

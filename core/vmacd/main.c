@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../api/http.h"
@@ -34,6 +35,8 @@ struct host {
 	ev_signal int_w, term_w;
 	int stopping;
 	int exit_code;
+	double started;          /* Unix time this run began: older checkpoints are from before a restart */
+	int checkpoints_failing; /* the last save failed: said once, retried */
 };
 
 static void usage(FILE *f)
@@ -89,6 +92,92 @@ static void restore_params(struct host *h, struct vmac_driver *drv, const char *
 		vmac_event_log_add(&h->log, "warning", device, err);
 }
 
+static double unix_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
+/* The checkpoints the bus thread has handed over go to the store, in one
+ * transaction (a batch at most the ring's size; the store keeps the newest
+ * of each machine). A failure (a full disk) is said once; those checkpoints
+ * are lost, newer ones follow. */
+static void store_checkpoints(struct host *h)
+{
+	enum { BATCH = 16 };
+	struct vmac_checkpoint cp[BATCH];
+	struct vmac_bus_checkpoint head[BATCH]; /* names and time, copied out of the ring */
+	uint8_t *data[BATCH];
+	const struct vmac_bus_checkpoint *c;
+	double mono_to_unix = unix_now() - (double)vmac_now_ns() / 1e9;
+	char err[512], text[600];
+	int n, i;
+	do {
+		for (n = 0; n < BATCH && (c = vmac_bus_checkpoint_peek(h->bus)) != NULL; n++) {
+			/* Copied out so that the slot goes back to the bus thread at once. */
+			memcpy(&head[n], c, sizeof(head[n]));
+			data[n] = malloc(c->len ? c->len : 1);
+			if (data[n])
+				memcpy(data[n], c->data, c->len);
+			vmac_bus_checkpoint_release(h->bus);
+			if (!data[n]) {
+				n--; /* out of memory: this one is lost, a newer one follows */
+				continue;
+			}
+			cp[n].machine = head[n].machine;
+			cp[n].driver = head[n].driver;
+			cp[n].version = head[n].version;
+			cp[n].time = mono_to_unix + (double)head[n].time_ns / 1e9;
+			cp[n].data = data[n];
+			cp[n].len = head[n].len;
+		}
+		if (n == 0)
+			return;
+		if (vmac_store_checkpoints_put(h->store, cp, n, err, sizeof(err)) != 0) {
+			if (!h->checkpoints_failing) {
+				snprintf(text, sizeof(text), "checkpoints are not being saved: %s", err);
+				vmac_event_log_add(&h->log, "warning", "", text);
+			}
+			h->checkpoints_failing = 1;
+		} else {
+			h->checkpoints_failing = 0;
+		}
+		for (i = 0; i < n; i++)
+			free(data[i]);
+	} while (n == BATCH);
+}
+
+/* The checkpoint of machine `device`, if the store has one of this driver,
+ * offered to its freshly loaded instance (for recover, after attach). */
+static void offer_checkpoint(struct host *h, struct vmac_driver *drv, const char *device)
+{
+	struct vmac_checkpoint_info info;
+	char driver[VMAC_NAME_MAX + 1], version[VMAC_DRIVER_VERSION_MAX + 1], err[512], text[700];
+	uint8_t *data;
+	size_t len;
+	double time;
+	int rc = vmac_store_checkpoint_get(h->store, device, &data, &len, driver, sizeof(driver), version,
+	                                   sizeof(version), &time, err, sizeof(err));
+	if (rc < 0)
+		vmac_event_log_add(&h->log, "warning", device, err);
+	if (rc != 1)
+		return;
+	if (strcmp(driver, vmac_driver_name(drv)) == 0) {
+		info.time = time;
+		info.age_s = unix_now() - time;
+		if (info.age_s < 0)
+			info.age_s = 0; /* the clock was set back */
+		info.version = version;
+		info.restarted = time < h->started;
+		if (vmac_driver_offer_checkpoint(drv, data, len, &info, err, sizeof(err)) != 0) {
+			snprintf(text, sizeof(text), "%s: checkpoint not offered: %s", device, err);
+			vmac_event_log_add(&h->log, "warning", device, text);
+		}
+	}
+	free(data);
+}
+
 struct load {
 	struct host *h;
 	const struct vmac_bus_msg *m;
@@ -99,8 +188,10 @@ struct load {
 static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *text)
 {
 	struct load *l = ctx;
-	if (drv)
+	if (drv) {
 		restore_params(l->h, drv, l->m->device);
+		offer_checkpoint(l->h, drv, l->m->device);
+	}
 	if (vmac_bus_loaded(l->h->bus, l->m, rc, drv, text) != 0)
 		vmac_event_log_add(&l->h->log, "warning", l->m->device,
 		                   "command ring full; device will retry on discovery");
@@ -109,6 +200,7 @@ static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *te
 static void load_driver(struct host *h, const struct vmac_bus_msg *m)
 {
 	struct load l = {h, m};
+	store_checkpoints(h); /* one taken before this load is found by it */
 	vmac_deploy_load(h->store, &h->cfg, m->driver, m->device, hand_over, &l);
 }
 
@@ -177,6 +269,7 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 		case VMAC_MSG_STOPPED: ev_break(loop, EVBREAK_ALL); break;
 		}
 	}
+	store_checkpoints(h);
 	store_events(h);
 }
 
@@ -286,6 +379,7 @@ int main(int argc, char **argv)
 	signal(SIGPIPE, SIG_IGN);
 	setvbuf(stderr, NULL, _IOLBF, 0);
 	vmac_event_log_init(&h->log);
+	h->started = unix_now();
 	h->loop = EV_DEFAULT;
 	h->bus = vmac_bus_new(&h->cfg, err, sizeof(err));
 	if (!h->bus) {

@@ -404,6 +404,17 @@ local function stop_host()
 	W():stop_host()
 end
 
+-- A host crash (SIGKILL, a power cut): gone at once, no word to the boards.
+local function crash_host()
+	W():crash_host()
+end
+
+-- A new host after crash_host: it discovers the boards
+-- again and offers each machine its last checkpoint (recover).
+local function start_host()
+	W():start_host()
+end
+
 -- Keep the frames of the test file from a traceback.
 local function test_frames(tb, file)
 	local out = {}
@@ -434,7 +445,7 @@ local function load_file(file)
 		board = make_board, kitchen = kitchen, config = config, run_for = run_for, run_until = run_until,
 		eventually = eventually, always = always, expect = expect, expect_eq = expect_eq,
 		expect_near = expect_near, expect_event = expect_event, events = events, now = now, fail = fail,
-		stop_host = stop_host,
+		stop_host = stop_host, crash_host = crash_host, start_host = start_host,
 	} do
 		env[k] = v
 	end

@@ -234,7 +234,8 @@ static void push_value(lua_State *L, const struct vmac_value *v)
 static int l_state(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
-	lua_pushstring(L, vmac_bus_device_state(lw->w->bus, luaL_checkstring(L, 2)));
+	const char *name = luaL_checkstring(L, 2);
+	lua_pushstring(L, lw->w->bus ? vmac_bus_device_state(lw->w->bus, name) : "absent");
 	return 1;
 }
 
@@ -242,7 +243,8 @@ static int l_state(lua_State *L)
 static int l_var(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
-	const struct vmac_variable *v = vmac_bus_device_var(lw->w->bus, luaL_checkstring(L, 2), luaL_checkstring(L, 3));
+	const char *device = luaL_checkstring(L, 2), *name = luaL_checkstring(L, 3);
+	const struct vmac_variable *v = lw->w->bus ? vmac_bus_device_var(lw->w->bus, device, name) : NULL;
 	if (v)
 		push_value(L, &v->value);
 	else
@@ -359,6 +361,8 @@ static int l_plant(lua_State *L)
 			lua_pushboolean(L, wa->door_closed);
 		else if (!strcmp(f, "door_locked"))
 			lua_pushboolean(L, wa->door_locked);
+		else if (!strcmp(f, "unsafe_episodes"))
+			lua_pushnumber(L, wa->unsafe_episodes);
 		else
 			break;
 		return 1;
@@ -534,6 +538,20 @@ static int l_stop_host(lua_State *L)
 	return 0;
 }
 
+static int l_crash_host(lua_State *L)
+{
+	vt_crash_host(check_world(L)->w);
+	return 0;
+}
+
+static int l_start_host(lua_State *L)
+{
+	char err[256];
+	if (vt_start_host(check_world(L)->w, err, sizeof(err)) != 0)
+		return luaL_error(L, "start_host: %s", err);
+	return 0;
+}
+
 static int l_frames(lua_State *L)
 {
 	lua_pushnumber(L, (double)check_world(L)->w->frames);
@@ -552,13 +570,30 @@ static int l_wall(lua_State *L)
 
 static int open_world(lua_State *L)
 {
-	static const luaL_Reg methods[] = {
-	    {"board", l_board},         {"run", l_run},       {"now", l_now},         {"io", l_io},
-	    {"io_names", l_io_names},   {"state", l_state},   {"var", l_var},         {"device", l_device},
-	    {"input", l_input},         {"set", l_set},       {"plant", l_plant},     {"connect", l_connect},
-	    {"faults", l_faults},       {"events", l_events}, {"history", l_history}, {"trace", l_trace},
-	    {"stop_host", l_stop_host}, {"frames", l_frames}, {"free", l_gc},         {"config", l_config},
-	    {"slot", l_slot},           {NULL, NULL}};
+	static const luaL_Reg methods[] = {{"board", l_board},
+	                                   {"run", l_run},
+	                                   {"now", l_now},
+	                                   {"io", l_io},
+	                                   {"io_names", l_io_names},
+	                                   {"state", l_state},
+	                                   {"var", l_var},
+	                                   {"device", l_device},
+	                                   {"input", l_input},
+	                                   {"set", l_set},
+	                                   {"plant", l_plant},
+	                                   {"connect", l_connect},
+	                                   {"faults", l_faults},
+	                                   {"events", l_events},
+	                                   {"history", l_history},
+	                                   {"trace", l_trace},
+	                                   {"stop_host", l_stop_host},
+	                                   {"crash_host", l_crash_host},
+	                                   {"start_host", l_start_host},
+	                                   {"frames", l_frames},
+	                                   {"free", l_gc},
+	                                   {"config", l_config},
+	                                   {"slot", l_slot},
+	                                   {NULL, NULL}};
 	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {NULL, NULL}};
 	luaL_newmetatable(L, WORLD_MT);
 	lua_pushvalue(L, -1);

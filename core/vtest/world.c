@@ -151,10 +151,71 @@ static void record_event(struct vt_world *w, const struct vmac_bus_msg *m)
 	memcpy(e->text, m->text, sizeof(e->text));
 }
 
+/* The host's checkpoints, kept as vmacd's store keeps them: the newest of
+ * each machine (the store of a host that crashes survives it). */
+static void keep_checkpoints(struct vt_world *w)
+{
+	const struct vmac_bus_checkpoint *c;
+	while ((c = vmac_bus_checkpoint_peek(w->bus)) != NULL) {
+		struct vt_checkpoint *k = NULL;
+		uint8_t *data = malloc(c->len ? c->len : 1);
+		int i;
+		for (i = 0; i < w->ncheckpoints && !k; i++)
+			if (strcmp(w->checkpoints[i].machine, c->machine) == 0)
+				k = &w->checkpoints[i];
+		if (!k && w->ncheckpoints < VT_MAX_BOARDS)
+			k = &w->checkpoints[w->ncheckpoints++];
+		if (k && data) {
+			free(k->data);
+			memcpy(k->machine, c->machine, sizeof(k->machine));
+			memcpy(k->driver, c->driver, sizeof(k->driver));
+			memcpy(k->version, c->version, sizeof(k->version));
+			k->t_ns = c->time_ns;
+			k->data = data;
+			k->len = c->len;
+			memcpy(data, c->data, c->len);
+		} else {
+			free(data);
+		}
+		vmac_bus_checkpoint_release(w->bus);
+	}
+}
+
+/* A freshly loaded driver of machine `device` gets its checkpoint, as
+ * vmacd's main thread offers it (virtual time for the age). */
+static void offer_checkpoint(struct vt_world *w, struct vmac_driver *drv, const char *device)
+{
+	struct vmac_checkpoint_info info;
+	char err[VMAC_DRIVER_ERR_MAX];
+	int i;
+	for (i = 0; i < w->ncheckpoints; i++) {
+		const struct vt_checkpoint *k = &w->checkpoints[i];
+		if (strcmp(k->machine, device) != 0 || strcmp(k->driver, vmac_driver_name(drv)) != 0)
+			continue;
+		info.time = (double)k->t_ns / 1e9;
+		info.age_s = (double)(w->now_ns - k->t_ns) / 1e9;
+		info.version = k->version;
+		info.restarted = k->t_ns < w->host_started_ns;
+		if (vmac_driver_offer_checkpoint(drv, k->data, k->len, &info, err, sizeof(err)) != 0) {
+			struct vmac_bus_msg m;
+			memset(&m, 0, sizeof(m));
+			m.time_ns = w->now_ns;
+			snprintf(m.event_kind, sizeof(m.event_kind), "warning");
+			snprintf(m.device, sizeof(m.device), "%s", device);
+			snprintf(m.text, sizeof(m.text), "%s: checkpoint not offered: %s", device, err);
+			record_event(w, &m);
+		}
+		return;
+	}
+}
+
 static void pump(struct vt_world *w)
 {
 	struct vmac_bus_msg m;
 	int loaded = 0;
+	if (!w->bus)
+		return;
+	keep_checkpoints(w);
 	while (vmac_bus_poll_msg(w->bus, &m)) {
 		struct vmac_driver *drv = NULL;
 		char text[VMAC_EVENT_TEXT];
@@ -164,6 +225,8 @@ static void pump(struct vt_world *w)
 		case VMAC_MSG_LOAD:
 			text[0] = 0;
 			rc = vmac_load_driver(&w->cfg, m.driver, m.device, &drv, text, sizeof(text));
+			if (drv)
+				offer_checkpoint(w, drv, m.device);
 			vmac_bus_loaded(w->bus, &m, rc, drv, text);
 			loaded = 1;
 			break;
@@ -202,7 +265,8 @@ static void deliver(struct vt_world *w, struct vt_pkt *p)
 	w->frames++;
 	if (p->to_host) {
 		p->p.rx_ns = w->now_ns;
-		vmac_bus_virtual_receive(w->bus, &p->p);
+		if (w->bus) /* else the host is down: the frame is lost */
+			vmac_bus_virtual_receive(w->bus, &p->p);
 		return;
 	}
 	{
@@ -241,7 +305,7 @@ static void step_plants(struct vt_world *w)
 int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 {
 	while (w->now_ns < until_ns) {
-		int64_t next_tick = vmac_bus_virtual_next_tick(w->bus), t = next_tick;
+		int64_t next_tick = w->bus ? vmac_bus_virtual_next_tick(w->bus) : INT64_MAX, t = next_tick;
 		if (w->next_plant_ns < t)
 			t = w->next_plant_ns;
 		if (w->nq > 0 && w->q[0].at < t)
@@ -260,10 +324,12 @@ int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 			deliver(w, &p);
 			w->moved = 1;
 		}
-		if (t < next_tick)
+		if (t < next_tick && (w->bus || t < w->next_plant_ns - VT_PLANT_STEP_NS))
 			continue;
-		vmac_bus_virtual_tick(w->bus, t);
-		pump(w);
+		if (w->bus) {
+			vmac_bus_virtual_tick(w->bus, t);
+			pump(w);
+		} /* else no host (vt_crash_host): checks run on the plant grid */
 		/* Checks run at each bus tick at which something they read may
 		 * have changed (world.h, `moved`): every change a driver, a board
 		 * or a plant makes is seen at the tick it happens. */
@@ -408,14 +474,19 @@ int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, 
 int vt_input(struct vt_world *w, const char *device, const char *name, const struct vmac_value *value, char *reply,
              size_t replylen)
 {
-	int rc = vmac_bus_input(w->bus, device, name, value, reply, replylen);
+	int rc;
+	if (!w->bus) {
+		snprintf(reply, replylen, "the host is down (crash_host)");
+		return -1;
+	}
+	rc = vmac_bus_input(w->bus, device, name, value, reply, replylen);
 	pump(w);
 	return rc;
 }
 
 const struct vmac_device_status *vt_device(struct vt_world *w, const char *device)
 {
-	return vmac_bus_device_status(w->bus, device, &w->status) == 0 ? &w->status : NULL;
+	return w->bus && vmac_bus_device_status(w->bus, device, &w->status) == 0 ? &w->status : NULL;
 }
 
 void vt_stop_host(struct vt_world *w)
@@ -423,9 +494,39 @@ void vt_stop_host(struct vt_world *w)
 	struct vmac_host_cmd c;
 	memset(&c, 0, sizeof(c));
 	c.kind = VMAC_CMD_STOP;
+	if (!w->bus)
+		return;
 	vmac_bus_send_cmd(w->bus, &c);
 	vmac_bus_virtual_commands(w->bus);
 	pump(w);
+}
+
+void vt_crash_host(struct vt_world *w)
+{
+	if (!w->bus)
+		return;
+	pump(w);               /* what reached the store before the crash */
+	vmac_bus_free(w->bus); /* no detach, no SHUTDOWN: the boards' watchdogs end it */
+	w->bus = NULL;
+	w->moved = 1;
+}
+
+int vt_start_host(struct vt_world *w, char *err, size_t errlen)
+{
+	struct vmac_bus_link link;
+	if (w->bus) {
+		snprintf(err, errlen, "the host is running");
+		return -1;
+	}
+	link.send = host_send;
+	link.ctx = w;
+	w->bus = vmac_bus_new_virtual(&w->cfg, &link, &w->bus_group, err, errlen);
+	if (!w->bus)
+		return -1;
+	vmac_bus_virtual_start_at(w->bus, w->now_ns);
+	w->host_started_ns = w->now_ns;
+	w->moved = 1;
+	return 0;
 }
 
 struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char *err, size_t errlen)
@@ -446,10 +547,8 @@ struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char
 	sin->sin_port = htons(5870);
 	sin->sin_addr.s_addr = htonl(0xEFFF564Du); /* 239.255.86.77 */
 	w->bus_group.len = sizeof(*sin);
-	link.send = host_send;
-	link.ctx = w;
-	w->bus = vmac_bus_new_virtual(&w->cfg, &link, &w->bus_group, err, errlen);
-	if (!w->bus) {
+	(void)link;
+	if (vt_start_host(w, err, errlen) != 0) {
 		free(w);
 		return NULL;
 	}
@@ -468,6 +567,8 @@ void vt_world_free(struct vt_world *w)
 	}
 	for (i = 0; i < w->nboards; i++)
 		free(w->boards[i]);
+	for (i = 0; i < w->ncheckpoints; i++)
+		free(w->checkpoints[i].data);
 	free(w->q);
 	free(w->events);
 	free(w);

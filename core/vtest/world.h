@@ -70,6 +70,16 @@ struct vt_event {
 
 struct vt_pkt; /* in flight */
 
+/* A machine's newest checkpoint, as vmacd's store keeps it. */
+struct vt_checkpoint {
+	char machine[VMAC_NAME_MAX + 1];
+	char driver[VMAC_NAME_MAX + 1];
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	int64_t t_ns;
+	uint8_t *data;
+	size_t len;
+};
+
 struct vt_world {
 	struct vmac_config cfg;
 	struct vmac_bus *bus;
@@ -96,6 +106,9 @@ struct vt_world {
 	FILE *trace;                      /* CSV of every service, or NULL */
 	char trace_test[128];             /* the running test's name, the CSV's first column */
 	struct vmac_device_status status; /* scratch for vt_device */
+	struct vt_checkpoint checkpoints[VT_MAX_BOARDS];
+	int ncheckpoints;
+	int64_t host_started_ns; /* when the running host started (crash_host, start_host) */
 };
 
 /* cfg: drivers_dir, scripts_dir, stdlib_dir and limits as the test wants. */
@@ -128,6 +141,14 @@ const struct vmac_device_status *vt_device(struct vt_world *w, const char *devic
 /* A named I/O of board b now (the board's own view: outputs it drives,
  * inputs its plant gives). 0, or -1 when b's driver has no such name. */
 int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, double *value, int *is_bool);
+
+/* A host crash: the host is gone at once, with no word to the boards
+ * (their watchdogs turn the outputs off); the checkpoints it had handed
+ * over stay. Until vt_start_host the world runs without a host (bus NULL). */
+void vt_crash_host(struct vt_world *w);
+/* A new host, its bus clock starting now (also at the world's start). 0, or
+ * -1 with err. */
+int vt_start_host(struct vt_world *w, char *err, size_t errlen);
 
 /* Stop the host the way vmacd stops (every board told to go safe). */
 void vt_stop_host(struct vt_world *w);

@@ -3,7 +3,9 @@
 -- in scripts/cycles/dishwasher/, written with the steps this driver offers
 -- (`d` below): fill, wash, drain, dry. The door has no lock: opening it
 -- stops everything and pauses the programme until it is closed again. A
--- hot reload continues a running programme where it was (migrate, below).
+-- hot reload continues a running programme where it was (migrate, below);
+-- after a restart, recover resumes it from the host's checkpoint when that
+-- is fresh and the plant agrees, else cancels it (drains).
 
 local appliance = require "appliance"
 local cycle = require "cycle"
@@ -17,10 +19,15 @@ end
 table.sort(program_names)
 
 local IDLE_LEVEL, RUN_LEVEL = 6, 5
+-- Recovery: the water may differ this much from the checkpoint's. Nothing
+-- moves the water while the outputs are off; a fill (3 l at 0.25 l/s) may
+-- have gone on for a periodic checkpoint's 5 s after it; drained is 3 l less.
+local RECOVER_LEVEL_L = 1.5
+local ENDED = { done = true, cancelled = true, failed = true } -- a cycle's finished phases
 
 local driver = {
 	name = "dishwasher",
-	version = "1.1.0",
+	version = "1.2.0",
 	level = IDLE_LEVEL,
 	description = "dishwasher: fill to the level switch, wash, drain, rinse; door interlock",
 	io = {
@@ -37,6 +44,8 @@ local driver = {
 		program = { default = "normal", values = program_names, persist = true, label = "Programme" },
 		time_scale = { default = 1, min = 0.001, max = 10, label = "Time scale (tests and demos)" },
 		fill_timeout_s = { default = 120, min = 5, max = 3600, unit = "s", label = "Longest fill" },
+		recover_max_age_s = { default = 600, min = 0, max = 86400, unit = "s",
+		                      label = "Oldest checkpoint a programme resumes from" },
 	},
 	variables = {
 		state = { group = "cycle", label = "State" },
@@ -60,6 +69,11 @@ local driver = {
 
 local want = { fill_valve = false, wash_motor = false, drain_pump = false }
 local params
+-- The last water level, kept in dev.state for the recovery check.
+local last = { level_l = nil }
+-- Set by recover when a programme resumes: what the first tick checks the
+-- plant against ({level_l = , age_s = }), then nil.
+local recovery = nil
 
 local function all_off(o)
 	o.fill_valve, o.wash_motor, o.drain_pump = false, false, false
@@ -116,10 +130,44 @@ control = appliance.new { cycle = run, programs = programs, idle_level = IDLE_LE
 
 function driver.attach(dev)
 	params = dev.params
-	dev.state.control = control -- the programme, the buttons and the cycle (migrate)
+	dev.state.control = control -- the programme, the buttons and the cycle (migrate, recover)
+	dev.state.last = last
+end
+
+local function where()
+	return tostring(control.chosen) .. " at step " .. tostring(run.step_name)
+end
+
+local function age_text(age_s)
+	return string.format("checkpoint %.0f s old", age_s)
+end
+
+-- The first tick after recover resumed a programme: the door closed and
+-- the water within RECOVER_LEVEL_L of the checkpoint's, or it is cancelled
+-- (drained), saying why.
+local function check_plant(dev, inputs, r)
+	local why
+	if not inputs.door_closed then
+		why = "the door is open"
+	elseif type(r.level_l) ~= "number" then
+		why = "the checkpoint has no water level to compare"
+	elseif math.abs(inputs.level_l - r.level_l) > RECOVER_LEVEL_L then
+		why = string.format("the water level is %.1f l, the checkpoint had %.1f l", inputs.level_l, r.level_l)
+	end
+	if why then
+		dev:event("recovery: " .. why .. ": cancelling " .. where() .. " (" .. age_text(r.age_s) .. ")")
+		run:cancel()
+	else
+		dev:event("recovered: resuming " .. where() .. " (" .. age_text(r.age_s) .. ")")
+	end
 end
 
 function driver.tick(dev, inputs)
+	if recovery then
+		check_plant(dev, inputs, recovery)
+		recovery = nil
+	end
+	last.level_l = inputs.level_l
 	control:buttons(dev, inputs.start_button, inputs.cancel_button)
 	run:tick(inputs.time, inputs, want)
 	control:publish(dev)
@@ -145,6 +193,50 @@ function driver.migrate(dev, old)
 		return
 	end
 	assert(control:restore(old.control))
+end
+
+-- Recovery after a restart (docs/DRIVERS.md), after attach and before the
+-- first tick, with the host's last checkpoint of dev.state: a running (or
+-- paused) programme resumes where it was when the checkpoint is at most
+-- recover_max_age_s old and the plant agrees at the first tick
+-- (check_plant); older, it is cancelled at once. One that was cancelling
+-- goes on draining. Idle or finished: nothing to resume (a finished
+-- programme's status is kept). The cycle goes on from os.clock(): the bus
+-- clock started again.
+function driver.recover(dev, saved)
+	local old = saved.state
+	if type(old) ~= "table" or type(old.control) ~= "table" or type(old.control.cycle) ~= "table" then
+		return
+	end
+	local phase = old.control.cycle.phase
+	local active = phase == "running" or phase == "cancelling"
+	if not active and not ENDED[phase] then
+		return -- idle (or no cycle we know): nothing to take over
+	end
+	local ok, err = control:restore(old.control, os.clock())
+	if not ok then -- e.g. its programme is gone: drain instead
+		local copy = {}
+		for k, v in pairs(old.control) do copy[k] = v end
+		copy.cycle = {}
+		for k, v in pairs(old.control.cycle) do copy.cycle[k] = v end
+		copy.cycle.phase = "cancelling"
+		assert(control:restore(copy, os.clock()))
+		dev:event("recovery: cannot resume (" .. err .. "): cancelling")
+		return
+	end
+	if not active then
+		return
+	end
+	local age_s = tonumber(saved.age_s) or math.huge -- no age: too old to trust
+	if phase == "cancelling" then
+		dev:event("recovered: cancelling " .. tostring(control.chosen) .. " goes on (" .. age_text(age_s) .. ")")
+	elseif age_s > params.recover_max_age_s then
+		dev:event(string.format("recovery: %s, more than %g s: cancelling %s", age_text(age_s),
+			params.recover_max_age_s, where()))
+		run:cancel()
+	else
+		recovery = { age_s = age_s, level_l = type(old.last) == "table" and old.last.level_l or nil }
+	end
 end
 
 return driver

@@ -2,12 +2,13 @@
 -- relays. The wall switches are toggle switches: every change of a switch's
 -- position flips its light (switch 1: kitchen, switch 2: dining). An
 -- operator may set any of the four from the UI or the API; the state is
--- published. A hot reload keeps every relay as it was. Board I/O:
+-- published. A hot reload keeps every relay as it was; after a restart,
+-- recover switches back on what was on at the host's checkpoint. Board I/O:
 -- docs/BOARD.md, "Lights".
 
 local driver = {
 	name = "lights",
-	version = "1.1.0",
+	version = "1.2.0",
 	level = 4, -- 16 ms with 1 ms slots: a switch feels instant
 	description = "kitchen and dining lights, TV and disposal relays, two wall switches",
 	io = {
@@ -91,6 +92,28 @@ function driver.migrate(dev, old)
 				switches[name] = old.switches[name]
 			end
 		end
+	end
+	show(dev)
+end
+
+-- Recovery after a restart (docs/DRIVERS.md), after attach and before the
+-- first tick: the lights and the TV that were on at the checkpoint go on
+-- again, at the first tick. Not the garbage disposal: a motor that starts
+-- by itself, maybe minutes later, could catch a hand; an event says it was
+-- left off. The switch positions are not taken over: a switch may have
+-- moved while the host was away, and the first tick reads where they are.
+local RECOVERED = { "kitchen", "dining", "tv" }
+
+function driver.recover(dev, saved)
+	local old = type(saved.state) == "table" and saved.state.relays
+	if type(old) ~= "table" then
+		return
+	end
+	for _, r in ipairs(RECOVERED) do
+		relays[r] = old[r] == true
+	end
+	if old.disposal == true then
+		dev:event("recovery: the garbage disposal was on; left off")
 	end
 	show(dev)
 end

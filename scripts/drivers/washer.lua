@@ -6,7 +6,9 @@
 -- door opens and resumes after it is closed and locked again; cancel stops
 -- the drum and drains. The door is never unlocked while the drum turns or
 -- the water is above the door. A hot reload continues a running programme
--- where it was (dev.state and migrate, at the end).
+-- where it was (dev.state and migrate, at the end); after a restart, recover
+-- resumes it from the host's checkpoint when that is fresh and the plant
+-- agrees, else cancels it (drains and unlocks).
 
 local appliance = require "appliance"
 local cycle = require "cycle"
@@ -27,10 +29,12 @@ local IDLE_LEVEL, RUN_LEVEL = 5, 4
 local COUNTS_PER_REV = 360
 local STILL_RPM = 2 -- below this the drum counts as stopped
 local TEMPS = { hot = { true, false }, warm = { true, true }, cold = { false, true } }
+local RECOVER_LEVEL_L = 2 -- recovery: the water may differ this much from the checkpoint's
+local ENDED = { done = true, cancelled = true, failed = true } -- a cycle's finished phases
 
 local driver = {
 	name = "washer",
-	version = "1.1.0",
+	version = "1.2.0",
 	level = IDLE_LEVEL,
 	description = "washing machine: fill, wash, rinse, spin; door interlock",
 	io = {
@@ -54,6 +58,8 @@ local driver = {
 		time_scale = { default = 1, min = 0.001, max = 10, label = "Time scale (tests and demos)" },
 		door_level_l = { default = 5, min = 0, max = 40, unit = "l", label = "Water level of the door" },
 		fill_timeout_s = { default = 300, min = 10, max = 3600, unit = "s", label = "Longest fill" },
+		recover_max_age_s = { default = 600, min = 0, max = 86400, unit = "s",
+		                      label = "Oldest checkpoint a programme resumes from" },
 	},
 	variables = {
 		state = { group = "cycle", label = "State" },
@@ -88,10 +94,14 @@ local want = { hot_valve = false, cold_valve = false, drain_pump = false, door_l
 -- Named inputs plus the measured drum speed, for the steps.
 local inp = { drum_rpm = 0 }
 -- What the driver carries from tick to tick besides the cycle: the last
--- encoder reading and its bus time (for the drum speed), whether the guard
--- holds the door locked, and the drum's set point.
-local memory = { encoder = nil, time = nil, guard = false, setpoint_rpm = 0 }
+-- encoder reading and its bus time (for the drum speed), whether the drum
+-- speed has been measured yet (not on the first tick of a new instance),
+-- whether the guard holds the door locked, and the drum's set point.
+local memory = { encoder = nil, time = nil, measured = false, guard = false, setpoint_rpm = 0 }
 local params -- dev.params, for the steps
+-- Set by recover when a programme resumes: what the first tick checks the
+-- plant against ({level_l = , age_s = }), then nil.
+local recovery = nil
 
 local function all_off(o)
 	o.hot_valve, o.cold_valve, o.drain_pump = false, false, false
@@ -109,7 +119,9 @@ end
 -- The guard: never unlock a closed door on a turning drum or on water above
 -- it, whatever the cycle asks. It holds the lock from the moment it is
 -- unsafe until the drum has clearly stopped (half the still speed), so a
--- drum coasting near the threshold cannot make the solenoid chatter. A door
+-- drum coasting near the threshold cannot make the solenoid chatter, and
+-- not before the drum speed has been measured (a recovered machine starts
+-- with the guard of its checkpoint: the drum may still turn). A door
 -- already open (the emergency release) is not locked: the interlock has
 -- everything off.
 local function guard_lock()
@@ -117,7 +129,7 @@ local function guard_lock()
 		memory.guard = false
 	elseif not safe_to_open() then
 		memory.guard = true
-	elseif memory.guard and safe_below(STILL_RPM / 2) then
+	elseif memory.guard and memory.measured and safe_below(STILL_RPM / 2) then
 		memory.guard = false
 	end
 	return memory.guard
@@ -147,7 +159,9 @@ local function steps_for(c)
 	local function scaled(minutes) return minutes * 60 * params.time_scale end
 	local function stop_drum()
 		c.out.motor_on, c.out.motor_rpm = true, 0 -- the ramp brakes it
-		c:wait_until(function() return math.abs(c.inp.drum_rpm) < STILL_RPM end, 120, "the drum to stop")
+		c:wait_until(function() -- (unknown before the first measurement: after a restart it may turn)
+			return memory.measured and math.abs(c.inp.drum_rpm) < STILL_RPM
+		end, 120, "the drum to stop")
 		c.out.motor_on = false
 	end
 	function w.lock()
@@ -227,7 +241,7 @@ local drum_ramp = ramp.new { accel = 100, max_rate = 50 } -- RPM/s^2, RPM/s
 local drum_pid = pid.new { kp = 2, ki = 0.8, out_min = -1000, out_max = 1000 }
 
 local function drive_drum(dt)
-	if not want.motor_on then
+	if not want.motor_on or not memory.measured then
 		drum_pid:reset()
 		drum_ramp:reset(inp.drum_rpm)
 		memory.setpoint_rpm = 0
@@ -256,7 +270,12 @@ local function read_board(inputs)
 	if dt > 0 then
 		-- counts since the last tick, across the int32 wrap; 0.1 s filter
 		local rpm = bit.tobit(inputs.drum - memory.encoder) / COUNTS_PER_REV / dt * 60
-		inp.drum_rpm = inp.drum_rpm + (rpm - inp.drum_rpm) * dt / (0.1 + dt)
+		if memory.measured then
+			inp.drum_rpm = inp.drum_rpm + (rpm - inp.drum_rpm) * dt / (0.1 + dt)
+		else -- the first measurement: the drum may be turning (a restart), start from it
+			inp.drum_rpm, memory.measured = rpm, true
+			drum_ramp:reset(rpm)
+		end
 	end
 	memory.encoder, memory.time = inputs.drum, inputs.time
 	return dt
@@ -272,8 +291,41 @@ function driver.attach(dev)
 	keep.drum_ramp, keep.drum_pid = drum_ramp, drum_pid
 end
 
+-- name of the programme and its step, for events
+local function where()
+	return tostring(control.chosen) .. " at step " .. tostring(wash.step_name)
+end
+
+local function age_text(age_s)
+	return string.format("checkpoint %.0f s old", age_s)
+end
+
+-- The first tick after recover resumed a programme: the plant must agree
+-- with the checkpoint (door closed, water within RECOVER_LEVEL_L), or the
+-- programme is cancelled (stop, drain, unlock), saying why.
+local function check_plant(dev, r)
+	local why
+	if not inp.door_closed then
+		why = "the door is open"
+	elseif type(r.level_l) ~= "number" then
+		why = "the checkpoint has no water level to compare"
+	elseif math.abs(inp.level_l - r.level_l) > RECOVER_LEVEL_L then
+		why = string.format("the water level is %.1f l, the checkpoint had %.1f l", inp.level_l, r.level_l)
+	end
+	if why then
+		dev:event("recovery: " .. why .. ": cancelling " .. where() .. " (" .. age_text(r.age_s) .. ")")
+		wash:cancel()
+	else
+		dev:event("recovered: resuming " .. where() .. " (" .. age_text(r.age_s) .. ")")
+	end
+end
+
 function driver.tick(dev, inputs)
 	local dt = read_board(inputs)
+	if recovery then
+		check_plant(dev, recovery)
+		recovery = nil
+	end
 	control:buttons(dev, inputs.start_button, inputs.cancel_button)
 	wash:tick(inputs.time, inp, want)
 	control:publish(dev)
@@ -295,6 +347,54 @@ end
 
 function driver.detach()
 	all_off(want)
+end
+
+-- Recovery after a restart (docs/DRIVERS.md): after attach, before the first
+-- tick, with the host's last checkpoint of dev.state. A programme that was
+-- running (or paused) resumes where it was when the checkpoint is at most
+-- recover_max_age_s old and the plant agrees at the first tick
+-- (check_plant); older, it is cancelled at once. One that was cancelling
+-- goes on cancelling. Idle or finished: nothing to resume (a finished
+-- programme's status is kept). The bus clock started again: the cycle goes
+-- on from os.clock(), and the encoder reading and its time are not taken
+-- over (the first tick starts fresh). The door guard starts from the
+-- checkpoint's, held while a programme was active, until the drum is
+-- measured still and the water below the door.
+function driver.recover(dev, saved)
+	local old = saved.state
+	if type(old) ~= "table" or type(old.control) ~= "table" or type(old.control.cycle) ~= "table" then
+		return
+	end
+	local phase = old.control.cycle.phase
+	local active = phase == "running" or phase == "cancelling"
+	memory.guard = active or type(old.memory) == "table" and old.memory.guard == true
+	if not active and not ENDED[phase] then
+		return -- idle (or no cycle we know): nothing to take over
+	end
+	local ok, err = control:restore(old.control, os.clock())
+	if not ok then -- e.g. its programme is gone: make the machine safe instead
+		local copy = {}
+		for k, v in pairs(old.control) do copy[k] = v end
+		copy.cycle = {}
+		for k, v in pairs(old.control.cycle) do copy.cycle[k] = v end
+		copy.cycle.phase = "cancelling"
+		assert(control:restore(copy, os.clock()))
+		dev:event("recovery: cannot resume (" .. err .. "): cancelling")
+		return
+	end
+	if not active then
+		return
+	end
+	local age_s = tonumber(saved.age_s) or math.huge -- no age: too old to trust
+	if phase == "cancelling" then
+		dev:event("recovered: cancelling " .. tostring(control.chosen) .. " goes on (" .. age_text(age_s) .. ")")
+	elseif age_s > params.recover_max_age_s then
+		dev:event(string.format("recovery: %s, more than %g s: cancelling %s", age_text(age_s),
+			params.recover_max_age_s, where()))
+		wash:cancel()
+	else
+		recovery = { age_s = age_s, level_l = type(old.inp) == "table" and old.inp.level_l or nil }
+	end
 end
 
 -- into[name] = from[name] for each of names whose value in from (a plain
@@ -335,7 +435,8 @@ function driver.migrate(dev, old)
 		end
 	end
 	take(memory, old.memory, { "encoder", "time", "setpoint_rpm" }, "number")
-	take(memory, old.memory, { "guard" }, "boolean")
+	take(memory, old.memory, { "guard", "measured" }, "boolean")
+	memory.measured = memory.measured or memory.time ~= nil -- 1.1.0 measured from its first tick on
 	take(drum_ramp, old.drum_ramp, { "value", "rate", "target" }, "number")
 	take(drum_pid, old.drum_pid, { "i_term", "p_term", "d_term", "output" }, "number")
 end

@@ -201,9 +201,13 @@ test("the washer board dropping out mid-cycle: driver unloaded, board safe, the 
 	expect_eq(l.device.misses, 0, "misses of the lights board")
 	l:set("toggle1")
 	run_until(function() return l.out.kitchen end, 0.5, "the kitchen light on from its wall switch")
-	-- Plugged in again, the washer announces itself and attaches afresh.
+	-- Plugged in again, the washer announces itself, attaches afresh and
+	-- resumes the wash from its last checkpoint (docs/DRIVERS.md "Recovery").
 	w:replug()
-	run_until(function() return w.var.state == "idle" end, 5, "the washer attached again, idle")
+	run_until(function() return w.var.state == "running" end, 5, "the washer attached again, running")
+	expect_eq(w.var.step, "wash", "the step it resumed at")
+	expect_event({ kind = "driver", device = "washer-1", text = "recovered: resuming quick at step wash" },
+		"an event saying the programme resumed")
 end)
 
 test("a board that answers later than the deadline is dropped", function()
@@ -223,7 +227,10 @@ test("a board powered off mid-cycle is dropped and its outputs are off", functio
 	run_until(function() return w.state == "errant" end, 1, "the host to drop the washer")
 	expect(all_off(w), "every output off")
 	w:power_on()
-	run_until(function() return w.var.state == "idle" end, 5, "the washer attached again, idle")
+	-- The tub kept its water: the washer resumes the fill where it was.
+	run_until(function() return w.var.state == "running" end, 5, "the washer attached again, running")
+	expect_eq(w.var.step, "fill", "the step it resumed at")
+	run_until(function() return w.var.step == "wash" end, 60, "the fill to finish and the wash to begin")
 end)
 
 test("corrupted frames are refused, and a board whose every frame is corrupted is dropped", function()
@@ -241,4 +248,48 @@ test("with a miss limit of 3, a lossy link (1% of frames lost) does not stop the
 	w:input("start", "quick")
 	finish(w)
 	expect(w.device.misses > 0, "some misses counted")
+end)
+
+-- ---- recovery after a host crash (docs/DRIVERS.md "Recovery after a restart") ----
+
+local function unsafe_door(w)
+	local p = w.plant
+	return p.door_closed and not p.door_locked and (math.abs(p.drum_rpm) > 2 or p.water_l > 5)
+end
+
+test("a host crash mid-wash: the boards go safe, and the new host resumes the wash where it was", function()
+	local w = washer(0.05)
+	always("the door locked while the drum turns or water is above the door", function() return not unsafe_door(w) end)
+	w:input("start", "quick")
+	run_until(function() return w.var.step == "wash" end, 120, "the wash step")
+	run_for(1)
+	local left = w.var.time_left_s
+	crash_host()
+	run_until(function() return all_off(w) end, 1, "the board's watchdog to turn every output off")
+	expect_eq(w.state, "absent", "the host's view of the washer while there is no host")
+	run_for(1) -- the PTC lock holds the door meanwhile (docs/BOARD.md)
+	start_host()
+	run_until(function() return w.var.state == "running" end, 5, "the washer running again")
+	expect_eq(w.var.step, "wash", "the step it resumed at")
+	expect(w.var.time_left_s <= left + 1, "the wash goes on with the time it had left (" .. tostring(w.var.time_left_s)
+		.. " s, " .. tostring(left) .. " s before the crash)")
+	expect_event({ kind = "recovered", device = "washer-1" }, "the host's recovered event")
+	run_until(function() return w.var.state == "done" end, 600, "the programme to finish")
+	run_until(function() return not w.out.door_lock end, 30, "the door unlocked once the drum is still")
+end)
+
+test("a host down for longer than recover_max_age_s: the washer drains and unlocks, saying why", function()
+	local w = board { name = "washer-1", plant = "washer", params = { time_scale = 0.05, recover_max_age_s = 30 } }
+	run_until(function() return w.var.state == "idle" end, 5, "the washer attached and idle")
+	always("the door locked while the drum turns or water is above the door", function() return not unsafe_door(w) end)
+	w:set("lock_release_s", 120) -- a real PTC lock: it stays locked through this outage
+	w:input("start", "quick")
+	run_until(function() return w.var.step == "wash" end, 120, "the wash step")
+	crash_host()
+	run_for(60)
+	start_host()
+	run_until(function() return w.var.state == "cancelling" or w.var.state == "cancelled" end, 5,
+		"the programme cancelled")
+	expect_event({ kind = "driver", device = "washer-1", text = "more than 30 s" }, "an event saying why")
+	run_until(function() return w.plant.water_l < 0.5 and not w.out.door_lock end, 600, "drained and unlocked")
 end)

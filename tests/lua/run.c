@@ -19,9 +19,13 @@
  * still loads stdlib/ modules (as in a driver, once per state); a name
  * that is no stdlib module is looked up next in tests/lua/ (testing,
  * host_copy, washer_plant and the test files themselves), loaded as text
- * into the same sandboxed globals; and "washer_example" is the lua block of
- * docs/STDLIB.md after its example marker, at its own line numbers. As the
- * whole case runs as a driver file's load, require works all through it.
+ * into the same sandboxed globals; "washer_example" is the lua block of
+ * docs/STDLIB.md after its example marker, at its own line numbers; and
+ * "driver_NAME" runs scripts/drivers/NAME.lua, with vmac.cycles() reading
+ * scripts/cycles/NAME/, anew at every require: each is a new instance of
+ * the shipped driver (its manifest and callbacks), as after a restart. As
+ * the whole case runs as a driver file's load, require works all through it
+ * (and os.clock() is 0, as while a driver loads).
  *
  * What the real sandbox cannot give a test, the tests no longer do: one
  * state cannot load a module twice, so the reload tests of appliance and
@@ -49,6 +53,9 @@
 #define CASE_BUDGETS 500                /* per case: 100 million instructions (the whole wash takes 37) */
 
 #define TESTS_DIR "tests/lua"
+#define DRIVERS_DIR "scripts/drivers"
+#define CYCLES_DIR "scripts/cycles"
+#define DRIVER_PREFIX "driver_"
 #define EXAMPLE_DOC "docs/STDLIB.md"
 #define EXAMPLE_MARKER "<!-- test_washer_example.lua loads the next lua block -->"
 
@@ -92,6 +99,19 @@ static void load_example(lua_State *L)
 		lua_error(L);
 }
 
+/* "driver_NAME": a new instance of scripts/drivers/NAME.lua, its
+ * programmes from scripts/cycles/NAME/: [-0, +1] what the file returned,
+ * or raises. Not cached: every require is another instance. */
+static int require_driver(lua_State *L, const char *path, const char *driver)
+{
+	struct vmac_driver *d = drv_of(L);
+	char chunk[600];
+	snprintf(d->cycles_dir, sizeof(d->cycles_dir), CYCLES_DIR "/%s", driver);
+	snprintf(chunk, sizeof(chunk), "@%s", path);
+	drv_run_sandboxed(L, path, chunk, driver);
+	return 1;
+}
+
 /* require for the tests: upvalue 1 the sandboxed globals, upvalue 2 the
  * driver's own require. Modules are cached where the driver's are. */
 static int test_require(lua_State *L)
@@ -102,6 +122,11 @@ static int test_require(lua_State *L)
 	snprintf(path, sizeof(path), "%s/%s.lua", drv_of(L)->stdlib_dir, name);
 	if (!drv_valid_module_name(name, 40) || access(path, R_OK) == 0)
 		goto driver_require;
+	if (strncmp(name, DRIVER_PREFIX, strlen(DRIVER_PREFIX)) == 0) {
+		snprintf(path, sizeof(path), DRIVERS_DIR "/%s.lua", name + strlen(DRIVER_PREFIX));
+		if (access(path, R_OK) == 0)
+			return require_driver(L, path, name + strlen(DRIVER_PREFIX));
+	}
 	snprintf(path, sizeof(path), TESTS_DIR "/%s.lua", name);
 	helper = access(path, R_OK) == 0;
 	example = strcmp(name, "washer_example") == 0;

@@ -177,3 +177,65 @@ test("restore refuses a running programme this version does not have, and change
 	T.fails(function() n.ctl:restore({}) end, "appliance:restore: old must be a copy of an appliance",
 		"restore({})")
 end)
+
+-- ---- checkpoints and recovery ----
+
+test("publish asks for a checkpoint at the first publish and at each change of state or step only", function()
+	local m = machine()
+	local asked = 0
+	function m.dev.checkpoint() asked = asked + 1 end
+	m.tick()
+	T.equal(asked, 1, "checkpoints after the first publish (idle)")
+	m.tick()
+	T.equal(asked, 1, "checkpoints after a second idle tick")
+	m.programs.two = function(c)
+		c:step("first", function() c:wait(1) end)
+		c:step("second", function() c:wait(1) end)
+	end
+	m.ctl:start(m.dev, "two")
+	m.tick()
+	T.equal(asked, 2, "checkpoints once running its first step")
+	for _ = 1, 5 do m.tick() end
+	T.equal(asked, 2, "checkpoints during the first step")
+	for _ = 1, 6 do m.tick() end
+	T.equal(m.dev.vars.step, "second", "step after 1.1 s")
+	T.equal(asked, 3, "checkpoints at the second step")
+	m.ctl:input(m.dev, "pause")
+	m.tick()
+	T.equal(asked, 4, "checkpoints after the pause (state paused)")
+	m.ctl:input(m.dev, "resume")
+	for _ = 1, 20 do m.tick() end
+	T.equal(m.dev.vars.state, "done", "state at the end")
+	T.equal(asked, 6, "checkpoints after resume and at the end (running, done)")
+end)
+
+test("publish works on a dev without checkpoint (an older host)", function()
+	local m = machine()
+	T.equal(m.dev.checkpoint, nil, "the fake dev's checkpoint")
+	m.ctl:start(m.dev, "short")
+	m.tick()
+	T.equal(m.dev.vars.state, "running", "state published")
+end)
+
+test("restore(old, now) goes on at the new clock, asks for the running level, and buttons start afresh",
+	function()
+		local m = machine()
+		m.ctl:start(m.dev, "long")
+		for _ = 1, 30 do m.tick() end
+		m.ctl.last_cancel = true -- the old instance saw the cancel button down at its last tick
+		local n = machine()
+		local old = host_copy.state({ control = m.ctl }).control
+		T.equal(n.ctl:restore(old, 0), true, "restore(old, 0)")
+		n.t = 0
+		n.tick()
+		T.equal(n.dev.vars.state, "running", "state on the new clock")
+		T.near(n.dev.vars.time_left_s, 10 - 3.1, 0.11, "time left on the new clock")
+		T.equal(n.dev.levels[1], 3, "level asked for at the first publish")
+		local held = machine()
+		held.ctl:restore(old, 0)
+		held.t = 0
+		held.tick(false, true)
+		T.equal(held.dev.vars.state, "cancelled",
+			"a cancel button held at the first tick after a restart (a press, as at any attach)")
+		T.fails(function() n.ctl:restore(old, {}) end, "appliance:restore: now must be a number", "restore(old, {})")
+	end)

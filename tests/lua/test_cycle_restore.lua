@@ -381,3 +381,86 @@ test("restore refuses a copy that does not say how far it got, and raises on wha
 	T.fails(function() c:restore({ phase = "spinning" }) end, "cycle:restore: old must be a copy of a cycle",
 		"an unknown phase")
 end)
+
+-- ---- recovery after a restart: restore(old, now) on a new bus clock ----
+
+test("restored at a new bus clock that starts below the old one, the step goes on with the same time left",
+	function()
+		local bus = new_bus()
+		local old = washing(bus, counts())
+		local left, old_elapsed = old:wait_left(), old:elapsed()
+		local runs = counts()
+		local c = programme(new_instance().cycle, runs)
+		T.equal(c:restore(reload(old), 2), true, "restore(old, 2)")
+		T.equal(c.time, 2, "the cycle's bus time: the new clock's")
+		T.near(c.started_at, old.started_at + (2 - old.time), 1e-9, "started_at, moved with the clock")
+		T.near(c:wait_left(), left, 1e-9, "time left before the first tick")
+
+		bus.t = 2 -- the bus clock started again
+		bus.run(c, DT)
+		T.equal(c.state, "running", "state after the first tick on the new clock (no 'time went backwards')")
+		T.equal(runs.fill, 0, "times fill ran again")
+		T.equal(c.step_name, "wash", "step after the first tick")
+		T.near(c:wait_left(), left - DT, 1e-6, "time left after the first tick")
+		T.near(c:elapsed(), old_elapsed + DT, 1e-6, "the cycle clock went on from the old one's reading")
+		local ended = bus.finish(c, 400)
+		T.equal(c.state, "done", "state at the end")
+		T.near(ended - 2, left + 5, 2 * DT, "seconds from the restart to the end (rest of the wash, drain)")
+
+		local again = programme(new_instance().cycle, counts())
+		again:restore(reload(old))
+		T.fails(function() again:tick(2, {}, {}) end, "time went backwards",
+			"without now, a tick on the new clock")
+		T.fails(function() again:restore(reload(old), "now") end, "cycle:restore: now must be a number",
+			"restore(old, 'now')")
+	end)
+
+test("restored at a new bus clock, a paused cycle stays paused with its clock standing", function()
+	local bus = new_bus()
+	local old = washing(bus, counts())
+	old:pause()
+	bus.run(old, 5)
+	local left = old:wait_left()
+	local c = programme(new_instance().cycle, counts())
+	c:restore(reload(old), 0)
+	bus.t = 0
+	bus.run(c, 3)
+	T.equal(c.state, "paused", "state on the new clock")
+	T.near(c:wait_left(), left, 1e-9, "time left while paused")
+	c:resume()
+	bus.run(c, 1)
+	T.near(c:wait_left(), left - 1 + DT, 1e-6, "time left 1 s after resume (the tick that resumes counts from itself)")
+end)
+
+test("restored at a new bus clock, a re-arming interlock gets its whole re-arm timeout from then", function()
+	local function door(interlock_module)
+		return interlock_module.new {
+			name = "door open",
+			trip = function(i) return not i.door_closed end,
+			safe = function(o) o.motor_rpm = 0 end,
+			rearm = function(o, i) o.door_lock = true; return i.door_locked end,
+			rearm_timeout = 5,
+		}
+	end
+	local bus = new_bus()
+	bus.inp.door_closed, bus.inp.door_locked = true, true
+	local old = programme(cycle, counts(), { interlocks = { door(interlock) } })
+	old:start()
+	bus.run(old, 70)
+	bus.inp.door_closed, bus.inp.door_locked = false, false
+	bus.run(old, 1)
+	bus.inp.door_closed = true
+	bus.run(old, 4) -- 4 of its 5 s re-arming
+	T.equal(old.interlocks[1].state, "rearming", "old interlock")
+
+	local new = new_instance()
+	local c = programme(new.cycle, counts(), { interlocks = { door(new.interlock) } })
+	c:restore(reload(old), 1)
+	T.equal(c.interlocks[1].since, 1, "the interlock's since: the new clock's now")
+	bus.t = 1
+	bus.run(c, 3)
+	T.equal(c.interlocks[1].state, "rearming", "interlock 3 s after the restart (not in fault)")
+	bus.inp.door_locked = true
+	bus.run(c, 2 * DT)
+	T.equal(c.state, "running", "state once locked")
+end)

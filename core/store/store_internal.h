@@ -1,0 +1,36 @@
+/* The store's insides, shared by its files (store.c: tokens, params,
+ * driver versions, events, opening; store_checkpoint.c: checkpoints of
+ * machine state). The rest of the host sees only store.h. */
+#ifndef VMAC_STORE_INTERNAL_H
+#define VMAC_STORE_INTERNAL_H
+
+#include "store.h"
+
+#include <pthread.h>
+#include <sqlite3.h>
+
+struct vmac_store {
+	sqlite3 *db;
+	/* Held by every function below from its first statement until its
+	 * error text is written: the one connection is shared by the host's
+	 * threads, and what it says about the last statement
+	 * (sqlite3_changes, sqlite3_last_insert_rowid, sqlite3_errmsg) or
+	 * which transaction a statement joins is only true while no other
+	 * thread's statement runs in between. */
+	pthread_mutex_t lock;
+};
+
+/* Unix time now. */
+double store_now_s(void);
+/* err says what failed and SQLite's why; returns the code of it. */
+int store_fail(struct vmac_store *s, const char *what, char *err, size_t errlen);
+/* store_fail(), then let the other threads in. */
+int store_fail_unlock(struct vmac_store *s, const char *what, char *err, size_t errlen);
+/* Column i of a row as text into out. */
+void store_text_col(sqlite3_stmt *st, int i, char *out, size_t len);
+/* Take the lock and open a write transaction: 0, or -1 still holding the lock. */
+int store_begin(struct vmac_store *s);
+/* Commit when ok, else roll back; let the other threads in. 0, or < 0 with err. */
+int store_end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen);
+
+#endif
