@@ -70,7 +70,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	rc = vmac_driver_recover(d, 1, err, sizeof(err));
 	if (rc != (offered ? VMAC_RECOVER_DONE : VMAC_RECOVER_NONE)) {
 		/* recover may only fail by the walk's budget or the cap, on a huge state */
-		if (!(offered && rc < 0 && (strstr(err, "budget") || strstr(err, "memory") || strstr(err, "instruction"))))
+		if (!(offered && rc < 0 &&
+		      (strstr(err, "budget") || strstr(err, "memory") || strstr(err, "instruction"))))
 			abort();
 		vmac_driver_free(d);
 		return 0;
@@ -78,8 +79,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	if (offered) {
 		again = malloc(size);
 		if (!again || vmac_driver_checkpoint(d, again, size, &len, err, sizeof(err)) != 0 || len > size) {
-			fprintf(stderr, "fuzz_checkpoint: a checkpoint taken does not encode again in %zu bytes: %s\n", size,
-			        err);
+			fprintf(stderr, "fuzz_checkpoint: a checkpoint taken does not encode again in %zu bytes: %s\n",
+			        size, err);
 			abort();
 		}
 		free(again);
