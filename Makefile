@@ -9,6 +9,8 @@
 #                   then again under ASan+UBSan)
 #   make fuzz       every libFuzzer harness FUZZ_SECONDS each (default 60), executions per target
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
+#   make soak       one host under every fault at once for SOAK_MINUTES (default 60), its resources
+#                   sampled every 10 s; make test-soak: the same for 2 minutes
 #   make clean
 
 BUILD   ?= build
@@ -49,11 +51,11 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
-                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
-                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/console.c core/sched/sched.c core/sched/search.c \
-                core/store/store.c core/store/store_checkpoint.c
+                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
+                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/console.c core/sched/sched.c core/sched/search.c \
+                core/store/store.c core/store/store_checkpoint.c core/store/store_recording.c
 # vmac test: the host core and the board firmware on one virtual clock.
-VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c
+VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c core/vtest/replay.c
 OBJ = $(BUILD)/obj
 
 portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
@@ -71,7 +73,7 @@ UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD
 
 .PHONY: format format-check test-build asan-build
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz fuzz test-integration test-ui test-asan bench clean
-.PHONY: firmware run-qemu
+.PHONY: firmware run-qemu soak test-soak
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c
@@ -97,7 +99,7 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(host_obj) $(portable_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
 $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
-                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(OBJ)/core/cli/lint.o \
+                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(OBJ)/core/cli/command.o $(OBJ)/core/cli/recordings.o $(OBJ)/core/cli/lint.o \
                    $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
@@ -203,14 +205,14 @@ $(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sche
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
 
-$(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o
+$(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
 # Checkpoints: dev.state through the driver's encoder and decoder, and the
 # store's table of them (white-box: core/driver/internal.h).
 $(BUILD)/tests/test_checkpoint: $(OBJ)/tests/unit/test_checkpoint.o $(driver_obj) $(OBJ)/core/store/store.o \
-                                $(OBJ)/core/store/store_checkpoint.o
+                                $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
@@ -229,7 +231,7 @@ $(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o $(driver_obj)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
 # The store killed mid-write (tests/integration/test_store.py).
-$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o
+$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
 
@@ -423,6 +425,18 @@ bench:
 	@$(MAKE) --no-print-directory all $(BUILD)/bench/bare_loop
 	python3 tests/bench/bench.py --bin $(BUILD)/bin --bare $(BUILD)/bench/bare_loop --seconds $(BENCH_SECONDS) \
 		--out $(BUILD)/bench/results.json
+
+# The soak (tests/soak/soak.py, docs/RELIABILITY.md "Soak"): boards killed
+# and restarted, a driver reloaded every 10 s, 20 web UI clients, 1,000
+# malformed datagrams a second, bad tokens and a nearly full store, all at
+# once; the host's RSS, descriptors, threads and store size every 10 s.
+# Exits non-zero saying what broke. test-soak is the 2-minute version for CI.
+SOAK_MINUTES ?= 60
+soak: $(BINS)
+	python3 tests/soak/soak.py --bin $(BUILD)/bin --minutes $(SOAK_MINUTES) --out $(BUILD)/soak
+
+test-soak: $(BINS)
+	@$(MAKE) --no-print-directory soak SOAK_MINUTES=2
 
 # The committed .clang-format, enforced: a C file that is not formatted
 # fails (make format rewrites them in place).

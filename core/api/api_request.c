@@ -104,6 +104,11 @@ void http_route(const char *method, const char *url, struct http_route *r)
 		r->endpoint = HTTP_EVENT_LOG;
 	else if (get && strcmp(url, "/api/events") == 0)
 		r->endpoint = HTTP_EVENTS;
+	else if (get && strcmp(url, "/api/recordings") == 0)
+		r->endpoint = HTTP_RECORDINGS;
+	else if (get && named_path(url, "/api/recordings/", "", name, len) &&
+	         strspn(name, "0123456789") == strlen(name))
+		r->endpoint = HTTP_RECORDING;
 	else if (get && strcmp(url, "/api") == 0)
 		r->endpoint = HTTP_INDEX;
 	else
@@ -116,6 +121,7 @@ void http_route(const char *method, const char *url, struct http_route *r)
 	case HTTP_UPLOAD:
 	case HTTP_DEVICE:
 	case HTTP_DRIVER:
+	case HTTP_RECORDING:
 	case HTTP_MANIFEST: break;
 	default: name[0] = 0; /* a path that did not match may have left part of itself there */
 	}

@@ -34,6 +34,8 @@ enum http_endpoint {
 	HTTP_MANIFEST,   /* GET /api/drivers/NAME/manifest */
 	HTTP_EVENT_LOG,  /* GET /api/events/log */
 	HTTP_EVENTS,     /* GET /api/events */
+	HTTP_RECORDINGS, /* GET /api/recordings */
+	HTTP_RECORDING,  /* GET /api/recordings/ID */
 	HTTP_INDEX,      /* GET /api */
 	HTTP_NOT_FOUND,  /* anything else (after the token is checked): 404 */
 };

@@ -253,14 +253,16 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	case HTTP_MANIFEST: return http_driver_manifest(c, r.name);
 	case HTTP_EVENT_LOG: return http_event_log(h, c);
 	case HTTP_EVENTS: return http_events_stream(h, c);
+	case HTTP_RECORDINGS: return http_recordings(h, c);
+	case HTTP_RECORDING: return http_recording(h, c, r.name);
 	case HTTP_INDEX:
 		return http_reply(c, MHD_HTTP_OK,
-		                  json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING,
+		                  json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING,
 		                            "endpoints", "/api/status", "/api/health", "/api/events",
 		                            "/api/devices/NAME/input", "/api/drivers", "/api/drivers/NAME",
 		                            "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
 		                            "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
-		                            "/api/drivers/NAME/activate"));
+		                            "/api/drivers/NAME/activate", "/api/recordings", "/api/recordings/ID"));
 	default: return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
 	}
 }

@@ -122,6 +122,10 @@ enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c);
 enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c);
 enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c);
 
+/* api_recordings.c */
+enum MHD_Result http_recordings(struct vmac_http *h, struct MHD_Connection *c);
+enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, const char *id);
+
 /* api_drivers.c */
 enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
 enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,

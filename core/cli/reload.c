@@ -11,74 +11,9 @@
 #include <time.h>
 
 #include "client.h"
+#include "command.h"
 
 #define FILE_MAX (1 << 20)
-
-struct common {
-	const char *http, *token, *token_file;
-	int json;
-};
-
-/* The options every one of these commands takes; returns 1 when handled. */
-static int common_opt(int opt, struct common *o)
-{
-	switch (opt) {
-	case 'H': o->http = optarg; return 1;
-	case 't': o->token = optarg; return 1;
-	case 'f': o->token_file = optarg; return 1;
-	case 'j': o->json = 1; return 1;
-	default: return 0;
-	}
-}
-
-static const char COMMON_HELP[] =
-    "  --http ADDR:PORT   the host's HTTP address (default $VMAC_HTTP or 127.0.0.1:8080)\n"
-    "  --json             print the host's JSON answer as it is\n"
-    "  --token T          a token (default $VMAC_TOKEN)\n"
-    "  --token-file F     read the token from F's first line (default $VMAC_TOKEN_FILE)\n";
-
-/* One call and its answer for people: 0 on HTTP 200, 1 otherwise. */
-static int run(const struct common *o, const char *method, const char *path, const char *body, size_t len,
-               void (*show)(json_t *answer))
-{
-	char url[512], err[600];
-	struct vmac_buffer b = {NULL, 0};
-	long code = 0;
-	json_t *a;
-	json_error_t jerr;
-	int rc;
-	vmac_client_url(url, sizeof(url), o->http, path);
-	curl_global_init(CURL_GLOBAL_DEFAULT);
-	rc = body ? vmac_client_upload(url, body, len, &b, &code, err, sizeof(err))
-	          : vmac_client_call(method, url, NULL, &b, &code, err, sizeof(err));
-	curl_global_cleanup();
-	if (rc != 0) {
-		fprintf(stderr, "vmac: %s\n", err);
-		return 1;
-	}
-	if (o->json) {
-		printf("%s\n", b.data ? b.data : "");
-		free(b.data);
-		return code == 200 ? 0 : 1;
-	}
-	a = json_loads(b.data ? b.data : "", 0, &jerr);
-	free(b.data);
-	if (code == 401 || code == 403) {
-		fprintf(stderr, "vmac: HTTP %ld: %s\n%s\n", code, json_string_value(json_object_get(a, "error")),
-		        vmac_client_auth_hint());
-		json_decref(a);
-		return 1;
-	}
-	if (!a) {
-		fprintf(stderr, "vmac: HTTP %ld, and the answer is not JSON (%s)\n", code, jerr.text);
-		return 1;
-	}
-	if (code != 200)
-		fprintf(stderr, "vmac: HTTP %ld: %s\n", code, json_string_value(json_object_get(a, "error")));
-	show(a);
-	json_decref(a);
-	return code == 200 ? 0 : 1;
-}
 
 static void show_machines(json_t *a)
 {
@@ -166,34 +101,22 @@ static char *read_all(const char *path, size_t *len)
 	return buf;
 }
 
-#define COMMON_OPTS                                                                                                    \
-	{"http", required_argument, 0, 'H'}, {"host", required_argument, 0, 'H'},                                      \
-	    {"token", required_argument, 0, 't'}, {"token-file", required_argument, 0, 'f'},                           \
-	    {"json", no_argument, 0, 'j'},                                                                             \
-	{                                                                                                              \
-		"help", no_argument, 0, 'h'                                                                            \
-	}
-
-static void common_init(struct common *o)
-{
-	memset(o, 0, sizeof(*o));
-	o->http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080";
-}
-
 int vmac_reload_main(int argc, char **argv)
 {
-	static const struct option opts[] = {
-	    COMMON_OPTS, {"probation", required_argument, 0, 'p'}, {"driver", required_argument, 0, 'd'}, {0, 0, 0, 0}};
-	struct common o;
+	static const struct option opts[] = {VMAC_CMD_OPTS,
+	                                     {"probation", required_argument, 0, 'p'},
+	                                     {"driver", required_argument, 0, 'd'},
+	                                     {0, 0, 0, 0}};
+	struct vmac_cmd o;
 	const char *probation = NULL, *driver = NULL;
 	char name[64], path[256];
 	size_t len = 0;
 	char *src;
 	int opt, rc;
-	common_init(&o);
+	vmac_cmd_init(&o);
 	optind = 1;
 	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (common_opt(opt, &o))
+		if (vmac_cmd_opt(opt, &o))
 			continue;
 		switch (opt) {
 		case 'p': probation = optarg; break;
@@ -209,7 +132,7 @@ int vmac_reload_main(int argc, char **argv)
 			    "  --driver NAME      the driver's name (default: FILE's name without .lua)\n"
 			    "  --probation S      seconds of probation (default: the host's reload_probation_s, 30)\n"
 			    "%s",
-			    COMMON_HELP);
+			    VMAC_CMD_HELP);
 			return 0;
 		default: return 2;
 		}
@@ -241,41 +164,25 @@ int vmac_reload_main(int argc, char **argv)
 		snprintf(path, sizeof(path), "/api/drivers/%s?probation=%s", name, probation);
 	else
 		snprintf(path, sizeof(path), "/api/drivers/%s", name);
-	rc = run(&o, "POST", path, src, len, show_deploy);
+	rc = vmac_cmd_run(&o, "POST", path, src, len, show_deploy);
 	free(src);
 	return rc;
 }
 
 /* The options of a command that takes only the common ones: 0 to go on
  * (optind at the first argument), else the exit code (--help: 0, printed). */
-static int only_common(int argc, char **argv, struct common *o, const char *help, int *exit_code)
-{
-	static const struct option opts[] = {COMMON_OPTS, {0, 0, 0, 0}};
-	int opt;
-	common_init(o);
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (common_opt(opt, o))
-			continue;
-		if (opt == 'h')
-			printf("%s%s", help, COMMON_HELP);
-		*exit_code = opt == 'h' ? 0 : 2;
-		return 1;
-	}
-	return 0;
-}
 
 int vmac_rollback_main(int argc, char **argv)
 {
-	struct common o;
+	struct vmac_cmd o;
 	char path[256];
 	int rc;
-	if (only_common(argc, argv, &o,
-	                "usage: vmac rollback [options] DRIVER\n"
-	                "Go back to the version of DRIVER that was active before the active one (or to the\n"
-	                "driver's file), on every running machine, each at a slot boundary with migrate().\n"
-	                "Needs a token of scope deploy.\n",
-	                &rc))
+	if (vmac_cmd_only_common(argc, argv, &o,
+	                         "usage: vmac rollback [options] DRIVER\n"
+	                         "Go back to the version of DRIVER that was active before the active one (or to the\n"
+	                         "driver's file), on every running machine, each at a slot boundary with migrate().\n"
+	                         "Needs a token of scope deploy.\n",
+	                         &rc))
 		return rc;
 	if (optind != argc - 1 || strlen(argv[optind]) > 63 || strchr(argv[optind], '/')) {
 		fprintf(stderr, "usage: vmac rollback [options] DRIVER (vmac rollback --help)\n");
@@ -284,21 +191,21 @@ int vmac_rollback_main(int argc, char **argv)
 	if (vmac_client_token(o.token, o.token_file) != 0)
 		return 2;
 	snprintf(path, sizeof(path), "/api/drivers/%s/rollback", argv[optind]);
-	return run(&o, "POST", path, NULL, 0, show_deploy);
+	return vmac_cmd_run(&o, "POST", path, NULL, 0, show_deploy);
 }
 
 int vmac_activate_main(int argc, char **argv)
 {
-	static const struct option opts[] = {COMMON_OPTS, {"probation", required_argument, 0, 'p'}, {0, 0, 0, 0}};
-	struct common o;
+	static const struct option opts[] = {VMAC_CMD_OPTS, {"probation", required_argument, 0, 'p'}, {0, 0, 0, 0}};
+	struct vmac_cmd o;
 	const char *probation = NULL;
 	char path[256], *end;
 	long long id;
 	int opt;
-	common_init(&o);
+	vmac_cmd_init(&o);
 	optind = 1;
 	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (common_opt(opt, &o))
+		if (vmac_cmd_opt(opt, &o))
 			continue;
 		if (opt == 'p') {
 			probation = optarg;
@@ -312,7 +219,7 @@ int vmac_activate_main(int argc, char **argv)
 			    "and probation. Needs a token of scope deploy.\n"
 			    "  --probation S      seconds of probation (default: the host's reload_probation_s, "
 			    "30)\n%s",
-			    COMMON_HELP);
+			    VMAC_CMD_HELP);
 			return 0;
 		}
 		return 2;
@@ -329,20 +236,21 @@ int vmac_activate_main(int argc, char **argv)
 		         probation);
 	else
 		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld", argv[optind], id);
-	return run(&o, "POST", path, NULL, 0, show_deploy);
+	return vmac_cmd_run(&o, "POST", path, NULL, 0, show_deploy);
 }
 
 int vmac_drivers_main(int argc, char **argv)
 {
-	struct common o;
+	struct vmac_cmd o;
 	char path[256];
 	int rc;
-	if (only_common(argc, argv, &o,
-	                "usage: vmac drivers [options] [DRIVER]\n"
-	                "List the driver versions a running vmacd keeps (uploaded with vmac reload): id, version,\n"
-	                "state (active, replaced, rolled_back, refused, pending), when, by which token, hash.\n"
-	                "Needs a token of scope read.\n",
-	                &rc))
+	if (vmac_cmd_only_common(
+	        argc, argv, &o,
+	        "usage: vmac drivers [options] [DRIVER]\n"
+	        "List the driver versions a running vmacd keeps (uploaded with vmac reload): id, version,\n"
+	        "state (active, replaced, rolled_back, refused, pending), when, by which token, hash.\n"
+	        "Needs a token of scope read.\n",
+	        &rc))
 		return rc;
 	if (optind < argc - 1 || (optind == argc - 1 && (strlen(argv[optind]) > 63 || strchr(argv[optind], '/')))) {
 		fprintf(stderr, "usage: vmac drivers [options] [DRIVER] (vmac drivers --help)\n");
@@ -354,5 +262,5 @@ int vmac_drivers_main(int argc, char **argv)
 		snprintf(path, sizeof(path), "/api/drivers/%s", argv[optind]);
 	else
 		snprintf(path, sizeof(path), "/api/drivers");
-	return run(&o, "GET", path, NULL, 0, show_versions);
+	return vmac_cmd_run(&o, "GET", path, NULL, 0, show_versions);
 }

@@ -17,6 +17,7 @@
 #include "console.h"
 #include "events.h"
 #include "lint.h"
+#include "recordings.h"
 #include "reload.h"
 #include "token.h"
 
@@ -277,6 +278,8 @@ static void usage(FILE *f)
 	           "  rollback  go back to a driver's previous version\n"
 	           "  drivers   list the driver versions the host keeps\n"
 	           "  activate  make a kept driver version the active one again\n"
+	           "  recordings  list the flight recordings the host keeps (drops, driver failures)\n"
+	           "  recording get ID > FILE, recording to-test FILE: fetch one, make it a test\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
@@ -321,6 +324,10 @@ int main(int argc, char **argv)
 		return vmac_drivers_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "activate") == 0)
 		return vmac_activate_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "recordings") == 0)
+		return vmac_recordings_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "recording") == 0)
+		return vmac_recording_main(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

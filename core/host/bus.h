@@ -11,6 +11,7 @@
 
 #include "../common/errors.h"
 #include "../driver/driver.h"
+#include "../recorder/recorder.h"
 #include "../transport/transport.h"
 #include "config.h"
 #include "hist.h"
@@ -32,10 +33,11 @@ struct vmac_bus_checkpoint {
 
 /* Bus thread -> main thread. */
 enum vmac_bus_msg_kind {
-	VMAC_MSG_EVENT,   /* something to record and show */
-	VMAC_MSG_LOAD,    /* please load driver `driver` for device slot/generation */
-	VMAC_MSG_UNLOAD,  /* free this driver (closing a Lua state is slow) */
-	VMAC_MSG_STOPPED, /* every board told to go safe; the bus thread is done */
+	VMAC_MSG_EVENT,     /* something to record and show */
+	VMAC_MSG_LOAD,      /* please load driver `driver` for device slot/generation */
+	VMAC_MSG_UNLOAD,    /* free this driver (closing a Lua state is slow) */
+	VMAC_MSG_STOPPED,   /* every board told to go safe; the bus thread is done */
+	VMAC_MSG_RECORDING, /* a machine's recorder, captured (rec->reason says why): write it out, free it */
 };
 
 /* What the main thread does with a VMAC_MSG_EVENT beyond recording it; the
@@ -56,6 +58,7 @@ struct vmac_bus_msg {
 	char event_kind[24]; /* attached, dropped, driver_missing, ... */
 	int64_t version_id;  /* rolled_back: the store's id of the version that failed */
 	char text[VMAC_EVENT_TEXT];
+	struct vmac_recorder *rec; /* RECORDING; UNLOAD: free it too (may be NULL) */
 };
 
 /* Main thread -> bus thread. */
@@ -68,7 +71,8 @@ struct vmac_host_cmd {
 	enum vmac_host_cmd_kind kind;
 	uint32_t slot, generation;
 	struct vmac_driver *drv;
-	int missing; /* no driver file at all (vs. a driver that failed to load) */
+	struct vmac_recorder *rec; /* its machine's flight recorder (NULL: none) */
+	int missing;               /* no driver file at all (vs. a driver that failed to load) */
 	char text[VMAC_EVENT_TEXT];
 };
 

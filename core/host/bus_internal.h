@@ -49,6 +49,7 @@ struct machine {
 	int attached;               /* attach() has run */
 	int64_t next_checkpoint_ns; /* checkpoint_s: the next periodic checkpoint */
 	int checkpoint_failing;     /* the last one was refused (said once) */
+	struct vmac_recorder *rec;  /* the flight recorder (NULL: none) */
 	/* Hot reload: the instance drv took over from, kept while drv is on
 	 * probation (until probation_end_ns) to roll back to if drv fails. */
 	struct vmac_driver *prev;
@@ -205,6 +206,19 @@ int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why);
 int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
              size_t replylen);
 void bus_end_probations(struct vmac_bus *bus, int64_t now);
+
+/* record.c: the flight recorder's bus side (no allocation) */
+void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
+void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
+void bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name, const struct vmac_value *v,
+                   int rc);
+void bus_rec_level(struct vmac_bus *bus, struct machine *m, unsigned level);
+void bus_rec_miss(struct vmac_bus *bus, struct device *d, const char *why);
+void bus_rec_failure(struct vmac_bus *bus, struct machine *m, int kind, const char *text);
+void bus_rec_swap(struct vmac_bus *bus, struct machine *m);
+/* m is going away: its recorder to the main thread, captured when it has a
+ * reason, else to be freed. */
+void bus_rec_release(struct vmac_bus *bus, struct machine *m);
 
 /* checkpoint.c */
 int bus_checkpoints_init(struct vmac_bus *bus);

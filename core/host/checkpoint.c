@@ -77,14 +77,16 @@ void bus_attached(struct vmac_bus *bus, struct machine *m, int64_t now)
 {
 	const struct device *primary = &bus->dev[m->primary];
 	char err[VMAC_DRIVER_ERR_MAX];
+	int64_t t_ns = now - bus->start_ns; /* bus time, for attach and the recorder alike */
 	int rc;
 	m->attached = 1;
 	m->next_checkpoint_ns = now + (int64_t)bus->cfg.checkpoint_s * 1000000000;
-	if (vmac_driver_attach(m->drv, bus_time(bus), err, sizeof(err)) != 0) {
+	bus_rec_attach(bus, m, t_ns);
+	if (vmac_driver_attach(m->drv, (double)t_ns / 1e9, err, sizeof(err)) != 0) {
 		bus_driver_failed(bus, m, " in attach", err);
 		return;
 	}
-	rc = vmac_driver_recover(m->drv, bus_time(bus), err, sizeof(err));
+	rc = vmac_driver_recover(m->drv, (double)t_ns / 1e9, err, sizeof(err));
 	if (rc < 0)
 		bus_driver_failed(bus, m, " in recover", err);
 	else if (rc == VMAC_RECOVER_DONE)

@@ -55,6 +55,8 @@ static const struct key keys[] = {
     {U(reload_probation_s, 0, 86400)},
     {U(checkpoint_s, 0, 3600)},
     {U(checkpoint_kib, 1, 1024)},
+    {U(recorder_s, 0, 3600)},
+    {U(recordings_max, 1, 10000)},
     {B(allow_jit)},
     {B(realtime)},
     {B(cyclic)},
@@ -83,6 +85,8 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->reload_probation_s = 30;
 	c->checkpoint_s = 5;
 	c->checkpoint_kib = 16;
+	c->recorder_s = 60;
+	c->recordings_max = 50;
 	c->realtime = 1;
 	c->cyclic = 1;
 }

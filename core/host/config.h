@@ -43,6 +43,8 @@ struct vmac_config {
 	uint32_t reload_probation_s; /* hot reload: a new version failing within this goes back (0 = none) */
 	uint32_t checkpoint_s;       /* a machine's dev.state saved at least this often (0 = only when asked) */
 	uint32_t checkpoint_kib;     /* largest checkpoint (encoded dev.state) */
+	uint32_t recorder_s;         /* flight recorder: seconds of ticks kept per machine (0 = off) */
+	uint32_t recordings_max;     /* recordings kept in the store (the oldest go) */
 	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
 	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */

@@ -81,6 +81,7 @@ static void set_aside(struct vmac_bus *bus, struct device *d, uint8_t reason)
 
 void bus_free_machine(struct vmac_bus *bus, struct machine *m)
 {
+	bus_rec_release(bus, m);
 	bus_unload(bus, m->drv);
 	bus_unload(bus, m->prev);
 	memset(m, 0, sizeof(*m));
@@ -91,6 +92,8 @@ void bus_free_machine(struct vmac_bus *bus, struct machine *m)
 void bus_drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char *kind, const char *why)
 {
 	bus_event(bus, d, kind, "%s dropped: %s", d->ann.board, why);
+	if (d->mach >= 0)
+		bus_rec_failure(bus, &bus->mach[d->mach], VMAC_REC_DROP, why);
 	bus->counters.drops++;
 	if (d->mach >= 0) {
 		int mi = d->mach;
@@ -119,6 +122,7 @@ void bus_miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)
 	d->misses++;
 	d->consecutive_misses++;
 	bus->counters.misses++;
+	bus_rec_miss(bus, d, fmt_why);
 	if (d->unsent) {
 		d->misses_host++;
 		bus->counters.misses_host++;
@@ -358,6 +362,7 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
 	struct device *primary = &bus->dev[m->primary];
 	bus_event(bus, primary, "driver_error", "%s: driver %s %s failed%s: %s", primary->ann.board, m->driver,
 	          vmac_driver_version(m->drv), where, err);
+	bus_rec_failure(bus, m, VMAC_REC_ERROR, err);
 	if (m->prev) {
 		int64_t tag = vmac_driver_tag(m->drv);
 		uint32_t i;
@@ -385,17 +390,18 @@ void bus_run_machine(struct vmac_bus *bus, struct machine *m)
 	char err[VMAC_DRIVER_ERR_MAX];
 	const struct vmac_inputs *in[VMAC_DRIVER_MAX_BOARDS];
 	struct vmac_outputs *out[VMAC_DRIVER_MAX_BOARDS];
-	struct device *primary = &bus->dev[m->primary];
-	int i;
+	int64_t now = bus_now(bus), t_ns = now - bus->start_ns; /* bus time: the driver's inputs.time */
+	int i, rc;
 	for (i = 0; i < m->nboards; i++) {
 		in[i] = &bus->dev[m->board[i]].inputs;
 		out[i] = &bus->dev[m->board[i]].outputs;
 	}
-	if (vmac_driver_tick(m->drv, bus_time(bus), in, out, err, sizeof(err)) == 0) {
-		bus_checkpoint_due(bus, m, bus_now(bus));
+	rc = vmac_driver_tick(m->drv, (double)t_ns / 1e9, in, out, err, sizeof(err));
+	bus_rec_tick(bus, m, t_ns); /* a failed tick too: its inputs replay the failure */
+	if (rc == 0) {
+		bus_checkpoint_due(bus, m, now);
 		return;
 	}
-	(void)primary;
 	bus_driver_failed(bus, m, "", err);
 }
 
@@ -416,6 +422,7 @@ static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen)
 		}
 	m->level = level;
 	vmac_driver_set_level_now(m->drv, level);
+	bus_rec_level(bus, m, level);
 	for (i = 0; i < m->nboards; i++) {
 		struct device *d = &bus->dev[m->board[i]];
 		uint16_t wd = watchdog_for(bus, level);
@@ -449,6 +456,7 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 		return;
 	}
 	m->drv = c->drv;
+	m->rec = c->rec;
 	m->level = vmac_driver_level(c->drv);
 	bus_bind_driver(m, m->drv);
 	if (admit(bus, m, d) != 0) {

@@ -139,6 +139,14 @@ void bus_commands(struct vmac_bus *bus)
 		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping || d->mach < 0 ||
 		    bus->mach[d->mach].primary != c.slot || bus->mach[d->mach].drv) {
 			bus_unload(bus, c.drv); /* the device went away meanwhile */
+			if (c.rec) {
+				struct vmac_bus_msg u;
+				memset(&u, 0, sizeof(u));
+				u.kind = VMAC_MSG_UNLOAD;
+				u.rec = c.rec;
+				if (bus_post(bus, &u) != 0)
+					vmac_recorder_free(c.rec); /* slow but safe: the main thread is far behind */
+			}
 			continue;
 		}
 		bus_on_loaded(bus, d, &c);
@@ -165,7 +173,11 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 		         d ? bus_state_name(d->state) : "no such device");
 		return -VMAC_ENOTRUNNING;
 	}
-	rc = vmac_driver_input(m->drv, bus_time(bus), name, value, reply, replylen, err, sizeof(err));
+	{
+		int64_t t_ns = bus_now(bus) - bus->start_ns;
+		rc = vmac_driver_input(m->drv, (double)t_ns / 1e9, name, value, reply, replylen, err, sizeof(err));
+		bus_rec_input(bus, m, t_ns, name, value, rc);
+	}
 	if (rc >= 0)
 		return rc;
 	bus_driver_failed(bus, m, " in input", err);
@@ -284,10 +296,13 @@ int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int r
 	c.slot = load->slot;
 	c.generation = load->generation;
 	c.drv = drv;
+	if (drv) /* sized for recorder_s at the driver's level */
+		c.rec = vmac_recorder_new(bus->cfg.recorder_s, (double)(bus->slot_ns << vmac_driver_level(drv)) / 1e9);
 	c.missing = rc == -ENOENT;
 	snprintf(c.text, sizeof(c.text), "%s", text);
 	if (vmac_bus_send_cmd(bus, &c) != 0) {
 		vmac_driver_free(drv);
+		vmac_recorder_free(c.rec);
 		return -1;
 	}
 	return 0;

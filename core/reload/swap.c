@@ -39,6 +39,7 @@ int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
 		return -1;
 	}
 	m->drv = prev;
+	bus_rec_swap(bus, m);
 	memset(&msg, 0, sizeof(msg));
 	msg.kind = VMAC_MSG_EVENT;
 	msg.time_ns = bus_now(bus);
@@ -85,6 +86,7 @@ int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, i
 		return -VMAC_EREFUSED;
 	}
 	m->drv = nd;
+	bus_rec_swap(bus, m);
 	/* Said before od is handed over: the main thread may free it at once. */
 	bus_event(bus, &bus->dev[m->primary], "reloaded",
 	          "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)", bus->dev[m->primary].ann.board,

@@ -56,6 +56,14 @@ static const char *const migrations[] = {
     " version TEXT NOT NULL,"
     " time REAL NOT NULL,"
     " data BLOB NOT NULL)",
+    "CREATE TABLE recordings ("
+    " id INTEGER PRIMARY KEY,"
+    " machine TEXT NOT NULL,"
+    " driver TEXT NOT NULL,"
+    " version TEXT NOT NULL,"
+    " reason TEXT NOT NULL,"
+    " time REAL NOT NULL,"
+    " data BLOB NOT NULL)",
 };
 
 static const char *const scope_names[] = {"none", "read", "operate", "deploy"};

@@ -172,4 +172,25 @@ int vmac_store_checkpoint_get(struct vmac_store *s, const char *machine, uint8_t
                               size_t driverlen, char *version, size_t versionlen, double *time, char *err,
                               size_t errlen);
 
+/* ---- flight recordings (docs/RECORDING.md; store_recording.c) ----
+ * The newest `keep` are kept; adding one removes the oldest past that. */
+struct vmac_recording_info {
+	int64_t id;
+	char machine[64], driver[64], version[32];
+	char reason[200];
+	double time; /* Unix time it was captured */
+	size_t size; /* bytes of the file */
+};
+
+/* Store one (the file's text): 0 and *id, or < 0 with err. */
+int vmac_store_recording_add(struct vmac_store *s, const struct vmac_recording_info *info, const char *data, size_t len,
+                             int keep, int64_t *id, char *err, size_t errlen);
+/* Every recording kept, newest first (machine: only its; NULL: all).
+ * Returns how many, or < 0 with err. */
+int vmac_store_recording_list(struct vmac_store *s, const char *machine,
+                              void (*fn)(void *ctx, const struct vmac_recording_info *r), void *ctx, char *err,
+                              size_t errlen);
+/* Recording id: 1 with *data (malloc'd) and *len, 0 no such one, < 0 err. */
+int vmac_store_recording_get(struct vmac_store *s, int64_t id, char **data, size_t *len, char *err, size_t errlen);
+
 #endif

@@ -18,6 +18,7 @@
 #include "../host/bus.h"
 #include "../host/config.h"
 #include "../host/events.h"
+#include "../recorder/recording.h"
 #include "../reload/deploy.h"
 #include "../reload/loader.h"
 #include "../store/store.h"
@@ -178,6 +179,64 @@ static void offer_checkpoint(struct host *h, struct vmac_driver *drv, const char
 	free(data);
 }
 
+/* The source of the driver version a recording ran: the store's version,
+ * or the driver's file as it is now (malloc'd; NULL when neither). */
+static char *recorded_source(struct host *h, const struct vmac_recorder *r, size_t *len)
+{
+	struct vmac_driver_version v;
+	char path[VMAC_PATH_MAX + 64], err[512], *src = NULL;
+	FILE *f;
+	long n;
+	*len = 0;
+	if (r->version_id > 0)
+		return vmac_store_driver_get(h->store, r->version_id, &v, &src, len, err, sizeof(err)) == 1 ? src
+		                                                                                            : NULL;
+	if (vmac_driver_path(&h->cfg, r->driver, path, sizeof(path)) != 0 || !(f = fopen(path, "rb")))
+		return NULL;
+	if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && n <= (1 << 20) && fseek(f, 0, SEEK_SET) == 0 &&
+	    (src = malloc((size_t)n + 1)) != NULL) {
+		*len = fread(src, 1, (size_t)n, f);
+		src[*len] = 0;
+	}
+	fclose(f);
+	return src;
+}
+
+/* A machine's flight recorder, captured (a drop, a driver failure), goes
+ * to the store as a recording file (docs/RECORDING.md); an event says
+ * where to find it. */
+static void store_recording(struct host *h, struct vmac_recorder *r)
+{
+	struct vmac_recording_info info;
+	char err[512], text[700], *file, *src;
+	size_t len, srclen;
+	int64_t id;
+	memset(&info, 0, sizeof(info));
+	snprintf(info.machine, sizeof(info.machine), "%s", r->machine);
+	snprintf(info.driver, sizeof(info.driver), "%s", r->driver);
+	snprintf(info.version, sizeof(info.version), "%s", r->version);
+	snprintf(info.reason, sizeof(info.reason), "%s", r->reason);
+	info.time = unix_now() - (double)(vmac_now_ns() - r->when_ns) / 1e9;
+	src = recorded_source(h, r, &srclen);
+	file = vmac_recording_write(r, src, srclen, info.time, &len);
+	free(src);
+	vmac_recorder_free(r);
+	if (!file) {
+		vmac_event_log_add(&h->log, "warning", info.machine, "recording lost: out of memory");
+		return;
+	}
+	if (vmac_store_recording_add(h->store, &info, file, len, (int)h->cfg.recordings_max, &id, err, sizeof(err)) !=
+	    0) {
+		snprintf(text, sizeof(text), "%s: recording lost: %s", info.machine, err);
+		vmac_event_log_add(&h->log, "warning", info.machine, text);
+	} else {
+		snprintf(text, sizeof(text), "%s: recording %lld kept (%zu bytes): %s; vmac recording get %lld",
+		         info.machine, (long long)id, len, info.reason, (long long)id);
+		vmac_event_log_add(&h->log, "recording", info.machine, text);
+	}
+	free(file);
+}
+
 struct load {
 	struct host *h;
 	const struct vmac_bus_msg *m;
@@ -265,7 +324,11 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 				roll_back_version(h, &m);
 			break;
 		case VMAC_MSG_LOAD: load_driver(h, &m); break;
-		case VMAC_MSG_UNLOAD: vmac_driver_free(m.drv); break;
+		case VMAC_MSG_UNLOAD:
+			vmac_driver_free(m.drv);
+			vmac_recorder_free(m.rec);
+			break;
+		case VMAC_MSG_RECORDING: store_recording(h, m.rec); break;
 		case VMAC_MSG_STOPPED: ev_break(loop, EVBREAK_ALL); break;
 		}
 	}

@@ -14,6 +14,9 @@ simulated plants, in virtual time: no sockets, no sleeping, no hardware, no root
 With no PATH: the project's own tests under tests/ and scripts/.
 
   --drivers DIR      look for NAME.lua in DIR before the shipped scripts/drivers/
+  --replay FILE      replay a flight recording (vmac recording get ID > FILE) against
+                     the driver it recorded, or with --drivers against DIR's version;
+                     say where an output first differs (docs/RECORDING.md)
   --filter PATTERN   run only tests whose "file: name" contains PATTERN (plain text)
   --seed N           seed of the fault injector (default 1); a run is a function of it
   --list             list the tests and exit
@@ -54,6 +57,7 @@ do
 			print(USAGE)
 			os.exit(0)
 		elseif a == "--drivers" then opts.drivers = value(a)
+		elseif a == "--replay" then opts.replay = value(a)
 		elseif a == "--filter" then opts.filter = value(a)
 		elseif a == "--seed" then opts.seed = math.floor(number(a, 0))
 		elseif a == "--list" then opts.list = true
@@ -74,6 +78,19 @@ if opts.drivers then
 	local f = io.open(opts.drivers .. "/.", "r")
 	if not f then usage_error("--drivers " .. opts.drivers .. ": no such folder") end
 	f:close()
+end
+
+-- --replay FILE: no tests, one replay (docs/RECORDING.md). Exit 0 as
+-- recorded (or the recorded failure gone), 1 differs or fails, 2 cannot run.
+if opts.replay then
+	local f, err = io.open(opts.replay, "rb")
+	if not f then usage_error("--replay: " .. err) end
+	local text = f:read("*a")
+	f:close()
+	local settings = opts.drivers and { { "drivers", opts.drivers } } or {}
+	local rc, report = world.replay(text, settings, opts.drivers == nil)
+	io.stdout:write(report)
+	os.exit(rc == 0 and 0 or rc == 1 and 1 or 2)
 end
 
 -- Opened now, so a folder that does not exist is said before the tests run.
@@ -409,6 +426,17 @@ local function crash_host()
 	W():crash_host()
 end
 
+-- A flight recording (its text) replayed against the driver under test
+-- (--drivers DIR, else the shipped one): the test fails where an output
+-- differs or the driver fails (docs/RECORDING.md, "A recording as a test").
+local function replay(text)
+	if type(text) ~= "string" then error("replay: expects the recording's text", 2) end
+	checked()
+	local rc, report = world.replay(text, current.settings, false)
+	if rc ~= 0 then fail(report) end
+	return report
+end
+
 -- A new host after crash_host: it discovers the boards
 -- again and offers each machine its last checkpoint (recover).
 local function start_host()
@@ -445,7 +473,7 @@ local function load_file(file)
 		board = make_board, kitchen = kitchen, config = config, run_for = run_for, run_until = run_until,
 		eventually = eventually, always = always, expect = expect, expect_eq = expect_eq,
 		expect_near = expect_near, expect_event = expect_event, events = events, now = now, fail = fail,
-		stop_host = stop_host, crash_host = crash_host, start_host = start_host,
+		stop_host = stop_host, crash_host = crash_host, start_host = start_host, replay = replay,
 	} do
 		env[k] = v
 	end

@@ -17,6 +17,7 @@
 #include <time.h>
 
 #include "../common/paths.h"
+#include "replay.h"
 #include "world.h"
 
 #define WORLD_MT "vmac.world"
@@ -57,41 +58,49 @@ static struct vt_board *check_board(lua_State *L, struct lworld *lw, int i)
 	return b;
 }
 
-/* world.new(settings, seed): settings is a list of {key, value} strings
- * applied over the test defaults with the host's own config keys. */
-static int l_new(lua_State *L)
+/* The host's settings for a test: the defaults of vmac test with the
+ * list of {key, value} at index idx over them. Raises on a bad one. */
+static void test_config(lua_State *L, int idx, struct vmac_config *cfg)
 {
-	struct vmac_config cfg;
 	char err[512], root[VMAC_PATH_MAX];
-	uint64_t seed = (uint64_t)luaL_checknumber(L, 2);
-	struct lworld *lw;
 	int i, n;
-	luaL_checktype(L, 1, LUA_TTABLE);
-	vmac_config_defaults(&cfg);
+	luaL_checktype(L, idx, LUA_TTABLE);
+	vmac_config_defaults(cfg);
 	vmac_root_dir(root, sizeof(root));
-	snprintf(cfg.scripts_dir, sizeof(cfg.scripts_dir), "%s/scripts", root);
-	snprintf(cfg.stdlib_dir, sizeof(cfg.stdlib_dir), "%s/stdlib", root);
-	cfg.realtime = 0;
-	cfg.max_devices = 64;     /* a scene, not a plant floor: keeps each tick short */
-	cfg.driver_budget_us = 0; /* the instruction budget only: deterministic */
-	n = (int)lua_objlen(L, 1);
+	snprintf(cfg->scripts_dir, sizeof(cfg->scripts_dir), "%s/scripts", root);
+	snprintf(cfg->stdlib_dir, sizeof(cfg->stdlib_dir), "%s/stdlib", root);
+	cfg->realtime = 0;
+	cfg->max_devices = 64;     /* a scene, not a plant floor: keeps each tick short */
+	cfg->driver_budget_us = 0; /* the instruction budget only: deterministic */
+	n = (int)lua_objlen(L, idx);
 	for (i = 1; i <= n; i++) {
 		const char *k, *v;
-		lua_rawgeti(L, 1, i);
+		lua_rawgeti(L, idx, i);
 		lua_rawgeti(L, -1, 1);
 		lua_rawgeti(L, -2, 2);
 		k = lua_tostring(L, -2);
 		v = lua_tostring(L, -1);
 		if (!k || !v)
-			return luaL_error(L, "config: setting %d is not a key and a value", i);
+			luaL_error(L, "config: setting %d is not a key and a value", i);
 		if (strcmp(k, "drivers") == 0)
-			snprintf(cfg.drivers_dir, sizeof(cfg.drivers_dir), "%s", v);
-		else if (vmac_config_set(&cfg, k, v, err, sizeof(err)) != 0)
-			return luaL_error(L, "config: %s", err);
+			snprintf(cfg->drivers_dir, sizeof(cfg->drivers_dir), "%s", v);
+		else if (vmac_config_set(cfg, k, v, err, sizeof(err)) != 0)
+			luaL_error(L, "config: %s", err);
 		lua_pop(L, 3);
 	}
-	if (vmac_config_check(&cfg, err, sizeof(err)) != 0)
-		return luaL_error(L, "config: %s", err);
+	if (vmac_config_check(cfg, err, sizeof(err)) != 0)
+		luaL_error(L, "config: %s", err);
+}
+
+/* world.new(settings, seed): settings is a list of {key, value} strings
+ * applied over the test defaults with the host's own config keys. */
+static int l_new(lua_State *L)
+{
+	struct vmac_config cfg;
+	char err[512];
+	uint64_t seed = (uint64_t)luaL_checknumber(L, 2);
+	struct lworld *lw;
+	test_config(L, 1, &cfg);
 	lw = lua_newuserdata(L, sizeof(*lw));
 	memset(lw, 0, sizeof(*lw));
 	lw->L = L;
@@ -102,6 +111,26 @@ static int l_new(lua_State *L)
 	if (!lw->w)
 		return luaL_error(L, "cannot build the world: %s", err);
 	return 1;
+}
+
+/* world.replay(text, settings, use_recorded) -> rc, report: a flight
+ * recording replayed against a driver (replay.c): rc 0 as recorded, 1
+ * differs or fails, -1 cannot run. */
+static int l_replay(lua_State *L)
+{
+	struct vmac_config cfg;
+	size_t len;
+	const char *text = luaL_checklstring(L, 1, &len);
+	char *report = malloc(16384);
+	int rc;
+	test_config(L, 2, &cfg);
+	if (!report)
+		return luaL_error(L, "out of memory");
+	rc = vt_replay(text, len, &cfg, lua_toboolean(L, 3), report, 16384);
+	lua_pushinteger(L, rc);
+	lua_pushstring(L, report);
+	free(report);
+	return 2;
 }
 
 static int l_gc(lua_State *L)
@@ -594,7 +623,7 @@ static int open_world(lua_State *L)
 	                                   {"config", l_config},
 	                                   {"slot", l_slot},
 	                                   {NULL, NULL}};
-	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {NULL, NULL}};
+	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {"replay", l_replay}, {NULL, NULL}};
 	luaL_newmetatable(L, WORLD_MT);
 	lua_pushvalue(L, -1);
 	world_mt_ref = luaL_ref(L, LUA_REGISTRYINDEX);

@@ -230,7 +230,11 @@ static void pump(struct vt_world *w)
 			vmac_bus_loaded(w->bus, &m, rc, drv, text);
 			loaded = 1;
 			break;
-		case VMAC_MSG_UNLOAD: vmac_driver_free(m.drv); break;
+		case VMAC_MSG_UNLOAD:
+			vmac_driver_free(m.drv);
+			vmac_recorder_free(m.rec);
+			break;
+		case VMAC_MSG_RECORDING: vmac_recorder_free(m.rec); break;
 		default: break;
 		}
 		if (loaded) {

@@ -1,0 +1,141 @@
+/* The flight recorder's bus side (docs/RECORDING.md): what crossed the
+ * driver boundary goes into the machine's recorder (core/recorder/), in
+ * memory the main thread allocated when it loaded the driver: no
+ * allocation, no disk, no waiting. When the machine goes away the recorder
+ * goes to the main thread: captured (a drop, a driver failure: it says why)
+ * or to be freed (the host stopping). */
+#include "bus_internal.h"
+
+#include <stdio.h>
+#include <string.h>
+
+static int64_t rec_now(const struct vmac_bus *bus)
+{
+	return bus_now(bus) - bus->start_ns; /* bus time, as the driver's inputs.time */
+}
+
+static void describe(struct vmac_bus *bus, struct machine *m)
+{
+	struct vmac_recorder *r = m->rec;
+	int i;
+	snprintf(r->machine, sizeof(r->machine), "%s", bus->dev[m->primary].ann.board);
+	snprintf(r->driver, sizeof(r->driver), "%s", m->driver);
+	snprintf(r->version, sizeof(r->version), "%s", vmac_driver_version(m->drv));
+	r->version_id = vmac_driver_tag(m->drv);
+	r->level = m->level;
+	r->period_s = (double)(bus->slot_ns << m->level) / 1e9;
+	r->nboards = m->nboards < VMAC_REC_BOARDS ? m->nboards : VMAC_REC_BOARDS;
+	for (i = 0; i < r->nboards; i++) {
+		const struct device *b = &bus->dev[m->board[i]];
+		snprintf(r->boards[i].name, sizeof(r->boards[i].name), "%s", b->ann.board);
+		r->boards[i].minor = b->ann.minor;
+	}
+}
+
+void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
+{
+	struct vmac_rec_event *e;
+	int i, n;
+	if (!m->rec)
+		return;
+	describe(bus, m);
+	m->rec->attach_ns = t_ns;
+	e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_ATTACH);
+	snprintf(e->name, sizeof(e->name), "%s", m->rec->version);
+	n = vmac_driver_nparams(m->drv);
+	for (i = 0; i < n; i++) {
+		struct vmac_variable p;
+		if (vmac_driver_param(m->drv, i, &p) != 0)
+			continue;
+		e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_PARAM);
+		memcpy(e->name, p.name, sizeof(e->name) - 1);
+		e->value = p.value;
+	}
+}
+
+void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t)
+{
+	int i;
+	if (!m->rec)
+		return;
+	for (i = 0; i < m->nboards; i++) {
+		const struct device *b = &bus->dev[m->board[i]];
+		vmac_rec_tick(m->rec, t, i, i == m->nboards - 1, &b->inputs, &b->outputs);
+	}
+}
+
+void bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name, const struct vmac_value *v,
+                   int rc)
+{
+	struct vmac_rec_event *e;
+	(void)bus;
+	if (!m->rec)
+		return;
+	e = vmac_rec_event(m->rec, t_ns, VMAC_REC_INPUT);
+	snprintf(e->name, sizeof(e->name), "%s", name);
+	e->value = *v;
+	e->code = rc;
+}
+
+void bus_rec_level(struct vmac_bus *bus, struct machine *m, unsigned level)
+{
+	if (m->rec)
+		vmac_rec_event(m->rec, rec_now(bus), VMAC_REC_LEVEL)->code = (int32_t)level;
+}
+
+void bus_rec_miss(struct vmac_bus *bus, struct device *d, const char *why)
+{
+	struct machine *m = d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	struct vmac_rec_event *e;
+	int i;
+	if (!m || !m->rec)
+		return;
+	e = vmac_rec_event(m->rec, rec_now(bus), VMAC_REC_MISS);
+	for (i = 0; i < m->nboards; i++)
+		if (&bus->dev[m->board[i]] == d)
+			e->board = (uint8_t)i;
+	e->code = d->seq;
+	e->a_ns = d->sent_ns;
+	e->b_ns = d->last_seen_ns > d->sent_ns ? d->last_seen_ns : 0;
+	snprintf(e->text, sizeof(e->text), "%s", why);
+}
+
+void bus_rec_failure(struct vmac_bus *bus, struct machine *m, int kind, const char *text)
+{
+	struct vmac_rec_event *e;
+	if (!m->rec)
+		return;
+	e = vmac_rec_event(m->rec, rec_now(bus), (enum vmac_rec_kind)kind);
+	snprintf(e->text, sizeof(e->text), "%s", text);
+	if (!m->rec->reason[0]) { /* its first line */
+		int n = (int)strcspn(text, "\n");
+		snprintf(m->rec->reason, sizeof(m->rec->reason), "%s: %.*s",
+		         kind == VMAC_REC_ERROR ? "driver error" : "dropped", n, text);
+	}
+}
+
+void bus_rec_swap(struct vmac_bus *bus, struct machine *m)
+{
+	if (!m->rec)
+		return;
+	describe(bus, m);
+	snprintf(vmac_rec_event(m->rec, rec_now(bus), VMAC_REC_SWAP)->name, VMAC_REC_NAME_MAX + 1, "%s",
+	         m->rec->version);
+}
+
+void bus_rec_release(struct vmac_bus *bus, struct machine *m)
+{
+	struct vmac_bus_msg msg;
+	struct vmac_recorder *r = m->rec;
+	if (!r)
+		return;
+	m->rec = NULL;
+	memset(&msg, 0, sizeof(msg));
+	msg.kind = r->reason[0] && r->attach_ns >= 0 ? VMAC_MSG_RECORDING : VMAC_MSG_UNLOAD;
+	msg.time_ns = bus_now(bus);
+	msg.rec = r;
+	r->when_ns = msg.time_ns;
+	snprintf(msg.device, sizeof(msg.device), "%s", r->machine);
+	if (bus_post(bus, &msg) != 0)
+		vmac_recorder_free(r); /* the ring to the main thread is full: lost, never blocking */
+}

@@ -1,0 +1,94 @@
+/* The flight recorder (docs/RECORDING.md): for every machine, two rings of
+ * what crossed the driver boundary, allocated once on the main thread when
+ * its driver is loaded and written by the bus thread with no allocation:
+ * one record per board per tick (the inputs the driver was given, the
+ * outputs it returned) and the rarer events (operator input, params at
+ * attach, level changes, misses and late replies with their times, driver
+ * errors, the drop). On a drop or a driver failure the bus thread hands the
+ * whole recorder to the main thread, which writes it out (recording.c) and
+ * frees it. */
+#ifndef VMAC_RECORDER_H
+#define VMAC_RECORDER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../common/value.h"
+#include "../proto/proto.h"
+
+#define VMAC_REC_NAME_MAX 31
+#define VMAC_REC_TEXT_MAX 160
+#define VMAC_REC_EVENTS 128 /* events kept per machine (the newest) */
+#define VMAC_REC_BOARDS 8   /* VMAC_DRIVER_MAX_BOARDS */
+
+enum vmac_rec_kind {
+	VMAC_REC_ATTACH = 1, /* the driver attached (name: its version) */
+	VMAC_REC_PARAM,      /* a param's value at attach (name, value) */
+	VMAC_REC_INPUT,      /* operator input (name, value; code: 0 accepted, > 0 refused, -1 the driver failed) */
+	VMAC_REC_LEVEL,      /* the machine's level changed (code: the new level) */
+	VMAC_REC_MISS,       /* a board missed its deadline (board; a_ns sent, b_ns received or 0; text) */
+	VMAC_REC_ERROR,      /* the driver failed (text) */
+	VMAC_REC_DROP,       /* the machine was dropped (text) */
+	VMAC_REC_SWAP,       /* a hot reload: another version took over (name: its version) */
+};
+
+struct vmac_rec_tick {
+	int64_t t_ns; /* bus time of the tick (the driver's inputs.time * 1e9) */
+	uint8_t board;
+	uint8_t last; /* the last board of its tick */
+	struct vmac_inputs in;
+	struct vmac_outputs out; /* what the driver returned for the board */
+};
+
+struct vmac_rec_event {
+	int64_t t_ns;
+	uint8_t kind; /* enum vmac_rec_kind */
+	uint8_t board;
+	int32_t code;
+	int64_t a_ns, b_ns; /* MISS: CLOCK_MONOTONIC sent and received (0: no reply) */
+	char name[VMAC_REC_NAME_MAX + 1];
+	struct vmac_value value;
+	char text[VMAC_REC_TEXT_MAX + 1];
+};
+
+struct vmac_recorder {
+	struct vmac_rec_tick *ticks;
+	uint32_t ticks_cap;
+	uint64_t ticks_written; /* ever: the ring holds the last min(written, cap) */
+	struct vmac_rec_event events[VMAC_REC_EVENTS];
+	uint64_t events_written;
+	int64_t attach_ns;                  /* bus time of attach; -1 before */
+	char reason[VMAC_REC_TEXT_MAX + 1]; /* why it was captured ("" while recording) */
+	/* The machine, as at its last attach or swap (bus thread). */
+	char machine[VMAC_REC_NAME_MAX + 1];
+	char driver[VMAC_REC_NAME_MAX + 1];
+	char version[VMAC_REC_NAME_MAX + 1];
+	int64_t version_id; /* the store's id of the version (0: the driver's file) */
+	unsigned level;
+	double period_s;
+	int nboards;
+	struct {
+		char name[VMAC_REC_NAME_MAX + 1];
+		uint32_t minor;
+	} boards[VMAC_REC_BOARDS];
+	int64_t when_ns; /* CLOCK_MONOTONIC when captured */
+};
+
+/* Main thread: a recorder holding seconds of ticks at period_s (at least
+ * 64 ticks), or NULL (out of memory, or seconds 0: no recording). */
+struct vmac_recorder *vmac_recorder_new(double seconds, double period_s);
+void vmac_recorder_free(struct vmac_recorder *r);
+
+/* Bus thread, no allocation. */
+void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
+                   const struct vmac_outputs *out);
+/* An event: fills and returns the next slot (the caller sets the rest). */
+struct vmac_rec_event *vmac_rec_event(struct vmac_recorder *r, int64_t t_ns, enum vmac_rec_kind kind);
+
+/* Reading, in order, oldest first: how many ticks (events) are kept, and the i-th. */
+uint32_t vmac_rec_nticks(const struct vmac_recorder *r);
+const struct vmac_rec_tick *vmac_rec_tick_at(const struct vmac_recorder *r, uint32_t i);
+uint32_t vmac_rec_nevents(const struct vmac_recorder *r);
+const struct vmac_rec_event *vmac_rec_event_at(const struct vmac_recorder *r, uint32_t i);
+
+#endif
