@@ -173,6 +173,13 @@ async function main() {
       await page.click('nav a[data-page="events"]');
       await page.waitForSelector('#event-rows tr:has(td.kind:text("dropped"))', { timeout: 5000 });
       await page.screenshot({ path: path.join(OUT, "6-events.png"), fullPage: true });
+      // The drop made a flight recording (docs/RECORDING.md): its event plots the last seconds.
+      await page.click('#event-rows tr:has(td.kind:text("recording")) button.show-recording', { timeout: 5000 });
+      await page.waitForFunction(() => {
+        const c = document.querySelector("canvas.recording-plot");
+        return c && Number(c.dataset.points) > 10 && Number(c.dataset.marks) >= 1;
+      }, null, { timeout: 5000 });
+      await page.screenshot({ path: path.join(OUT, "6b-recording.png"), fullPage: true });
       await page.click('nav a[data-page="system"]');
       await page.waitForSelector("#system-facts div", { timeout: 5000 });
       await page.screenshot({ path: path.join(OUT, "7-system.png"), fullPage: true });

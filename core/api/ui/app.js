@@ -417,8 +417,51 @@ function eventRow(e) {
   const kind = e.kind;
   const cls = BAD_KINDS.includes(kind) ? "bad" : GOOD_KINDS.includes(kind) ? "good" : "";
   const when = new Date(e.time * 1000).toLocaleTimeString();
+  const what = el("td", {}, el("pre", {}, e.text));
+  const rec = kind === "recording" && /recording (\d+) kept/.exec(e.text || "");
+  if (rec) what.append(el("button", { class: "show-recording", "data-recording": rec[1],
+    onclick: (ev) => showRecording(rec[1], ev.target.parentNode) }, "Plot the last seconds"));
   return el("tr", { class: cls, "data-seq": e.seq }, el("td", {}, when), el("td", { class: "kind" }, kind),
-    el("td", {}, e.device || ""), el("td", {}, el("pre", {}, e.text)));
+    el("td", {}, e.device || ""), what);
+}
+
+// A flight recording (docs/RECORDING.md) fetched and its last seconds
+// plotted: the first board's digital outputs as on/off steps and its pwm,
+// with the misses, the error and the drop marked; a link saves the file.
+const RECORDING_PLOT_S = 10;
+
+async function showRecording(id, cell) {
+  try {
+    const r = await fetch("/api/recordings/" + id, { headers: { Authorization: "Bearer " + state.token } });
+    if (!r.ok) throw new Error("HTTP " + r.status);
+    const text = await r.text();
+    const lines = text.trim().split("\n").map((l) => JSON.parse(l));
+    const ticks = lines.filter((l) => l.tick), marks = lines.filter((l) => l.event && ["miss", "error", "drop"].includes(l.event));
+    const end = lines.filter((l) => l.t !== undefined).reduce((m, l) => Math.max(m, l.t), 0) / 1e9;
+    const canvas = el("canvas", { class: "plot recording-plot", width: 600, height: 160 });
+    const ctx = canvas.getContext("2d");
+    const x = (t) => 600 * (1 - (end - t) / RECORDING_PLOT_S);
+    const shown = ticks.filter((l) => l.t / 1e9 >= end - RECORDING_PLOT_S);
+    for (let bit = 0; bit < 7; bit++) { // digital outputs, a lane each
+      ctx.strokeStyle = ["#2563eb", "#16a34a", "#d97706", "#9333ea", "#dc2626", "#0891b2", "#4b5563"][bit];
+      ctx.beginPath();
+      shown.forEach((l, i) => {
+        const y = 150 - bit * 20 - (((l.tick[0].out[0] >> bit) & 1) ? 12 : 0);
+        if (i === 0) ctx.moveTo(x(l.t / 1e9), y); else ctx.lineTo(x(l.t / 1e9), y);
+      });
+      ctx.stroke();
+    }
+    ctx.fillStyle = "#dc2626";
+    for (const m of marks) ctx.fillRect(x(m.t / 1e9) - 1, 0, 2, 160);
+    canvas.dataset.points = shown.length;
+    canvas.dataset.marks = marks.length;
+    const url = URL.createObjectURL(new Blob([text], { type: "application/x-ndjson" }));
+    cell.append(el("p", {}, shown.length + " ticks of the last " + RECORDING_PLOT_S + " s (outputs do0.. as lanes; red: miss, error, drop). ",
+      el("a", { href: url, download: "recording-" + id + ".vrec" }, "Save the file"),
+      " and replay it: vmac test --replay recording-" + id + ".vrec"), canvas);
+  } catch (err) {
+    toast("recording " + id + ": " + err.message, true);
+  }
 }
 
 async function loadEvents() {
