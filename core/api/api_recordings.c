@@ -1,12 +1,15 @@
 /* The flight recordings (docs/API.md "Recordings", docs/RECORDING.md):
  * GET /api/recordings lists what the store keeps, newest first (?machine=
- * NAME: one machine's); GET /api/recordings/ID is the recording's file. */
+ * NAME: one machine's); GET /api/recordings/ID is the recording's file;
+ * POST /api/devices/NAME/record captures a running machine's now. */
 #include "http_internal.h"
 
 #include <jansson.h>
 #include <microhttpd.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "../common/errors.h"
 
 static void append(void *ctx, const struct vmac_recording_info *r)
 {
@@ -48,4 +51,17 @@ enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, co
 	ret = MHD_queue_response(c, MHD_HTTP_OK, r);
 	MHD_destroy_response(r);
 	return ret;
+}
+
+enum MHD_Result http_record(struct vmac_http *h, struct MHD_Connection *c, const char *device)
+{
+	char reply[300];
+	int rc = vmac_bus_request_record(h->bus, device, 2000, reply, sizeof(reply));
+	if (rc == -VMAC_ENOTRUNNING)
+		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body(reply));
+	if (rc == -VMAC_EBUSY)
+		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body(reply));
+	if (rc != 0)
+		return http_reply(c, MHD_HTTP_CONFLICT, http_error_body(reply));
+	return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "text", reply));
 }

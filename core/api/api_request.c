@@ -73,6 +73,9 @@ void http_route(const char *method, const char *url, struct http_route *r)
 	} else if (post && device_path(url, "/cycle", name, len)) {
 		r->endpoint = HTTP_CYCLE;
 		r->need = VMAC_SCOPE_OPERATE;
+	} else if (post && device_path(url, "/record", name, len)) {
+		r->endpoint = HTTP_RECORD;
+		r->need = VMAC_SCOPE_OPERATE;
 	} else if (post && driver_path(url, "/rollback", name, len)) {
 		r->endpoint = HTTP_ROLLBACK;
 		r->need = VMAC_SCOPE_DEPLOY;
@@ -116,6 +119,7 @@ void http_route(const char *method, const char *url, struct http_route *r)
 	switch (r->endpoint) {
 	case HTTP_INPUT:
 	case HTTP_CYCLE:
+	case HTTP_RECORD:
 	case HTTP_ROLLBACK:
 	case HTTP_ACTIVATE:
 	case HTTP_UPLOAD:

@@ -20,6 +20,7 @@ enum http_endpoint {
 	HTTP_HEALTH,     /* GET /api/health, no token */
 	HTTP_INPUT,      /* POST /api/devices/NAME/input */
 	HTTP_CYCLE,      /* POST /api/devices/NAME/cycle */
+	HTTP_RECORD,     /* POST /api/devices/NAME/record */
 	HTTP_ROLLBACK,   /* POST /api/drivers/NAME/rollback */
 	HTTP_ACTIVATE,   /* POST /api/drivers/NAME/activate */
 	HTTP_UPLOAD,     /* POST /api/drivers/NAME */

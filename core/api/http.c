@@ -254,6 +254,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	case HTTP_EVENT_LOG: return http_event_log(h, c);
 	case HTTP_EVENTS: return http_events_stream(h, c);
 	case HTTP_RECORDINGS: return http_recordings(h, c);
+	case HTTP_RECORD: return http_record(h, c, r.name);
 	case HTTP_RECORDING: return http_recording(h, c, r.name);
 	case HTTP_INDEX:
 		return http_reply(c, MHD_HTTP_OK,

@@ -125,6 +125,7 @@ enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c
 /* api_recordings.c */
 enum MHD_Result http_recordings(struct vmac_http *h, struct MHD_Connection *c);
 enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, const char *id);
+enum MHD_Result http_record(struct vmac_http *h, struct MHD_Connection *c, const char *device);
 
 /* api_drivers.c */
 enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver);

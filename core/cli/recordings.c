@@ -61,6 +61,34 @@ int vmac_recordings_main(int argc, char **argv)
 	return vmac_cmd_run(&o, "GET", path, NULL, 0, show_recordings);
 }
 
+static void show_record(json_t *a)
+{
+	printf("%s\n",
+	       json_string_value(json_object_get(a, "text")) ? json_string_value(json_object_get(a, "text")) : "");
+}
+
+int vmac_record_main(int argc, char **argv)
+{
+	struct vmac_cmd o;
+	char path[256];
+	int rc;
+	if (vmac_cmd_only_common(argc, argv, &o,
+	                         "usage: vmac record [options] MACHINE\n"
+	                         "Capture the flight recorder of a running machine now, without a drop: the last\n"
+	                         "seconds become a recording (vmac recordings lists it) and recording goes on.\n"
+	                         "Needs a token of scope operate.\n",
+	                         &rc))
+		return rc;
+	if (optind != argc - 1 || strlen(argv[optind]) > 63 || strpbrk(argv[optind], "/&?#")) {
+		fprintf(stderr, "usage: vmac record [options] MACHINE (vmac record --help)\n");
+		return 2;
+	}
+	if (vmac_client_token(o.token, o.token_file) != 0)
+		return 2;
+	snprintf(path, sizeof(path), "/api/devices/%s/record", argv[optind]);
+	return vmac_cmd_run(&o, "POST", path, NULL, 0, show_record) == 0 ? 0 : 1;
+}
+
 /* vmac recording get ID: the file on standard output. */
 static int get(int argc, char **argv)
 {

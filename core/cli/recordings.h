@@ -5,5 +5,6 @@
 
 int vmac_recordings_main(int argc, char **argv);
 int vmac_recording_main(int argc, char **argv);
+int vmac_record_main(int argc, char **argv);
 
 #endif

@@ -280,6 +280,7 @@ static void usage(FILE *f)
 	           "  activate  make a kept driver version the active one again\n"
 	           "  recordings  list the flight recordings the host keeps (drops, driver failures)\n"
 	           "  recording get ID > FILE, recording to-test FILE: fetch one, make it a test\n"
+	           "  record    capture a running machine's flight recorder now\n"
 	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
 	           "Run 'vmac COMMAND --help' for a command's options.\n");
 }
@@ -328,6 +329,8 @@ int main(int argc, char **argv)
 		return vmac_recordings_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "recording") == 0)
 		return vmac_recording_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "record") == 0)
+		return vmac_record_main(argc - 1, argv + 1);
 	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
 	usage(stderr);
 	return 2;

@@ -59,12 +59,14 @@ struct vmac_bus_msg {
 	int64_t version_id;  /* rolled_back: the store's id of the version that failed */
 	char text[VMAC_EVENT_TEXT];
 	struct vmac_recorder *rec; /* RECORDING; UNLOAD: free it too (may be NULL) */
+	int replace;               /* RECORDING: the machine runs on: send it a new recorder (VMAC_CMD_RECORDER) */
 };
 
 /* Main thread -> bus thread. */
 enum vmac_host_cmd_kind {
-	VMAC_CMD_LOADED, /* drv loaded (or NULL with text saying why not) */
-	VMAC_CMD_STOP,   /* put every board in its safe state and end */
+	VMAC_CMD_LOADED,   /* drv loaded (or NULL with text saying why not) */
+	VMAC_CMD_STOP,     /* put every board in its safe state and end */
+	VMAC_CMD_RECORDER, /* rec for the machine whose primary is slot/generation, after a capture */
 };
 
 struct vmac_host_cmd {
@@ -211,6 +213,11 @@ struct vmac_bus_input_request {
 	char reply[VMAC_EVENT_TEXT];
 	char machine[VMAC_NAME_MAX + 1]; /* rc 0: the machine's name (its primary board), what persists under */
 };
+/* Capture the flight recorder of machine `device` now (vmac record): it
+ * goes to the main thread as a recording, and a new one takes its place.
+ * 0, or < 0 with reply saying why (no such machine, no recorder). */
+int vmac_bus_request_record(struct vmac_bus *bus, const char *device, int timeout_ms, char *reply, size_t replylen);
+
 int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms);
 
 /* Hot reload from another thread (docs/API.md "Drivers"): drv, loaded for

@@ -50,6 +50,7 @@ struct machine {
 	int64_t next_checkpoint_ns; /* checkpoint_s: the next periodic checkpoint */
 	int checkpoint_failing;     /* the last one was refused (said once) */
 	struct vmac_recorder *rec;  /* the flight recorder (NULL: none) */
+	int64_t attach_ns;          /* bus time of attach (a recorder put in later starts after it) */
 	/* Hot reload: the instance drv took over from, kept while drv is on
 	 * probation (until probation_end_ns) to roll back to if drv fails. */
 	struct vmac_driver *prev;
@@ -98,7 +99,7 @@ struct device {
  * RUNNING, the caller waits for the answer, which comes without delay. */
 enum { REQ_FREE, REQ_FILLING, REQ_QUEUED, REQ_RUNNING, REQ_DONE, REQ_ABANDONED };
 
-enum { REQ_INPUT, REQ_SWAP, REQ_MACHINES };
+enum { REQ_INPUT, REQ_SWAP, REQ_MACHINES, REQ_RECORD };
 
 struct request {
 	_Atomic int state;
@@ -210,8 +211,12 @@ void bus_end_probations(struct vmac_bus *bus, int64_t now);
 /* record.c: the flight recorder's bus side (no allocation) */
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
 void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
-void bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name, const struct vmac_value *v,
-                   int rc);
+/* Operator input, recorded before the driver's input() runs (what that
+ * does, a level change, is recorded after it, in time order); its outcome
+ * is filled in after (n: what bus_rec_input returned). */
+uint64_t bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name,
+                       const struct vmac_value *v);
+void bus_rec_input_rc(struct machine *m, uint64_t n, int rc);
 void bus_rec_level(struct vmac_bus *bus, struct machine *m, unsigned level);
 void bus_rec_miss(struct vmac_bus *bus, struct device *d, const char *why);
 void bus_rec_failure(struct vmac_bus *bus, struct machine *m, int kind, const char *text);
@@ -219,6 +224,11 @@ void bus_rec_swap(struct vmac_bus *bus, struct machine *m);
 /* m is going away: its recorder to the main thread, captured when it has a
  * reason, else to be freed. */
 void bus_rec_release(struct vmac_bus *bus, struct machine *m);
+/* m runs on: its recorder to the main thread, captured with reason why,
+ * and a new one asked for. 0, or -1 (no recorder). */
+int bus_rec_capture(struct vmac_bus *bus, struct machine *m, const char *why);
+/* A new recorder the main thread sent after a capture (VMAC_CMD_RECORDER). */
+void bus_rec_install(struct vmac_bus *bus, const struct vmac_host_cmd *c);
 
 /* checkpoint.c */
 int bus_checkpoints_init(struct vmac_bus *bus);

@@ -367,6 +367,9 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
 		int64_t tag = vmac_driver_tag(m->drv);
 		uint32_t i;
 		if (bus_roll_back(bus, m, err) == 0) {
+			char why[VMAC_REC_TEXT_MAX + 1];
+			snprintf(why, sizeof(why), "rolled back: %s", err);
+			bus_rec_capture(bus, m, why); /* the failing version's last seconds; the machine runs on */
 			/* One version everywhere: every other machine on probation
 			 * with the same version goes back too. */
 			for (i = 0; i < bus->nused; i++) {

@@ -111,6 +111,23 @@ void bus_requests(struct vmac_bus *bus)
 		}
 		if (q->kind == REQ_SWAP) {
 			q->r.rc = bus_swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
+		} else if (q->kind == REQ_RECORD) {
+			struct device *d = bus_find_by_name(bus, q->r.device);
+			struct machine *m = d && d->mach >= 0 && d->state == DEV_RUNNING ? &bus->mach[d->mach] : NULL;
+			if (!m || !m->attached) {
+				snprintf(q->r.reply, sizeof(q->r.reply), "%s: no running machine of that name",
+				         q->r.device);
+				q->r.rc = -VMAC_ENOTRUNNING;
+			} else if (bus_rec_capture(bus, m, "asked for (vmac record)") != 0) {
+				snprintf(q->r.reply, sizeof(q->r.reply),
+				         "%s: no flight recorder (recorder_s is 0, or a capture is being written)",
+				         q->r.device);
+				q->r.rc = -VMAC_EFAIL;
+			} else {
+				snprintf(q->r.reply, sizeof(q->r.reply), "%s: captured; GET /api/recordings lists it",
+				         q->r.device);
+				q->r.rc = 0;
+			}
 		} else if (q->kind == REQ_MACHINES) {
 			/* Every command sent before this request was queued is
 			 * handled first: a driver the main thread handed over is
@@ -133,6 +150,10 @@ void bus_commands(struct vmac_bus *bus)
 		if (c.kind == VMAC_CMD_STOP) {
 			if (!bus->stopping)
 				bus_begin_stop(bus, bus_now(bus));
+			continue;
+		}
+		if (c.kind == VMAC_CMD_RECORDER) {
+			bus_rec_install(bus, &c);
 			continue;
 		}
 		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
@@ -175,8 +196,9 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	}
 	{
 		int64_t t_ns = bus_now(bus) - bus->start_ns;
+		uint64_t rec_n = bus_rec_input(bus, m, t_ns, name, value);
 		rc = vmac_driver_input(m->drv, (double)t_ns / 1e9, name, value, reply, replylen, err, sizeof(err));
-		bus_rec_input(bus, m, t_ns, name, value, rc);
+		bus_rec_input_rc(m, rec_n, rc);
 	}
 	if (rc >= 0)
 		return rc;
@@ -271,6 +293,17 @@ int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_
 	*rc = r == 0 ? req.rc : r;
 	snprintf(reply, replylen, "%s", req.reply);
 	return r;
+}
+
+int vmac_bus_request_record(struct vmac_bus *bus, const char *device, int timeout_ms, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	int r;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	r = bus_request(bus, REQ_RECORD, &req, NULL, 0, NULL, 0, timeout_ms);
+	snprintf(reply, replylen, "%s", req.reply);
+	return r != 0 ? r : req.rc;
 }
 
 int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,

@@ -39,7 +39,8 @@ void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 	if (!m->rec)
 		return;
 	describe(bus, m);
-	m->rec->attach_ns = t_ns;
+	m->rec->attach_ns = m->attach_ns = t_ns;
+	m->rec->from_attach = 1;
 	e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_ATTACH);
 	snprintf(e->name, sizeof(e->name), "%s", m->rec->version);
 	n = vmac_driver_nparams(m->drv);
@@ -64,17 +65,24 @@ void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t)
 	}
 }
 
-void bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name, const struct vmac_value *v,
-                   int rc)
+uint64_t bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name,
+                       const struct vmac_value *v)
 {
 	struct vmac_rec_event *e;
 	(void)bus;
 	if (!m->rec)
-		return;
+		return 0;
 	e = vmac_rec_event(m->rec, t_ns, VMAC_REC_INPUT);
 	snprintf(e->name, sizeof(e->name), "%s", name);
 	e->value = *v;
-	e->code = rc;
+	return m->rec->events_written;
+}
+
+void bus_rec_input_rc(struct machine *m, uint64_t n, int rc)
+{
+	/* Unless input() made so many events that the ring wrapped over it. */
+	if (m->rec && n > 0 && m->rec->events_written - n < VMAC_REC_EVENTS)
+		m->rec->events[(n - 1) % VMAC_REC_EVENTS].code = rc;
 }
 
 void bus_rec_level(struct vmac_bus *bus, struct machine *m, unsigned level)
@@ -138,4 +146,45 @@ void bus_rec_release(struct vmac_bus *bus, struct machine *m)
 	snprintf(msg.device, sizeof(msg.device), "%s", r->machine);
 	if (bus_post(bus, &msg) != 0)
 		vmac_recorder_free(r); /* the ring to the main thread is full: lost, never blocking */
+}
+
+int bus_rec_capture(struct vmac_bus *bus, struct machine *m, const char *why)
+{
+	struct vmac_bus_msg msg;
+	struct vmac_recorder *r = m->rec;
+	if (!r)
+		return -1;
+	m->rec = NULL;
+	snprintf(r->reason, sizeof(r->reason), "%.*s", (int)strcspn(why, "\n"), why);
+	memset(&msg, 0, sizeof(msg));
+	msg.kind = VMAC_MSG_RECORDING;
+	msg.time_ns = bus_now(bus);
+	msg.rec = r;
+	msg.replace = 1;
+	msg.slot = m->primary;
+	msg.generation = bus->dev[m->primary].generation;
+	r->when_ns = msg.time_ns;
+	snprintf(msg.device, sizeof(msg.device), "%s", r->machine);
+	if (bus_post(bus, &msg) != 0)
+		vmac_recorder_free(r); /* the ring to the main thread is full: lost, never blocking */
+	return 0;
+}
+
+void bus_rec_install(struct vmac_bus *bus, const struct vmac_host_cmd *c)
+{
+	struct device *d = c->slot < bus->ndev ? &bus->dev[c->slot] : NULL;
+	struct machine *m = d && d->generation == c->generation && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	if (!m || !m->used || !m->attached || m->primary != c->slot || m->rec || bus->stopping) {
+		struct vmac_bus_msg u; /* the machine went away meanwhile */
+		memset(&u, 0, sizeof(u));
+		u.kind = VMAC_MSG_UNLOAD;
+		u.rec = c->rec;
+		if (bus_post(bus, &u) != 0)
+			vmac_recorder_free(c->rec);
+		return;
+	}
+	m->rec = c->rec;
+	describe(bus, m);
+	m->rec->attach_ns = m->attach_ns;
+	m->rec->from_attach = 0;
 }

@@ -58,6 +58,7 @@ struct vmac_recorder {
 	struct vmac_rec_event events[VMAC_REC_EVENTS];
 	uint64_t events_written;
 	int64_t attach_ns;                  /* bus time of attach; -1 before */
+	int from_attach;                    /* it has recorded since attach (not put in later, after a capture) */
 	char reason[VMAC_REC_TEXT_MAX + 1]; /* why it was captured ("" while recording) */
 	/* The machine, as at its last attach or swap (bus thread). */
 	char machine[VMAC_REC_NAME_MAX + 1];

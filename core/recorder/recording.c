@@ -119,7 +119,7 @@ char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_
 	unsigned char hash[crypto_generichash_BYTES];
 	char hex[2 * crypto_generichash_BYTES + 1];
 	json_t *h, *boards = json_array();
-	int i, complete = r->ticks_written <= r->ticks_cap;
+	int i, complete = r->from_attach && r->ticks_written <= r->ticks_cap;
 
 	for (i = 0; i < r->nboards; i++)
 		json_array_append_new(

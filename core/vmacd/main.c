@@ -205,8 +205,9 @@ static char *recorded_source(struct host *h, const struct vmac_recorder *r, size
 /* A machine's flight recorder, captured (a drop, a driver failure), goes
  * to the store as a recording file (docs/RECORDING.md); an event says
  * where to find it. */
-static void store_recording(struct host *h, struct vmac_recorder *r)
+static void store_recording(struct host *h, const struct vmac_bus_msg *m)
 {
+	struct vmac_recorder *r = m->rec;
 	struct vmac_recording_info info;
 	char err[512], text[700], *file, *src;
 	size_t len, srclen;
@@ -220,6 +221,16 @@ static void store_recording(struct host *h, struct vmac_recorder *r)
 	src = recorded_source(h, r, &srclen);
 	file = vmac_recording_write(r, src, srclen, info.time, &len);
 	free(src);
+	if (m->replace) { /* the machine runs on: a new recorder takes the place of this one */
+		struct vmac_host_cmd c;
+		memset(&c, 0, sizeof(c));
+		c.kind = VMAC_CMD_RECORDER;
+		c.slot = m->slot;
+		c.generation = m->generation;
+		c.rec = vmac_recorder_new(h->cfg.recorder_s, r->period_s);
+		if (c.rec && vmac_bus_send_cmd(h->bus, &c) != 0)
+			vmac_recorder_free(c.rec);
+	}
 	vmac_recorder_free(r);
 	if (!file) {
 		vmac_event_log_add(&h->log, "warning", info.machine, "recording lost: out of memory");
@@ -328,7 +339,7 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 			vmac_driver_free(m.drv);
 			vmac_recorder_free(m.rec);
 			break;
-		case VMAC_MSG_RECORDING: store_recording(h, m.rec); break;
+		case VMAC_MSG_RECORDING: store_recording(h, &m); break;
 		case VMAC_MSG_STOPPED: ev_break(loop, EVBREAK_ALL); break;
 		}
 	}
