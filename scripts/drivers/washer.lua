@@ -301,7 +301,9 @@ local function age_text(age_s)
 end
 
 -- The first tick after recover resumed a programme: the plant must agree
--- with the checkpoint (door closed, water within RECOVER_LEVEL_L), or the
+-- with the checkpoint (door closed, water within RECOVER_LEVEL_L; in a fill
+-- it may have risen more, as the valves stayed open until the board's
+-- watchdog closed them, and in a drain or a spin fallen more), or the
 -- programme is cancelled (stop, drain, unlock), saying why.
 local function check_plant(dev, r)
 	local why
@@ -309,7 +311,8 @@ local function check_plant(dev, r)
 		why = "the door is open"
 	elseif type(r.level_l) ~= "number" then
 		why = "the checkpoint has no water level to compare"
-	elseif math.abs(inp.level_l - r.level_l) > RECOVER_LEVEL_L then
+	elseif (inp.level_l - r.level_l > RECOVER_LEVEL_L and wash.step_name ~= "fill")
+		or (r.level_l - inp.level_l > RECOVER_LEVEL_L and wash.step_name ~= "drain" and wash.step_name ~= "spin") then
 		why = string.format("the water level is %.1f l, the checkpoint had %.1f l", inp.level_l, r.level_l)
 	end
 	if why then
