@@ -68,7 +68,7 @@ UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD
               $(BUILD)/tests/test_host \
               $(BUILD)/tests/test_driver $(BUILD)/tests/test_isolation $(BUILD)/tests/test_sched $(BUILD)/tests/test_store \
               $(BUILD)/tests/test_proto_v2 $(BUILD)/tests/test_cyclic $(BUILD)/tests/test_board_v2 $(BUILD)/tests/test_board_cyclic \
-              $(BUILD)/tests/test_transport $(BUILD)/tests/test_checkpoint
+              $(BUILD)/tests/test_transport $(BUILD)/tests/test_checkpoint $(BUILD)/tests/test_recording
 
 
 .PHONY: format format-check test-build asan-build
@@ -213,6 +213,11 @@ $(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/stor
 # store's table of them (white-box: core/driver/internal.h).
 $(BUILD)/tests/test_checkpoint: $(OBJ)/tests/unit/test_checkpoint.o $(driver_obj) $(OBJ)/core/store/store.o \
                                 $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
+	@mkdir -p $(dir $@)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
+
+$(BUILD)/tests/test_recording: $(OBJ)/tests/unit/test_recording.o $(OBJ)/core/recorder/recorder.o \
+                               $(OBJ)/core/recorder/recording.o
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 

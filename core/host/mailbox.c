@@ -112,20 +112,23 @@ void bus_requests(struct vmac_bus *bus)
 		if (q->kind == REQ_SWAP) {
 			q->r.rc = bus_swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
 		} else if (q->kind == REQ_RECORD) {
-			struct device *d = bus_find_by_name(bus, q->r.device);
-			struct machine *m = d && d->mach >= 0 && d->state == DEV_RUNNING ? &bus->mach[d->mach] : NULL;
+			char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
+			struct device *d;
+			struct machine *m;
+			memcpy(device, q->r.device, sizeof(device));
+			d = bus_find_by_name(bus, device);
+			m = d && d->mach >= 0 && d->state == DEV_RUNNING ? &bus->mach[d->mach] : NULL;
 			if (!m || !m->attached) {
-				snprintf(q->r.reply, sizeof(q->r.reply), "%s: no running machine of that name",
-				         q->r.device);
+				snprintf(q->r.reply, sizeof(q->r.reply), "%s: no running machine of that name", device);
 				q->r.rc = -VMAC_ENOTRUNNING;
 			} else if (bus_rec_capture(bus, m, "asked for (vmac record)") != 0) {
 				snprintf(q->r.reply, sizeof(q->r.reply),
 				         "%s: no flight recorder (recorder_s is 0, or a capture is being written)",
-				         q->r.device);
+				         device);
 				q->r.rc = -VMAC_EFAIL;
 			} else {
 				snprintf(q->r.reply, sizeof(q->r.reply), "%s: captured; GET /api/recordings lists it",
-				         q->r.device);
+				         device);
 				q->r.rc = 0;
 			}
 		} else if (q->kind == REQ_MACHINES) {

@@ -173,6 +173,8 @@ char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_
 
 /* ---- reading ---- */
 
+#define HEADER_START "{\"format\":\"vmac-recording\"" /* how every header the writer makes begins */
+
 #define FAIL(...)                                                                                                      \
 	do {                                                                                                           \
 		snprintf(err, errlen, __VA_ARGS__);                                                                    \
@@ -258,6 +260,10 @@ int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, 
 
 	memset(r, 0, sizeof(*r));
 	nl = memchr(p, '\n', (size_t)(end - p));
+	/* The header holds the driver's source: a file cut short is often cut in it. */
+	if (!nl && len > 0 &&
+	    memcmp(text, HEADER_START, len < sizeof(HEADER_START) - 1 ? len : sizeof(HEADER_START) - 1) == 0)
+		FAIL("recording truncated: its header line has no end");
 	if (!nl)
 		FAIL(len ? "not a vmac recording (no header line)" : "not a vmac recording (empty)");
 	j = json_loadb(p, (size_t)(nl - p), 0, &je);
@@ -343,9 +349,9 @@ int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, 
 				FAIL("recording damaged: line %zu is not a tick of this machine", lineno);
 			r->nticks++;
 		} else {
-			l->ev.t_ns = l->t_ns;
 			if (read_event(j, &l->ev) != 0)
 				FAIL("recording damaged: line %zu is not an event", lineno);
+			l->ev.t_ns = l->t_ns; /* after read_event, which clears ev */
 			r->nevents++;
 		}
 		r->nlines++;

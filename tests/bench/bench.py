@@ -29,9 +29,14 @@ same run on the same machine, reported as ratios.
             needs root, qemu-system-arm and make firmware, else SKIPPED): its
             reply time next to vmac-board's on the same raw-Ethernet bridge,
             and the highest rate one QEMU board holds with zero misses
+  recorder  the flight recorder and checkpoints (tests/bench/recorder.py):
+            host CPU per device per tick, 100 boards at 100 Hz, with
+            recorder_s=60 and with checkpoint_s=1, each next to both off in
+            the same round (3 to 5 rounds); vmacd's RSS with 1,000 boards at
+            10 Hz, recorder_s=60 next to 0, over time
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -375,7 +380,7 @@ def main():
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder")
     p.add_argument("--max-boards", type=int, default=None,
                    help="most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)")
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
@@ -434,6 +439,11 @@ def main():
         from qemu_board import qemu
         print("qemu: the firmware in QEMU, reply time and highest rate, %d s windows" % args.seconds, flush=True)
         results["qemu"] = qemu(args)
+
+    if "recorder" in only:
+        from recorder import recorder
+        print("recorder: the flight recorder and checkpoints, on next to off, %d s windows" % args.seconds, flush=True)
+        results["recorder"] = recorder(args)
 
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
@@ -505,6 +515,9 @@ def report(r):
     if r.get("qemu"):
         from qemu_board import report_qemu
         report_qemu(r["qemu"])
+    if r.get("recorder"):
+        from recorder import report_recorder
+        report_recorder(r["recorder"])
 
 
 if __name__ == "__main__":
