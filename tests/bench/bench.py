@@ -34,9 +34,12 @@ same run on the same machine, reported as ratios.
             recorder_s=60 and with checkpoint_s=1, each next to both off in
             the same round (3 to 5 rounds); vmacd's RSS with 1,000 boards at
             10 Hz, recorder_s=60 next to 0, over time
+  ethring   raw Ethernet's receive ring next to recvmmsg on eth-cyclic
+            (tests/bench/ethring.py): host CPU per device per tick, 100
+            boards at 1 kHz, alternating rounds (root, else SKIPPED)
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -380,7 +383,7 @@ def main():
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring")
     p.add_argument("--max-boards", type=int, default=None,
                    help="most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)")
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
@@ -444,6 +447,11 @@ def main():
         from recorder import recorder
         print("recorder: the flight recorder and checkpoints, on next to off, %d s windows" % args.seconds, flush=True)
         results["recorder"] = recorder(args)
+
+    if "ethring" in only:
+        from ethring import ethring
+        print("ethring: raw Ethernet's receive ring next to recvmmsg, %d s windows" % args.seconds, flush=True)
+        results["ethring"] = ethring(args)
 
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
@@ -518,6 +526,9 @@ def report(r):
     if r.get("recorder"):
         from recorder import report_recorder
         report_recorder(r["recorder"])
+    if r.get("ethring"):
+        from ethring import report_ethring
+        report_ethring(r["ethring"])
 
 
 if __name__ == "__main__":
