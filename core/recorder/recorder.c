@@ -38,7 +38,9 @@ void vmac_recorder_free(struct vmac_recorder *r)
 void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
                    const struct vmac_outputs *out)
 {
-	struct vmac_rec_tick *t = &r->ticks[r->ticks_written % r->ticks_cap];
+	struct vmac_rec_tick *t = &r->ticks[r->ticks_next];
+	if (++r->ticks_next == r->ticks_cap)
+		r->ticks_next = 0;
 	t->t_ns = t_ns;
 	t->board = (uint8_t)board;
 	t->last = (uint8_t)last;

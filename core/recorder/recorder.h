@@ -55,6 +55,7 @@ struct vmac_recorder {
 	struct vmac_rec_tick *ticks;
 	uint32_t ticks_cap;
 	uint64_t ticks_written; /* ever: the ring holds the last min(written, cap) */
+	uint32_t ticks_next;    /* the slot the next tick goes to (ticks_written % ticks_cap, kept: no division) */
 	struct vmac_rec_event events[VMAC_REC_EVENTS];
 	uint64_t events_written;
 	int64_t attach_ns;                  /* bus time of attach; -1 before */
