@@ -751,7 +751,8 @@ void vmac_bus_free(struct vmac_bus *bus)
 	if (bus->mach)
 		for (i = 0; i < bus->ndev; i++) {
 			vmac_driver_free(bus->mach[i].drv);
-			vmac_recorder_free(bus->mach[i].rec); /* a host gone without stopping (vmac test's crash_host) */
+			vmac_recorder_free(
+			    bus->mach[i].rec); /* a host gone without stopping (vmac test's crash_host) */
 		}
 	if (bus->loop)
 		ev_loop_destroy(bus->loop);
