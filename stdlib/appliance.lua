@@ -179,4 +179,77 @@ function Appliance:restore(old, now)
 	return true
 end
 
+-- ---- recovery after a restart (docs/DRIVERS.md "Recovery after a restart") ----
+
+local ENDED = { done = true, cancelled = true, failed = true }
+
+local function where(self)
+	return tostring(self.chosen) .. " at step " .. tostring(self.cycle.step_name)
+end
+
+local function age_text(age_s)
+	return string.format("checkpoint %.0f s old", age_s)
+end
+
+-- In the driver's recover(dev, saved): take over the appliance of the
+-- checkpoint, old (the plain copy of it in saved.state), age_s old, with the
+-- bus clock that started again (os.clock()). Returns what became of it:
+--   "idle"       nothing was running: nothing taken over
+--   "ended"      a finished programme: its status taken over
+--   "cancelling" a cancel was under way: its cleanup starts again
+--   "cancelled"  the programme could not go on (older than max_age_s, or its
+--                programme is not in this version): cancelled, so its
+--                cleanup runs; an event says why
+--   "resume"     the programme goes on where it was: check the plant at the
+--                first tick and call self:agree(dev, why) with what is wrong
+--                (nil when nothing is)
+function Appliance:recover(dev, old, age_s, max_age_s)
+	if type(old) ~= "table" or type(old.cycle) ~= "table" then
+		return "idle"
+	end
+	local phase = old.cycle.phase
+	local active = phase == "running" or phase == "cancelling"
+	if not active and not ENDED[phase] then
+		return "idle"
+	end
+	age_s = tonumber(age_s) or math.huge -- no age: too old to trust
+	self.recover_age_s = age_s
+	local ok, err = self:restore(old, os.clock())
+	if not ok then -- e.g. its programme is gone: make the machine safe instead
+		local copy = {}
+		for k, v in pairs(old) do copy[k] = v end
+		copy.cycle = {}
+		for k, v in pairs(old.cycle) do copy.cycle[k] = v end
+		copy.cycle.phase = "cancelling"
+		assert(self:restore(copy, os.clock()))
+		dev:event("recovery: cannot resume (" .. err .. "): cancelling")
+		return "cancelled"
+	end
+	if not active then
+		return "ended"
+	elseif phase == "cancelling" then
+		dev:event("recovered: cancelling " .. tostring(self.chosen) .. " goes on (" .. age_text(age_s) .. ")")
+		return "cancelling"
+	elseif age_s > max_age_s then
+		dev:event(string.format("recovery: %s, more than %g s: cancelling %s", age_text(age_s), max_age_s,
+			where(self)))
+		self.cycle:cancel()
+		return "cancelled"
+	end
+	return "resume"
+end
+
+-- At the first tick after recover returned "resume": why is what the
+-- plant says against going on (nil: nothing): the programme is cancelled
+-- then, else it resumes; an event says which, and why.
+function Appliance:agree(dev, why)
+	local age = age_text(self.recover_age_s or 0)
+	if why then
+		dev:event("recovery: " .. why .. ": cancelling " .. where(self) .. " (" .. age .. ")")
+		self.cycle:cancel()
+	else
+		dev:event("recovered: resuming " .. where(self) .. " (" .. age .. ")")
+	end
+end
+
 return appliance

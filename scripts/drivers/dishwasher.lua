@@ -23,7 +23,6 @@ local IDLE_LEVEL, RUN_LEVEL = 6, 5
 -- moves the water while the outputs are off; a fill (3 l at 0.25 l/s) may
 -- have gone on for a periodic checkpoint's 5 s after it; drained is 3 l less.
 local RECOVER_LEVEL_L = 1.5
-local ENDED = { done = true, cancelled = true, failed = true } -- a cycle's finished phases
 
 local driver = {
 	name = "dishwasher",
@@ -72,7 +71,7 @@ local params
 -- The last water level, kept in dev.state for the recovery check.
 local last = { level_l = nil }
 -- Set by recover when a programme resumes: what the first tick checks the
--- plant against ({level_l = , age_s = }), then nil.
+-- plant against ({level_l = }), then nil.
 local recovery = nil
 
 local function all_off(o)
@@ -134,14 +133,6 @@ function driver.attach(dev)
 	dev.state.last = last
 end
 
-local function where()
-	return tostring(control.chosen) .. " at step " .. tostring(run.step_name)
-end
-
-local function age_text(age_s)
-	return string.format("checkpoint %.0f s old", age_s)
-end
-
 -- The first tick after recover resumed a programme: the door closed and
 -- the water within RECOVER_LEVEL_L of the checkpoint's, or it is cancelled
 -- (drained), saying why.
@@ -154,12 +145,7 @@ local function check_plant(dev, inputs, r)
 	elseif math.abs(inputs.level_l - r.level_l) > RECOVER_LEVEL_L then
 		why = string.format("the water level is %.1f l, the checkpoint had %.1f l", inputs.level_l, r.level_l)
 	end
-	if why then
-		dev:event("recovery: " .. why .. ": cancelling " .. where() .. " (" .. age_text(r.age_s) .. ")")
-		run:cancel()
-	else
-		dev:event("recovered: resuming " .. where() .. " (" .. age_text(r.age_s) .. ")")
-	end
+	control:agree(dev, why)
 end
 
 function driver.tick(dev, inputs)
@@ -205,37 +191,11 @@ end
 -- clock started again.
 function driver.recover(dev, saved)
 	local old = saved.state
-	if type(old) ~= "table" or type(old.control) ~= "table" or type(old.control.cycle) ~= "table" then
+	if type(old) ~= "table" then
 		return
 	end
-	local phase = old.control.cycle.phase
-	local active = phase == "running" or phase == "cancelling"
-	if not active and not ENDED[phase] then
-		return -- idle (or no cycle we know): nothing to take over
-	end
-	local ok, err = control:restore(old.control, os.clock())
-	if not ok then -- e.g. its programme is gone: drain instead
-		local copy = {}
-		for k, v in pairs(old.control) do copy[k] = v end
-		copy.cycle = {}
-		for k, v in pairs(old.control.cycle) do copy.cycle[k] = v end
-		copy.cycle.phase = "cancelling"
-		assert(control:restore(copy, os.clock()))
-		dev:event("recovery: cannot resume (" .. err .. "): cancelling")
-		return
-	end
-	if not active then
-		return
-	end
-	local age_s = tonumber(saved.age_s) or math.huge -- no age: too old to trust
-	if phase == "cancelling" then
-		dev:event("recovered: cancelling " .. tostring(control.chosen) .. " goes on (" .. age_text(age_s) .. ")")
-	elseif age_s > params.recover_max_age_s then
-		dev:event(string.format("recovery: %s, more than %g s: cancelling %s", age_text(age_s),
-			params.recover_max_age_s, where()))
-		run:cancel()
-	else
-		recovery = { age_s = age_s, level_l = type(old.last) == "table" and old.last.level_l or nil }
+	if control:recover(dev, old.control, saved.age_s, params.recover_max_age_s) == "resume" then
+		recovery = { level_l = type(old.last) == "table" and old.last.level_l or nil }
 	end
 end
 

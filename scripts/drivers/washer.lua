@@ -30,7 +30,6 @@ local COUNTS_PER_REV = 360
 local STILL_RPM = 2 -- below this the drum counts as stopped
 local TEMPS = { hot = { true, false }, warm = { true, true }, cold = { false, true } }
 local RECOVER_LEVEL_L = 2 -- recovery: the water may differ this much from the checkpoint's
-local ENDED = { done = true, cancelled = true, failed = true } -- a cycle's finished phases
 
 local driver = {
 	name = "washer",
@@ -100,7 +99,7 @@ local inp = { drum_rpm = 0 }
 local memory = { encoder = nil, time = nil, measured = false, guard = false, setpoint_rpm = 0 }
 local params -- dev.params, for the steps
 -- Set by recover when a programme resumes: what the first tick checks the
--- plant against ({level_l = , age_s = }), then nil.
+-- plant against ({level_l = }), then nil.
 local recovery = nil
 
 local function all_off(o)
@@ -292,14 +291,6 @@ function driver.attach(dev)
 end
 
 -- name of the programme and its step, for events
-local function where()
-	return tostring(control.chosen) .. " at step " .. tostring(wash.step_name)
-end
-
-local function age_text(age_s)
-	return string.format("checkpoint %.0f s old", age_s)
-end
-
 -- The first tick after recover resumed a programme: the plant must agree
 -- with the checkpoint (door closed, water within RECOVER_LEVEL_L; in a fill
 -- it may have risen more, as the valves stayed open until the board's
@@ -315,12 +306,7 @@ local function check_plant(dev, r)
 		or (r.level_l - inp.level_l > RECOVER_LEVEL_L and wash.step_name ~= "drain" and wash.step_name ~= "spin") then
 		why = string.format("the water level is %.1f l, the checkpoint had %.1f l", inp.level_l, r.level_l)
 	end
-	if why then
-		dev:event("recovery: " .. why .. ": cancelling " .. where() .. " (" .. age_text(r.age_s) .. ")")
-		wash:cancel()
-	else
-		dev:event("recovered: resuming " .. where() .. " (" .. age_text(r.age_s) .. ")")
-	end
+	control:agree(dev, why)
 end
 
 function driver.tick(dev, inputs)
@@ -369,34 +355,10 @@ function driver.recover(dev, saved)
 		return
 	end
 	local phase = old.control.cycle.phase
-	local active = phase == "running" or phase == "cancelling"
-	memory.guard = active or type(old.memory) == "table" and old.memory.guard == true
-	if not active and not ENDED[phase] then
-		return -- idle (or no cycle we know): nothing to take over
-	end
-	local ok, err = control:restore(old.control, os.clock())
-	if not ok then -- e.g. its programme is gone: make the machine safe instead
-		local copy = {}
-		for k, v in pairs(old.control) do copy[k] = v end
-		copy.cycle = {}
-		for k, v in pairs(old.control.cycle) do copy.cycle[k] = v end
-		copy.cycle.phase = "cancelling"
-		assert(control:restore(copy, os.clock()))
-		dev:event("recovery: cannot resume (" .. err .. "): cancelling")
-		return
-	end
-	if not active then
-		return
-	end
-	local age_s = tonumber(saved.age_s) or math.huge -- no age: too old to trust
-	if phase == "cancelling" then
-		dev:event("recovered: cancelling " .. tostring(control.chosen) .. " goes on (" .. age_text(age_s) .. ")")
-	elseif age_s > params.recover_max_age_s then
-		dev:event(string.format("recovery: %s, more than %g s: cancelling %s", age_text(age_s),
-			params.recover_max_age_s, where()))
-		wash:cancel()
-	else
-		recovery = { age_s = age_s, level_l = type(old.inp) == "table" and old.inp.level_l or nil }
+	memory.guard = phase == "running" or phase == "cancelling"
+		or type(old.memory) == "table" and old.memory.guard == true
+	if control:recover(dev, old.control, saved.age_s, params.recover_max_age_s) == "resume" then
+		recovery = { level_l = type(old.inp) == "table" and old.inp.level_l or nil }
 	end
 end
 
