@@ -24,10 +24,12 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # clang + its runtime for the libFuzzer harness, python3 for integration tests,
 # luajit for the escape corpus's bytecode driver, lua-check for vmac lint, openssl for the
 # TLS test's certificate; the Arm cross compiler, picolibc and QEMU for the firmware on a
-# microcontroller and its tests (make firmware, tests/integration/test_qemu.py).
+# microcontroller and its tests (make firmware, tests/integration/test_qemu.py); libmosquitto for
+# vmacd's MQTT client, and the mosquitto broker and python3-paho-mqtt for its tests (test_mqtt.py).
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
-        openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm
+        openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm \
+        libmosquitto-dev mosquitto python3-paho-mqtt
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
@@ -35,6 +37,8 @@ BENCH_DEBS := rt-tests
 PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lev -lpthread -lm
+# Only vmacd links the MQTT client (core/mqtt/, docs/MQTT.md).
+MQTT_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto)
 
 # Strict warnings everywhere. -Wno-format-truncation: snprintf truncation
 # into fixed buffers is the intended behaviour (names and texts are capped).
@@ -54,6 +58,9 @@ HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.
                 core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
                 core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/console.c core/sched/sched.c core/sched/search.c \
                 core/store/store.c core/store/store_checkpoint.c core/store/store_recording.c
+# vmacd's MQTT client (core/mqtt/mqtt_internal.h says which file owns what).
+MQTT_SRC     := core/mqtt/mqtt_settings.c core/mqtt/mqtt_client.c core/mqtt/mqtt_devices.c core/mqtt/mqtt_native.c \
+                core/mqtt/mqtt_ha.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c core/vtest/replay.c
 OBJ = $(BUILD)/obj
@@ -62,6 +69,7 @@ portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
 driver_obj   = $(DRIVER_SRC:%.c=$(OBJ)/%.o)
 host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
+mqtt_obj     = $(MQTT_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD)/tests/test_board $(BUILD)/tests/test_plant \
@@ -94,9 +102,9 @@ $(OBJ)/gen/ui_assets.o: $(BUILD)/gen/ui_assets.c core/api/ui_assets.h
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) -Icore/api -c $< -o $@
 
-$(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(host_obj) $(portable_obj)
+$(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(mqtt_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS) $(MQTT_LIBS)
 
 $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
                    $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(OBJ)/core/cli/command.o $(OBJ)/core/cli/recordings.o $(OBJ)/core/cli/lint.o \
@@ -216,6 +224,7 @@ $(BUILD)/tests/test_checkpoint: $(OBJ)/tests/unit/test_checkpoint.o $(driver_obj
 	@mkdir -p $(dir $@)
 	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
 
+# The flight recorder's rings and its recordings as files.
 $(BUILD)/tests/test_recording: $(OBJ)/tests/unit/test_recording.o $(OBJ)/core/recorder/recorder.o \
                                $(OBJ)/core/recorder/recording.o
 	@mkdir -p $(dir $@)

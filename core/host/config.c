@@ -60,6 +60,19 @@ static const struct key keys[] = {
     {B(allow_jit)},
     {B(realtime)},
     {B(cyclic)},
+    {S(mqtt_url)},
+    {S(mqtt_client_id)},
+    {S(mqtt_host_id)},
+    {S(mqtt_user)},
+    {S(mqtt_password)},
+    {S(mqtt_password_file)},
+    {S(mqtt_cafile)},
+    {S(mqtt_certfile)},
+    {S(mqtt_keyfile)},
+    {S(mqtt_prefix)},
+    {S(mqtt_discovery_prefix)},
+    {B(mqtt_commands)},
+    {U(mqtt_keepalive_s, 5, 3600)},
 };
 
 void vmac_config_defaults(struct vmac_config *c)
@@ -89,6 +102,9 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->recordings_max = 50;
 	c->realtime = 1;
 	c->cyclic = 1;
+	snprintf(c->mqtt_prefix, sizeof(c->mqtt_prefix), "vmac");
+	snprintf(c->mqtt_discovery_prefix, sizeof(c->mqtt_discovery_prefix), "homeassistant");
+	c->mqtt_keepalive_s = 30;
 }
 
 static const struct key *find_key(const char *name)

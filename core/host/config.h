@@ -48,6 +48,20 @@ struct vmac_config {
 	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
 	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */
+	/* MQTT (docs/MQTT.md; checked by core/mqtt/mqtt_settings.c): off while mqtt_url is "". */
+	char mqtt_url[256];                     /* mqtt://HOST:PORT or mqtts://HOST:PORT */
+	char mqtt_client_id[128];               /* "" = vmac-HOSTNAME */
+	char mqtt_host_id[64];                  /* this host in topics; "" = the host name */
+	char mqtt_user[128];                    /* "" = no user name */
+	char mqtt_password[256];                /* never printed */
+	char mqtt_password_file[VMAC_PATH_MAX]; /* the password, its first line */
+	char mqtt_cafile[VMAC_PATH_MAX];        /* mqtts: the CA (PEM); "" = the system's */
+	char mqtt_certfile[VMAC_PATH_MAX];      /* mqtts: a client certificate (PEM), with mqtt_keyfile */
+	char mqtt_keyfile[VMAC_PATH_MAX];
+	char mqtt_prefix[128];           /* topics: PREFIX/HOST/DEVICE/... */
+	char mqtt_discovery_prefix[128]; /* Home Assistant's discovery prefix */
+	int mqtt_commands;               /* accept operator input from the command topics */
+	uint32_t mqtt_keepalive_s;
 	struct vmac_config_driver_setting driver[VMAC_CONFIG_DRIVER_SETTINGS];
 	int ndriver;
 };

@@ -18,6 +18,7 @@
 #include "../host/bus.h"
 #include "../host/config.h"
 #include "../host/events.h"
+#include "../mqtt/mqtt.h"
 #include "../recorder/recording.h"
 #include "../reload/deploy.h"
 #include "../reload/loader.h"
@@ -27,6 +28,8 @@ struct host {
 	struct vmac_config cfg;
 	struct vmac_bus *bus;
 	struct vmac_http *http;
+	struct vmac_mqtt_settings mqtt_settings; /* checked at start; mqtt NULL when off */
+	struct vmac_mqtt *mqtt;
 	struct vmac_store *store;
 	struct vmac_event_log log;
 	uint64_t stored_seq; /* events up to this one are in the store */
@@ -438,6 +441,10 @@ static int parse_args(struct host *h, int argc, char **argv)
 		fprintf(stderr, "vmacd: %s\n", err);
 		return 2;
 	}
+	if (vmac_mqtt_settings_parse(&h->cfg, &h->mqtt_settings, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmacd: %s\n", err);
+		return 2;
+	}
 	return 0;
 }
 
@@ -500,6 +507,23 @@ int main(int argc, char **argv)
 		fprintf(stderr, "vmacd: cannot start the bus thread: %s\n", strerror(-rc));
 		return 1;
 	}
+	if (h->mqtt_settings.enabled) { /* its threads too leave the stop signals to the main thread */
+		sigset_t set, old;
+		sigemptyset(&set);
+		sigaddset(&set, SIGINT);
+		sigaddset(&set, SIGTERM);
+		pthread_sigmask(SIG_BLOCK, &set, &old);
+		h->mqtt = vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, err, sizeof(err));
+		pthread_sigmask(SIG_SETMASK, &old, NULL);
+		if (!h->mqtt) {
+			fprintf(stderr, "vmacd: mqtt: %s\n", err);
+			return 1;
+		}
+		fprintf(stderr, "vmacd: mqtt to %s://%s:%d as %s, topics %s/%s/...%s\n",
+		        h->mqtt_settings.tls ? "mqtts" : "mqtt", h->mqtt_settings.host, h->mqtt_settings.port,
+		        h->mqtt_settings.client_id, h->mqtt_settings.prefix, h->mqtt_settings.host_id,
+		        h->mqtt_settings.commands ? ", commands accepted" : ", commands off");
+	}
 	fprintf(stderr,
 	        "vmacd: bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us\n"
 	        "vmacd: drivers from %s%s%s/drivers\n"
@@ -509,6 +533,7 @@ int main(int argc, char **argv)
 	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, vmac_http_tls(h->http) ? "https" : "http",
 	        (int)(strrchr(h->cfg.http, ':') - h->cfg.http), h->cfg.http, vmac_http_port(h->http));
 	ev_run(h->loop, 0);
+	vmac_mqtt_stop(h->mqtt); /* devices and host offline, while the broker can still be told */
 	vmac_bus_join(h->bus);
 	on_wake(h->loop, &h->wake_w, 0); /* the last events */
 	vmac_http_stop(h->http);

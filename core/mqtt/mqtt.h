@@ -1,0 +1,54 @@
+/* The MQTT client of vmacd (docs/MQTT.md): the settings it is started with,
+ * and start/stop. It runs on threads of its own (libmosquitto's network
+ * thread and a publisher thread), reads the bus's published status copy
+ * (vmac_bus_status) and hands operator input in through the bus's request
+ * slots (vmac_bus_request_input), exactly as the HTTP API does: the bus
+ * thread never waits for it. */
+#ifndef VMAC_MQTT_H
+#define VMAC_MQTT_H
+
+#include <stddef.h>
+
+#include "../host/bus.h"
+#include "../host/config.h"
+#include "../host/events.h"
+
+#define VMAC_MQTT_TOPIC_MAX 128 /* a prefix, or a host id */
+
+/* The mqtt_* settings of the configuration, checked, with defaults filled
+ * in and the password file read (vmac_mqtt_settings_parse). */
+struct vmac_mqtt_settings {
+	int enabled; /* mqtt_url given */
+	int tls;     /* mqtts:// */
+	char host[256];
+	int port;
+	char client_id[128];
+	char host_id[64]; /* this host in topics: PREFIX/HOST_ID/... */
+	char user[128];
+	char password[256]; /* never printed */
+	int has_password;
+	char cafile[VMAC_PATH_MAX], certfile[VMAC_PATH_MAX], keyfile[VMAC_PATH_MAX];
+	char prefix[VMAC_MQTT_TOPIC_MAX];
+	char discovery_prefix[VMAC_MQTT_TOPIC_MAX];
+	int commands; /* subscribe to the command topics */
+	unsigned keepalive_s;
+};
+
+/* The configuration's mqtt_* keys into *out. Returns 0, or -1 with err
+ * naming the setting and what is wrong (the host then does not start).
+ * Reads mqtt_password_file and checks that the TLS files can be read. */
+int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_settings *out, char *err, size_t errlen);
+
+struct vmac_mqtt; /* opaque */
+
+/* Start the client (enabled settings only): it connects in the background
+ * and keeps trying; a broker that is down is never an error here. log gets
+ * its events (kind "mqtt"). Returns NULL with err set only when the client
+ * cannot be made at all (out of memory, a TLS file libmosquitto refuses). */
+struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const struct vmac_config *cfg,
+                                  struct vmac_bus *bus, struct vmac_event_log *log, char *err, size_t errlen);
+/* Publish the host and its devices offline (waiting at most about a
+ * second for the broker), disconnect, join the threads, free. NULL: nothing. */
+void vmac_mqtt_stop(struct vmac_mqtt *m);
+
+#endif

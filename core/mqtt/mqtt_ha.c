@@ -1,0 +1,385 @@
+/* Profile "ha": Home Assistant MQTT discovery (docs/MQTT.md, "Home
+ * Assistant"). One HA device per machine, its entities made from the
+ * driver's manifest (vmac_driver_describe's JSON) and published retained
+ * under DISCOVERY/COMPONENT/NODE/OBJECT/config; the host is a device too
+ * (every machine's via_device). Entities read and write vmac's own topics
+ * (mqtt_native.c). Configs are published again when HA says it is online
+ * on DISCOVERY/status, and a config of the previous driver version that the
+ * new one no longer has is removed (an empty retained payload). An entity
+ * whose kind only its value tells (no default, no unit) and that had no
+ * value yet is configured as a string, and configured again when a value
+ * says it is a boolean or a number (device_up comes with the first status
+ * copy that shows the machine running: before its driver's first tick). */
+#include "mqtt_internal.h"
+
+#include <ctype.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* s with every character outside [A-Za-z0-9_-] made '_' (HA's ids). */
+static void ha_id(char *out, size_t outlen, const char *s)
+{
+	size_t i;
+	for (i = 0; s[i] && i + 1 < outlen; i++)
+		out[i] = isalnum((unsigned char)s[i]) || s[i] == '-' || s[i] == '_' ? s[i] : '_';
+	out[i] = 0;
+}
+
+/* vmac's units in HA's spelling (HA compares units of a device class). */
+static const char *ha_unit(const char *unit)
+{
+	if (strcmp(unit, "degC") == 0)
+		return "°C";
+	if (strcmp(unit, "degF") == 0)
+		return "°F";
+	if (strcmp(unit, "l") == 0)
+		return "L";
+	return unit;
+}
+
+struct ha {
+	const struct vmac_mqtt_settings *s;
+	const char *device;
+	char topic_base[300]; /* PREFIX/HOST/DEVICE */
+	char node[160];       /* HOST_DEVICE */
+	char dev_id[180];     /* vmac_HOST_DEVICE */
+	json_t *device_obj;
+	json_t *out;
+};
+
+static json_t *entity(struct ha *h, const char *name, json_t *decl)
+{
+	char uid[240], topic[400], host_status[300];
+	const char *label = json_string_value(json_object_get(decl, "label"));
+	snprintf(uid, sizeof(uid), "%s_%s", h->dev_id, name);
+	snprintf(topic, sizeof(topic), "%s/availability", h->topic_base);
+	snprintf(host_status, sizeof(host_status), "%s/%s/status", h->s->prefix, h->s->host_id);
+	/* Available only while both the host and the machine say online. */
+	return json_pack("{s:s, s:s, s:[{s:s}, {s:s}], s:s, s:O}", "name", label ? label : name, "unique_id", uid,
+	                 "availability", "topic", host_status, "topic", topic, "availability_mode", "all", "device",
+	                 h->device_obj);
+}
+
+static void add(struct ha *h, const char *component, const char *name, json_t *config)
+{
+	char topic[512], object[64];
+	if (!config)
+		return;
+	ha_id(object, sizeof(object), name);
+	snprintf(topic, sizeof(topic), "%s/%s/%s/%s/config", h->s->discovery_prefix, component, h->node, object);
+	json_object_set_new(h->out, topic, config);
+}
+
+/* The kind of a declared value: 'n' number, 'b' boolean, 's' string, from
+ * its declaration, else from its value now; '?' when neither says (no value
+ * yet), configured as a string. */
+static char kind_of(json_t *decl, const struct vmac_value *now)
+{
+	json_t *def = json_object_get(decl, "default");
+	if (json_object_get(decl, "values") || json_is_string(def))
+		return 's';
+	if (json_is_boolean(def))
+		return 'b';
+	if (json_is_number(def) || json_object_get(decl, "min") || json_object_get(decl, "max") ||
+	    json_object_get(decl, "unit"))
+		return 'n';
+	if (now && now->type == VMAC_VALUE_BOOL)
+		return 'b';
+	if (now && now->type == VMAC_VALUE_STRING)
+		return 's';
+	return now && now->type == VMAC_VALUE_NUMBER ? 'n' : '?';
+}
+
+static int whole(json_t *v)
+{
+	double x = json_number_value(v);
+	return !v || (json_is_number(v) && floor(x) == x);
+}
+
+/* A read-only view: sensor (with its unit) or binary_sensor. */
+static void add_reader(struct ha *h, const char *name, json_t *decl, char kind)
+{
+	json_t *e = entity(h, name, decl);
+	const char *unit = json_string_value(json_object_get(decl, "unit"));
+	char state[400];
+	snprintf(state, sizeof(state), "%s/%s", h->topic_base, name);
+	json_object_set_new(e, "state_topic", json_string(state));
+	if (kind == 'b') {
+		json_object_set_new(e, "payload_on", json_string("true"));
+		json_object_set_new(e, "payload_off", json_string("false"));
+		add(h, "binary_sensor", name, e);
+		return;
+	}
+	if (unit) {
+		json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
+		json_object_set_new(e, "state_class", json_string("measurement"));
+		if (strcmp(unit, "degC") == 0 || strcmp(unit, "degF") == 0)
+			json_object_set_new(e, "device_class", json_string("temperature"));
+	}
+	add(h, "sensor", name, e);
+}
+
+/* A settable value: switch, number, select or text. */
+static void add_writer(struct ha *h, const char *name, json_t *decl, char kind, int config)
+{
+	json_t *e = entity(h, name, decl), *values = json_object_get(decl, "values");
+	const char *unit = json_string_value(json_object_get(decl, "unit"));
+	const char *component;
+	char t[400];
+	snprintf(t, sizeof(t), "%s/%s", h->topic_base, name);
+	json_object_set_new(e, "state_topic", json_string(t));
+	snprintf(t, sizeof(t), "%s/set/%s", h->topic_base, name);
+	json_object_set_new(e, "command_topic", json_string(t));
+	if (config)
+		json_object_set_new(e, "entity_category", json_string("config"));
+	if (kind == 'b') {
+		component = "switch";
+		json_object_set_new(e, "payload_on", json_string("true"));
+		json_object_set_new(e, "payload_off", json_string("false"));
+		json_object_set_new(e, "state_on", json_string("true"));
+		json_object_set_new(e, "state_off", json_string("false"));
+	} else if (kind == 'n') {
+		json_t *min = json_object_get(decl, "min"), *max = json_object_get(decl, "max"),
+		       *step = json_object_get(decl, "step");
+		component = "number";
+		json_object_set_new(e, "min", json_real(json_is_number(min) ? json_number_value(min) : -1e9));
+		json_object_set_new(e, "max", json_real(json_is_number(max) ? json_number_value(max) : 1e9));
+		json_object_set_new(e, "step",
+		                    json_real(json_is_number(step) ? json_number_value(step)
+		                              : whole(min) && whole(max) && whole(json_object_get(decl, "default"))
+		                                  ? 1
+		                                  : 0.001));
+		json_object_set_new(e, "mode", json_string("box"));
+		if (unit)
+			json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
+	} else if (json_is_array(values)) {
+		component = "select";
+		json_object_set(e, "options", values);
+	} else {
+		component = "text";
+		json_object_set_new(e, "max", json_integer(VMAC_DRIVER_STR_MAX));
+	}
+	add(h, component, name, e);
+}
+
+/* The value of name in the status (NULL: none). */
+static const struct vmac_value *now_of(const struct vmac_device_status *st, const char *name)
+{
+	int i;
+	for (i = 0; st && i < st->nvars; i++)
+		if (strcmp(st->vars[i].name, name) == 0)
+			return &st->vars[i].value;
+	for (i = 0; st && i < st->nparams; i++)
+		if (strcmp(st->params[i].name, name) == 0)
+			return &st->params[i].value;
+	return NULL;
+}
+
+/* Whether name is the argument of a command (a cycle's programme). */
+static int is_command_arg(json_t *commands, const char *name)
+{
+	const char *key;
+	json_t *c;
+	json_object_foreach(commands, key, c)
+	{
+		const char *arg = json_string_value(json_object_get(c, "arg"));
+		if (arg && strcmp(arg, name) == 0)
+			return 1;
+	}
+	return 0;
+}
+
+/* The kind of every variable, then every param, of the manifest (kind_of's
+ * letters) into out: what decides each entity's component. */
+static void kinds_of(json_t *manifest, const struct vmac_device_status *st, char *out, size_t outlen)
+{
+	static const char *const tables[] = {"variables", "params"};
+	const char *name;
+	json_t *decl;
+	size_t n = 0, t;
+	for (t = 0; t < 2; t++)
+		json_object_foreach(json_object_get(manifest, tables[t]), name, decl)
+		{
+			if (n + 1 < outlen)
+				out[n++] = kind_of(decl, now_of(st, name));
+		}
+	out[n] = 0;
+}
+
+/* Whether two kinds_of make the same configs ('?' is configured as 's'). */
+static int same_components(const char *a, const char *b)
+{
+	for (; *a && *b; a++, b++)
+		if ((*a == '?' ? 's' : *a) != (*b == '?' ? 's' : *b))
+			return 0;
+	return *a == *b;
+}
+
+json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
+                        json_t *manifest, const struct vmac_device_status *st)
+{
+	struct ha h;
+	char host_id[80], dev[80], model[100], via[100];
+	json_t *commands = json_object_get(manifest, "commands"), *decl;
+	const char *name;
+	memset(&h, 0, sizeof(h));
+	h.s = s;
+	h.device = device;
+	h.out = json_object();
+	ha_id(host_id, sizeof(host_id), s->host_id);
+	ha_id(dev, sizeof(dev), device);
+	snprintf(h.topic_base, sizeof(h.topic_base), "%s/%s/%s", s->prefix, s->host_id, device);
+	snprintf(h.node, sizeof(h.node), "%s_%s", host_id, dev);
+	snprintf(h.dev_id, sizeof(h.dev_id), "vmac_%s_%s", host_id, dev);
+	snprintf(model, sizeof(model), "%s %s", driver, version);
+	snprintf(via, sizeof(via), "vmac_%s", host_id);
+	h.device_obj = json_pack("{s:[s], s:s, s:s, s:s, s:s, s:s}", "identifiers", h.dev_id, "name", device, "model",
+	                         model, "manufacturer", "vmac", "sw_version", version, "via_device", via);
+	json_object_foreach(json_object_get(manifest, "variables"), name, decl)
+	{
+		char kind = kind_of(decl, now_of(st, name));
+		if (json_is_true(json_object_get(decl, "set")) && s->commands)
+			add_writer(&h, name, decl, kind, 0);
+		else
+			add_reader(&h, name, decl, kind);
+	}
+	json_object_foreach(json_object_get(manifest, "params"), name, decl)
+	{
+		char kind = kind_of(decl, now_of(st, name));
+		if (s->commands)
+			add_writer(&h, name, decl, kind, !is_command_arg(commands, name));
+		else
+			add_reader(&h, name, decl, kind);
+	}
+	if (s->commands)
+		json_object_foreach(commands, name, decl)
+		{
+			json_t *e = entity(&h, name, decl);
+			char t[400];
+			snprintf(t, sizeof(t), "%s/cmd/%s", h.topic_base, name);
+			json_object_set_new(e, "command_topic", json_string(t));
+			json_object_set_new(e, "payload_press", json_string("PRESS"));
+			add(&h, "button", name, e);
+		}
+	json_decref(h.device_obj);
+	return h.out;
+}
+
+/* The host itself: a device with one entity, its connection. */
+static void publish_host(struct vmac_mqtt *m)
+{
+	char host_id[80], topic[512], uid[120], state[300], name[100], via[100];
+	json_t *o;
+	char *body;
+	ha_id(host_id, sizeof(host_id), m->s.host_id);
+	snprintf(topic, sizeof(topic), "%s/binary_sensor/%s/status/config", m->s.discovery_prefix, host_id);
+	snprintf(uid, sizeof(uid), "vmac_%s_status", host_id);
+	snprintf(state, sizeof(state), "%s/%s/status", m->s.prefix, m->s.host_id);
+	snprintf(name, sizeof(name), "vmac %s", m->s.host_id);
+	snprintf(via, sizeof(via), "vmac_%s", host_id);
+	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:s, s:{s:[s], s:s, s:s, s:s}}", "name", "Connected", "unique_id", uid,
+	              "state_topic", state, "payload_on", "online", "payload_off", "offline", "device_class",
+	              "connectivity", "device", "identifiers", via, "name", name, "model", "vmacd", "manufacturer",
+	              "vmac");
+	body = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	if (body)
+		mqtt_publish(m, topic, body, -1, 1, 1);
+	free(body);
+	json_decref(o);
+}
+
+static void free_configs(struct mqtt_device *d)
+{
+	int i;
+	for (i = 0; i < d->nconfigs; i++)
+		free(d->configs[i]);
+	free(d->configs);
+	d->configs = NULL;
+	d->nconfigs = 0;
+}
+
+static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	json_t *configs = mqtt_ha_configs(&m->s, d->name, d->driver, d->version, d->manifest, st), *c;
+	const char *topic;
+	char **kept;
+	int i, n = 0;
+	if (!configs)
+		return;
+	kinds_of(d->manifest, st, d->kinds, sizeof(d->kinds));
+	/* Entities of the version before (or of a kind guessed before) that these
+	 * configs do not have: removed. */
+	for (i = 0; i < d->nconfigs; i++)
+		if (!json_object_get(configs, d->configs[i]))
+			mqtt_publish(m, d->configs[i], "", 0, 1, 1);
+	free_configs(d);
+	kept = calloc(json_object_size(configs) + 1, sizeof(*kept));
+	json_object_foreach(configs, topic, c)
+	{
+		char *body = json_dumps(c, JSON_COMPACT);
+		if (body)
+			mqtt_publish(m, topic, body, -1, 1, 1);
+		free(body);
+		if (kept && (kept[n] = strdup(topic)) != NULL)
+			n++;
+	}
+	d->configs = kept;
+	d->nconfigs = kept ? n : 0;
+	json_decref(configs);
+}
+
+/* An entity configured before its kind was known ('?') whose value now says
+ * it is a boolean or a number: every config of d again, the guessed one
+ * removed (its topic names the component). */
+static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
+                   struct mqtt_value *const *changed, int n)
+{
+	char now[sizeof(d->kinds)];
+	(void)changed;
+	(void)n;
+	if (!strchr(d->kinds, '?'))
+		return;
+	kinds_of(d->manifest, st, now, sizeof(now));
+	if (same_components(d->kinds, now))
+		memcpy(d->kinds, now, sizeof(now)); /* a string after all, or still no value */
+	else
+		device_up(m, d, st);
+}
+
+static void connected(struct vmac_mqtt *m)
+{
+	char topic[300];
+	snprintf(topic, sizeof(topic), "%s/status", m->s.discovery_prefix);
+	mqtt_subscribe(m, topic, 1);
+	publish_host(m);
+}
+
+/* HA (re)started: it has forgotten what it was told; tell it again. */
+static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
+{
+	char topic[300];
+	int i;
+	snprintf(topic, sizeof(topic), "%s/status", m->s.discovery_prefix);
+	if (strcmp(msg->topic, topic) != 0)
+		return 0;
+	if (msg->len == 6 && memcmp(msg->payload, "online", 6) == 0) {
+		mqtt_event(m, "", "Home Assistant is online: discovery configs published again");
+		publish_host(m);
+		for (i = 0; i < m->status.ndevices; i++) {
+			struct mqtt_device *d = mqtt_device_find(m, m->status.devices[i].name);
+			if (d && d->online)
+				device_up(m, d, &m->status.devices[i]);
+		}
+	}
+	return 1;
+}
+
+const struct mqtt_profile mqtt_ha_profile = {
+    .name = "ha",
+    .connected = connected,
+    .device_up = device_up,
+    .values = values,
+    .message = message,
+};

@@ -1,0 +1,147 @@
+/* What the files of core/mqtt/ share. Who owns what:
+ *   mqtt_settings.c  the mqtt_* settings, checked at start
+ *   mqtt_client.c    the connection (libmosquitto, its network thread, reconnect with backoff, the last
+ *                    will), the publisher thread and its loop, publishing with a bound on what waits
+ *   mqtt_devices.c   the bus's status copy read every 250 ms: which machines are up or down, which values
+ *                    changed (newest wins), handed to every profile
+ *   mqtt_native.c    profile "vmac": the host's and devices' availability, state topics, the command
+ *                    topics into the bus's request slots, errors published back
+ *   mqtt_ha.c        profile "ha": Home Assistant discovery configs from each driver's manifest
+ * A profile is one way of speaking MQTT over the same connection and the same device table; Sparkplug B
+ * would be one more (docs/MQTT.md, "Adding a profile"). Everything here runs on the publisher thread
+ * unless it says otherwise. */
+#ifndef VMAC_MQTT_INTERNAL_H
+#define VMAC_MQTT_INTERNAL_H
+
+#include <jansson.h>
+#include <pthread.h>
+#include <stdatomic.h>
+
+#include "mqtt.h"
+
+#define MQTT_POLL_MS 250           /* the status copy is read this often */
+#define MQTT_INPUT_TIMEOUT_MS 2000 /* as the HTTP API waits for the bus thread */
+#define MQTT_MAX_OUTSTANDING 5000  /* messages handed to libmosquitto and not yet written: values wait */
+#define MQTT_QUEUE 64              /* messages received and not yet handled; more are dropped, counted */
+#define MQTT_PAYLOAD_MAX 256       /* a command's payload; longer is refused */
+#define MQTT_VALUES (VMAC_DRIVER_MAX_VARS + VMAC_DRIVER_MAX_PARAMS)
+#define MQTT_TEXT_MAX 96 /* a value as text */
+
+/* A value as published: its text, and when a variable with update =
+ * "timer:N" may be published next. */
+struct mqtt_value {
+	char name[VMAC_DRIVER_NAME_MAX + 1];
+	char text[MQTT_TEXT_MAX];
+	int sent;        /* text went out on this connection */
+	double period_s; /* timer:N (0: on every change) */
+	double next_s;   /* monotonic seconds: not before this */
+};
+
+/* A machine as the client knows it (by its primary board's name). */
+struct mqtt_device {
+	char name[VMAC_NAME_MAX + 1];
+	char driver[VMAC_NAME_MAX + 1];
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	int online;       /* running, and said so */
+	int seen;         /* in the status this round */
+	json_t *manifest; /* the running version's declarations (vmac_loaded_manifest), NULL until known */
+	char **configs;   /* ha: the discovery config topics published for this version */
+	int nconfigs;
+	/* ha: the kind of each variable, then each param, in those configs ('n', 'b', 's'; '?' where neither
+	 * the declaration nor a value said it yet, configured as a string until a value says otherwise). */
+	char kinds[MQTT_VALUES + 1];
+	struct mqtt_value values[MQTT_VALUES];
+	int nvalues;
+};
+
+struct mqtt_message {
+	char topic[256];
+	char payload[MQTT_PAYLOAD_MAX + 1];
+	int len; /* -1: longer than MQTT_PAYLOAD_MAX (payload holds its start) */
+};
+
+struct vmac_mqtt;
+
+/* Every hook is optional. Publisher thread. */
+struct mqtt_profile {
+	const char *name;
+	/* After every CONNACK: subscriptions, and what the broker needs retained
+	 * (the host's birth); devices follow with device_up/down. */
+	void (*connected)(struct vmac_mqtt *m);
+	/* A machine running: new, back after a drop, a new driver version, or
+	 * everything again after a reconnect. st: its status now. */
+	void (*device_up)(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st);
+	/* A machine no longer running (dropped, asleep, gone). */
+	void (*device_down)(struct vmac_mqtt *m, struct mqtt_device *d);
+	/* Values of one machine that changed (or all, after device_up), from one
+	 * status copy (st): a group's variables come together. */
+	void (*values)(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
+	               struct mqtt_value *const *changed, int n);
+	/* A message on a subscribed topic: 1 handled, 0 not this profile's. */
+	int (*message)(struct vmac_mqtt *m, const struct mqtt_message *msg);
+	/* The host stopping in order: last words (the will covers a crash). */
+	void (*stopping)(struct vmac_mqtt *m);
+};
+
+extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile;
+
+struct vmac_mqtt {
+	struct vmac_mqtt_settings s;
+	struct vmac_bus *bus;
+	struct vmac_event_log *log;
+	struct mosquitto *mosq;
+	pthread_t thread;
+	atomic_int stopping;
+	atomic_int connected;     /* CONNACK accepted, not yet disconnected (network thread sets it) */
+	atomic_int need_births;   /* a new connection: everything again */
+	atomic_int outstanding;   /* published, not yet written (QoS 0) or acknowledged (QoS 1) */
+	atomic_int was_connected; /* said once per outage */
+	pthread_mutex_t lock;     /* queue, nqueue, dropped; wake */
+	pthread_cond_t wake;
+	struct mqtt_message queue[MQTT_QUEUE];
+	int nqueue;
+	unsigned long dropped;
+	/* The publisher thread's own. */
+	struct vmac_status status;
+	struct mqtt_device *devices;
+	int ndevices, cap;
+	unsigned long skipped_rounds; /* values held back: too much waiting to be written */
+};
+
+/* Publish (retained or not) at QoS 0 or 1; len -1: strlen(payload). 0, or
+ * -1 when not connected (nothing queued). Any thread. */
+int mqtt_publish(struct vmac_mqtt *m, const char *topic, const char *payload, int len, int qos, int retain);
+int mqtt_subscribe(struct vmac_mqtt *m, const char *pattern, int qos);
+/* Whether values may be published now (connected, not too much waiting). */
+int mqtt_can_publish_values(struct vmac_mqtt *m);
+void mqtt_event(struct vmac_mqtt *m, const char *device, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+double mqtt_now_s(void);
+
+/* mqtt_client.c: every profile's hook, in order. */
+void mqtt_profiles_device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st);
+void mqtt_profiles_device_down(struct vmac_mqtt *m, struct mqtt_device *d);
+void mqtt_profiles_values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
+                          struct mqtt_value *const *changed, int n);
+void mqtt_profiles_stopping(struct vmac_mqtt *m);
+
+/* mqtt_devices.c */
+void mqtt_devices_poll(struct vmac_mqtt *m);      /* read the status copy, tell the profiles */
+void mqtt_devices_republish(struct vmac_mqtt *m); /* after a reconnect: every device again */
+void mqtt_devices_stopping(struct vmac_mqtt *m);  /* every device down, then the profiles' last words */
+void mqtt_devices_free(struct vmac_mqtt *m);
+struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
+
+/* mqtt_native.c: values as text and back (pure; docs/MQTT.md "Payloads"). */
+void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
+/* A command's payload (len bytes, -1: too long) into v: 0, or -1 with why. */
+int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const char **why);
+/* Topic helpers: PREFIX/HOST/rest into out. */
+void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+
+/* mqtt_ha.c: the discovery configs of one machine (pure): a JSON object
+ * {config topic: config payload object} from its manifest and status. */
+json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
+                        json_t *manifest, const struct vmac_device_status *st);
+
+#endif

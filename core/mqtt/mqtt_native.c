@@ -1,0 +1,289 @@
+/* Profile "vmac": vmac's own topics (docs/MQTT.md, "Topics"). The host's
+ * birth and will on PREFIX/HOST/status, each machine's availability and
+ * values (retained), and the command topics PREFIX/HOST/DEVICE/set/NAME
+ * and .../cmd/NAME handed to the bus exactly as POST
+ * /api/devices/NAME/input hands them (the driver validates; a refusal is
+ * published back on PREFIX/HOST/DEVICE/error, never more than that). */
+#include "mqtt_internal.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../common/errors.h"
+
+void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char *fmt, ...)
+{
+	va_list ap;
+	int n = snprintf(out, outlen, "%s/%s/", m->s.prefix, m->s.host_id);
+	if (n < 0 || (size_t)n >= outlen)
+		return;
+	va_start(ap, fmt);
+	vsnprintf(out + n, outlen - (size_t)n, fmt, ap);
+	va_end(ap);
+}
+
+void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen)
+{
+	switch (v->type) {
+	case VMAC_VALUE_NUMBER:
+		if (isfinite(v->number))
+			snprintf(out, outlen, "%.15g", v->number);
+		else
+			snprintf(out, outlen, "null");
+		break;
+	case VMAC_VALUE_BOOL: snprintf(out, outlen, "%s", v->number != 0 ? "true" : "false"); break;
+	case VMAC_VALUE_STRING: snprintf(out, outlen, "%s", v->str); break;
+	default: out[0] = 0; break; /* no value: the retained one is cleared */
+	}
+}
+
+static int equals_ci(const char *a, const char *b)
+{
+	return strcasecmp(a, b) == 0;
+}
+
+int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const char **why)
+{
+	char text[MQTT_PAYLOAD_MAX + 1], *end;
+	size_t n, i;
+	memset(v, 0, sizeof(*v));
+	if (len < 0) {
+		*why = "the payload is over 256 bytes";
+		return -1;
+	}
+	memcpy(text, payload, (size_t)len);
+	text[len] = 0;
+	if (strlen(text) != (size_t)len) {
+		*why = "the payload holds a NUL byte";
+		return -1;
+	}
+	for (i = 0; i < (size_t)len; i++)
+		if ((unsigned char)text[i] < 0x20 && text[i] != '\t' && text[i] != '\n' && text[i] != '\r') {
+			*why = "the payload holds control characters";
+			return -1;
+		}
+	/* Trim blanks around it. */
+	for (n = strlen(text); n > 0 && isspace((unsigned char)text[n - 1]); n--)
+		text[n - 1] = 0;
+	for (i = 0; isspace((unsigned char)text[i]); i++)
+		;
+	memmove(text, text + i, strlen(text + i) + 1);
+	n = strlen(text);
+	if (n == 0 || strcmp(text, "null") == 0 || strcmp(text, "PRESS") == 0) {
+		v->type = VMAC_VALUE_NONE; /* a command without a value */
+		return 0;
+	}
+	if (equals_ci(text, "true") || equals_ci(text, "on")) {
+		v->type = VMAC_VALUE_BOOL;
+		v->number = 1;
+		return 0;
+	}
+	if (equals_ci(text, "false") || equals_ci(text, "off")) {
+		v->type = VMAC_VALUE_BOOL;
+		return 0;
+	}
+	errno = 0;
+	v->number = strtod(text, &end);
+	if (!*end && errno == 0 && isfinite(v->number) && !isalpha((unsigned char)text[0])) {
+		v->type = VMAC_VALUE_NUMBER;
+		return 0;
+	}
+	v->number = 0;
+	if (n >= 2 && text[0] == '"' && text[n - 1] == '"') { /* a JSON string: "12" stays a string */
+		json_t *s = json_loads(text, JSON_DECODE_ANY, NULL);
+		const char *str = json_string_value(s);
+		if (!str || strlen(str) > VMAC_DRIVER_STR_MAX) {
+			json_decref(s);
+			*why = "expected a JSON string of at most 63 bytes";
+			return -1;
+		}
+		v->type = VMAC_VALUE_STRING;
+		snprintf(v->str, sizeof(v->str), "%s", str);
+		json_decref(s);
+		return 0;
+	}
+	if (text[0] == '{' || text[0] == '[') {
+		*why = "expected true/false/ON/OFF, a number, a string (at most 63 bytes) or nothing, not JSON "
+		       "structures";
+		return -1;
+	}
+	if (n > VMAC_DRIVER_STR_MAX) {
+		*why = "a string value is at most 63 bytes";
+		return -1;
+	}
+	v->type = VMAC_VALUE_STRING;
+	snprintf(v->str, sizeof(v->str), "%s", text);
+	return 0;
+}
+
+/* [A-Za-z0-9._-]{1,max} (a device), or [a-z][a-z0-9_]{0,max-1} (a name). */
+static int device_ok(const char *s)
+{
+	size_t i, n = strlen(s);
+	if (n == 0 || n > VMAC_NAME_MAX)
+		return 0;
+	for (i = 0; i < n; i++)
+		if (!isalnum((unsigned char)s[i]) && s[i] != '.' && s[i] != '_' && s[i] != '-')
+			return 0;
+	return 1;
+}
+
+static int name_ok(const char *s)
+{
+	size_t i, n = strlen(s);
+	if (n == 0 || n > VMAC_DRIVER_NAME_MAX || !islower((unsigned char)s[0]))
+		return 0;
+	for (i = 0; i < n; i++)
+		if (!islower((unsigned char)s[i]) && !isdigit((unsigned char)s[i]) && s[i] != '_')
+			return 0;
+	return 1;
+}
+
+/* {"topic": , "name": , "code": , "error": } on PREFIX/HOST/DEVICE/error
+ * (PREFIX/HOST/error when the topic names no valid device). Not retained. */
+static void publish_error(struct vmac_mqtt *m, const char *device, const char *topic, const char *name,
+                          const char *code, const char *text)
+{
+	char where[512];
+	json_t *o =
+	    json_pack("{s:s, s:s, s:s, s:s}", "topic", topic, "name", name ? name : "", "code", code, "error", text);
+	char *body = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	if (device)
+		mqtt_topic(m, where, sizeof(where), "%s/error", device);
+	else
+		mqtt_topic(m, where, sizeof(where), "error");
+	if (body)
+		mqtt_publish(m, where, body, -1, 0, 0);
+	free(body);
+	json_decref(o);
+}
+
+/* PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME: operator input, as POST
+ * /api/devices/DEVICE/input {"name": NAME, "value": payload} does it. */
+static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *rest)
+{
+	struct vmac_bus_input_request req;
+	char device[VMAC_NAME_MAX + 2], kind[8], name[VMAC_DRIVER_NAME_MAX + 2];
+	const char *slash1 = strchr(rest, '/'), *slash2 = slash1 ? strchr(slash1 + 1, '/') : NULL, *why;
+	size_t dn = slash1 ? (size_t)(slash1 - rest) : 0, kn = slash2 ? (size_t)(slash2 - slash1 - 1) : 0;
+	if (!slash2 || dn >= sizeof(device) || kn >= sizeof(kind) || strlen(slash2 + 1) >= sizeof(name) ||
+	    strchr(slash2 + 1, '/')) {
+		publish_error(m, NULL, msg->topic, NULL, "malformed",
+		              "expected PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME");
+		return;
+	}
+	memcpy(device, rest, dn);
+	device[dn] = 0;
+	memcpy(kind, slash1 + 1, kn);
+	kind[kn] = 0;
+	snprintf(name, sizeof(name), "%s", slash2 + 1);
+	if (!device_ok(device)) {
+		publish_error(m, NULL, msg->topic, name, "malformed", "no such device");
+		return;
+	}
+	if ((strcmp(kind, "set") != 0 && strcmp(kind, "cmd") != 0) || !name_ok(name)) {
+		publish_error(m, device, msg->topic, name, "malformed",
+		              "expected .../set/NAME or .../cmd/NAME, NAME a variable, param or command of the driver");
+		return;
+	}
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	snprintf(req.name, sizeof(req.name), "%s", name);
+	if (mqtt_payload_value(msg->payload, msg->len, &req.value, &why) != 0) {
+		publish_error(m, device, msg->topic, name, "malformed", why);
+		return;
+	}
+	if (strcmp(kind, "set") == 0 && req.value.type == VMAC_VALUE_NONE) {
+		publish_error(m, device, msg->topic, name, "malformed", "set needs a value");
+		return;
+	}
+	if (vmac_bus_request_input(m->bus, &req, MQTT_INPUT_TIMEOUT_MS) != 0) {
+		publish_error(m, device, msg->topic, name, "busy", req.reply);
+		return;
+	}
+	if (req.rc == 0)
+		return; /* the new value is published from the next status copy */
+	publish_error(m, device, msg->topic, name,
+	              req.rc > 0                    ? "refused"
+	              : req.rc == -VMAC_ENOTRUNNING ? "not_running"
+	                                            : "driver_failed",
+	              req.reply);
+}
+
+static void connected(struct vmac_mqtt *m)
+{
+	char topic[512];
+	mqtt_topic(m, topic, sizeof(topic), "status");
+	mqtt_publish(m, topic, "online", -1, 1, 1);
+	if (m->s.commands) {
+		mqtt_topic(m, topic, sizeof(topic), "+/set/+");
+		mqtt_subscribe(m, topic, 1);
+		mqtt_topic(m, topic, sizeof(topic), "+/cmd/+");
+		mqtt_subscribe(m, topic, 1);
+	}
+}
+
+static void availability(struct vmac_mqtt *m, struct mqtt_device *d, const char *what)
+{
+	char topic[512];
+	mqtt_topic(m, topic, sizeof(topic), "%s/availability", d->name);
+	mqtt_publish(m, topic, what, -1, 1, 1);
+}
+
+static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	(void)st;
+	availability(m, d, "online");
+}
+
+static void device_down(struct vmac_mqtt *m, struct mqtt_device *d)
+{
+	availability(m, d, "offline");
+}
+
+static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
+                   struct mqtt_value *const *changed, int n)
+{
+	char topic[512];
+	int i;
+	(void)st;
+	for (i = 0; i < n; i++) {
+		mqtt_topic(m, topic, sizeof(topic), "%s/%s", d->name, changed[i]->name);
+		mqtt_publish(m, topic, changed[i]->text, -1, 0, 1);
+	}
+}
+
+static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
+{
+	char mine[512];
+	size_t n;
+	mqtt_topic(m, mine, sizeof(mine), "%s", "");
+	n = strlen(mine);
+	if (strncmp(msg->topic, mine, n) != 0)
+		return 0;
+	if (m->s.commands)
+		command(m, msg, msg->topic + n);
+	return 1;
+}
+
+static void stopping(struct vmac_mqtt *m)
+{
+	char topic[512];
+	mqtt_topic(m, topic, sizeof(topic), "status");
+	mqtt_publish(m, topic, "offline", -1, 1, 1);
+}
+
+const struct mqtt_profile mqtt_native_profile = {
+    .name = "vmac",
+    .connected = connected,
+    .device_up = device_up,
+    .device_down = device_down,
+    .values = values,
+    .message = message,
+    .stopping = stopping,
+};

@@ -1,0 +1,202 @@
+/* The mqtt_* settings (docs/HOST.md, docs/MQTT.md) checked at start, with
+ * their defaults filled in: the broker's URL, the client id and host id,
+ * the credentials (the password file read here, once), the TLS files and
+ * the topic prefixes. No libmosquitto: pure checks and file reads. */
+#include "mqtt.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* A host name or IPv4 address: letters, digits, '.', '-'. */
+static int host_ok(const char *s, size_t len)
+{
+	size_t i;
+	if (len == 0 || len > 253)
+		return 0;
+	for (i = 0; i < len; i++)
+		if (!isalnum((unsigned char)s[i]) && s[i] != '.' && s[i] != '-')
+			return 0;
+	return 1;
+}
+
+/* mqtt://HOST[:PORT] or mqtts://HOST[:PORT]. */
+static int parse_url(const char *url, struct vmac_mqtt_settings *s, char *err, size_t errlen)
+{
+	const char *rest, *colon;
+	size_t hostlen;
+	if (strncmp(url, "mqtt://", 7) == 0) {
+		rest = url + 7;
+		s->tls = 0;
+		s->port = 1883;
+	} else if (strncmp(url, "mqtts://", 8) == 0) {
+		rest = url + 8;
+		s->tls = 1;
+		s->port = 8883;
+	} else {
+		snprintf(err, errlen, "mqtt_url '%s': expected mqtt://HOST:PORT or mqtts://HOST:PORT", url);
+		return -1;
+	}
+	colon = strchr(rest, ':');
+	hostlen = colon ? (size_t)(colon - rest) : strlen(rest);
+	if (!host_ok(rest, hostlen) || hostlen >= sizeof(s->host)) {
+		snprintf(err, errlen, "mqtt_url '%s': expected a host name or IPv4 address after %s", url,
+		         s->tls ? "mqtts://" : "mqtt://");
+		return -1;
+	}
+	memcpy(s->host, rest, hostlen);
+	s->host[hostlen] = 0;
+	if (colon) {
+		char *end;
+		long port;
+		errno = 0;
+		port = strtol(colon + 1, &end, 10);
+		if (errno || end == colon + 1 || *end || port < 1 || port > 65535) {
+			snprintf(err, errlen, "mqtt_url '%s': the port must be 1..65535", url);
+			return -1;
+		}
+		s->port = (int)port;
+	}
+	return 0;
+}
+
+/* A topic prefix: one or more levels of printable characters, no
+ * wildcard, no empty level. */
+static int prefix_ok(const char *p)
+{
+	size_t i, n = strlen(p);
+	if (n == 0 || p[0] == '/' || p[n - 1] == '/' || strstr(p, "//"))
+		return 0;
+	for (i = 0; i < n; i++)
+		if (p[i] == '+' || p[i] == '#' || (unsigned char)p[i] < 0x21 || p[i] == 0x7f)
+			return 0;
+	return 1;
+}
+
+/* [A-Za-z0-9_-]+: one topic level, and a Home Assistant node id. */
+static int id_ok(const char *p)
+{
+	size_t i, n = strlen(p);
+	if (n == 0)
+		return 0;
+	for (i = 0; i < n; i++)
+		if (!isalnum((unsigned char)p[i]) && p[i] != '_' && p[i] != '-')
+			return 0;
+	return 1;
+}
+
+static int readable(const char *key, const char *path, char *err, size_t errlen)
+{
+	if (path[0] && access(path, R_OK) != 0) {
+		snprintf(err, errlen, "%s '%s': cannot be read (%s)", key, path, strerror(errno));
+		return -1;
+	}
+	return 0;
+}
+
+/* The first line of the password file, without its line end. */
+static int read_password(const char *path, struct vmac_mqtt_settings *s, char *err, size_t errlen)
+{
+	FILE *f = fopen(path, "r");
+	size_t n;
+	if (!f) {
+		snprintf(err, errlen, "mqtt_password_file '%s': %s", path, strerror(errno));
+		return -1;
+	}
+	if (!fgets(s->password, sizeof(s->password), f))
+		s->password[0] = 0;
+	fclose(f);
+	n = strcspn(s->password, "\r\n");
+	s->password[n] = 0;
+	if (n == 0) {
+		snprintf(err, errlen, "mqtt_password_file '%s': the file is empty", path);
+		return -1;
+	}
+	s->has_password = 1;
+	return 0;
+}
+
+int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_settings *out, char *err, size_t errlen)
+{
+	struct vmac_mqtt_settings *s = out;
+	char hostname[64];
+	size_t i;
+	memset(s, 0, sizeof(*s));
+	if (!cfg->mqtt_url[0])
+		return 0; /* off: the other keys are not looked at */
+	s->enabled = 1;
+	if (parse_url(cfg->mqtt_url, s, err, errlen) != 0)
+		return -1;
+	if (gethostname(hostname, sizeof(hostname)) != 0)
+		snprintf(hostname, sizeof(hostname), "vmac");
+	hostname[sizeof(hostname) - 1] = 0;
+	for (i = 0; hostname[i]; i++) /* a topic level and an HA id: [A-Za-z0-9_-] */
+		if (!isalnum((unsigned char)hostname[i]) && hostname[i] != '-')
+			hostname[i] = '_';
+	snprintf(s->host_id, sizeof(s->host_id), "%s", cfg->mqtt_host_id[0] ? cfg->mqtt_host_id : hostname);
+	if (!id_ok(s->host_id)) {
+		snprintf(err, errlen, "mqtt_host_id '%s': expected letters, digits, '_' and '-' only", s->host_id);
+		return -1;
+	}
+	if (cfg->mqtt_client_id[0])
+		snprintf(s->client_id, sizeof(s->client_id), "%s", cfg->mqtt_client_id);
+	else
+		snprintf(s->client_id, sizeof(s->client_id), "vmac-%s", hostname);
+	for (i = 0; s->client_id[i]; i++)
+		if ((unsigned char)s->client_id[i] < 0x21 || s->client_id[i] == 0x7f) {
+			snprintf(err, errlen, "mqtt_client_id '%s': no spaces or control characters", s->client_id);
+			return -1;
+		}
+	snprintf(s->user, sizeof(s->user), "%s", cfg->mqtt_user);
+	if (cfg->mqtt_password[0] && cfg->mqtt_password_file[0]) {
+		snprintf(err, errlen, "mqtt_password and mqtt_password_file: give one or the other");
+		return -1;
+	}
+	if (cfg->mqtt_password[0]) {
+		snprintf(s->password, sizeof(s->password), "%s", cfg->mqtt_password);
+		s->has_password = 1;
+	} else if (cfg->mqtt_password_file[0] && read_password(cfg->mqtt_password_file, s, err, errlen) != 0) {
+		return -1;
+	}
+	if (s->has_password && !s->user[0]) {
+		snprintf(err, errlen, "a password for the broker needs mqtt_user too");
+		return -1;
+	}
+	if (!s->tls && (cfg->mqtt_cafile[0] || cfg->mqtt_certfile[0] || cfg->mqtt_keyfile[0])) {
+		snprintf(err, errlen, "mqtt_cafile, mqtt_certfile and mqtt_keyfile need an mqtts:// mqtt_url");
+		return -1;
+	}
+	if (!cfg->mqtt_certfile[0] != !cfg->mqtt_keyfile[0]) {
+		snprintf(err, errlen, "a client certificate needs both mqtt_certfile and mqtt_keyfile");
+		return -1;
+	}
+	if (readable("mqtt_cafile", cfg->mqtt_cafile, err, errlen) ||
+	    readable("mqtt_certfile", cfg->mqtt_certfile, err, errlen) ||
+	    readable("mqtt_keyfile", cfg->mqtt_keyfile, err, errlen))
+		return -1;
+	snprintf(s->cafile, sizeof(s->cafile), "%s", cfg->mqtt_cafile);
+	snprintf(s->certfile, sizeof(s->certfile), "%s", cfg->mqtt_certfile);
+	snprintf(s->keyfile, sizeof(s->keyfile), "%s", cfg->mqtt_keyfile);
+	if (!prefix_ok(cfg->mqtt_prefix) || strlen(cfg->mqtt_prefix) >= sizeof(s->prefix)) {
+		snprintf(err, errlen,
+		         "mqtt_prefix '%s': expected topic levels such as vmac or site/vmac (no +, #, "
+		         "spaces or empty levels)",
+		         cfg->mqtt_prefix);
+		return -1;
+	}
+	if (!prefix_ok(cfg->mqtt_discovery_prefix) || strlen(cfg->mqtt_discovery_prefix) >= sizeof(s->prefix)) {
+		snprintf(err, errlen,
+		         "mqtt_discovery_prefix '%s': expected topic levels such as homeassistant (no +, #, spaces or "
+		         "empty levels)",
+		         cfg->mqtt_discovery_prefix);
+		return -1;
+	}
+	snprintf(s->prefix, sizeof(s->prefix), "%s", cfg->mqtt_prefix);
+	snprintf(s->discovery_prefix, sizeof(s->discovery_prefix), "%s", cfg->mqtt_discovery_prefix);
+	s->commands = cfg->mqtt_commands;
+	s->keepalive_s = cfg->mqtt_keepalive_s;
+	return 0;
+}
