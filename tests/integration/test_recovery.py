@@ -29,21 +29,22 @@ SERIAL = True
 
 TRIALS = 50
 SANITIZED_TRIALS = 8
-KILL_AFTER_S = (0.3, 2.5)   # a trial's kill comes this long after the programme runs again
+KILL_AFTER_S = (0.3, 1.6)   # a trial's kill comes this long after the programme runs again
 LOCK_RELEASE_S = 20         # the PTC lock holds this long after the watchdog: longer than any restart here
 SHORT_LOCK_RELEASE_S = 8    # enough for the 2 s an old checkpoint waits, and quicker to see the door released
 # The boards' watchdog: shorter than the harness's 1.5 s (quicker trials, and
-# a valve left open by a crashed host fills less), still 5 periods of the
-# washer's idle level; longer than 3 periods, so it is what the boards get.
-WATCHDOG_MS = 1000
+# a valve left open by a crashed host fills less), 3.5 periods of the
+# washer's idle level: longer than 3 periods, so it is what the boards get.
+WATCHDOG_MS = 700
 WATCHDOG_S = WATCHDOG_MS / 1000.0
 # The crash trials' valves. At 1 l/s the water a valve adds between the
 # checkpoint and the watchdog (at most checkpoint_s + the watchdog) is about
 # the 2 l the washer accepts when it resumes: a killed fill resumes, and the
 # programme gets through every step, spin too. From FAST_FILL_TRIAL on, 5 l/s:
-# a killed fill has 5 l or more too much, the washer cancels and drains, and
-# the later kills fall in its cancel (which goes on). The quick programme's
-# steps at time_scale 0.02: a 4.8 s wash, a 2.4 s spin.
+# a killed fill has more water than its checkpoint, which a fill accepts (its
+# valves ran until the watchdog); a drain or a cancel that was under way goes
+# on. The quick programme's steps at time_scale 0.02: a 4.8 s wash, a 2.4 s
+# spin.
 SLOW_FILL_LPS, FAST_FILL_LPS, FAST_FILL_TRIAL = 1, 5, 31
 TRIAL_TIME_SCALE = "0.02"
 WATCHDOG_LATE_S = 0.3       # the board looks every 5 ms; its line reaches the harness a little later
