@@ -25,11 +25,12 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # luajit for the escape corpus's bytecode driver, lua-check for vmac lint, openssl for the
 # TLS test's certificate; the Arm cross compiler, picolibc and QEMU for the firmware on a
 # microcontroller and its tests (make firmware, tests/integration/test_qemu.py); libmosquitto for
-# vmacd's MQTT client, and the mosquitto broker and python3-paho-mqtt for its tests (test_mqtt.py).
+# vmacd's MQTT client, and the mosquitto broker and python3-paho-mqtt for its tests (test_mqtt.py,
+# test_sparkplug.py); protoc-c and libprotobuf-c for its Sparkplug B payloads (core/mqtt/sparkplug_b.proto).
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
         openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm \
-        libmosquitto-dev mosquitto python3-paho-mqtt
+        libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
@@ -37,8 +38,9 @@ BENCH_DEBS := rt-tests
 PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lev -lpthread -lm
-# Only vmacd links the MQTT client (core/mqtt/, docs/MQTT.md).
-MQTT_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto)
+# Only vmacd links the MQTT client (core/mqtt/, docs/MQTT.md), and protobuf-c for Sparkplug B.
+MQTT_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto) \
+             $(shell pkg-config --libs libprotobuf-c 2>/dev/null || echo -lprotobuf-c)
 
 # Strict warnings everywhere. -Wno-format-truncation: snprintf truncation
 # into fixed buffers is the intended behaviour (names and texts are capped).
@@ -60,7 +62,7 @@ HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.
                 core/store/store.c core/store/store_checkpoint.c core/store/store_recording.c
 # vmacd's MQTT client (core/mqtt/mqtt_internal.h says which file owns what).
 MQTT_SRC     := core/mqtt/mqtt_settings.c core/mqtt/mqtt_client.c core/mqtt/mqtt_devices.c core/mqtt/mqtt_native.c \
-                core/mqtt/mqtt_ha.c
+                core/mqtt/mqtt_ha.c core/mqtt/mqtt_sparkplug.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c core/vtest/replay.c
 OBJ = $(BUILD)/obj
@@ -69,7 +71,7 @@ portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
 driver_obj   = $(DRIVER_SRC:%.c=$(OBJ)/%.o)
 host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
 vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
-mqtt_obj     = $(MQTT_SRC:%.c=$(OBJ)/%.o)
+mqtt_obj     = $(MQTT_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/sparkplug_b.pb-c.o
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD)/tests/test_board $(BUILD)/tests/test_plant \
@@ -101,6 +103,20 @@ $(BUILD)/gen/ui_assets.c: core/api/ui/embed.py $(UI_FILES)
 $(OBJ)/gen/ui_assets.o: $(BUILD)/gen/ui_assets.c core/api/ui_assets.h
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) -Icore/api -c $< -o $@
+
+# Sparkplug B's payload (core/mqtt/sparkplug_b.proto, from the specification) in C, made by protoc-c.
+SPB_GEN := $(BUILD)/gen/sparkplug_b.pb-c
+$(SPB_GEN).c: core/mqtt/sparkplug_b.proto
+	@mkdir -p $(dir $@)
+	protoc-c --proto_path=core/mqtt --c_out=$(BUILD)/gen $<
+$(SPB_GEN).h: $(SPB_GEN).c
+
+$(OBJ)/gen/sparkplug_b.pb-c.o: $(SPB_GEN).c $(SPB_GEN).h
+	@mkdir -p $(dir $@)
+	$(CC) $(HOST_CFLAGS) -I$(BUILD)/gen -c $< -o $@
+
+$(OBJ)/core/mqtt/mqtt_sparkplug.o: $(SPB_GEN).h
+$(OBJ)/core/mqtt/mqtt_sparkplug.o: HOST_CFLAGS += -I$(BUILD)/gen
 
 $(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(mqtt_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)

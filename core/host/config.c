@@ -72,6 +72,8 @@ static const struct key keys[] = {
     {S(mqtt_prefix)},
     {S(mqtt_discovery_prefix)},
     {B(mqtt_commands)},
+    {B(mqtt_sparkplug)},
+    {S(mqtt_sparkplug_group)},
     {U(mqtt_keepalive_s, 5, 3600)},
 };
 
@@ -104,6 +106,7 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->cyclic = 1;
 	snprintf(c->mqtt_prefix, sizeof(c->mqtt_prefix), "vmac");
 	snprintf(c->mqtt_discovery_prefix, sizeof(c->mqtt_discovery_prefix), "homeassistant");
+	snprintf(c->mqtt_sparkplug_group, sizeof(c->mqtt_sparkplug_group), "vmac");
 	c->mqtt_keepalive_s = 30;
 }
 

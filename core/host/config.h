@@ -61,6 +61,8 @@ struct vmac_config {
 	char mqtt_prefix[128];           /* topics: PREFIX/HOST/DEVICE/... */
 	char mqtt_discovery_prefix[128]; /* Home Assistant's discovery prefix */
 	int mqtt_commands;               /* accept operator input from the command topics */
+	int mqtt_sparkplug;              /* also speak Sparkplug B (an Edge Node; docs/MQTT.md) */
+	char mqtt_sparkplug_group[128];  /* its group id: spBv1.0/GROUP/... */
 	uint32_t mqtt_keepalive_s;
 	struct vmac_config_driver_setting driver[VMAC_CONFIG_DRIVER_SETTINGS];
 	int ndriver;

@@ -30,7 +30,9 @@ struct vmac_mqtt_settings {
 	char cafile[VMAC_PATH_MAX], certfile[VMAC_PATH_MAX], keyfile[VMAC_PATH_MAX];
 	char prefix[VMAC_MQTT_TOPIC_MAX];
 	char discovery_prefix[VMAC_MQTT_TOPIC_MAX];
-	int commands; /* subscribe to the command topics */
+	int commands;  /* subscribe to the command topics */
+	int sparkplug; /* also a Sparkplug B Edge Node, on a connection of its own */
+	char sparkplug_group[VMAC_MQTT_TOPIC_MAX];
 	unsigned keepalive_s;
 };
 

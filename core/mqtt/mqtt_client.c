@@ -16,7 +16,7 @@
 #include <string.h>
 #include <time.h>
 
-static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile};
+static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile, &mqtt_sparkplug_profile};
 #define NPROFILES (int)(sizeof(profiles) / sizeof(profiles[0]))
 
 double mqtt_now_s(void)
@@ -36,46 +36,93 @@ void mqtt_event(struct vmac_mqtt *m, const char *device, const char *fmt, ...)
 	vmac_event_log_add(m->log, "mqtt", device, text);
 }
 
-int mqtt_publish(struct vmac_mqtt *m, const char *topic, const char *payload, int len, int qos, int retain)
+int mqtt_conn_publish(struct mqtt_conn *c, const char *topic, const void *payload, int len, int qos, int retain)
 {
 	int rc;
-	if (!atomic_load(&m->connected))
+	if (!c->mosq || !atomic_load(&c->connected))
 		return -1;
 	if (len < 0)
 		len = (int)strlen(payload);
-	atomic_fetch_add(&m->outstanding, 1);
-	rc = mosquitto_publish(m->mosq, NULL, topic, len, payload, qos, retain != 0);
+	atomic_fetch_add(&c->outstanding, 1);
+	rc = mosquitto_publish(c->mosq, NULL, topic, len, payload, qos, retain != 0);
 	if (rc != MOSQ_ERR_SUCCESS) {
-		atomic_fetch_sub(&m->outstanding, 1);
+		atomic_fetch_sub(&c->outstanding, 1);
 		return -1;
 	}
 	return 0;
 }
 
+int mqtt_conn_subscribe(struct mqtt_conn *c, const char *pattern, int qos)
+{
+	return c->mosq && mosquitto_subscribe(c->mosq, NULL, pattern, qos) == MOSQ_ERR_SUCCESS ? 0 : -1;
+}
+
+int mqtt_conn_is_up(struct mqtt_conn *c)
+{
+	return c->mosq && atomic_load(&c->connected);
+}
+
+int mqtt_conn_can_publish(struct mqtt_conn *c)
+{
+	return mqtt_conn_is_up(c) && atomic_load(&c->outstanding) < MQTT_MAX_OUTSTANDING;
+}
+
+int mqtt_publish(struct vmac_mqtt *m, const char *topic, const char *payload, int len, int qos, int retain)
+{
+	return mqtt_conn_publish(&m->conns[MQTT_CONN_MAIN], topic, payload, len, qos, retain);
+}
+
 int mqtt_subscribe(struct vmac_mqtt *m, const char *pattern, int qos)
 {
-	return mosquitto_subscribe(m->mosq, NULL, pattern, qos) == MOSQ_ERR_SUCCESS ? 0 : -1;
+	return mqtt_conn_subscribe(&m->conns[MQTT_CONN_MAIN], pattern, qos);
 }
 
 int mqtt_can_publish_values(struct vmac_mqtt *m)
 {
-	return atomic_load(&m->connected) && atomic_load(&m->outstanding) < MQTT_MAX_OUTSTANDING;
+	return mqtt_conn_can_publish(&m->conns[MQTT_CONN_MAIN]);
 }
 
 /* ---- libmosquitto's network thread: flags and the queue only ---- */
 
+static const char *conn_what(const struct mqtt_conn *c)
+{
+	return c->index == MQTT_CONN_SPARKPLUG ? " (Sparkplug)" : "";
+}
+
+/* Sparkplug: this connection carries the will registered with it
+ * (bdseq_next); the next one gets the following bdSeq, persisted, so a
+ * restart goes on counting. The will is changed here, on the network
+ * thread, the one that reconnects with it: never while it is being sent. */
+static void spb_next_will(struct mqtt_conn *c)
+{
+	struct vmac_mqtt *m = c->m;
+	char topic[300];
+	void *ndeath;
+	int len;
+	atomic_store(&m->spb.bdseq, m->spb.bdseq_next);
+	m->spb.bdseq_next = (m->spb.bdseq_next + 1) % 256;
+	mqtt_spb_bdseq_store(m->spb.path, m->spb.bdseq_next);
+	snprintf(topic, sizeof(topic), "spBv1.0/%s/NDEATH/%s", m->s.sparkplug_group, m->s.host_id);
+	if ((ndeath = mqtt_spb_ndeath((unsigned)m->spb.bdseq_next, &len)) != NULL)
+		mosquitto_will_set(c->mosq, topic, len, ndeath, 1, false);
+	free(ndeath);
+}
+
 static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 {
-	struct vmac_mqtt *m = obj;
+	struct mqtt_conn *c = obj;
+	struct vmac_mqtt *m = c->m;
 	(void)mosq;
 	if (rc != 0) { /* refused: bad credentials, not authorised; libmosquitto tries again */
-		mqtt_event(m, "", "the broker %s:%d refused the connection: %s", m->s.host, m->s.port,
+		mqtt_event(m, "", "the broker %s:%d refused the connection%s: %s", m->s.host, m->s.port, conn_what(c),
 		           mosquitto_connack_string(rc));
 		return;
 	}
-	atomic_store(&m->outstanding, 0);
-	atomic_store(&m->connected, 1);
-	atomic_store(&m->need_births, 1);
+	if (c->index == MQTT_CONN_SPARKPLUG)
+		spb_next_will(c);
+	atomic_store(&c->outstanding, 0);
+	atomic_store(&c->connected, 1);
+	atomic_store(&c->need_births, 1);
 	pthread_mutex_lock(&m->lock);
 	pthread_cond_signal(&m->wake);
 	pthread_mutex_unlock(&m->lock);
@@ -83,26 +130,28 @@ static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 
 static void on_disconnect(struct mosquitto *mosq, void *obj, int rc)
 {
-	struct vmac_mqtt *m = obj;
+	struct mqtt_conn *c = obj;
+	struct vmac_mqtt *m = c->m;
 	(void)mosq;
-	atomic_store(&m->connected, 0);
-	if (rc != 0 && !atomic_load(&m->stopping) && atomic_exchange(&m->was_connected, 0))
-		mqtt_event(m, "", "lost the broker %s:%d (%s); reconnecting with backoff, control goes on", m->s.host,
-		           m->s.port, mosquitto_strerror(rc));
+	atomic_store(&c->connected, 0);
+	if (rc != 0 && !atomic_load(&m->stopping) && atomic_exchange(&c->was_connected, 0))
+		mqtt_event(m, "", "lost the broker %s:%d%s (%s); reconnecting with backoff, control goes on", m->s.host,
+		           m->s.port, conn_what(c), mosquitto_strerror(rc));
 }
 
 static void on_publish(struct mosquitto *mosq, void *obj, int mid)
 {
-	struct vmac_mqtt *m = obj;
+	struct mqtt_conn *c = obj;
 	(void)mosq;
 	(void)mid;
-	if (atomic_load(&m->outstanding) > 0)
-		atomic_fetch_sub(&m->outstanding, 1);
+	if (atomic_load(&c->outstanding) > 0)
+		atomic_fetch_sub(&c->outstanding, 1);
 }
 
 static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto_message *msg)
 {
-	struct vmac_mqtt *m = obj;
+	struct mqtt_conn *c = obj;
+	struct vmac_mqtt *m = c->m;
 	struct mqtt_message *q;
 	(void)mosq;
 	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic) || msg->retain)
@@ -113,6 +162,7 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 	} else {
 		q = &m->queue[m->nqueue++];
 		snprintf(q->topic, sizeof(q->topic), "%s", msg->topic);
+		q->conn = c->index;
 		q->len = msg->payloadlen > MQTT_PAYLOAD_MAX ? -1 : msg->payloadlen;
 		if (msg->payloadlen > 0) /* an empty payload may come as NULL */
 			memcpy(q->payload, msg->payload, q->len < 0 ? MQTT_PAYLOAD_MAX : (size_t)q->len);
@@ -186,14 +236,19 @@ static void *publisher(void *arg)
 	while (!atomic_load(&m->stopping)) {
 		struct timespec until;
 		double now = mqtt_now_s(), left;
-		int p;
-		if (atomic_exchange(&m->need_births, 0)) {
-			mqtt_event(m, "", "connected to the broker %s:%d as %s", m->s.host, m->s.port, m->s.client_id);
-			atomic_store(&m->was_connected, 1);
+		int p, k;
+		for (k = 0; k < MQTT_CONNS; k++) {
+			struct mqtt_conn *c = &m->conns[k];
+			if (!c->mosq || !atomic_exchange(&c->need_births, 0))
+				continue;
+			mqtt_event(m, "", "connected to the broker %s:%d as %s%s", m->s.host, m->s.port, c->client_id,
+			           conn_what(c));
+			atomic_store(&c->was_connected, 1);
 			for (p = 0; p < NPROFILES; p++)
-				if (profiles[p]->connected)
+				if (profiles[p]->conn == k && profiles[p]->connected)
 					profiles[p]->connected(m);
-			mqtt_devices_republish(m);
+			if (k == MQTT_CONN_MAIN)
+				mqtt_devices_republish(m);
 		}
 		handle_messages(m);
 		if (now >= next_poll) {
@@ -213,23 +268,24 @@ static void *publisher(void *arg)
 			until.tv_nsec -= 1000000000L;
 		}
 		pthread_mutex_lock(&m->lock);
-		if (m->nqueue == 0 && !atomic_load(&m->need_births) && !atomic_load(&m->stopping))
+		if (m->nqueue == 0 && !atomic_load(&m->conns[MQTT_CONN_MAIN].need_births) &&
+		    !atomic_load(&m->conns[MQTT_CONN_SPARKPLUG].need_births) && !atomic_load(&m->stopping))
 			pthread_cond_timedwait(&m->wake, &m->lock, &until);
 		pthread_mutex_unlock(&m->lock);
 	}
 	return NULL;
 }
 
-static int tls_setup(struct vmac_mqtt *m, char *err, size_t errlen)
+static int tls_setup(struct vmac_mqtt *m, struct mosquitto *mosq, char *err, size_t errlen)
 {
 	int rc;
 	if (!m->s.tls)
 		return 0;
 	if (m->s.cafile[0])
-		rc = mosquitto_tls_set(m->mosq, m->s.cafile, NULL, m->s.certfile[0] ? m->s.certfile : NULL,
+		rc = mosquitto_tls_set(mosq, m->s.cafile, NULL, m->s.certfile[0] ? m->s.certfile : NULL,
 		                       m->s.keyfile[0] ? m->s.keyfile : NULL, NULL);
 	else
-		rc = mosquitto_tls_set(m->mosq, NULL, "/etc/ssl/certs", m->s.certfile[0] ? m->s.certfile : NULL,
+		rc = mosquitto_tls_set(mosq, NULL, "/etc/ssl/certs", m->s.certfile[0] ? m->s.certfile : NULL,
 		                       m->s.keyfile[0] ? m->s.keyfile : NULL, NULL);
 	if (rc != MOSQ_ERR_SUCCESS) {
 		snprintf(err, errlen, "mqtts: the TLS files were refused: %s", mosquitto_strerror(rc));
@@ -238,12 +294,89 @@ static int tls_setup(struct vmac_mqtt *m, char *err, size_t errlen)
 	return 0;
 }
 
+/* The will of connection c: PREFIX/HOST/status "offline" (retained) on the
+ * main one, the NDEATH with the next bdSeq on Sparkplug's. */
+static int set_will(struct mqtt_conn *c, char *err, size_t errlen)
+{
+	struct vmac_mqtt *m = c->m;
+	char topic[512];
+	void *ndeath;
+	int len, rc;
+	if (c->index == MQTT_CONN_MAIN) {
+		/* A host that dies (SIGKILL, power) is said offline by the broker. */
+		mqtt_topic(m, topic, sizeof(topic), "status");
+		rc = mosquitto_will_set(c->mosq, topic, 7, "offline", 1, true);
+	} else {
+		snprintf(topic, sizeof(topic), "spBv1.0/%s/NDEATH/%s", m->s.sparkplug_group, m->s.host_id);
+		if (!(ndeath = mqtt_spb_ndeath((unsigned)m->spb.bdseq_next, &len))) {
+			snprintf(err, errlen, "out of memory");
+			return -1;
+		}
+		rc = mosquitto_will_set(c->mosq, topic, len, ndeath, 1,
+		                        false); /* the specification: QoS 1, not retained */
+		free(ndeath);
+	}
+	if (rc != MOSQ_ERR_SUCCESS) {
+		snprintf(err, errlen, "mqtt: cannot set the last will on %s", topic);
+		return -1;
+	}
+	return 0;
+}
+
+/* Connection c made and started (its network thread connecting in the
+ * background); 0, or -1 with err. */
+static int conn_start(struct vmac_mqtt *m, int index, char *err, size_t errlen)
+{
+	struct mqtt_conn *c = &m->conns[index];
+	const struct vmac_mqtt_settings *s = &m->s;
+	int rc;
+	c->m = m;
+	c->index = index;
+	snprintf(c->client_id, sizeof(c->client_id), "%s%s", s->client_id, index == MQTT_CONN_SPARKPLUG ? "-spb" : "");
+	c->mosq = mosquitto_new(c->client_id, true, c);
+	if (!c->mosq) {
+		snprintf(err, errlen, "cannot make the MQTT client: %s", strerror(errno));
+		return -1;
+	}
+	mosquitto_int_option(c->mosq, MOSQ_OPT_PROTOCOL_VERSION, MQTT_PROTOCOL_V311);
+	mosquitto_reconnect_delay_set(c->mosq, 1, 30, true);
+	mosquitto_connect_callback_set(c->mosq, on_connect);
+	mosquitto_disconnect_callback_set(c->mosq, on_disconnect);
+	mosquitto_publish_callback_set(c->mosq, on_publish);
+	mosquitto_message_callback_set(c->mosq, on_message);
+	if (s->user[0] &&
+	    mosquitto_username_pw_set(c->mosq, s->user, s->has_password ? s->password : NULL) != MOSQ_ERR_SUCCESS) {
+		snprintf(err, errlen, "mqtt_user: refused by libmosquitto");
+		return -1;
+	}
+	if (set_will(c, err, errlen) != 0 || tls_setup(m, c->mosq, err, errlen) != 0)
+		return -1;
+	rc = mosquitto_connect_async(c->mosq, s->host, s->port, (int)s->keepalive_s);
+	if (rc != MOSQ_ERR_SUCCESS) /* the broker down is no error: the network thread keeps trying */
+		mqtt_event(m, "", "the broker %s:%d is not reachable yet%s (%s); trying again with backoff", s->host,
+		           s->port, conn_what(c), rc == MOSQ_ERR_ERRNO ? strerror(errno) : mosquitto_strerror(rc));
+	if ((rc = mosquitto_loop_start(c->mosq)) != MOSQ_ERR_SUCCESS) {
+		snprintf(err, errlen, "cannot start the MQTT network thread: %s", mosquitto_strerror(rc));
+		return -1;
+	}
+	return 0;
+}
+
+static void conn_stop(struct mqtt_conn *c)
+{
+	if (!c->mosq)
+		return;
+	mosquitto_disconnect(c->mosq);
+	mosquitto_loop_stop(c->mosq, false);
+	mosquitto_destroy(c->mosq);
+	c->mosq = NULL;
+}
+
 struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const struct vmac_config *cfg,
                                   struct vmac_bus *bus, struct vmac_event_log *log, char *err, size_t errlen)
 {
 	struct vmac_mqtt *m = calloc(1, sizeof(*m));
-	char will[512];
-	int rc;
+	int rc, k;
 	if (!m) {
 		snprintf(err, errlen, "out of memory");
 		return NULL;
@@ -262,60 +395,49 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 		pthread_condattr_destroy(&attr);
 	}
 	mosquitto_lib_init();
-	m->mosq = mosquitto_new(s->client_id, true, m);
-	if (!m->status.devices || !m->status.slot_load || !m->mosq) {
-		snprintf(err, errlen, "cannot make the MQTT client: %s", m->mosq ? "out of memory" : strerror(errno));
+	if (!m->status.devices || !m->status.slot_load) {
+		snprintf(err, errlen, "cannot make the MQTT client: out of memory");
 		goto fail;
 	}
-	mosquitto_int_option(m->mosq, MOSQ_OPT_PROTOCOL_VERSION, MQTT_PROTOCOL_V311);
-	mosquitto_reconnect_delay_set(m->mosq, 1, 30, true);
-	mosquitto_connect_callback_set(m->mosq, on_connect);
-	mosquitto_disconnect_callback_set(m->mosq, on_disconnect);
-	mosquitto_publish_callback_set(m->mosq, on_publish);
-	mosquitto_message_callback_set(m->mosq, on_message);
-	if (s->user[0] &&
-	    mosquitto_username_pw_set(m->mosq, s->user, s->has_password ? s->password : NULL) != MOSQ_ERR_SUCCESS) {
-		snprintf(err, errlen, "mqtt_user: refused by libmosquitto");
-		goto fail;
+	if (s->sparkplug) {
+		snprintf(m->spb.path, sizeof(m->spb.path), "%s/sparkplug-bdseq", cfg->state_dir);
+		m->spb.bdseq_next = mqtt_spb_bdseq_load(m->spb.path);
 	}
-	/* A host that dies (SIGKILL, power) is said offline by the broker. */
-	mqtt_topic(m, will, sizeof(will), "status");
-	if (mosquitto_will_set(m->mosq, will, 7, "offline", 1, true) != MOSQ_ERR_SUCCESS) {
-		snprintf(err, errlen, "mqtt: cannot set the last will on %s", will);
-		goto fail;
-	}
-	if (tls_setup(m, err, errlen) != 0)
-		goto fail;
-	rc = mosquitto_connect_async(m->mosq, s->host, s->port, (int)s->keepalive_s);
-	if (rc != MOSQ_ERR_SUCCESS) /* the broker down is no error: the network thread keeps trying */
-		mqtt_event(m, "", "the broker %s:%d is not reachable yet (%s); trying again with backoff", s->host,
-		           s->port, rc == MOSQ_ERR_ERRNO ? strerror(errno) : mosquitto_strerror(rc));
-	if ((rc = mosquitto_loop_start(m->mosq)) != MOSQ_ERR_SUCCESS) {
-		snprintf(err, errlen, "cannot start the MQTT network thread: %s", mosquitto_strerror(rc));
-		goto fail;
-	}
+	for (k = 0; k < MQTT_CONNS; k++)
+		if ((k == MQTT_CONN_MAIN || s->sparkplug) && conn_start(m, k, err, errlen) != 0)
+			goto fail;
 	if ((rc = pthread_create(&m->thread, NULL, publisher, m)) != 0) {
 		snprintf(err, errlen, "cannot start the MQTT publisher thread: %s", strerror(rc));
-		atomic_store(&m->stopping, 1);
-		mosquitto_disconnect(m->mosq);
-		mosquitto_loop_stop(m->mosq, true);
 		goto fail;
 	}
 	pthread_setname_np(m->thread, "vmac-mqtt");
 	return m;
 fail:
-	if (m->mosq)
-		mosquitto_destroy(m->mosq);
+	atomic_store(&m->stopping, 1);
+	for (k = 0; k < MQTT_CONNS; k++)
+		conn_stop(&m->conns[k]);
 	mosquitto_lib_cleanup();
 	free(m->status.devices);
 	free(m->status.slot_load);
+	pthread_mutex_destroy(&m->lock);
+	pthread_cond_destroy(&m->wake);
 	free(m);
 	return NULL;
+}
+
+static int waiting(struct vmac_mqtt *m)
+{
+	int k;
+	for (k = 0; k < MQTT_CONNS; k++)
+		if (mqtt_conn_is_up(&m->conns[k]) && atomic_load(&m->conns[k].outstanding) > 0)
+			return 1;
+	return 0;
 }
 
 void vmac_mqtt_stop(struct vmac_mqtt *m)
 {
 	double deadline;
+	int k;
 	if (!m)
 		return;
 	atomic_store(&m->stopping, 1);
@@ -326,13 +448,12 @@ void vmac_mqtt_stop(struct vmac_mqtt *m)
 	/* Last words, then wait (at most a second) for them to be written. */
 	mqtt_devices_stopping(m);
 	deadline = mqtt_now_s() + 1.0;
-	while (atomic_load(&m->connected) && atomic_load(&m->outstanding) > 0 && mqtt_now_s() < deadline) {
+	while (waiting(m) && mqtt_now_s() < deadline) {
 		struct timespec ts = {0, 10 * 1000 * 1000};
 		nanosleep(&ts, NULL);
 	}
-	mosquitto_disconnect(m->mosq);
-	mosquitto_loop_stop(m->mosq, false);
-	mosquitto_destroy(m->mosq);
+	for (k = 0; k < MQTT_CONNS; k++)
+		conn_stop(&m->conns[k]);
 	mosquitto_lib_cleanup();
 	mqtt_devices_free(m);
 	free(m->status.devices);

@@ -119,7 +119,7 @@ static void go_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_
 	if ((!d->manifest || strcmp(d->driver, st->driver) != 0 || strcmp(d->version, st->driver_version) != 0) &&
 	    load_manifest(d, st) != 0)
 		return; /* not known yet: next round */
-	if (!atomic_load(&m->connected))
+	if (!mqtt_conn_is_up(&m->conns[MQTT_CONN_MAIN]))
 		return; /* said when the connection is back (mqtt_devices_republish) */
 	d->online = 1;
 	mqtt_profiles_device_up(m, d, st);
@@ -155,7 +155,7 @@ void mqtt_devices_poll(struct vmac_mqtt *m)
 	}
 	for (i = 0; i < m->ndevices; i++) {
 		struct mqtt_device *d = &m->devices[i];
-		if (!d->seen && d->online && atomic_load(&m->connected)) {
+		if (!d->seen && d->online && mqtt_conn_is_up(&m->conns[MQTT_CONN_MAIN])) {
 			d->online = 0;
 			mqtt_profiles_device_down(m, d);
 		}
@@ -176,7 +176,7 @@ void mqtt_devices_republish(struct vmac_mqtt *m)
 	/* The others are said offline again: dropped while the broker was away,
 	 * or a broker that lost its retained messages. */
 	for (i = 0; i < m->ndevices; i++)
-		if (!m->devices[i].online && atomic_load(&m->connected))
+		if (!m->devices[i].online && mqtt_conn_is_up(&m->conns[MQTT_CONN_MAIN]))
 			mqtt_profiles_device_down(m, &m->devices[i]);
 }
 
@@ -199,6 +199,7 @@ void mqtt_devices_free(struct vmac_mqtt *m)
 		for (k = 0; k < m->devices[i].nconfigs; k++)
 			free(m->devices[i].configs[k]);
 		free(m->devices[i].configs);
+		free(m->devices[i].spb_metrics);
 	}
 	free(m->devices);
 	m->devices = NULL;

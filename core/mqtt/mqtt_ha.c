@@ -378,6 +378,7 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 
 const struct mqtt_profile mqtt_ha_profile = {
     .name = "ha",
+    .conn = MQTT_CONN_MAIN,
     .connected = connected,
     .device_up = device_up,
     .values = values,

@@ -7,9 +7,10 @@
  *   mqtt_native.c    profile "vmac": the host's and devices' availability, state topics, the command
  *                    topics into the bus's request slots, errors published back
  *   mqtt_ha.c        profile "ha": Home Assistant discovery configs from each driver's manifest
- * A profile is one way of speaking MQTT over the same connection and the same device table; Sparkplug B
- * would be one more (docs/MQTT.md, "Adding a profile"). Everything here runs on the publisher thread
- * unless it says otherwise. */
+ *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
+ *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
+ * A profile is one way of speaking MQTT over a connection and the same device table (docs/MQTT.md,
+ * "Adding a profile"). Everything here runs on the publisher thread unless it says otherwise. */
 #ifndef VMAC_MQTT_INTERNAL_H
 #define VMAC_MQTT_INTERNAL_H
 
@@ -23,7 +24,8 @@
 #define MQTT_INPUT_TIMEOUT_MS 2000 /* as the HTTP API waits for the bus thread */
 #define MQTT_MAX_OUTSTANDING 5000  /* messages handed to libmosquitto and not yet written: values wait */
 #define MQTT_QUEUE 64              /* messages received and not yet handled; more are dropped, counted */
-#define MQTT_PAYLOAD_MAX 256       /* a command's payload; longer is refused */
+#define MQTT_PAYLOAD_MAX 1024      /* a received payload; longer is kept as len -1 and refused */
+#define MQTT_TEXT_PAYLOAD_MAX 256  /* a command's text payload (mqtt_native.c); longer is refused */
 #define MQTT_VALUES (VMAC_DRIVER_MAX_VARS + VMAC_DRIVER_MAX_PARAMS)
 #define MQTT_TEXT_MAX 96 /* a value as text */
 
@@ -35,6 +37,12 @@ struct mqtt_value {
 	int sent;        /* text went out on this connection */
 	double period_s; /* timer:N (0: on every change) */
 	double next_s;   /* monotonic seconds: not before this */
+};
+
+/* sparkplug: a metric of a DBIRTH and its Sparkplug datatype. */
+struct mqtt_spb_metric {
+	char name[VMAC_DRIVER_NAME_MAX + 1];
+	unsigned datatype;
 };
 
 /* A machine as the client knows it (by its primary board's name). */
@@ -50,14 +58,36 @@ struct mqtt_device {
 	/* ha: the kind of each variable, then each param, in those configs ('n', 'b', 's'; '?' where neither
 	 * the declaration nor a value said it yet, configured as a string until a value says otherwise). */
 	char kinds[MQTT_VALUES + 1];
+	/* sparkplug: DBIRTH sent in this Sparkplug session, and the datatype of each variable and param in it
+	 * (a value of another type brings a new DBIRTH). */
+	int spb_born;
+	struct mqtt_spb_metric *spb_metrics;
+	int nspb_metrics;
 	struct mqtt_value values[MQTT_VALUES];
 	int nvalues;
 };
 
 struct mqtt_message {
 	char topic[256];
-	char payload[MQTT_PAYLOAD_MAX + 1];
-	int len; /* -1: longer than MQTT_PAYLOAD_MAX (payload holds its start) */
+	char payload[MQTT_PAYLOAD_MAX + 1]; /* NUL after len bytes; binary payloads (Sparkplug) use len */
+	int len;                            /* -1: longer than MQTT_PAYLOAD_MAX (payload holds its start) */
+	int conn;                           /* the connection it came on (MQTT_CONN_*) */
+};
+
+/* The connections: the main one (profiles vmac and ha; its will PREFIX/HOST/status offline), and
+ * Sparkplug's own (client id + "-spb"; its will the NDEATH), made only with mqtt_sparkplug = true. MQTT
+ * gives a connection one will, and each of them needs its own. */
+enum { MQTT_CONN_MAIN, MQTT_CONN_SPARKPLUG, MQTT_CONNS };
+
+struct mqtt_conn {
+	struct vmac_mqtt *m;
+	int index;              /* MQTT_CONN_* */
+	struct mosquitto *mosq; /* NULL: this connection is not used */
+	char client_id[160];
+	atomic_int connected;     /* CONNACK accepted, not yet disconnected (network thread sets it) */
+	atomic_int need_births;   /* a new connection: its profiles say everything again */
+	atomic_int outstanding;   /* published, not yet written (QoS 0) or acknowledged (QoS 1) */
+	atomic_int was_connected; /* said once per outage */
 };
 
 struct vmac_mqtt;
@@ -65,8 +95,10 @@ struct vmac_mqtt;
 /* Every hook is optional. Publisher thread. */
 struct mqtt_profile {
 	const char *name;
-	/* After every CONNACK: subscriptions, and what the broker needs retained
-	 * (the host's birth); devices follow with device_up/down. */
+	int conn; /* the connection it speaks on (MQTT_CONN_*) */
+	/* After every CONNACK on its connection: subscriptions, and what the broker
+	 * needs (the host's birth); on the main connection devices follow with
+	 * device_up/down. */
 	void (*connected)(struct vmac_mqtt *m);
 	/* A machine running: new, back after a drop, a new driver version, or
 	 * everything again after a reconnect. st: its status now. */
@@ -83,20 +115,27 @@ struct mqtt_profile {
 	void (*stopping)(struct vmac_mqtt *m);
 };
 
-extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile;
+extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile;
+
+/* Sparkplug's session (mqtt_sparkplug.c). bdseq_next is the bdSeq of the
+ * NDEATH registered as the will of the next connection; the network thread
+ * moves it to bdseq on every CONNACK (and persists the one after). */
+struct mqtt_spb {
+	char path[VMAC_PATH_MAX + 32]; /* STATE_DIR/sparkplug-bdseq: the next connection's bdSeq */
+	atomic_int bdseq;              /* this connection's bdSeq (its NBIRTH's and its will's) */
+	int bdseq_next;                /* network thread */
+	unsigned seq;                  /* the next message's seq, 0..255 */
+	int born;                      /* bdseq + 1 of the connection the NBIRTH went out on; 0: none yet */
+};
 
 struct vmac_mqtt {
 	struct vmac_mqtt_settings s;
 	struct vmac_bus *bus;
 	struct vmac_event_log *log;
-	struct mosquitto *mosq;
+	struct mqtt_conn conns[MQTT_CONNS];
 	pthread_t thread;
 	atomic_int stopping;
-	atomic_int connected;     /* CONNACK accepted, not yet disconnected (network thread sets it) */
-	atomic_int need_births;   /* a new connection: everything again */
-	atomic_int outstanding;   /* published, not yet written (QoS 0) or acknowledged (QoS 1) */
-	atomic_int was_connected; /* said once per outage */
-	pthread_mutex_t lock;     /* queue, nqueue, dropped; wake */
+	pthread_mutex_t lock; /* queue, nqueue, dropped; wake */
 	pthread_cond_t wake;
 	struct mqtt_message queue[MQTT_QUEUE];
 	int nqueue;
@@ -106,14 +145,21 @@ struct vmac_mqtt {
 	struct mqtt_device *devices;
 	int ndevices, cap;
 	unsigned long skipped_rounds; /* values held back: too much waiting to be written */
+	struct mqtt_spb spb;
 };
 
-/* Publish (retained or not) at QoS 0 or 1; len -1: strlen(payload). 0, or
- * -1 when not connected (nothing queued). Any thread. */
+/* Publish (retained or not) at QoS 0 or 1 on the main connection; len -1:
+ * strlen(payload). 0, or -1 when not connected (nothing queued). Any thread. */
 int mqtt_publish(struct vmac_mqtt *m, const char *topic, const char *payload, int len, int qos, int retain);
 int mqtt_subscribe(struct vmac_mqtt *m, const char *pattern, int qos);
-/* Whether values may be published now (connected, not too much waiting). */
+/* The same on connection c (MQTT_CONN_*). */
+int mqtt_conn_publish(struct mqtt_conn *c, const char *topic, const void *payload, int len, int qos, int retain);
+int mqtt_conn_subscribe(struct mqtt_conn *c, const char *pattern, int qos);
+int mqtt_conn_is_up(struct mqtt_conn *c);
+/* Whether values may be published now on the main connection (connected,
+ * not too much waiting); mqtt_conn_can_publish: on c. */
 int mqtt_can_publish_values(struct vmac_mqtt *m);
+int mqtt_conn_can_publish(struct mqtt_conn *c);
 void mqtt_event(struct vmac_mqtt *m, const char *device, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 double mqtt_now_s(void);
 
@@ -135,6 +181,10 @@ struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
 /* A command's payload (len bytes, -1: too long) into v: 0, or -1 with why. */
 int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const char **why);
+/* {"topic", "name", "code", "error"} on PREFIX/HOST/DEVICE/error (device
+ * NULL: PREFIX/HOST/error); docs/MQTT.md "Payloads". */
+void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,
+                        const char *text);
 /* Topic helpers: PREFIX/HOST/rest into out. */
 void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
@@ -143,5 +193,13 @@ void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char 
  * {config topic: config payload object} from its manifest and status. */
 json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
                         json_t *manifest, const struct vmac_device_status *st);
+
+/* mqtt_sparkplug.c: the NDEATH payload with bdSeq (malloc'd, *len its size;
+ * NULL when out of memory), for the will of a connection. Any thread. */
+void *mqtt_spb_ndeath(unsigned bdseq, int *len);
+/* STATE_DIR/sparkplug-bdseq: the bdSeq of the next connection (0 when
+ * missing or unreadable), and storing it (best effort). Any thread. */
+int mqtt_spb_bdseq_load(const char *path);
+void mqtt_spb_bdseq_store(const char *path, int bdseq);
 
 #endif

@@ -144,10 +144,9 @@ static int name_ok(const char *s)
 	return 1;
 }
 
-/* {"topic": , "name": , "code": , "error": } on PREFIX/HOST/DEVICE/error
- * (PREFIX/HOST/error when the topic names no valid device). Not retained. */
-static void publish_error(struct vmac_mqtt *m, const char *device, const char *topic, const char *name,
-                          const char *code, const char *text)
+/* Not retained. */
+void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,
+                        const char *text)
 {
 	char where[512];
 	json_t *o =
@@ -173,8 +172,8 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 	size_t dn = slash1 ? (size_t)(slash1 - rest) : 0, kn = slash2 ? (size_t)(slash2 - slash1 - 1) : 0;
 	if (!slash2 || dn >= sizeof(device) || kn >= sizeof(kind) || strlen(slash2 + 1) >= sizeof(name) ||
 	    strchr(slash2 + 1, '/')) {
-		publish_error(m, NULL, msg->topic, NULL, "malformed",
-		              "expected PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME");
+		mqtt_publish_error(m, NULL, msg->topic, NULL, "malformed",
+		                   "expected PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME");
 		return;
 	}
 	memcpy(device, rest, dn);
@@ -183,36 +182,37 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 	kind[kn] = 0;
 	snprintf(name, sizeof(name), "%s", slash2 + 1);
 	if (!device_ok(device)) {
-		publish_error(m, NULL, msg->topic, name, "malformed", "no such device");
+		mqtt_publish_error(m, NULL, msg->topic, name, "malformed", "no such device");
 		return;
 	}
 	if ((strcmp(kind, "set") != 0 && strcmp(kind, "cmd") != 0) || !name_ok(name)) {
-		publish_error(m, device, msg->topic, name, "malformed",
-		              "expected .../set/NAME or .../cmd/NAME, NAME a variable, param or command of the driver");
+		mqtt_publish_error(
+		    m, device, msg->topic, name, "malformed",
+		    "expected .../set/NAME or .../cmd/NAME, NAME a variable, param or command of the driver");
 		return;
 	}
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", name);
-	if (mqtt_payload_value(msg->payload, msg->len, &req.value, &why) != 0) {
-		publish_error(m, device, msg->topic, name, "malformed", why);
+	if (mqtt_payload_value(msg->payload, msg->len > MQTT_TEXT_PAYLOAD_MAX ? -1 : msg->len, &req.value, &why) != 0) {
+		mqtt_publish_error(m, device, msg->topic, name, "malformed", why);
 		return;
 	}
 	if (strcmp(kind, "set") == 0 && req.value.type == VMAC_VALUE_NONE) {
-		publish_error(m, device, msg->topic, name, "malformed", "set needs a value");
+		mqtt_publish_error(m, device, msg->topic, name, "malformed", "set needs a value");
 		return;
 	}
 	if (vmac_bus_request_input(m->bus, &req, MQTT_INPUT_TIMEOUT_MS) != 0) {
-		publish_error(m, device, msg->topic, name, "busy", req.reply);
+		mqtt_publish_error(m, device, msg->topic, name, "busy", req.reply);
 		return;
 	}
 	if (req.rc == 0)
 		return; /* the new value is published from the next status copy */
-	publish_error(m, device, msg->topic, name,
-	              req.rc > 0                    ? "refused"
-	              : req.rc == -VMAC_ENOTRUNNING ? "not_running"
-	                                            : "driver_failed",
-	              req.reply);
+	mqtt_publish_error(m, device, msg->topic, name,
+	                   req.rc > 0                    ? "refused"
+	                   : req.rc == -VMAC_ENOTRUNNING ? "not_running"
+	                                                 : "driver_failed",
+	                   req.reply);
 }
 
 static void connected(struct vmac_mqtt *m)
@@ -264,7 +264,7 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 	size_t n;
 	mqtt_topic(m, mine, sizeof(mine), "%s", "");
 	n = strlen(mine);
-	if (strncmp(msg->topic, mine, n) != 0)
+	if (msg->conn != MQTT_CONN_MAIN || strncmp(msg->topic, mine, n) != 0)
 		return 0;
 	if (m->s.commands)
 		command(m, msg, msg->topic + n);
@@ -280,6 +280,7 @@ static void stopping(struct vmac_mqtt *m)
 
 const struct mqtt_profile mqtt_native_profile = {
     .name = "vmac",
+    .conn = MQTT_CONN_MAIN,
     .connected = connected,
     .device_up = device_up,
     .device_down = device_down,

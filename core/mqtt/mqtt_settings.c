@@ -196,6 +196,19 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 	}
 	snprintf(s->prefix, sizeof(s->prefix), "%s", cfg->mqtt_prefix);
 	snprintf(s->discovery_prefix, sizeof(s->discovery_prefix), "%s", cfg->mqtt_discovery_prefix);
+	/* A Sparkplug group id is one topic level; '.' allowed (names such as plant.hall2). */
+	for (i = 0; cfg->mqtt_sparkplug_group[i]; i++)
+		if (!isalnum((unsigned char)cfg->mqtt_sparkplug_group[i]) &&
+		    !strchr("_-.", cfg->mqtt_sparkplug_group[i]))
+			break;
+	if (!cfg->mqtt_sparkplug_group[0] || cfg->mqtt_sparkplug_group[i] ||
+	    strlen(cfg->mqtt_sparkplug_group) >= sizeof(s->sparkplug_group)) {
+		snprintf(err, errlen, "mqtt_sparkplug_group '%s': expected letters, digits, '_', '-' and '.' only",
+		         cfg->mqtt_sparkplug_group);
+		return -1;
+	}
+	snprintf(s->sparkplug_group, sizeof(s->sparkplug_group), "%s", cfg->mqtt_sparkplug_group);
+	s->sparkplug = cfg->mqtt_sparkplug;
 	s->commands = cfg->mqtt_commands;
 	s->keepalive_s = cfg->mqtt_keepalive_s;
 	return 0;

@@ -1,0 +1,671 @@
+/* Profile "sparkplug": Sparkplug B 3.0 (docs/MQTT.md, "Sparkplug B"). vmacd
+ * is an Edge Node (spBv1.0/GROUP/NBIRTH/HOST), each machine a Device
+ * (spBv1.0/GROUP/DBIRTH/HOST/DEVICE ...), on a connection of its own whose
+ * will is the NDEATH (mqtt_client.c sets it, with the bdSeq counted here
+ * and kept in STATE_DIR/sparkplug-bdseq). Payloads are sparkplug_b.proto
+ * through protobuf-c. A DCMD is operator input through the bus's request
+ * slots, with the checks and the refusals of the native profile
+ * (mqtt_native.c: refusals on PREFIX/HOST/DEVICE/error); an NCMD "Node
+ * Control/Rebirth" brings the NBIRTH and every DBIRTH again. Publisher
+ * thread, except where a function says otherwise. */
+#include "mqtt_internal.h"
+
+#include <ctype.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../common/errors.h"
+#include "sparkplug_b.pb-c.h"
+
+typedef SparkplugB__Payload Payload;
+typedef SparkplugB__Payload__Metric Metric;
+
+#define DT_INT64 SPARKPLUG_B__DATA_TYPE__Int64
+#define DT_UINT64 SPARKPLUG_B__DATA_TYPE__UInt64
+#define DT_DOUBLE SPARKPLUG_B__DATA_TYPE__Double
+#define DT_BOOLEAN SPARKPLUG_B__DATA_TYPE__Boolean
+#define DT_STRING SPARKPLUG_B__DATA_TYPE__String
+#define REBIRTH "Node Control/Rebirth"
+#define COMMANDS "Commands/" /* a driver's command as a Boolean metric: write true to run it */
+#define SPB_COMMANDS_MAX 32  /* commands of one driver in a DBIRTH */
+#define SPB_METRICS (MQTT_VALUES + SPB_COMMANDS_MAX + 2)
+#define SPB_NAME_MAX (sizeof(COMMANDS) + VMAC_DRIVER_NAME_MAX)
+
+/* ms since the epoch, UTC (the specification's timestamps). */
+static uint64_t now_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (uint64_t)ts.tv_sec * 1000u + (uint64_t)ts.tv_nsec / 1000000u;
+}
+
+/* spBv1.0/GROUP/TYPE/HOST[/DEVICE] */
+static void spb_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char *type, const char *device)
+{
+	snprintf(out, outlen, "spBv1.0/%s/%s/%s%s%s", m->s.sparkplug_group, type, m->s.host_id, device ? "/" : "",
+	         device ? device : "");
+}
+
+/* A payload being made: at most SPB_METRICS metrics, their names here. */
+struct spb_out {
+	Payload payload;
+	Metric *list[SPB_METRICS];
+	Metric metrics[SPB_METRICS];
+	char names[SPB_METRICS][SPB_NAME_MAX];
+	uint64_t ts;
+};
+
+static void out_init(struct spb_out *o)
+{
+	Payload init = SPARKPLUG_B__PAYLOAD__INIT;
+	o->payload = init;
+	o->payload.metrics = o->list;
+	o->ts = now_ms();
+}
+
+/* A metric with name, datatype and timestamp, no value yet; NULL when full. */
+static Metric *out_metric(struct spb_out *o, const char *name, unsigned datatype)
+{
+	Metric init = SPARKPLUG_B__PAYLOAD__METRIC__INIT, *mt;
+	size_t i = o->payload.n_metrics;
+	if (i == SPB_METRICS)
+		return NULL;
+	mt = &o->metrics[i];
+	*mt = init;
+	snprintf(o->names[i], sizeof(o->names[i]), "%s", name);
+	mt->name = o->names[i];
+	mt->has_datatype = 1;
+	mt->datatype = datatype;
+	mt->has_timestamp = 1;
+	mt->timestamp = o->ts;
+	o->list[i] = mt;
+	o->payload.n_metrics++;
+	return mt;
+}
+
+/* v as a metric of datatype t (v's type fits t: datatype_of made t from it).
+ * The string stays v's: v must outlive the packing. */
+static void metric_value(Metric *mt, unsigned t, const struct vmac_value *v)
+{
+	if (v->type == VMAC_VALUE_NONE || (v->type == VMAC_VALUE_NUMBER && !isfinite(v->number))) {
+		mt->has_is_null = 1;
+		mt->is_null = 1;
+		return;
+	}
+	switch (t) {
+	case DT_BOOLEAN:
+		mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE;
+		mt->boolean_value = v->number != 0;
+		break;
+	case DT_INT64:
+		mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE;
+		mt->long_value = (uint64_t)(int64_t)llround(v->number); /* two's complement, as the spec says */
+		break;
+	case DT_DOUBLE:
+		mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_DOUBLE_VALUE;
+		mt->double_value = v->number;
+		break;
+	default:
+		mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_STRING_VALUE;
+		mt->string_value = (char *)(uintptr_t)v->str; /* read only: packing copies it */
+		break;
+	}
+}
+
+/* Pack and publish (QoS 0, not retained, as the specification says for
+ * everything but the NDEATH); with_seq: the node's next seq. 0, or -1. */
+static int out_send(struct vmac_mqtt *m, const char *topic, struct spb_out *o, int with_seq)
+{
+	size_t len;
+	uint8_t *buf;
+	int rc;
+	o->payload.has_timestamp = 1;
+	o->payload.timestamp = o->ts;
+	if (with_seq) {
+		o->payload.has_seq = 1;
+		o->payload.seq = m->spb.seq;
+	}
+	len = sparkplug_b__payload__get_packed_size(&o->payload);
+	if (!(buf = malloc(len ? len : 1)))
+		return -1;
+	sparkplug_b__payload__pack(&o->payload, buf);
+	rc = mqtt_conn_publish(&m->conns[MQTT_CONN_SPARKPLUG], topic, buf, (int)len, 0, 0);
+	free(buf);
+	if (rc == 0 && with_seq)
+		m->spb.seq = (m->spb.seq + 1) % 256;
+	return rc;
+}
+
+void *mqtt_spb_ndeath(unsigned bdseq, int *len)
+{
+	Payload p = SPARKPLUG_B__PAYLOAD__INIT;
+	Metric mt = SPARKPLUG_B__PAYLOAD__METRIC__INIT, *list[1] = {&mt};
+	uint8_t *buf;
+	size_t n;
+	p.has_timestamp = 1;
+	p.timestamp = now_ms();
+	p.n_metrics = 1;
+	p.metrics = list;
+	mt.name = (char *)(uintptr_t) "bdSeq";
+	mt.has_datatype = 1;
+	mt.datatype = DT_UINT64;
+	mt.has_timestamp = 1;
+	mt.timestamp = p.timestamp;
+	mt.value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE;
+	mt.long_value = bdseq;
+	n = sparkplug_b__payload__get_packed_size(&p);
+	if (!(buf = malloc(n)))
+		return NULL;
+	sparkplug_b__payload__pack(&p, buf);
+	*len = (int)n;
+	return buf;
+}
+
+int mqtt_spb_bdseq_load(const char *path)
+{
+	FILE *f = fopen(path, "r");
+	int n = 0;
+	if (!f)
+		return 0;
+	if (fscanf(f, "%d", &n) != 1 || n < 0 || n > 255)
+		n = 0;
+	fclose(f);
+	return n;
+}
+
+void mqtt_spb_bdseq_store(const char *path, int bdseq)
+{
+	char tmp[VMAC_PATH_MAX + 48];
+	FILE *f;
+	snprintf(tmp, sizeof(tmp), "%s.tmp", path);
+	if (!(f = fopen(tmp, "w")))
+		return;
+	fprintf(f, "%d\n", bdseq);
+	if (fclose(f) == 0)
+		rename(tmp, path);
+}
+
+/* ---- datatypes from the manifest ---- */
+
+static int whole(json_t *v)
+{
+	double x = json_number_value(v);
+	return !v || (json_is_number(v) && floor(x) == x);
+}
+
+/* The Sparkplug datatype of a declared value: String (values, a string
+ * default), Boolean (a boolean default), Int64 (a number declared with
+ * whole min/max/default/step, a param or a variable without a unit, and
+ * whole now), Double (another number: a measurement); else from its value
+ * now; String when neither says (no value yet: null, and a DBIRTH again
+ * once its value says otherwise). */
+static unsigned datatype_of(json_t *decl, int is_param, const struct vmac_value *now)
+{
+	json_t *def = json_object_get(decl, "default"), *min = json_object_get(decl, "min"),
+	       *max = json_object_get(decl, "max");
+	int now_whole = !now || now->type != VMAC_VALUE_NUMBER || floor(now->number) == now->number;
+	if (json_object_get(decl, "values") || json_is_string(def))
+		return DT_STRING;
+	if (json_is_boolean(def))
+		return DT_BOOLEAN;
+	if (json_is_number(def) || min || max || json_object_get(decl, "unit"))
+		return (is_param || !json_object_get(decl, "unit")) && whole(def) && whole(min) && whole(max) &&
+		               whole(json_object_get(decl, "step")) && now_whole
+		           ? DT_INT64
+		           : DT_DOUBLE;
+	if (now && now->type == VMAC_VALUE_BOOL)
+		return DT_BOOLEAN;
+	if (now && now->type == VMAC_VALUE_NUMBER)
+		return DT_DOUBLE;
+	return DT_STRING;
+}
+
+static const struct vmac_value *value_in(const struct vmac_device_status *st, const char *name)
+{
+	int i;
+	for (i = 0; st && i < st->nvars; i++)
+		if (strcmp(st->vars[i].name, name) == 0)
+			return &st->vars[i].value;
+	for (i = 0; st && i < st->nparams; i++)
+		if (strcmp(st->params[i].name, name) == 0)
+			return &st->params[i].value;
+	return NULL;
+}
+
+/* The declaration of a variable or (*is_param set) a param. */
+static json_t *decl_of(json_t *manifest, const char *name, int *is_param)
+{
+	json_t *d = json_object_get(json_object_get(manifest, "variables"), name);
+	*is_param = !d;
+	return d ? d : json_object_get(json_object_get(manifest, "params"), name);
+}
+
+static const struct vmac_device_status *status_of(struct vmac_mqtt *m, const char *name)
+{
+	int i;
+	for (i = 0; i < m->status.ndevices; i++)
+		if (strcmp(m->status.devices[i].name, name) == 0)
+			return &m->status.devices[i];
+	return NULL;
+}
+
+/* ---- births, deaths, data ---- */
+
+/* NBIRTH on this connection done, and no CONNACK since. */
+static int live(struct vmac_mqtt *m)
+{
+	return m->s.sparkplug && mqtt_conn_is_up(&m->conns[MQTT_CONN_SPARKPLUG]) &&
+	       m->spb.born == atomic_load(&m->spb.bdseq) + 1;
+}
+
+/* DBIRTH of d: every variable and param of its manifest with its datatype
+ * and its value in st (null when it has none yet), its commands as Boolean
+ * metrics (with mqtt_commands), its driver; the datatypes remembered for
+ * its DDATA. */
+static void dbirth(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	static const struct vmac_value none;
+	static const char *const tables[] = {"variables", "params"};
+	struct spb_out *o = calloc(1, sizeof(*o));
+	struct mqtt_spb_metric *types = calloc(MQTT_VALUES, sizeof(*types));
+	char topic[300], model[VMAC_NAME_MAX + VMAC_DRIVER_VERSION_MAX + 2];
+	struct vmac_value driver;
+	const char *name;
+	json_t *decl;
+	int ntypes = 0, t;
+	if (!o || !types)
+		goto done;
+	out_init(o);
+	for (t = 0; t < 2; t++)
+		json_object_foreach(json_object_get(d->manifest, tables[t]), name, decl)
+		{
+			const struct vmac_value *v = value_in(st, name);
+			unsigned dt = datatype_of(decl, t == 1, v);
+			Metric *mt;
+			if (ntypes == MQTT_VALUES || !(mt = out_metric(o, name, dt)))
+				break;
+			metric_value(mt, dt, v ? v : &none);
+			snprintf(types[ntypes].name, sizeof(types[ntypes].name), "%s", name);
+			types[ntypes++].datatype = dt;
+		}
+	if (m->s.commands) {
+		int n = 0;
+		json_object_foreach(json_object_get(d->manifest, "commands"), name, decl)
+		{
+			char metric[SPB_NAME_MAX];
+			Metric *mt;
+			snprintf(metric, sizeof(metric), COMMANDS "%s", name);
+			if (n++ == SPB_COMMANDS_MAX || !(mt = out_metric(o, metric, DT_BOOLEAN)))
+				break;
+			mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE;
+			mt->boolean_value = 0;
+		}
+	}
+	memset(&driver, 0, sizeof(driver));
+	driver.type = VMAC_VALUE_STRING;
+	snprintf(model, sizeof(model), "%s %s", d->driver, d->version);
+	snprintf(driver.str, sizeof(driver.str), "%s", model);
+	metric_value(out_metric(o, "Properties/Driver", DT_STRING), DT_STRING, &driver);
+	spb_topic(m, topic, sizeof(topic), "DBIRTH", d->name);
+	if (out_send(m, topic, o, 1) != 0)
+		goto done;
+	free(d->spb_metrics);
+	d->spb_metrics = types;
+	d->nspb_metrics = ntypes;
+	types = NULL;
+	d->spb_born = 1;
+done:
+	free(types);
+	free(o);
+}
+
+/* NBIRTH (seq 0, this connection's bdSeq, Node Control/Rebirth false), then
+ * a DBIRTH for every machine running: after a CONNACK and for a Rebirth. */
+static void births(struct vmac_mqtt *m)
+{
+	struct spb_out *o = calloc(1, sizeof(*o));
+	char topic[300];
+	int bdseq = atomic_load(&m->spb.bdseq), i;
+	Metric *mt;
+	if (!o)
+		return;
+	out_init(o);
+	mt = out_metric(o, "bdSeq", DT_UINT64);
+	mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE;
+	mt->long_value = (uint64_t)bdseq;
+	mt = out_metric(o, REBIRTH, DT_BOOLEAN);
+	mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE;
+	mt->boolean_value = 0;
+	m->spb.seq = 0;
+	spb_topic(m, topic, sizeof(topic), "NBIRTH", NULL);
+	if (out_send(m, topic, o, 1) == 0)
+		m->spb.born = bdseq + 1;
+	free(o);
+	for (i = 0; i < m->ndevices; i++) {
+		struct mqtt_device *d = &m->devices[i];
+		d->spb_born = 0;
+		if (d->online && d->manifest && live(m))
+			dbirth(m, d, status_of(m, d->name));
+	}
+}
+
+static void connected(struct vmac_mqtt *m)
+{
+	char topic[300];
+	spb_topic(m, topic, sizeof(topic), "NCMD", NULL);
+	mqtt_conn_subscribe(&m->conns[MQTT_CONN_SPARKPLUG], topic, 1);
+	if (m->s.commands) {
+		spb_topic(m, topic, sizeof(topic), "DCMD", "+");
+		mqtt_conn_subscribe(&m->conns[MQTT_CONN_SPARKPLUG], topic, 1);
+	}
+	births(m);
+}
+
+/* Its DBIRTH goes out with its values (the values hook right after). A
+ * driver without variables or params gets it now. */
+static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	d->spb_born = 0;
+	if (live(m) && json_object_size(json_object_get(d->manifest, "variables")) == 0 &&
+	    json_object_size(json_object_get(d->manifest, "params")) == 0)
+		dbirth(m, d, st);
+}
+
+static void device_down(struct vmac_mqtt *m, struct mqtt_device *d)
+{
+	struct spb_out *o;
+	char topic[300];
+	if (!d->spb_born || !live(m))
+		return;
+	d->spb_born = 0;
+	if (!(o = calloc(1, sizeof(*o))))
+		return;
+	out_init(o);
+	spb_topic(m, topic, sizeof(topic), "DDEATH", d->name);
+	out_send(m, topic, o, 1);
+	free(o);
+}
+
+static const struct mqtt_spb_metric *born_metric(const struct mqtt_device *d, const char *name)
+{
+	int i;
+	for (i = 0; i < d->nspb_metrics; i++)
+		if (strcmp(d->spb_metrics[i].name, name) == 0)
+			return &d->spb_metrics[i];
+	return NULL;
+}
+
+/* DDATA with the values that changed (report by exception: mqtt_devices.c
+ * passes only those, timer:N honoured). A value whose datatype is not the
+ * one its DBIRTH said (a first value of an undeclared kind, a fraction in
+ * an Int64) brings a new DBIRTH instead: a Sparkplug host takes a metric's
+ * datatype from the birth only. */
+static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
+                   struct mqtt_value *const *changed, int n)
+{
+	struct spb_out *o;
+	char topic[300];
+	int i;
+	if (!live(m))
+		return;
+	if (!d->spb_born) {
+		dbirth(m, d, st);
+		return;
+	}
+	if (!(o = calloc(1, sizeof(*o))))
+		return;
+	out_init(o);
+	for (i = 0; i < n; i++) {
+		const struct vmac_value *v = value_in(st, changed[i]->name);
+		const struct mqtt_spb_metric *born = born_metric(d, changed[i]->name);
+		unsigned dt;
+		int is_param;
+		json_t *decl;
+		Metric *mt;
+		if (!v)
+			continue;
+		if (!born) {
+			free(o);
+			dbirth(m, d, st);
+			return;
+		}
+		decl = decl_of(d->manifest, born->name, &is_param);
+		dt = v->type == VMAC_VALUE_NONE ? born->datatype : datatype_of(decl, is_param, v);
+		if (born->datatype == DT_DOUBLE && dt == DT_INT64)
+			dt = DT_DOUBLE; /* a whole number now, a fraction before */
+		if (dt != born->datatype) {
+			free(o);
+			dbirth(m, d, st);
+			return;
+		}
+		if ((mt = out_metric(o, born->name, dt)) != NULL)
+			metric_value(mt, dt, v);
+	}
+	if (o->payload.n_metrics) {
+		spb_topic(m, topic, sizeof(topic), "DDATA", d->name);
+		out_send(m, topic, o, 1);
+	}
+	free(o);
+}
+
+/* ---- commands ---- */
+
+/* A DCMD metric's value as operator input; 0, or -1 with why. */
+static int metric_input(const Metric *mt, struct vmac_value *v, const char **why)
+{
+	memset(v, 0, sizeof(*v));
+	if (mt->has_datatype && (mt->datatype == SPARKPLUG_B__DATA_TYPE__Unknown || mt->datatype > 34)) {
+		*why = "unknown datatype";
+		return -1;
+	}
+	if (mt->has_is_null && mt->is_null) {
+		v->type = VMAC_VALUE_NONE;
+		return 0;
+	}
+	switch (mt->value_case) {
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE:
+		v->type = VMAC_VALUE_BOOL;
+		v->number = mt->boolean_value ? 1 : 0;
+		return 0;
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE_INT_VALUE: /* Int8..Int32 travel as two's complement */
+		v->type = VMAC_VALUE_NUMBER;
+		v->number = mt->has_datatype && mt->datatype >= SPARKPLUG_B__DATA_TYPE__Int8 &&
+		                    mt->datatype <= SPARKPLUG_B__DATA_TYPE__Int32
+		                ? (double)(int32_t)mt->int_value
+		                : (double)mt->int_value;
+		return 0;
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE:
+		v->type = VMAC_VALUE_NUMBER;
+		v->number = mt->has_datatype && mt->datatype == SPARKPLUG_B__DATA_TYPE__Int64
+		                ? (double)(int64_t)mt->long_value
+		                : (double)mt->long_value;
+		return 0;
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE_FLOAT_VALUE:
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE_DOUBLE_VALUE:
+		v->type = VMAC_VALUE_NUMBER;
+		v->number = mt->value_case == SPARKPLUG_B__PAYLOAD__METRIC__VALUE_FLOAT_VALUE ? (double)mt->float_value
+		                                                                              : mt->double_value;
+		if (!isfinite(v->number)) {
+			*why = "not a finite number";
+			return -1;
+		}
+		return 0;
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE_STRING_VALUE:
+		if (strlen(mt->string_value) > VMAC_DRIVER_STR_MAX) {
+			*why = "a string value is at most 63 bytes";
+			return -1;
+		}
+		v->type = VMAC_VALUE_STRING;
+		snprintf(v->str, sizeof(v->str), "%s", mt->string_value);
+		return 0;
+	case SPARKPLUG_B__PAYLOAD__METRIC__VALUE__NOT_SET:
+		*why = "a metric without a value (and not is_null)";
+		return -1;
+	default: *why = "only Boolean, integer, Float, Double and String values are taken"; return -1;
+	}
+}
+
+/* One DCMD metric into the bus, as the native profile's set/cmd topics. */
+static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *topic, const Metric *mt)
+{
+	struct vmac_bus_input_request req;
+	const char *why, *name = mt->name;
+	int command = 0;
+	size_t i;
+	if (!name || !name[0]) {
+		mqtt_publish_error(m, device, topic, NULL, "malformed",
+		                   "a metric without a name (vmacd uses no aliases)");
+		return;
+	}
+	if (strncmp(name, COMMANDS, strlen(COMMANDS)) == 0) {
+		name += strlen(COMMANDS);
+		command = 1;
+	}
+	for (i = 0; name[i]; i++)
+		if (!islower((unsigned char)name[i]) && !isdigit((unsigned char)name[i]) && name[i] != '_')
+			break;
+	if (!name[0] || name[i] || i > VMAC_DRIVER_NAME_MAX || !islower((unsigned char)name[0])) {
+		mqtt_publish_error(m, device, topic, mt->name, "refused",
+		                   "no such metric: expected a variable, a param or Commands/NAME of the driver");
+		return;
+	}
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	snprintf(req.name, sizeof(req.name), "%s", name);
+	if (metric_input(mt, &req.value, &why) != 0) {
+		mqtt_publish_error(m, device, topic, mt->name, "malformed", why);
+		return;
+	}
+	if (command) { /* true runs it; false is no command */
+		if (req.value.type != VMAC_VALUE_BOOL) {
+			mqtt_publish_error(m, device, topic, mt->name, "malformed", "a command metric takes a Boolean");
+			return;
+		}
+		if (req.value.number == 0)
+			return;
+		req.value.type = VMAC_VALUE_NONE;
+		req.value.number = 0;
+	} else if (req.value.type == VMAC_VALUE_NONE) {
+		mqtt_publish_error(m, device, topic, mt->name, "malformed", "set needs a value");
+		return;
+	}
+	if (vmac_bus_request_input(m->bus, &req, MQTT_INPUT_TIMEOUT_MS) != 0) {
+		mqtt_publish_error(m, device, topic, mt->name, "busy", req.reply);
+		return;
+	}
+	if (req.rc != 0)
+		mqtt_publish_error(m, device, topic, mt->name,
+		                   req.rc > 0                    ? "refused"
+		                   : req.rc == -VMAC_ENOTRUNNING ? "not_running"
+		                                                 : "driver_failed",
+		                   req.reply);
+}
+
+/* A received payload, or NULL with why (malformed, too long). */
+static Payload *unpack(const struct mqtt_message *msg, const char **why)
+{
+	Payload *p;
+	if (msg->len < 0) {
+		*why = "the payload is over 1024 bytes";
+		return NULL;
+	}
+	if (!(p = sparkplug_b__payload__unpack(NULL, (size_t)msg->len, (const uint8_t *)msg->payload)))
+		*why = "not a Sparkplug B payload (protobuf)";
+	return p;
+}
+
+static void dcmd(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *device)
+{
+	const char *why;
+	Payload *p;
+	size_t i;
+	for (i = 0; device[i]; i++)
+		if (!isalnum((unsigned char)device[i]) && !strchr("._-", device[i]))
+			break;
+	if (!device[0] || device[i] || i > VMAC_NAME_MAX) {
+		mqtt_publish_error(m, NULL, msg->topic, NULL, "malformed", "no such device");
+		return;
+	}
+	if (!(p = unpack(msg, &why))) {
+		mqtt_publish_error(m, device, msg->topic, NULL, "malformed", why);
+		return;
+	}
+	if (p->n_metrics == 0)
+		mqtt_publish_error(m, device, msg->topic, NULL, "malformed", "a DCMD without metrics");
+	for (i = 0; i < p->n_metrics; i++)
+		dcmd_metric(m, device, msg->topic, p->metrics[i]);
+	sparkplug_b__payload__free_unpacked(p, NULL);
+}
+
+/* NCMD: Node Control/Rebirth true brings every birth again; anything else
+ * is said in the host's events. */
+static void ncmd(struct vmac_mqtt *m, const struct mqtt_message *msg)
+{
+	const char *why;
+	Payload *p = unpack(msg, &why);
+	int rebirth = 0;
+	size_t i;
+	if (!p) {
+		mqtt_event(m, "", "Sparkplug: an NCMD refused: %s", why);
+		return;
+	}
+	for (i = 0; i < p->n_metrics; i++) {
+		const Metric *mt = p->metrics[i];
+		if (mt->name && strcmp(mt->name, REBIRTH) == 0 &&
+		    mt->value_case == SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE && mt->boolean_value)
+			rebirth = 1;
+		else
+			mqtt_event(m, "", "Sparkplug: an NCMD metric refused: %s", mt->name ? mt->name : "(no name)");
+	}
+	sparkplug_b__payload__free_unpacked(p, NULL);
+	if (rebirth && mqtt_conn_is_up(&m->conns[MQTT_CONN_SPARKPLUG])) {
+		mqtt_event(m, "", "Sparkplug: Rebirth asked for: NBIRTH and every DBIRTH again");
+		births(m);
+	}
+}
+
+static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
+{
+	char mine[300];
+	size_t n;
+	if (msg->conn != MQTT_CONN_SPARKPLUG)
+		return 0;
+	spb_topic(m, mine, sizeof(mine), "NCMD", NULL);
+	if (strcmp(msg->topic, mine) == 0) {
+		ncmd(m, msg);
+		return 1;
+	}
+	spb_topic(m, mine, sizeof(mine), "DCMD", "");
+	n = strlen(mine);
+	if (m->s.commands && strncmp(msg->topic, mine, n) == 0)
+		dcmd(m, msg, msg->topic + n);
+	return 1;
+}
+
+/* An orderly stop: the DDEATHs went out (device_down); the NDEATH now, as
+ * the will would say it (QoS 1, not retained). */
+static void stopping(struct vmac_mqtt *m)
+{
+	char topic[300];
+	void *ndeath;
+	int len;
+	if (!m->s.sparkplug || !(ndeath = mqtt_spb_ndeath((unsigned)atomic_load(&m->spb.bdseq), &len)))
+		return;
+	spb_topic(m, topic, sizeof(topic), "NDEATH", NULL);
+	mqtt_conn_publish(&m->conns[MQTT_CONN_SPARKPLUG], topic, ndeath, len, 1, 0);
+	free(ndeath);
+}
+
+const struct mqtt_profile mqtt_sparkplug_profile = {
+    .name = "sparkplug",
+    .conn = MQTT_CONN_SPARKPLUG,
+    .connected = connected,
+    .device_up = device_up,
+    .device_down = device_down,
+    .values = values,
+    .message = message,
+    .stopping = stopping,
+};
