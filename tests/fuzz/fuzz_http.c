@@ -86,7 +86,7 @@ static int parse_request(char *text, size_t size, struct request *q)
 static int has_name(enum http_endpoint e)
 {
 	return e == HTTP_INPUT || e == HTTP_CYCLE || e == HTTP_ROLLBACK || e == HTTP_ACTIVATE || e == HTTP_UPLOAD ||
-	       e == HTTP_DEVICE || e == HTTP_DRIVER || e == HTTP_MANIFEST;
+	       e == HTTP_DEVICE || e == HTTP_DRIVER || e == HTTP_MANIFEST || e == HTTP_RECORD || e == HTTP_RECORDING;
 }
 
 /* The path of a named endpoint, made again from its name: one path per
@@ -105,6 +105,8 @@ static void check_named_path(const struct http_route *r, const char *path)
 	    {HTTP_DEVICE, "/api/devices/", ""},
 	    {HTTP_DRIVER, "/api/drivers/", ""},
 	    {HTTP_MANIFEST, "/api/drivers/", "/manifest"},
+	    {HTTP_RECORD, "/api/devices/", "/record"},
+	    {HTTP_RECORDING, "/api/recordings/", ""},
 	};
 	char again[256];
 	size_t i;
@@ -126,7 +128,8 @@ static void check_route(const char *method, const char *path, const struct http_
 	if ((r->need == VMAC_SCOPE_NONE) !=
 	    (r->endpoint == HTTP_BAD_METHOD || r->endpoint == HTTP_UI || r->endpoint == HTTP_HEALTH))
 		abort(); /* a request without a token reaches only the UI and the health check */
-	if ((r->need == VMAC_SCOPE_OPERATE) != (r->endpoint == HTTP_INPUT || r->endpoint == HTTP_CYCLE))
+	if ((r->need == VMAC_SCOPE_OPERATE) !=
+	    (r->endpoint == HTTP_INPUT || r->endpoint == HTTP_CYCLE || r->endpoint == HTTP_RECORD))
 		abort();
 	if ((r->need == VMAC_SCOPE_DEPLOY) !=
 	    (r->endpoint == HTTP_ROLLBACK || r->endpoint == HTTP_ACTIVATE || r->endpoint == HTTP_UPLOAD))
