@@ -524,8 +524,9 @@ int main(int argc, char **argv)
 		sigaddset(&set, SIGTERM);
 		pthread_sigmask(SIG_BLOCK, &set, &old);
 		h->site = vmac_site_new(h->mqtt_settings.prefix, h->mqtt_settings.host_id);
-		h->mqtt = h->site ? vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, h->site, err, sizeof(err))
-		                  : NULL;
+		h->mqtt = h->site
+		              ? vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, h->site, err, sizeof(err))
+		              : NULL;
 		pthread_sigmask(SIG_SETMASK, &old, NULL);
 		if (!h->site)
 			snprintf(err, sizeof(err), "out of memory");
