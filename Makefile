@@ -38,9 +38,11 @@ BENCH_DEBS := rt-tests
 PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lev -lpthread -lm
-# Only vmacd links the MQTT client (core/mqtt/, docs/MQTT.md), and protobuf-c for Sparkplug B.
+# vmacd links the MQTT client (core/mqtt/, docs/MQTT.md), and protobuf-c for Sparkplug B; vmac links
+# libmosquitto alone, for `vmac site` (core/cli/site.c).
 MQTT_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto) \
              $(shell pkg-config --libs libprotobuf-c 2>/dev/null || echo -lprotobuf-c)
+SITE_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto)
 
 # Strict warnings everywhere. -Wno-format-truncation: snprintf truncation
 # into fixed buffers is the intended behaviour (names and texts are capped).
@@ -58,11 +60,11 @@ DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest
                 core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
                 core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
-                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/console.c core/sched/sched.c core/sched/search.c \
+                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/api_site.c core/mqtt/site.c core/api/console.c core/sched/sched.c core/sched/search.c \
                 core/store/store.c core/store/store_checkpoint.c core/store/store_recording.c
 # vmacd's MQTT client (core/mqtt/mqtt_internal.h says which file owns what).
 MQTT_SRC     := core/mqtt/mqtt_settings.c core/mqtt/mqtt_client.c core/mqtt/mqtt_devices.c core/mqtt/mqtt_native.c \
-                core/mqtt/mqtt_ha.c core/mqtt/mqtt_sparkplug.c
+                core/mqtt/mqtt_ha.c core/mqtt/mqtt_sparkplug.c core/mqtt/mqtt_site.c
 # vmac test: the host core and the board firmware on one virtual clock.
 VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c core/vtest/replay.c
 OBJ = $(BUILD)/obj
@@ -124,9 +126,10 @@ $(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(mqtt_obj) $(host_obj) $(portable_
 
 $(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
                    $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(OBJ)/core/cli/command.o $(OBJ)/core/cli/recordings.o $(OBJ)/core/cli/lint.o \
+                   $(OBJ)/core/cli/site.o $(OBJ)/core/mqtt/mqtt_settings.o \
                    $(vtest_obj) $(host_obj) $(portable_obj)
 	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS) $(SITE_LIBS)
 
 $(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/firmware/posix/boards.o $(OBJ)/firmware/posix/dispatch.o \
                           $(OBJ)/core/transport/transport.o $(OBJ)/core/transport/transport_udp.o \

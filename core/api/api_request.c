@@ -112,6 +112,8 @@ void http_route(const char *method, const char *url, struct http_route *r)
 	else if (get && named_path(url, "/api/recordings/", "", name, len) &&
 	         strspn(name, "0123456789") == strlen(name))
 		r->endpoint = HTTP_RECORDING;
+	else if (get && strcmp(url, "/api/site") == 0)
+		r->endpoint = HTTP_SITE;
 	else if (get && strcmp(url, "/api") == 0)
 		r->endpoint = HTTP_INDEX;
 	else

@@ -37,6 +37,7 @@ enum http_endpoint {
 	HTTP_EVENTS,     /* GET /api/events */
 	HTTP_RECORDINGS, /* GET /api/recordings */
 	HTTP_RECORDING,  /* GET /api/recordings/ID */
+	HTTP_SITE,       /* GET /api/site */
 	HTTP_INDEX,      /* GET /api */
 	HTTP_NOT_FOUND,  /* anything else (after the token is checked): 404 */
 };

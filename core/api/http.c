@@ -256,14 +256,15 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 	case HTTP_RECORDINGS: return http_recordings(h, c);
 	case HTTP_RECORD: return http_record(h, c, r.name);
 	case HTTP_RECORDING: return http_recording(h, c, r.name);
+	case HTTP_SITE: return http_site(h, c);
 	case HTTP_INDEX:
-		return http_reply(c, MHD_HTTP_OK,
-		                  json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING,
-		                            "endpoints", "/api/status", "/api/health", "/api/events",
-		                            "/api/devices/NAME/input", "/api/drivers", "/api/drivers/NAME",
-		                            "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
-		                            "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
-		                            "/api/drivers/NAME/activate", "/api/recordings", "/api/recordings/ID"));
+		return http_reply(
+		    c, MHD_HTTP_OK,
+		    json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints",
+		              "/api/status", "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
+		              "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
+		              "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
+		              "/api/drivers/NAME/activate", "/api/recordings", "/api/recordings/ID", "/api/site"));
 	default: return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
 	}
 }
@@ -376,6 +377,11 @@ int vmac_http_tls(const struct vmac_http *h)
 unsigned vmac_http_port(const struct vmac_http *h)
 {
 	return h->port;
+}
+
+void vmac_http_set_site(struct vmac_http *h, struct vmac_site *site)
+{
+	atomic_store(&h->site, site);
 }
 
 void vmac_http_stop(struct vmac_http *h)

@@ -23,6 +23,11 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 unsigned vmac_http_port(const struct vmac_http *h);
 /* Whether it serves HTTPS (settings tls_cert and tls_key). */
 int vmac_http_tls(const struct vmac_http *h);
+/* GET /api/site serves this site view (core/mqtt/site.h) from now on;
+ * NULL (the default): MQTT is off, {"enabled": false}. The view must outlive
+ * the server (vmac_http_stop first). */
+struct vmac_site;
+void vmac_http_set_site(struct vmac_http *h, struct vmac_site *site);
 void vmac_http_stop(struct vmac_http *h);
 
 #endif

@@ -47,6 +47,7 @@ struct vmac_http {
 	_Atomic int stopping;       /* event streams end */
 	pthread_mutex_t fails_lock; /* connection threads share the table */
 	struct fail_count fails[FAIL_CLIENTS];
+	struct vmac_site *_Atomic site; /* GET /api/site (api_site.c); NULL: MQTT off */
 };
 
 /* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
@@ -117,6 +118,9 @@ enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c,
 enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const char *name);
 enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate);
 enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c);
+
+/* api_site.c */
+enum MHD_Result http_site(struct vmac_http *h, struct MHD_Connection *c);
 
 /* api_events.c */
 enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c);

@@ -19,6 +19,7 @@
 #include "lint.h"
 #include "recordings.h"
 #include "reload.h"
+#include "site.h"
 #include "token.h"
 
 /* GET url into *out. Returns 0, or prints why and returns 1. */
@@ -274,6 +275,7 @@ static void usage(FILE *f)
 	           "  get       print published variables (DEVICE.NAME...)\n"
 	           "  set       operator input (DEVICE.NAME:VALUE, DEVICE.NAME!)\n"
 	           "  events    follow the host's events as they happen\n"
+	           "  site      every host on an MQTT broker, its devices and values (the broker alone)\n"
 	           "  reload    upload a new version of a driver; machines switch at a slot boundary\n"
 	           "  rollback  go back to a driver's previous version\n"
 	           "  drivers   list the driver versions the host keeps\n"
@@ -309,6 +311,8 @@ int main(int argc, char **argv)
 		return cmd_bench(argc - 1, argv + 1);
 	if (strcmp(argv[1], "token") == 0)
 		return vmac_token_main(argc - 1, argv + 1);
+	if (strcmp(argv[1], "site") == 0)
+		return vmac_site_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "events") == 0)
 		return vmac_events_main(argc - 1, argv + 1);
 	if (strcmp(argv[1], "console") == 0)

@@ -42,13 +42,17 @@ struct vmac_mqtt_settings {
 int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_settings *out, char *err, size_t errlen);
 
 struct vmac_mqtt; /* opaque */
+struct vmac_site; /* site.h */
 
 /* Start the client (enabled settings only): it connects in the background
  * and keeps trying; a broker that is down is never an error here. log gets
  * its events (kind "mqtt"). Returns NULL with err set only when the client
- * cannot be made at all (out of memory, a TLS file libmosquitto refuses). */
+ * cannot be made at all (out of memory, a TLS file libmosquitto refuses).
+ * site (NULL: none): the site view it keeps, from every host's native topics
+ * on the broker; the caller owns it and frees it after vmac_mqtt_stop. */
 struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const struct vmac_config *cfg,
-                                  struct vmac_bus *bus, struct vmac_event_log *log, char *err, size_t errlen);
+                                  struct vmac_bus *bus, struct vmac_event_log *log, struct vmac_site *site, char *err,
+                                  size_t errlen);
 /* Publish the host and its devices offline (waiting at most about a
  * second for the broker), disconnect, join the threads, free. NULL: nothing. */
 void vmac_mqtt_stop(struct vmac_mqtt *m);

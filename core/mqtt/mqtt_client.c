@@ -16,7 +16,10 @@
 #include <string.h>
 #include <time.h>
 
-static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile, &mqtt_sparkplug_profile};
+#include "site.h"
+
+static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile, &mqtt_sparkplug_profile,
+                                                      &mqtt_site_profile};
 #define NPROFILES (int)(sizeof(profiles) / sizeof(profiles[0]))
 
 double mqtt_now_s(void)
@@ -122,6 +125,8 @@ static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 		spb_next_will(c);
 	atomic_store(&c->outstanding, 0);
 	atomic_store(&c->connected, 1);
+	if (c->index == MQTT_CONN_MAIN && m->site)
+		vmac_site_set_connected(m->site, 1);
 	atomic_store(&c->need_births, 1);
 	pthread_mutex_lock(&m->lock);
 	pthread_cond_signal(&m->wake);
@@ -134,6 +139,8 @@ static void on_disconnect(struct mosquitto *mosq, void *obj, int rc)
 	struct vmac_mqtt *m = c->m;
 	(void)mosq;
 	atomic_store(&c->connected, 0);
+	if (c->index == MQTT_CONN_MAIN && m->site)
+		vmac_site_set_connected(m->site, 0);
 	if (rc != 0 && !atomic_load(&m->stopping) && atomic_exchange(&c->was_connected, 0))
 		mqtt_event(m, "", "lost the broker %s:%d%s (%s); reconnecting with backoff, control goes on", m->s.host,
 		           m->s.port, conn_what(c), mosquitto_strerror(rc));
@@ -154,6 +161,8 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 	struct vmac_mqtt *m = c->m;
 	struct mqtt_message *q;
 	(void)mosq;
+	if (c->index == MQTT_CONN_MAIN && mqtt_site_message(m, msg))
+		return; /* the site view's, applied here (mqtt_site.c) */
 	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic) || msg->retain)
 		return; /* a retained command is an old one: never acted on */
 	pthread_mutex_lock(&m->lock);
@@ -373,7 +382,8 @@ static void conn_stop(struct mqtt_conn *c)
 }
 
 struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const struct vmac_config *cfg,
-                                  struct vmac_bus *bus, struct vmac_event_log *log, char *err, size_t errlen)
+                                  struct vmac_bus *bus, struct vmac_event_log *log, struct vmac_site *site, char *err,
+                                  size_t errlen)
 {
 	struct vmac_mqtt *m = calloc(1, sizeof(*m));
 	int rc, k;
@@ -384,6 +394,7 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 	m->s = *s;
 	m->bus = bus;
 	m->log = log;
+	m->site = site;
 	m->status.devices = calloc(cfg->max_devices, sizeof(*m->status.devices));
 	m->status.slot_load = calloc((size_t)1 << cfg->max_level, sizeof(*m->status.slot_load));
 	pthread_mutex_init(&m->lock, NULL);

@@ -9,6 +9,8 @@
  *   mqtt_ha.c        profile "ha": Home Assistant discovery configs from each driver's manifest
  *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
  *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
+ *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
+ *                    /api/site serves, on the network thread
  * A profile is one way of speaking MQTT over a connection and the same device table (docs/MQTT.md,
  * "Adding a profile"). Everything here runs on the publisher thread unless it says otherwise. */
 #ifndef VMAC_MQTT_INTERNAL_H
@@ -115,7 +117,7 @@ struct mqtt_profile {
 	void (*stopping)(struct vmac_mqtt *m);
 };
 
-extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile;
+extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile, mqtt_site_profile;
 
 /* Sparkplug's session (mqtt_sparkplug.c). bdseq_next is the bdSeq of the
  * NDEATH registered as the will of the next connection; the network thread
@@ -146,6 +148,7 @@ struct vmac_mqtt {
 	int ndevices, cap;
 	unsigned long skipped_rounds; /* values held back: too much waiting to be written */
 	struct mqtt_spb spb;
+	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
 };
 
 /* Publish (retained or not) at QoS 0 or 1 on the main connection; len -1:
@@ -176,6 +179,12 @@ void mqtt_devices_republish(struct vmac_mqtt *m); /* after a reconnect: every de
 void mqtt_devices_stopping(struct vmac_mqtt *m);  /* every device down, then the profiles' last words */
 void mqtt_devices_free(struct vmac_mqtt *m);
 struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
+
+/* mqtt_site.c: a message on the main connection, on libmosquitto's network
+ * thread: 1 when it was one of the site view's topics (applied or counted
+ * as malformed), 0 when it is for the queue. */
+struct mosquitto_message;
+int mqtt_site_message(struct vmac_mqtt *m, const struct mosquitto_message *msg);
 
 /* mqtt_native.c: values as text and back (pure; docs/MQTT.md "Payloads"). */
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);

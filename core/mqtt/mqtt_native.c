@@ -266,6 +266,11 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 	n = strlen(mine);
 	if (msg->conn != MQTT_CONN_MAIN || strncmp(msg->topic, mine, n) != 0)
 		return 0;
+	{ /* only the command topics' shape (DEVICE/set/NAME): the site view takes the others */
+		const char *p = msg->topic + n, *slash = strchr(p, '/');
+		if (!slash || !(slash = strchr(slash + 1, '/')) || strchr(slash + 1, '/'))
+			return 0;
+	}
 	if (m->s.commands)
 		command(m, msg, msg->topic + n);
 	return 1;

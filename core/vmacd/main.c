@@ -20,6 +20,7 @@
 #include "../host/config.h"
 #include "../host/events.h"
 #include "../mqtt/mqtt.h"
+#include "../mqtt/site.h"
 #include "../recorder/recording.h"
 #include "../reload/deploy.h"
 #include "../reload/loader.h"
@@ -31,6 +32,7 @@ struct host {
 	struct vmac_http *http;
 	struct vmac_mqtt_settings mqtt_settings; /* checked at start; mqtt NULL when off */
 	struct vmac_mqtt *mqtt;
+	struct vmac_site *site; /* the other hosts on the broker (GET /api/site); NULL when MQTT is off */
 	struct vmac_store *store;
 	struct vmac_event_log log;
 	uint64_t stored_seq; /* events up to this one are in the store */
@@ -521,8 +523,13 @@ int main(int argc, char **argv)
 		sigaddset(&set, SIGINT);
 		sigaddset(&set, SIGTERM);
 		pthread_sigmask(SIG_BLOCK, &set, &old);
-		h->mqtt = vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, err, sizeof(err));
+		h->site = vmac_site_new(h->mqtt_settings.prefix, h->mqtt_settings.host_id);
+		h->mqtt = h->site
+		              ? vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, h->site, err, sizeof(err))
+		              : NULL;
 		pthread_sigmask(SIG_SETMASK, &old, NULL);
+		if (!h->site)
+			snprintf(err, sizeof(err), "out of memory");
 		if (!h->mqtt) {
 			fprintf(stderr, "vmacd: mqtt: %s\n", err);
 			return 1;
@@ -531,6 +538,7 @@ int main(int argc, char **argv)
 		        h->mqtt_settings.tls ? "mqtts" : "mqtt", h->mqtt_settings.host, h->mqtt_settings.port,
 		        h->mqtt_settings.client_id, h->mqtt_settings.prefix, h->mqtt_settings.host_id,
 		        h->mqtt_settings.commands ? ", commands accepted" : ", commands off");
+		vmac_http_set_site(h->http, h->site);
 	}
 	fprintf(stderr,
 	        "vmacd: bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us\n"
@@ -545,6 +553,7 @@ int main(int argc, char **argv)
 	vmac_bus_join(h->bus);
 	on_wake(h->loop, &h->wake_w, 0); /* the last events */
 	vmac_http_stop(h->http);
+	vmac_site_free(h->site); /* after the server: a request may have been reading it */
 	vmac_store_close(h->store);
 	vmac_bus_free(h->bus);
 	fprintf(stderr, "vmacd: stopped; every board was told to go safe\n");

@@ -1,5 +1,6 @@
 #!/bin/sh
-# make test-ui: the web UI's tests in a real browser (tests/ui/ui_test.mjs).
+# make test-ui: the web UI's tests in a real browser (tests/ui/ui_test.mjs, and
+# tests/ui/site_test.mjs for the Site page with a broker and a second host).
 # Installs what they need when it is missing: Debian's chromium (apt) and,
 # when there is no Node.js 20 or later, Debian's nodejs and npm; then
 # playwright-core from npm at the version tests/ui/package-lock.json pins.
@@ -61,4 +62,8 @@ if ! node_ok; then
 fi
 (cd "$here" && npm ci --no-audit --no-fund --loglevel=error)
 echo "== the web UI in headless chromium (screenshots in $out)"
-exec node "$here/ui_test.mjs" --bin "$bin" --out "$out"
+failed=0
+node "$here/ui_test.mjs" --bin "$bin" --out "$out" || failed=1
+echo "== the Site page: two hosts on one MQTT broker (tests/ui/site_test.mjs)"
+node "$here/site_test.mjs" --bin "$bin" --out "$out" || failed=1
+exit $failed

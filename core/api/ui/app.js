@@ -21,6 +21,7 @@ const state = {
   eventsLoaded: false,
   status: null,
   stream: null,
+  siteTimer: null,    // the Site page's poll while it is shown
 };
 
 const $ = (sel, root) => (root || document).querySelector(sel);
@@ -88,6 +89,7 @@ function signedOut(why) {
   state.token = null;
   localStorage.removeItem("vmacToken");
   if (state.stream) state.stream.abort();
+  siteTimer(false);
   $("#signin").hidden = false;
   $("#signin-error").textContent = why || "";
   document.querySelectorAll(".page").forEach((p) => { p.hidden = true; });
@@ -530,15 +532,73 @@ function drawSystem(s) {
   $("#counters").replaceChildren(...rows.map(([k, v]) => el("tr", {}, el("td", {}, k), el("td", {}, v))));
 }
 
+// ---- site: every host on the broker (GET /api/site), read only ----
+
+const SITE_PERIOD_MS = 1000;
+
+function siteValue(v) {
+  if (v === null || v === undefined) return "-";
+  if (typeof v === "boolean") return v ? "on" : "off";
+  return String(v);
+}
+
+function drawSite(site) {
+  const note = $("#site-note");
+  const hosts = $("#site-hosts");
+  if (!site.enabled) {
+    note.textContent = "This host has no MQTT broker (mqtt_url is not set): it sees no other host.";
+    hosts.replaceChildren();
+    return;
+  }
+  const online = site.hosts.filter((h) => h.state === "online").length;
+  note.textContent = site.hosts.length + " host" + (site.hosts.length === 1 ? "" : "s") + " on the broker under " +
+    site.prefix + "/, " + online + " online" + (site.connected ? "" : " (this host has lost the broker: " +
+    "what it last heard)") + ". Read only: each host is operated from its own page.";
+  hosts.replaceChildren(...site.hosts.map(siteHost));
+}
+
+function siteDevice(d) {
+  const values = Object.entries(d.values).map(([k, v]) => el("span", { "data-name": k }, k, " ", el("b", {}, siteValue(v))));
+  return el("tr", { "data-device": d.device },
+    el("td", {}, d.device),
+    el("td", {}, el("span", { class: "badge " + d.state }, d.state)),
+    el("td", {}, el("div", { class: "site-values" }, values)));
+}
+
+function siteHost(h) {
+  const title = el("h3", {}, h.host, " ", el("span", { class: "badge " + h.state }, h.state),
+    h.self ? el("span", { class: "badge" }, "this host") : null);
+  if (h.devices.length === 0) return el("div", { class: "site-host", "data-host": h.host }, title,
+    el("p", { class: "empty" }, "No devices."));
+  const head = el("thead", {}, el("tr", {}, el("th", {}, "Device"), el("th", {}, "State"), el("th", {}, "Values")));
+  return el("div", { class: "site-host", "data-host": h.host }, title,
+    el("table", { class: "site-devices" }, head, el("tbody", {}, h.devices.map(siteDevice))));
+}
+
+async function loadSite() {
+  try {
+    drawSite(await api("GET", "/api/site"));
+  } catch (e) {
+    $("#site-note").textContent = "The site view cannot be read: " + e.message;
+  }
+}
+
+function siteTimer(on) {
+  if (state.siteTimer) clearInterval(state.siteTimer);
+  state.siteTimer = on ? setInterval(() => { if (state.token) loadSite(); }, SITE_PERIOD_MS) : null;
+  if (on) loadSite();
+}
+
 // ---- pages ----
 
 function showPage() {
   const page = (location.hash || "#devices").slice(1);
-  const name = ["devices", "events", "system"].includes(page) ? page : "devices";
+  const name = ["devices", "events", "system", "site"].includes(page) ? page : "devices";
   document.querySelectorAll(".page").forEach((p) => { p.hidden = p.id !== "page-" + name; });
   document.querySelectorAll("nav a").forEach((a) => a.classList.toggle("active", a.dataset.page === name));
   if (name === "events") loadEvents();
   if (name === "system" && state.status) drawSystem(state.status);
+  siteTimer(name === "site");
 }
 
 window.addEventListener("hashchange", () => { if (state.token) showPage(); });
