@@ -430,8 +430,8 @@ test: deps
 	@$(call timed,test-lua)
 	@$(call timed,test-drivers)
 	@$(call timed,test-fuzz)
-	@$(call timed,test-integration asan-build,-j2)
-	@$(call timed,test-ui test-soak,-j2)
+	@$(call timed,test-integration asan-build test-soak,-j3)
+	@$(call timed,test-ui)
 	@$(call timed,test-asan,VMAC_SCHED_PROPERTY_RUNS=10000)
 	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \

@@ -28,7 +28,7 @@ from test_kitchen_cycles import DOOR_LEVEL_L, DOOR_LOCKED_BIT, LOCK_BIT, WASHER_
 SERIAL = True
 
 TRIALS = 50
-SANITIZED_TRIALS = 8
+SANITIZED_TRIALS = 3
 KILL_AFTER_S = (0.3, 1.6)   # a trial's kill comes this long after the programme runs again
 LOCK_RELEASE_S = 20         # the PTC lock holds this long after the watchdog: longer than any restart here
 SHORT_LOCK_RELEASE_S = 8    # enough for the 2 s an old checkpoint waits, and quicker to see the door released
@@ -329,7 +329,7 @@ def test_the_washer_survives_50_host_crashes(t):
     seed = random.SystemRandom().randrange(1 << 30)
     loop = CrashLoop(t, seed)
     # Under the sanitizers (make test-asan runs every test again with
-    # build/asan/bin) 8 trials look for memory errors on the same paths; the
+    # build/asan/bin) 3 trials look for memory errors on the same paths; the
     # 50 that judge the behaviour run in the plain build.
     trials_wanted = SANITIZED_TRIALS if os.sep + "asan" + os.sep in t.bindir + os.sep else TRIALS
     trials = []  # (outcome, where killed, restart to running s, kill to watchdog s)
