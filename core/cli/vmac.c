@@ -223,16 +223,18 @@ static int cmd_bench(int argc, char **argv)
 	ssize_t len;
 	int i, n = 0;
 	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf(
-		    "usage: vmac bench [--seconds N] [--only lateness,cost,capacity,vtest,reload,ui] [--max-boards N]\n"
-		    "                  [--out FILE]\n"
-		    "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
-		    "per device per tick (next to a bare sendmmsg loop), the speed of vmac test (wall time of a\n"
-		    "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
-		    "same window without), and tick lateness with 50 web UI clients (next to none). Figures are ratios "
-		    "to baselines run in the same run on the same\n"
-		    "machine. Needs cyclictest (Debian rt-tests) and the bare loop built by 'make bench'\n"
-		    "(build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
+		printf("usage: vmac bench [--seconds N] [--max-boards N] [--out FILE]\n"
+		       "                  [--only "
+		       "lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt]\n"
+		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
+		       "per device per tick (next to a bare sendmmsg loop), the speed of vmac test (wall time of a\n"
+		       "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
+		       "same window without), tick lateness with 50 web UI clients (next to none), the fieldbus\n"
+		       "modes, the firmware in QEMU, the flight recorder and checkpoints, raw Ethernet's receive\n"
+		       "ring, and MQTT through Mosquitto (each next to its own baseline). Figures are ratios "
+		       "to baselines run in the same run on the same\n"
+		       "machine. Needs cyclictest (Debian rt-tests) and the bare loop built by 'make bench'\n"
+		       "(build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
 		return 0;
 	}
 	vmac_root_dir(root, sizeof(root));

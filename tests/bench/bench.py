@@ -37,9 +37,14 @@ same run on the same machine, reported as ratios.
   ethring   raw Ethernet's receive ring next to recvmmsg on eth-cyclic
             (tests/bench/ethring.py): host CPU per device per tick, 100
             boards at 1 kHz, alternating rounds (root, else SKIPPED)
+  mqtt      MQTT through Mosquitto (tests/bench/mqtt_bench.py): 1,000
+            boards at 10 Hz, a variable changing at every tick, MQTT on
+            next to off in alternating rounds: value messages per second
+            to a subscriber, tick lateness p99 on/off, host CPU, misses
+            (mosquitto and python3-paho-mqtt, else SKIPPED)
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt]
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -383,7 +388,7 @@ def main():
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring")
+    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt")
     p.add_argument("--max-boards", type=int, default=None,
                    help="most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)")
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
@@ -452,6 +457,12 @@ def main():
         from ethring import ethring
         print("ethring: raw Ethernet's receive ring next to recvmmsg, %d s windows" % args.seconds, flush=True)
         results["ethring"] = ethring(args)
+
+    if "mqtt" in only:
+        from mqtt_bench import mqtt
+        print("mqtt: 1000 boards at 10 Hz through Mosquitto, MQTT on next to off, %d s windows" % args.seconds,
+              flush=True)
+        results["mqtt"] = mqtt(args)
 
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
@@ -529,6 +540,9 @@ def report(r):
     if r.get("ethring"):
         from ethring import report_ethring
         report_ethring(r["ethring"])
+    if r.get("mqtt"):
+        from mqtt_bench import report_mqtt
+        report_mqtt(r["mqtt"])
 
 
 if __name__ == "__main__":
