@@ -7,8 +7,8 @@ cancel it (stop, drain, unlock). Through it all the door is never unlocked
 while the drum turns or the water is above the door: the simulated washer's
 safety monitor prints no "washer UNSAFE:" line (its PTC door lock holds the
 door while the host is away, docs/BOARD.md) and the host's status keeps
-test_kitchen_cycles' door guard. An old or a damaged checkpoint is refused
-cleanly.
+test_kitchen_cycles' door guard. Old and damaged checkpoints:
+test_checkpoints.py.
 
 Serial: every trial measures the board's watchdog against the moment of the
 kill, and the host's restart time, to a few hundred milliseconds; with three
@@ -120,7 +120,7 @@ def last_outputs(board):
     return lines[-1].text.split("outputs ", 1)[1] if lines else "digital=0x00 pwm=0"
 
 
-def crash(t, host, board, when):
+def crash(t, host, board, when, late_s=WATCHDOG_LATE_S):
     """SIGKILL vmacd; the board's watchdog must turn every output off within
     its period of the kill. Returns the seconds from the kill to the
     watchdog's line."""
@@ -136,7 +136,7 @@ def crash(t, host, board, when):
     took_s = line.time_s - killed_at
     assert period_s <= WATCHDOG_S, "%s: the board's watchdog is %.3f s, the host set %.3f s" % (
         when, period_s, WATCHDOG_S)
-    assert took_s <= period_s + WATCHDOG_LATE_S, "%s: the watchdog turned the outputs off %.2f s after the kill " \
+    assert took_s <= period_s + late_s, "%s: the watchdog turned the outputs off %.2f s after the kill " \
         "(period %.2f s)" % (when, took_s, period_s)
     deadline = time.monotonic() + 1
     while last_outputs(board) != "digital=0x00 pwm=0" and time.monotonic() < deadline:
@@ -363,89 +363,3 @@ def test_the_washer_survives_50_host_crashes(t):
                 loop.programme.cancels, loop.ended_before_kill)
         record.write(summary + "\n" + detail + "\n")
     print(summary + "\n" + detail, file=sys.stderr, flush=True)  # the runner keeps a worker's stdout for itself
-
-
-def wash_with_water(host, board, guard):
-    """Start the programme and wait for its wash with the water above the door."""
-    start_programme(host, board, guard)
-    return host.wait_status(lambda s: var(host, s, "step") == "wash" and level_l(host, s) > DOOR_LEVEL_L
-                            and abs(var(host, s, "drum_rpm") or 0) > 10, 60, "the drum washing in water", guard)
-
-
-def test_a_checkpoint_too_old_drains_the_washer(t):
-    host = recovery_host(t)
-    board = washer_board(t, SHORT_LOCK_RELEASE_S)
-    host.wait_running(["washer-1"])
-    wash_with_water(host, board, door_guard(host))
-    crash(t, host, board, "killed mid-wash")
-    time.sleep(2)  # not a synchronisation: the checkpoint ages past recover_max_age_s
-    host = recovery_host(t, {"driver.washer.param.recover_max_age_s": 1})
-    guard = door_guard(host)
-    why = host.wait_event("driver", "washer-1", "more than 1 s: cancelling quick", timeout_s=RESTART_S,
-                          invariant=guard)
-    assert "checkpoint" in why["text"] and "old" in why["text"], "the event does not say why: %r" % why["text"]
-    host.wait_status(lambda s: var(host, s, "state") == "cancelling", 10, "the programme cancelling", guard)
-    steps = []
-
-    def follow(s):
-        guard(s)
-        step = var(host, s, "step")
-        if var(host, s, "state") == "cancelling" and step and (not steps or steps[-1] != step):
-            steps.append(step)
-
-    s = host.wait_status(lambda s: var(host, s, "state") == "cancelled", 90, "the cancel done", follow)
-    assert "drain" in steps and steps == [x for x in CLEANUP_STEPS if x in steps], \
-        "the cancel's steps: %s, expected stop, drain, unlock" % steps
-    d = washer(host, s)
-    assert d["inputs"]["digital"][TUB_EMPTY_BIT], "cancelled with %.1f l in the tub" % level_l(host, s)
-    # The lock solenoid off, and the PTC lock releasing the door after its delay.
-    host.wait_status(lambda s: not washer(host, s)["outputs"]["digital"][LOCK_BIT]
-                     and not washer(host, s)["inputs"]["digital"][DOOR_LOCKED_BIT], SHORT_LOCK_RELEASE_S + 10,
-                     "the door unlocked after the cancel", guard)
-    assert_safe_board(board, "after the old checkpoint")
-
-
-def checkpoint_row(t):
-    """(driver, length of data, data) of washer-1's checkpoint in the store, or None."""
-    con = sqlite3.connect("file:%s?mode=ro" % os.path.join(t.logdir, "vmac.db"), uri=True, timeout=10)
-    try:
-        return con.execute("SELECT driver, length(data), data FROM checkpoints WHERE machine = 'washer-1'").fetchone()
-    finally:
-        con.close()
-
-
-def test_a_damaged_checkpoint_is_refused_cleanly(t):
-    host = recovery_host(t)
-    board = washer_board(t)
-    host.wait_running(["washer-1"])
-    wash_with_water(host, board, door_guard(host))
-    crash(t, host, board, "killed mid-wash")
-    row = checkpoint_row(t)
-    assert row and row[0] == "washer" and row[1] > 8, "no checkpoint of the washer in the store: %r" % (row,)
-    # Damaged inside: the header is intact, the body cut in the middle of its values.
-    damaged = row[2][:row[1] // 2]
-    con = sqlite3.connect(os.path.join(t.logdir, "vmac.db"), timeout=10)
-    with con:
-        con.execute("UPDATE checkpoints SET data = ? WHERE machine = 'washer-1'", (damaged,))
-    con.close()
-
-    host = recovery_host(t)
-    guard = door_guard(host)
-    warning = host.wait_event("warning", "washer-1", "checkpoint damaged", timeout_s=RESTART_S, invariant=guard)
-    assert "not offered" in warning["text"], "the warning: %r" % warning["text"]
-    s = host.wait_status(lambda s: var(host, s, "state") == "idle", RESTART_S, "the washer attached afresh", guard)
-    assert not host.find_events("recovered", "washer-1", "recover() ran"), \
-        "recover() ran with a damaged checkpoint: %s" % host.find_events("recovered", "washer-1")
-    assert not host.find_events("driver_error", "washer-1"), host.find_events("driver_error", "washer-1")
-    # Fresh, it knows no programme, but its door guard holds the lock over the water.
-    if level_l(host, s) > DOOR_LEVEL_L:
-        host.wait_status(lambda s: washer(host, s)["outputs"]["digital"][LOCK_BIT], 5,
-                         "the fresh washer holding the door locked over %.1f l" % level_l(host, s), guard)
-    # And its next checkpoint replaces the damaged one.
-    deadline = time.monotonic() + 10
-    while checkpoint_row(t)[2] == damaged:
-        assert time.monotonic() < deadline, "the damaged checkpoint was not replaced within 10 s"
-        host.wait_status(lambda s: True, 1, "a status", guard)
-        time.sleep(0.1)
-    assert host.alive(), "vmacd died after the damaged checkpoint"
-    assert_safe_board(board, "after the damaged checkpoint")
