@@ -131,42 +131,40 @@ void bus_rec_swap(struct vmac_bus *bus, struct machine *m)
 	         m->rec->version);
 }
 
-void bus_rec_release(struct vmac_bus *bus, struct machine *m)
+/* Hand m's recorder to the main thread: a RECORDING (captured; replace:
+ * the machine runs on and wants a new one) or an UNLOAD (to be freed). A
+ * full ring loses it, never blocking. */
+static void hand_over(struct vmac_bus *bus, struct machine *m, enum vmac_bus_msg_kind kind, int replace)
 {
 	struct vmac_bus_msg msg;
 	struct vmac_recorder *r = m->rec;
-	if (!r)
-		return;
 	m->rec = NULL;
 	memset(&msg, 0, sizeof(msg));
-	msg.kind = r->reason[0] && r->attach_ns >= 0 ? VMAC_MSG_RECORDING : VMAC_MSG_UNLOAD;
+	msg.kind = kind;
 	msg.time_ns = bus_now(bus);
 	msg.rec = r;
-	r->when_ns = msg.time_ns;
-	snprintf(msg.device, sizeof(msg.device), "%s", r->machine);
-	if (bus_post(bus, &msg) != 0)
-		vmac_recorder_free(r); /* the ring to the main thread is full: lost, never blocking */
-}
-
-int bus_rec_capture(struct vmac_bus *bus, struct machine *m, const char *why)
-{
-	struct vmac_bus_msg msg;
-	struct vmac_recorder *r = m->rec;
-	if (!r)
-		return -1;
-	m->rec = NULL;
-	snprintf(r->reason, sizeof(r->reason), "%.*s", (int)strcspn(why, "\n"), why);
-	memset(&msg, 0, sizeof(msg));
-	msg.kind = VMAC_MSG_RECORDING;
-	msg.time_ns = bus_now(bus);
-	msg.rec = r;
-	msg.replace = 1;
+	msg.replace = replace;
 	msg.slot = m->primary;
 	msg.generation = bus->dev[m->primary].generation;
 	r->when_ns = msg.time_ns;
 	snprintf(msg.device, sizeof(msg.device), "%s", r->machine);
 	if (bus_post(bus, &msg) != 0)
-		vmac_recorder_free(r); /* the ring to the main thread is full: lost, never blocking */
+		vmac_recorder_free(r);
+}
+
+void bus_rec_release(struct vmac_bus *bus, struct machine *m)
+{
+	if (m->rec)
+		hand_over(bus, m, m->rec->reason[0] && m->rec->attach_ns >= 0 ? VMAC_MSG_RECORDING : VMAC_MSG_UNLOAD,
+		          0);
+}
+
+int bus_rec_capture(struct vmac_bus *bus, struct machine *m, const char *why)
+{
+	if (!m->rec)
+		return -1;
+	snprintf(m->rec->reason, sizeof(m->rec->reason), "%.*s", (int)strcspn(why, "\n"), why);
+	hand_over(bus, m, VMAC_MSG_RECORDING, 1);
 	return 0;
 }
 

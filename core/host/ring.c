@@ -27,28 +27,6 @@ void vmac_ring_fini(struct vmac_ring *r)
 	r->buf = NULL;
 }
 
-int vmac_ring_push(struct vmac_ring *r, const void *elem)
-{
-	size_t head = atomic_load_explicit(&r->head, memory_order_relaxed);
-	size_t tail = atomic_load_explicit(&r->tail, memory_order_acquire);
-	if (head - tail > r->mask)
-		return -1;
-	memcpy(r->buf + (head & r->mask) * r->elem_size, elem, r->elem_size);
-	atomic_store_explicit(&r->head, head + 1, memory_order_release);
-	return 0;
-}
-
-int vmac_ring_pop(struct vmac_ring *r, void *elem)
-{
-	size_t tail = atomic_load_explicit(&r->tail, memory_order_relaxed);
-	size_t head = atomic_load_explicit(&r->head, memory_order_acquire);
-	if (tail == head)
-		return 0;
-	memcpy(elem, r->buf + (tail & r->mask) * r->elem_size, r->elem_size);
-	atomic_store_explicit(&r->tail, tail + 1, memory_order_release);
-	return 1;
-}
-
 void *vmac_ring_reserve(struct vmac_ring *r)
 {
 	size_t head = atomic_load_explicit(&r->head, memory_order_relaxed);
@@ -77,4 +55,25 @@ void vmac_ring_release(struct vmac_ring *r)
 {
 	size_t tail = atomic_load_explicit(&r->tail, memory_order_relaxed);
 	atomic_store_explicit(&r->tail, tail + 1, memory_order_release);
+}
+
+/* The copying forms, on the in-place ones. */
+int vmac_ring_push(struct vmac_ring *r, const void *elem)
+{
+	void *slot = vmac_ring_reserve(r);
+	if (!slot)
+		return -1;
+	memcpy(slot, elem, r->elem_size);
+	vmac_ring_commit(r);
+	return 0;
+}
+
+int vmac_ring_pop(struct vmac_ring *r, void *elem)
+{
+	const void *slot = vmac_ring_peek(r);
+	if (!slot)
+		return 0;
+	memcpy(elem, slot, r->elem_size);
+	vmac_ring_release(r);
+	return 1;
 }
