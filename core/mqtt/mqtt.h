@@ -1,6 +1,6 @@
 /* The MQTT client of vmacd (docs/MQTT.md): the settings it is started with,
- * and start/stop. It runs on threads of its own (libmosquitto's network
- * thread and a publisher thread), reads the bus's published status copy
+ * and start/stop. It runs on threads of its own (a network thread per
+ * connection and a publisher thread), reads the bus's published status copy
  * (vmac_bus_status) and hands operator input in through the bus's request
  * slots (vmac_bus_request_input), exactly as the HTTP API does: the bus
  * thread never waits for it. */

@@ -1,7 +1,8 @@
-/* The MQTT connection and the publisher thread. libmosquitto's own network
- * thread (mosquitto_loop_start) connects, reconnects with exponential
- * backoff (1 s to 30 s) and keeps the session alive; its callbacks only set
- * flags and queue received messages. The publisher thread reads the bus's
+/* The MQTT connections and the publisher thread. Each connection has a
+ * network thread of ours (net_thread: libmosquitto's loop) that connects,
+ * reconnects with exponential backoff (1 s to 30 s) after any failure, TLS
+ * ones included, says why once per reason, and keeps the session alive; its
+ * callbacks only set flags and queue received messages. The publisher thread reads the bus's
  * status copy every MQTT_POLL_MS, publishes what changed, and handles the
  * received messages (commands into the bus's request slots). Neither ever
  * touches the bus thread except through vmac_bus_status and
@@ -111,18 +112,39 @@ static void spb_next_will(struct mqtt_conn *c)
 	free(ndeath);
 }
 
+/* A failure to connect or a lost connection, in an event: once per reason
+ * (c->reported), so a broker that stays away for a day says so once, and
+ * again only when the reason changes or after it was reached. Network thread. */
+static void say_failure(struct mqtt_conn *c, int rc)
+{
+	struct vmac_mqtt *m = c->m;
+	char why[sizeof(c->reported)];
+	snprintf(why, sizeof(why), "%s%s%s", rc == MOSQ_ERR_ERRNO ? strerror(errno) : mosquitto_strerror(rc),
+	         c->last_error[0] ? ": " : "", c->last_error);
+	if (atomic_exchange(&c->was_connected, 0))
+		mqtt_event(m, "", "lost the broker %s:%d%s (%s); reconnecting with backoff, control goes on", m->s.host,
+		           m->s.port, conn_what(c), why);
+	else if (strcmp(why, c->reported) != 0)
+		mqtt_event(m, "",
+		           "cannot connect to the broker %s:%d%s (%s); trying again with backoff, control goes on",
+		           m->s.host, m->s.port, conn_what(c), why);
+	snprintf(c->reported, sizeof(c->reported), "%s", why);
+}
+
 static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 {
 	struct mqtt_conn *c = obj;
 	struct vmac_mqtt *m = c->m;
 	(void)mosq;
-	if (rc != 0) { /* refused: bad credentials, not authorised; libmosquitto tries again */
-		mqtt_event(m, "", "the broker %s:%d refused the connection%s: %s", m->s.host, m->s.port, conn_what(c),
-		           mosquitto_connack_string(rc));
+	if (rc != 0) { /* refused (bad credentials, not authorised): said by on_disconnect, which follows */
+		snprintf(c->last_error, sizeof(c->last_error), "%s", mosquitto_connack_string(rc));
 		return;
 	}
 	if (c->index == MQTT_CONN_SPARKPLUG)
 		spb_next_will(c);
+	c->reported[0] = 0; /* the next failure is news again */
+	c->last_error[0] = 0;
+	atomic_fetch_add(&c->connacks, 1);
 	atomic_store(&c->outstanding, 0);
 	atomic_store(&c->connected, 1);
 	if (c->index == MQTT_CONN_MAIN && m->site)
@@ -133,6 +155,16 @@ static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 	pthread_mutex_unlock(&m->lock);
 }
 
+/* libmosquitto's own error lines (network thread): kept, for the event
+ * that says why a connection failed (a TLS handshake's reason is only here). */
+static void on_log(struct mosquitto *mosq, void *obj, int level, const char *text)
+{
+	struct mqtt_conn *c = obj;
+	(void)mosq;
+	if ((level & MOSQ_LOG_ERR) && text)
+		snprintf(c->last_error, sizeof(c->last_error), "%s", text);
+}
+
 static void on_disconnect(struct mosquitto *mosq, void *obj, int rc)
 {
 	struct mqtt_conn *c = obj;
@@ -141,9 +173,8 @@ static void on_disconnect(struct mosquitto *mosq, void *obj, int rc)
 	atomic_store(&c->connected, 0);
 	if (c->index == MQTT_CONN_MAIN && m->site)
 		vmac_site_set_connected(m->site, 0);
-	if (rc != 0 && !atomic_load(&m->stopping) && atomic_exchange(&c->was_connected, 0))
-		mqtt_event(m, "", "lost the broker %s:%d%s (%s); reconnecting with backoff, control goes on", m->s.host,
-		           m->s.port, conn_what(c), mosquitto_strerror(rc));
+	if (rc != 0 && !atomic_load(&m->stopping))
+		say_failure(c, rc);
 }
 
 static void on_publish(struct mosquitto *mosq, void *obj, int mid)
@@ -332,6 +363,60 @@ static int set_will(struct mqtt_conn *c, char *err, size_t errlen)
 	return 0;
 }
 
+/* Waits seconds, or less when a stop comes (network thread). */
+static void net_pause(struct vmac_mqtt *m, int seconds)
+{
+	struct timespec until;
+	clock_gettime(CLOCK_MONOTONIC, &until);
+	until.tv_sec += seconds;
+	pthread_mutex_lock(&m->lock);
+	while (!atomic_load(&m->stopping) && pthread_cond_timedwait(&m->net_wake, &m->lock, &until) != ETIMEDOUT)
+		;
+	pthread_mutex_unlock(&m->lock);
+}
+
+/* A connection's network thread: connect, run libmosquitto's loop, and after
+ * any failure say why (once per reason) and try again with backoff (1 s,
+ * doubling to 30 s; from 1 s again after a connection was made). Not
+ * mosquitto_loop_start's thread: that one gives up for good on what
+ * libmosquitto takes for fatal (a TLS handshake refused, the broker's
+ * certificate not trusted), silently, so a broker mended later would never be
+ * reached again. */
+static void *net_thread(void *arg)
+{
+	struct mqtt_conn *c = arg;
+	struct vmac_mqtt *m = c->m;
+	int backoff_s = 1, rc, connacks, first = 1;
+	for (;;) {
+		atomic_store(&c->in_connect, 1); /* before the check: a stop sees one or the other */
+		if (atomic_load(&m->stopping))
+			break;
+		c->last_error[0] = 0;
+		rc = first ? mosquitto_connect(c->mosq, m->s.host, m->s.port, (int)m->s.keepalive_s)
+		           : mosquitto_reconnect(c->mosq);
+		first = 0;
+		atomic_store(&c->in_connect, 0);
+		connacks = atomic_load(&c->connacks);
+		/* Until the connection fails; at a stop, until the DISCONNECT is out
+		 * (at most a second). */
+		while (rc == MOSQ_ERR_SUCCESS) {
+			if (atomic_load(&c->closing) &&
+			    (!mosquitto_want_write(c->mosq) || mqtt_now_s() > c->m->close_by))
+				break;
+			rc = mosquitto_loop(c->mosq, 250, 1);
+		}
+		if (atomic_load(&c->closing) || atomic_load(&m->stopping))
+			break;
+		if (atomic_load(&c->connacks) != connacks)
+			backoff_s = 1;
+		say_failure(c, rc);
+		net_pause(m, backoff_s);
+		backoff_s = backoff_s >= 16 ? 30 : backoff_s * 2;
+	}
+	atomic_store(&c->in_connect, 0);
+	return NULL;
+}
+
 /* Connection c made and started (its network thread connecting in the
  * background); 0, or -1 with err. */
 static int conn_start(struct vmac_mqtt *m, int index, char *err, size_t errlen)
@@ -347,10 +432,11 @@ static int conn_start(struct vmac_mqtt *m, int index, char *err, size_t errlen)
 		snprintf(err, errlen, "cannot make the MQTT client: %s", strerror(errno));
 		return -1;
 	}
+	mosquitto_threaded_set(c->mosq, true); /* our network thread, and publishes from the publisher thread */
 	mosquitto_int_option(c->mosq, MOSQ_OPT_PROTOCOL_VERSION, MQTT_PROTOCOL_V311);
-	mosquitto_reconnect_delay_set(c->mosq, 1, 30, true);
 	mosquitto_connect_callback_set(c->mosq, on_connect);
 	mosquitto_disconnect_callback_set(c->mosq, on_disconnect);
+	mosquitto_log_callback_set(c->mosq, on_log);
 	mosquitto_publish_callback_set(c->mosq, on_publish);
 	mosquitto_message_callback_set(c->mosq, on_message);
 	if (s->user[0] &&
@@ -360,23 +446,34 @@ static int conn_start(struct vmac_mqtt *m, int index, char *err, size_t errlen)
 	}
 	if (set_will(c, err, errlen) != 0 || tls_setup(m, c->mosq, err, errlen) != 0)
 		return -1;
-	rc = mosquitto_connect_async(c->mosq, s->host, s->port, (int)s->keepalive_s);
-	if (rc != MOSQ_ERR_SUCCESS) /* the broker down is no error: the network thread keeps trying */
-		mqtt_event(m, "", "the broker %s:%d is not reachable yet%s (%s); trying again with backoff", s->host,
-		           s->port, conn_what(c), rc == MOSQ_ERR_ERRNO ? strerror(errno) : mosquitto_strerror(rc));
-	if ((rc = mosquitto_loop_start(c->mosq)) != MOSQ_ERR_SUCCESS) {
-		snprintf(err, errlen, "cannot start the MQTT network thread: %s", mosquitto_strerror(rc));
+	if ((rc = pthread_create(&c->net, NULL, net_thread, c)) != 0) {
+		snprintf(err, errlen, "cannot start the MQTT network thread: %s", strerror(rc));
 		return -1;
 	}
+	pthread_setname_np(c->net, index == MQTT_CONN_SPARKPLUG ? "vmac-mqtt-spb" : "vmac-mqtt-net");
+	c->net_started = 1;
 	return 0;
 }
 
 static void conn_stop(struct mqtt_conn *c)
 {
+	struct vmac_mqtt *m = c->m;
 	if (!c->mosq)
 		return;
-	mosquitto_disconnect(c->mosq);
-	mosquitto_loop_stop(c->mosq, false);
+	if (c->net_started) {
+		m->close_by = mqtt_now_s() + 1.0;
+		mosquitto_disconnect(c->mosq); /* queued; the network thread writes it */
+		atomic_store(&c->closing, 1);
+		pthread_mutex_lock(&m->lock);
+		pthread_cond_broadcast(&m->net_wake);
+		pthread_mutex_unlock(&m->lock);
+		/* A connect to a broker that does not answer can block for minutes
+		 * (the kernel's SYN retries): not worth waiting for at a stop. */
+		if (atomic_load(&c->in_connect))
+			pthread_cancel(c->net);
+		pthread_join(c->net, NULL);
+		c->net_started = 0;
+	}
 	mosquitto_destroy(c->mosq);
 	c->mosq = NULL;
 }
@@ -403,6 +500,7 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 		pthread_condattr_init(&attr);
 		pthread_condattr_setclock(&attr, CLOCK_MONOTONIC);
 		pthread_cond_init(&m->wake, &attr);
+		pthread_cond_init(&m->net_wake, &attr);
 		pthread_condattr_destroy(&attr);
 	}
 	mosquitto_lib_init();
@@ -432,6 +530,7 @@ fail:
 	free(m->status.slot_load);
 	pthread_mutex_destroy(&m->lock);
 	pthread_cond_destroy(&m->wake);
+	pthread_cond_destroy(&m->net_wake);
 	free(m);
 	return NULL;
 }
@@ -471,5 +570,6 @@ void vmac_mqtt_stop(struct vmac_mqtt *m)
 	free(m->status.slot_load);
 	pthread_mutex_destroy(&m->lock);
 	pthread_cond_destroy(&m->wake);
+	pthread_cond_destroy(&m->net_wake);
 	free(m);
 }

@@ -1,6 +1,6 @@
 /* What the files of core/mqtt/ share. Who owns what:
  *   mqtt_settings.c  the mqtt_* settings, checked at start
- *   mqtt_client.c    the connection (libmosquitto, its network thread, reconnect with backoff, the last
+ *   mqtt_client.c    the connections (libmosquitto, a network thread each, reconnect with backoff, the last
  *                    will), the publisher thread and its loop, publishing with a bound on what waits
  *   mqtt_devices.c   the bus's status copy read every 250 ms: which machines are up or down, which values
  *                    changed (newest wins), handed to every profile
@@ -90,6 +90,18 @@ struct mqtt_conn {
 	atomic_int need_births;   /* a new connection: its profiles say everything again */
 	atomic_int outstanding;   /* published, not yet written (QoS 0) or acknowledged (QoS 1) */
 	atomic_int was_connected; /* said once per outage */
+	atomic_int connacks;      /* CONNACKs accepted so far */
+	/* The network thread (mqtt_client.c, net_thread). */
+	pthread_t net;
+	int net_started;
+	atomic_int in_connect; /* in mosquitto_connect: a stop cancels it rather than wait minutes */
+	atomic_int closing;    /* conn_stop: write what is queued (the DISCONNECT), then end */
+	/* Network thread only: libmosquitto's last error line (its log callback:
+	 * the OpenSSL reason of a refused handshake, or the broker's CONNACK) and
+	 * the failure last reported, so that a broker that stays unreachable is
+	 * said once per reason, not once per retry. */
+	char last_error[160];
+	char reported[200];
 };
 
 struct vmac_mqtt;
@@ -137,8 +149,10 @@ struct vmac_mqtt {
 	struct mqtt_conn conns[MQTT_CONNS];
 	pthread_t thread;
 	atomic_int stopping;
-	pthread_mutex_t lock; /* queue, nqueue, dropped; wake */
+	pthread_mutex_t lock; /* queue, nqueue, dropped; wake; net_wake */
 	pthread_cond_t wake;
+	pthread_cond_t net_wake; /* the network threads' backoff, cut short by a stop */
+	double close_by;         /* a stop: the network threads write what is queued until then */
 	struct mqtt_message queue[MQTT_QUEUE];
 	int nqueue;
 	unsigned long dropped;

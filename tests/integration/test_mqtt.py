@@ -58,13 +58,16 @@ def free_port():
 
 class Broker:
     """mosquitto on 127.0.0.1:port with a generated config, no persistence:
-    a restarted broker has forgotten every retained message."""
+    a restarted broker has forgotten every retained message. config: the
+    configuration's text instead of an open listener, a function of the port
+    (test_mqtt_tls.py)."""
 
-    def __init__(self, t):
+    def __init__(self, t, config=None):
         self.t, self.port, self.proc = t, free_port(), None
         self.conf = os.path.join(t.logdir, "mosquitto.conf")
         with open(self.conf, "w") as f:
-            f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % self.port)
+            f.write(config(self.port) if config else
+                    "listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % self.port)
         self.start()
 
     def start(self):
@@ -89,15 +92,22 @@ class Broker:
 
 class Hub:
     """A client subscribed to everything: the latest payload of each topic
-    (and whether it came retained), and every message in order."""
+    (and whether it came retained), and every message in order. With cafile
+    it connects over TLS, with user and password it logs in."""
 
-    def __init__(self, broker, name="hub"):
+    def __init__(self, broker, name="hub", cafile=None, user=None, password=None):
         mqtt = paho()
         self.cond = threading.Condition()
         self.latest, self.log = {}, []
+        self.subscribed = threading.Event()
         self.c = mqtt.Client(client_id="%s-%d" % (name, os.getpid()))
+        if cafile:
+            self.c.tls_set(ca_certs=cafile)
+        if user:
+            self.c.username_pw_set(user, password)
         self.c.on_message = self._on_message
         self.c.on_connect = lambda c, u, f, rc: c.subscribe("#", qos=1)
+        self.c.on_subscribe = lambda c, u, mid, granted: self.subscribed.set()
         self.c.connect("127.0.0.1", broker.port, keepalive=30)
         self.c.loop_start()
 

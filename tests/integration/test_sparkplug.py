@@ -5,22 +5,30 @@ here by a small protobuf reader and writer that use the specification's
 field numbers (Payload: timestamp 1, metrics 2, seq 3; Metric: name 1,
 timestamp 3, datatype 4, is_null 7, int 10, long 11, float 12, double 13,
 boolean 14, string 15), not vmacd's own .proto: a wrong field number there
-fails here. Covered: NBIRTH (bdSeq, Node Control/Rebirth, seq 0), a DBIRTH
+fails here. Every payload the node published is decoded again by Eclipse
+Tahu's JavaScript codec (npm sparkplug-payload, pinned in
+tests/mqtt/tahu/package-lock.json, run through tests/mqtt/tahu/codec.mjs)
+and must agree with the test's reader, and one DCMD is encoded by Tahu.
+Covered: NBIRTH (bdSeq, Node Control/Rebirth, seq 0), a DBIRTH
 per kitchen machine with its metrics and datatypes, DDATA when a light is
-switched, seq 0..255 across every message of the node, DCMD switching a
+switched, seq 0..255 across every message of the node and its wrap from
+255 to 0, DCMD switching a
 light (and refused, or ignored with commands off), NCMD Rebirth, malformed
 DCMDs refused while the host runs on, a dropped board's DDEATH, the NDEATH
 the broker publishes for a killed vmacd with the bdSeq of its NBIRTH, and
 bdSeq counting on across a restart. SKIPPED without mosquitto or paho."""
 
+import base64
 import json
 import os
+import shutil
 import signal
 import struct
+import subprocess
 import threading
 import time
 
-from harness import KITCHEN_NAMES, undisturbed
+from harness import KITCHEN_NAMES, Skip, undisturbed
 from test_mqtt import HOST_ID, PREFIX, Broker, paho
 
 GROUP = "plant"
@@ -139,6 +147,61 @@ def command(metrics):
     return body
 
 
+# ---- Eclipse Tahu's codec (tests/mqtt/tahu/codec.mjs) ----
+
+TAHU = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "mqtt", "tahu")
+TAHU_TYPES = {"Boolean": BOOLEAN, "Int64": INT64, "UInt64": UINT64, "Double": DOUBLE, "String": STRING}
+
+
+def tahu(requests):
+    """Tahu's answers to requests ({"decode": bytes} or {"encode": payload}),
+    in order: one node process for all of them."""
+    node = shutil.which("node")
+    if not node or not os.path.isdir(os.path.join(TAHU, "node_modules", "sparkplug-payload")):
+        raise Skip("Eclipse Tahu's codec is not installed (node and npm ci in tests/mqtt/tahu: "
+                   "tests/npm_ci.sh tests/mqtt/tahu 12, which make test-integration runs)")
+    lines = "".join(json.dumps({"decode": base64.b64encode(r["decode"]).decode()} if "decode" in r else r) + "\n"
+                    for r in requests)
+    p = subprocess.run([node, os.path.join(TAHU, "codec.mjs")], input=lines, capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 0, "Tahu's codec failed: %s" % p.stderr[-2000:]
+    out = [json.loads(line) for line in p.stdout.splitlines()]
+    assert len(out) == len(requests), "Tahu answered %d of %d requests: %s" % (len(out), len(requests), p.stderr)
+    return out
+
+
+def tahu_agrees(raw_messages):
+    """Every (topic, payload) decoded by Tahu, field by field as the test's
+    reader decoded it: seq, timestamp, and each metric's name, datatype and
+    value. Returns how many payloads and metrics were compared."""
+    answers = tahu([{"decode": data} for _, data in raw_messages])
+    metrics = 0
+    for (topic, data), a in zip(raw_messages, answers):
+        assert a["ok"], "Tahu cannot decode the %s payload %s: %s" % (topic, data.hex(), a["error"])
+        ours, theirs = decode(data), a["payload"]
+        assert ("seq" in ours) == ("seq" in theirs) and int(theirs.get("seq", -1)) == ours.get("seq", -1), \
+            "%s: seq %s by Tahu, %s by the test's reader" % (topic, theirs.get("seq"), ours.get("seq"))
+        assert int(theirs["timestamp"]) == ours["timestamp"], "%s: timestamps differ: %s" % (topic, theirs)
+        assert len(theirs.get("metrics", [])) == len(ours["metrics"]), "%s: metric counts differ" % topic
+        for m, t in zip(ours["metrics"], theirs.get("metrics", [])):
+            what = "%s metric %s" % (topic, m.get("name"))
+            assert t["name"] == m["name"] and TAHU_TYPES.get(t["type"]) == m["datatype"], \
+                "%s: Tahu reads name %r type %s, the test's reader %r datatype %s" % (
+                    what, t["name"], t["type"], m["name"], m["datatype"])
+            assert ("timestamp" in t) == ("timestamp" in m) and int(t.get("timestamp", -1)) == m.get("timestamp", -1), \
+                "%s: timestamp %s by Tahu, %s" % (what, t.get("timestamp"), m.get("timestamp"))
+            if m.get("is_null"):
+                assert t["value"] is None, "%s: null for the test's reader, %r for Tahu" % (what, t["value"])
+            elif m["datatype"] in (INT64, UINT64):
+                assert int(t["value"]) == m["value"], "%s: %s by Tahu, %s" % (what, t["value"], m["value"])
+            elif m["datatype"] == DOUBLE:
+                assert abs(t["value"] - m["value"]) <= 1e-9 * max(1.0, abs(m["value"])), (what, t, m)
+            else:
+                assert t["value"] == m["value"], "%s: %r by Tahu, %r by the test's reader" % (what, t["value"], m["value"])
+            metrics += 1
+    return len(answers), metrics
+
+
 # ---- a Sparkplug host application ----
 
 class SpHost:
@@ -199,6 +262,12 @@ class SpHost:
                     parts[2] not in ("NCMD", "DCMD"):
                 out.append((parts[2], parts[4] if len(parts) > 4 else None, decode(data), retain, qos))
         return out
+
+    def node_raw(self):
+        """(topic, payload bytes) of every message the node published."""
+        with self.cond:
+            return [(tp, data) for tp, data, _, _ in self.log if tp.startswith("spBv1.0/%s/" % GROUP) and
+                    tp.split("/")[3:4] == [HOST_ID] and tp.split("/")[2] not in ("NCMD", "DCMD")]
 
     def close(self):
         self.c.loop_stop()
@@ -294,6 +363,14 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         sp.publish(NODE % "DCMD" + "/washer-1", command([("program", STRING, "quick")]))
         sp.wait(NODE % "DDATA" + "/washer-1", has_value("program", "quick"), since=mark, what="program set by DCMD")
 
+        # A DCMD encoded by Eclipse Tahu's codec is obeyed like the test's own.
+        encoded = tahu([{"encode": {"timestamp": int(time.time() * 1000),
+                                    "metrics": [{"name": "dining", "type": "Boolean", "value": True}]}}])[0]
+        assert encoded["ok"], "Tahu cannot encode a DCMD: %s" % encoded
+        mark = sp.mark()
+        sp.publish(NODE % "DCMD" + "/lights-1", base64.b64decode(encoded["b64"]))
+        sp.wait(NODE % "DDATA" + "/lights-1", has_value("dining", True), since=mark, what="DDATA dining (Tahu's DCMD)")
+
         # NCMD Rebirth: NBIRTH (seq 0, the same bdSeq) and every DBIRTH again.
         mark = sp.mark()
         sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
@@ -325,6 +402,9 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         assert ndeath["by_name"]["bdSeq"]["value"] == bdseq["value"], (ndeath, bdseq)
         assert "seq" not in ndeath, ndeath
         assert [q for k, d, p, r, q in sp.node_messages() if k == "NDEATH"] == [1], "the NDEATH QoS"
+        # Every payload again through Eclipse Tahu's decoder: it reads what the test's reader read.
+        payloads, metrics = tahu_agrees(sp.node_raw())
+        assert payloads >= 10 and metrics >= 50, "only %d payloads and %d metrics compared" % (payloads, metrics)
     finally:
         sp.close()
 
@@ -368,5 +448,49 @@ def test_sparkplug_dropped_board_ddeath_commands_off_and_bdseq_across_restarts(t
         assert second["by_name"]["bdSeq"]["value"] == (first["by_name"]["bdSeq"]["value"] + 1) % 256, \
             (first["by_name"]["bdSeq"], second["by_name"]["bdSeq"])
         host2.status()
+    finally:
+        sp.close()
+
+
+COUNTER_LUA = """
+local driver = { name = "counter", version = "1.0.0", io = { do0 = "do0" },
+                 variables = { n = { update = "auto" } } }
+function driver.tick(dev, inputs)
+    dev.state.n = (dev.state.n or 0) + 1
+    dev.vars.n = dev.state.n
+end
+return driver
+"""
+
+
+def test_sparkplug_seq_wraps_from_255_to_0(t):
+    """Over 256 messages of one node: seq counts on from 255 to 0 (the NBIRTH
+    is the only 0 that is not a wrap), and Tahu reads every payload. Eight
+    boards whose driver counts its ticks change a value at every poll of the
+    MQTT client, so the node sends some 30 DDATA a second."""
+    broker = Broker(t)
+    sp = SpHost(broker)
+    settings = {"mqtt_url": broker.url, "mqtt_host_id": HOST_ID, "mqtt_keepalive_s": 5, "miss_limit": 3,
+                "mqtt_sparkplug": "true", "mqtt_sparkplug_group": GROUP}
+    host = t.host(drivers=t.drivers(counter=COUNTER_LUA), settings=settings)
+    t.board("generic", "count", driver="counter", count=8)
+    try:
+        _, since = sp.wait(NODE % "NBIRTH", what="NBIRTH")
+        deadline = time.monotonic() + 120
+        while len(sp.node_messages()) < 300:
+            assert time.monotonic() < deadline, "the node sent only %d messages in 120 s: %s" % (
+                len(sp.node_messages()), sorted({(k, d) for k, d, p, r, q in sp.node_messages()}))
+            time.sleep(0.2)
+        messages = sp.node_messages()
+        check_seq(messages)
+        seqs = [p["seq"] for k, d, p, r, q in messages]
+        wraps = [i for i in range(1, len(seqs)) if seqs[i - 1] == 255 and seqs[i] == 0]
+        assert wraps and messages[wraps[0]][0] != "NBIRTH", \
+            "no wrap from 255 to 0 in %d messages (seqs ...%s)" % (len(seqs), seqs[-20:])
+        assert sum(1 for k, d, p, r, q in messages if k == "DBIRTH") >= 8, "a DBIRTH per counting board"
+        payloads, metrics = tahu_agrees(sp.node_raw())
+        assert payloads >= 300, "Tahu compared only %d payloads" % payloads
+        names = [d["name"] for d in host.status()["devices"]]
+        undisturbed(names)(host.last)
     finally:
         sp.close()

@@ -33,12 +33,12 @@ def cpu_s(pid, tid=None):
 
 
 def mqtt_threads(pid):
-    """The publisher thread (vmac-mqtt) and libmosquitto's network thread
-    (the only other thread libmosquitto starts: it keeps vmacd's name)."""
+    """The publisher thread (vmac-mqtt) and the connections' network threads
+    (vmac-mqtt-net, and vmac-mqtt-spb for Sparkplug)."""
     tids = []
     for tid in os.listdir("/proc/%d/task" % pid):
         with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
-            if f.read().strip() == "vmac-mqtt":
+            if f.read().strip() in ("vmac-mqtt", "vmac-mqtt-net", "vmac-mqtt-spb"):
                 tids.append(int(tid))
     return tids
 

@@ -1,9 +1,9 @@
 #!/bin/sh
 # make test-ui: the web UI's tests in a real browser (tests/ui/ui_test.mjs, and
 # tests/ui/site_test.mjs for the Site page with a broker and a second host).
-# Installs what they need when it is missing: Debian's chromium (apt) and,
-# when there is no Node.js 20 or later, Debian's nodejs and npm; then
-# playwright-core from npm at the version tests/ui/package-lock.json pins.
+# Installs what they need when it is missing: Debian's chromium (apt), and
+# through tests/npm_ci.sh Node.js 20 or later and playwright-core at the
+# version tests/ui/package-lock.json pins.
 # When chromium or a Node.js new enough cannot be installed on this machine
 # the suite cannot run:
 #   - with CI=true in the environment that is a failure (exit 1, the reason
@@ -19,11 +19,6 @@ out=$2
 here=$(cd "$(dirname "$0")" && pwd)
 sudo=""
 [ "$(id -u)" = 0 ] || sudo=sudo
-
-node_ok() {
-	command -v node >/dev/null && command -v npm >/dev/null &&
-		[ "$(node -p 'process.versions.node.split(".")[0]')" -ge 20 ]
-}
 
 install() {
 	$sudo apt-get update -qq && $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@"
@@ -50,17 +45,13 @@ if [ ! -x /usr/bin/chromium ]; then
 	echo "test-ui: installing chromium"
 	install chromium || true
 fi
-if ! node_ok; then
-	echo "test-ui: installing nodejs and npm"
-	install nodejs npm || true
-fi
 if [ ! -x /usr/bin/chromium ]; then
 	cannot_run "Debian's chromium cannot be installed on this machine"
 fi
-if ! node_ok; then
-	cannot_run "playwright-core needs Node.js 20 or later, and this machine has $(node --version 2>/dev/null || echo none)"
+# Node.js 20 or later and playwright-core at the version package-lock.json pins.
+if ! why=$("$here/../npm_ci.sh" "$here" 20 2>&1 >/dev/null); then
+	cannot_run "$why"
 fi
-(cd "$here" && npm ci --no-audit --no-fund --loglevel=error)
 echo "== the web UI in headless chromium (screenshots in $out)"
 failed=0
 node "$here/ui_test.mjs" --bin "$bin" --out "$out" || failed=1
