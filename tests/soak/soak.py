@@ -256,6 +256,8 @@ class Soak:
         self.last_status = None
         self.store_on_tmpfs = False
         self.last_free = 0.0
+        self.smaps_warm = None
+        self.smaps_last = None
 
     def fail(self, msg):
         with self.lock:
@@ -501,6 +503,25 @@ class Soak:
                 self.healthy_bad.append(bad)
                 log("soak: " + bad)
 
+    def read_smaps(self):
+        """{mapping name: Rss KiB} of the host, anonymous mappings summed
+        under [anon] (malloc arenas and LuaJIT's chunks are not told apart)."""
+        out = {}
+        name = None
+        try:
+            with open("/proc/%d/smaps" % self.pid) as f:
+                for line in f:
+                    fields = line.split()
+                    if "-" in fields[0] and len(fields) >= 5 and not fields[0].endswith(":"):
+                        name = fields[5] if len(fields) > 5 else "[anon]"
+                        if name.startswith("/"):
+                            name = os.path.basename(name)
+                    elif fields[0] == "Rss:":
+                        out[name] = out.get(name, 0) + int(fields[1])
+        except OSError:
+            pass
+        return out
+
     def sample(self, elapsed_s):
         def status_field(name):
             with open("/proc/%d/status" % self.pid) as f:
@@ -515,17 +536,23 @@ class Soak:
             except OSError:
                 return 0
 
-        s = {"t": elapsed_s, "rss_kib": status_field("VmRSS"), "fds": len(os.listdir("/proc/%d/fd" % self.pid)),
+        s = {"t": elapsed_s, "rss_kib": status_field("VmRSS"), "anon_kib": status_field("RssAnon"),
+             "file_kib": status_field("RssFile"), "fds": len(os.listdir("/proc/%d/fd" % self.pid)),
              "threads": status_field("Threads"), "db": size("vmac.db"), "wal": size("vmac.db-wal")}
+        # Where the memory is, mapping by mapping, once after the warm-up and
+        # at the end (the report names the mappings that grew).
+        if not self.smaps_warm and elapsed_s >= WARMUP_FRACTION * self.seconds:
+            self.smaps_warm = self.read_smaps()
+        self.smaps_last = self.read_smaps()
         if self.store_on_tmpfs:
             st = os.statvfs(self.in_host_ns(self.state))
             s["free_kib"] = st.f_bavail * st.f_frsize // 1024
         st = self.last_status or {}
         s["malformed"] = st.get("counters", {}).get("malformed_frames", 0)
         self.samples.append(s)
-        log("  %6.0f s  rss %7d KiB  fds %4d  threads %3d  db %6d KiB  wal %6d KiB%s  malformed %8d  "
+        log("  %6.0f s  rss %7d KiB (anon %d)  fds %4d  threads %3d  db %6d KiB  wal %6d KiB%s  malformed %8d  "
             "restarts %4d  reloads %3d/%-3d  401s %5d" % (
-                elapsed_s, s["rss_kib"], s["fds"], s["threads"], s["db"] // 1024, s["wal"] // 1024,
+                elapsed_s, s["rss_kib"], s["anon_kib"], s["fds"], s["threads"], s["db"] // 1024, s["wal"] // 1024,
                 "  free %5d KiB" % s["free_kib"] if "free_kib" in s else "", s["malformed"],
                 self.counts["restarts"], self.counts["reloads_ok"],
                 self.counts["reloads_ok"] + self.counts["reloads_full"], self.counts["bad_401"]))
@@ -603,6 +630,11 @@ class Soak:
                 pct = (b - a) * 100.0 / a if a else 0.0
                 growth[key] = (a, b, pct)
                 log("  %-12s %10.0f %12.0f %+7.1f%%" % (label, a, b, pct))
+            if self.smaps_warm and self.smaps_last:
+                grew = sorted(((self.smaps_last.get(k, 0) - self.smaps_warm.get(k, 0), k)
+                               for k in set(self.smaps_warm) | set(self.smaps_last)), reverse=True)
+                log("  RSS by mapping, warm-up -> end: " + ", ".join(
+                    "%s %+d KiB" % (k, d) for d, k in grew if abs(d) >= 64) or "no mapping changed by 64 KiB")
             peak = max(self.samples, key=lambda s: s["rss_kib"])
             log("  peak rss %d KiB at %.0f s; fds %d..%d, threads %d..%d over the whole run" % (
                 peak["rss_kib"], peak["t"], min(s["fds"] for s in self.samples), max(s["fds"] for s in self.samples),
