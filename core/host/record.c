@@ -148,6 +148,7 @@ static void hand_over(struct vmac_bus *bus, struct machine *m, enum vmac_bus_msg
 	msg.generation = bus->dev[m->primary].generation;
 	r->when_ns = msg.time_ns;
 	snprintf(msg.device, sizeof(msg.device), "%s", r->machine);
+	vmac_rec_seal(r);
 	if (bus_post(bus, &msg) != 0)
 		vmac_recorder_free(r);
 }

@@ -3,9 +3,22 @@
 
 #include <stdlib.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #define MIN_TICKS 64
 #define MAX_TICKS (1u << 22) /* 4 Mi ticks (about 160 MiB): a bound on any setting */
+
+/* Zeroed memory aligned to a cache line; NULL when out of memory. */
+static void *zalloc_line(size_t size)
+{
+	void *p;
+	size = (size + 63) & ~(size_t)63;
+	if (!(p = aligned_alloc(64, size)))
+		return NULL;
+	return memset(p, 0, size);
+}
 
 struct vmac_recorder *vmac_recorder_new(double seconds, double period_s)
 {
@@ -14,10 +27,11 @@ struct vmac_recorder *vmac_recorder_new(double seconds, double period_s)
 	uint32_t cap = want >= MAX_TICKS ? MAX_TICKS : want < MIN_TICKS ? MIN_TICKS : (uint32_t)want;
 	if (!(seconds > 0))
 		return NULL;
-	r = calloc(1, sizeof(*r));
+	cap = (cap + VMAC_REC_STAGE - 1) / VMAC_REC_STAGE * VMAC_REC_STAGE; /* whole stages */
+	r = zalloc_line(sizeof(*r));
 	if (!r)
 		return NULL;
-	r->ticks = calloc(cap, sizeof(*r->ticks));
+	r->ticks = zalloc_line((size_t)cap * sizeof(*r->ticks));
 	if (!r->ticks) {
 		free(r);
 		return NULL;
@@ -35,18 +49,50 @@ void vmac_recorder_free(struct vmac_recorder *r)
 	free(r);
 }
 
+/* Two records to a cache line; the ring is 64-byte aligned and holds whole
+ * stages. */
+_Static_assert(sizeof(struct vmac_rec_tick) == 32, "a tick record is 32 bytes");
+
+/* A record goes to the stage, in the recorder, which the bus thread touches
+ * every tick anyway; every VMAC_REC_STAGE records the stage goes to the ring
+ * in whole cache lines with non-temporal stores. Written one at a time, each
+ * record cost the bus thread a cache miss and, on a VM, a page walk: the
+ * ring's line was last written recorder_s ago, and every machine's ring is
+ * on its own pages (docs/PERFORMANCE.md, "The flight recorder"). */
 void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
                    const struct vmac_outputs *out)
 {
-	struct vmac_rec_tick *t = &r->ticks[r->ticks_next];
+	uint32_t slot = r->ticks_next, k = slot % VMAC_REC_STAGE;
+	struct vmac_rec_tick *t = &r->stage[k];
 	if (++r->ticks_next == r->ticks_cap)
 		r->ticks_next = 0;
+	memset(t, 0, sizeof(*t));
 	t->t_ns = t_ns;
 	t->board = (uint8_t)board;
 	t->last = (uint8_t)last;
 	t->in = *in;
 	t->out = *out;
 	r->ticks_written++;
+	if (k == VMAC_REC_STAGE - 1) {
+		struct vmac_rec_tick *dst = &r->ticks[slot - k];
+#if defined(__SSE2__)
+		const __m128i *from = (const __m128i *)(const void *)r->stage;
+		__m128i *to = (__m128i *)(void *)dst;
+		size_t i;
+		for (i = 0; i < VMAC_REC_STAGE * sizeof(struct vmac_rec_tick) / 16; i++)
+			_mm_stream_si128(to + i, _mm_load_si128(from + i));
+#else
+		memcpy(dst, r->stage, sizeof(r->stage));
+#endif
+	}
+}
+
+void vmac_rec_seal(struct vmac_recorder *r)
+{
+	(void)r;
+#if defined(__SSE2__)
+	_mm_sfence(); /* the non-temporal stores visible before the recorder is handed over */
+#endif
 }
 
 struct vmac_rec_event *vmac_rec_event(struct vmac_recorder *r, int64_t t_ns, enum vmac_rec_kind kind)
@@ -66,8 +112,10 @@ uint32_t vmac_rec_nticks(const struct vmac_recorder *r)
 
 const struct vmac_rec_tick *vmac_rec_tick_at(const struct vmac_recorder *r, uint32_t i)
 {
-	uint64_t first = r->ticks_written - vmac_rec_nticks(r);
-	return &r->ticks[(first + i) % r->ticks_cap];
+	uint64_t n = r->ticks_written - vmac_rec_nticks(r) + i;
+	if (n >= r->ticks_written - r->ticks_written % VMAC_REC_STAGE)
+		return &r->stage[n % VMAC_REC_STAGE]; /* not in the ring yet */
+	return &r->ticks[n % r->ticks_cap];
 }
 
 uint32_t vmac_rec_nevents(const struct vmac_recorder *r)

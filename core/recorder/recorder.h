@@ -20,6 +20,7 @@
 #define VMAC_REC_TEXT_MAX 160
 #define VMAC_REC_EVENTS 128 /* events kept per machine (the newest) */
 #define VMAC_REC_BOARDS 8   /* VMAC_DRIVER_MAX_BOARDS */
+#define VMAC_REC_STAGE 16   /* tick records written to the ring at once (512 bytes) */
 
 enum vmac_rec_kind {
 	VMAC_REC_ATTACH = 1, /* the driver attached (name: its version) */
@@ -52,7 +53,10 @@ struct vmac_rec_event {
 };
 
 struct vmac_recorder {
-	struct vmac_rec_tick *ticks;
+	/* The newest ticks_written % VMAC_REC_STAGE tick records: they go to
+	 * the ring VMAC_REC_STAGE at a time (recorder.c, vmac_rec_tick). */
+	_Alignas(64) struct vmac_rec_tick stage[VMAC_REC_STAGE];
+	struct vmac_rec_tick *ticks; /* 64-byte aligned, ticks_cap a multiple of VMAC_REC_STAGE */
 	uint32_t ticks_cap;
 	uint64_t ticks_written; /* ever: the ring holds the last min(written, cap) */
 	uint32_t ticks_next;    /* the slot the next tick goes to (ticks_written % ticks_cap, kept: no division) */
@@ -84,6 +88,10 @@ void vmac_recorder_free(struct vmac_recorder *r);
 /* Bus thread, no allocation. */
 void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
                    const struct vmac_outputs *out);
+/* Bus thread, before the recorder goes to another thread: every record
+ * written so far is visible to it (the ring is written with non-temporal
+ * stores, which a lock's release does not order). */
+void vmac_rec_seal(struct vmac_recorder *r);
 /* An event: fills and returns the next slot (the caller sets the rest). */
 struct vmac_rec_event *vmac_rec_event(struct vmac_recorder *r, int64_t t_ns, enum vmac_rec_kind kind);
 

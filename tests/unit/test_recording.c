@@ -123,11 +123,36 @@ START_TEST(the_tick_ring_keeps_the_newest_in_order_and_says_it_is_incomplete)
 }
 END_TEST
 
+/* The ring is written a stage at a time (recorder.c): whatever the count,
+ * part of a stage or many wraps, the newest ticks read back in order, each
+ * the one written at its place. */
+START_TEST(every_count_of_ticks_reads_back_whether_staged_or_in_the_ring)
+{
+	uint32_t n, i, kept;
+	for (n = 0; n <= 3 * 64 + VMAC_REC_STAGE + 3; n++) {
+		struct vmac_recorder *r = recorded(n);
+		kept = n < r->ticks_cap ? n : r->ticks_cap;
+		ck_assert_msg(vmac_rec_nticks(r) == kept, "%u ticks written, %u kept, not %u", n, vmac_rec_nticks(r),
+		              kept);
+		for (i = 0; i < kept; i++) {
+			const struct vmac_rec_tick *t = vmac_rec_tick_at(r, i);
+			uint32_t want = n - kept + i;
+			ck_assert_msg(t->t_ns == (int64_t)(want + 1) * PERIOD_NS && t->in.encoder == (int32_t)want * -3,
+			              "after %u ticks, the %u-th kept is not tick %u (at %lld ns)", n, i, want,
+			              (long long)t->t_ns);
+		}
+		vmac_rec_seal(r);
+		vmac_recorder_free(r);
+	}
+}
+END_TEST
+
 START_TEST(a_recorder_is_sized_by_seconds_and_bounded)
 {
 	struct vmac_recorder *r = vmac_recorder_new(60, 0.1);
 	ck_assert_ptr_nonnull(r);
-	ck_assert_msg(r->ticks_cap == 600, "60 s at 100 ms hold %u ticks, not 600", r->ticks_cap);
+	ck_assert_msg(r->ticks_cap == 608, "60 s at 100 ms hold %u ticks, not 600 rounded up to whole stages of %d",
+	              r->ticks_cap, VMAC_REC_STAGE);
 	ck_assert_msg(vmac_rec_nticks(r) == 0 && vmac_rec_nevents(r) == 0 && r->attach_ns == -1,
 	              "a new recorder is not empty and unattached");
 	vmac_recorder_free(r);
@@ -485,6 +510,7 @@ int main(void)
 	int failed;
 	tcase_set_timeout(tc, 120);
 	tcase_add_test(tc, the_tick_ring_keeps_the_newest_in_order_and_says_it_is_incomplete);
+	tcase_add_test(tc, every_count_of_ticks_reads_back_whether_staged_or_in_the_ring);
 	tcase_add_test(tc, a_recorder_is_sized_by_seconds_and_bounded);
 	tcase_add_test(tc, the_event_ring_keeps_the_newest_128_in_order);
 	tcase_add_test(tc, everything_recorded_reads_back_as_it_was);
