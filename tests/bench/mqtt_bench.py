@@ -16,7 +16,7 @@ Per window (--seconds of steady state, a fresh vmacd each):
             its whole life, so each window is a fresh host measured from
             start: attach (under a second), SETTLE_S and the window
   cpu       vmacd's on-CPU time (schedstat, all threads) and utime+stime as
-            a share of a CPU, the MQTT publisher thread's part, Mosquitto's
+            a share of a CPU, the MQTT threads' part (publisher and network), Mosquitto's
   misses    counters.misses and misses_host over the window"""
 
 import os
@@ -82,13 +82,13 @@ class Subscriber:
 
 
 def mqtt_thread_seconds(pid):
-    """On-CPU seconds (schedstat) of the MQTT publisher thread (vmac-mqtt);
-    libmosquitto's network thread keeps vmacd's name and is not told apart."""
+    """On-CPU seconds (schedstat) of the MQTT threads: the publisher
+    (vmac-mqtt) and the connection's network thread (vmac-mqtt-net)."""
     total = 0
     for tid in os.listdir("/proc/%d/task" % pid):
         try:
             with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
-                if f.read().strip() != "vmac-mqtt":
+                if f.read().strip() not in ("vmac-mqtt", "vmac-mqtt-net", "vmac-mqtt-spb"):
                     continue
             with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
                 total += int(f.read().split()[0])
@@ -199,7 +199,7 @@ def mqtt(args):
                       "of a CPU (on-CPU; utime+stime %.1f%%)%s; %d misses (%d the host's), %d drops, %d running%s" % (
                           lat["p50"], lat["p99"], lat["p999"], lat["max"], r["uptime_s_at_end"],
                           100 * r["host_on_cpu_share"], 100 * r["host_cpu_share"],
-                          ", publisher thread %.1f%%, mosquitto %.1f%%" % (
+                          ", MQTT threads %.1f%%, mosquitto %.1f%%" % (
                               100 * r["publisher_cpu_share"], 100 * r["broker_cpu_share"]) if on else "",
                           r["misses"], r["misses_host"], r["drops"], r["running_at_end"],
                           "; %.0f value messages/s to the subscriber (every machine's first within %.1f s)" % (
@@ -251,7 +251,7 @@ def report_mqtt(r):
           "%d ms: %d/s, in bursts of one per machine, so a window holds %d or %d bursts)" % (
               r["messages_per_s_median"], r["boards"], MQTT_POLL_S * 1000, r["boards"] / MQTT_POLL_S,
               r["seconds"] / MQTT_POLL_S, r["seconds"] / MQTT_POLL_S + 1))
-    print("  vmacd's CPU (on-CPU, all threads): on %.1f%% of a CPU, %.2f us per device per tick (publisher thread "
+    print("  vmacd's CPU (on-CPU, all threads): on %.1f%% of a CPU, %.2f us per device per tick (MQTT threads "
           "%.1f%%); off %.1f%%, %.2f us; on/off %.2f (median of the rounds); mosquitto %.1f%% of a CPU" % (
               100 * med(ons, "host_on_cpu_share"), med(ons, "run_us_per_device_tick"),
               100 * med(ons, "publisher_cpu_share"), 100 * med(offs, "host_on_cpu_share"),
