@@ -322,14 +322,16 @@ $(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c $(DR
 FUZZ_BINS := $(FUZZ_TARGETS:%=$(BUILD)/fuzz/fuzz_%)
 
 # Run every target $(1) seconds; print each one's executions and the total.
+# The manifest target also starts from the shipped drivers (scripts/drivers).
 # A failure (crash, leak, timeout, out of memory) is printed with the
 # input's file, and fails the run after the other targets have had theirs.
 fuzz_all = total=0; failed=; \
 	for t in $(FUZZ_TARGETS); do \
 		mkdir -p $(BUILD)/fuzz/work-$$t; \
 		dict=; [ -f tests/fuzz/$$t.dict ] && dict=-dict=tests/fuzz/$$t.dict; \
+		seeds=; [ $$t = manifest ] && seeds=scripts/drivers; \
 		if $(BUILD)/fuzz/fuzz_$$t -max_total_time=$(1) -timeout=10 -artifact_prefix=$(BUILD)/fuzz/$$t- $$dict \
-			$(BUILD)/fuzz/work-$$t tests/fuzz/corpus-$$t > $(BUILD)/fuzz/$$t.log 2>&1; then \
+			$(BUILD)/fuzz/work-$$t tests/fuzz/corpus-$$t $$seeds > $(BUILD)/fuzz/$$t.log 2>&1; then \
 			runs=$$(sed -n 's/^Done \([0-9]*\) runs.*/\1/p' $(BUILD)/fuzz/$$t.log); \
 			printf '  %-9s %10s executions in %s s\n' $$t "$$runs" $(1); \
 			total=$$((total + $${runs:-0})); \

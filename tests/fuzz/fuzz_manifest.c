@@ -9,7 +9,8 @@
  * it (http_manifest_json, core/api/api_request.c), and then runs as a
  * machine: its boards added, attach, two ticks, and operator input of each
  * declared name, with outputs only on declared channels.
- * Seeds: tests/fuzz/corpus-manifest/ (the shipped drivers among them). */
+ * Seeds: tests/fuzz/corpus-manifest/ and the shipped drivers (scripts/drivers/,
+ * which make fuzz passes as a second corpus). */
 #include <jansson.h>
 #include <stdint.h>
 #include <stdio.h>
