@@ -280,20 +280,17 @@ struct offer {
 	const uint8_t *buf;
 	size_t len;
 	const struct vmac_checkpoint_info *info;
-	char why[160];
 };
 
-static int offer_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+/* [-0, +1] on success: the dev.state a checkpoint holds, decoded. */
+static int decode_state(lua_State *L, const uint8_t *buf, size_t len, char *err, size_t errlen)
 {
-	struct offer *o = args;
-	lua_State *L = d->L;
 	struct dec c;
 	memset(&c, 0, sizeof(c));
-	c.p = o->buf + HEADER;
-	c.end = o->buf + o->len;
+	c.p = buf + HEADER;
+	c.end = buf + len;
 	lua_newtable(L);
 	c.tables = lua_gettop(L);
-	lua_createtable(L, 0, 5); /* saved */
 	if (dec_value(&c, L, 0) != 0)
 		goto fail;
 	if (!lua_istable(L, -1)) {
@@ -304,6 +301,34 @@ static int offer_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		damaged(&c, "bytes after the end");
 		goto fail;
 	}
+	lua_remove(L, c.tables);
+	return 0;
+fail:
+	snprintf(err, errlen, "%s", c.why);
+	return -1;
+}
+
+/* A checkpoint's header: 0, or -1 with err. */
+static int check_header(const uint8_t *buf, size_t len, char *err, size_t errlen)
+{
+	if (len < HEADER || memcmp(buf, MAGIC, 4) != 0) {
+		snprintf(err, errlen, "checkpoint damaged: not a vmac checkpoint");
+		return -1;
+	}
+	if (buf[4] != FORMAT) {
+		snprintf(err, errlen, "checkpoint in format %u, this host reads %u", (unsigned)buf[4], FORMAT);
+		return -1;
+	}
+	return 0;
+}
+
+static int offer_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	struct offer *o = args;
+	lua_State *L = d->L;
+	lua_createtable(L, 0, 5); /* saved */
+	if (decode_state(L, o->buf, o->len, err, errlen) != 0)
+		return -1;
 	lua_setfield(L, -2, "state");
 	lua_pushnumber(L, o->info->age_s);
 	lua_setfield(L, -2, "age_s");
@@ -317,24 +342,40 @@ static int offer_work(struct vmac_driver *d, void *args, char *err, size_t errle
 		luaL_unref(L, LUA_REGISTRYINDEX, d->ref_saved);
 	d->ref_saved = luaL_ref(L, LUA_REGISTRYINDEX);
 	return 0;
-fail:
-	snprintf(err, errlen, "%s", c.why);
-	return -1;
 }
 
 int vmac_driver_offer_checkpoint(struct vmac_driver *d, const uint8_t *buf, size_t len,
                                  const struct vmac_checkpoint_info *info, char *err, size_t errlen)
 {
-	struct offer o = {buf, len, info, ""};
-	if (len < HEADER || memcmp(buf, MAGIC, 4) != 0) {
-		snprintf(err, errlen, "checkpoint damaged: not a vmac checkpoint");
+	struct offer o = {buf, len, info};
+	if (check_header(buf, len, err, errlen) != 0)
 		return -1;
-	}
-	if (buf[4] != FORMAT) {
-		snprintf(err, errlen, "checkpoint in format %u, this host reads %u", (unsigned)buf[4], FORMAT);
-		return -1;
-	}
 	return drv_protect(d, offer_work, &o, err, errlen);
+}
+
+/* ---- a replay resuming from a recorded dev.state ---- */
+
+static int resume_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	const struct offer *o = args;
+	lua_State *L = d->L;
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_migrate);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	if (decode_state(L, o->buf, o->len, err, errlen) != 0)
+		return -1;
+	return drv_guarded_call(d, 2, 0, 1, err, errlen);
+}
+
+int vmac_driver_resume_from(struct vmac_driver *d, const uint8_t *buf, size_t len, double time_s, char *err,
+                            size_t errlen)
+{
+	struct offer o = {buf, len, NULL};
+	if (check_header(buf, len, err, errlen) != 0)
+		return -1;
+	if (d->ref_migrate == LUA_NOREF)
+		return 1;
+	d->now_s = time_s;
+	return drv_protect(d, resume_work, &o, err, errlen);
 }
 
 /* ---- recover(dev, saved) ---- */

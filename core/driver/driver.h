@@ -210,6 +210,13 @@ int vmac_driver_offer_checkpoint(struct vmac_driver *d, const uint8_t *buf, size
 enum { VMAC_RECOVER_NONE = 0, VMAC_RECOVER_UNUSED = 1, VMAC_RECOVER_DONE = 2 };
 int vmac_driver_recover(struct vmac_driver *d, double time_s, char *err, size_t errlen);
 
+/* A replay resuming mid-life (docs/RECORDING.md, "Replay"), after attach:
+ * the dev.state of checkpoint buf handed to migrate(dev, state), as a hot
+ * reload hands the old instance's. 0; 1 when the driver has no migrate
+ * (nothing done); -1 with err (a damaged checkpoint, or migrate failed). */
+int vmac_driver_resume_from(struct vmac_driver *d, const uint8_t *buf, size_t len, double time_s, char *err,
+                            size_t errlen);
+
 /* detach(dev, reason) if the driver has one; errors are ignored (the
  * machine is going away). */
 void vmac_driver_detach(struct vmac_driver *d, const char *reason);

@@ -211,6 +211,9 @@ void bus_end_probations(struct vmac_bus *bus, int64_t now);
 /* record.c: the flight recorder's bus side (no allocation) */
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
 void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
+/* A checkpoint of m's dev.state just encoded (now: CLOCK_MONOTONIC, as the
+ * tick's), offered to its recorder. */
+void bus_rec_state(struct vmac_bus *bus, struct machine *m, int64_t now, const uint8_t *data, size_t len);
 /* Operator input, recorded before the driver's input() runs (what that
  * does, a level change, is recorded after it, in time order); its outcome
  * is filled in after (n: what bus_rec_input returned). */

@@ -49,6 +49,7 @@ static int checkpoint_now(struct vmac_bus *bus, struct machine *m, int64_t now)
 	snprintf(cp->version, sizeof(cp->version), "%s", vmac_driver_version(m->drv));
 	cp->time_ns = now;
 	cp->len = len;
+	bus_rec_state(bus, m, now, cp->data, len); /* before the commit: the main thread may take the slot */
 	vmac_ring_commit(&bus->checkpoints);
 	bus->counters.checkpoints++;
 	if (bus->wakeup)

@@ -65,6 +65,12 @@ void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t)
 	}
 }
 
+void bus_rec_state(struct vmac_bus *bus, struct machine *m, int64_t now, const uint8_t *data, size_t len)
+{
+	if (m->rec)
+		vmac_rec_state(m->rec, now - bus->start_ns, data, len);
+}
+
 uint64_t bus_rec_input(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const char *name,
                        const struct vmac_value *v)
 {

@@ -38,6 +38,12 @@ struct vmac_recorder *vmac_recorder_new(double seconds, double period_s)
 	}
 	r->ticks_cap = cap;
 	r->attach_ns = -1;
+	r->span_ns = (int64_t)((double)cap * period_s * 1e9);
+	for (int i = 0; i < VMAC_REC_STATES; i++)
+		if (!(r->states[i].data = malloc(VMAC_REC_STATE_MAX))) {
+			vmac_recorder_free(r);
+			return NULL;
+		}
 	return r;
 }
 
@@ -45,6 +51,8 @@ void vmac_recorder_free(struct vmac_recorder *r)
 {
 	if (!r)
 		return;
+	for (int i = 0; i < VMAC_REC_STATES; i++)
+		free(r->states[i].data);
 	free(r->ticks);
 	free(r);
 }
@@ -85,6 +93,32 @@ void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, c
 		memcpy(dst, r->stage, sizeof(r->stage));
 #endif
 	}
+}
+
+void vmac_rec_state(struct vmac_recorder *r, int64_t t_ns, const uint8_t *data, size_t len)
+{
+	const struct vmac_rec_state *newest = &r->states[(r->states_next + VMAC_REC_STATES - 1) % VMAC_REC_STATES];
+	struct vmac_rec_state *s = &r->states[r->states_next];
+	if (len == 0 || len > VMAC_REC_STATE_MAX || (newest->len && t_ns - newest->t_ns < r->span_ns / 2))
+		return;
+	memcpy(s->data, data, len);
+	s->len = (uint32_t)len;
+	s->t_ns = t_ns;
+	s->at = r->ticks_written;
+	r->states_next = (r->states_next + 1) % VMAC_REC_STATES;
+}
+
+const struct vmac_rec_state *vmac_rec_state_base(const struct vmac_recorder *r)
+{
+	uint64_t first = r->ticks_written - vmac_rec_nticks(r);
+	const struct vmac_rec_state *best = NULL;
+	int i;
+	for (i = 0; i < VMAC_REC_STATES; i++) {
+		const struct vmac_rec_state *s = &r->states[i];
+		if (s->len && s->at >= first && s->at < r->ticks_written && (!best || s->at < best->at))
+			best = s;
+	}
+	return best;
 }
 
 void vmac_rec_seal(struct vmac_recorder *r)

@@ -18,9 +18,11 @@
 
 #define VMAC_REC_NAME_MAX 31
 #define VMAC_REC_TEXT_MAX 160
-#define VMAC_REC_EVENTS 128 /* events kept per machine (the newest) */
-#define VMAC_REC_BOARDS 8   /* VMAC_DRIVER_MAX_BOARDS */
-#define VMAC_REC_STAGE 16   /* tick records written to the ring at once (512 bytes) */
+#define VMAC_REC_EVENTS 128     /* events kept per machine (the newest) */
+#define VMAC_REC_BOARDS 8       /* VMAC_DRIVER_MAX_BOARDS */
+#define VMAC_REC_STAGE 16       /* tick records written to the ring at once (512 bytes) */
+#define VMAC_REC_STATES 3       /* dev.state snapshots kept (recorder.c, vmac_rec_state) */
+#define VMAC_REC_STATE_MAX 4096 /* bytes of one; a larger dev.state is not kept */
 
 enum vmac_rec_kind {
 	VMAC_REC_ATTACH = 1, /* the driver attached (name: its version) */
@@ -78,6 +80,17 @@ struct vmac_recorder {
 		uint32_t minor;
 	} boards[VMAC_REC_BOARDS];
 	int64_t when_ns; /* CLOCK_MONOTONIC when captured */
+	/* dev.state as checkpoints encoded it (core/driver/checkpoint.c), at
+	 * most every half of the ring's span, so that a recording whose ring has
+	 * wrapped can replay from the oldest one it still covers. */
+	struct vmac_rec_state {
+		int64_t t_ns;  /* bus time of the machine's tick it followed */
+		uint64_t at;   /* ticks_written then: the state is before record `at` */
+		uint32_t len;  /* 0: empty */
+		uint8_t *data; /* VMAC_REC_STATE_MAX bytes, allocated with the recorder */
+	} states[VMAC_REC_STATES];
+	uint32_t states_next;
+	int64_t span_ns; /* what the ring holds: ticks_cap x the period */
 };
 
 /* Main thread: a recorder holding seconds of ticks at period_s (at least
@@ -88,6 +101,13 @@ void vmac_recorder_free(struct vmac_recorder *r);
 /* Bus thread, no allocation. */
 void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
                    const struct vmac_outputs *out);
+/* Bus thread, after a checkpoint of the machine's dev.state (data, len bytes)
+ * at bus time t_ns: kept when half the ring's span has passed since the
+ * newest kept (or none is) and it fits; no allocation. */
+void vmac_rec_state(struct vmac_recorder *r, int64_t t_ns, const uint8_t *data, size_t len);
+/* The oldest state kept whose tick is still in the ring (NULL: none). */
+const struct vmac_rec_state *vmac_rec_state_base(const struct vmac_recorder *r);
+
 /* Bus thread, before the recorder goes to another thread: every record
  * written so far is visible to it (the ring is written with non-temporal
  * stores, which a lock's release does not order). */

@@ -131,6 +131,17 @@ char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_
 	              complete, "boards", boards);
 	if (h && src)
 		json_object_set_new(h, "source", json_stringn(src, srclen)); /* NULL (left out) when not UTF-8 */
+	if (h && !complete) { /* where a replay can resume: dev.state after a tick the ring still holds */
+		const struct vmac_rec_state *st = vmac_rec_state_base(r);
+		char *x = st ? malloc(2 * (size_t)st->len + 1) : NULL;
+		if (x) {
+			sodium_bin2hex(x, 2 * (size_t)st->len + 1, st->data, st->len);
+			json_object_set_new(h, "state", json_pack("{s:I,s:s}", "t", (json_int_t)st->t_ns, "data", x));
+			free(x);
+		} else if (st) {
+			o.failed = 1;
+		}
+	}
 	put_line(&o, h);
 	while (ti < nt || ei < ne) {
 		const struct vmac_rec_tick *t = ti < nt ? vmac_rec_tick_at(r, ti) : NULL;
@@ -299,6 +310,16 @@ int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, 
 			FAIL("out of memory");
 		memcpy(r->source, json_string_value(json_object_get(j, "source")), r->source_len + 1);
 	}
+	if (json_object_get(j, "state")) {
+		json_t *st = json_object_get(j, "state");
+		const char *x = json_string_value(json_object_get(st, "data"));
+		size_t xl = x ? strlen(x) : 0;
+		if (!json_is_integer(json_object_get(st, "t")) || !x || xl == 0 || xl % 2 ||
+		    xl / 2 > VMAC_REC_STATE_MAX || !(r->state = malloc(xl / 2)) ||
+		    sodium_hex2bin(r->state, xl / 2, x, xl, NULL, &r->state_len, NULL) != 0 || r->state_len != xl / 2)
+			FAIL("recording damaged: its header's state is not a time and hex data");
+		r->state_t_ns = json_integer_value(json_object_get(st, "t"));
+	}
 	json_decref(j);
 	j = NULL;
 	for (p = nl + 1; p < end; p = nl + 1) {
@@ -371,6 +392,8 @@ void vmac_recording_free(struct vmac_recording *r)
 {
 	free(r->source);
 	free(r->lines);
+	free(r->state);
+	r->state = NULL;
 	r->source = NULL;
 	r->lines = NULL;
 	r->nlines = 0;

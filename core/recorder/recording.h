@@ -40,6 +40,11 @@ struct vmac_recording {
 	} boards[VMAC_REC_BOARDS];
 	char *source; /* malloc'd, NUL-terminated; NULL when the recording has none */
 	size_t source_len;
+	/* Not complete: dev.state after the machine's tick at state_t_ns, as a
+	 * checkpoint encodes it (malloc'd; NULL when the recording has none). */
+	uint8_t *state;
+	size_t state_len;
+	int64_t state_t_ns;
 	struct vmac_recording_line *lines; /* malloc'd */
 	size_t nlines, nticks, nevents;
 };

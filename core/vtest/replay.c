@@ -78,8 +78,8 @@ int vt_replay(const char *text, size_t len, const struct vmac_config *base, int 
 	struct vmac_config cfg = *base;
 	struct vmac_driver *d = NULL;
 	char err[VMAC_DRIVER_ERR_MAX], msg[640], key[128], val[96];
-	size_t i, ticks = 0, inputs = 0;
-	int b, rc = 1, attached = 0;
+	size_t i, first = 0, ticks = 0, inputs = 0;
+	int b, rc = 1, attached = 0, resume = 0;
 
 	report[0] = 0;
 	if (vmac_recording_read(text, len, &rec, err, sizeof(err)) != 0) {
@@ -108,16 +108,32 @@ int vt_replay(const char *text, size_t len, const struct vmac_config *base, int 
 	}
 	say(&r, "replay of %s (driver %s %s, recorded: %s) against %s %s\n", rec.machine, rec.driver, rec.version,
 	    rec.reason, vmac_driver_name(d), use_recorded && rec.source ? "as recorded" : vmac_driver_version(d));
-	if (!rec.complete)
-		say(&r,
-		    "  the recording starts %.3f s after attach: the driver starts afresh at its first tick, so what "
-		    "it did before is not known\n",
-		    rec.nlines ? (double)(rec.lines[0].t_ns - rec.attach_ns) / 1e9 : 0.0);
 	for (b = 0; b < rec.nboards; b++)
 		vmac_driver_add_board(d, rec.boards[b].minor, rec.boards[b].name);
 	vmac_driver_set_level_now(d, rec.level);
+	/* A recording that starts after attach resumes from the dev.state it
+	 * holds (the oldest its ring still covered), as a hot reload would:
+	 * what came before is skipped, the levels it set kept. */
+	if (!rec.complete && rec.state) {
+		for (; first < rec.nlines && rec.lines[first].t_ns <= rec.state_t_ns; first++)
+			if (!rec.lines[first].is_tick && rec.lines[first].ev.kind == VMAC_REC_LEVEL)
+				vmac_driver_set_level_now(d, (unsigned)rec.lines[first].ev.code);
+		resume = first < rec.nlines;
+	}
+	if (!rec.complete && resume)
+		say(&r,
+		    "  the recording starts %.3f s after attach: the driver resumes from its dev.state at %.3f s "
+		    "(its migrate(dev, state), as at a hot reload); %zu records before it are skipped\n",
+		    rec.nlines ? (double)(rec.lines[0].t_ns - rec.attach_ns) / 1e9 : 0.0,
+		    (double)(rec.state_t_ns - rec.attach_ns) / 1e9, first);
+	else if (!rec.complete)
+		say(&r,
+		    "  the recording starts %.3f s after attach%s: the driver starts afresh at its first tick, so what "
+		    "it did before is not known\n",
+		    rec.nlines ? (double)(rec.lines[0].t_ns - rec.attach_ns) / 1e9 : 0.0,
+		    rec.state ? "" : " and holds no dev.state to resume from");
 	rc = 0;
-	for (i = 0; i < rec.nlines && rc == 0; i++) {
+	for (i = first; i < rec.nlines && rc == 0; i++) {
 		const struct vmac_recording_line *l = &rec.lines[i];
 		double t = (double)l->t_ns / 1e9;
 		if (!attached && (l->is_tick || l->ev.kind == VMAC_REC_ATTACH || l->ev.kind == VMAC_REC_INPUT)) {
@@ -127,6 +143,17 @@ int vt_replay(const char *text, size_t len, const struct vmac_config *base, int 
 				say(&r, "  attach failed: %s\n", err);
 				rc = 1;
 				break;
+			}
+			if (resume) {
+				int got = vmac_driver_resume_from(d, rec.state, rec.state_len, at, err, sizeof(err));
+				if (got < 0) {
+					say(&r, "  resuming from the recorded dev.state failed: %s\n", err);
+					rc = 1;
+					break;
+				}
+				if (got == 1)
+					say(&r, "  (%s has no migrate(dev, state): it starts afresh instead)\n",
+					    vmac_driver_name(d));
 			}
 		}
 		if (!l->is_tick) {

@@ -393,3 +393,64 @@ def test_recordings_are_bounded(t):
         assert http_status(host, "/api/recordings/%d" % gone, read) == 404, "recording %d was not removed" % gone
     for rec_id in kept[2:]:
         assert http_status(host, "/api/recordings/%d" % rec_id, read) == 200, "recording %d is gone" % rec_id
+
+
+# A driver whose outputs depend on what it counted: from the 80th tick on,
+# the lamp is on every fifth tick of the count in dev.state (so a version
+# that starts counting afresh cannot match a recording taken later).
+COUNTING = """-- counting: the lamp on every fifth tick from the 80th
+local driver = { name = "counting", version = "%(version)s", io = { lamp = "do0" } }
+function driver.attach(dev)
+	dev.state.n = 0
+end
+function driver.tick(dev, inputs)
+	dev.state.n = dev.state.n + 1
+	dev.out.lamp = dev.state.n >= 80 and dev.state.n %% 5 == 0
+end
+%(migrate)s
+return driver
+"""
+COUNTING_MIGRATES = COUNTING % {"version": "1.0.0", "migrate": "function driver.migrate(dev, old)\n"
+                                "\tdev.state.n = old.n or 0\nend"}
+COUNTING_FORGETS = COUNTING % {"version": "1.0.1", "migrate": ""}
+
+
+def test_a_wrapped_recording_replays_from_the_state_it_holds(t):
+    """A ring far shorter than the machine's life (recorder_s 2: 64 ticks at
+    100 ms) with checkpoints every second: `vmac record` captures a
+    recording that starts mid-life and carries the driver's dev.state from
+    the oldest checkpoint the ring still covers; the replay resumes from it
+    through migrate and reproduces every output after it. The same
+    recording against a version without migrate starts afresh and differs."""
+    drivers = driver_dir(t, "drivers", counting=COUNTING_MIGRATES)
+    host = t.host(drivers=drivers, settings={"recorder_s": 2, "checkpoint_s": 1})
+    t.board("generic", "count-1", driver="counting")
+    host.wait_running(["count-1"])
+    host.wait_status(lambda s: host.device("count-1", s)["served"] >= 150, 60, "count-1 served 150 ticks")
+    since = host.last_event_seq()
+    code, body = http_post(host, "/api/devices/count-1/record", {}, t.token)
+    assert code == 200, "POST /api/devices/count-1/record: %d %s" % (code, body)
+    rec_event = host.wait_event("recording", "count-1", after_seq=since)
+    path = fetch(t, host, recording_id(rec_event), "counting.rec")
+    header, records, _ = parse(path)
+    ticks = [r for r in records if "tick" in r]
+    assert header["complete"] is False, "a 64-tick ring after 150 ticks says it holds every tick since attach"
+    assert "state" in header, "a wrapped recording carries no dev.state: %r" % sorted(header)
+    after = [r for r in ticks if r["t"] > header["state"]["t"]]
+    assert ticks[0]["t"] <= header["state"]["t"] and len(after) >= 20, (
+        "the state (at %d ns) is not inside the recording's ticks (%d .. %d ns), %d ticks after it" % (
+            header["state"]["t"], ticks[0]["t"], ticks[-1]["t"], len(after)))
+    lamp = [r["tick"][0]["out"][0] & 1 for r in after]
+    assert 0 < sum(lamp) < len(lamp), "the lamp never changes in the ticks replayed: %r" % lamp
+
+    rc, out, err = vmac(t, "test", "--replay", path)
+    assert rc == 0, "the wrapped recording does not replay from its state (exit %d):\n%s%s" % (rc, out, err)
+    assert "resumes from its dev.state" in out, "the replay does not say it resumes from the state: %r" % out
+    m = re.search(r"(\d+) ticks and \d+ operator inputs replayed: every output as recorded", out)
+    assert m and int(m.group(1)) == len(after), "the replay ran %s ticks, %d follow the state: %r" % (
+        m and m.group(1), len(after), out)
+
+    other = driver_dir(t, "forgets", counting=COUNTING_FORGETS)
+    rc, out, err = vmac(t, "test", "--replay", path, "--drivers", other)
+    assert rc == 1 and "has no migrate" in out and "DIFFERS at tick" in out, (
+        "a version without migrate replayed the wrapped recording as recorded (exit %d):\n%s%s" % (rc, out, err))

@@ -147,6 +147,56 @@ START_TEST(every_count_of_ticks_reads_back_whether_staged_or_in_the_ring)
 }
 END_TEST
 
+/* dev.state snapshots (vmac_rec_state): kept at most every half of the
+ * ring's span; a recording whose ring wrapped carries the oldest one the
+ * ring still covers, a complete one none. */
+START_TEST(a_wrapped_recording_carries_the_oldest_state_its_ring_covers)
+{
+	static const uint8_t a[] = "state-a", b[] = "state-b", c[] = "state-c";
+	struct vmac_recorder *r = recorded(0); /* 64 ticks at 100 ms: a span of 6.4 s */
+	struct vmac_recording rec;
+	size_t len;
+	char *text;
+	uint32_t i;
+
+	ck_assert_msg(vmac_rec_state_base(r) == NULL, "a new recorder has a state");
+	for (i = 0; i < 200; i++) {
+		struct vmac_inputs in = inputs_of(i);
+		struct vmac_outputs out = outputs_of(i);
+		int64_t t = (int64_t)(i + 1) * PERIOD_NS;
+		vmac_rec_tick(r, t, 0, 1, &in, &out);
+		if (i == 100)
+			vmac_rec_state(r, t, a, sizeof(a));
+		if (i == 110) /* 1 s later: within half the span of a, not kept */
+			vmac_rec_state(r, t, c, sizeof(c));
+		if (i == 140) /* 4 s later: kept */
+			vmac_rec_state(r, t, b, sizeof(b));
+	}
+	/* The ring holds ticks 136..199: a (after tick 100) is out of it, b (after 140) is the base. */
+	ck_assert_msg(vmac_rec_state_base(r) && vmac_rec_state_base(r)->len == sizeof(b) &&
+	                  memcmp(vmac_rec_state_base(r)->data, b, sizeof(b)) == 0,
+	              "the base state is not the newest the ring still covers");
+	text = round_trip(r, NULL, &rec, &len);
+	ck_assert_msg(!rec.complete && rec.state && rec.state_len == sizeof(b) && memcmp(rec.state, b, sizeof(b)) == 0,
+	              "the recording does not carry state b");
+	ck_assert_msg(rec.state_t_ns == 141 * PERIOD_NS, "the state is at %lld ns, not after tick 140",
+	              (long long)rec.state_t_ns);
+	vmac_recording_free(&rec);
+	free(text);
+	vmac_rec_state(r, 200 * PERIOD_NS, (const uint8_t *)"", 0); /* empty: not kept */
+	ck_assert_msg(vmac_rec_state_base(r)->len == sizeof(b), "an empty state was kept");
+	vmac_recorder_free(r);
+
+	r = recorded(10); /* complete: replay starts at attach, no state needed */
+	vmac_rec_state(r, 10 * PERIOD_NS, a, sizeof(a));
+	text = round_trip(r, NULL, &rec, &len);
+	ck_assert_msg(rec.complete && rec.state == NULL, "a complete recording carries a state");
+	vmac_recording_free(&rec);
+	free(text);
+	vmac_recorder_free(r);
+}
+END_TEST
+
 START_TEST(a_recorder_is_sized_by_seconds_and_bounded)
 {
 	struct vmac_recorder *r = vmac_recorder_new(60, 0.1);
@@ -512,6 +562,7 @@ int main(void)
 	tcase_add_test(tc, the_tick_ring_keeps_the_newest_in_order_and_says_it_is_incomplete);
 	tcase_add_test(tc, every_count_of_ticks_reads_back_whether_staged_or_in_the_ring);
 	tcase_add_test(tc, a_recorder_is_sized_by_seconds_and_bounded);
+	tcase_add_test(tc, a_wrapped_recording_carries_the_oldest_state_its_ring_covers);
 	tcase_add_test(tc, the_event_ring_keeps_the_newest_128_in_order);
 	tcase_add_test(tc, everything_recorded_reads_back_as_it_was);
 	tcase_add_test(tc, every_truncation_is_refused_as_truncated);
