@@ -1,6 +1,9 @@
 /* The cost of one driver tick through the driver API (vmac_driver_tick):
  * a small driver reading an analog and a digital input and setting two
- * outputs and a variable, N times. Prints microseconds per tick; compare
+ * outputs and a variable, N times. Prints microseconds per tick, and then
+ * what loading the same driver into a fresh sandbox and freeing it costs
+ * (vmac_driver_load_source + vmac_driver_free, N / 100 times: what every
+ * input of a fuzz target that runs Lua pays, docs/RELIABILITY.md); compare
  * two builds of core/driver/ in the same run to see what a change costs:
  *
  *   make build/bench/driver_tick && build/bench/driver_tick 300000 */
@@ -50,5 +53,18 @@ int main(int argc, char **argv)
 	}
 	clock_gettime(CLOCK_MONOTONIC, &b);
 	printf("%.3f us/tick\n", ((b.tv_sec - a.tv_sec) * 1e9 + (b.tv_nsec - a.tv_nsec)) / n / 1000.0);
+	vmac_driver_free(d);
+	n = n / 100 > 0 ? n / 100 : 1;
+	clock_gettime(CLOCK_MONOTONIC, &a);
+	for (int i = 0; i < n; i++) {
+		if (vmac_driver_load_source("t.lua", src, strlen(src), &l, &d, err, sizeof err)) {
+			puts(err);
+			return 1;
+		}
+		vmac_driver_free(d);
+	}
+	clock_gettime(CLOCK_MONOTONIC, &b);
+	printf("%.1f us per load and free of a sandboxed driver\n",
+	       ((b.tv_sec - a.tv_sec) * 1e9 + (b.tv_nsec - a.tv_nsec)) / n / 1000.0);
 	return 0;
 }
