@@ -13,6 +13,7 @@
 #include <arpa/inet.h>
 #include <errno.h>
 #include <ev.h>
+#include <fcntl.h>
 #include <sched.h>
 #include <semaphore.h>
 #include <stdarg.h>
@@ -546,40 +547,14 @@ static void on_socket(struct ev_loop *loop, ev_io *w, int revents)
 	drain(bus);
 }
 
-static void try_realtime(struct vmac_bus *bus)
-{
-	struct sched_param sp;
-	const char *what = NULL;
-	int rc;
-	if (!bus->cfg.realtime)
-		return;
-	memset(&sp, 0, sizeof(sp));
-	sp.sched_priority = 50;
-	rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
-	if (rc != 0)
-		what = "SCHED_FIFO";
-	else
-		bus->realtime = 1;
-#if !defined(__SANITIZE_ADDRESS__)
-	if (!what && mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
-		rc = errno;
-		what = "mlockall";
-	}
-#endif
-	if (what)
-		bus_event(bus, NULL, "warning",
-		          "real-time setup refused (%s: %s); running with normal scheduling, "
-		          "tick lateness will be higher",
-		          what, strerror(rc));
-}
-
 static void *bus_main(void *arg)
 {
 	struct vmac_bus *bus = arg;
 	struct itimerspec its;
 	struct timespec start;
 
-	try_realtime(bus);
+	bus_try_realtime(bus);
+	bus_try_cpu_awake(bus);
 	clock_gettime(CLOCK_MONOTONIC, &start);
 	bus->start_ns = (int64_t)start.tv_sec * 1000000000 + start.tv_nsec;
 	/* Absolute periodic timer: ticks fall on start + k * period however
@@ -619,6 +594,7 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	}
 	bus->cfg = *cfg;
 	bus->tfd = -1;
+	bus->cpu_awake_fd = -1;
 	bus->tr.fd = -1;
 	bus->ndev = cfg->max_devices;
 	bus->slot_ns = (int64_t)vmac_config_slot_us(cfg) * 1000;
@@ -759,6 +735,8 @@ void vmac_bus_free(struct vmac_bus *bus)
 	vmac_transport_close(&bus->tr);
 	if (bus->tfd >= 0)
 		close(bus->tfd);
+	if (bus->cpu_awake_fd >= 0)
+		close(bus->cpu_awake_fd);
 	vmac_ring_fini(&bus->to_main);
 	vmac_ring_fini(&bus->to_bus);
 	bus_checkpoints_fini(bus);

@@ -122,6 +122,7 @@ struct vmac_bus {
 	ev_async cmd_w;
 	pthread_t thread;
 	int tfd;
+	int cpu_awake_fd;          /* /dev/cpu_dma_latency held at 0 (cpu_awake), or -1 */
 	int64_t reply_deadline_ns; /* the configured reply deadline (reply_deadline_us) */
 	int64_t start_ns;
 	uint64_t tick_index;
@@ -211,6 +212,9 @@ void bus_end_probations(struct vmac_bus *bus, int64_t now);
 /* record.c: the flight recorder's bus side (no allocation) */
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
 void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
+/* realtime.c, at the bus thread's start. */
+void bus_try_realtime(struct vmac_bus *bus);
+void bus_try_cpu_awake(struct vmac_bus *bus);
 /* A checkpoint of m's dev.state just encoded (now: CLOCK_MONOTONIC, as the
  * tick's), offered to its recorder. */
 void bus_rec_state(struct vmac_bus *bus, struct machine *m, int64_t now, const uint8_t *data, size_t len);

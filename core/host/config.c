@@ -59,6 +59,7 @@ static const struct key keys[] = {
     {U(recordings_max, 1, 10000)},
     {B(allow_jit)},
     {B(realtime)},
+    {B(cpu_awake)},
     {B(cyclic)},
     {S(mqtt_url)},
     {S(mqtt_client_id)},

@@ -47,6 +47,7 @@ struct vmac_config {
 	uint32_t recordings_max;     /* recordings kept in the store (the oldest go) */
 	int allow_jit;               /* honour a manifest's jit = true */
 	int realtime;                /* try SCHED_FIFO and mlockall */
+	int cpu_awake;               /* hold /dev/cpu_dma_latency at 0 while the bus runs */
 	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */
 	/* MQTT (docs/MQTT.md; checked by core/mqtt/mqtt_settings.c): off while mqtt_url is "". */
 	char mqtt_url[256];                     /* mqtt://HOST:PORT or mqtts://HOST:PORT */

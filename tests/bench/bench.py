@@ -127,7 +127,7 @@ return driver
 
 
 def start_kitchen(ctx, boards, period_us, deadline_us):
-    settings = {"reply_deadline_us": deadline_us, "realtime": "true",
+    settings = {"reply_deadline_us": deadline_us, "realtime": "true", "cpu_awake": "true",
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": max(1024, boards + 8)}
     settings.update(schedule_for(boards, period_us))

@@ -65,7 +65,7 @@ def fieldbus_kitchen(ctx, mode, boards, period_us):
     """vmacd and one vmac-board --count `boards` (running benchprobe) on the
     bus of `mode`, every board running; returns (host, board process).
     Raises Skip when eth-cyclic cannot make its namespace."""
-    settings = {"reply_deadline_us": period_us, "realtime": "true",
+    settings = {"reply_deadline_us": period_us, "realtime": "true", "cpu_awake": "true",
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": min(MAX_DEVICES_RANGE, max(MAX_DEVICES_DEFAULT, boards + 8))}
     settings.update(schedule_for(boards, period_us))
