@@ -1,6 +1,7 @@
 /* The bus thread (see bus.h): its clock, its tick, sending and receiving,
  * and its set-up (real time, or virtual time for `vmac test`). One tick per
- * slot from an absolute timerfd: drain replies, judge deadlines, discover,
+ * slot at start + k x slot (bus_loop: an epoll wait with a timeout to the
+ * next tick): drain replies, judge deadlines, discover,
  * send the requests the schedule (core/sched, docs/SCHEDULER.md) puts in
  * this slot. Replies are handled as they arrive; the primary board's reply
  * runs its machine's driver at once, and the outputs leave with each
@@ -12,7 +13,6 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
-#include <ev.h>
 #include <fcntl.h>
 #include <sched.h>
 #include <semaphore.h>
@@ -296,7 +296,7 @@ static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 	on_reply(bus, d, &m);
 }
 
-static void drain(struct vmac_bus *bus)
+void bus_drain(struct vmac_bus *bus)
 {
 	for (;;) {
 		int i, n = vmac_transport_recv(&bus->tr, bus->tr.fd, bus->rx, RX_BATCH);
@@ -489,7 +489,7 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 	vmac_hist_add(&bus->lateness, (now - scheduled) / 1000);
 	if (!bus->virt) {
 		vmac_transport_clock_sync(&bus->tr);
-		drain(bus);
+		bus_drain(bus);
 	}
 	bus_check_deadlines(bus, now);
 	if (bus->stopping) {
@@ -527,26 +527,6 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 	return 0;
 }
 
-static void on_tick(struct ev_loop *loop, ev_io *w, int revents)
-{
-	struct vmac_bus *bus = w->data;
-	uint64_t expirations = 0;
-	(void)revents;
-
-	if (read(bus->tfd, &expirations, sizeof(expirations)) != sizeof(expirations) || expirations == 0)
-		return;
-	if (bus_tick(bus, vmac_now_ns(), expirations))
-		ev_break(loop, EVBREAK_ALL);
-}
-
-static void on_socket(struct ev_loop *loop, ev_io *w, int revents)
-{
-	struct vmac_bus *bus = w->data;
-	(void)loop;
-	(void)revents;
-	drain(bus);
-}
-
 static void *bus_main(void *arg)
 {
 	struct vmac_bus *bus = arg;
@@ -557,17 +537,17 @@ static void *bus_main(void *arg)
 	bus_try_cpu_awake(bus);
 	clock_gettime(CLOCK_MONOTONIC, &start);
 	bus->start_ns = (int64_t)start.tv_sec * 1000000000 + start.tv_nsec;
-	/* Absolute periodic timer: ticks fall on start + k * period however
-	 * late any one of them was handled. */
+	/* Without epoll_pwait2: an absolute periodic timer. */
 	memset(&its, 0, sizeof(its));
 	its.it_value.tv_sec = (bus->start_ns + bus->slot_ns) / 1000000000;
 	its.it_value.tv_nsec = (bus->start_ns + bus->slot_ns) % 1000000000;
 	its.it_interval.tv_sec = bus->slot_ns / 1000000000;
 	its.it_interval.tv_nsec = bus->slot_ns % 1000000000;
 	bus->tick_index = 0;
-	timerfd_settime(bus->tfd, TFD_TIMER_ABSTIME, &its, NULL);
+	if (bus->timerfd_wait)
+		timerfd_settime(bus->tfd, TFD_TIMER_ABSTIME, &its, NULL);
 	bus->next_discover_ns = bus->start_ns;
-	ev_run(bus->loop, 0);
+	bus_loop(bus);
 	return NULL;
 }
 
@@ -594,6 +574,8 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	}
 	bus->cfg = *cfg;
 	bus->tfd = -1;
+	bus->epfd = -1;
+	bus->wakefd = -1;
 	bus->cpu_awake_fd = -1;
 	bus->tr.fd = -1;
 	bus->ndev = cfg->max_devices;
@@ -650,22 +632,8 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 		snprintf(err, errlen, "cannot create the tick timer: %s", strerror(errno));
 		goto fail;
 	}
-	bus->loop = ev_loop_new(EVFLAG_AUTO | EVFLAG_NOSIGMASK);
-	if (!bus->loop) {
-		snprintf(err, errlen, "cannot create the bus event loop");
+	if (bus_wait_init(bus, err, errlen) != 0)
 		goto fail;
-	}
-	ev_io_init(&bus->timer_w, on_tick, bus->tfd, EV_READ);
-	bus->timer_w.data = bus;
-	ev_io_init(&bus->sock_w, on_socket, bus->tr.fd, EV_READ);
-	bus->sock_w.data = bus;
-	ev_async_init(&bus->cmd_w, bus_on_cmd);
-	bus->cmd_w.data = bus;
-	/* Ticks first: a flood on the socket must not starve the schedule. */
-	ev_set_priority(&bus->timer_w, EV_MAXPRI);
-	ev_io_start(bus->loop, &bus->timer_w);
-	ev_io_start(bus->loop, &bus->sock_w);
-	ev_async_start(bus->loop, &bus->cmd_w);
 	return bus;
 fail:
 	vmac_bus_free(bus);
@@ -730,8 +698,7 @@ void vmac_bus_free(struct vmac_bus *bus)
 			vmac_recorder_free(
 			    bus->mach[i].rec); /* a host gone without stopping (vmac test's crash_host) */
 		}
-	if (bus->loop)
-		ev_loop_destroy(bus->loop);
+	bus_wait_fini(bus);
 	vmac_transport_close(&bus->tr);
 	if (bus->tfd >= 0)
 		close(bus->tfd);

@@ -117,9 +117,9 @@ struct request {
 struct vmac_bus {
 	struct vmac_config cfg;
 	struct vmac_transport tr;
-	struct ev_loop *loop;
-	ev_io timer_w, sock_w;
-	ev_async cmd_w;
+	int epfd;         /* the bus thread's wait (bus.c, bus_loop): the socket, wakefd (and tfd) */
+	int wakefd;       /* eventfd: the main thread has commands or requests (vmac_bus_wake) */
+	int timerfd_wait; /* no epoll_pwait2 on this kernel: ticks from tfd */
 	pthread_t thread;
 	int tfd;
 	int cpu_awake_fd;          /* /dev/cpu_dma_latency held at 0 (cpu_awake), or -1 */
@@ -183,7 +183,14 @@ void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, c
     __attribute__((format(printf, 4, 5)));
 void bus_requests(struct vmac_bus *bus);
 void bus_commands(struct vmac_bus *bus);
-void bus_on_cmd(struct ev_loop *loop, ev_async *w, int revents);
+/* wait.c: the bus thread's wait and loop. bus_wake: what to_bus and the
+ * requests hold is there (any thread). bus_drain (bus.c): every reply
+ * waiting on the socket. */
+int bus_wait_init(struct vmac_bus *bus, char *err, size_t errlen);
+void bus_wait_fini(struct vmac_bus *bus);
+void bus_loop(struct vmac_bus *bus);
+void bus_wake(struct vmac_bus *bus);
+void bus_drain(struct vmac_bus *bus);
 int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
                 int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms);
 

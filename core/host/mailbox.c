@@ -1,13 +1,12 @@
 /* Between the bus thread and the others, without waiting and without
  * allocating on the bus thread: events and unloaded drivers to the main
- * thread (a ring), commands from it (a ring and an ev_async), and the
+ * thread (a ring), commands from it (a ring and an eventfd), and the
  * request slots through which the HTTP threads hand in operator input, a
  * hot-reload swap or a question, and wait for the answer. */
 #include "bus_internal.h"
 
 #include <arpa/inet.h>
 #include <errno.h>
-#include <ev.h>
 #include <sched.h>
 #include <semaphore.h>
 #include <stdarg.h>
@@ -177,14 +176,6 @@ void bus_commands(struct vmac_bus *bus)
 	}
 }
 
-void bus_on_cmd(struct ev_loop *loop, ev_async *w, int revents)
-{
-	(void)revents;
-	(void)loop;
-	bus_commands(w->data);
-	bus_requests(w->data);
-}
-
 int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
                    char *reply, size_t replylen)
 {
@@ -227,7 +218,7 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
 	if (vmac_ring_push(&bus->to_bus, cmd) != 0)
 		return -EAGAIN;
 	if (!bus->virt)
-		ev_async_send(bus->loop, &bus->cmd_w);
+		bus_wake(bus);
 	return 0;
 }
 
@@ -255,7 +246,7 @@ int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_reques
 	atomic_store(&q->state, REQ_QUEUED);
 	atomic_store(&bus->req_queued, 1);
 	if (!bus->virt)
-		ev_async_send(bus->loop, &bus->cmd_w);
+		bus_wake(bus);
 	clock_gettime(CLOCK_REALTIME, &until);
 	until.tv_sec += timeout_ms / 1000;
 	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;

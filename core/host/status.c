@@ -4,7 +4,6 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
-#include <ev.h>
 #include <sched.h>
 #include <semaphore.h>
 #include <stdarg.h>

@@ -1,0 +1,111 @@
+/* The bus thread's wait (docs/HOST.md, "Threads"): one epoll set holding
+ * the bus socket and an eventfd the other threads write to wake it
+ * (bus_wake), waited on with epoll_pwait2 and a timeout to the next tick,
+ * or, on a kernel before 5.11, with the absolute periodic timerfd in the
+ * set. The loop runs ticks, replies as they arrive, and the main thread's
+ * commands and requests. */
+#include "bus_internal.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/syscall.h>
+#include <time.h>
+#include <unistd.h>
+
+/* epoll_pwait2 (Linux 5.11): epoll_wait with a timeout in nanoseconds. -1
+ * with errno ENOSYS on an older kernel. */
+static int pwait2(int epfd, struct epoll_event *ev, int max, int64_t timeout_ns)
+{
+	struct timespec ts = {(time_t)(timeout_ns / 1000000000), (long)(timeout_ns % 1000000000)};
+	return (int)syscall(SYS_epoll_pwait2, epfd, ev, max, &ts, NULL, (size_t)0);
+}
+
+/* The bus thread's loop: the tick when its time has come (before anything
+ * else that is ready: a flood on the socket must not starve the schedule),
+ * replies as they arrive, and the main thread's commands and requests when
+ * it wakes the thread. It waits with epoll_pwait2 and a timeout to the next
+ * tick: a wait on a timerfd wakes some 8 us later at p50 and 18 us at p99
+ * (docs/PERFORMANCE.md, "Tick lateness"); on a kernel without epoll_pwait2
+ * the absolute timerfd is in the set instead. Ticks fall on start + k x
+ * slot however late any one of them was handled. Returns when the bus has
+ * stopped. */
+void bus_loop(struct vmac_bus *bus)
+{
+	struct epoll_event ev[4];
+	uint64_t count;
+	int n, i;
+	for (;;) {
+		int64_t now = vmac_now_ns(), next = bus->start_ns + (int64_t)(bus->tick_index + 1) * bus->slot_ns;
+		if (!bus->timerfd_wait && now >= next) {
+			if (bus_tick(bus, now, (uint64_t)((now - bus->start_ns) / bus->slot_ns) - bus->tick_index))
+				return;
+			continue;
+		}
+		n = bus->timerfd_wait ? epoll_wait(bus->epfd, ev, 4, -1) : pwait2(bus->epfd, ev, 4, next - now);
+		if (n < 0)
+			continue; /* EINTR */
+		for (i = 0; i < n; i++)
+			if (ev[i].data.fd == bus->tfd && read(bus->tfd, &count, sizeof(count)) == sizeof(count) &&
+			    count && bus_tick(bus, vmac_now_ns(), count))
+				return;
+		if (!bus->timerfd_wait && vmac_now_ns() >= next)
+			continue; /* the tick first: what else is ready is still ready after it */
+		for (i = 0; i < n; i++) {
+			if (ev[i].data.fd == bus->tr.fd) {
+				bus_drain(bus);
+			} else if (ev[i].data.fd == bus->wakefd) {
+				if (read(bus->wakefd, &count, sizeof(count)) != sizeof(count))
+					continue;
+				bus_commands(bus);
+				bus_requests(bus);
+			}
+		}
+	}
+}
+
+static int watch(struct vmac_bus *bus, int fd)
+{
+	struct epoll_event e;
+	memset(&e, 0, sizeof(e));
+	e.events = EPOLLIN;
+	e.data.fd = fd;
+	return epoll_ctl(bus->epfd, EPOLL_CTL_ADD, fd, &e);
+}
+
+int bus_wait_init(struct vmac_bus *bus, char *err, size_t errlen)
+{
+	struct epoll_event e;
+	bus->epfd = epoll_create1(EPOLL_CLOEXEC);
+	bus->wakefd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+	if (bus->epfd < 0 || bus->wakefd < 0 || watch(bus, bus->tr.fd) != 0 || watch(bus, bus->wakefd) != 0)
+		goto fail;
+	if (pwait2(bus->epfd, &e, 1, 0) < 0 && errno == ENOSYS) {
+		bus->timerfd_wait = 1; /* Linux before 5.11 */
+		if (watch(bus, bus->tfd) != 0)
+			goto fail;
+	}
+	return 0;
+fail:
+	snprintf(err, errlen, "cannot create the bus event loop: %s", strerror(errno));
+	return -1;
+}
+
+void bus_wait_fini(struct vmac_bus *bus)
+{
+	if (bus->epfd >= 0)
+		close(bus->epfd);
+	if (bus->wakefd >= 0)
+		close(bus->wakefd);
+	bus->epfd = bus->wakefd = -1;
+}
+
+void bus_wake(struct vmac_bus *bus)
+{
+	uint64_t one = 1;
+	if (write(bus->wakefd, &one, sizeof(one)) != sizeof(one)) {
+		/* the counter is full: a wake-up is pending anyway */
+	}
+}
