@@ -223,7 +223,7 @@ static int cmd_bench(int argc, char **argv)
 	ssize_t len;
 	int i, n = 0;
 	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf("usage: vmac bench [--seconds N] [--max-boards N] [--out FILE]\n"
+		printf("usage: vmac bench [--seconds N] [--max-boards N] [--cpu-awake true|false] [--out FILE]\n"
 		       "                  [--only "
 		       "lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt]\n"
 		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"

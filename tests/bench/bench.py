@@ -45,6 +45,7 @@ same run on the same machine, reported as ratios.
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
                 [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt]
+                [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
 import argparse
@@ -62,6 +63,13 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from harness import Context, Skip  # noqa: E402  (the integration tests' process handling)
 
 PRIORITY = 50  # vmacd's bus thread asks for SCHED_FIFO 50; cyclictest gets the same
+
+
+def cpu_awake():
+    """vmacd's cpu_awake where a part compares it with cyclictest, which
+    keeps the CPUs out of deep idle states as cpu_awake does: "true" unless
+    --cpu-awake false (docs/PERFORMANCE.md, "Tick lateness")."""
+    return os.environ.get("VMAC_BENCH_CPU_AWAKE", "true")
 THESIS_TABLE3 = {1000: 10, 100: 100, 10: 1000}
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -127,7 +135,7 @@ return driver
 
 
 def start_kitchen(ctx, boards, period_us, deadline_us):
-    settings = {"reply_deadline_us": deadline_us, "realtime": "true", "cpu_awake": "true",
+    settings = {"reply_deadline_us": deadline_us, "realtime": "true", "cpu_awake": cpu_awake(),
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": max(1024, boards + 8)}
     settings.update(schedule_for(boards, period_us))
@@ -389,11 +397,14 @@ def main():
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt")
+    p.add_argument("--cpu-awake", choices=("true", "false"), default="true",
+                   help="vmacd's cpu_awake where lateness is compared with cyclictest (default true: like for like)")
     p.add_argument("--max-boards", type=int, default=None,
                    help="most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)")
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
     p.add_argument("--out", default="build/bench/results.json")
     args = p.parse_args()
+    os.environ["VMAC_BENCH_CPU_AWAKE"] = args.cpu_awake  # read by cpu_awake(), here and in fieldbus.py
     # A SIGTERM unwinds like Ctrl-C: every context's cleanup runs (the
     # fieldbus's network namespace and veth pair are removed).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))

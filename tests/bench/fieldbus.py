@@ -13,7 +13,7 @@ import subprocess
 import sys
 import time
 
-from bench import (BENCH_LUA, PRIORITY, ROOT, THESIS_TABLE3, bare, board_wrapper, cpu_seconds, cyclictest,  # noqa: F401
+from bench import (BENCH_LUA, PRIORITY, ROOT, THESIS_TABLE3, bare, board_wrapper, cpu_awake, cpu_seconds, cyclictest,  # noqa: F401
                    fresh, schedule_for, with_ctx)
 from harness import Context, Skip  # noqa: E402,F401
 
@@ -65,7 +65,7 @@ def fieldbus_kitchen(ctx, mode, boards, period_us):
     """vmacd and one vmac-board --count `boards` (running benchprobe) on the
     bus of `mode`, every board running; returns (host, board process).
     Raises Skip when eth-cyclic cannot make its namespace."""
-    settings = {"reply_deadline_us": period_us, "realtime": "true", "cpu_awake": "true",
+    settings = {"reply_deadline_us": period_us, "realtime": "true", "cpu_awake": cpu_awake(),
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": min(MAX_DEVICES_RANGE, max(MAX_DEVICES_DEFAULT, boards + 8))}
     settings.update(schedule_for(boards, period_us))
