@@ -478,6 +478,23 @@ static void conn_stop(struct mqtt_conn *c)
 	c->mosq = NULL;
 }
 
+/* The connections closed and everything of m freed (a start that failed
+ * half-way, or a stop). */
+static void mqtt_free(struct vmac_mqtt *m)
+{
+	int k;
+	for (k = 0; k < MQTT_CONNS; k++)
+		conn_stop(&m->conns[k]);
+	mosquitto_lib_cleanup();
+	mqtt_devices_free(m);
+	free(m->status.devices);
+	free(m->status.slot_load);
+	pthread_mutex_destroy(&m->lock);
+	pthread_cond_destroy(&m->wake);
+	pthread_cond_destroy(&m->net_wake);
+	free(m);
+}
+
 struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const struct vmac_config *cfg,
                                   struct vmac_bus *bus, struct vmac_event_log *log, struct vmac_site *site, char *err,
                                   size_t errlen)
@@ -523,15 +540,7 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 	return m;
 fail:
 	atomic_store(&m->stopping, 1);
-	for (k = 0; k < MQTT_CONNS; k++)
-		conn_stop(&m->conns[k]);
-	mosquitto_lib_cleanup();
-	free(m->status.devices);
-	free(m->status.slot_load);
-	pthread_mutex_destroy(&m->lock);
-	pthread_cond_destroy(&m->wake);
-	pthread_cond_destroy(&m->net_wake);
-	free(m);
+	mqtt_free(m);
 	return NULL;
 }
 
@@ -547,7 +556,6 @@ static int waiting(struct vmac_mqtt *m)
 void vmac_mqtt_stop(struct vmac_mqtt *m)
 {
 	double deadline;
-	int k;
 	if (!m)
 		return;
 	atomic_store(&m->stopping, 1);
@@ -562,14 +570,5 @@ void vmac_mqtt_stop(struct vmac_mqtt *m)
 		struct timespec ts = {0, 10 * 1000 * 1000};
 		nanosleep(&ts, NULL);
 	}
-	for (k = 0; k < MQTT_CONNS; k++)
-		conn_stop(&m->conns[k]);
-	mosquitto_lib_cleanup();
-	mqtt_devices_free(m);
-	free(m->status.devices);
-	free(m->status.slot_load);
-	pthread_mutex_destroy(&m->lock);
-	pthread_cond_destroy(&m->wake);
-	pthread_cond_destroy(&m->net_wake);
-	free(m);
+	mqtt_free(m);
 }

@@ -191,6 +191,18 @@ void mqtt_devices_stopping(struct vmac_mqtt *m)
 	mqtt_profiles_stopping(m);
 }
 
+const struct vmac_value *mqtt_status_value(const struct vmac_device_status *st, const char *name)
+{
+	int i;
+	for (i = 0; st && i < st->nvars; i++)
+		if (strcmp(st->vars[i].name, name) == 0)
+			return &st->vars[i].value;
+	for (i = 0; st && i < st->nparams; i++)
+		if (strcmp(st->params[i].name, name) == 0)
+			return &st->params[i].value;
+	return NULL;
+}
+
 void mqtt_devices_free(struct vmac_mqtt *m)
 {
 	int i, k;

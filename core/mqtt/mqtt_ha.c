@@ -164,19 +164,6 @@ static void add_writer(struct ha *h, const char *name, json_t *decl, char kind, 
 	add(h, component, name, e);
 }
 
-/* The value of name in the status (NULL: none). */
-static const struct vmac_value *now_of(const struct vmac_device_status *st, const char *name)
-{
-	int i;
-	for (i = 0; st && i < st->nvars; i++)
-		if (strcmp(st->vars[i].name, name) == 0)
-			return &st->vars[i].value;
-	for (i = 0; st && i < st->nparams; i++)
-		if (strcmp(st->params[i].name, name) == 0)
-			return &st->params[i].value;
-	return NULL;
-}
-
 /* Whether name is the argument of a command (a cycle's programme). */
 static int is_command_arg(json_t *commands, const char *name)
 {
@@ -203,7 +190,7 @@ static void kinds_of(json_t *manifest, const struct vmac_device_status *st, char
 		json_object_foreach(json_object_get(manifest, tables[t]), name, decl)
 		{
 			if (n + 1 < outlen)
-				out[n++] = kind_of(decl, now_of(st, name));
+				out[n++] = kind_of(decl, mqtt_status_value(st, name));
 		}
 	out[n] = 0;
 }
@@ -239,7 +226,7 @@ json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, 
 	                         model, "manufacturer", "vmac", "sw_version", version, "via_device", via);
 	json_object_foreach(json_object_get(manifest, "variables"), name, decl)
 	{
-		char kind = kind_of(decl, now_of(st, name));
+		char kind = kind_of(decl, mqtt_status_value(st, name));
 		if (json_is_true(json_object_get(decl, "set")) && s->commands)
 			add_writer(&h, name, decl, kind, 0);
 		else
@@ -247,7 +234,7 @@ json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, 
 	}
 	json_object_foreach(json_object_get(manifest, "params"), name, decl)
 	{
-		char kind = kind_of(decl, now_of(st, name));
+		char kind = kind_of(decl, mqtt_status_value(st, name));
 		if (s->commands)
 			add_writer(&h, name, decl, kind, !is_command_arg(commands, name));
 		else

@@ -192,6 +192,8 @@ void mqtt_devices_poll(struct vmac_mqtt *m);      /* read the status copy, tell 
 void mqtt_devices_republish(struct vmac_mqtt *m); /* after a reconnect: every device again */
 void mqtt_devices_stopping(struct vmac_mqtt *m);  /* every device down, then the profiles' last words */
 void mqtt_devices_free(struct vmac_mqtt *m);
+/* The value of a variable or param named name in a machine's status (NULL: none). */
+const struct vmac_value *mqtt_status_value(const struct vmac_device_status *st, const char *name);
 struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
 
 /* mqtt_site.c: a message on the main connection, on libmosquitto's network

@@ -223,18 +223,6 @@ static unsigned datatype_of(json_t *decl, int is_param, const struct vmac_value 
 	return DT_STRING;
 }
 
-static const struct vmac_value *value_in(const struct vmac_device_status *st, const char *name)
-{
-	int i;
-	for (i = 0; st && i < st->nvars; i++)
-		if (strcmp(st->vars[i].name, name) == 0)
-			return &st->vars[i].value;
-	for (i = 0; st && i < st->nparams; i++)
-		if (strcmp(st->params[i].name, name) == 0)
-			return &st->params[i].value;
-	return NULL;
-}
-
 /* The declaration of a variable or (*is_param set) a param. */
 static json_t *decl_of(json_t *manifest, const char *name, int *is_param)
 {
@@ -282,7 +270,7 @@ static void dbirth(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 	for (t = 0; t < 2; t++)
 		json_object_foreach(json_object_get(d->manifest, tables[t]), name, decl)
 		{
-			const struct vmac_value *v = value_in(st, name);
+			const struct vmac_value *v = mqtt_status_value(st, name);
 			unsigned dt = datatype_of(decl, t == 1, v);
 			Metric *mt;
 			if (ntypes == MQTT_VALUES || !(mt = out_metric(o, name, dt)))
@@ -419,7 +407,7 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 		return;
 	out_init(o);
 	for (i = 0; i < n; i++) {
-		const struct vmac_value *v = value_in(st, changed[i]->name);
+		const struct vmac_value *v = mqtt_status_value(st, changed[i]->name);
 		const struct mqtt_spb_metric *born = born_metric(d, changed[i]->name);
 		unsigned dt;
 		int is_param;
