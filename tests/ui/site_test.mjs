@@ -12,9 +12,8 @@ import os from "node:os";
 import path from "node:path";
 import readline from "node:readline";
 import { chromium } from "playwright-core";
+import { args, check, tally, until } from "./common.mjs";
 
-const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) =>
-  (a.startsWith("--") ? acc.concat([[a.slice(2), all[i + 1]]]) : acc), []));
 const BIN = path.resolve(args.bin || "build/bin");
 const OUT = path.resolve(args.out || "build/ui");
 const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
@@ -25,7 +24,6 @@ const STATE_B = fs.mkdtempSync(path.join(os.tmpdir(), "vmac-site-b-"));
 const rnd = (lo, hi) => lo + Math.floor(Math.random() * (hi - lo + 1));
 const bus = () => `239.255.${rnd(1, 254)}.${rnd(1, 254)}:${rnd(20000, 60000)}`;
 const procs = [];
-let failures = 0;
 
 if (!MOSQUITTO) {
   const why = "the Site page's test needs Debian's mosquitto (make deps installs it)";
@@ -50,25 +48,6 @@ function start(name, argv) {
   return p;
 }
 
-async function until(fn, ms, what) {
-  const end = Date.now() + ms;
-  for (;;) {
-    const v = await fn();
-    if (v) return v;
-    if (Date.now() > end) throw new Error(`${what}: not within ${ms} ms`);
-    await new Promise((r) => setTimeout(r, 100));
-  }
-}
-
-async function check(name, fn) {
-  try {
-    await fn();
-    console.log("PASS " + name);
-  } catch (e) {
-    failures++;
-    console.log("FAIL " + name + ": " + (e && e.message ? e.message.split("\n")[0] : e));
-  }
-}
 
 function freePort() {
   return new Promise((resolve) => {
@@ -115,7 +94,7 @@ async function main() {
   });
   try {
     const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
-    page.on("pageerror", (e) => { failures++; console.log("FAIL the page raised: " + e.message); });
+    page.on("pageerror", (e) => { tally.failures++; console.log("FAIL the page raised: " + e.message); });
     const row = (host, device) => `#page-site [data-host="${host}"] tr[data-device="${device}"]`;
 
     await check("host A's Site page lists both hosts, their lights online with values", async () => {
@@ -152,12 +131,12 @@ async function main() {
 try {
   await main();
 } catch (e) {
-  failures++;
+  tally.failures++;
   console.log("FAIL the test could not run: " + e.message);
 } finally {
   for (const p of procs) p.kill("SIGKILL");
   fs.rmSync(STATE_A, { recursive: true, force: true });
   fs.rmSync(STATE_B, { recursive: true, force: true });
 }
-console.log(failures ? `${failures} failed (logs and screenshots in ${OUT})` : `every Site check passed (screenshots in ${OUT})`);
-process.exit(failures ? 1 : 0);
+console.log(tally.failures ? `${tally.failures} failed (logs and screenshots in ${OUT})` : `every Site check passed (screenshots in ${OUT})`);
+process.exit(tally.failures ? 1 : 0);

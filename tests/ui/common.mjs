@@ -1,0 +1,28 @@
+// What the web UI's browser tests share (tests/ui/ui_test.mjs,
+// tests/ui/site_test.mjs): their command line, waiting for a condition, and
+// checks that count their failures and go on.
+export const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, all) =>
+  (a.startsWith("--") ? acc.concat([[a.slice(2), all[i + 1]]]) : acc), []));
+
+// failures: how many checks (and page errors) failed so far.
+export const tally = { failures: 0 };
+
+export async function until(fn, ms, what) {
+  const end = Date.now() + ms;
+  for (;;) {
+    const v = await fn();
+    if (v) return v;
+    if (Date.now() > end) throw new Error(`${what}: not within ${ms} ms`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+}
+
+export async function check(name, fn) {
+  try {
+    await fn();
+    console.log("PASS " + name);
+  } catch (e) {
+    tally.failures++;
+    console.log("FAIL " + name + ": " + (e && e.message ? e.message.split("\n")[0] : e));
+  }
+}
