@@ -16,7 +16,6 @@ SKIPPED without mosquitto or paho (a failure with CI=true)."""
 import os
 import re
 import signal
-import socket
 import subprocess
 import time
 
@@ -178,7 +177,7 @@ def test_mqtt_tls_with_the_documented_acl(t):
             "mqtt_url": "mqtts://127.0.0.1:%d" % broker.port, "mqtt_cafile": other["ca"],
             "mqtt_user": "vmac-kitchen", "mqtt_password_file": secret, "mqtt_host_id": "untrusting",
             "mqtt_client_id": "vmac-untrusting"})
-        line = host2.wait_line(r"\[mqtt\] cannot connect to the broker .*certificate verify failed", 30,
+        host2.wait_line(r"\[mqtt\] cannot connect to the broker .*certificate verify failed", 30,
                                stream="stderr", what="vmacd saying it cannot trust the broker's certificate")
         # It keeps trying (libmosquitto alone would give up after the first
         # refused handshake): the broker sees a second handshake a second or
@@ -205,8 +204,6 @@ def test_mqtt_tls_with_the_documented_acl(t):
             if os.path.isfile(path) and (name.endswith(".log") or "stdout" in name or "stderr" in name):
                 with open(path, errors="replace") as f:
                     assert PASSWORDS["vmac-kitchen"] not in f.read(), "the broker password is in %s" % name
-        assert line.text  # (the TLS complaint was found above)
     finally:
         hub.close()
         mallory.close()
-        socket.setdefaulttimeout(None)
