@@ -19,7 +19,9 @@
 		return -1;                                                                                             \
 	} while (0)
 
-static int valid_name(const char *s)
+/* s of n bytes: a NUL inside would make "in\0a" and "in\0b" one name
+ * "in" on the C side (found by tests/fuzz/fuzz_manifest.c). */
+static int valid_name(const char *s, size_t n)
 {
 	size_t i;
 	if (!(s[0] >= 'a' && s[0] <= 'z'))
@@ -27,7 +29,18 @@ static int valid_name(const char *s)
 	for (i = 0; s[i]; i++)
 		if (!((s[i] >= 'a' && s[i] <= 'z') || (s[i] >= '0' && s[i] <= '9') || s[i] == '_'))
 			return 0;
-	return i <= VMAC_DRIVER_NAME_MAX;
+	return i == n && i <= VMAC_DRIVER_NAME_MAX;
+}
+
+/* The key at idx is a string and a valid name. */
+static int valid_key(lua_State *L, int idx)
+{
+	size_t n;
+	const char *s;
+	if (lua_type(L, idx) != LUA_TSTRING)
+		return 0;
+	s = lua_tolstring(L, idx, &n);
+	return valid_name(s, n);
 }
 
 /* s is UTF-8 (what JSON carries): a name or version that is not would
@@ -113,7 +126,7 @@ static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
 		struct io *io;
 		const char *chan;
 		int spec = lua_gettop(L);
-		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+		if (!valid_key(L, -2))
 			BAD("io: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
 		if (d->nio == VMAC_DRIVER_MAX_IO)
 			BAD("io: more than %d names", VMAC_DRIVER_MAX_IO);
@@ -242,7 +255,7 @@ static int parse_params(struct vmac_driver *d, int t, const struct vmac_driver_l
 		int s = lua_gettop(L);
 		char name[VMAC_DRIVER_NAME_MAX + 1], why[160], key[64];
 		const char *over;
-		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+		if (!valid_key(L, -2))
 			BAD("params: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
 		snprintf(name, sizeof(name), "%s", lua_tostring(L, -2));
 		if (++n > VMAC_DRIVER_MAX_PARAMS)
@@ -316,7 +329,7 @@ static int parse_variables(struct vmac_driver *d, int t, char *err, size_t errle
 		int s = lua_gettop(L);
 		struct var *v;
 		char update[32], group[VMAC_DRIVER_NAME_MAX + 1];
-		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+		if (!valid_key(L, -2))
 			BAD("variables: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
 		if (d->nvars == VMAC_DRIVER_MAX_VARS)
 			BAD("variables: more than %d", VMAC_DRIVER_MAX_VARS);
@@ -338,7 +351,7 @@ static int parse_variables(struct vmac_driver *d, int t, char *err, size_t errle
 				    "not '%s'",
 				    v->pub.name, update);
 		}
-		if (opt_string(L, s, "group", group, sizeof(group)) || (group[0] && !valid_name(group)))
+		if (opt_string(L, s, "group", group, sizeof(group)) || (group[0] && !valid_name(group, strlen(group))))
 			BAD("variables.%s: group must be a name", v->pub.name);
 		lua_getfield(L, s, "set");
 		v->settable = lua_toboolean(L, -1);
@@ -398,7 +411,7 @@ static int check_names(struct vmac_driver *d, int t, int params, char *err, size
 	while (lua_next(L, -2)) {
 		const char *name;
 		char arg[VMAC_DRIVER_NAME_MAX + 1];
-		if (lua_type(L, -2) != LUA_TSTRING || !valid_name(lua_tostring(L, -2)))
+		if (!valid_key(L, -2))
 			BAD("commands: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
 		name = lua_tostring(L, -2);
 		if (!lua_istable(L, -1))

@@ -191,6 +191,14 @@ START_TEST(manifest_errors_name_the_field)
 	 * left the whole driver out (found by tests/fuzz/fuzz_manifest.c). */
 	load_fails("return { name = 't', version = '1.\\138', io = {}, tick = function() end }\n",
 	           "version (a string of UTF-8 text");
+	/* A NUL inside a name made "in\0a" and "in\0b" both "in" on the C side
+	 * (found by tests/fuzz/fuzz_manifest.c). */
+	load_fails("return { name = 't', version = '1', io = { ['in\\0a'] = 'di0', ['in\\0b'] = 'di1' },\n"
+	           "  tick = function() end }\n",
+	           "io: names are [a-z][a-z0-9_]*");
+	load_fails("return { name = 't', version = '1', io = {}, variables = { ['v\\0'] = {} },\n"
+	           "  tick = function() end }\n",
+	           "variables");
 	load_fails("return { name = 't', version = '1', tick = function() end }\n", "io must be a table");
 	load_fails("return { name = 't', version = '1', io = {} }\n", "tick must be a function");
 	load_fails("return { name = 't', version = '1', level = 11, io = {}, tick = function() end }\n",
