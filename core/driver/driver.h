@@ -49,6 +49,12 @@ struct vmac_driver_limits {
 	/* Bus time in seconds, for os.clock(); NULL: 0. */
 	double (*clock)(void *ctx);
 	void *clock_ctx;
+	/* Where the state's heap comes from, as a lua_Alloc (free when nsize is
+	 * 0; a shrink must not fail); the cap above holds either way. NULL: the
+	 * C library's realloc and free. tests/fuzz/ gives an arena it can
+	 * snapshot and restore (docs/TESTING.md, "Fuzzing"). */
+	void *(*heap)(void *ctx, void *ptr, size_t osize, size_t nsize);
+	void *heap_ctx;
 };
 
 /* What the host offers a running driver (dev:set_level, dev:event). Set by
@@ -96,6 +102,17 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
  * host); file names it in messages ("washer.lua"). */
 int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
                             struct vmac_driver **out, char *err, size_t errlen);
+
+/* The same in two steps: a sandbox with nothing loaded yet (file names it
+ * in messages), then the one driver it will hold, from a text in memory
+ * (its name and settings from limits; -EALREADY the second time). After a
+ * failed load_into the sandbox is of no further use: free it.
+ * vmac_driver_load_source is these two; tests/fuzz/ snapshots the sandbox
+ * between them. */
+int vmac_driver_new(const char *file, const struct vmac_driver_limits *limits, struct vmac_driver **out, char *err,
+                    size_t errlen);
+int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, const struct vmac_driver_limits *limits,
+                          char *err, size_t errlen);
 
 /* The manifest's declarations as JSON text, made at load for user
  * interfaces (docs/API.md "GET /api/drivers/NAME/manifest"): name,

@@ -62,8 +62,10 @@ struct var {
 struct vmac_driver {
 	lua_State *L;
 	char stdlib_dir[512], cycles_dir[600];
-	int loading;                    /* require() and vmac.cycles() read files only while loading */
-	size_t used, cap;               /* heap accounting of the counting allocator */
+	int loading;      /* require() and vmac.cycles() read files only while loading */
+	size_t used, cap; /* heap accounting of the counting allocator */
+	void *(*heap)(void *ctx, void *ptr, size_t osize, size_t nsize); /* NULL: realloc/free */
+	void *heap_ctx;
 	uint64_t budget_hooks;          /* hook calls allowed per guarded call */
 	uint64_t hooks;                 /* hook calls so far in this call */
 	int64_t budget_ns, deadline_ns; /* wall-clock budget per call; 0 = none */
@@ -109,6 +111,7 @@ struct vmac_driver {
 	int64_t tag;           /* the host's (vmac_driver_set_tag) */
 	char *describe;        /* the manifest's declarations as JSON (vmac_driver_describe) */
 	int events_in_window;
+	int loaded; /* vmac_driver_load_into ran (once per sandbox) */
 };
 
 /* The host's work on a driver's state: fn(d, args, err, errlen) returns 0 or

@@ -136,17 +136,12 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	return code;
 }
 
-struct load_args {
-	const char *src;
-	size_t len;
-	const struct vmac_driver_limits *limits;
-};
-
-static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+/* The libraries the sandbox copies from (drv_make_env), in a state of
+ * nothing else: [-0, +0]. */
+static int open_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
-	struct load_args *a = args;
 	lua_State *L = d->L;
-	char chunkname[80];
+	(void)args;
 	/* Interpreter only: the count hook that enforces the budget is not
 	 * honoured inside JIT-compiled traces. */
 	luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_OFF);
@@ -163,6 +158,20 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pop(L, 1);
 	lua_newtable(L);
 	lua_setfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
+	return 0;
+}
+
+struct load_args {
+	const char *src;
+	size_t len;
+	const struct vmac_driver_limits *limits;
+};
+
+static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	struct load_args *a = args;
+	lua_State *L = d->L;
+	char chunkname[80];
 	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
 	if (luaL_loadbufferx(L, a->src, a->len, chunkname, "t") != 0) {
 		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
@@ -193,19 +202,13 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	return 0;
 }
 
-int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
-                            struct vmac_driver **out, char *err, size_t errlen)
+int vmac_driver_new(const char *file, const struct vmac_driver_limits *limits, struct vmac_driver **out, char *err,
+                    size_t errlen)
 {
 	struct vmac_driver *d;
-	struct load_args args;
-	int i;
 	lua_State *L;
 
 	*out = NULL;
-	if (len > FILE_MAX) {
-		snprintf(err, errlen, "%s: larger than 1 MiB", file);
-		return -EFBIG;
-	}
 	d = calloc(1, sizeof(*d));
 	if (!d) {
 		snprintf(err, errlen, "out of memory");
@@ -216,8 +219,52 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 	d->budget_ns = (int64_t)limits->budget_us * 1000;
 	d->clock = limits->clock;
 	d->clock_ctx = limits->clock_ctx;
+	d->heap = limits->heap;
+	d->heap_ctx = limits->heap_ctx;
 	d->ref_tick = d->ref_attach = d->ref_input = d->ref_detach = d->ref_migrate = d->ref_recover = LUA_NOREF;
 	d->ref_saved = LUA_NOREF;
+	if (limits->stdlib_dir)
+		snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir);
+	if (limits->cycles_dir)
+		snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir);
+	snprintf(d->file, sizeof(d->file), "%s", file);
+	snprintf(d->name, sizeof(d->name), "?");
+	L = d->L = lua_newstate(drv_alloc, d);
+	if (!L) {
+		free(d);
+		snprintf(err, errlen, "cannot create Lua state");
+		return -ENOMEM;
+	}
+	lua_atpanic(L, drv_on_panic);
+	if (lua_cpcall(L, drv_make_entries, d) != 0) {
+		snprintf(err, errlen, "%s: not enough memory to set up the sandbox", file);
+		vmac_driver_free(d);
+		return -ENOMEM;
+	}
+	if (drv_protect(d, open_work, NULL, err, errlen) != 0) {
+		vmac_driver_free(d);
+		return -ENOMEM;
+	}
+	*out = d;
+	return 0;
+}
+
+int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, const struct vmac_driver_limits *limits,
+                          char *err, size_t errlen)
+{
+	struct load_args args;
+	int i;
+
+	if (d->loaded) {
+		snprintf(err, errlen, "%s: a driver is loaded in this sandbox already", d->file);
+		return -EALREADY;
+	}
+	d->loaded = 1;
+	if (len > FILE_MAX) {
+		snprintf(err, errlen, "%s: larger than 1 MiB", d->file);
+		return -EFBIG;
+	}
+	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");
 	for (i = 0; i < limits->nsettings; i++) {
 		const char *k = limits->settings[i].key, *v = limits->settings[i].value;
 		char *end;
@@ -233,39 +280,32 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 			         "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
 			         "instructions, budget_us, param.NAME)",
 			         limits->expect_name ? limits->expect_name : "?", k, v);
-			free(d);
 			return -EINVAL;
 		}
-	}
-	if (limits->stdlib_dir)
-		snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir);
-	if (limits->cycles_dir)
-		snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir);
-	snprintf(d->file, sizeof(d->file), "%s", file);
-	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");
-	L = d->L = lua_newstate(drv_alloc, d);
-	if (!L) {
-		free(d);
-		snprintf(err, errlen, "cannot create Lua state");
-		return -ENOMEM;
-	}
-	lua_atpanic(L, drv_on_panic);
-	if (lua_cpcall(L, drv_make_entries, d) != 0) {
-		snprintf(err, errlen, "%s: not enough memory to set up the sandbox", file);
-		goto fail;
 	}
 	args.src = src;
 	args.len = len;
 	args.limits = limits;
-	if (drv_protect(d, load_work, &args, err, errlen) != 0)
-		goto fail;
+	return drv_protect(d, load_work, &args, err, errlen) != 0 ? -EINVAL : 0;
+}
+
+int vmac_driver_load_source(const char *file, const char *src, size_t len, const struct vmac_driver_limits *limits,
+                            struct vmac_driver **out, char *err, size_t errlen)
+{
+	struct vmac_driver *d;
+	int rc;
+
+	*out = NULL;
+	rc = vmac_driver_new(file, limits, &d, err, errlen);
+	if (rc != 0)
+		return rc;
+	rc = vmac_driver_load_into(d, src, len, limits, err, errlen);
+	if (rc != 0) {
+		vmac_driver_free(d);
+		return rc;
+	}
 	*out = d;
 	return 0;
-fail:
-	lua_close(L);
-	free(d->describe);
-	free(d);
-	return -EINVAL;
 }
 
 const char *vmac_driver_name(const struct vmac_driver *d)

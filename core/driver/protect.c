@@ -42,7 +42,8 @@ struct vmac_driver *drv_of(lua_State *L)
 }
 
 /* Counting allocator: refuses to grow past the cap, so a greedy driver gets
- * a Lua "not enough memory" error in its own state. */
+ * a Lua "not enough memory" error in its own state. The memory itself comes
+ * from the C library or from the limits' heap. */
 void *drv_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 {
 	struct vmac_driver *d = ud;
@@ -50,7 +51,10 @@ void *drv_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 	if (nsize == 0) {
 		if (ptr)
 			d->used -= osize;
-		free(ptr);
+		if (d->heap)
+			d->heap(d->heap_ctx, ptr, osize, 0);
+		else
+			free(ptr);
 		return NULL;
 	}
 	if (!ptr)
@@ -59,7 +63,7 @@ void *drv_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 		d->mem_refused |= d->in_driver;
 		return NULL;
 	}
-	p = realloc(ptr, nsize);
+	p = d->heap ? d->heap(d->heap_ctx, ptr, osize, nsize) : realloc(ptr, nsize);
 	if (p)
 		d->used = d->used - osize + nsize;
 	return p;

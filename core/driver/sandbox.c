@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 /* ---- the sandbox ---- */
@@ -168,20 +169,35 @@ static int bus_clock(lua_State *L)
 char *drv_read_file(const char *path, size_t *len, char *err, size_t errlen, int *code)
 {
 	FILE *f = fopen(path, "rb");
+	struct stat st;
+	size_t want = FILE_MAX + 1;
 	char *buf;
 	if (!f) {
 		*code = -errno;
 		snprintf(err, errlen, "%s: %s", path, strerror(errno));
 		return NULL;
 	}
-	buf = malloc(FILE_MAX + 1);
+	/* As large as the file is now (one byte more shows it grew meanwhile),
+	 * not the 1 MiB the largest may take. */
+	if (fstat(fileno(f), &st) == 0 && st.st_size >= 0 && (uint64_t)st.st_size < FILE_MAX)
+		want = (size_t)st.st_size + 1;
+	buf = malloc(want);
+	*len = buf ? fread(buf, 1, want, f) : 0;
+	if (buf && *len == want && want <= FILE_MAX) {
+		char *more = realloc(buf, FILE_MAX + 1);
+		if (!more) {
+			free(buf);
+		} else {
+			*len += fread(more + want, 1, FILE_MAX + 1 - want, f);
+		}
+		buf = more;
+	}
 	if (!buf) {
 		fclose(f);
 		*code = -ENOMEM;
 		snprintf(err, errlen, "%s: out of memory", path);
 		return NULL;
 	}
-	*len = fread(buf, 1, FILE_MAX + 1, f);
 	if (ferror(f) || *len > FILE_MAX) {
 		*code = ferror(f) ? -EIO : -EFBIG;
 		snprintf(err, errlen, "%s: %s", path, ferror(f) ? "read error" : "larger than 1 MiB");

@@ -4,6 +4,7 @@
  * sandbox being exactly its allow-list. The escape corpus runs end to end in
  * tests/integration/test_escape.py. */
 #include <check.h>
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -648,6 +649,92 @@ START_TEST(sandbox_is_exactly_the_allow_list)
 }
 END_TEST
 
+/* A heap of the caller's (vmac_driver_limits.heap): the C library's,
+ * counting what it holds. */
+static size_t heap_live;
+static long heap_calls;
+static void *counting_heap(void *ctx, void *ptr, size_t osize, size_t nsize)
+{
+	void *q;
+	(void)ctx;
+	heap_calls++;
+	if (nsize == 0) {
+		if (ptr)
+			heap_live -= osize;
+		free(ptr);
+		return NULL;
+	}
+	q = realloc(ptr, nsize);
+	if (q)
+		heap_live += nsize - (ptr ? osize : 0);
+	return q;
+}
+
+START_TEST(two_step_load_on_a_given_heap)
+{
+	struct vmac_driver *d;
+	char err[VMAC_DRIVER_ERR_MAX] = "", big[] = "/tmp/vmac-test-driver-big.lua";
+	const char *src = "local t = require 'twice'\n"
+	                  "return { name = 't', version = '1', io = { lamp = 'do0' },\n"
+	                  "  tick = function(dev) dev.out.lamp = t.f(1) == 2 end }\n";
+	const char *head = "return { name = 't', version = '1', io = {}, tick = function() end }\n";
+	struct vmac_driver_setting bad = {"colour", "red"};
+	FILE *f;
+	int i;
+	mkdir(STDLIB_DIR, 0755);
+	write_file(STDLIB_DIR "/twice.lua", "return { f = function(x) return 2 * x end }\n");
+	heap_live = 0;
+	heap_calls = 0;
+	limits.heap = counting_heap;
+	limits.expect_name = "t";
+
+	/* Every byte of the state comes from the given heap, and the cap's
+	 * accounting is what that heap holds. */
+	ck_assert_int_eq(vmac_driver_new("t.lua", &limits, &d, err, sizeof(err)), 0);
+	ck_assert_msg(heap_calls > 0 && heap_live == vmac_driver_memory(d),
+	              "the sandbox did not come from the given heap: %ld calls, %zu bytes held, %zu counted",
+	              heap_calls, heap_live, vmac_driver_memory(d));
+	ck_assert_int_eq(vmac_driver_load_into(d, src, strlen(src), &limits, err, sizeof(err)), 0);
+	ck_assert_str_eq(vmac_driver_name(d), "t");
+	ck_assert_msg(heap_live == vmac_driver_memory(d), "%zu bytes held, %zu counted", heap_live,
+	              vmac_driver_memory(d));
+	/* One driver a sandbox. */
+	ck_assert_int_eq(vmac_driver_load_into(d, src, strlen(src), &limits, err, sizeof(err)), -EALREADY);
+	ck_assert_msg(strstr(err, "loaded in this sandbox already") != NULL, "%s", err);
+	vmac_driver_free(d);
+	ck_assert_msg(heap_live == 0, "%zu bytes left in the given heap after free", heap_live);
+
+	/* A host setting it does not know refuses the load and says which. */
+	limits.settings = &bad;
+	limits.nsettings = 1;
+	ck_assert_int_eq(vmac_driver_new("t.lua", &limits, &d, err, sizeof(err)), 0);
+	ck_assert_int_eq(vmac_driver_load_into(d, src, strlen(src), &limits, err, sizeof(err)), -EINVAL);
+	ck_assert_msg(strstr(err, "driver.t.colour = 'red': unknown key") != NULL, "%s", err);
+	vmac_driver_free(d);
+	limits.settings = NULL;
+	limits.nsettings = 0;
+	limits.heap = NULL;
+
+	/* A file is read whole at its own size, and one over 1 MiB is refused. */
+	f = fopen(big, "w");
+	ck_assert_msg(f != NULL, "cannot write %s", big);
+	i = fputs(head, f) >= 0 ? (int)strlen(head) : 0;
+	fputs("--", f);
+	for (i += 3; i < 1 << 20; i++)
+		fputc('x', f); /* exactly 1 MiB in all */
+	fputc('\n', f);
+	fclose(f);
+	ck_assert_msg(vmac_driver_load(big, &limits, &d, err, sizeof(err)) == 0, "a 1 MiB driver: %s", err);
+	vmac_driver_free(d);
+	f = fopen(big, "a");
+	fputs("-- and one line too many for 1 MiB\n", f);
+	fclose(f);
+	ck_assert_int_eq(vmac_driver_load(big, &limits, &d, err, sizeof(err)), -EFBIG);
+	ck_assert_msg(strstr(err, "larger than 1 MiB") != NULL, "%s", err);
+	unlink(big);
+}
+END_TEST
+
 START_TEST(load_gets_a_larger_budget_and_stdlib)
 {
 	struct vmac_driver *d;
@@ -697,6 +784,7 @@ int main(void)
 	tcase_add_test(tc, sandbox_bounds);
 	tcase_add_test(tc, sandbox_is_exactly_the_allow_list);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
+	tcase_add_test(tc, two_step_load_on_a_given_heap);
 	tcase_add_test(tc, take_over_hands_plain_state_params_and_outputs);
 	tcase_add_test(tc, take_over_refuses_what_it_cannot_copy);
 	suite_add_tcase(s, tc);
