@@ -7,7 +7,8 @@
 #   make run-qemu   deps + build + firmware + the kitchen with boards in QEMU on raw Ethernet (root)
 #   make test       deps + build + every test (unit, fuzz, integration, the web UI in chromium,
 #                   then again under ASan+UBSan)
-#   make fuzz       every libFuzzer harness FUZZ_SECONDS each (default 60), executions per target
+#   make fuzz       every libFuzzer harness FUZZ_SECONDS each (default 60) in FUZZ_JOBS processes
+#                   (default nproc), executions per target
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
 #   make soak       one host under every fault at once for SOAK_MINUTES (default 60), its resources
 #                   sampled every 10 s; make test-soak: the same for 2 minutes
@@ -286,6 +287,11 @@ $(FOBJ)/%.o: %.c
 	@mkdir -p $(dir $@)
 	clang $(FUZZ_CFLAGS) -MMD -MP -c $< -o $@
 
+# The arena is the harnesses' heap, not code under test: no coverage of it.
+$(FOBJ)/tests/fuzz/fuzz_arena.o: tests/fuzz/fuzz_arena.c
+	@mkdir -p $(dir $@)
+	clang $(filter-out -fsanitize=fuzzer-no-link,$(FUZZ_CFLAGS)) -MMD -MP -c $< -o $@
+
 # The wire codec and the board (portable C99).
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
 	@mkdir -p $(dir $@)
@@ -302,12 +308,12 @@ $(BUILD)/fuzz/fuzz_console: $(call fuzz_obj,tests/fuzz/fuzz_console.c core/api/c
 	$(FUZZ_LINK)
 
 # A driver's source through load and manifest validation, then one run.
-$(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c $(DRIVER_SRC) core/api/api_request.c \
+$(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c tests/fuzz/fuzz_arena.c $(DRIVER_SRC) core/api/api_request.c \
                               core/api/console.c)
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 # Lua values to outputs, variables and params and back (core/driver/instance.c).
-$(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c $(DRIVER_SRC))
+$(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c tests/fuzz/fuzz_arena.c $(DRIVER_SRC))
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 # The HTTP API's routing, request bodies and arguments, and the console's
@@ -316,34 +322,14 @@ $(BUILD)/fuzz/fuzz_http: $(call fuzz_obj,tests/fuzz/fuzz_http.c core/api/api_req
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 # A checkpoint of dev.state offered to a driver (core/driver/checkpoint.c).
-$(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c $(DRIVER_SRC))
+$(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c tests/fuzz/fuzz_arena.c $(DRIVER_SRC))
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 FUZZ_BINS := $(FUZZ_TARGETS:%=$(BUILD)/fuzz/fuzz_%)
 
-# Run every target $(1) seconds; print each one's executions and the total.
-# The manifest target also starts from the shipped drivers (scripts/drivers).
-# A failure (crash, leak, timeout, out of memory) is printed with the
-# input's file, and fails the run after the other targets have had theirs.
-fuzz_all = total=0; failed=; \
-	for t in $(FUZZ_TARGETS); do \
-		mkdir -p $(BUILD)/fuzz/work-$$t; \
-		dict=; [ -f tests/fuzz/$$t.dict ] && dict=-dict=tests/fuzz/$$t.dict; \
-		seeds=; [ $$t = manifest ] && seeds=scripts/drivers; \
-		if $(BUILD)/fuzz/fuzz_$$t -max_total_time=$(1) -timeout=10 -artifact_prefix=$(BUILD)/fuzz/$$t- $$dict \
-			$(BUILD)/fuzz/work-$$t tests/fuzz/corpus-$$t $$seeds > $(BUILD)/fuzz/$$t.log 2>&1; then \
-			runs=$$(sed -n 's/^Done \([0-9]*\) runs.*/\1/p' $(BUILD)/fuzz/$$t.log); \
-			printf '  %-9s %10s executions in %s s\n' $$t "$$runs" $(1); \
-			total=$$((total + $${runs:-0})); \
-		else \
-			tail -n 60 $(BUILD)/fuzz/$$t.log; \
-			echo "fuzz_$$t found a failure: the input is $(BUILD)/fuzz/$$t-*, the log $(BUILD)/fuzz/$$t.log"; \
-			failed="$$failed $$t"; \
-		fi; \
-	done; \
-	printf '  %-9s %10s executions\n' total $$total; \
-	if [ -n "$$failed" ]; then echo "fuzzing failed:$$failed"; exit 1; fi
-
+# Every target FUZZ_JOBS processes at once (default: one per CPU), then the
+# corpora of the Lua targets again in fresh sandboxes: tests/fuzz/run.sh.
+FUZZ_JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 FUZZ_SECONDS ?= 60
 FUZZ_TEST_SECONDS ?= 4
 
@@ -379,13 +365,13 @@ test-drivers: $(BUILD)/bin/vmac
 
 # Every fuzz target for a few seconds (make fuzz for longer runs).
 test-fuzz: $(FUZZ_BINS)
-	@echo "== fuzzing every parser $(FUZZ_TEST_SECONDS) s each ($(FUZZ_TARGETS))"
-	@$(call fuzz_all,$(FUZZ_TEST_SECONDS))
+	@echo "== fuzzing every parser $(FUZZ_TEST_SECONDS) s each, $(FUZZ_JOBS) processes ($(FUZZ_TARGETS))"
+	@tests/fuzz/run.sh $(BUILD) $(FUZZ_TEST_SECONDS) $(FUZZ_JOBS) $(FUZZ_TARGETS)
 
 # Every fuzz target FUZZ_SECONDS each (default 60).
 fuzz: $(FUZZ_BINS)
-	@echo "== fuzzing every parser $(FUZZ_SECONDS) s each ($(FUZZ_TARGETS))"
-	@$(call fuzz_all,$(FUZZ_SECONDS))
+	@echo "== fuzzing every parser $(FUZZ_SECONDS) s each, $(FUZZ_JOBS) processes ($(FUZZ_TARGETS))"
+	@tests/fuzz/run.sh $(BUILD) $(FUZZ_SECONDS) $(FUZZ_JOBS) $(FUZZ_TARGETS)
 
 # A suite (or test) that cannot run on this machine (no chromium, no root
 # for a mount namespace) appends its reason to SKIPPED and passes; make test

@@ -13,6 +13,7 @@
 
 #include "../../core/driver/driver.h"
 #include "fuzz.h"
+#include "fuzz_arena.h"
 
 /* recover walks what it got (every key and value, nested), then keeps it
  * as its own dev.state; tick counts. */
@@ -52,15 +53,21 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
 	if (size > 65536)
 		return 0;
-	memset(&limits, 0, sizeof(limits));
-	limits.memory_bytes = 4 << 20;
-	limits.instructions = 1000000;
-	limits.max_level = 10;
-	limits.default_level = 4;
-	if (vmac_driver_load_source("fuzz.lua", DRIVER, sizeof(DRIVER) - 1, &limits, &d, err, sizeof(err)) != 0 ||
-	    vmac_driver_add_board(d, 0, "primary") != 0) {
-		fprintf(stderr, "fuzz_checkpoint: the driver does not load: %s\n", err);
-		abort();
+	d = fuzz_arena_kept();
+	if (!d) {
+		memset(&limits, 0, sizeof(limits));
+		limits.memory_bytes = 4 << 20;
+		limits.instructions = 1000000;
+		limits.max_level = 10;
+		limits.default_level = 4;
+		fuzz_arena_prepare(&limits);
+		if (vmac_driver_load_source("fuzz.lua", DRIVER, sizeof(DRIVER) - 1, &limits, &d, err, sizeof(err)) !=
+		        0 ||
+		    vmac_driver_add_board(d, 0, "primary") != 0) {
+			fprintf(stderr, "fuzz_checkpoint: the driver does not load: %s\n", err);
+			abort();
+		}
+		fuzz_arena_keep(d);
 	}
 	offered = vmac_driver_offer_checkpoint(d, data, size, &info, err, sizeof(err)) == 0;
 	if (!offered && !err[0])
@@ -73,7 +80,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		if (!(offered && rc < 0 &&
 		      (strstr(err, "budget") || strstr(err, "memory") || strstr(err, "instruction"))))
 			abort();
-		vmac_driver_free(d);
+		fuzz_arena_done(d);
 		return 0;
 	}
 	if (offered) {
@@ -90,6 +97,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		fprintf(stderr, "fuzz_checkpoint: the driver does not tick after recover: %s\n", err);
 		abort();
 	}
-	vmac_driver_free(d);
+	fuzz_arena_done(d);
 	return 0;
 }

@@ -100,27 +100,24 @@ static unsigned fake_input(void *ctx, struct vmac_bus_input_request *req, char *
 	return statuses[pick];
 }
 
-static void answer_line(const struct vmac_console_ops *ops, const char *line, size_t answerlen, size_t errorslen)
+/* One line into answer and errors, of exactly answerlen and errorslen
+ * bytes (so ASan sees a write past either). */
+static void answer_line(const struct vmac_console_ops *ops, const char *line, char *answer, size_t answerlen,
+                        char *errors, size_t errorslen)
 {
-	char *answer = malloc(answerlen), *errors = malloc(errorslen);
-	int nerr;
-	if (!answer || !errors)
-		abort();
-	nerr = vmac_console_line(ops, line, answer, answerlen, errors, errorslen);
+	int nerr = vmac_console_line(ops, line, answer, answerlen, errors, errorslen);
 	if (nerr < 0 || strlen(answer) >= answerlen || strlen(errors) >= errorslen)
 		abort();
 	if (strpbrk(answer, "\n\r")) /* the answer is one line */
 		abort();
 	if (nerr > 0 && answerlen >= 4096 && errorslen >= 8192 && strlen(line) < 1000 && !strchr(answer, '#'))
 		abort(); /* an error without its # answer (the buffers had room) */
-	free(answer);
-	free(errors);
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
 	struct vmac_console_ops ops;
-	char *text, *line, *save = NULL;
+	char *text, *line, *save = NULL, *answer, *errors, *small_answer, *small_errors;
 	size_t small;
 	if (size < 2 || size > 16384)
 		return 0;
@@ -138,10 +135,20 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	ops.input = fake_input;
 	ops.ctx = NULL;
 	ops.may_operate = may_operate;
+	answer = malloc(4096); /* as POST /api/console */
+	errors = malloc(8192);
+	small_answer = malloc(small);
+	small_errors = malloc(small + 7);
+	if (!answer || !errors || !small_answer || !small_errors)
+		abort();
 	for (line = strtok_r(text, "\n", &save); line; line = strtok_r(NULL, "\n", &save)) {
-		answer_line(&ops, line, 4096, 8192); /* as POST /api/console */
-		answer_line(&ops, line, small, small + 7);
+		answer_line(&ops, line, answer, 4096, errors, 8192);
+		answer_line(&ops, line, small_answer, small, small_errors, small + 7);
 	}
 	free(text);
+	free(answer);
+	free(errors);
+	free(small_answer);
+	free(small_errors);
 	return 0;
 }

@@ -1,16 +1,13 @@
 /* libFuzzer harness for loading a driver (core/driver/load.c) and checking
  * its manifest (core/driver/manifest.c): the input is a driver's source,
- * loaded with vmac_driver_load_source into a sandboxed state as the host
- * loads an upload. Leading lines "--!KEY=VALUE" (Lua comments) become the
- * host's driver.NAME.KEY settings (memory_kib, instructions, budget_us,
- * param.NAME; --!name=X: the board announced driver X). A refused load
- * must say why; an accepted one must have a manifest inside every bound
- * of driver.h and a description that is a JSON object as the API decodes
- * it (http_manifest_json, core/api/api_request.c), and then runs as a
- * machine: its boards added, attach, two ticks, and operator input of each
- * declared name, with outputs only on declared channels.
- * Seeds: tests/fuzz/corpus-manifest/ and the shipped drivers (scripts/drivers/,
- * which make fuzz passes as a second corpus). */
+ * loaded into a sandboxed state as the host loads an upload
+ * (vmac_driver_load_source: vmac_driver_new, vmac_driver_load_into).
+ * Leading lines "--!KEY=VALUE" (Lua comments) become the host's driver.NAME.KEY settings (memory_kib, instructions,
+ * budget_us, param.NAME; --!name=X: the board announced driver X). A refused load must say why; an accepted one must
+ * have a manifest inside every bound of driver.h and a description that is a JSON object as the API decodes it
+ * (http_manifest_json, core/api/api_request.c), and then runs as a machine: its boards added, attach, two ticks, and
+ * operator input of each declared name, with outputs only on declared channels. Seeds: tests/fuzz/corpus-manifest/ and
+ * the shipped drivers (scripts/drivers/, which make fuzz passes as a second corpus). */
 #include <jansson.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -20,6 +17,7 @@
 #include "../../core/api/api_request.h"
 #include "../../core/driver/driver.h"
 #include "fuzz.h"
+#include "fuzz_arena.h"
 
 #ifndef FUZZ_STDLIB_DIR
 #define FUZZ_STDLIB_DIR "stdlib"
@@ -260,16 +258,26 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	limits.settings = settings;
 	limits.nsettings = nsettings;
 	err[0] = 0;
-	/* The whole input (settings lines too: they are comments) is the source. */
-	rc = vmac_driver_load_source("fuzz.lua", (const char *)data, size, &limits, &d, err, sizeof(err));
+	/* A sandbox as vmac_driver_load_source makes it, restored from the
+	 * arena's snapshot (docs/TESTING.md, "Fuzzing"), then the whole input
+	 * (settings lines too: they are comments) loaded into it. */
+	d = fuzz_arena_kept();
+	if (!d) {
+		fuzz_arena_prepare(&limits);
+		if (vmac_driver_new("fuzz.lua", &limits, &d, err, sizeof(err)) != 0) {
+			fprintf(stderr, "fuzz_manifest: no sandbox: %s\n", err);
+			abort();
+		}
+		fuzz_arena_keep(d);
+	}
+	rc = vmac_driver_load_into(d, (const char *)data, size, &limits, err, sizeof(err));
 	if (rc != 0) {
-		if (rc > 0 || d || !err[0] || !memchr(err, 0, sizeof(err)))
-			abort(); /* refused without a reason, or with a driver anyway */
+		if (rc > 0 || !err[0] || !memchr(err, 0, sizeof(err)))
+			abort(); /* refused without a reason */
+		fuzz_arena_done(d);
 		return 0;
 	}
-	if (!d)
-		abort();
 	run(d, seed);
-	vmac_driver_free(d);
+	fuzz_arena_done(d);
 	return 0;
 }

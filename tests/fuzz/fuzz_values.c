@@ -17,6 +17,7 @@
 
 #include "../../core/driver/internal.h"
 #include "fuzz.h"
+#include "fuzz_arena.h"
 
 /* Every kind of I/O, on three boards (the primary, minor 7, minor
  * 0xFFFFFFFF); variables of every update rule, a group; params of every
@@ -363,14 +364,20 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	if (size > 4096)
 		return 0;
 	trace = getenv("VMAC_FUZZ_TRACE") != NULL;
-	memset(&limits, 0, sizeof(limits));
-	limits.memory_bytes = 1 << 20;
-	limits.instructions = 100000;
-	limits.max_level = 10;
-	limits.default_level = 4;
-	if (vmac_driver_load_source("fuzz.lua", DRIVER, sizeof(DRIVER) - 1, &limits, &d, err, sizeof(err)) != 0) {
-		fprintf(stderr, "fuzz_values: the driver does not load: %s\n", err);
-		abort();
+	d = fuzz_arena_kept();
+	if (!d) {
+		memset(&limits, 0, sizeof(limits));
+		limits.memory_bytes = 1 << 20;
+		limits.instructions = 100000;
+		limits.max_level = 10;
+		limits.default_level = 4;
+		fuzz_arena_prepare(&limits);
+		if (vmac_driver_load_source("fuzz.lua", DRIVER, sizeof(DRIVER) - 1, &limits, &d, err, sizeof(err)) !=
+		    0) {
+			fprintf(stderr, "fuzz_values: the driver does not load: %s\n", err);
+			abort();
+		}
+		fuzz_arena_keep(d);
 	}
 	nboards = 0;
 	minors[nboards++] = board_minors[byte(&r) % 4];
@@ -414,6 +421,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		fprintf(stderr, "fuzz_values: %d operations, %s\n", steps,
 		        alive ? "the driver runs" : "the driver failed");
 	check_params(d);
-	vmac_driver_free(d);
+	fuzz_arena_done(d);
 	return 0;
 }
