@@ -673,7 +673,7 @@ static void *counting_heap(void *ctx, void *ptr, size_t osize, size_t nsize)
 START_TEST(two_step_load_on_a_given_heap)
 {
 	struct vmac_driver *d;
-	char err[VMAC_DRIVER_ERR_MAX] = "", big[] = "/tmp/vmac-test-driver-big.lua";
+	char err[VMAC_DRIVER_ERR_MAX] = "", big[64];
 	const char *src = "local t = require 'twice'\n"
 	                  "return { name = 't', version = '1', io = { lamp = 'do0' },\n"
 	                  "  tick = function(dev) dev.out.lamp = t.f(1) == 2 end }\n";
@@ -716,6 +716,7 @@ START_TEST(two_step_load_on_a_given_heap)
 	limits.heap = NULL;
 
 	/* A file is read whole at its own size, and one over 1 MiB is refused. */
+	snprintf(big, sizeof(big), "/tmp/vmac-test-driver-big-%d.lua", (int)getpid());
 	f = fopen(big, "w");
 	ck_assert_msg(f != NULL, "cannot write %s", big);
 	i = fputs(head, f) >= 0 ? (int)strlen(head) : 0;
