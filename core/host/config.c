@@ -254,8 +254,11 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
 	return 0;
 }
 
-#define CONFIG_INSTRUCTIONS 10000000 /* a settings file needs a few thousand */
-#define CONFIG_MEMORY (16u << 20)    /* bytes of the file's Lua state; a settings file needs a few KiB */
+/* A settings file needs a few thousand instructions and a few KiB; these
+ * leave hundreds of times that, and a runaway file is refused in
+ * milliseconds (docs/HOST.md, "Settings"). */
+#define CONFIG_INSTRUCTIONS 1000000
+#define CONFIG_MEMORY (1u << 20) /* bytes of the file's Lua state */
 
 /* The state's allocator: refuses to grow past CONFIG_MEMORY (LuaJIT then
  * raises "not enough memory" inside the protected call). ud: the bytes in
@@ -327,7 +330,7 @@ int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t 
 		return -1;
 	}
 	if ((rc = lua_cpcall(L, config_load_protected, &a)) != 0) {
-		const char *msg = rc == LUA_ERRMEM ? "the file needs more than 16 MiB (settings are plain assignments)"
+		const char *msg = rc == LUA_ERRMEM ? "the file needs more than 1 MiB (settings are plain assignments)"
 		                  : lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1)
 		                                                   : "error object is not a string";
 		size_t n = strlen(path);
