@@ -37,8 +37,10 @@ static int terminated(const char *s, size_t size)
 }
 
 /* What must hold of a config after any sequence of loads and settings,
- * refused or not. */
-static void check_config(const struct vmac_config *c)
+ * refused or not. all: also that every driver setting is found under its
+ * driver's name (quadratic in their number: after the last line, not after
+ * each, which cost more than the rest of an input). */
+static void check_config(const struct vmac_config *c, int all)
 {
 	struct vmac_driver_setting out[VMAC_CONFIG_DRIVER_SETTINGS];
 	int i, n = 0;
@@ -65,14 +67,14 @@ static void check_config(const struct vmac_config *c)
 			abort();
 	}
 	/* Every setting is found under its driver's name, and only there. */
-	for (i = 0; i < c->ndriver; i++) {
+	for (i = 0; all && i < c->ndriver; i++) {
 		int j, first = 1;
 		for (j = 0; j < i; j++)
 			first &= strcmp(c->driver[j].driver, c->driver[i].driver) != 0;
 		if (first)
 			n += vmac_config_driver_settings(c, c->driver[i].driver, out, VMAC_CONFIG_DRIVER_SETTINGS);
 	}
-	if (n != c->ndriver)
+	if (all && n != c->ndriver)
 		abort();
 }
 
@@ -96,7 +98,7 @@ static void fuzz_file(const uint8_t *data, size_t size)
 	err[0] = 0;
 	rc = vmac_config_load(&c, file_path, err, sizeof(err));
 	check_result(rc, err);
-	check_config(&c);
+	check_config(&c, 1);
 	err[0] = 0;
 	check_result(vmac_config_check(&c, err, sizeof(err)), err);
 }
@@ -118,8 +120,9 @@ static void fuzz_lines(const uint8_t *data, size_t size)
 		*eq = 0;
 		err[0] = 0;
 		check_result(vmac_config_set(&c, line, eq + 1, err, sizeof(err)), err);
-		check_config(&c);
+		check_config(&c, 0);
 	}
+	check_config(&c, 1);
 	err[0] = 0;
 	check_result(vmac_config_check(&c, err, sizeof(err)), err);
 	free(text);
