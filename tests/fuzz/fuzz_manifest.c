@@ -27,6 +27,7 @@
 #endif
 
 #define SETTINGS_MAX 8
+#define INSTRUCTIONS_MAX 200000 /* of a setting (below): the host's default driver_instructions */
 
 static int manifest_name_ok(const char *s)
 {
@@ -238,6 +239,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 			struct vmac_driver_setting *s = &settings[nsettings++];
 			snprintf(s->key, sizeof(s->key), "%.*s", (int)(eq - line), line);
 			snprintf(s->value, sizeof(s->value), "%s", eq + 1);
+			/* The harness has no wall-clock budget (it would make runs
+			 * differ), and a load gets VMAC_DRIVER_LOAD_FACTOR budgets:
+			 * instructions=1e9, which a host allows, would let one input
+			 * loop for minutes. Above INSTRUCTIONS_MAX the setting is
+			 * that. */
+			if (strcmp(s->key, "instructions") == 0 && strtod(s->value, NULL) > INSTRUCTIONS_MAX)
+				snprintf(s->value, sizeof(s->value), "%d", INSTRUCTIONS_MAX);
 		}
 		if (!nl)
 			break;
