@@ -52,13 +52,15 @@ struct enc {
 	char why[160];
 };
 
+/* n more bytes; with buf NULL only counted (would_encode). */
 static int put(struct enc *e, const void *p, size_t n)
 {
 	if (e->cap - e->len < n) {
 		snprintf(e->why, sizeof(e->why), "dev.state encodes to more than %zu bytes (checkpoint_kib)", e->cap);
 		return -1;
 	}
-	memcpy(e->buf + e->len, p, n);
+	if (e->buf)
+		memcpy(e->buf + e->len, p, n);
 	e->len += n;
 	return 0;
 }
@@ -283,6 +285,27 @@ struct offer {
 };
 
 /* [-0, +1] on success: the dev.state a checkpoint holds, decoded. */
+/* Whether the table at i encodes again in at most cap bytes (counted, not
+ * written): 0, or -1 with why. What a checkpoint gives a driver must be
+ * what its next checkpoint can hold, and a table the file nests shallow and
+ * refers to deep may come first in the encoder's order at the deep place,
+ * its whole subtree then deeper than VMAC_CHECKPOINT_DEPTH (found by
+ * tests/fuzz/fuzz_checkpoint.c). [-0, +0] */
+static int would_encode(lua_State *L, int i, size_t cap, char *why, size_t whylen)
+{
+	struct enc e;
+	int top = lua_gettop(L), rc;
+	memset(&e, 0, sizeof(e));
+	e.cap = cap;
+	lua_newtable(L);
+	e.seen = lua_gettop(L);
+	rc = put(&e, MAGIC, 4) || put_tag(&e, FORMAT) || enc_table(&e, L, i, 0);
+	lua_settop(L, top);
+	if (rc)
+		snprintf(why, whylen, "checkpoint damaged: its dev.state would not checkpoint again: %s", e.why);
+	return rc ? -1 : 0;
+}
+
 static int decode_state(lua_State *L, const uint8_t *buf, size_t len, char *err, size_t errlen)
 {
 	struct dec c;
@@ -302,6 +325,8 @@ static int decode_state(lua_State *L, const uint8_t *buf, size_t len, char *err,
 		goto fail;
 	}
 	lua_remove(L, c.tables);
+	if (would_encode(L, lua_gettop(L), len, c.why, sizeof(c.why)) != 0)
+		goto fail;
 	return 0;
 fail:
 	snprintf(err, errlen, "%s", c.why);

@@ -493,6 +493,74 @@ START_TEST(malformed_checkpoints_are_refused_with_the_reason)
 }
 END_TEST
 
+/* A table the file nests shallow and refers to deep: the encoder may reach
+ * it first at the deep place, and its whole chain then lies deeper than
+ * VMAC_CHECKPOINT_DEPTH. Such a checkpoint is refused, for what a driver is
+ * given must checkpoint again (found by tests/fuzz/fuzz_checkpoint.c).
+ * Root {[first] = A, [second] = B}: A a chain of 30 tables, B a chain of 30
+ * whose innermost refers to A. Which key the encoder takes first is
+ * LuaJIT's hash order, so both orders of the keys are offered: one of them
+ * is refused, and whatever is taken checkpoints again. */
+static size_t chain(uint8_t *p, int ref)
+{
+	size_t n = 0;
+	int i;
+	p[n++] = '{';
+	for (i = 1; i < 30; i++) {
+		p[n++] = 'T';
+		p[n++] = '{';
+	}
+	if (ref) {
+		p[n++] = 'F';
+		p[n++] = '@';
+		memcpy(p + n, "\x02\x00\x00\x00", 4); /* table 2: A, after the root */
+		n += 4;
+	}
+	for (i = 0; i < 30; i++)
+		p[n++] = '}';
+	return n;
+}
+
+START_TEST(a_checkpoint_taken_checkpoints_again)
+{
+	struct vmac_driver *r;
+	uint8_t ck[512], again[512];
+	char err[VMAC_DRIVER_ERR_MAX];
+	int order, refusals = 0;
+	for (order = 0; order < 2; order++) {
+		double first = order ? 2 : 1, second = order ? 1 : 2;
+		size_t n = 0, len;
+		memcpy(ck, "VMCK\x01{N", 7);
+		n = 7;
+		memcpy(ck + n, &first, 8); /* little-endian hosts only, as the format */
+		n += 8;
+		n += chain(ck + n, 0);
+		ck[n++] = 'N';
+		memcpy(ck + n, &second, 8);
+		n += 8;
+		n += chain(ck + n, 1);
+		ck[n++] = '}';
+		r = load_ok("return { name = 't', version = '2', io = {}, tick = function() end,\n"
+		            "  recover = function(dev, saved) dev.state = saved.state end }");
+		err[0] = 0;
+		if (vmac_driver_offer_checkpoint(r, ck, n, &info, err, sizeof(err)) != 0) {
+			says(err,
+			     "checkpoint damaged: its dev.state would not checkpoint again: dev.state is nested deeper",
+			     "a table shallow in the file, deep in the encoder's order");
+			refusals++;
+		} else {
+			ck_assert_msg(vmac_driver_recover(r, 0, err, sizeof(err)) == VMAC_RECOVER_DONE, "recover: %s",
+			              err);
+			ck_assert_msg(vmac_driver_checkpoint(r, again, sizeof(again), &len, err, sizeof(err)) == 0,
+			              "keys in order %d: a checkpoint taken does not checkpoint again: %s", order, err);
+		}
+		vmac_driver_free(r);
+	}
+	ck_assert_msg(refusals == 1, "%d of the two orders refused (one must be: the encoder takes one first)",
+	              refusals);
+}
+END_TEST
+
 START_TEST(random_byte_flips_are_taken_or_refused_cleanly)
 {
 	struct vmac_driver *w = attached_with(RICH_STATE), *r = load_ok(any_reader);
@@ -697,6 +765,7 @@ int main(void)
 	tcase_add_checked_fixture(tc, setup, NULL);
 	tcase_set_timeout(tc, 120);
 	tcase_add_test(tc, round_trip_keeps_plain_data_sharing_and_cycles);
+	tcase_add_test(tc, a_checkpoint_taken_checkpoints_again);
 	tcase_add_test(tc, restarted_false_and_version_arrive_as_given);
 	tcase_add_test(tc, over_checkpoint_kib_fails_only_the_checkpoint);
 	tcase_add_test(tc, depth_limit_is_the_same_both_ways);
