@@ -277,7 +277,7 @@ $(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/s
 # goes to $(BUILD)/fuzz/work-NAME, never to the committed seeds.
 FUZZ_TARGETS := proto config console manifest values http checkpoint
 FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=all
-FUZZ_CFLAGS   = -std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer $(WARN) -Wno-unknown-warning-option $(FUZZ_SAN) \
+FUZZ_CFLAGS   = -std=c11 -D_GNU_SOURCE -g -O2 -fno-omit-frame-pointer $(WARN) -Wno-unknown-warning-option $(FUZZ_SAN) \
                 -fsanitize=fuzzer-no-link $(PKG_CFLAGS)
 FUZZ_LINK     = clang $(FUZZ_SAN) -fsanitize=fuzzer $^ -o $@
 FOBJ          = $(BUILD)/fuzz/obj
@@ -295,7 +295,7 @@ $(FOBJ)/tests/fuzz/fuzz_arena.o: tests/fuzz/fuzz_arena.c
 # The wire codec and the board (portable C99).
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
 	@mkdir -p $(dir $@)
-	clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
+	clang -std=c99 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
 
 # The config file and key=value settings (vmac_config_load/set/check).
 $(BUILD)/fuzz/fuzz_config: $(call fuzz_obj,tests/fuzz/fuzz_config.c core/host/config.c core/common/addr.c \
