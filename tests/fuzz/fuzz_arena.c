@@ -188,3 +188,25 @@ void fuzz_arena_done(struct vmac_driver *d)
 	free(d->describe);
 	free(d);
 }
+
+struct vmac_driver *fuzz_arena_fixed_driver(const char *target, const char *src, size_t len, size_t memory_bytes,
+                                            uint64_t instructions)
+{
+	struct vmac_driver_limits limits;
+	struct vmac_driver *d = fuzz_arena_kept();
+	char err[VMAC_DRIVER_ERR_MAX];
+	if (d)
+		return d;
+	memset(&limits, 0, sizeof(limits));
+	limits.memory_bytes = memory_bytes;
+	limits.instructions = instructions;
+	limits.max_level = 10;
+	limits.default_level = 4;
+	fuzz_arena_prepare(&limits);
+	if (vmac_driver_load_source("fuzz.lua", src, len, &limits, &d, err, sizeof(err)) != 0) {
+		fprintf(stderr, "%s: the driver does not load: %s\n", target, err);
+		abort();
+	}
+	fuzz_arena_keep(d);
+	return d;
+}

@@ -9,6 +9,7 @@
 #define VMAC_FUZZ_ARENA_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "../../core/driver/driver.h"
 
@@ -29,6 +30,13 @@ struct vmac_driver *fuzz_arena_kept(void);
 /* Keep d, loaded just now after fuzz_arena_prepare, and snapshot the arena
  * and d's C side; the arena off, nothing. */
 void fuzz_arena_keep(struct vmac_driver *d);
+
+/* For a target that runs one fixed driver: src (named fuzz.lua) loaded with
+ * this memory cap and instruction budget (levels 10, default 4), kept and
+ * restored with the functions above, or loaded afresh with the arena off.
+ * Aborts, naming target, when it does not load. fuzz_arena_done after. */
+struct vmac_driver *fuzz_arena_fixed_driver(const char *target, const char *src, size_t len, size_t memory_bytes,
+                                            uint64_t instructions);
 
 /* After an input: free d unless it is the kept one (restored, not freed). */
 void fuzz_arena_done(struct vmac_driver *d);

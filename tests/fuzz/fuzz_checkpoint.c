@@ -39,7 +39,6 @@ static const char DRIVER[] = "local function walk(t, seen, depth)\n"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-	struct vmac_driver_limits limits;
 	struct vmac_checkpoint_info info = {1.7e9, 3.5, "1.0", 1};
 	struct vmac_driver *d = NULL;
 	struct vmac_inputs in;
@@ -53,22 +52,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
 	if (size > 65536)
 		return 0;
-	d = fuzz_arena_kept();
-	if (!d) {
-		memset(&limits, 0, sizeof(limits));
-		limits.memory_bytes = 4 << 20;
-		limits.instructions = 1000000;
-		limits.max_level = 10;
-		limits.default_level = 4;
-		fuzz_arena_prepare(&limits);
-		if (vmac_driver_load_source("fuzz.lua", DRIVER, sizeof(DRIVER) - 1, &limits, &d, err, sizeof(err)) !=
-		        0 ||
-		    vmac_driver_add_board(d, 0, "primary") != 0) {
-			fprintf(stderr, "fuzz_checkpoint: the driver does not load: %s\n", err);
-			abort();
-		}
-		fuzz_arena_keep(d);
-	}
+	d = fuzz_arena_fixed_driver("fuzz_checkpoint", DRIVER, sizeof(DRIVER) - 1, 4 << 20, 1000000);
+	if (vmac_driver_add_board(d, 0, "primary") != 0)
+		abort();
 	offered = vmac_driver_offer_checkpoint(d, data, size, &info, err, sizeof(err)) == 0;
 	if (!offered && !err[0])
 		abort(); /* a refusal says why */

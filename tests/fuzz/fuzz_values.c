@@ -354,7 +354,6 @@ enum op { OP_SET, OP_TICK, OP_INPUT, OP_PARAMS, OP_RESTORE, OP_ADD_BOARD, OP_LEV
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
 	static const uint32_t board_minors[] = {0, 7, 0xFFFFFFFFu, 1};
-	struct vmac_driver_limits limits;
 	struct vmac_driver *d = NULL;
 	struct reader r = {data, data + size};
 	char err[VMAC_DRIVER_ERR_MAX];
@@ -364,21 +363,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	if (size > 4096)
 		return 0;
 	trace = getenv("VMAC_FUZZ_TRACE") != NULL;
-	d = fuzz_arena_kept();
-	if (!d) {
-		memset(&limits, 0, sizeof(limits));
-		limits.memory_bytes = 1 << 20;
-		limits.instructions = 100000;
-		limits.max_level = 10;
-		limits.default_level = 4;
-		fuzz_arena_prepare(&limits);
-		if (vmac_driver_load_source("fuzz.lua", DRIVER, sizeof(DRIVER) - 1, &limits, &d, err, sizeof(err)) !=
-		    0) {
-			fprintf(stderr, "fuzz_values: the driver does not load: %s\n", err);
-			abort();
-		}
-		fuzz_arena_keep(d);
-	}
+	d = fuzz_arena_fixed_driver("fuzz_values", DRIVER, sizeof(DRIVER) - 1, 1 << 20, 100000);
 	nboards = 0;
 	minors[nboards++] = board_minors[byte(&r) % 4];
 	if (vmac_driver_add_board(d, minors[0], "primary") != 0)
