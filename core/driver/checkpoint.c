@@ -147,26 +147,30 @@ static int enc_value(struct enc *e, lua_State *L, int i, int depth)
 	}
 }
 
+/* The whole checkpoint of the value at state (a table; anything else is
+ * an empty one): 0, or -1 with e->why. [-0, +1] the table of seen tables. */
+static int enc_state(struct enc *e, lua_State *L, int state)
+{
+	lua_newtable(L);
+	e->seen = lua_gettop(L);
+	if (put(e, MAGIC, 4) || put_tag(e, FORMAT))
+		return -1;
+	return lua_istable(L, state) ? enc_table(e, L, state, 0) : (put_tag(e, '{') || put_tag(e, '}'));
+}
+
 static int encode_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
 	struct enc *e = args;
 	lua_State *L = d->L;
-	int state;
-	lua_newtable(L);
-	e->seen = lua_gettop(L);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
 	lua_rawgeti(L, -1, key_state(d));
 	lua_rawget(L, -3);
-	state = lua_gettop(L);
-	if (put(e, MAGIC, 4) || put_tag(e, FORMAT))
-		goto fail;
-	if (lua_istable(L, state) ? enc_table(e, L, state, 0) : (put_tag(e, '{') || put_tag(e, '}')))
-		goto fail;
+	if (enc_state(e, L, lua_gettop(L)) != 0) {
+		snprintf(err, errlen, "%s", e->why);
+		return -1;
+	}
 	return 0;
-fail:
-	snprintf(err, errlen, "%s", e->why);
-	return -1;
 }
 
 int vmac_driver_checkpoint(struct vmac_driver *d, uint8_t *buf, size_t cap, size_t *len, char *err, size_t errlen)
@@ -284,7 +288,6 @@ struct offer {
 	const struct vmac_checkpoint_info *info;
 };
 
-/* [-0, +1] on success: the dev.state a checkpoint holds, decoded. */
 /* Whether the table at i encodes again in at most cap bytes (counted, not
  * written): 0, or -1 with why. What a checkpoint gives a driver must be
  * what its next checkpoint can hold, and a table the file nests shallow and
@@ -297,15 +300,14 @@ static int would_encode(lua_State *L, int i, size_t cap, char *why, size_t whyle
 	int top = lua_gettop(L), rc;
 	memset(&e, 0, sizeof(e));
 	e.cap = cap;
-	lua_newtable(L);
-	e.seen = lua_gettop(L);
-	rc = put(&e, MAGIC, 4) || put_tag(&e, FORMAT) || enc_table(&e, L, i, 0);
+	rc = enc_state(&e, L, i);
 	lua_settop(L, top);
 	if (rc)
 		snprintf(why, whylen, "checkpoint damaged: its dev.state would not checkpoint again: %s", e.why);
 	return rc ? -1 : 0;
 }
 
+/* [-0, +1] on success: the dev.state a checkpoint holds, decoded. */
 static int decode_state(lua_State *L, const uint8_t *buf, size_t len, char *err, size_t errlen)
 {
 	struct dec c;
