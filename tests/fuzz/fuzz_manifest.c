@@ -2,12 +2,16 @@
  * its manifest (core/driver/manifest.c): the input is a driver's source,
  * loaded into a sandboxed state as the host loads an upload
  * (vmac_driver_load_source: vmac_driver_new, vmac_driver_load_into).
- * Leading lines "--!KEY=VALUE" (Lua comments) become the host's driver.NAME.KEY settings (memory_kib, instructions,
- * budget_us, param.NAME; --!name=X: the board announced driver X). A refused load must say why; an accepted one must
- * have a manifest inside every bound of driver.h and a description that is a JSON object as the API decodes it
- * (http_manifest_json, core/api/api_request.c), and then runs as a machine: its boards added, attach, two ticks, and
- * operator input of each declared name, with outputs only on declared channels. Seeds: tests/fuzz/corpus-manifest/ and
- * the shipped drivers (scripts/drivers/, which make fuzz passes as a second corpus). */
+ * Leading lines "--!KEY=VALUE" (Lua comments) become the host's
+ * driver.NAME.KEY settings (memory_kib, instructions, budget_us,
+ * param.NAME; --!name=X: the board announced driver X). A refused load
+ * must say why; an accepted one must have a manifest inside every bound
+ * of driver.h and a description that is a JSON object as the API decodes
+ * it (http_manifest_json, core/api/api_request.c), and then runs as a
+ * machine: its boards added, attach, two ticks, and operator input of each
+ * declared name, with outputs only on declared channels.
+ * Seeds: tests/fuzz/corpus-manifest/ and the shipped drivers
+ * (scripts/drivers/, which make fuzz passes as a second corpus). */
 #include <jansson.h>
 #include <stdint.h>
 #include <stdio.h>
