@@ -249,13 +249,13 @@ void vmac_driver_set_tag(struct vmac_driver *d, int64_t tag);
 int64_t vmac_driver_tag(const struct vmac_driver *d);
 
 /* Params (the manifest's `params`, in name order): how many; whether name
- * is one with persist = true (1), one without (0), or none (-1); the i-th
- * with its value now (bus thread once bound; a raw read in a protected
- * call, no metamethod runs; a value that cannot be read is NONE). 0, or -1
- * when there is no i-th. */
+ * is one with persist = true (1), one without (0), or none (-1); all of
+ * them with their values now into out (room for VMAC_DRIVER_MAX_PARAMS),
+ * returning how many (bus thread once bound; raw reads in one protected
+ * call, no metamethod runs; a value that cannot be read is NONE). */
 int vmac_driver_nparams(const struct vmac_driver *d);
 int vmac_driver_param_persists(const struct vmac_driver *d, const char *name);
-int vmac_driver_param(const struct vmac_driver *d, int i, struct vmac_variable *out);
+int vmac_driver_params(const struct vmac_driver *d, struct vmac_variable *out);
 
 /* A persisted value back into dev.params before the driver runs (the host's
  * main thread, right after loading): name must be a persist = true param,

@@ -469,39 +469,40 @@ int vmac_driver_param_persists(const struct vmac_driver *d, const char *name)
 }
 
 struct param_args {
-	int i;
-	struct vmac_variable *out;
 	const char *name;
 	const struct vmac_value *v;
 	char *why;
 	size_t whylen;
 };
 
-static int param_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+static int params_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
-	struct param_args *a = args;
+	struct vmac_variable *out = args;
 	lua_State *L = d->L;
+	int i;
 	(void)err;
 	(void)errlen;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
-	drv_raw_getfield(L, 1, d->params[a->i].name);
-	to_value(L, &a->out->value);
+	for (i = 0; i < d->nparams; i++) {
+		drv_raw_getfield(L, 1, d->params[i].name);
+		to_value(L, &out[i].value);
+		lua_settop(L, 1);
+	}
 	return 0;
 }
 
-int vmac_driver_param(const struct vmac_driver *cd, int i, struct vmac_variable *out)
+int vmac_driver_params(const struct vmac_driver *cd, struct vmac_variable *out)
 {
 	struct vmac_driver *d = (struct vmac_driver *)cd; /* reads only; protection keeps flags in d */
-	struct param_args a;
-	memset(out, 0, sizeof(*out));
-	if (i < 0 || i >= d->nparams)
-		return -1;
-	memcpy(out->name, d->params[i].name, sizeof(out->name));
-	memcpy(out->unit, d->params[i].unit, sizeof(out->unit));
-	a.i = i;
-	a.out = out;
-	drv_protect_quiet(d, param_work, &a);
-	return 0;
+	int i;
+	memset(out, 0, (size_t)d->nparams * sizeof(*out));
+	for (i = 0; i < d->nparams; i++) {
+		memcpy(out[i].name, d->params[i].name, sizeof(out[i].name));
+		memcpy(out[i].unit, d->params[i].unit, sizeof(out[i].unit));
+	}
+	if (d->nparams > 0)
+		drv_protect_quiet(d, params_work, out);
+	return d->nparams;
 }
 
 static int restore_param_work(struct vmac_driver *d, void *args, char *err, size_t errlen)

@@ -34,6 +34,7 @@ static void describe(struct vmac_bus *bus, struct machine *m)
 
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 {
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
 	struct vmac_rec_event *e;
 	int i, n;
 	if (!m->rec)
@@ -43,14 +44,11 @@ void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 	m->rec->from_attach = 1;
 	e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_ATTACH);
 	snprintf(e->name, sizeof(e->name), "%s", m->rec->version);
-	n = vmac_driver_nparams(m->drv);
+	n = vmac_driver_params(m->drv, p);
 	for (i = 0; i < n; i++) {
-		struct vmac_variable p;
-		if (vmac_driver_param(m->drv, i, &p) != 0)
-			continue;
 		e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_PARAM);
-		memcpy(e->name, p.name, sizeof(e->name) - 1);
-		e->value = p.value;
+		memcpy(e->name, p[i].name, sizeof(e->name) - 1);
+		e->value = p[i].value;
 	}
 }
 

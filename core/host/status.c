@@ -69,9 +69,7 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 		o->nvars = vmac_driver_nvars(m->drv);
 		for (v = 0; v < o->nvars; v++)
 			o->vars[v] = *vmac_driver_variable(m->drv, v);
-		o->nparams = vmac_driver_nparams(m->drv);
-		for (v = 0; v < o->nparams; v++)
-			vmac_driver_param(m->drv, v, &o->params[v]);
+		o->nparams = vmac_driver_params(m->drv, o->params);
 	}
 }
 

@@ -57,7 +57,7 @@ struct board_outputs {
 static void check_loaded(struct vmac_driver *d, struct board_outputs *boards, int *nboards)
 {
 	json_t *desc = http_manifest_json(vmac_driver_describe(d)); /* as GET /api/drivers/NAME/manifest has it */
-	struct vmac_variable p;
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
 	int i, j;
 	if (!json_is_object(desc) || !json_is_string(json_object_get(desc, "name")) ||
 	    !json_is_string(json_object_get(desc, "version")) || !json_is_integer(json_object_get(desc, "level")))
@@ -103,13 +103,13 @@ static void check_loaded(struct vmac_driver *d, struct board_outputs *boards, in
 	for (i = 0; i < vmac_driver_nvars(d); i++)
 		if (!manifest_name_ok(vmac_driver_variable(d, i)->name))
 			abort();
+	if (vmac_driver_params(d, p) != vmac_driver_nparams(d))
+		abort();
 	for (i = 0; i < vmac_driver_nparams(d); i++) {
-		if (vmac_driver_param(d, i, &p) != 0 || !manifest_name_ok(p.name) || !value_ok(&p.value) ||
-		    !memchr(p.unit, 0, sizeof(p.unit)) || vmac_driver_param_persists(d, p.name) < 0)
+		if (!manifest_name_ok(p[i].name) || !value_ok(&p[i].value) ||
+		    !memchr(p[i].unit, 0, sizeof(p[i].unit)) || vmac_driver_param_persists(d, p[i].name) < 0)
 			abort();
 	}
-	if (vmac_driver_param(d, vmac_driver_nparams(d), &p) != -1)
-		abort();
 }
 
 static int tick(struct vmac_driver *d, const struct board_outputs *boards, int nboards, double time_s, uint32_t seed)
@@ -166,12 +166,13 @@ static int input(struct vmac_driver *d, const char *name, const struct vmac_valu
 static void run(struct vmac_driver *d, uint32_t seed)
 {
 	struct board_outputs boards[VMAC_DRIVER_MAX_BOARDS];
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
 	struct vmac_value v;
 	json_t *desc, *commands;
 	const char *name;
 	json_t *decl;
 	char err[VMAC_DRIVER_ERR_MAX];
-	int i, nboards, failed = 0;
+	int i, n, nboards, failed = 0;
 	memset(boards, 0, sizeof(boards));
 	check_loaded(d, boards, &nboards);
 	for (i = 0; i < nboards; i++) {
@@ -196,11 +197,9 @@ static void run(struct vmac_driver *d, uint32_t seed)
 		v.number = seed % 100;
 		failed = input(d, vmac_driver_variable(d, i)->name, &v) < 0;
 	}
-	for (i = 0; i < vmac_driver_nparams(d) && !failed; i++) {
-		struct vmac_variable p;
-		vmac_driver_param(d, i, &p);
-		failed = input(d, p.name, &p.value) < 0;
-	}
+	n = vmac_driver_params(d, p);
+	for (i = 0; i < n && !failed; i++)
+		failed = input(d, p[i].name, &p[i].value) < 0;
 	desc = http_manifest_json(vmac_driver_describe(d));
 	commands = json_object_get(desc, "commands");
 	v.type = VMAC_VALUE_NONE;

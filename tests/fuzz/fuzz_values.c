@@ -1,7 +1,7 @@
 /* libFuzzer harness for the conversion of values between the host and a
  * driver (core/driver/instance.c): dev.out into board outputs, dev.vars
  * into published variables, operator input (vmac_driver_input, checked
- * against the declarations) and params both ways (vmac_driver_param,
+ * against the declarations) and params both ways (vmac_driver_params,
  * vmac_driver_restore_param). One fixed driver (below) runs a program of
  * operations the input spells (see struct op); between them the harness
  * writes any Lua value (nil, booleans, numbers of every kind, strings of
@@ -201,6 +201,7 @@ static int set_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 /* The boards, in the order added; what each may have on. */
 static uint32_t minors[VMAC_DRIVER_MAX_BOARDS];
 static int nboards;
+static int trace = -1; /* VMAC_FUZZ_TRACE set: each operation printed */
 
 static uint8_t allowed_digital(int b)
 {
@@ -237,7 +238,7 @@ static int tick(struct vmac_driver *d, struct reader *r, double time_s)
 	}
 	err[0] = 0;
 	rc = vmac_driver_tick(d, time_s, ins, outs, err, sizeof(err));
-	if (getenv("VMAC_FUZZ_TRACE"))
+	if (trace)
 		fprintf(stderr, "fuzz_values: tick %d %s, board 0 digital 0x%02x pwm %d\n", rc, err, out[0].digital,
 		        out[0].pwm);
 	if (rc != 0 && (rc != -1 || !err[0]))
@@ -262,12 +263,13 @@ static int tick(struct vmac_driver *d, struct reader *r, double time_s)
  * have, its string terminated. */
 static void check_params(const struct vmac_driver *d)
 {
-	int i;
-	for (i = 0; i < vmac_driver_nparams(d); i++) {
-		struct vmac_variable p;
-		if (vmac_driver_param(d, i, &p) != 0 || !value_ok(&p.value) || !memchr(p.name, 0, sizeof(p.name)))
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
+	int i, n = vmac_driver_params(d, p);
+	if (n != vmac_driver_nparams(d))
+		abort();
+	for (i = 0; i < n; i++)
+		if (!value_ok(&p[i].value) || !memchr(p[i].name, 0, sizeof(p[i].name)))
 			abort();
-	}
 }
 
 static int same_value(const struct vmac_value *a, const struct vmac_value *b)
@@ -277,14 +279,6 @@ static int same_value(const struct vmac_value *a, const struct vmac_value *b)
 	if (a->type == VMAC_VALUE_STRING)
 		return strcmp(a->str, b->str) == 0;
 	return a->number == b->number || (a->number != a->number && b->number != b->number);
-}
-
-/* The params' values now, into p (VMAC_DRIVER_MAX_PARAMS). */
-static void read_params(const struct vmac_driver *d, struct vmac_variable *p)
-{
-	int i;
-	for (i = 0; i < vmac_driver_nparams(d); i++)
-		vmac_driver_param(d, i, &p[i]);
 }
 
 /* A refusal's message about a value that is no string (nor names one)
@@ -305,11 +299,11 @@ static int input(struct vmac_driver *d, struct reader *r, double time_s)
 	const char *n = name(r, buf, sizeof(buf));
 	int rc, i;
 	host_value(r, &v);
-	read_params(d, before);
+	vmac_driver_params(d, before);
 	err[0] = 0;
 	memset(reply, 'x', sizeof(reply));
 	rc = vmac_driver_input(d, time_s, n, &v, reply, sizeof(reply), err, sizeof(err));
-	if (getenv("VMAC_FUZZ_TRACE"))
+	if (trace)
 		fprintf(stderr, "fuzz_values: input %s (type %d) -> %d '%s' %s\n", n, (int)v.type, rc, reply,
 		        rc < 0 ? err : "");
 	if (rc < -1 || rc > VMAC_REFUSED_NOT_PERSIST || !memchr(reply, 0, sizeof(reply)) || (rc == -1 && !err[0]))
@@ -320,7 +314,7 @@ static int input(struct vmac_driver *d, struct reader *r, double time_s)
 		check_text(reply, n, &v);
 	if (rc < 0)
 		return rc;
-	read_params(d, after);
+	vmac_driver_params(d, after);
 	for (i = 0; i < vmac_driver_nparams(d); i++) {
 		if (rc > 0 && !same_value(&before[i].value, &after[i].value))
 			abort(); /* a refused input changed a param */
@@ -358,11 +352,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	struct reader r = {data, data + size};
 	char err[VMAC_DRIVER_ERR_MAX];
 	double time_s = 1;
-	int steps, alive = 1, trace;
+	int steps, alive = 1;
 
 	if (size > 4096)
 		return 0;
-	trace = getenv("VMAC_FUZZ_TRACE") != NULL;
+	if (trace < 0)
+		trace = getenv("VMAC_FUZZ_TRACE") != NULL;
 	d = fuzz_arena_fixed_driver("fuzz_values", DRIVER, sizeof(DRIVER) - 1, 1 << 20, 100000);
 	nboards = 0;
 	minors[nboards++] = board_minors[byte(&r) % 4];

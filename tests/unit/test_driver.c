@@ -459,15 +459,13 @@ END_TEST
 /* The value of param name now. */
 static struct vmac_value param_value(struct vmac_driver *d, const char *name)
 {
-	struct vmac_variable p;
-	int i;
-	for (i = 0; i < vmac_driver_nparams(d); i++) {
-		vmac_driver_param(d, i, &p);
-		if (strcmp(p.name, name) == 0)
-			return p.value;
-	}
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
+	int i, n = vmac_driver_params(d, p);
+	for (i = 0; i < n; i++)
+		if (strcmp(p[i].name, name) == 0)
+			return p[i].value;
 	ck_abort_msg("no param %s", name);
-	return p.value;
+	return p[0].value;
 }
 
 /* Operator input to params: a value of another type than the param's is

@@ -155,7 +155,7 @@ START_TEST(a_state_at_its_cap_fails_as_a_driver_not_the_host)
 	    "  params = { p = { default = 1, persist = true } },\n"
 	    "  input = function() return true end,\n"
 	    "  tick = function(dev, inputs) dev.state.x = { inputs.a, #ballast } end }";
-	struct vmac_variable p;
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
 	struct vmac_value v = {VMAC_VALUE_NUMBER, 2, ""};
 	struct vmac_outputs out;
 	char err[VMAC_DRIVER_ERR_MAX] = "", why[200] = "", reply[200];
@@ -167,7 +167,7 @@ START_TEST(a_state_at_its_cap_fails_as_a_driver_not_the_host)
 	d = load_ok(text);
 	d->cap = d->used;
 	vmac_driver_set_level_now(d, 3);
-	ck_assert_int_eq(vmac_driver_param(d, 0, &p), 0);
+	ck_assert_int_eq(vmac_driver_params(d, p), 1);
 	ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) != 0, "a tick that allocates at the cap succeeded");
 	says(err, "memory cap exceeded", "tick at the cap");
 	vmac_driver_free(d);
@@ -194,7 +194,7 @@ START_TEST(a_state_at_its_cap_fails_as_a_driver_not_the_host)
 			break;
 		case 4:
 			vmac_driver_restore_param(d, "p", &v, why, sizeof(why));
-			vmac_driver_param(d, 0, &p);
+			vmac_driver_params(d, p);
 			ck_assert_int_ne(tick1(d, 0, &out, err, sizeof(err)), 0);
 			break;
 		case 5: /* a migrated dev.state into a state at its cap */
@@ -261,7 +261,7 @@ END_TEST
 START_TEST(metamethods_the_host_could_reach)
 {
 	struct vmac_outputs out;
-	struct vmac_variable p;
+	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
 	char err[VMAC_DRIVER_ERR_MAX] = "";
 	struct vmac_driver *d;
 	/* A manifest whose absent fields loop when read. */
@@ -281,8 +281,8 @@ START_TEST(metamethods_the_host_could_reach)
 	            "    setmetatable(dev.out, loop) setmetatable(dev.vars, loop) setmetatable(dev, loop)\n"
 	            "  end }");
 	ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) == 0, "first tick: %s", err);
-	ck_assert_int_eq(vmac_driver_param(d, 0, &p), 0);
-	ck_assert_msg(p.value.type == VMAC_VALUE_NONE, "the removed param reads as something");
+	ck_assert_int_eq(vmac_driver_params(d, p), 1);
+	ck_assert_msg(p[0].value.type == VMAC_VALUE_NONE, "the removed param reads as something");
 	vmac_driver_set_level_now(d, 2);
 	ck_assert_msg(tick1(d, 0.1, &out, err, sizeof(err)) == 0, "second tick: %s", err);
 	ck_assert_msg(out.digital == 0, "an output the driver never set is on");
