@@ -258,7 +258,8 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
  * leave hundreds of times that, and a runaway file is refused in
  * milliseconds (docs/HOST.md, "Settings"). */
 #define CONFIG_INSTRUCTIONS 1000000
-#define CONFIG_MEMORY (1u << 20) /* bytes of the file's Lua state */
+#define CONFIG_MEMORY (1u << 20)    /* bytes of the file's Lua state */
+#define CONFIG_FILE_MAX (64 * 1024) /* bytes of the file; a settings file is a few hundred */
 
 /* The state's allocator: refuses to grow past CONFIG_MEMORY (LuaJIT then
  * raises "not enough memory" inside the protected call). ud: the bytes in
@@ -292,7 +293,8 @@ static void config_too_long(lua_State *L, lua_Debug *ar)
 
 struct config_load {
 	struct vmac_config *c;
-	const char *path;
+	const char *name, *text;
+	size_t len;
 	char *err;
 	size_t errlen;
 	int rc;
@@ -305,7 +307,8 @@ static int config_load_protected(lua_State *L)
 	/* The file runs with an empty environment: plain assignments only.
 	 * Text only: LuaJIT's bytecode loader trusts its input, and a damaged
 	 * bytecode file would crash the host (found by tests/fuzz/fuzz_config.c). */
-	if (luaL_loadfilex(L, a->path, "t") != 0)
+	lua_pushfstring(L, "@%s", a->name);
+	if (luaL_loadbufferx(L, a->text, a->len, lua_tostring(L, -1), "t") != 0)
 		return lua_error(L);
 	lua_newtable(L);
 	lua_pushvalue(L, -1);
@@ -314,34 +317,76 @@ static int config_load_protected(lua_State *L)
 	lua_sethook(L, config_too_long, LUA_MASKCOUNT, CONFIG_INSTRUCTIONS);
 	lua_call(L, 0, 0);
 	lua_sethook(L, NULL, 0, 0);
-	a->rc = apply_table(a->c, L, a->path, "", 0, a->err, a->errlen);
+	a->rc = apply_table(a->c, L, a->name, "", 0, a->err, a->errlen);
 	return 0;
 }
 
-int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
+int vmac_config_load_text(struct vmac_config *c, const char *name, const char *text, size_t len, char *err,
+                          size_t errlen)
 {
 	size_t used = 0;
 	lua_State *L = lua_newstate(config_alloc, &used);
-	struct config_load a = {c, path, err, errlen, -1};
+	struct config_load a = {c, name, text, len, err, errlen, -1};
 	int rc;
 
 	if (!L) {
-		snprintf(err, errlen, "%s: cannot create Lua state", path);
+		snprintf(err, errlen, "%s: cannot create Lua state", name);
 		return -1;
 	}
 	if ((rc = lua_cpcall(L, config_load_protected, &a)) != 0) {
 		const char *msg = rc == LUA_ERRMEM ? "the file needs more than 1 MiB (settings are plain assignments)"
 		                  : lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1)
 		                                                   : "error object is not a string";
-		size_t n = strlen(path);
-		if (strncmp(msg, path, n) == 0)
+		size_t n = strlen(name);
+		if (strncmp(msg, name, n) == 0)
 			snprintf(err, errlen, "%s", msg);
 		else
-			snprintf(err, errlen, "%s: %s", path, msg);
+			snprintf(err, errlen, "%s: %s", name, msg);
 		a.rc = -1;
 	}
 	lua_close(L);
 	return a.rc;
+}
+
+int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
+{
+	FILE *f = fopen(path, "rb");
+	char *text = NULL, *more;
+	size_t len = 0, cap = 0, got;
+	int rc;
+	if (!f) {
+		snprintf(err, errlen, "%s: cannot open: %s", path, strerror(errno));
+		return -1;
+	}
+	do {
+		if (len == cap) {
+			cap = cap ? 2 * cap : 4096;
+			if (!(more = realloc(text, cap))) {
+				snprintf(err, errlen, "%s: out of memory", path);
+				goto fail;
+			}
+			text = more;
+		}
+		got = fread(text + len, 1, cap - len, f);
+		len += got;
+		if (len > CONFIG_FILE_MAX) {
+			snprintf(err, errlen, "%s: larger than %d KiB (settings are plain assignments)", path,
+			         CONFIG_FILE_MAX / 1024);
+			goto fail;
+		}
+	} while (got > 0);
+	if (ferror(f)) {
+		snprintf(err, errlen, "%s: cannot read: %s", path, strerror(errno));
+		goto fail;
+	}
+	fclose(f);
+	rc = vmac_config_load_text(c, path, text, len, err, errlen);
+	free(text);
+	return rc;
+fail:
+	fclose(f);
+	free(text);
+	return -1;
 }
 
 /* "IPv4:PORT" with port 0..65535. */

@@ -77,8 +77,12 @@ static inline uint32_t vmac_config_slot_us(const struct vmac_config *c)
 
 void vmac_config_defaults(struct vmac_config *c);
 /* Apply a Lua config file (plain assignments, evaluated with no library at
- * all). Returns 0, or -1 with err naming the file, line and key. */
+ * all; at most 64 KiB). Returns 0, or -1 with err naming the file, line and
+ * key. vmac_config_load_text: the same for a file's len bytes already read,
+ * name standing for the file in messages. */
 int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen);
+int vmac_config_load_text(struct vmac_config *c, const char *name, const char *text, size_t len, char *err,
+                          size_t errlen);
 /* Apply one "key=value" (the same keys as the file). Returns 0 or -1. */
 int vmac_config_set(struct vmac_config *c, const char *key, const char *value, char *err, size_t errlen);
 /* The driver.NAME.KEY settings of one driver, copied to out (at most max);

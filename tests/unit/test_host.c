@@ -96,6 +96,25 @@ START_TEST(config_file_errors_name_the_problem)
 	ck_assert_msg(strstr(err, path) != NULL && strstr(err, "1 MiB") != NULL,
 	              "a greedy config file: '%s' does not name the file and the cap", err);
 	unlink(path);
+
+	/* A file over 64 KiB is refused before it runs; one that is not there
+	 * says so. */
+	{
+		char *big = malloc(65 * 1024 + 1);
+		ck_assert_ptr_nonnull(big);
+		memset(big, ' ', 65 * 1024);
+		big[65 * 1024] = 0;
+		memcpy(big, "slice_us = 2000\n", 16);
+		path = write_temp(big);
+		free(big);
+		ck_assert_int_ne(vmac_config_load(&c, path, err, sizeof(err)), 0);
+		ck_assert_msg(strstr(err, path) != NULL && strstr(err, "64 KiB") != NULL,
+		              "a config file over 64 KiB: '%s' does not name the file and the bound", err);
+		unlink(path);
+	}
+	ck_assert_int_ne(vmac_config_load(&c, "/nonexistent/vmac.lua", err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, "/nonexistent/vmac.lua") != NULL && strstr(err, "cannot open") != NULL,
+	              "a missing config file: '%s'", err);
 }
 END_TEST
 
