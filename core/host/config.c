@@ -258,29 +258,48 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
  * leave hundreds of times that, and a runaway file is refused in
  * milliseconds (docs/HOST.md, "Settings"). */
 #define CONFIG_INSTRUCTIONS 1000000
-#define CONFIG_MEMORY (1u << 20)    /* bytes of the file's Lua state */
-#define CONFIG_FILE_MAX (64 * 1024) /* bytes of the file; a settings file is a few hundred */
+#define CONFIG_MEMORY (1u << 20)     /* bytes of the file's Lua state */
+#define CONFIG_ALLOCATED (16u << 20) /* bytes it may allocate in all, freed or not */
+#define CONFIG_FILE_MAX (64 * 1024)  /* bytes of the file; a settings file is a few hundred */
 
-/* The state's allocator: refuses to grow past CONFIG_MEMORY (LuaJIT then
- * raises "not enough memory" inside the protected call). ud: the bytes in
- * use. Without it `s = s .. s` forty times took all the memory there was
- * (found by tests/fuzz/fuzz_config.c). */
+/* What the file's state has allocated: in use now, and in all; which
+ * bound refused an allocation (0 none, 1 in use, 2 in all). */
+struct config_heap {
+	size_t used, total;
+	int refused;
+};
+
+/* The state's allocator: refuses to grow past CONFIG_MEMORY in use or
+ * CONFIG_ALLOCATED in all (LuaJIT then raises "not enough memory" inside
+ * the protected call). Without the first `s = s .. s` forty times took all
+ * the memory there was; without the second `for i = 1, 1e9 do s = 2 .. s
+ * end` copied gigabytes within its instructions, for most of a second
+ * (seconds and gigabytes of RSS under ASan; both found by
+ * tests/fuzz/fuzz_config.c). */
 static void *config_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 {
-	size_t *used = ud;
+	struct config_heap *h = ud;
 	void *p;
 	if (!ptr)
 		osize = 0;
 	if (nsize == 0) {
 		free(ptr);
-		*used -= osize;
+		h->used -= osize;
 		return NULL;
 	}
-	if (nsize > osize && *used - osize + nsize > CONFIG_MEMORY)
+	if (nsize > osize && h->used - osize + nsize > CONFIG_MEMORY) {
+		h->refused = 1;
 		return NULL;
+	}
+	if (nsize > osize && h->total + (nsize - osize) > CONFIG_ALLOCATED) {
+		h->refused = 2;
+		return NULL;
+	}
 	p = realloc(ptr, nsize);
-	if (p)
-		*used = *used - osize + nsize;
+	if (p) {
+		h->used = h->used - osize + nsize;
+		h->total += nsize > osize ? nsize - osize : 0;
+	}
 	return p;
 }
 
@@ -324,9 +343,10 @@ static int config_load_protected(lua_State *L)
 int vmac_config_load_text(struct vmac_config *c, const char *name, const char *text, size_t len, char *err,
                           size_t errlen)
 {
-	size_t used = 0;
-	lua_State *L = lua_newstate(config_alloc, &used);
+	struct config_heap heap = {0, 0, 0};
+	lua_State *L = lua_newstate(config_alloc, &heap);
 	struct config_load a = {c, name, text, len, err, errlen, -1};
+	const char *msg;
 	int rc;
 
 	if (!L) {
@@ -334,11 +354,13 @@ int vmac_config_load_text(struct vmac_config *c, const char *name, const char *t
 		return -1;
 	}
 	if ((rc = lua_cpcall(L, config_load_protected, &a)) != 0) {
-		const char *msg = rc == LUA_ERRMEM ? "the file needs more than 1 MiB (settings are plain assignments)"
-		                  : lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1)
-		                                                   : "error object is not a string";
-		size_t n = strlen(name);
-		if (strncmp(msg, name, n) == 0)
+		if (rc == LUA_ERRMEM && heap.refused == 2)
+			msg = "the file allocated more than 16 MiB in all (settings are plain assignments)";
+		else if (rc == LUA_ERRMEM)
+			msg = "the file needs more than 1 MiB (settings are plain assignments)";
+		else
+			msg = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "error object is not a string";
+		if (strncmp(msg, name, strlen(name)) == 0)
 			snprintf(err, errlen, "%s", msg);
 		else
 			snprintf(err, errlen, "%s: %s", name, msg);

@@ -97,6 +97,15 @@ START_TEST(config_file_errors_name_the_problem)
 	              "a greedy config file: '%s' does not name the file and the cap", err);
 	unlink(path);
 
+	/* A churning file: a few KiB in use at a time, but gigabytes copied
+	 * within its instructions; refused at 16 MiB allocated in all (found
+	 * by tests/fuzz/fuzz_config.c). */
+	path = write_temp("s = 'x' for r = 1, 1e90 do s = 2 .. s end\n");
+	ck_assert_int_ne(vmac_config_load(&c, path, err, sizeof(err)), 0);
+	ck_assert_msg(strstr(err, path) != NULL && strstr(err, "16 MiB in all") != NULL,
+	              "a churning config file: '%s' does not name the file and the bound", err);
+	unlink(path);
+
 	/* A file over 64 KiB is refused before it runs; one that is not there
 	 * says so. */
 	{
