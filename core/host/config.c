@@ -258,9 +258,9 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
  * leave hundreds of times that, and a runaway file is refused in
  * milliseconds (docs/HOST.md, "Settings"). */
 #define CONFIG_INSTRUCTIONS 1000000
-#define CONFIG_MEMORY (1u << 20)     /* bytes of the file's Lua state */
-#define CONFIG_ALLOCATED (16u << 20) /* bytes it may allocate in all, freed or not */
-#define CONFIG_FILE_MAX (64 * 1024)  /* bytes of the file; a settings file is a few hundred */
+#define CONFIG_MEMORY (1u << 20)    /* bytes of the file's Lua state */
+#define CONFIG_ALLOCATED (4u << 20) /* bytes it may allocate in all, freed or not */
+#define CONFIG_FILE_MAX (64 * 1024) /* bytes of the file; a settings file is a few hundred */
 
 /* What the file's state has allocated: in use now, and in all; which
  * bound refused an allocation (0 none, 1 in use, 2 in all). */
@@ -355,7 +355,7 @@ int vmac_config_load_text(struct vmac_config *c, const char *name, const char *t
 	}
 	if ((rc = lua_cpcall(L, config_load_protected, &a)) != 0) {
 		if (rc == LUA_ERRMEM && heap.refused == 2)
-			msg = "the file allocated more than 16 MiB in all (settings are plain assignments)";
+			msg = "the file allocated more than 4 MiB in all (settings are plain assignments)";
 		else if (rc == LUA_ERRMEM)
 			msg = "the file needs more than 1 MiB (settings are plain assignments)";
 		else

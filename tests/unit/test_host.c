@@ -98,13 +98,29 @@ START_TEST(config_file_errors_name_the_problem)
 	unlink(path);
 
 	/* A churning file: a few KiB in use at a time, but gigabytes copied
-	 * within its instructions; refused at 16 MiB allocated in all (found
+	 * within its instructions; refused at 4 MiB allocated in all (found
 	 * by tests/fuzz/fuzz_config.c). */
 	path = write_temp("s = 'x' for r = 1, 1e90 do s = 2 .. s end\n");
 	ck_assert_int_ne(vmac_config_load(&c, path, err, sizeof(err)), 0);
-	ck_assert_msg(strstr(err, path) != NULL && strstr(err, "16 MiB in all") != NULL,
+	ck_assert_msg(strstr(err, path) != NULL && strstr(err, "4 MiB in all") != NULL,
 	              "a churning config file: '%s' does not name the file and the bound", err);
 	unlink(path);
+
+	/* Nearly 64 KiB of settings, a driver table of 40 drivers: within
+	 * every bound (it allocates under 2 MiB in all). */
+	{
+		char *big = malloc(64 * 1024), *q = big;
+		int i;
+		ck_assert_ptr_nonnull(big);
+		q += sprintf(q, "driver = {\n");
+		for (i = 0; q - big < 60000; i++)
+			q += sprintf(q, "  d%d = { key_%d = \"value %d xxxxxxxxxxxxxxxxxxxxxxxx\" },\n", i % 40, i, i);
+		sprintf(q, "}\n");
+		path = write_temp(big);
+		free(big);
+		ck_assert_msg(vmac_config_load(&c, path, err, sizeof(err)) == 0, "60 KB of driver settings: %s", err);
+		unlink(path);
+	}
 
 	/* A file over 64 KiB is refused before it runs; one that is not there
 	 * says so. */
