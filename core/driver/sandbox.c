@@ -266,11 +266,9 @@ static int sandbox_require(lua_State *L)
 	size_t nlen;
 	const char *name = luaL_checklstring(L, 1, &nlen);
 
-	/* A loaded module is looked up by the argument itself, and a name
-	 * longer than any module's is refused before that: a loop requiring a
-	 * long string cost a strlen and a compare of all of it each time. */
-	if (nlen > 40)
-		return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_], at most 40)", name);
+	/* A loaded module is looked up by the argument itself, a string Lua
+	 * has already interned: lua_getfield(name) measured and compared all of
+	 * a long name again on every call of a loop. */
 	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
 	lua_pushvalue(L, 1);
 	lua_rawget(L, -2);
