@@ -56,9 +56,10 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
-# The driver sandbox (core/driver/internal.h says which file owns what).
+# The driver sandbox (core/driver/internal.h says which file owns what) and
+# the bounded file reader it shares with the config file.
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
-                core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c
+                core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c core/common/file.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
                 core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/wait.c core/host/realtime.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
                 core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/api_site.c core/mqtt/site.c core/api/console.c core/sched/sched.c core/sched/search.c \
@@ -298,7 +299,7 @@ $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/bo
 	clang -std=c99 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
 
 # The config file and key=value settings (vmac_config_load/set/check).
-$(BUILD)/fuzz/fuzz_config: $(call fuzz_obj,tests/fuzz/fuzz_config.c core/host/config.c core/common/addr.c \
+$(BUILD)/fuzz/fuzz_config: $(call fuzz_obj,tests/fuzz/fuzz_config.c core/host/config.c core/common/addr.c core/common/file.c \
                             core/transport/transport.c core/transport/transport_udp.c core/transport/transport_eth.c \
                             core/proto/proto.c)
 	$(FUZZ_LINK) $(PKG_LIBS)

@@ -18,6 +18,7 @@
 #ifndef VMAC_DRIVER_INTERNAL_H
 #define VMAC_DRIVER_INTERNAL_H
 
+#include "../common/file.h"
 #include "driver.h"
 
 #include <lauxlib.h>
@@ -159,7 +160,6 @@ void drv_raw_getfield(lua_State *L, int i, const char *k);
 void drv_raw_setfield(lua_State *L, int i, const char *k);
 
 /* sandbox.c */
-char *drv_read_file(const char *path, size_t *len, char *err, size_t errlen, int *code);
 void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg);
 int drv_valid_module_name(const char *name, size_t maxlen);
 void drv_make_env(lua_State *L);

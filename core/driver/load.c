@@ -127,7 +127,7 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	const char *base = strrchr(path, '/');
 	size_t len = 0;
 	int code = 0;
-	char *src = drv_read_file(path, &len, err, errlen, &code);
+	char *src = vmac_read_file(path, FILE_MAX, &len, err, errlen, &code);
 	*out = NULL;
 	if (!src)
 		return code;

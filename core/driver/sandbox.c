@@ -166,49 +166,6 @@ static int bus_clock(lua_State *L)
 	return 1;
 }
 
-char *drv_read_file(const char *path, size_t *len, char *err, size_t errlen, int *code)
-{
-	FILE *f = fopen(path, "rb");
-	struct stat st;
-	size_t want = FILE_MAX + 1;
-	char *buf;
-	if (!f) {
-		*code = -errno;
-		snprintf(err, errlen, "%s: %s", path, strerror(errno));
-		return NULL;
-	}
-	/* As large as the file is now (one byte more shows it grew meanwhile),
-	 * not the 1 MiB the largest may take. */
-	if (fstat(fileno(f), &st) == 0 && st.st_size >= 0 && (uint64_t)st.st_size < FILE_MAX)
-		want = (size_t)st.st_size + 1;
-	buf = malloc(want);
-	*len = buf ? fread(buf, 1, want, f) : 0;
-	if (buf && *len == want && want <= FILE_MAX) {
-		char *more = realloc(buf, FILE_MAX + 1);
-		if (!more) {
-			free(buf);
-		} else {
-			*len += fread(more + want, 1, FILE_MAX + 1 - want, f);
-		}
-		buf = more;
-	}
-	if (!buf) {
-		fclose(f);
-		*code = -ENOMEM;
-		snprintf(err, errlen, "%s: out of memory", path);
-		return NULL;
-	}
-	if (ferror(f) || *len > FILE_MAX) {
-		*code = ferror(f) ? -EIO : -EFBIG;
-		snprintf(err, errlen, "%s: %s", path, ferror(f) ? "read error" : "larger than 1 MiB");
-		fclose(f);
-		free(buf);
-		return NULL;
-	}
-	fclose(f);
-	return buf;
-}
-
 /* Load a file as text into the driver's environment (upvalue 1 of the
  * calling C closure) and call it with arg: [-0, +1] the result, or raises. */
 void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg)
@@ -216,7 +173,7 @@ void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const 
 	char err[300];
 	size_t len = 0;
 	int code = 0;
-	char *src = drv_read_file(path, &len, err, sizeof(err), &code);
+	char *src = vmac_read_file(path, FILE_MAX, &len, err, sizeof(err), &code);
 	if (!src)
 		luaL_error(L, "%s", err);
 	code = luaL_loadbufferx(L, src, len, chunk, "t");

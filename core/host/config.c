@@ -6,6 +6,7 @@
 #include "config.h"
 
 #include "../common/addr.h"
+#include "../common/file.h"
 #include "../transport/transport.h"
 
 #include <arpa/inet.h>
@@ -372,43 +373,14 @@ int vmac_config_load_text(struct vmac_config *c, const char *name, const char *t
 
 int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t errlen)
 {
-	FILE *f = fopen(path, "rb");
-	char *text = NULL, *more;
-	size_t len = 0, cap = 0, got;
-	int rc;
-	if (!f) {
-		snprintf(err, errlen, "%s: cannot open: %s", path, strerror(errno));
+	size_t len;
+	int rc, code;
+	char *text = vmac_read_file(path, CONFIG_FILE_MAX, &len, err, errlen, &code);
+	if (!text)
 		return -1;
-	}
-	do {
-		if (len == cap) {
-			cap = cap ? 2 * cap : 4096;
-			if (!(more = realloc(text, cap))) {
-				snprintf(err, errlen, "%s: out of memory", path);
-				goto fail;
-			}
-			text = more;
-		}
-		got = fread(text + len, 1, cap - len, f);
-		len += got;
-		if (len > CONFIG_FILE_MAX) {
-			snprintf(err, errlen, "%s: larger than %d KiB (settings are plain assignments)", path,
-			         CONFIG_FILE_MAX / 1024);
-			goto fail;
-		}
-	} while (got > 0);
-	if (ferror(f)) {
-		snprintf(err, errlen, "%s: cannot read: %s", path, strerror(errno));
-		goto fail;
-	}
-	fclose(f);
 	rc = vmac_config_load_text(c, path, text, len, err, errlen);
 	free(text);
 	return rc;
-fail:
-	fclose(f);
-	free(text);
-	return -1;
 }
 
 /* "IPv4:PORT" with port 0..65535. */
