@@ -156,8 +156,6 @@ static int open_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pushnil(L);
 	lua_setfield(L, -2, "dump");
 	lua_pop(L, 1);
-	lua_newtable(L);
-	lua_setfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
 	return 0;
 }
 

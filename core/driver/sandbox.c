@@ -215,33 +215,36 @@ static void load_module(lua_State *L, const struct vmac_driver *d, const char *n
 }
 
 /* require(name) for drivers: loads stdlib/NAME.lua once, as text, into the
- * driver's own environment (upvalue 1), and caches it. Only while the driver
+ * driver's own environment (upvalue 1), and keeps what it returned in the
+ * table of loaded modules (upvalue 2). Only while the driver
  * file itself is loading (main thread): a callback must never read a file. */
 static int sandbox_require(lua_State *L)
 {
-	struct vmac_driver *d = drv_of(L);
+	struct vmac_driver *d;
 	size_t nlen;
 	const char *name = luaL_checklstring(L, 1, &nlen);
 
 	/* A loaded module is looked up by the argument itself, a string Lua
-	 * has already interned: lua_getfield(name) measured and compared all of
-	 * a long name again on every call of a loop. */
-	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
+	 * has already interned, in the table of loaded modules (upvalue 2):
+	 * lua_getfield(name), or a lookup of that table by name, measured and
+	 * compared a name again on every call of a loop. */
 	lua_pushvalue(L, 1);
-	lua_rawget(L, -2);
+	lua_rawget(L, lua_upvalueindex(2));
 	if (!lua_isnil(L, -1))
 		return 1;
 	lua_pop(L, 1);
 	if (strlen(name) != nlen || !drv_valid_module_name(name, 40))
 		return luaL_error(L, "require: '%s' is not a stdlib module name ([a-z0-9_], at most 40)", name);
+	d = drv_of(L);
 	if (!d->loading)
 		return luaL_error(
 		    L, "require '%s': modules can only be required when the driver loads (top of the file)", name);
 	if (!d->stdlib_dir[0])
 		return luaL_error(L, "require '%s': no standard library configured", name);
 	load_module(L, d, name);
-	lua_pushvalue(L, -1);
-	lua_setfield(L, -3, name);
+	lua_pushvalue(L, 1);
+	lua_pushvalue(L, -2);
+	lua_rawset(L, lua_upvalueindex(2));
 	return 1;
 }
 
@@ -441,7 +444,8 @@ void drv_make_env(lua_State *L)
 	lua_setfield(L, env, "vmac");
 
 	lua_pushvalue(L, env);
-	lua_pushcclosure(L, sandbox_require, 1);
+	lua_newtable(L); /* the modules loaded so far: name -> what the module returned */
+	lua_pushcclosure(L, sandbox_require, 2);
 	lua_setfield(L, env, "require");
 	lua_pushvalue(L, env);
 	lua_setfield(L, env, "_G");

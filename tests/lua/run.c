@@ -113,7 +113,8 @@ static int require_driver(lua_State *L, const char *path, const char *driver)
 }
 
 /* require for the tests: upvalue 1 the sandboxed globals, upvalue 2 the
- * driver's own require. Modules are cached where the driver's are. */
+ * driver's own require (which keeps the stdlib modules), upvalue 3 the
+ * test helpers loaded so far. */
 static int test_require(lua_State *L)
 {
 	const char *name = luaL_checkstring(L, 1);
@@ -132,8 +133,7 @@ static int test_require(lua_State *L)
 	example = strcmp(name, "washer_example") == 0;
 	if (!helper && !example)
 		goto driver_require;
-	lua_getfield(L, LUA_REGISTRYINDEX, "vmac.loaded");
-	lua_getfield(L, -1, name);
+	lua_getfield(L, lua_upvalueindex(3), name);
 	if (!lua_isnil(L, -1))
 		return 1;
 	lua_pop(L, 1);
@@ -152,7 +152,7 @@ static int test_require(lua_State *L)
 		lua_pushboolean(L, 1);
 	}
 	lua_pushvalue(L, -1);
-	lua_setfield(L, -3, name);
+	lua_setfield(L, lua_upvalueindex(3), name);
 	return 1;
 driver_require:
 	lua_pushvalue(L, lua_upvalueindex(2));
@@ -190,7 +190,8 @@ static int case_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	drv_make_env(L);                /* chunk, env */
 	lua_pushvalue(L, -1);           /* chunk, env, env */
 	lua_getfield(L, -1, "require"); /* chunk, env, env, the driver's require */
-	lua_pushcclosure(L, test_require, 2);
+	lua_newtable(L);                /* chunk, env, env, require, the helpers loaded */
+	lua_pushcclosure(L, test_require, 3);
 	lua_setfield(L, -2, "require"); /* chunk, env */
 	lua_setfenv(L, -2);
 	lua_pushstring(L, a->suite);
