@@ -105,7 +105,8 @@ int vmac_driver_load_source(const char *file, const char *src, size_t len, const
 
 /* The same in two steps: a sandbox with nothing loaded yet (file names it
  * in messages), then the one driver it will hold, from a text in memory
- * (its name and settings from limits; -EALREADY the second time). After a
+ * (its name, settings, stdlib and cycles folders from limits; -EALREADY the
+ * second time). After a
  * failed load_into the sandbox is of no further use: free it.
  * vmac_driver_load_source is these two; tests/fuzz/ snapshots the sandbox
  * between them. */

@@ -221,10 +221,6 @@ int vmac_driver_new(const char *file, const struct vmac_driver_limits *limits, s
 	d->heap_ctx = limits->heap_ctx;
 	d->ref_tick = d->ref_attach = d->ref_input = d->ref_detach = d->ref_migrate = d->ref_recover = LUA_NOREF;
 	d->ref_saved = LUA_NOREF;
-	if (limits->stdlib_dir)
-		snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir);
-	if (limits->cycles_dir)
-		snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir);
 	snprintf(d->file, sizeof(d->file), "%s", file);
 	snprintf(d->name, sizeof(d->name), "?");
 	L = d->L = lua_newstate(drv_alloc, d);
@@ -263,6 +259,8 @@ int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, co
 		return -EFBIG;
 	}
 	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");
+	snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir ? limits->stdlib_dir : "");
+	snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir ? limits->cycles_dir : "");
 	for (i = 0; i < limits->nsettings; i++) {
 		const char *k = limits->settings[i].key, *v = limits->settings[i].value;
 		char *end;
