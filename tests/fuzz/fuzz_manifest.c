@@ -4,14 +4,16 @@
  * (vmac_driver_load_source: vmac_driver_new, vmac_driver_load_into).
  * Leading lines "--!KEY=VALUE" (Lua comments) become the host's
  * driver.NAME.KEY settings (memory_kib, instructions, budget_us,
- * param.NAME; --!name=X: the board announced driver X). A refused load
+ * param.NAME; --!name=X: the board announced driver X, whose programmes
+ * vmac.cycles() reads from scripts/cycles/X/). A refused load
  * must say why; an accepted one must have a manifest inside every bound
  * of driver.h and a description that is a JSON object as the API decodes
  * it (http_manifest_json, core/api/api_request.c), and then runs as a
  * machine: its boards added, attach, two ticks, and operator input of each
  * declared name, with outputs only on declared channels.
- * Seeds: tests/fuzz/corpus-manifest/ and the shipped drivers
- * (scripts/drivers/, which make fuzz passes as a second corpus). */
+ * Seeds: tests/fuzz/corpus-manifest/ and the shipped drivers, each
+ * announced by its own name (tests/fuzz/run.sh writes them as seeds from
+ * scripts/drivers/). */
 #include <jansson.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -31,7 +33,24 @@
 #endif
 
 #define SETTINGS_MAX 8
-#define INSTRUCTIONS_MAX 200000 /* of a setting (below): the host's default driver_instructions */
+/* The instructions a call of the driver may run, and the most a setting
+ * line may give it: a twentieth of the host's default driver_instructions
+ * (200,000). Every shipped driver runs within the smallest budget the host
+ * takes (instructions=1000: 2,000 a call, 100,000 a load; docs/TESTING.md,
+ * "Fuzzing"). An input that loops reaches the budget's overrun, the same
+ * code at any budget, after 500,000 instructions of a load instead of 10
+ * million: at the host's budget a few dozen such inputs took over a third
+ * of the target's time. */
+#define INSTRUCTIONS 10000
+
+/* VMAC_FUZZ_MUST_LOAD=1: the input is one of the shipped drivers, which
+ * must load and attach (tests/fuzz/run.sh checks each seed so first): a
+ * seed the harness refuses would leave the driver it stands for unfuzzed. */
+static int must_load(void)
+{
+	const char *v = getenv("VMAC_FUZZ_MUST_LOAD");
+	return v && strcmp(v, "1") == 0;
+}
 
 static int manifest_name_ok(const char *s)
 {
@@ -187,6 +206,10 @@ static void run(struct vmac_driver *d, uint32_t seed)
 	if (vmac_driver_attach(d, 1.0, err, sizeof(err)) != 0) {
 		if (!err[0])
 			abort();
+		if (must_load()) {
+			fprintf(stderr, "fuzz_manifest: a seed that must attach does not: %s\n", err);
+			abort();
+		}
 		return;
 	}
 	if (tick(d, boards, nboards, 1.0, seed) != 0)
@@ -216,16 +239,27 @@ static void run(struct vmac_driver *d, uint32_t seed)
 	vmac_driver_detach(d, "fuzz");
 }
 
+/* The input's FNV-1a hash: the seed of the board inputs a tick is given.
+ * Not instrumented for coverage: its loop's compare, traced at every byte,
+ * took a twentieth of the target's time and tells the fuzzer nothing. */
+__attribute__((no_sanitize("coverage"), noinline)) static uint32_t input_hash(const uint8_t *data, size_t size)
+{
+	uint32_t h = 2166136261u;
+	size_t i;
+	for (i = 0; i < size; i++)
+		h = (h ^ data[i]) * 16777619u;
+	return h;
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
 	struct vmac_driver_setting settings[SETTINGS_MAX];
 	struct vmac_driver_limits limits;
 	struct vmac_driver *d = NULL;
-	char err[VMAC_DRIVER_ERR_MAX], expect[VMAC_NAME_MAX + 1] = "";
+	char err[VMAC_DRIVER_ERR_MAX], expect[VMAC_NAME_MAX + 1] = "", cycles[VMAC_NAME_MAX + 64];
 	const char *src = (const char *)data, *end = src + size;
-	uint32_t seed = 2166136261u;
+	uint32_t seed;
 	int nsettings = 0, rc;
-	size_t i;
 
 	if (size > 65536)
 		return 0;
@@ -245,26 +279,27 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 			/* The harness has no wall-clock budget (it would make runs
 			 * differ), and a load gets VMAC_DRIVER_LOAD_FACTOR budgets:
 			 * instructions=1e9, which a host allows, would let one input
-			 * loop for minutes. Above INSTRUCTIONS_MAX the setting is
-			 * that. */
-			if (strcmp(s->key, "instructions") == 0 && strtod(s->value, NULL) > INSTRUCTIONS_MAX)
-				snprintf(s->value, sizeof(s->value), "%d", INSTRUCTIONS_MAX);
+			 * loop for minutes. Above INSTRUCTIONS the setting is that. */
+			if (strcmp(s->key, "instructions") == 0 && strtod(s->value, NULL) > INSTRUCTIONS)
+				snprintf(s->value, sizeof(s->value), "%d", INSTRUCTIONS);
 		}
 		if (!nl)
 			break;
 		src = nl + 1;
 	}
-	for (i = 0; i < size; i++)
-		seed = (seed ^ data[i]) * 16777619u;
+	seed = input_hash(data, size);
 
 	memset(&limits, 0, sizeof(limits));
 	limits.memory_bytes = 1 << 20;
-	limits.instructions = 200000;
+	limits.instructions = INSTRUCTIONS;
 	limits.budget_us = 0; /* instructions bound a run; wall clock would make runs differ */
 	limits.max_level = 10;
 	limits.default_level = 4;
 	limits.stdlib_dir = FUZZ_STDLIB_DIR;
-	limits.cycles_dir = FUZZ_CYCLES_DIR;
+	/* The folder of the announced driver's programmes (vmac.cycles), as the
+	 * host has it; a name that is not one has none. */
+	snprintf(cycles, sizeof(cycles), "%s/%s", FUZZ_CYCLES_DIR, manifest_name_ok(expect) ? expect : "-");
+	limits.cycles_dir = cycles;
 	limits.expect_name = expect[0] ? expect : NULL;
 	limits.settings = settings;
 	limits.nsettings = nsettings;
@@ -285,6 +320,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	if (rc != 0) {
 		if (rc > 0 || !err[0] || !memchr(err, 0, sizeof(err)))
 			abort(); /* refused without a reason */
+		if (must_load()) {
+			fprintf(stderr, "fuzz_manifest: a seed that must load does not: %s\n", err);
+			abort();
+		}
 		fuzz_arena_done(d);
 		return 0;
 	}
