@@ -57,7 +57,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 # The driver sandbox (core/driver/internal.h says which file owns what) and
-# the bounded file reader it shares with the config file.
+# the bounded file reader (core/common/file.c) every whole-file read uses.
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c core/common/file.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \

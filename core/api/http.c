@@ -19,6 +19,7 @@
 
 #include "../common/addr.h"
 #include "../common/errors.h"
+#include "../common/file.h"
 #include "../reload/deploy.h"
 #include "../reload/loader.h"
 #include "console.h"
@@ -272,24 +273,16 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 /* A PEM file's text (at most 64 KiB), or NULL with err. */
 static char *read_pem(const char *path, const char *what, char *err, size_t errlen)
 {
-	FILE *f = fopen(path, "rb");
-	char *buf;
-	size_t n;
-	if (!f) {
-		snprintf(err, errlen, "%s %s: %s", what, path, strerror(errno));
-		return NULL;
-	}
-	buf = malloc(65537);
+	char why[600];
+	size_t n = 0;
+	int code = 0;
+	char *buf = vmac_read_file(path, 64 << 10, &n, why, sizeof(why), &code);
 	if (!buf) {
-		fclose(f);
-		snprintf(err, errlen, "out of memory");
+		snprintf(err, errlen, "%s %s", what, why);
 		return NULL;
 	}
-	n = fread(buf, 1, 65536, f);
-	fclose(f);
-	buf[n] = 0;
-	if (n == 0 || n == 65536 || !strstr(buf, "-----BEGIN ")) {
-		snprintf(err, errlen, "%s %s: not a PEM file (or empty, or over 64 KiB)", what, path);
+	if (n == 0 || !strstr(buf, "-----BEGIN ")) {
+		snprintf(err, errlen, "%s %s: not a PEM file (or empty)", what, path);
 		free(buf);
 		return NULL;
 	}

@@ -10,9 +10,12 @@
 #include <string.h>
 #include <time.h>
 
+#include "../common/file.h"
 #include "../recorder/recording.h"
 #include "client.h"
 #include "command.h"
+
+#define RECORDING_FILE_MAX ((size_t)64 << 20) /* a washer's 60 s is about 170 KiB (docs/RECORDING.md) */
 
 static void show_recordings(json_t *a)
 {
@@ -146,8 +149,7 @@ static int to_test(int argc, char **argv)
 	char err[600], *text;
 	const char *file;
 	size_t len, i;
-	FILE *f;
-	long n;
+	int code = 0;
 	if (argc == 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
 		printf("usage: vmac recording to-test FILE > NAME_test.lua\n"
 		       "Write a vmac test file that replays recording FILE against the driver under test and\n"
@@ -160,22 +162,11 @@ static int to_test(int argc, char **argv)
 		return 2;
 	}
 	file = argv[1];
-	f = fopen(file, "rb");
-	if (!f || fseek(f, 0, SEEK_END) != 0 || (n = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
-		fprintf(stderr, "vmac: %s: cannot read it\n", file);
-		if (f)
-			fclose(f);
+	text = vmac_read_file(file, RECORDING_FILE_MAX, &len, err, sizeof(err), &code);
+	if (!text) {
+		fprintf(stderr, "vmac: %s\n", err);
 		return 2;
 	}
-	text = malloc((size_t)n + 1);
-	len = text ? fread(text, 1, (size_t)n, f) : 0;
-	fclose(f);
-	if (!text || len != (size_t)n) {
-		fprintf(stderr, "vmac: %s: cannot read it\n", file);
-		free(text);
-		return 2;
-	}
-	text[len] = 0;
 	if (vmac_recording_read(text, len, &rec, err, sizeof(err)) != 0) {
 		fprintf(stderr, "vmac: %s: %s\n", file, err);
 		free(text);

@@ -10,6 +10,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../common/file.h"
 #include "client.h"
 #include "command.h"
 
@@ -82,25 +83,6 @@ static int name_of(const char *path, char *name, size_t len)
 	return 0;
 }
 
-static char *read_all(const char *path, size_t *len)
-{
-	FILE *f = fopen(path, "rb");
-	char *buf;
-	if (!f)
-		return NULL;
-	buf = malloc(FILE_MAX + 2);
-	if (buf) {
-		*len = fread(buf, 1, FILE_MAX + 1, f);
-		buf[*len] = 0;
-		if (ferror(f)) {
-			free(buf);
-			buf = NULL;
-		}
-	}
-	fclose(f);
-	return buf;
-}
-
 int vmac_reload_main(int argc, char **argv)
 {
 	static const struct option opts[] = {VMAC_CMD_OPTS,
@@ -109,10 +91,10 @@ int vmac_reload_main(int argc, char **argv)
 	                                     {0, 0, 0, 0}};
 	struct vmac_cmd o;
 	const char *probation = NULL, *driver = NULL;
-	char name[64], path[256];
+	char name[64], path[256], why[600];
 	size_t len = 0;
 	char *src;
-	int opt, rc;
+	int opt, rc, code = 0;
 	vmac_cmd_init(&o);
 	optind = 1;
 	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
@@ -146,14 +128,9 @@ int vmac_reload_main(int argc, char **argv)
 		fprintf(stderr, "vmac reload: cannot take a driver name from '%s' (use --driver NAME)\n", argv[optind]);
 		return 2;
 	}
-	src = read_all(argv[optind], &len);
+	src = vmac_read_file(argv[optind], FILE_MAX, &len, why, sizeof(why), &code);
 	if (!src) {
-		perror(argv[optind]);
-		return 2;
-	}
-	if (len > FILE_MAX) {
-		fprintf(stderr, "vmac reload: %s is larger than 1 MiB\n", argv[optind]);
-		free(src);
+		fprintf(stderr, "vmac reload: %s\n", why);
 		return 2;
 	}
 	if (vmac_client_token(o.token, o.token_file) != 0) {

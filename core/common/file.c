@@ -23,10 +23,10 @@ char *vmac_read_file(const char *path, size_t max, size_t *len, char *err, size_
 	 * not the most it may take. */
 	if (fstat(fileno(f), &st) == 0 && st.st_size >= 0 && (uint64_t)st.st_size < max)
 		want = (size_t)st.st_size + 1;
-	buf = malloc(want);
+	buf = malloc(want + 1); /* and a NUL */
 	*len = buf ? fread(buf, 1, want, f) : 0;
 	if (buf && *len == want && want <= max) {
-		char *more = realloc(buf, max + 1);
+		char *more = realloc(buf, max + 2);
 		if (!more) {
 			free(buf);
 		} else {
@@ -53,5 +53,6 @@ char *vmac_read_file(const char *path, size_t max, size_t *len, char *err, size_
 		return NULL;
 	}
 	fclose(f);
+	buf[*len] = 0;
 	return buf;
 }

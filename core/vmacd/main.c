@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "../api/http.h"
+#include "../common/file.h"
 #include "../common/paths.h"
 #include "../host/bus.h"
 #include "../host/config.h"
@@ -190,22 +191,15 @@ static void offer_checkpoint(struct host *h, struct vmac_driver *drv, const char
 static char *recorded_source(struct host *h, const struct vmac_recorder *r, size_t *len)
 {
 	struct vmac_driver_version v;
-	char path[VMAC_PATH_MAX + 64], err[512], *src = NULL;
-	FILE *f;
-	long n;
+	char path[VMAC_PATH_MAX + 64], err[VMAC_PATH_MAX + 128], *src = NULL;
+	int code = 0;
 	*len = 0;
 	if (r->version_id > 0)
 		return vmac_store_driver_get(h->store, r->version_id, &v, &src, len, err, sizeof(err)) == 1 ? src
 		                                                                                            : NULL;
-	if (vmac_driver_path(&h->cfg, r->driver, path, sizeof(path)) != 0 || !(f = fopen(path, "rb")))
+	if (vmac_driver_path(&h->cfg, r->driver, path, sizeof(path)) != 0)
 		return NULL;
-	if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && n <= (1 << 20) && fseek(f, 0, SEEK_SET) == 0 &&
-	    (src = malloc((size_t)n + 1)) != NULL) {
-		*len = fread(src, 1, (size_t)n, f);
-		src[*len] = 0;
-	}
-	fclose(f);
-	return src;
+	return vmac_read_file(path, 1 << 20, len, err, sizeof(err), &code);
 }
 
 /* A machine's flight recorder, captured (a drop, a driver failure), goes
