@@ -68,7 +68,8 @@ static const struct chunk *compiled(const char *buf, size_t size, const char *na
 	lua_State *own;
 	int i, ok;
 	for (i = 0; i < nchunks; i++)
-		if (strcmp(chunks[i].name, name) == 0 && chunks[i].text_len == size && memcmp(chunks[i].text, buf, size) == 0)
+		if (strcmp(chunks[i].name, name) == 0 && chunks[i].text_len == size &&
+		    memcmp(chunks[i].text, buf, size) == 0)
 			return &chunks[i];
 	if (nchunks == CHUNKS)
 		return NULL;
