@@ -27,6 +27,10 @@
 #define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value */
 #define VMAC_DRIVER_VERSION_MAX 31
 #define VMAC_DRIVER_LOAD_FACTOR 50 /* loading the file gets this many budgets */
+/* The most a manifest's description (vmac_driver_describe) may hold:
+ * values, and bytes of strings and keys; past either, the load is refused. */
+#define VMAC_DRIVER_DESCRIBE_VALUES 10000
+#define VMAC_DRIVER_DESCRIBE_BYTES (256 * 1024)
 
 /* Per-driver overrides from the host's settings (driver.NAME.KEY). */
 struct vmac_driver_setting {

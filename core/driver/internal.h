@@ -171,6 +171,6 @@ int drv_dev_checkpoint(lua_State *L);
 /* manifest.c */
 int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *lim, char *err, size_t errlen);
 int drv_check_value(lua_State *L, int s, char *why, size_t len);
-char *drv_describe(struct vmac_driver *d);
+int drv_describe(struct vmac_driver *d, char *err, size_t errlen);
 
 #endif

@@ -192,7 +192,8 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 		return -1;
 	make_dev(d);                                      /* consumes params */
 	d->ref_manifest = luaL_ref(L, LUA_REGISTRYINDEX); /* the driver table */
-	d->describe = drv_describe(d);
+	if (drv_describe(d, err, errlen) != 0)
+		return -1;
 	if (d->jit)
 		luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_ON);
 	lua_settop(L, 0);

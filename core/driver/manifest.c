@@ -519,16 +519,43 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 
 /* ---- the declarations as JSON, for user interfaces ---- */
 
+/* What a description may still hold: values, and bytes of strings and
+ * keys. Without a bound, tables that refer to each other (a cycle, or one
+ * table under many keys) made the depth-limited walk exponential: a driver
+ * of 286 bytes held its host's load for seconds and its C heap grew by a
+ * gigabyte (found by fuzz_manifest). */
+struct describe_left {
+	long values;
+	size_t bytes;
+	int over;
+};
+
+static int take_bytes(struct describe_left *left, size_t n)
+{
+	if (n > left->bytes) {
+		left->over = 1;
+		return -1;
+	}
+	left->bytes -= n;
+	return 0;
+}
+
 /* The plain data at index i as JSON (depth-limited; functions and the like
  * are left out: NULL). A table with 1..n and nothing else is an array. */
-static json_t *to_json(lua_State *L, int i, int depth)
+static json_t *to_json(lua_State *L, int i, int depth, struct describe_left *left)
 {
 	json_t *o;
 	size_t n;
+	if (left->over || --left->values < 0) {
+		left->over = 1;
+		return NULL;
+	}
 	switch (lua_type(L, i)) {
 	case LUA_TBOOLEAN: return json_boolean(lua_toboolean(L, i));
 	case LUA_TNUMBER: return json_real(lua_tonumber(L, i));
-	case LUA_TSTRING: return json_stringn(lua_tostring(L, i), lua_objlen(L, i));
+	case LUA_TSTRING:
+		n = lua_objlen(L, i);
+		return take_bytes(left, n) == 0 ? json_stringn(lua_tostring(L, i), n) : NULL;
 	case LUA_TTABLE: break;
 	default: return NULL;
 	}
@@ -539,7 +566,7 @@ static json_t *to_json(lua_State *L, int i, int depth)
 	o = n > 0 ? json_array() : json_object();
 	lua_pushnil(L);
 	while (lua_next(L, i)) {
-		json_t *v = to_json(L, -1, depth + 1);
+		json_t *v = to_json(L, -1, depth + 1, left);
 		if (v && json_is_array(o) && lua_type(L, -2) == LUA_TNUMBER) {
 			lua_Number k = lua_tonumber(L, -2);
 			if (k >= 1 && k <= (lua_Number)n && k == (lua_Number)(size_t)k) {
@@ -548,42 +575,60 @@ static json_t *to_json(lua_State *L, int i, int depth)
 				json_array_set_new(o, (size_t)k - 1, v);
 				v = NULL;
 			}
-		} else if (v && json_is_object(o) && lua_type(L, -2) == LUA_TSTRING) {
+		} else if (v && json_is_object(o) && lua_type(L, -2) == LUA_TSTRING &&
+		           take_bytes(left, lua_objlen(L, -2)) == 0) {
 			json_object_set_new(o, lua_tostring(L, -2), v);
 			v = NULL;
 		}
 		json_decref(v);
 		lua_pop(L, 1);
+		if (left->over) {
+			lua_pop(L, 1); /* the key: the walk stops here */
+			break;
+		}
 	}
 	return o;
 }
 
 /* name, version, description, level and the tables io, variables, params,
- * commands and ui of the manifest as JSON text. Protected work: the fields
- * are fetched first (that may raise), then turned into JSON with calls that
- * neither raise nor allocate on the state, so no JSON leaks. */
-char *drv_describe(struct vmac_driver *d)
+ * commands and ui of the manifest as JSON text, into d->describe: 0, or -1
+ * with err (past VMAC_DRIVER_DESCRIBE_VALUES or _BYTES, or out of memory).
+ * Protected work: the fields are fetched first (that may raise), then
+ * turned into JSON with calls that neither raise nor allocate on the
+ * state, so no JSON leaks. */
+int drv_describe(struct vmac_driver *d, char *err, size_t errlen)
 {
 	static const char *const fields[] = {"description", "io", "variables", "params", "commands", "ui", NULL};
+	struct describe_left left = {VMAC_DRIVER_DESCRIBE_VALUES, VMAC_DRIVER_DESCRIBE_BYTES, 0};
 	lua_State *L = d->L;
 	int first, i;
 	json_t *o;
-	char *text;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_manifest);
 	first = lua_gettop(L) + 1;
 	for (i = 0; fields[i]; i++)
 		drv_raw_getfield(L, first - 1, fields[i]);
 	luaL_checkstack(L, 2 * 10 + 4, "describe"); /* to_json: two slots a level, nine levels */
 	o = json_pack("{s:s, s:s, s:i}", "name", d->name, "version", d->version, "level", (int)d->level);
-	for (i = 0; fields[i] && o; i++) {
-		json_t *v = to_json(L, first + i, 0);
+	for (i = 0; fields[i] && o && !left.over; i++) {
+		json_t *v = to_json(L, first + i, 0, &left);
 		if (v)
 			json_object_set_new(o, fields[i], v);
 	}
 	lua_settop(L, first - 2);
-	text = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	d->describe = o && !left.over ? json_dumps(o, JSON_COMPACT) : NULL;
 	json_decref(o);
-	return text;
+	if (left.over) {
+		snprintf(err, errlen,
+		         "%s: manifest: too large to describe (description, io, variables, params, commands and ui "
+		         "hold more than %d values or %d KiB of text)",
+		         d->file, VMAC_DRIVER_DESCRIBE_VALUES, VMAC_DRIVER_DESCRIBE_BYTES / 1024);
+		return -1;
+	}
+	if (!d->describe) {
+		snprintf(err, errlen, "%s: out of memory describing the manifest", d->file);
+		return -1;
+	}
+	return 0;
 }
 
 const char *vmac_driver_describe(const struct vmac_driver *d)

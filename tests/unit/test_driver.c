@@ -702,6 +702,17 @@ START_TEST(two_step_load_on_a_given_heap)
 	vmac_driver_free(d);
 	ck_assert_msg(heap_live == 0, "%zu bytes left in the given heap after free", heap_live);
 
+	/* The stdlib and cycles folders come with the load, not with the
+	 * sandbox: one made without them loads a driver that requires. */
+	limits.stdlib_dir = NULL;
+	limits.cycles_dir = NULL;
+	ck_assert_int_eq(vmac_driver_new("t.lua", &limits, &d, err, sizeof(err)), 0);
+	limits.stdlib_dir = STDLIB_DIR;
+	limits.cycles_dir = CYCLES_DIR;
+	ck_assert_msg(vmac_driver_load_into(d, src, strlen(src), &limits, err, sizeof(err)) == 0,
+	              "a sandbox made without a stdlib folder, loaded with one: %s", err);
+	vmac_driver_free(d);
+
 	/* A host setting it does not know refuses the load and says which. */
 	limits.settings = &bad;
 	limits.nsettings = 1;
@@ -749,6 +760,7 @@ START_TEST(load_gets_a_larger_budget_and_stdlib)
 	d = load_ok("local n = 0 for i = 1, 150000 do n = n + i end\n"
 	            "local t = require 'twice'\nlocal c = vmac.cycles()\n"
 	            "assert(t.f(21) == 42 and c.a == 'first' and c.b == 'second')\n"
+	            "for i = 1, 1000 do assert(require 'twice' == t) end\n" /* loaded once, then the same table */
 	            "return { name = 't', version = '1', io = {}, tick = function()\n"
 	            "  local n = 0 for i = 1, 150000 do n = n + i end end }\n");
 	vmac_driver_add_board(d, 0, "b0");
@@ -761,6 +773,39 @@ START_TEST(load_gets_a_larger_budget_and_stdlib)
 	           "cycles/t/c.lua:");
 	unlink(CYCLES_DIR "/c.lua");
 	load_fails("require 'nosuch'\nreturn {}\n", "no such stdlib module");
+}
+END_TEST
+
+/* A manifest's description is bounded: tables that refer to each other
+ * made its walk exponential (fuzz_manifest: 286 bytes held a load for 7 s
+ * under ASan and took a gigabyte of C heap), and one string under many keys
+ * multiplies its text. */
+START_TEST(a_description_past_its_bounds_is_refused)
+{
+	struct vmac_driver *d;
+	char src[600];
+	/* Found by the fuzzer: each of 20 variables holds the table of them all. */
+	load_fails(
+	    "local vars = {}\n"
+	    "for i = 1, 20 do vars['v' .. i] = {e = 't', version = '1', variables = vars, tick = function() end} end\n"
+	    "return { name = 't', version = '1', io = {}, variables = vars, tick = function() end }\n",
+	    "manifest: too large to describe");
+	/* One table under four keys a level: 4^9 values in the nine levels walked. */
+	load_fails("local t = {} for i = 1, 12 do t = {a = t, b = t, c = t, d = t} end\n"
+	           "return { name = 't', version = '1', io = {}, ui = t, tick = function() end }\n",
+	           "more than 10000 values or 256 KiB of text");
+	/* One string of 60 KB five times over. */
+	load_fails("local s = string.rep('x', 60000)\n"
+	           "return { name = 't', version = '1', io = {}, ui = {s, s, s, s, s}, tick = function() end }\n",
+	           "too large to describe");
+	/* Within both: 9,000 values, and 180 KB of text. */
+	snprintf(src, sizeof(src), "%s",
+	         "local ui, s = {}, string.rep('y', 60000) for i = 1, 9000 do ui[i] = i end\n"
+	         "return { name = 't', version = '1', io = {}, ui = {ui, s, s, s}, tick = function() end }\n");
+	d = load_ok(src);
+	ck_assert_msg(strlen(vmac_driver_describe(d)) > 180000, "the description lost its text: %zu bytes",
+	              strlen(vmac_driver_describe(d)));
+	vmac_driver_free(d);
 }
 END_TEST
 
@@ -784,6 +829,7 @@ int main(void)
 	tcase_add_test(tc, sandbox_is_exactly_the_allow_list);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
 	tcase_add_test(tc, two_step_load_on_a_given_heap);
+	tcase_add_test(tc, a_description_past_its_bounds_is_refused);
 	tcase_add_test(tc, take_over_hands_plain_state_params_and_outputs);
 	tcase_add_test(tc, take_over_refuses_what_it_cannot_copy);
 	suite_add_tcase(s, tc);
