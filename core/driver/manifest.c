@@ -519,11 +519,12 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 
 /* ---- the declarations as JSON, for user interfaces ---- */
 
-/* What a description may still hold: values, and bytes of strings and
- * keys. Without a bound, tables that refer to each other (a cycle, or one
- * table under many keys) made the depth-limited walk exponential: a driver
- * of 286 bytes held its host's load for seconds and its C heap grew by a
- * gigabyte (found by fuzz_manifest). */
+/* What a description may still hold: values (a null filling a hole of an
+ * array is one), and bytes of strings and keys. Without a bound, tables
+ * that refer to each other (a cycle, or one table under many keys) made the
+ * depth-limited walk exponential: a driver of 286 bytes took 0.7 s of its
+ * load and 173 MB of the host's heap, one a little wider 22 s and 3.6 GB
+ * (found by fuzz_manifest; docs/RELIABILITY.md). */
 struct describe_left {
 	long values;
 	size_t bytes;
@@ -570,10 +571,19 @@ static json_t *to_json(lua_State *L, int i, int depth, struct describe_left *lef
 		if (v && json_is_array(o) && lua_type(L, -2) == LUA_TNUMBER) {
 			lua_Number k = lua_tonumber(L, -2);
 			if (k >= 1 && k <= (lua_Number)n && k == (lua_Number)(size_t)k) {
-				while (json_array_size(o) < (size_t)k)
-					json_array_append_new(o, json_null());
-				json_array_set_new(o, (size_t)k - 1, v);
-				v = NULL;
+				/* the holes before k become nulls, each a value */
+				while (json_array_size(o) < (size_t)k - 1 && !left->over)
+					if (--left->values < 0)
+						left->over = 1;
+					else
+						json_array_append_new(o, json_null());
+				if (!left->over) {
+					if (json_array_size(o) < (size_t)k)
+						json_array_append_new(o, v);
+					else
+						json_array_set_new(o, (size_t)k - 1, v);
+					v = NULL;
+				}
 			}
 		} else if (v && json_is_object(o) && lua_type(L, -2) == LUA_TSTRING &&
 		           take_bytes(left, lua_objlen(L, -2)) == 0) {

@@ -794,6 +794,14 @@ START_TEST(a_description_past_its_bounds_is_refused)
 	load_fails("local t = {} for i = 1, 12 do t = {a = t, b = t, c = t, d = t} end\n"
 	           "return { name = 't', version = '1', io = {}, ui = t, tick = function() end }\n",
 	           "more than 10000 values or 256 KiB of text");
+	/* A list of 32,768 whose only element is its last (its length is
+	 * 32,768 in LuaJIT), under 300 keys: 600 values walked, 9.8 million
+	 * nulls written out for its holes. */
+	load_fails("local t = {} for i = 1, 32768 do t[i] = 0 end for i = 1, 32767 do t[i] = nil end\n"
+	           "assert(#t == 32768)\n"
+	           "local ui = {} for i = 1, 300 do ui[i] = t end\n"
+	           "return { name = 't', version = '1', io = {}, ui = ui, tick = function() end }\n",
+	           "too large to describe");
 	/* One string of 60 KB five times over. */
 	load_fails("local s = string.rep('x', 60000)\n"
 	           "return { name = 't', version = '1', io = {}, ui = {s, s, s, s, s}, tick = function() end }\n",
