@@ -11,10 +11,9 @@
 #include <time.h>
 
 #include "../common/file.h"
+#include "../driver/driver.h"
 #include "client.h"
 #include "command.h"
-
-#define FILE_MAX (1 << 20)
 
 static void show_machines(json_t *a)
 {
@@ -128,7 +127,7 @@ int vmac_reload_main(int argc, char **argv)
 		fprintf(stderr, "vmac reload: cannot take a driver name from '%s' (use --driver NAME)\n", argv[optind]);
 		return 2;
 	}
-	src = vmac_read_file(argv[optind], FILE_MAX, &len, why, sizeof(why), &code);
+	src = vmac_read_file(argv[optind], VMAC_DRIVER_FILE_MAX, &len, why, sizeof(why), &code);
 	if (!src) {
 		fprintf(stderr, "vmac reload: %s\n", why);
 		return 2;

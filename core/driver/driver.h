@@ -26,7 +26,8 @@
 #define VMAC_DRIVER_NAME_MAX 31                /* names of io, params, variables, commands */
 #define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value */
 #define VMAC_DRIVER_VERSION_MAX 31
-#define VMAC_DRIVER_LOAD_FACTOR 50 /* loading the file gets this many budgets */
+#define VMAC_DRIVER_LOAD_FACTOR 50     /* loading the file gets this many budgets */
+#define VMAC_DRIVER_FILE_MAX (1 << 20) /* bytes of a driver's file (and of a stdlib module) */
 /* The most a manifest's description (vmac_driver_describe) may hold:
  * values, and bytes of strings and keys; past either, the load is refused. */
 #define VMAC_DRIVER_DESCRIBE_VALUES 10000

@@ -29,8 +29,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define HOOK_EVERY 1000 /* instructions between budget checks */
-#define FILE_MAX (1 << 20)
+#define HOOK_EVERY 1000             /* instructions between budget checks */
 #define REP_MAX 65536               /* bytes string.rep may build */
 #define PATTERN_STEPS_MAX (1 << 24) /* worst-case steps of one pattern call */
 #define EVENTS_PER_S 10

@@ -127,7 +127,7 @@ int vmac_driver_load(const char *path, const struct vmac_driver_limits *limits, 
 	const char *base = strrchr(path, '/');
 	size_t len = 0;
 	int code = 0;
-	char *src = vmac_read_file(path, FILE_MAX, &len, err, errlen, &code);
+	char *src = vmac_read_file(path, VMAC_DRIVER_FILE_MAX, &len, err, errlen, &code);
 	*out = NULL;
 	if (!src)
 		return code;
@@ -255,8 +255,8 @@ int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, co
 		return -EALREADY;
 	}
 	d->loaded = 1;
-	if (len > FILE_MAX) {
-		snprintf(err, errlen, "%s: larger than 1 MiB", d->file);
+	if (len > VMAC_DRIVER_FILE_MAX) {
+		snprintf(err, errlen, "%s: larger than %d MiB", d->file, VMAC_DRIVER_FILE_MAX >> 20);
 		return -EFBIG;
 	}
 	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");

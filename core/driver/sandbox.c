@@ -173,7 +173,7 @@ void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const 
 	char err[300];
 	size_t len = 0;
 	int code = 0;
-	char *src = vmac_read_file(path, FILE_MAX, &len, err, sizeof(err), &code);
+	char *src = vmac_read_file(path, VMAC_DRIVER_FILE_MAX, &len, err, sizeof(err), &code);
 	if (!src)
 		luaL_error(L, "%s", err);
 	code = luaL_loadbufferx(L, src, len, chunk, "t");

@@ -199,7 +199,7 @@ static char *recorded_source(struct host *h, const struct vmac_recorder *r, size
 		                                                                                            : NULL;
 	if (vmac_driver_path(&h->cfg, r->driver, path, sizeof(path)) != 0)
 		return NULL;
-	return vmac_read_file(path, 1 << 20, len, err, sizeof(err), &code);
+	return vmac_read_file(path, VMAC_DRIVER_FILE_MAX, len, err, sizeof(err), &code);
 }
 
 /* A machine's flight recorder, captured (a drop, a driver failure), goes

@@ -70,7 +70,8 @@ static void load_example(lua_State *L)
 	char err[300];
 	size_t len = 0, i, lines = 0, code_len;
 	int code = 0;
-	char *doc = vmac_read_file(EXAMPLE_DOC, FILE_MAX, &len, err, sizeof(err), &code), *at, *start, *end, *text;
+	char *doc = vmac_read_file(EXAMPLE_DOC, VMAC_DRIVER_FILE_MAX, &len, err, sizeof(err), &code), *at, *start, *end,
+	     *text;
 	if (!doc)
 		luaL_error(L, "%s", err);
 	doc[len] = 0;
@@ -178,7 +179,7 @@ static int case_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_State *L = d->L;
 	size_t len = 0;
 	int code = 0;
-	char *src = vmac_read_file(TESTS_DIR "/run.lua", FILE_MAX, &len, err, errlen, &code);
+	char *src = vmac_read_file(TESTS_DIR "/run.lua", VMAC_DRIVER_FILE_MAX, &len, err, errlen, &code);
 	if (!src)
 		return -1;
 	code = luaL_loadbufferx(L, src, len, "@" TESTS_DIR "/run.lua", "t");
