@@ -288,9 +288,10 @@ $(FOBJ)/%.o: %.c
 	@mkdir -p $(dir $@)
 	clang $(FUZZ_CFLAGS) -MMD -MP -c $< -o $@
 
-# The arena is the harnesses' heap and the bytecode cache the manifest
-# target's compiler of fixed files, not code under test: no coverage of them.
-$(FOBJ)/tests/fuzz/fuzz_arena.o $(FOBJ)/tests/fuzz/fuzz_bytecode.o: $(FOBJ)/%.o: %.c
+# The arena is the harnesses' heap, and fuzz_hostfiles.c the manifest
+# target's reader and compiler of the host's own Lua files, not code under
+# test: no coverage of them.
+$(FOBJ)/tests/fuzz/fuzz_arena.o $(FOBJ)/tests/fuzz/fuzz_hostfiles.o: $(FOBJ)/%.o: %.c
 	@mkdir -p $(dir $@)
 	clang $(filter-out -fsanitize=fuzzer-no-link,$(FUZZ_CFLAGS)) -MMD -MP -c $< -o $@
 
@@ -310,11 +311,11 @@ $(BUILD)/fuzz/fuzz_console: $(call fuzz_obj,tests/fuzz/fuzz_console.c core/api/c
 	$(FUZZ_LINK)
 
 # A driver's source through load and manifest validation, then one run.
-# The stdlib's and the programmes' chunks compiled once (fuzz_bytecode.c
-# wraps luaL_loadbufferx).
-$(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c tests/fuzz/fuzz_arena.c tests/fuzz/fuzz_bytecode.c \
+# The stdlib's and the programmes' files read and compiled once
+# (fuzz_hostfiles.c wraps vmac_read_file and luaL_loadbufferx).
+$(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c tests/fuzz/fuzz_arena.c tests/fuzz/fuzz_hostfiles.c \
                               $(DRIVER_SRC) core/api/api_request.c core/api/console.c)
-	$(FUZZ_LINK) -Wl,--wrap=luaL_loadbufferx $(PKG_LIBS)
+	$(FUZZ_LINK) -Wl,--wrap=vmac_read_file,--wrap=luaL_loadbufferx $(PKG_LIBS)
 
 # Lua values to outputs, variables and params and back (core/driver/instance.c).
 $(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c tests/fuzz/fuzz_arena.c $(DRIVER_SRC))

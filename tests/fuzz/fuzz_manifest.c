@@ -36,11 +36,11 @@
 /* The instructions a call of the driver may run, and the most a setting
  * line may give it: a twentieth of the host's default driver_instructions
  * (200,000). Every shipped driver runs within the smallest budget the host
- * takes (instructions=1000: 2,000 a call, 100,000 a load; docs/TESTING.md,
- * "Fuzzing"). An input that loops reaches the budget's overrun, the same
- * code at any budget, after 500,000 instructions of a load instead of 10
- * million: at the host's budget a few dozen such inputs took over a third
- * of the target's time. */
+ * takes (instructions=1000: about 2,000 a call, 100,000 a load; the budget
+ * is counted every 1,000; docs/TESTING.md, "Fuzzing"). An input that loops
+ * reaches the budget's overrun, the same code at any budget, after about
+ * 500,000 instructions of a load instead of 10 million: at the host's
+ * budget a few dozen such inputs took over a third of the target's time. */
 #define INSTRUCTIONS 10000
 
 /* VMAC_FUZZ_MUST_LOAD=1: the input is one of the shipped drivers, which
