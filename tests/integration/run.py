@@ -8,7 +8,11 @@ processes on its own bus, and kills whatever a test started however it ends.
 Tests run N at a time (default 4: they mostly wait on the programs they
 start, and each has its own bus, ports and state folder), each in a worker
 process of its own; a test file that must have the machine to itself says
-SERIAL = True and its tests run one at a time after the others.
+SERIAL = True and its tests run one at a time after the others. The longest
+start first, by how long each passed in the last run that timed it
+(build/integration-times.json, which every run updates; tests it does not
+know keep their file order): a long test started last kept the others
+waiting for it.
 
 Prints one PASS/FAIL/SKIP line per test and ends with 'N passed, N failed,
 N skipped'; the exit code is 1 when any test failed. A failed test keeps its
@@ -125,10 +129,38 @@ def run_worker(name, bindir, limit_s, keep):
     return 0
 
 
-def run_all(tests, args, bindir):
-    """Run tests in worker processes, args.jobs at a time, the serial ones
-    alone at the end; yields (name, outcome, reason, seconds) as each ends."""
-    parallel = [t[0] for t in tests if not t[2]]
+TIMES_FILE = os.path.join(HERE, "..", "..", "build", "integration-times.json")
+UNKNOWN_S = 5.0  # where a test with no time yet goes in the order: about the median
+
+
+def load_times():
+    """{test name: seconds it took to pass} of earlier runs, or {}."""
+    try:
+        with open(TIMES_FILE) as f:
+            times = json.load(f)
+        return {k: float(v) for k, v in times.items()} if isinstance(times, dict) else {}
+    except (OSError, ValueError, TypeError, AttributeError):
+        return {}
+
+
+def save_times(times):
+    """Keep times for the next run's order; nothing if build/ is not there."""
+    if not os.path.isdir(os.path.dirname(TIMES_FILE)):
+        return
+    tmp = TIMES_FILE + ".tmp"
+    try:
+        with open(tmp, "w") as f:
+            json.dump(times, f, indent=0, sort_keys=True)
+        os.replace(tmp, TIMES_FILE)
+    except OSError:
+        pass
+
+
+def run_all(tests, args, bindir, times):
+    """Run tests in worker processes, args.jobs at a time, the longest known
+    first, the serial ones alone at the end; yields (name, outcome, reason,
+    seconds) as each ends."""
+    parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -times.get(n, UNKNOWN_S))
     serial = [t[0] for t in tests if t[2]]
     running = {}  # Popen -> [name, start, output so far]
     sel = selectors.DefaultSelector()
@@ -210,11 +242,13 @@ def main():
     passed = failed = 0
     skips = []
     started = time.monotonic()
-    for name, outcome, reason, took in run_all(tests, args, bindir):
+    times = load_times()
+    for name, outcome, reason, took in run_all(tests, args, bindir, times):
         if outcome == "skip" and ci:
             outcome, reason = "fail", "could not run, and CI=true makes that a failure: %s" % reason
         if outcome == "pass":
             passed += 1
+            times[name] = round(took, 1)
             print("PASS %s (%.1f s)%s" % (name, took, reason), flush=True)
         elif outcome == "skip":
             skips.append((name, reason))
@@ -223,6 +257,7 @@ def main():
             failed += 1
             print("FAIL %s (%.1f s): %s" % (name, took, reason), flush=True)
     print("total %.0f s" % (time.monotonic() - started), file=sys.stderr, flush=True)
+    save_times(times)
     if skips:
         print("SKIPPED (did not run, not passed):", flush=True)
         for name, reason in skips:
