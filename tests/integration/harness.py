@@ -181,12 +181,15 @@ class Proc:
 class Host(Proc):
     """vmacd, with its status API at self.http ("127.0.0.1:PORT"). Every
     status fetched is remembered in self.last, and its events are merged into
-    self.events (by seq) so that none of the last-20 window is missed."""
+    self.events (by seq). The status holds the last 20: when more came since
+    the last poll (a busy host, a slow poll), the ones between are fetched
+    from the event log (GET /api/events/log?after=SEQ), so none is missed."""
 
     def __init__(self, ctx, name, argv, logdir):
         super().__init__(name, argv, logdir)
         self.ctx = ctx
         self.events = {}
+        self.complete_to = None  # every event up to this seq is in self.events
         self.last = None
         self.http = None
 
@@ -207,10 +210,34 @@ class Host(Proc):
 
     def status(self):
         s = self.get("/api/status")
-        for e in s.get("events", []):
+        window = s.get("events", [])
+        for e in window:
             self.events[e["seq"]] = e
+        if window:
+            oldest = min(e["seq"] for e in window)
+            if self.complete_to is None:
+                self.complete_to = oldest - 1  # what came before the first poll is not asked for
+            if oldest > self.complete_to + 1:
+                self.fill_events(oldest)
+            while self.complete_to + 1 in self.events:
+                self.complete_to += 1
         self.last = s
         return s
+
+    def fill_events(self, upto):
+        """The events after self.complete_to and before upto, from the store's
+        log; those not stored yet are asked for again at the next poll."""
+        after = self.complete_to
+        while after + 1 < upto:
+            try:
+                page = self.get("/api/events/log?after=%d&limit=1000" % after).get("events", [])
+            except (OSError, ValueError):
+                return
+            for e in page:
+                self.events[e["seq"]] = e
+            if not page:
+                return
+            after = max(e["seq"] for e in page)
 
     def device(self, name, status=None):
         """The device called name in status (the latest by default), or None."""
