@@ -61,7 +61,7 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
 DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c core/common/file.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
-                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/wait.c core/host/realtime.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
+                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/wait.c core/host/realtime.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/jobs.c core/host/workers.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
                 core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/api_site.c core/mqtt/site.c core/api/console.c core/sched/sched.c core/sched/search.c \
                 core/store/store.c core/store/store_checkpoint.c core/store/store_recording.c
 # vmacd's MQTT client (core/mqtt/mqtt_internal.h says which file owns what).
@@ -401,7 +401,7 @@ test-integration: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS) tahu-d
 # and UndefinedBehaviorSanitizer, any report fatal. asan-build builds that
 # tree quietly (its log in build/asan-build.log), so make test can run it
 # beside the plain integration tests, which mostly wait.
-ASAN := BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer" SAN="-fsanitize=address,undefined -fno-sanitize-recover=all"
+ASAN := BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer -DVMAC_CHECK_THREADS" SAN="-fsanitize=address,undefined -fno-sanitize-recover=all"
 test-build: $(BINS) $(UNIT_TESTS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS)
 
 asan-build:

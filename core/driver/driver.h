@@ -6,9 +6,12 @@
  * the process (docs/DRIVERS.md "Isolation"). The driver API is in
  * docs/DRIVERS.md.
  *
- * Threads: vmac_driver_load runs on the main thread (it reads files); every
- * other call is the bus thread's once the driver is handed over, and
- * allocates only inside the driver's own capped heap. */
+ * Threads: vmac_driver_load runs on the main thread (it reads files); once
+ * the driver is handed over, every call that runs Lua is made by the one
+ * driver worker that runs its machine (core/host/workers.c), one call at a
+ * time, and allocates only inside the driver's own capped heap. No Lua runs
+ * on the bus thread: a thread that called vmac_driver_forbid_thread gets
+ * every such call refused (and, built with VMAC_CHECK_THREADS, aborts). */
 #ifndef VMAC_DRIVER_H
 #define VMAC_DRIVER_H
 
@@ -271,6 +274,24 @@ int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const str
 
 /* Bytes the driver's heap holds now. */
 size_t vmac_driver_memory(const struct vmac_driver *d);
+
+/* The wall-clock budget of one call (budget_us, its driver.NAME override),
+ * in ns; 0: none. */
+int64_t vmac_driver_budget_ns(const struct vmac_driver *d);
+
+/* Counts the ticks that published a variable: a caller that copies the
+ * variables out needs to copy them only when it has moved. */
+uint64_t vmac_driver_vars_version(const struct vmac_driver *d);
+
+/* The library function the driver's code is inside now ("string.find"),
+ * or NULL: read from another thread to say what a stalled call was doing
+ * (a pointer to a constant string, stored once before and after each
+ * bounded library call). */
+const char *vmac_driver_lib_call(const struct vmac_driver *d);
+
+/* This thread (the bus thread) must never run a driver's Lua: from now on
+ * every call that would is refused with an error saying so. */
+void vmac_driver_forbid_thread(void);
 
 void vmac_driver_free(struct vmac_driver *d);
 

@@ -238,7 +238,7 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 {
 	lua_State *L = d->L;
 	struct vmac_value now[VMAC_DRIVER_MAX_VARS];
-	int i, j, keys = lua_gettop(L) + 1, dev = keys + 1, t = keys + 2;
+	int i, j, published = 0, keys = lua_gettop(L) + 1, dev = keys + 1, t = keys + 2;
 	if (d->nvars == 0)
 		return 0;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
@@ -274,7 +274,9 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 		if (d->vars[i].due) {
 			d->vars[i].pub.value = now[i];
 			d->vars[i].pub.published_s = time_s;
+			published = 1;
 		}
+	d->vars_version += (uint64_t)published;
 	return 0;
 }
 

@@ -111,7 +111,9 @@ struct vmac_driver {
 	int64_t tag;           /* the host's (vmac_driver_set_tag) */
 	char *describe;        /* the manifest's declarations as JSON (vmac_driver_describe) */
 	int events_in_window;
-	int loaded; /* vmac_driver_load_into ran (once per sandbox) */
+	int loaded;                    /* vmac_driver_load_into ran (once per sandbox) */
+	uint64_t vars_version;         /* counts the ticks that published a variable */
+	const char *volatile lib_call; /* the bounded library function running now ("string.find"), or NULL */
 };
 
 /* The host's work on a driver's state: fn(d, args, err, errlen) returns 0 or

@@ -372,6 +372,21 @@ size_t vmac_driver_memory(const struct vmac_driver *d)
 	return d->used;
 }
 
+int64_t vmac_driver_budget_ns(const struct vmac_driver *d)
+{
+	return d->budget_ns;
+}
+
+uint64_t vmac_driver_vars_version(const struct vmac_driver *d)
+{
+	return d->vars_version;
+}
+
+const char *vmac_driver_lib_call(const struct vmac_driver *d)
+{
+	return d->lib_call;
+}
+
 void vmac_driver_free(struct vmac_driver *d)
 {
 	if (!d)

@@ -27,6 +27,13 @@
 #include <string.h>
 #include <time.h>
 
+static _Thread_local int forbidden_thread;
+
+void vmac_driver_forbid_thread(void)
+{
+	forbidden_thread = 1;
+}
+
 int64_t drv_mono_ns(void)
 {
 	struct timespec ts;
@@ -192,6 +199,14 @@ int drv_protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, 
 	volatile int rc;
 	if (d->broken) {
 		snprintf(err, errlen, "%s", d->broken_msg);
+		return -1;
+	}
+	if (forbidden_thread) {
+#ifdef VMAC_CHECK_THREADS
+		fprintf(stderr, "vmac: driver %s called on a thread that must not run Lua (the bus thread)\n", d->name);
+		abort();
+#endif
+		snprintf(err, errlen, "%s: host error: driver called on the bus thread", d->file);
 		return -1;
 	}
 	job.d = d;

@@ -308,6 +308,7 @@ void bus_drain(struct vmac_bus *bus)
 		if (n < RX_BATCH)
 			break;
 	}
+	bus_workers_kick(bus); /* the ticks the replies asked for start now */
 }
 
 /* ---- the tick ---- */
@@ -438,6 +439,9 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 	}
 }
 
+/* Every board is told to go safe at once; every attached machine gets a
+ * last job (a checkpoint, then detach) that the stop waits for no longer
+ * than for the boards' acks: a driver never holds up a stop. */
 void bus_begin_stop(struct vmac_bus *bus, int64_t now)
 {
 	uint32_t i;
@@ -445,10 +449,6 @@ void bus_begin_stop(struct vmac_bus *bus, int64_t now)
 	bus->stop_deadline_ns = now + STOP_GRACE_PERIODS * bus->slot_ns;
 	if (bus->stop_deadline_ns < now + 100000000)
 		bus->stop_deadline_ns = now + 100000000; /* at least 100 ms for the acks */
-	bus_checkpoint_all(bus, now);                    /* what each machine was doing, for the next start */
-	for (i = 0; i < bus->nused; i++)
-		if (bus->mach[i].used && bus->mach[i].drv && bus->mach[i].attached)
-			vmac_driver_detach(bus->mach[i].drv, "host stopping");
 	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		if (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP) {
@@ -460,20 +460,36 @@ void bus_begin_stop(struct vmac_bus *bus, int64_t now)
 		bus_unschedule(bus, d);
 		d->mach = -1;
 	}
-	for (i = 0; i < bus->nused; i++)
-		if (bus->mach[i].used)
-			bus_free_machine(bus, &bus->mach[i]);
 	bus_flush(bus);
+	for (i = 0; i < bus->nused; i++) {
+		struct machine *m = &bus->mach[i];
+		if (!m->used)
+			continue;
+		if (!m->drv || !m->attached) {
+			bus_free_machine(bus, m);
+			continue;
+		}
+		/* what each machine was doing, for the next start, and detach */
+		m->want_attach = m->want_rollback = m->want_tick = 0;
+		m->want_stop = 1;
+		bus_dispatch(bus, m);
+	}
+	bus_workers_kick(bus);
 }
 
+/* Every board has acked and every machine's last job is done, or the
+ * deadline has come: the machines still in a job are given up. */
 static int stop_done(struct vmac_bus *bus, int64_t now)
 {
 	uint32_t i;
-	if (now >= bus->stop_deadline_ns)
-		return 1;
+	int done = 1;
+	for (i = 0; i < bus->nused && done; i++)
+		done = !bus->dev[i].pending && !bus->mach[i].used;
+	if (!done && now < bus->stop_deadline_ns)
+		return 0;
 	for (i = 0; i < bus->nused; i++)
-		if (bus->dev[i].pending)
-			return 0;
+		if (bus->mach[i].used)
+			bus_free_machine(bus, &bus->mach[i]);
 	return 1;
 }
 
@@ -481,17 +497,19 @@ static int stop_done(struct vmac_bus *bus, int64_t now)
  * when the bus has stopped (VMAC_MSG_STOPPED posted), else 0. */
 int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 {
-	int64_t scheduled;
+	/* Lateness from the first tick due: a thread held for a second shows a
+	 * second, not how late the last of the ticks it skipped was. */
+	int64_t scheduled = bus->start_ns + (int64_t)(bus->tick_index + 1) * bus->slot_ns;
 	bus->tick_index += expirations;
 	bus->counters.ticks++;
 	bus->counters.ticks_skipped += expirations - 1;
-	scheduled = bus->start_ns + (int64_t)bus->tick_index * bus->slot_ns;
 	vmac_hist_add(&bus->lateness, (now - scheduled) / 1000);
 	if (!bus->virt) {
 		vmac_transport_clock_sync(&bus->tr);
 		bus_drain(bus);
 	}
 	bus_check_deadlines(bus, now);
+	bus_collect(bus, now); /* the jobs done: their outputs go with this slot's services */
 	if (bus->stopping) {
 		if (stop_done(bus, now)) {
 			struct vmac_bus_msg m;
@@ -533,6 +551,7 @@ static void *bus_main(void *arg)
 	struct itimerspec its;
 	struct timespec start;
 
+	vmac_driver_forbid_thread(); /* no driver runs here (docs/HOST.md, "Threads") */
 	bus_try_realtime(bus);
 	bus_try_cpu_awake(bus);
 	clock_gettime(CLOCK_MONOTONIC, &start);
@@ -593,13 +612,16 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->status.devices || !bus->status.slot_load ||
 	    !bus->slot_entries || !bus->sched ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
-	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus)) {
+	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus) ||
+	    bus_jobs_init(bus)) {
 		snprintf(err, errlen, "out of memory");
 		vmac_bus_free(bus);
 		return NULL;
 	}
-	for (i = 0; i < bus->ndev; i++)
+	for (i = 0; i < bus->ndev; i++) {
 		bus->dev[i].mach = -1;
+		bus->mach[i].worker = -1;
+	}
 	for (i = 0; i < VMAC_BUS_REQUESTS; i++)
 		sem_init(&bus->req[i].done, 0, 0);
 	pthread_mutex_init(&bus->status_lock, NULL);
@@ -632,7 +654,7 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 		snprintf(err, errlen, "cannot create the tick timer: %s", strerror(errno));
 		goto fail;
 	}
-	if (bus_wait_init(bus, err, errlen) != 0)
+	if (bus_wait_init(bus, err, errlen) != 0 || bus_workers_init(bus, err, errlen) != 0)
 		goto fail;
 	return bus;
 fail:
@@ -690,13 +712,23 @@ void vmac_bus_virtual_commands(struct vmac_bus *bus)
 void vmac_bus_free(struct vmac_bus *bus)
 {
 	uint32_t i;
+	int stuck;
 	if (!bus)
 		return;
-	if (bus->mach)
+	bus_workers_fini(bus);
+	stuck = bus->workers != NULL; /* a worker still inside a driver's call: what it holds stays */
+	if (bus->mach && bus->jobs)
 		for (i = 0; i < bus->ndev; i++) {
+			struct job *j = &bus->jobs[i];
+			int st = atomic_load(&j->state);
+			if (st == JOB_RUNNING || st == JOB_DROPPED || st == JOB_STALLED)
+				continue;
+			/* a host gone without stopping (vmac test's crash_host) */
 			vmac_driver_free(bus->mach[i].drv);
-			vmac_recorder_free(
-			    bus->mach[i].rec); /* a host gone without stopping (vmac test's crash_host) */
+			if (bus->mach[i].prev != bus->mach[i].drv)
+				vmac_driver_free(bus->mach[i].prev);
+			vmac_recorder_free(bus->mach[i].rec);
+			free(j->ckpt);
 		}
 	bus_wait_fini(bus);
 	vmac_transport_close(&bus->tr);
@@ -710,6 +742,9 @@ void vmac_bus_free(struct vmac_bus *bus)
 	for (i = 0; i < VMAC_BUS_REQUESTS; i++)
 		sem_destroy(&bus->req[i].done);
 	free(bus->dev);
+	if (stuck)
+		return; /* the process ends: the jobs and machines a stuck worker reads stay */
+	bus_jobs_fini(bus);
 	free(bus->mach);
 	free(bus->tx);
 	free(bus->chunk_tx);
@@ -722,6 +757,9 @@ void vmac_bus_free(struct vmac_bus *bus)
 
 int vmac_bus_start(struct vmac_bus *bus)
 {
+	int rc = bus_workers_start(bus);
+	if (rc != 0)
+		return rc;
 	return -pthread_create(&bus->thread, NULL, bus_main, bus);
 }
 

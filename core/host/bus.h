@@ -1,8 +1,9 @@
 /* The bus thread: discovery, the periodic service of every device, the
  * deadline policy, and the messages it exchanges with the main thread.
- * Nothing on this thread allocates, logs to disk or blocks, except the bus
- * socket itself; slow work (loading drivers, JSON, HTTP) is the main
- * thread's, reached through two SPSC rings. */
+ * Nothing on this thread allocates, logs to disk, blocks or runs a driver,
+ * except the bus socket itself; drivers run on the driver workers (jobs the
+ * bus thread hands them), slow work (loading drivers, JSON, HTTP) is the
+ * main thread's, reached through SPSC rings. */
 #ifndef VMAC_BUS_H
 #define VMAC_BUS_H
 
@@ -45,6 +46,7 @@ enum vmac_bus_msg_kind {
 enum vmac_event_code {
 	VMAC_EVENT_RECORD = 0,  /* only recorded */
 	VMAC_EVENT_ROLLED_BACK, /* a version on probation failed and went back: the store records it (version_id) */
+	VMAC_EVENT_STALLED,     /* driver, version, version_id stalled a worker: not to be loaded again */
 };
 
 struct vmac_bus_msg {
@@ -55,10 +57,12 @@ struct vmac_bus_msg {
 	struct vmac_driver *drv;
 	char device[VMAC_NAME_MAX + 1];
 	char driver[VMAC_NAME_MAX + 1];
-	char event_kind[24]; /* attached, dropped, driver_missing, ... */
-	int64_t version_id;  /* rolled_back: the store's id of the version that failed */
+	char event_kind[24];                       /* attached, dropped, driver_missing, ... */
+	int64_t version_id;                        /* rolled_back, stalled: the store's id of the version that failed */
+	char version[VMAC_DRIVER_VERSION_MAX + 1]; /* stalled: its version */
 	char text[VMAC_EVENT_TEXT];
 	struct vmac_recorder *rec; /* RECORDING; UNLOAD: free it too (may be NULL) */
+	void *buf;                 /* UNLOAD: a machine's checkpoint buffer to free too (may be NULL) */
 	int replace;               /* RECORDING: the machine runs on: send it a new recorder (VMAC_CMD_RECORDER) */
 };
 
@@ -74,6 +78,7 @@ struct vmac_host_cmd {
 	uint32_t slot, generation;
 	struct vmac_driver *drv;
 	struct vmac_recorder *rec; /* its machine's flight recorder (NULL: none) */
+	uint8_t *ckpt;             /* its machine's checkpoint buffer, checkpoint_kib KiB (NULL: none) */
 	int missing;               /* no driver file at all (vs. a driver that failed to load) */
 	char text[VMAC_EVENT_TEXT];
 };
@@ -167,6 +172,10 @@ void vmac_bus_join(struct vmac_bus *bus);
  * thread) after pushing to the main ring; set it before start. */
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx);
 int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
+/* The main thread's care of the driver workers, on every wake-up: a
+ * stalled worker's priority lowered, an ended one joined, a spare kept
+ * ready for the next stall. */
+void vmac_bus_workers_service(struct vmac_bus *bus);
 /* The oldest checkpoint not yet taken (NULL: none), valid until
  * vmac_bus_checkpoint_release; main thread (the one consumer). */
 const struct vmac_bus_checkpoint *vmac_bus_checkpoint_peek(struct vmac_bus *bus);
@@ -187,8 +196,9 @@ void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out);
 const char *vmac_bus_host_addr(struct vmac_bus *bus);
 
 /* Operator input to the machine `device` belongs to: the driver's
- * input(dev, name, value). Bus thread only (in vmacd that means through the
- * command ring; `vmac test` calls it between steps of its virtual clock).
+ * input(dev, name, value), run and answered before it returns. Virtual
+ * mode only (`vmac test` calls it between steps of its virtual clock);
+ * vmacd's threads use vmac_bus_request_input.
  * Returns 0 (accepted), a vmac_refusal (> 0: refused, reply says why),
  * -VMAC_ENOTRUNNING (no running machine of that name) or -VMAC_EDRIVER (its
  * driver failed and the machine was dropped or rolled back); reply says
@@ -227,9 +237,12 @@ int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *
  * over again and an event of kind "rolled_back" carries drv's tag
  * (vmac_driver_tag). Returns -VMAC_EBUSY when the bus thread took no
  * request (*rc the same; reply says why; drv is the caller's), else 0 with
- * *rc: 0 switched (drv is the bus's now), or, drv the caller's to free and
- * reply saying why, -VMAC_ENOTRUNNING (no running machine of that name)
- * or -VMAC_EREFUSED (the machine would not take drv). */
+ * *rc: 0 switched (drv is the bus's now), -VMAC_EDRIVER (the take-over
+ * stalled, or the machine was dropped during it: drv went with the job and
+ * is not the caller's), or, drv the caller's to free and reply saying why,
+ * -VMAC_ENOTRUNNING (no running machine of that name) or -VMAC_EREFUSED
+ * (the machine would not take drv). The answer comes when the machine's
+ * driver worker has run the take-over. */
 int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
                           int timeout_ms, int *rc, char *reply, size_t replylen);
 

@@ -1,13 +1,18 @@
 /* The bus thread's insides, shared by its files (bus.c, devices.c,
- * mailbox.c, status.c, ../reload/swap.c); the rest of the host sees only
- * bus.h. Everything here runs on the bus thread unless it says otherwise.
- * Names shared between the files carry the prefix bus_. */
+ * mailbox.c, status.c, jobs.c, workers.c, ../reload/swap.c); the rest of
+ * the host sees only bus.h. Everything here runs on the bus thread unless
+ * it says otherwise. Names shared between the files carry the prefix bus_.
+ *
+ * The bus thread never runs a driver: every call into a driver's state is
+ * a job (struct job, one per machine, one at a time) that a driver worker
+ * runs (workers.c); jobs.c is the bus thread's side (hand a job over,
+ * collect what it gave, judge a job that overran). */
 #ifndef VMAC_BUS_INTERNAL_H
 #define VMAC_BUS_INTERNAL_H
 
 #include "bus.h"
 
-#include <ev.h>
+#include <pthread.h>
 #include <semaphore.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -35,6 +40,95 @@ enum dev_state {
  * "Version 2"). */
 enum reg_step { REG_REGISTER, REG_SIZE, REG_OFFSET };
 
+/* ---- drivers on workers (jobs.c, workers.c) ---- */
+
+enum job_kind {
+	JOB_ATTACH = 1, /* attach(dev), then recover(dev, saved) */
+	JOB_TICK,       /* tick(dev, inputs), then a checkpoint when due or asked */
+	JOB_INPUT,      /* input(dev, name, value) */
+	JOB_SWAP,       /* hot reload: other takes over from drv */
+	JOB_ROLLBACK,   /* drv (the previous version) takes over again from other (which failed) */
+	JOB_STOP,       /* the host stops: a checkpoint, then detach(dev) */
+};
+
+/* Who owns a job: IDLE and DONE the bus thread, QUEUED the bus thread
+ * until a worker takes it (QUEUED -> RUNNING), RUNNING the worker. The bus
+ * thread may give up a RUNNING job: DROPPED (its machine went away) or
+ * STALLED (it overran: its worker is retired); the worker that finishes it
+ * then disposes of its instances and sets it IDLE. */
+enum job_state { JOB_IDLE, JOB_QUEUED, JOB_RUNNING, JOB_DONE, JOB_DROPPED, JOB_STALLED };
+
+struct job {
+	_Atomic int state;
+	_Atomic int runner;         /* the worker that took it */
+	_Atomic int64_t started_ns; /* when it was taken (0: not yet) */
+	struct vmac_bus *bus;
+	int mach; /* its machine: bus->mach[mach] */
+	/* The bus thread's, written before QUEUED. */
+	enum job_kind kind;
+	int64_t queued_ns;
+	double time_s;             /* bus time of the call */
+	struct vmac_driver *drv;   /* the instance it runs on */
+	struct vmac_driver *other; /* SWAP: the new instance; ROLLBACK: the one that failed */
+	unsigned level;            /* the machine's level: told to the driver first */
+	int nboards;               /* the machine's boards, added to the driver first */
+	uint32_t minor[VMAC_DRIVER_MAX_BOARDS];
+	char board[VMAC_DRIVER_MAX_BOARDS][VMAC_NAME_MAX + 1];
+	char device[VMAC_NAME_MAX + 1]; /* the primary's name and the driver's, for events */
+	char driver[VMAC_NAME_MAX + 1];
+	struct vmac_inputs in[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
+	int checkpoint;                                /* TICK: one is due; STOP: the machine is attached */
+	char name[VMAC_NAME_MAX + 1];                  /* INPUT */
+	struct vmac_value value;
+	int req;       /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
+	uint8_t *ckpt; /* the machine's checkpoint buffer, checkpoint_kib KiB */
+	/* The worker's, written before DONE. */
+	int rc;
+	int recover_rc; /* ATTACH */
+	char err[VMAC_DRIVER_ERR_MAX];
+	char reply[VMAC_EVENT_TEXT];                     /* INPUT */
+	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
+	int want_level;                                  /* dev:set_level during the call; -1: none */
+	int ckpt_rc;                                     /* 1: ckpt_len bytes encoded; -1: refused (ckpt_err) */
+	size_t ckpt_len;
+	char ckpt_err[256];
+	int vars_fresh; /* vars hold the instance's published values now */
+	int nvars, nparams;
+	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
+	int params_fresh;
+	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
+	size_t memory;
+	/* The bus thread's own notes on it. */
+	int pushed;             /* QUEUED and in a worker's ring */
+	uint64_t rec_n;         /* INPUT: its event in the recorder */
+	int64_t overdue_ns;     /* past its limit: when the bus last looked, */
+	int64_t overdue_cpu_ns; /* and its worker's CPU time then */
+	/* The worker's own memory, across jobs. */
+	const struct vmac_driver *vars_of;
+	uint64_t vars_version;
+	int64_t params_ns;
+};
+
+enum worker_state { W_FREE, W_SPARE, W_ACTIVE, W_STALLED, W_EXITED };
+
+/* A driver worker: a thread that runs the jobs the bus thread queues on
+ * it (workers.c). */
+struct worker {
+	_Atomic int state;
+	int index;
+	struct vmac_bus *bus;
+	pthread_t thread;
+	int efd;               /* eventfd it sleeps on when its ring is empty */
+	_Atomic int sleeping;  /* it is about to sleep or sleeps: a push must wake it */
+	struct vmac_ring jobs; /* machine indexes, bus thread -> worker */
+	struct vmac_ring out;  /* struct vmac_bus_msg, worker -> main thread (events, unloads) */
+	_Atomic uint64_t events_lost;
+	_Atomic int quit;
+	int nmach;   /* machines it runs (bus thread) */
+	int kick;    /* the bus thread pushed: wake it at the end of this pass */
+	int demoted; /* stalled, and its priority lowered (main thread) */
+};
+
 /* A machine: the boards that share a driver name and major id, run by one
  * driver instance. Board 0 is the primary: its reply runs the tick. */
 struct machine {
@@ -46,7 +140,26 @@ struct machine {
 	uint32_t board[VMAC_DRIVER_MAX_BOARDS]; /* device slots, in the driver's board order */
 	int nboards;
 	unsigned level;
-	int attached;               /* attach() has run */
+	int attached; /* attach() has run */
+	int worker;   /* the driver worker that runs its jobs; -1: none yet */
+	/* Work waiting for the machine's job (jobs.c): dispatched in this order. */
+	int want_attach;
+	int want_rollback;
+	char rollback_why[200];
+	int want_swap;                 /* request slot + 1 of a hot reload; 0: none */
+	int input_rc;                  /* the last input's answer (vmac_bus_input) */
+	int inputs[VMAC_BUS_REQUESTS]; /* request slots of operator input, oldest first */
+	int ninputs;
+	int want_tick;
+	int64_t tick_ns; /* the primary's reply that asked for it */
+	int want_stop;
+	int want_checkpoint; /* a checkpoint was due and not taken: the next tick makes it */
+	uint64_t late;       /* services that found its tick not done (held outputs) */
+	/* The instance's published values and params, as its last job left them. */
+	int nvars, nparams;
+	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
+	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
+	size_t memory;
 	int64_t next_checkpoint_ns; /* checkpoint_s: the next periodic checkpoint */
 	int checkpoint_failing;     /* the last one was refused (said once) */
 	struct vmac_recorder *rec;  /* the flight recorder (NULL: none) */
@@ -105,6 +218,7 @@ struct request {
 	_Atomic int state;
 	sem_t done;
 	int kind;
+	int waiting; /* RUNNING, answered when its machine's job is collected (jobs.c) */
 	struct vmac_bus_input_request r;
 	struct vmac_driver *drv; /* REQ_SWAP: the new instance */
 	int64_t probation_ns;
@@ -165,6 +279,12 @@ struct vmac_bus {
 	int virt;
 	int64_t virt_now_ns;
 	struct vmac_bus_link link;
+	/* Driver workers (workers.c); none in virtual mode, where jobs run
+	 * inline. */
+	struct job *jobs; /* ndev, one per machine */
+	struct worker *workers;
+	int nworkers, nworkers_max;
+	int64_t job_limit_ns; /* how long a job other than a tick may run */
 };
 
 /* bus.c */
@@ -194,8 +314,42 @@ void bus_drain(struct vmac_bus *bus);
 int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
                 int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms);
 
+/* jobs.c: the bus thread's side of the driver workers */
+int bus_jobs_init(struct vmac_bus *bus);
+void bus_jobs_fini(struct vmac_bus *bus);
+/* Run what m waits for, if its job is free. */
+void bus_dispatch(struct vmac_bus *bus, struct machine *m);
+/* Operator input in virtual mode: m's job (name, value filled in) runs now;
+ * m->input_rc and the job's reply say how it went. */
+void bus_input_now(struct vmac_bus *bus, struct machine *m);
+/* Every job done: what it gave applied; every job overrun: failed. */
+void bus_collect(struct vmac_bus *bus, int64_t now);
+/* m is going away: its job is given up; its drivers, if the job holds
+ * them, are the worker's to dispose of (1), else the caller's (0). */
+int bus_job_release(struct vmac_bus *bus, struct machine *m);
+/* Answer request slot i (rc and reply already in it). */
+void bus_answer(struct vmac_bus *bus, int i);
+/* The machine's job is free, and nothing is queued for it. */
+int bus_machine_idle(const struct vmac_bus *bus, const struct machine *m);
+
+/* workers.c */
+int bus_workers_init(struct vmac_bus *bus, char *err, size_t errlen);
+int bus_workers_start(struct vmac_bus *bus);
+void bus_workers_fini(struct vmac_bus *bus);
+/* The job of machine mi to its worker (bus thread); 0, or -1 (no worker). */
+int bus_worker_push(struct vmac_bus *bus, struct machine *m);
+/* Wake the workers pushed to since the last call. */
+void bus_workers_kick(struct vmac_bus *bus);
+/* A worker overran a job: retired, its queued jobs moved. */
+void bus_worker_retire(struct vmac_bus *bus, int w);
+/* Run a job (a worker, or the bus in virtual mode). */
+void bus_run_job(struct job *j);
+/* CPU time worker w has used (ns), -1 when it cannot be read. */
+int64_t bus_worker_cpu_ns(struct vmac_bus *bus, int w);
+
 /* devices.c */
 void bus_unload(struct vmac_bus *bus, struct vmac_driver *drv);
+void bus_unload_buffer(struct vmac_bus *bus, void *buf);
 uint32_t bus_slot_of(const struct vmac_bus *bus, const struct device *d);
 void bus_unschedule(struct vmac_bus *bus, struct device *d);
 void bus_free_machine(struct vmac_bus *bus, struct machine *m);
@@ -207,18 +361,23 @@ void bus_bind_driver(struct machine *m, struct vmac_driver *drv);
 void bus_give_boards(struct vmac_bus *bus, struct machine *m, struct vmac_driver *drv);
 void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *where, const char *err);
 void bus_run_machine(struct vmac_bus *bus, struct machine *m);
+void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level);
 void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_host_cmd *c);
 struct device *bus_find_by_name(struct vmac_bus *bus, const char *name);
 
 /* ../reload/swap.c */
+/* Roll m back to m->prev (asked: done by a job); -1 when there is none. */
 int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why);
-int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
-             size_t replylen);
+void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j);
+/* A swap request (slot i): refused now (answered), or waiting for m's job. */
+void bus_swap(struct vmac_bus *bus, int i);
+void bus_swapped(struct vmac_bus *bus, struct machine *m, struct job *j);
 void bus_end_probations(struct vmac_bus *bus, int64_t now);
 
 /* record.c: the flight recorder's bus side (no allocation) */
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
-void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
+void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const struct vmac_inputs *in,
+                  const struct vmac_outputs *out);
 /* realtime.c, at the bus thread's start. */
 void bus_try_realtime(struct vmac_bus *bus);
 void bus_try_cpu_awake(struct vmac_bus *bus);
@@ -247,13 +406,14 @@ void bus_rec_install(struct vmac_bus *bus, const struct vmac_host_cmd *c);
 /* checkpoint.c */
 int bus_checkpoints_init(struct vmac_bus *bus);
 void bus_checkpoints_fini(struct vmac_bus *bus);
-/* After a tick of m: a checkpoint when asked or due. */
-void bus_checkpoint_due(struct vmac_bus *bus, struct machine *m, int64_t now);
-/* Every attached machine's, now (the host stopping). */
-void bus_checkpoint_all(struct vmac_bus *bus, int64_t now);
+/* Whether m's next tick should make a checkpoint (checkpoint_s passed). */
+int bus_checkpoint_due(struct vmac_bus *bus, struct machine *m, int64_t now);
+/* A job of m encoded one (j->ckpt_rc): into the ring for the main thread. */
+void bus_checkpoint_taken(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now);
 /* m's primary is registered: attach(), then recover() with the checkpoint
- * offered; a failure of either fails the driver. */
+ * offered, as m's job; a failure of either fails the driver. */
 void bus_attached(struct vmac_bus *bus, struct machine *m, int64_t now);
+void bus_attach_done(struct vmac_bus *bus, struct machine *m, struct job *j);
 
 /* status.c */
 const char *bus_state_name(enum dev_state s);

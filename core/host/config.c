@@ -53,6 +53,7 @@ static const struct key keys[] = {
     {U(driver_memory_kib, 64, 1048576)},
     {U(driver_instructions, 1000, 1000000000)},
     {U(driver_budget_us, 0, 10000000)},
+    {U(driver_threads, 0, 64)},
     {U(reload_probation_s, 0, 86400)},
     {U(checkpoint_s, 0, 3600)},
     {U(checkpoint_kib, 1, 1024)},

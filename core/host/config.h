@@ -40,6 +40,7 @@ struct vmac_config {
 	uint32_t driver_memory_kib;
 	uint32_t driver_instructions;
 	uint32_t driver_budget_us;   /* wall-clock per driver call; 0 = none */
+	uint32_t driver_threads;     /* driver workers; 0 = one per CPU the host may use */
 	uint32_t reload_probation_s; /* hot reload: a new version failing within this goes back (0 = none) */
 	uint32_t checkpoint_s;       /* a machine's dev.state saved at least this often (0 = only when asked) */
 	uint32_t checkpoint_kib;     /* largest checkpoint (encoded dev.state) */

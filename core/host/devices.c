@@ -21,25 +21,36 @@
 #include "../common/errors.h"
 #include "../sched/sched.h"
 
-static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen);
-static void hook_event(void *ctx, const char *text);
-
-/* Hand a driver to the main thread to close (closing a Lua state is slow). */
-void bus_unload(struct vmac_bus *bus, struct vmac_driver *drv)
+/* Hand a driver (or a machine's checkpoint buffer) to the main thread to
+ * free (closing a Lua state is slow). */
+static void unload(struct vmac_bus *bus, struct vmac_driver *drv, void *buf)
 {
 	struct vmac_bus_msg m;
-	if (!drv)
+	if (!drv && !buf)
 		return;
 	memset(&m, 0, sizeof(m));
 	m.kind = VMAC_MSG_UNLOAD;
 	m.drv = drv;
+	m.buf = buf;
 	if (vmac_ring_push(&bus->to_main, &m) != 0) {
-		/* The main thread is far behind; closing here is slow but safe. */
+		/* The main thread is far behind; closing here is slow but safe (the
+		 * instance runs no Lua: lua_close frees it). */
 		vmac_driver_free(m.drv);
+		free(buf);
 		return;
 	}
 	if (bus->wakeup)
 		bus->wakeup(bus->wakeup_ctx);
+}
+
+void bus_unload(struct vmac_bus *bus, struct vmac_driver *drv)
+{
+	unload(bus, drv, NULL);
+}
+
+void bus_unload_buffer(struct vmac_bus *bus, void *buf)
+{
+	unload(bus, NULL, buf);
 }
 
 /* ---- the error policy ---- */
@@ -78,12 +89,47 @@ static void set_aside(struct vmac_bus *bus, struct device *d, uint8_t reason)
 	d->mach = -1;
 }
 
+/* Everything waiting for m's job is answered: m is going away. */
+static void refuse_waiting(struct vmac_bus *bus, struct machine *m)
+{
+	int i;
+	for (i = 0; i < m->ninputs; i++) {
+		struct request *q = &bus->req[m->inputs[i]];
+		q->r.rc = -VMAC_ENOTRUNNING;
+		snprintf(q->r.reply, sizeof(q->r.reply), "the %s machine is not running (dropped)", m->driver);
+		bus_answer(bus, m->inputs[i]);
+	}
+	m->ninputs = 0;
+	if (m->want_swap) { /* the new instance is still the caller's */
+		struct request *q = &bus->req[m->want_swap - 1];
+		q->r.rc = -VMAC_ENOTRUNNING;
+		snprintf(q->r.reply, sizeof(q->r.reply), "the %s machine is not running (dropped)", m->driver);
+		bus_answer(bus, m->want_swap - 1);
+		m->want_swap = 0;
+	}
+}
+
+/* m's job is given up (a worker still inside it disposes of the instances
+ * it holds); everything else of m goes to the main thread. */
 void bus_free_machine(struct vmac_bus *bus, struct machine *m)
 {
+	struct job *j = &bus->jobs[m - bus->mach];
+	int held = bus_job_release(bus, m);
+	refuse_waiting(bus, m);
 	bus_rec_release(bus, m);
-	bus_unload(bus, m->drv);
-	bus_unload(bus, m->prev);
+	if (!held || (m->drv != j->drv && m->drv != j->other))
+		bus_unload(bus, m->drv);
+	if (!held || (m->prev != j->drv && m->prev != j->other))
+		bus_unload(bus, m->prev);
+	if (!held) {
+		bus_unload_buffer(bus, j->ckpt);
+		j->ckpt = NULL;
+	}
+	j->drv = j->other = NULL;
+	if (m->worker >= 0 && bus->workers)
+		bus->workers[m->worker].nmach--;
 	memset(m, 0, sizeof(*m));
+	m->worker = -1;
 }
 
 /* Drop d, and with it every other board of its machine: a machine with a
@@ -192,7 +238,11 @@ static uint16_t watchdog_for(const struct vmac_bus *bus, unsigned level)
 static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
 {
 	char why[200];
-	if (m->nboards == VMAC_DRIVER_MAX_BOARDS || vmac_driver_add_board(m->drv, d->ann.minor, d->ann.board) != 0) {
+	int i;
+	for (i = 0; i < m->nboards; i++)
+		if (bus->dev[m->board[i]].ann.minor == d->ann.minor)
+			break;
+	if (m->nboards == VMAC_DRIVER_MAX_BOARDS || i < m->nboards) {
 		snprintf(d->note, sizeof(d->note), "machine full: at most %d boards per machine",
 		         VMAC_DRIVER_MAX_BOARDS);
 		bus_event(bus, d, "machine_full", "%s not attached: %s", d->ann.board, d->note);
@@ -257,11 +307,21 @@ static void join_or_load(struct vmac_bus *bus, struct device *d)
 		}
 		return;
 	}
-	for (mi = 0; mi < (int)bus->ndev && bus->mach[mi].used; mi++)
+	/* Below nused, where every loop over machines looks: at most one machine
+	 * per device other than d. A slot whose job a worker still holds (given
+	 * up) is skipped until the worker lets go. */
+	for (mi = 0; mi < (int)bus->nused && (bus->mach[mi].used || !bus_machine_idle(bus, &bus->mach[mi])); mi++)
 		;
-	m = &bus->mach[mi]; /* never full: at most one machine per device */
+	if (mi == (int)bus->nused) {
+		d->mach = -1;
+		d->state = DEV_ERRANT;
+		snprintf(d->note, sizeof(d->note), "host busy: asked for again at its next announce");
+		return;
+	}
+	m = &bus->mach[mi];
 	memset(m, 0, sizeof(*m));
 	m->used = 1;
+	m->worker = -1;
 	m->bus = bus;
 	memcpy(m->driver, d->ann.driver, sizeof(m->driver));
 	m->major = d->ann.major;
@@ -331,99 +391,48 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 	join_or_load(bus, d);
 }
 
-/* Bind drv to machine m (dev:set_level, dev:event). */
-void bus_bind_driver(struct machine *m, struct vmac_driver *drv)
-{
-	struct vmac_driver_host host;
-	host.set_level = hook_set_level;
-	host.event = hook_event;
-	host.ctx = m;
-	vmac_driver_bind(drv, &host);
-}
-
-/* Hand drv every board of m it does not have yet (in m's order) and m's
- * level. */
-void bus_give_boards(struct vmac_bus *bus, struct machine *m, struct vmac_driver *drv)
-{
-	int i;
-	for (i = vmac_driver_boards(drv); i < m->nboards; i++) {
-		const struct device *b = &bus->dev[m->board[i]];
-		vmac_driver_add_board(drv, b->ann.minor, b->ann.board);
-	}
-	vmac_driver_set_level_now(drv, m->level);
-}
-
 /* m's driver failed in a call (where: "", " in input", ...): a version on
- * probation rolls back; otherwise, or if that fails, the machine is
- * dropped (every board to its safe state). */
+ * probation rolls back (a job: bus_rolled_back says how it went);
+ * otherwise the machine is dropped (every board to its safe state). */
 void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *where, const char *err)
 {
 	struct device *primary = &bus->dev[m->primary];
 	bus_event(bus, primary, "driver_error", "%s: driver %s %s failed%s: %s", primary->ann.board, m->driver,
 	          vmac_driver_version(m->drv), where, err);
 	bus_rec_failure(bus, m, VMAC_REC_ERROR, err);
-	if (m->prev) {
-		int64_t tag = vmac_driver_tag(m->drv);
-		uint32_t i;
-		if (bus_roll_back(bus, m, err) == 0) {
-			char why[VMAC_REC_TEXT_MAX + 1];
-			snprintf(why, sizeof(why), "rolled back: %s", err);
-			bus_rec_capture(bus, m, why); /* the failing version's last seconds; the machine runs on */
-			/* One version everywhere: every other machine on probation
-			 * with the same version goes back too. */
-			for (i = 0; i < bus->nused; i++) {
-				struct machine *o = &bus->mach[i];
-				if (o == m || !o->used || !o->prev || vmac_driver_tag(o->drv) != tag ||
-				    strcmp(o->driver, m->driver) != 0)
-					continue;
-				if (bus_roll_back(bus, o, "the same version failed on another machine") != 0)
-					bus_drop(bus, &bus->dev[o->primary], VMAC_SHUT_DRIVER, "dropped",
-					         "its driver failed");
-			}
-			return;
-		}
-	}
+	if (bus_roll_back(bus, m, err) == 0)
+		return;
 	bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
 }
 
-/* The machine's tick, on its primary board's reply. */
+/* The machine's tick, on its primary board's reply: a job for its worker
+ * now, or as soon as its job is free. */
 void bus_run_machine(struct vmac_bus *bus, struct machine *m)
 {
-	char err[VMAC_DRIVER_ERR_MAX];
-	const struct vmac_inputs *in[VMAC_DRIVER_MAX_BOARDS];
-	struct vmac_outputs *out[VMAC_DRIVER_MAX_BOARDS];
-	int64_t now = bus_now(bus), t_ns = now - bus->start_ns; /* bus time: the driver's inputs.time */
-	int i, rc;
-	for (i = 0; i < m->nboards; i++) {
-		in[i] = &bus->dev[m->board[i]].inputs;
-		out[i] = &bus->dev[m->board[i]].outputs;
-	}
-	rc = vmac_driver_tick(m->drv, (double)t_ns / 1e9, in, out, err, sizeof(err));
-	bus_rec_tick(bus, m, t_ns); /* a failed tick too: its inputs replay the failure */
-	if (rc == 0) {
-		bus_checkpoint_due(bus, m, now);
-		return;
-	}
-	bus_driver_failed(bus, m, "", err);
+	m->want_tick = 1;
+	m->tick_ns = bus_now(bus);
+	bus_dispatch(bus, m);
 }
 
-/* The bus's side of dev:set_level and dev:bus_event (struct vmac_driver_host). */
-static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen)
+/* dev:set_level(level) asked for during m's last job: the schedule changes
+ * at a slot boundary it picks, or, with no room, stays and an event says
+ * why (the driver's dev.level stays too). */
+void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level)
 {
-	struct machine *m = ctx;
-	struct vmac_bus *bus = m->bus;
 	unsigned old = m->level;
+	char err[200];
 	int i, j;
 	if (level == old)
-		return 0;
+		return;
 	for (i = 0; i < m->nboards; i++)
-		if (vmac_sched_set_level(bus->sched, m->board[i], level, err, errlen) != 0) {
+		if (vmac_sched_set_level(bus->sched, m->board[i], level, err, sizeof(err)) != 0) {
 			for (j = 0; j < i; j++)
 				vmac_sched_set_level(bus->sched, m->board[j], old, NULL, 0);
-			return -1;
+			bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u refused: %s", m->driver, old,
+			          level, err);
+			return;
 		}
 	m->level = level;
-	vmac_driver_set_level_now(m->drv, level);
 	bus_rec_level(bus, m, level);
 	for (i = 0; i < m->nboards; i++) {
 		struct device *d = &bus->dev[m->board[i]];
@@ -433,13 +442,6 @@ static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen)
 	}
 	bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u (period %.6g ms)", m->driver, old, level,
 	          (double)(bus->slot_ns << level) / 1e6);
-	return 0;
-}
-
-static void hook_event(void *ctx, const char *text)
-{
-	struct machine *m = ctx;
-	bus_event(m->bus, &m->bus->dev[m->primary], "driver", "%s", text);
 }
 
 /* The main thread has loaded (or failed to load) the driver of the machine
@@ -460,6 +462,16 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 	m->drv = c->drv;
 	m->rec = c->rec;
 	m->level = vmac_driver_level(c->drv);
+	bus->jobs[mi].ckpt = c->ckpt;
+	memcpy(bus->jobs[mi].device, d->ann.board, sizeof(bus->jobs[mi].device));
+	memcpy(bus->jobs[mi].driver, m->driver, sizeof(bus->jobs[mi].driver));
+	/* What the status shows until its first job: the declarations, their
+	 * values as loaded; the params' values come with attach. */
+	m->nvars = vmac_driver_nvars(c->drv);
+	for (i = 0; i < (uint32_t)m->nvars; i++)
+		m->vars[i] = *vmac_driver_variable(c->drv, (int)i);
+	m->nparams = 0;
+	m->memory = vmac_driver_memory(c->drv);
 	bus_bind_driver(m, m->drv);
 	if (admit(bus, m, d) != 0) {
 		char note[sizeof(d->note)];

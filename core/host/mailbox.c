@@ -55,13 +55,23 @@ void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, c
 	bus_post(bus, &m);
 }
 
-/* An input request; with persist, only to a persist = true param. */
-static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
+/* Input request slot i: refused now (answered), or waiting for its
+ * machine's job, which answers it (jobs.c); with persist, only to a
+ * persist = true param. */
+static void input_request(struct vmac_bus *bus, int i)
 {
+	struct request *q = &bus->req[i];
+	struct vmac_bus_input_request *r = &q->r;
 	struct device *d = bus_find_by_name(bus, r->device);
 	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
-	int rc;
-	if (r->persist && m && m->drv && vmac_driver_param_persists(m->drv, r->name) != 1) {
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
+		snprintf(r->reply, sizeof(r->reply), "%s is not running (%s)", r->device,
+		         d ? bus_state_name(d->state) : "no such device");
+		r->rc = -VMAC_ENOTRUNNING;
+		bus_answer(bus, i);
+		return;
+	}
+	if (r->persist && vmac_driver_param_persists(m->drv, r->name) != 1) {
 		const char *why = vmac_driver_param_persists(m->drv, r->name) < 0
 		                      ? "only params persist, and the driver has no such param"
 		                      : "this param does not persist (the driver does not declare it persist = true)";
@@ -69,12 +79,13 @@ static int input_request(struct vmac_bus *bus, struct vmac_bus_input_request *r)
 		memcpy(r->reply, r->name,
 		       n); /* name and reply are parts of one struct: no snprintf of one into the other */
 		snprintf(r->reply + n, sizeof(r->reply) - n, ": %s", why);
-		return VMAC_REFUSED_NOT_PERSIST;
+		r->rc = VMAC_REFUSED_NOT_PERSIST;
+		bus_answer(bus, i);
+		return;
 	}
-	rc = vmac_bus_input(bus, r->device, r->name, &r->value, r->reply, sizeof(r->reply));
-	if (rc == 0 && m && m->used)
-		memcpy(r->machine, bus->dev[m->primary].ann.board, sizeof(r->machine));
-	return rc;
+	q->waiting = 1;
+	m->inputs[m->ninputs++] = i; /* room: one per request slot */
+	bus_dispatch(bus, m);
 }
 
 /* The machines of driver that have a driver instance (attached, or their
@@ -94,7 +105,29 @@ static int list_machines(struct vmac_bus *bus, const char *driver, char (*names)
 	return n;
 }
 
-/* The requests other threads queued: run each, answer, post. */
+static void record_request(struct vmac_bus *bus, struct request *q)
+{
+	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
+	struct device *d;
+	struct machine *m;
+	memcpy(device, q->r.device, sizeof(device));
+	d = bus_find_by_name(bus, device);
+	m = d && d->mach >= 0 && d->state == DEV_RUNNING ? &bus->mach[d->mach] : NULL;
+	if (!m || !m->attached) {
+		snprintf(q->r.reply, sizeof(q->r.reply), "%s: no running machine of that name", device);
+		q->r.rc = -VMAC_ENOTRUNNING;
+	} else if (bus_rec_capture(bus, m, "asked for (vmac record)") != 0) {
+		snprintf(q->r.reply, sizeof(q->r.reply),
+		         "%s: no flight recorder (recorder_s is 0, or a capture is being written)", device);
+		q->r.rc = -VMAC_EFAIL;
+	} else {
+		snprintf(q->r.reply, sizeof(q->r.reply), "%s: captured; GET /api/recordings lists it", device);
+		q->r.rc = 0;
+	}
+}
+
+/* The requests other threads queued: each answered now, or (input, a hot
+ * reload) handed to its machine's job, which answers it. */
 void bus_requests(struct vmac_bus *bus)
 {
 	int i, expect;
@@ -108,40 +141,21 @@ void bus_requests(struct vmac_bus *bus)
 				atomic_store(&q->state, REQ_FREE);
 			continue;
 		}
-		if (q->kind == REQ_SWAP) {
-			q->r.rc = bus_swap(bus, q->r.device, q->drv, q->probation_ns, q->r.reply, sizeof(q->r.reply));
-		} else if (q->kind == REQ_RECORD) {
-			char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
-			struct device *d;
-			struct machine *m;
-			memcpy(device, q->r.device, sizeof(device));
-			d = bus_find_by_name(bus, device);
-			m = d && d->mach >= 0 && d->state == DEV_RUNNING ? &bus->mach[d->mach] : NULL;
-			if (!m || !m->attached) {
-				snprintf(q->r.reply, sizeof(q->r.reply), "%s: no running machine of that name", device);
-				q->r.rc = -VMAC_ENOTRUNNING;
-			} else if (bus_rec_capture(bus, m, "asked for (vmac record)") != 0) {
-				snprintf(q->r.reply, sizeof(q->r.reply),
-				         "%s: no flight recorder (recorder_s is 0, or a capture is being written)",
-				         device);
-				q->r.rc = -VMAC_EFAIL;
-			} else {
-				snprintf(q->r.reply, sizeof(q->r.reply), "%s: captured; GET /api/recordings lists it",
-				         device);
-				q->r.rc = 0;
-			}
-		} else if (q->kind == REQ_MACHINES) {
+		switch (q->kind) {
+		case REQ_SWAP: bus_swap(bus, i); continue;
+		case REQ_INPUT: input_request(bus, i); continue;
+		case REQ_RECORD: record_request(bus, q); break;
+		case REQ_MACHINES:
 			/* Every command sent before this request was queued is
 			 * handled first: a driver the main thread handed over is
 			 * in its machine when the list is made. */
 			bus_commands(bus);
 			q->r.rc = list_machines(bus, q->r.name, q->names, q->max_names);
-		} else {
-			q->r.rc = input_request(bus, &q->r);
+			break;
 		}
-		atomic_store(&q->state, REQ_DONE);
-		sem_post(&q->done);
+		bus_answer(bus, i);
 	}
+	bus_workers_kick(bus);
 }
 
 void bus_commands(struct vmac_bus *bus)
@@ -161,14 +175,18 @@ void bus_commands(struct vmac_bus *bus)
 		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
 		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping || d->mach < 0 ||
 		    bus->mach[d->mach].primary != c.slot || bus->mach[d->mach].drv) {
-			bus_unload(bus, c.drv); /* the device went away meanwhile */
-			if (c.rec) {
+			if (c.drv || c.rec || c.ckpt) { /* the device went away meanwhile */
 				struct vmac_bus_msg u;
 				memset(&u, 0, sizeof(u));
 				u.kind = VMAC_MSG_UNLOAD;
+				u.drv = c.drv;
 				u.rec = c.rec;
-				if (bus_post(bus, &u) != 0)
-					vmac_recorder_free(c.rec); /* slow but safe: the main thread is far behind */
+				u.buf = c.ckpt;
+				if (bus_post(bus, &u) != 0) { /* slow but safe: the main thread is far behind */
+					vmac_driver_free(c.drv);
+					vmac_recorder_free(c.rec);
+					free(c.ckpt);
+				}
 			}
 			continue;
 		}
@@ -179,38 +197,32 @@ void bus_commands(struct vmac_bus *bus)
 int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
                    char *reply, size_t replylen)
 {
-	char err[VMAC_DRIVER_ERR_MAX];
 	struct device *d = bus_find_by_name(bus, device);
 	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
-	int rc;
-	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
+	struct job *j;
+	if (!bus->virt) {
+		snprintf(reply, replylen, "host error: vmac_bus_input is for virtual mode; use vmac_bus_request_input");
+		return -VMAC_EFAIL;
+	}
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping || !bus_machine_idle(bus, m)) {
 		snprintf(reply, replylen, "%s is not running (%s)", device,
 		         d ? bus_state_name(d->state) : "no such device");
 		return -VMAC_ENOTRUNNING;
 	}
-	{
-		int64_t t_ns = bus_now(bus) - bus->start_ns;
-		uint64_t rec_n = bus_rec_input(bus, m, t_ns, name, value);
-		rc = vmac_driver_input(m->drv, (double)t_ns / 1e9, name, value, reply, replylen, err, sizeof(err));
-		bus_rec_input_rc(m, rec_n, rc);
-	}
-	if (rc >= 0)
-		return rc;
-	bus_driver_failed(bus, m, " in input", err);
-	bus_flush(bus);
-	snprintf(reply, replylen, "the driver failed: %s", err);
-	return -VMAC_EDRIVER;
+	/* One thread: the job runs and is collected before this returns. */
+	j = &bus->jobs[m - bus->mach];
+	snprintf(j->name, sizeof(j->name), "%s", name);
+	j->value = *value;
+	m->input_rc = -VMAC_ENOTRUNNING;
+	bus_input_now(bus, m);
+	snprintf(reply, replylen, "%s", j->reply);
+	return m->input_rc;
 }
 
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx)
 {
 	bus->wakeup = wakeup;
 	bus->wakeup_ctx = ctx;
-}
-
-int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg)
-{
-	return vmac_ring_pop(&bus->to_main, msg);
 }
 
 int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
@@ -323,13 +335,16 @@ int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int r
 	c.slot = load->slot;
 	c.generation = load->generation;
 	c.drv = drv;
-	if (drv) /* sized for recorder_s at the driver's level */
+	if (drv) { /* sized for recorder_s at the driver's level */
 		c.rec = vmac_recorder_new(bus->cfg.recorder_s, (double)(bus->slot_ns << vmac_driver_level(drv)) / 1e9);
+		c.ckpt = malloc((size_t)bus->cfg.checkpoint_kib * 1024); /* NULL: its checkpoints say so */
+	}
 	c.missing = rc == -ENOENT;
 	snprintf(c.text, sizeof(c.text), "%s", text);
 	if (vmac_bus_send_cmd(bus, &c) != 0) {
 		vmac_driver_free(drv);
 		vmac_recorder_free(c.rec);
+		free(c.ckpt);
 		return -1;
 	}
 	return 0;

@@ -34,9 +34,8 @@ static void describe(struct vmac_bus *bus, struct machine *m)
 
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 {
-	struct vmac_variable p[VMAC_DRIVER_MAX_PARAMS];
 	struct vmac_rec_event *e;
-	int i, n;
+	int i;
 	if (!m->rec)
 		return;
 	describe(bus, m);
@@ -44,23 +43,22 @@ void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 	m->rec->from_attach = 1;
 	e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_ATTACH);
 	snprintf(e->name, sizeof(e->name), "%s", m->rec->version);
-	n = vmac_driver_params(m->drv, p);
-	for (i = 0; i < n; i++) {
+	for (i = 0; i < m->nparams; i++) { /* as the attach job left them */
 		e = vmac_rec_event(m->rec, m->rec->attach_ns, VMAC_REC_PARAM);
-		memcpy(e->name, p[i].name, sizeof(e->name) - 1);
-		e->value = p[i].value;
+		memcpy(e->name, m->params[i].name, sizeof(e->name) - 1);
+		e->value = m->params[i].value;
 	}
 }
 
-void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t)
+void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t, const struct vmac_inputs *in,
+                  const struct vmac_outputs *out)
 {
 	int i;
+	(void)bus;
 	if (!m->rec)
 		return;
-	for (i = 0; i < m->nboards; i++) {
-		const struct device *b = &bus->dev[m->board[i]];
-		vmac_rec_tick(m->rec, t, i, i == m->nboards - 1, &b->inputs, &b->outputs);
-	}
+	for (i = 0; i < m->nboards; i++)
+		vmac_rec_tick(m->rec, t, i, i == m->nboards - 1, &in[i], &out[i]);
 }
 
 void bus_rec_state(struct vmac_bus *bus, struct machine *m, int64_t now, const uint8_t *data, size_t len)

@@ -63,13 +63,14 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->offset = i;
 	o->inputs = d->inputs;
 	o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
-	o->driver_memory = m && m->drv && m->primary == i ? vmac_driver_memory(m->drv) : 0;
+	o->driver_memory = m && m->drv && m->primary == i ? m->memory : 0;
 	o->nvars = o->nparams = 0;
-	if (m && m->drv && m->primary == i) {
-		o->nvars = vmac_driver_nvars(m->drv);
+	if (m && m->drv && m->primary == i) { /* as the machine's last job left them */
+		o->nvars = m->nvars;
 		for (v = 0; v < o->nvars; v++)
-			o->vars[v] = *vmac_driver_variable(m->drv, v);
-		o->nparams = vmac_driver_params(m->drv, o->params);
+			o->vars[v] = m->vars[v];
+		o->nparams = m->nparams;
+		memcpy(o->params, m->params, (size_t)m->nparams * sizeof(o->params[0]));
 	}
 }
 
@@ -118,15 +119,12 @@ const struct vmac_variable *vmac_bus_device_var(struct vmac_bus *bus, const char
 {
 	struct device *d = bus_find_by_name(bus, device);
 	const struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
-	int i, n;
+	int i;
 	if (!m || !m->drv || m->primary != bus_slot_of(bus, d))
 		return NULL;
-	n = vmac_driver_nvars(m->drv);
-	for (i = 0; i < n; i++) {
-		const struct vmac_variable *v = vmac_driver_variable(m->drv, i);
-		if (strcmp(v->name, name) == 0)
-			return v;
-	}
+	for (i = 0; i < m->nvars; i++)
+		if (strcmp(m->vars[i].name, name) == 0)
+			return &m->vars[i];
 	return NULL;
 }
 

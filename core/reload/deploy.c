@@ -126,7 +126,7 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const c
 		         : vmac_load_driver(x->cfg, driver, names[i], &drv, r->text, sizeof(r->text))) == 0) {
 			vmac_driver_set_tag(drv, tag);
 			rc = swap_one(x, driver, names[i], drv, probation_ms, r->text, sizeof(r->text));
-			if (rc != 0)
+			if (rc != 0 && rc != -VMAC_EDRIVER) /* EDRIVER: it stalled, and went with its worker */
 				vmac_driver_free(drv);
 		}
 		if (rc == 0) {

@@ -1,42 +1,43 @@
 /* Hot reload on the bus thread (docs/DRIVERS.md "Hot reload"): a new
- * instance takes over a machine at a slot boundary, is on probation for a
- * while, and the old one takes over again if it fails; deploy.c drives it
- * from an HTTP thread through the request slots. */
+ * instance takes over a machine at a slot boundary (a job on the machine's
+ * driver worker, between two of its ticks), is on probation for a while,
+ * and the old one takes over again if it fails; deploy.c drives it from an
+ * HTTP thread through the request slots. */
 #include "../host/bus_internal.h"
 
-#include <arpa/inet.h>
-#include <errno.h>
-#include <ev.h>
-#include <sched.h>
-#include <semaphore.h>
-#include <stdarg.h>
-#include <stdatomic.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
-#include <sys/timerfd.h>
-#include <unistd.h>
 
 #include "../common/errors.h"
-#include "../sched/sched.h"
 
-/* The version on probation failed (why): the instance it took over from
- * takes over again from it. 0, or -1 when that fails too (m->drv is still
- * the failed one; the caller drops the machine). */
 int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
 {
-	char err[VMAC_DRIVER_ERR_MAX];
-	struct vmac_driver *failed = m->drv, *prev = m->prev;
+	(void)bus;
+	if (!m->prev)
+		return -1;
+	m->want_rollback = 1;
+	snprintf(m->rollback_why, sizeof(m->rollback_why), "%s", why);
+	return 0;
+}
+
+/* The roll-back job ran (j->drv, the previous version, took over from
+ * j->other, the one that failed): the machine runs on the previous version,
+ * or, if that failed too, is dropped. */
+void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	struct vmac_driver *failed = j->other, *prev = j->drv;
 	struct device *primary = &bus->dev[m->primary];
 	struct vmac_bus_msg msg;
+	char why[VMAC_REC_TEXT_MAX + 1];
+	int64_t tag = vmac_driver_tag(failed);
+	uint32_t i;
 	m->prev = NULL;
-	bus_give_boards(bus, m, prev);
-	if (vmac_driver_take_over(prev, failed, bus_time(bus), err, sizeof(err)) != 0) {
+	if (j->rc != 0) {
 		bus_event(bus, primary, "driver_error", "%s: rolling back to driver %s %s failed too: %s",
-		          primary->ann.board, m->driver, vmac_driver_version(prev), err);
+		          primary->ann.board, m->driver, vmac_driver_version(prev), j->err);
 		bus_unload(bus, prev);
-		return -1;
+		bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
+		return;
 	}
 	m->drv = prev;
 	bus_rec_swap(bus, m);
@@ -47,72 +48,103 @@ int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why)
 	memcpy(msg.driver, m->driver, sizeof(msg.driver));
 	snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
 	msg.code = VMAC_EVENT_ROLLED_BACK;
-	msg.version_id = vmac_driver_tag(failed);
+	msg.version_id = tag;
 	snprintf(msg.text, sizeof(msg.text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
-	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev), why);
+	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev),
+	         m->rollback_why);
 	bus_post(bus, &msg);
 	bus_unload(bus, failed);
-	return 0;
+	snprintf(why, sizeof(why), "rolled back: %s", m->rollback_why);
+	bus_rec_capture(bus, m, why); /* the failing version's last seconds; the machine runs on */
+	/* One version everywhere: every other machine on probation with the
+	 * same version goes back too. */
+	for (i = 0; i < bus->nused; i++) {
+		struct machine *o = &bus->mach[i];
+		if (o == m || !o->used || !o->prev || vmac_driver_tag(o->drv) != tag ||
+		    strcmp(o->driver, m->driver) != 0)
+			continue;
+		bus_roll_back(bus, o, "the same version failed on another machine"); /* when its job is free */
+	}
 }
 
-/* Hot reload at this slot boundary (between two ticks): nd takes over the
- * machine named device from the instance running it. 0 done (nd is the
- * bus's); else nd is still the caller's and has not run, or ran only its
- * attach/migrate, and reply says why: -VMAC_ENOTRUNNING (no running
- * machine of that name), -VMAC_EREFUSED (it would not take nd). */
-int bus_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *nd, int64_t probation_ns, char *reply,
-             size_t replylen)
+/* Hot reload, swap request slot i: nd takes over the machine named device
+ * at a slot boundary. Refused at once (answered; nd still the caller's):
+ * -VMAC_ENOTRUNNING (no running machine of that name), -VMAC_EREFUSED (it
+ * runs another driver); else the machine's job does it (bus_swapped). */
+void bus_swap(struct vmac_bus *bus, int i)
 {
-	char err[VMAC_DRIVER_ERR_MAX];
-	struct device *d = bus_find_by_name(bus, device);
-	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
-	struct vmac_driver *od;
-	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
-		snprintf(reply, replylen, "%s is not running (%s)", device,
-		         d ? bus_state_name(d->state) : "no such device");
-		return -VMAC_ENOTRUNNING;
+	struct request *q = &bus->req[i];
+	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
+	struct device *d;
+	struct machine *m;
+	memcpy(device, q->r.device, sizeof(device));
+	d = bus_find_by_name(bus, device);
+	m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping || m->want_swap) {
+		snprintf(q->r.reply, sizeof(q->r.reply), "%s is not running (%s)", device,
+		         !d                  ? "no such device"
+		         : m && m->want_swap ? "another reload is under way"
+		                             : bus_state_name(d->state));
+		q->r.rc = -VMAC_ENOTRUNNING;
+	} else if (strcmp(vmac_driver_name(q->drv), m->driver) != 0) {
+		snprintf(q->r.reply, sizeof(q->r.reply), "%s runs driver %s, not %s", device, m->driver,
+		         vmac_driver_name(q->drv));
+		q->r.rc = -VMAC_EREFUSED;
+	} else {
+		q->waiting = 1;
+		m->want_swap = i + 1;
+		bus_dispatch(bus, m);
+		return;
 	}
-	if (strcmp(vmac_driver_name(nd), m->driver) != 0) {
-		snprintf(reply, replylen, "%s runs driver %s, not %s", device, m->driver, vmac_driver_name(nd));
-		return -VMAC_EREFUSED;
-	}
-	bus_bind_driver(m, nd);
-	bus_give_boards(bus, m, nd);
-	od = m->drv;
-	if (vmac_driver_take_over(nd, od, bus_time(bus), err, sizeof(err)) != 0) {
-		snprintf(reply, replylen, "the new version failed to take over %s: %s", device, err);
-		bus_event(bus, d, "reload_refused", "%s: driver %s %s not taken: %s", device, m->driver,
-		          vmac_driver_version(nd), err);
-		return -VMAC_EREFUSED;
+	bus_answer(bus, i);
+}
+
+/* The swap job ran: j->other took over from j->drv, or refused. */
+void bus_swapped(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	struct request *q = &bus->req[j->req];
+	struct vmac_driver *nd = j->other, *od = j->drv;
+	struct device *primary = &bus->dev[m->primary];
+	if (j->rc != 0) {
+		snprintf(q->r.reply, sizeof(q->r.reply), "the new version failed to take over %s: %s",
+		         primary->ann.board, j->err);
+		bus_event(bus, primary, "reload_refused", "%s: driver %s %s not taken: %s", primary->ann.board,
+		          m->driver, vmac_driver_version(nd), j->err);
+		q->r.rc = -VMAC_EREFUSED; /* nd is the caller's again */
+		bus_answer(bus, j->req);
+		j->req = -1;
+		return;
 	}
 	m->drv = nd;
 	bus_rec_swap(bus, m);
 	/* Said before od is handed over: the main thread may free it at once. */
-	bus_event(bus, &bus->dev[m->primary], "reloaded",
-	          "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)", bus->dev[m->primary].ann.board,
-	          m->driver, vmac_driver_version(od), vmac_driver_version(nd), (double)probation_ns / 1e9);
-	snprintf(reply, replylen, "%s: driver %s %s -> %s", device, m->driver, vmac_driver_version(od),
-	         vmac_driver_version(nd));
+	bus_event(bus, primary, "reloaded", "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)",
+	          primary->ann.board, m->driver, vmac_driver_version(od), vmac_driver_version(nd),
+	          (double)q->probation_ns / 1e9);
+	snprintf(q->r.reply, sizeof(q->r.reply), "%s: driver %s %s -> %s", primary->ann.board, m->driver,
+	         vmac_driver_version(od), vmac_driver_version(nd));
 	if (m->prev) /* a version still on probation: the one just replaced is what a rollback goes back to */
 		bus_unload(bus, m->prev);
 	m->prev = NULL;
-	if (probation_ns > 0) {
+	if (q->probation_ns > 0) {
 		m->prev = od;
-		m->probation_end_ns = bus_now(bus) + probation_ns;
+		m->probation_end_ns = bus_now(bus) + q->probation_ns;
 	} else {
 		bus_unload(bus, od);
 	}
-	return 0;
+	q->r.rc = 0;
+	bus_answer(bus, j->req);
+	j->req = -1;
 }
 
 /* Versions whose probation is over keep the machine: the previous
- * instance goes. */
+ * instance goes (unless a job holds it: a roll-back under way). */
 void bus_end_probations(struct vmac_bus *bus, int64_t now)
 {
 	uint32_t i;
 	for (i = 0; i < bus->nused; i++) {
 		struct machine *m = &bus->mach[i];
-		if (!m->used || !m->prev || now < m->probation_end_ns)
+		if (!m->used || !m->prev || now < m->probation_end_ns || m->want_rollback || !bus_machine_idle(bus, m))
 			continue;
 		bus_unload(bus, m->prev);
 		m->prev = NULL;

@@ -45,6 +45,14 @@ struct host {
 	int exit_code;
 	double started;          /* Unix time this run began: older checkpoints are from before a restart */
 	int checkpoints_failing; /* the last save failed: said once, retried */
+	/* Versions that stalled a driver worker: not loaded again until a new
+	 * version arrives (a reload gives a new version id). The newest 32. */
+	struct stalled {
+		char driver[VMAC_NAME_MAX + 1];
+		char version[VMAC_DRIVER_VERSION_MAX + 1];
+		int64_t id;
+	} stalled[32];
+	unsigned nstalled;
 };
 
 static void usage(FILE *f)
@@ -253,11 +261,34 @@ struct load {
 	const struct vmac_bus_msg *m;
 };
 
+static int has_stalled(const struct host *h, const struct vmac_driver *drv)
+{
+	unsigned i;
+	for (i = 0; i < h->nstalled && i < 32; i++)
+		if (h->stalled[i].id == vmac_driver_tag(drv) &&
+		    strcmp(h->stalled[i].driver, vmac_driver_name(drv)) == 0 &&
+		    strcmp(h->stalled[i].version, vmac_driver_version(drv)) == 0)
+			return 1;
+	return 0;
+}
+
 /* vmac_deploy_load's result goes to the bus thread, with the machine's
- * persisted params in the driver. */
+ * persisted params in the driver; a version that stalled a worker is
+ * refused. */
 static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *text)
 {
 	struct load *l = ctx;
+	char why[VMAC_EVENT_TEXT];
+	if (drv && has_stalled(l->h, drv)) {
+		snprintf(why, sizeof(why),
+		         "driver %s %s stalled a driver worker on this host; it is not loaded again until a new "
+		         "version arrives (vmac reload)",
+		         vmac_driver_name(drv), vmac_driver_version(drv));
+		vmac_driver_free(drv);
+		drv = NULL;
+		rc = -EPERM;
+		text = why;
+	}
 	if (drv) {
 		restore_params(l->h, drv, l->m->device);
 		offer_checkpoint(l->h, drv, l->m->device);
@@ -333,16 +364,24 @@ static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 			vmac_event_log_add(&h->log, m.event_kind, m.device, m.text);
 			if (m.code == VMAC_EVENT_ROLLED_BACK && m.version_id)
 				roll_back_version(h, &m);
+			if (m.code == VMAC_EVENT_STALLED) {
+				struct stalled *x = &h->stalled[h->nstalled++ % 32];
+				memcpy(x->driver, m.driver, sizeof(x->driver));
+				memcpy(x->version, m.version, sizeof(x->version));
+				x->id = m.version_id;
+			}
 			break;
 		case VMAC_MSG_LOAD: load_driver(h, &m); break;
 		case VMAC_MSG_UNLOAD:
 			vmac_driver_free(m.drv);
 			vmac_recorder_free(m.rec);
+			free(m.buf);
 			break;
 		case VMAC_MSG_RECORDING: store_recording(h, &m); break;
 		case VMAC_MSG_STOPPED: ev_break(loop, EVBREAK_ALL); break;
 		}
 	}
+	vmac_bus_workers_service(h->bus);
 	store_checkpoints(h);
 	store_events(h);
 }

@@ -233,6 +233,7 @@ static void pump(struct vt_world *w)
 		case VMAC_MSG_UNLOAD:
 			vmac_driver_free(m.drv);
 			vmac_recorder_free(m.rec);
+			free(m.buf);
 			break;
 		case VMAC_MSG_RECORDING: vmac_recorder_free(m.rec); break;
 		default: break;

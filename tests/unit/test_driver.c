@@ -5,6 +5,7 @@
  * tests/integration/test_escape.py. */
 #include <check.h>
 #include <errno.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -817,6 +818,43 @@ START_TEST(a_description_past_its_bounds_is_refused)
 }
 END_TEST
 
+/* The bus thread's rule (docs/HOST.md, "Threads"): once a thread has said
+ * it must not run Lua, no call into a driver's state runs there: the call
+ * fails with the reason, and the driver is untouched (it ticks on another
+ * thread afterwards). */
+static void *forbidden_tick(void *arg)
+{
+	static char err[VMAC_DRIVER_ERR_MAX];
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	memset(&in, 0, sizeof(in));
+	vmac_driver_forbid_thread();
+	if (tick1(arg, 1.0, &in, &out, err, sizeof(err)) == 0)
+		return NULL;
+	return err;
+}
+
+START_TEST(no_lua_runs_on_a_forbidden_thread)
+{
+	struct vmac_driver *d = load_ok("return { name = 't', version = '1', io = { lamp = 'do0' },\n"
+	                                "  tick = function(dev) dev.out.lamp = true end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX];
+	pthread_t th;
+	void *why = NULL;
+	memset(&in, 0, sizeof(in));
+	vmac_driver_add_board(d, 0, "b");
+	ck_assert_int_eq(pthread_create(&th, NULL, forbidden_tick, d), 0);
+	pthread_join(th, &why);
+	ck_assert_msg(why != NULL, "a driver ticked on a thread that must not run Lua");
+	ck_assert_msg(strstr(why, "bus thread") != NULL, "the refusal does not say why: %s", (char *)why);
+	ck_assert_msg(tick1(d, 2.0, &in, &out, err, sizeof(err)) == 0, "the driver failed after the refusal: %s", err);
+	ck_assert_int_eq(out.digital, 1);
+	vmac_driver_free(d);
+}
+END_TEST
+
 int main(void)
 {
 	Suite *s = suite_create("driver");
@@ -840,6 +878,7 @@ int main(void)
 	tcase_add_test(tc, a_description_past_its_bounds_is_refused);
 	tcase_add_test(tc, take_over_hands_plain_state_params_and_outputs);
 	tcase_add_test(tc, take_over_refuses_what_it_cannot_copy);
+	tcase_add_test(tc, no_lua_runs_on_a_forbidden_thread);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);

@@ -1,0 +1,407 @@
+/* The bus thread's side of the driver workers (workers.c): every call into
+ * a machine's driver is its job, one at a time. The bus thread fills the
+ * job (the inputs of every board, the operator's input, the instance that
+ * takes over) and queues it; at every tick it collects the jobs that are
+ * done (the outputs go with each board's next service: the phase-aligned
+ * transaction with one period's delay of docs/PROTOCOL.md) and judges the
+ * ones still running: a job that has run past its limit is a failure of
+ * its driver, detected here and not by the driver, and its worker is given
+ * up (workers.c). Nothing here waits, allocates or runs Lua. In virtual
+ * mode (vmac test) a job runs inline and is collected at once. */
+#include "bus_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+int bus_jobs_init(struct vmac_bus *bus)
+{
+	uint32_t i;
+	int64_t budget = (int64_t)bus->cfg.driver_budget_us * 1000;
+	bus->jobs = calloc(bus->ndev, sizeof(*bus->jobs));
+	if (!bus->jobs)
+		return -1;
+	for (i = 0; i < bus->ndev; i++) {
+		bus->jobs[i].bus = bus;
+		bus->jobs[i].mach = (int)i;
+		atomic_init(&bus->jobs[i].state, JOB_IDLE);
+		atomic_init(&bus->jobs[i].runner, -1);
+	}
+	/* attach, input, a hot reload's take-over: a few calls each, at most
+	 * VMAC_DRIVER_LOAD_FACTOR budgets, and never less than 100 ms. */
+	bus->job_limit_ns = budget * VMAC_DRIVER_LOAD_FACTOR;
+	if (bus->job_limit_ns < 100000000)
+		bus->job_limit_ns = 100000000;
+	return 0;
+}
+
+void bus_jobs_fini(struct vmac_bus *bus)
+{
+	free(bus->jobs);
+	bus->jobs = NULL;
+}
+
+static struct job *job_of(struct vmac_bus *bus, const struct machine *m)
+{
+	return &bus->jobs[m - bus->mach];
+}
+
+int bus_machine_idle(const struct vmac_bus *bus, const struct machine *m)
+{
+	return atomic_load(&bus->jobs[m - bus->mach].state) == JOB_IDLE;
+}
+
+void bus_answer(struct vmac_bus *bus, int i)
+{
+	struct request *q = &bus->req[i];
+	q->waiting = 0;
+	atomic_store(&q->state, REQ_DONE);
+	sem_post(&q->done);
+}
+
+static void fill(struct vmac_bus *bus, struct machine *m, struct job *j, enum job_kind kind, int64_t t_ns)
+{
+	int i;
+	j->kind = kind;
+	j->queued_ns = bus_now(bus);
+	j->time_s = (double)(t_ns - bus->start_ns) / 1e9;
+	j->drv = m->drv;
+	j->other = NULL;
+	j->level = m->level;
+	j->nboards = m->nboards;
+	for (i = 0; i < m->nboards; i++) {
+		const struct device *b = &bus->dev[m->board[i]];
+		j->minor[i] = b->ann.minor;
+		memcpy(j->board[i], b->ann.board, sizeof(j->board[i]));
+	}
+	j->req = -1;
+	j->checkpoint = 0;
+	atomic_store(&j->started_ns, 0);
+	atomic_store(&j->runner, -1);
+}
+
+static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j);
+
+/* j, filled, to a worker; in virtual mode run and collected now. */
+static void hand_over(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	if (bus->virt) {
+		atomic_store(&j->state, JOB_RUNNING);
+		bus_run_job(j);
+		atomic_store(&j->state, JOB_DONE);
+		collect_one(bus, m, j);
+		bus_dispatch(bus, m); /* what the job's results asked for (a roll-back) */
+		return;
+	}
+	atomic_store(&j->state, JOB_QUEUED);
+	if (bus_worker_push(bus, m) != 0)
+		j->pushed = 0; /* no worker, or its ring full: pushed again by bus_collect */
+	else
+		j->pushed = 1;
+}
+
+/* An input request from the machine's queue into j. */
+static void fill_input(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	int i = m->inputs[0];
+	struct request *q = &bus->req[i];
+	memmove(m->inputs, m->inputs + 1, (size_t)(--m->ninputs) * sizeof(m->inputs[0]));
+	fill(bus, m, j, JOB_INPUT, bus_now(bus));
+	memcpy(j->name, q->r.name, sizeof(j->name));
+	j->value = q->r.value;
+	j->req = i;
+	j->rec_n = bus_rec_input(bus, m, bus_now(bus) - bus->start_ns, j->name, &j->value);
+}
+
+void bus_input_now(struct vmac_bus *bus, struct machine *m)
+{
+	struct job *j = job_of(bus, m);
+	fill(bus, m, j, JOB_INPUT, bus_now(bus));
+	j->rec_n = bus_rec_input(bus, m, bus_now(bus) - bus->start_ns, j->name, &j->value);
+	hand_over(bus, m, j);
+}
+
+void bus_dispatch(struct vmac_bus *bus, struct machine *m)
+{
+	struct job *j = job_of(bus, m);
+	int64_t now;
+	if (!m->used || !m->drv || atomic_load(&j->state) != JOB_IDLE)
+		return;
+	now = bus_now(bus);
+	if (m->want_attach) {
+		m->want_attach = 0;
+		fill(bus, m, j, JOB_ATTACH, now);
+	} else if (m->want_rollback) {
+		m->want_rollback = 0;
+		fill(bus, m, j, JOB_ROLLBACK, now);
+		j->drv = m->prev;
+		j->other = m->drv;
+	} else if (m->want_stop) {
+		m->want_stop = 0;
+		fill(bus, m, j, JOB_STOP, now);
+		j->checkpoint = m->attached;
+	} else if (!m->attached) {
+		return; /* nothing runs before attach */
+	} else if (m->want_swap) {
+		struct request *q = &bus->req[m->want_swap - 1];
+		fill(bus, m, j, JOB_SWAP, now);
+		j->other = q->drv;
+		j->req = m->want_swap - 1;
+		m->want_swap = 0;
+		bus_bind_driver(m, j->other);
+	} else if (m->ninputs > 0) {
+		fill_input(bus, m, j);
+	} else if (m->want_tick) {
+		int i;
+		m->want_tick = 0;
+		fill(bus, m, j, JOB_TICK, m->tick_ns);
+		for (i = 0; i < m->nboards; i++)
+			j->in[i] = bus->dev[m->board[i]].inputs;
+		j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, now);
+		m->want_checkpoint = 0;
+	} else {
+		return;
+	}
+	hand_over(bus, m, j);
+}
+
+/* What every job leaves for the status: variables, params, memory. */
+static void copy_in(struct machine *m, const struct job *j)
+{
+	if (j->vars_fresh) {
+		m->nvars = j->nvars;
+		memcpy(m->vars, j->vars, (size_t)m->nvars * sizeof(m->vars[0]));
+	}
+	if (j->params_fresh) {
+		m->nparams = j->nparams;
+		memcpy(m->params, j->params, (size_t)m->nparams * sizeof(m->params[0]));
+	}
+	m->memory = j->memory;
+}
+
+static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	int64_t t_ns = (int64_t)(j->time_s * 1e9);
+	int i;
+	for (i = 0; i < j->nboards && i < m->nboards; i++)
+		bus->dev[m->board[i]].outputs = j->out[i];
+	if (bus_now(bus) - j->queued_ns > bus->slot_ns << m->level)
+		m->late++;
+	bus_rec_tick(bus, m, t_ns, j->in, j->out); /* a failed tick too: its inputs replay the failure */
+	if (j->rc != 0) {
+		bus_driver_failed(bus, m, "", j->err);
+		return;
+	}
+	if (j->ckpt_rc != 0)
+		bus_checkpoint_taken(bus, m, j, bus_now(bus));
+}
+
+static void input_done(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	struct request *q = j->req >= 0 ? &bus->req[j->req] : NULL;
+	bus_rec_input_rc(m, j->rec_n, j->rc);
+	if (j->rc < 0)
+		snprintf(j->reply, sizeof(j->reply), "the driver failed: %s", j->err);
+	m->input_rc = j->rc < 0 ? -VMAC_EDRIVER : j->rc;
+	if (q) { /* answered first: a failure below may free the machine */
+		q->r.rc = m->input_rc;
+		memcpy(q->r.reply, j->reply, sizeof(q->r.reply));
+		if (q->r.rc == 0)
+			memcpy(q->r.machine, bus->dev[m->primary].ann.board, sizeof(q->r.machine));
+		bus_answer(bus, j->req);
+		j->req = -1;
+	}
+	if (j->rc < 0) {
+		bus_driver_failed(bus, m, " in input", j->err);
+		bus_flush(bus);
+	}
+}
+
+/* A done job's results applied; the job is free again. The handlers
+ * below only ask for what comes next (the caller dispatches it), and each
+ * sets j->req to -1 once it has answered the request. */
+static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	copy_in(m, j);
+	if (j->want_level >= 0 && j->kind != JOB_STOP)
+		bus_apply_level(bus, m, (unsigned)j->want_level);
+	switch (j->kind) {
+	case JOB_ATTACH: bus_attach_done(bus, m, j); break;
+	case JOB_TICK: tick_done(bus, m, j); break;
+	case JOB_INPUT: input_done(bus, m, j); break;
+	case JOB_SWAP: bus_swapped(bus, m, j); break;
+	case JOB_ROLLBACK: bus_rolled_back(bus, m, j); break;
+	case JOB_STOP:
+		if (j->ckpt_rc != 0)
+			bus_checkpoint_taken(bus, m, j, bus_now(bus));
+		bus_free_machine(bus, m);
+		break;
+	}
+	atomic_store(&j->state, JOB_IDLE);
+	j->req = -1;
+}
+
+/* What a job was doing, for people. */
+static const char *job_name(enum job_kind k)
+{
+	switch (k) {
+	case JOB_ATTACH: return "attach";
+	case JOB_TICK: return "tick";
+	case JOB_INPUT: return "input";
+	case JOB_SWAP: return "take-over (attach, migrate)";
+	case JOB_ROLLBACK: return "roll-back take-over";
+	case JOB_STOP: return "detach";
+	}
+	return "call";
+}
+
+/* How long j may run: a tick, its machine's period or its driver's budget,
+ * whichever is longer; anything else, bus->job_limit_ns. */
+static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, const struct job *j)
+{
+	int64_t period = bus->slot_ns << m->level, budget = vmac_driver_budget_ns(j->drv);
+	if (j->kind != JOB_TICK)
+		return bus->job_limit_ns;
+	return budget > period ? budget : period;
+}
+
+/* j has run past its limit, and its worker was on a CPU for it: the driver
+ * failed, by the bus's judgement. Its worker is retired with the job (and
+ * the instances it holds); the machine is dropped, every board told to go
+ * safe; the version is not loaded again until a new one arrives. */
+static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
+{
+	struct device *primary = &bus->dev[m->primary];
+	struct vmac_bus_msg msg;
+	char why[VMAC_DRIVER_ERR_MAX];
+	int expect = JOB_RUNNING, w = atomic_load(&j->runner);
+	const char *call = vmac_driver_lib_call(j->kind == JOB_SWAP ? j->other : j->drv);
+	struct vmac_driver *stuck = j->kind == JOB_SWAP ? j->other : j->drv;
+	if (!atomic_compare_exchange_strong(&j->state, &expect, JOB_STALLED))
+		return; /* it has just finished */
+	snprintf(why, sizeof(why), "%s still running after %.3g ms (its limit %.3g ms)%s%s", job_name(j->kind),
+	         (double)(now - atomic_load(&j->started_ns)) / 1e6, (double)limit_of(bus, m, j) / 1e6,
+	         call ? ": inside " : "", call ? call : "");
+	memset(&msg, 0, sizeof(msg));
+	msg.kind = VMAC_MSG_EVENT;
+	msg.code = VMAC_EVENT_STALLED;
+	msg.time_ns = now;
+	memcpy(msg.device, primary->ann.board, sizeof(msg.device));
+	memcpy(msg.driver, m->driver, sizeof(msg.driver));
+	snprintf(msg.version, sizeof(msg.version), "%s", vmac_driver_version(stuck));
+	msg.version_id = vmac_driver_tag(stuck);
+	snprintf(msg.event_kind, sizeof(msg.event_kind), "driver_error");
+	snprintf(msg.text, sizeof(msg.text),
+	         "%s: driver %s %s stalled: %s; its worker is given up, and this version is not loaded again "
+	         "until a new one arrives",
+	         primary->ann.board, m->driver, vmac_driver_version(stuck), why);
+	bus_post(bus, &msg);
+	bus_rec_failure(bus, m, VMAC_REC_ERROR, why);
+	if (j->req >= 0) { /* the instances went with the worker: nothing to give back */
+		struct request *q = &bus->req[j->req];
+		q->r.rc = -VMAC_EDRIVER;
+		snprintf(q->r.reply, sizeof(q->r.reply), "the driver failed: %s", why);
+		bus_answer(bus, j->req);
+		j->req = -1;
+	}
+	if (m->prev && j->kind != JOB_ROLLBACK) {
+		/* On probation: the store goes back to the version before, which
+		 * the boards load when they announce themselves again. */
+		memset(&msg, 0, sizeof(msg));
+		msg.kind = VMAC_MSG_EVENT;
+		msg.code = VMAC_EVENT_ROLLED_BACK;
+		msg.time_ns = now;
+		memcpy(msg.device, primary->ann.board, sizeof(msg.device));
+		memcpy(msg.driver, m->driver, sizeof(msg.driver));
+		msg.version_id = vmac_driver_tag(stuck);
+		snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
+		snprintf(msg.text, sizeof(msg.text),
+		         "%s: driver %s %s stalled on probation; the version before it is active again",
+		         primary->ann.board, m->driver, vmac_driver_version(stuck));
+		bus_post(bus, &msg);
+	}
+	if (w >= 0)
+		bus_worker_retire(bus, w);
+	bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver stalled");
+}
+
+/* A running job past its limit is judged stalled only while its worker
+ * is on a CPU for it: a worker the machine kept waiting is not the
+ * driver's fault. Past ten limits it is stalled whatever the reason. */
+static void judge(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
+{
+	int64_t started = atomic_load(&j->started_ns), limit, cpu;
+	if (started == 0)
+		return;
+	limit = limit_of(bus, m, j);
+	if (now - started <= limit) {
+		j->overdue_ns = 0;
+		return;
+	}
+	cpu = bus_worker_cpu_ns(bus, atomic_load(&j->runner));
+	if (now - started > 10 * limit || cpu < 0) {
+		stalled(bus, m, j, now);
+		return;
+	}
+	if (j->overdue_ns && now > j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns) {
+		stalled(bus, m, j, now);
+		return;
+	}
+	j->overdue_ns = now;
+	j->overdue_cpu_ns = cpu;
+}
+
+void bus_collect(struct vmac_bus *bus, int64_t now)
+{
+	uint32_t i;
+	for (i = 0; i < bus->nused; i++) {
+		struct machine *m = &bus->mach[i];
+		struct job *j = &bus->jobs[i];
+		int st;
+		if (!m->used)
+			continue;
+		st = atomic_load(&j->state);
+		if (st == JOB_DONE) {
+			collect_one(bus, m, j);
+			bus_dispatch(bus, m);
+		} else if (st == JOB_RUNNING) {
+			judge(bus, m, j, now);
+		} else if (st == JOB_QUEUED && !j->pushed) {
+			j->pushed = bus_worker_push(bus, m) == 0;
+		} else if (st == JOB_IDLE) {
+			bus_dispatch(bus, m);
+		}
+	}
+	bus_workers_kick(bus);
+}
+
+int bus_job_release(struct vmac_bus *bus, struct machine *m)
+{
+	struct job *j = job_of(bus, m);
+	int expect = JOB_QUEUED, held = 0;
+	if (atomic_compare_exchange_strong(&j->state, &expect, JOB_IDLE)) {
+		held = 0; /* no worker took it: it never runs */
+	} else if (expect == JOB_RUNNING) {
+		if (atomic_compare_exchange_strong(&j->state, &expect, JOB_DROPPED))
+			held = 1; /* the worker disposes of what it holds */
+		else
+			atomic_store(&j->state, JOB_IDLE); /* it has just finished: the results go unread */
+	} else if (expect == JOB_STALLED || expect == JOB_DROPPED) {
+		held = 1;
+	} else {
+		atomic_store(&j->state, JOB_IDLE); /* DONE, unread; or IDLE */
+	}
+	if (j->req >= 0) {
+		struct request *q = &bus->req[j->req];
+		if (j->kind == JOB_SWAP && held) {
+			q->r.rc = -VMAC_EDRIVER; /* the new instance went with the job */
+			snprintf(q->r.reply, sizeof(q->r.reply), "%s was dropped during the take-over", m->driver);
+		} else {
+			q->r.rc = -VMAC_ENOTRUNNING;
+			snprintf(q->r.reply, sizeof(q->r.reply), "the %s machine was dropped meanwhile", m->driver);
+		}
+		bus_answer(bus, j->req);
+		j->req = -1;
+	}
+	return held;
+}
