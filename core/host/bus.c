@@ -730,6 +730,8 @@ void vmac_bus_free(struct vmac_bus *bus)
 			vmac_recorder_free(bus->mach[i].rec);
 			free(j->ckpt);
 		}
+	if (stuck)
+		return; /* the process ends: what a stuck worker reads (the bus, its jobs) stays */
 	bus_wait_fini(bus);
 	vmac_transport_close(&bus->tr);
 	if (bus->tfd >= 0)
@@ -742,8 +744,6 @@ void vmac_bus_free(struct vmac_bus *bus)
 	for (i = 0; i < VMAC_BUS_REQUESTS; i++)
 		sem_destroy(&bus->req[i].done);
 	free(bus->dev);
-	if (stuck)
-		return; /* the process ends: the jobs and machines a stuck worker reads stay */
 	bus_jobs_fini(bus);
 	free(bus->mach);
 	free(bus->tx);

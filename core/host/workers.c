@@ -115,7 +115,7 @@ void bus_run_job(struct job *j)
 		j->rc = vmac_driver_input(d, j->time_s, j->name, &j->value, j->reply, sizeof(j->reply), j->err,
 		                          sizeof(j->err));
 		break;
-	case JOB_SWAP: /* drv is the running instance, other the new one */
+	case JOB_SWAP:     /* drv is the running instance, other the new one */
 	case JOB_ROLLBACK: /* drv is the previous instance, other the failed one */
 		sync_instance(j->kind == JOB_SWAP ? j->other : j->drv, j);
 		j->rc = j->kind == JOB_SWAP
@@ -341,8 +341,11 @@ void bus_workers_fini(struct vmac_bus *bus)
 		struct worker *w = &bus->workers[i];
 		struct vmac_bus_msg m;
 		while (w->out.buf && vmac_ring_pop(&w->out, &m))
-			if (m.kind == VMAC_MSG_UNLOAD)
+			if (m.kind == VMAC_MSG_UNLOAD) {
 				vmac_driver_free(m.drv);
+				vmac_recorder_free(m.rec);
+				free(m.buf);
+			}
 		if (w->efd > 0)
 			close(w->efd);
 		vmac_ring_fini(&w->jobs);
@@ -366,13 +369,54 @@ static int least_loaded(struct vmac_bus *bus, int skip)
 	return best;
 }
 
+/* A spare made active; -1 when there is none. */
+static int take_spare(struct vmac_bus *bus)
+{
+	int i, expect;
+	for (i = 0; i < bus->nworkers_max; i++) {
+		expect = W_SPARE;
+		if (atomic_compare_exchange_strong(&bus->workers[i].state, &expect, W_ACTIVE))
+			return i;
+	}
+	return -1;
+}
+
+/* Jobs queued on w and not yet taken (stale entries included). */
+static size_t backlog(struct worker *w)
+{
+	return atomic_load(&w->jobs.head) - atomic_load(&w->jobs.tail);
+}
+
+/* An active worker with nothing queued, other than skip; -1: none. */
+static int idle_worker(struct vmac_bus *bus, int skip)
+{
+	int i;
+	for (i = 0; i < bus->nworkers_max; i++)
+		if (i != skip && atomic_load(&bus->workers[i].state) == W_ACTIVE && backlog(&bus->workers[i]) == 0 &&
+		    atomic_load(&bus->workers[i].sleeping))
+			return i;
+	return -1;
+}
+
 int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 {
-	struct job *j = &bus->jobs[m - bus->mach];
 	int mi = (int)(m - bus->mach);
 	struct worker *w;
+	if (m->worker >= 0 && atomic_load(&bus->workers[m->worker].state) == W_ACTIVE &&
+	    backlog(&bus->workers[m->worker]) > 0) {
+		/* Its worker is busy and another sleeps with nothing to do: the
+		 * machine moves (a worker keeps nothing of a machine between jobs). */
+		int b = idle_worker(bus, m->worker);
+		if (b >= 0) {
+			bus->workers[m->worker].nmach--;
+			bus->workers[b].nmach++;
+			m->worker = b;
+		}
+	}
 	if (m->worker < 0 || atomic_load(&bus->workers[m->worker].state) != W_ACTIVE) {
 		int b = least_loaded(bus, -1);
+		if (b < 0)
+			b = take_spare(bus); /* every worker given up: the spare the main thread made */
 		if (b < 0)
 			return -1;
 		if (m->worker >= 0)
@@ -383,7 +427,6 @@ int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 	w = &bus->workers[m->worker];
 	if (vmac_ring_push(&w->jobs, &mi) != 0)
 		return -1;
-	(void)j;
 	w->kick = 1;
 	return 0;
 }
@@ -408,13 +451,11 @@ void bus_workers_kick(struct vmac_bus *bus)
 void bus_worker_retire(struct vmac_bus *bus, int wi)
 {
 	struct worker *old = &bus->workers[wi];
-	int i, expect, spare = -1;
+	int i, spare;
 	atomic_store(&old->state, W_STALLED);
-	for (i = 0; i < bus->nworkers_max && spare < 0; i++) {
-		expect = W_SPARE;
-		if (atomic_compare_exchange_strong(&bus->workers[i].state, &expect, W_ACTIVE))
-			spare = i;
-	}
+	spare = take_spare(bus);
+	if (spare < 0)
+		spare = least_loaded(bus, wi);
 	/* Its other machines go on at once on the spare (or the least loaded
 	 * worker); a job queued on it is queued again there. */
 	for (i = 0; i < (int)bus->nused; i++) {
