@@ -277,6 +277,12 @@ int vmac_bus_virtual_tick(struct vmac_bus *bus, int64_t now_ns);
  * (a host started again after vt_crash_host). */
 void vmac_bus_virtual_start_at(struct vmac_bus *bus, int64_t now_ns);
 int64_t vmac_bus_virtual_next_tick(const struct vmac_bus *bus);
+/* Model a slow driver: every call of driver `driver` takes cost_ns of
+ * virtual time (0: none), its results ready only then; a tick that takes
+ * longer than its limit fails as on the host (docs/TESTING.md,
+ * driver_cost). At most VMAC_BUS_VIRTUAL_COSTS drivers; -1 when full. */
+#define VMAC_BUS_VIRTUAL_COSTS 8
+int vmac_bus_virtual_driver_cost(struct vmac_bus *bus, const char *driver, int64_t cost_ns);
 /* A frame reaching the host at p->rx_ns. */
 void vmac_bus_virtual_receive(struct vmac_bus *bus, const struct vmac_packet *p);
 /* Handle the commands sent with vmac_bus_send_cmd. */

@@ -103,6 +103,7 @@ struct job {
 	uint64_t rec_n;         /* INPUT: its event in the recorder */
 	int64_t overdue_ns;     /* past its limit: when the bus last looked, */
 	int64_t overdue_cpu_ns; /* and its worker's CPU time then */
+	int64_t ready_ns;       /* virtual mode, a slow driver: when its results are ready */
 	/* The worker's own memory, across jobs. */
 	const struct vmac_driver *vars_of;
 	uint64_t vars_version;
@@ -285,6 +286,10 @@ struct vmac_bus {
 	struct worker *workers;
 	int nworkers, nworkers_max;
 	int64_t job_limit_ns; /* how long a job other than a tick may run */
+	struct {              /* virtual mode: drivers whose calls take virtual time */
+		char driver[VMAC_NAME_MAX + 1];
+		int64_t cost_ns;
+	} virt_cost[VMAC_BUS_VIRTUAL_COSTS];
 };
 
 /* bus.c */

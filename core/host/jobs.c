@@ -82,12 +82,49 @@ static void fill(struct vmac_bus *bus, struct machine *m, struct job *j, enum jo
 
 static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j);
 
-/* j, filled, to a worker; in virtual mode run and collected now. */
+static int64_t virtual_cost(const struct vmac_bus *bus, const struct machine *m)
+{
+	int i;
+	for (i = 0; i < VMAC_BUS_VIRTUAL_COSTS; i++)
+		if (bus->virt_cost[i].cost_ns && strcmp(bus->virt_cost[i].driver, m->driver) == 0)
+			return bus->virt_cost[i].cost_ns;
+	return 0;
+}
+
+int vmac_bus_virtual_driver_cost(struct vmac_bus *bus, const char *driver, int64_t cost_ns)
+{
+	int i, free_one = -1;
+	for (i = 0; i < VMAC_BUS_VIRTUAL_COSTS; i++) {
+		if (strcmp(bus->virt_cost[i].driver, driver) == 0 && bus->virt_cost[i].driver[0]) {
+			bus->virt_cost[i].cost_ns = cost_ns;
+			return 0;
+		}
+		if (!bus->virt_cost[i].driver[0] && free_one < 0)
+			free_one = i;
+	}
+	if (free_one < 0)
+		return -1;
+	snprintf(bus->virt_cost[free_one].driver, sizeof(bus->virt_cost[free_one].driver), "%s", driver);
+	bus->virt_cost[free_one].cost_ns = cost_ns;
+	return 0;
+}
+
+/* j, filled, to a worker; in virtual mode run and collected now, or, for a
+ * driver made slow (vmac_bus_virtual_driver_cost), run now and collected
+ * when its virtual time has passed (bus_collect), or judged there as a
+ * worker's job is. */
 static void hand_over(struct vmac_bus *bus, struct machine *m, struct job *j)
 {
 	if (bus->virt) {
+		int64_t cost = virtual_cost(bus, m);
 		atomic_store(&j->state, JOB_RUNNING);
 		bus_run_job(j);
+		if (cost > 0) {
+			atomic_store(&j->started_ns, bus_now(bus));
+			j->ready_ns = bus_now(bus) + cost;
+			j->overdue_ns = 0;
+			return;
+		}
 		atomic_store(&j->state, JOB_DONE);
 		collect_one(bus, m, j);
 		bus_dispatch(bus, m); /* what the job's results asked for (a roll-back) */
@@ -323,6 +360,14 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 	if (w >= 0)
 		bus_worker_retire(bus, w);
 	bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver stalled");
+	if (bus->virt) { /* no worker holds it: the job's instances go now */
+		bus_unload(bus, j->drv);
+		bus_unload(bus, j->other);
+		bus_unload_buffer(bus, j->ckpt);
+		j->drv = j->other = NULL;
+		j->ckpt = NULL;
+		atomic_store(&j->state, JOB_IDLE);
+	}
 }
 
 /* A running job past its limit is judged stalled only while its worker
@@ -362,6 +407,11 @@ void bus_collect(struct vmac_bus *bus, int64_t now)
 			continue;
 		st = atomic_load(&j->state);
 		if (st == JOB_DONE) {
+			collect_one(bus, m, j);
+			bus_dispatch(bus, m);
+		} else if (st == JOB_RUNNING && bus->virt && now >= j->ready_ns &&
+		           now - atomic_load(&j->started_ns) <= limit_of(bus, m, j)) {
+			atomic_store(&j->state, JOB_DONE); /* a slow driver's call, done in virtual time */
 			collect_one(bus, m, j);
 			bus_dispatch(bus, m);
 		} else if (st == JOB_RUNNING) {

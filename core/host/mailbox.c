@@ -64,8 +64,10 @@ static void input_request(struct vmac_bus *bus, int i)
 	struct vmac_bus_input_request *r = &q->r;
 	struct device *d = bus_find_by_name(bus, r->device);
 	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
+	memcpy(device, r->device, sizeof(device));
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
-		snprintf(r->reply, sizeof(r->reply), "%s is not running (%s)", r->device,
+		snprintf(r->reply, sizeof(r->reply), "%s is not running (%s)", device,
 		         d ? bus_state_name(d->state) : "no such device");
 		r->rc = -VMAC_ENOTRUNNING;
 		bus_answer(bus, i);
@@ -204,10 +206,15 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 		snprintf(reply, replylen, "host error: vmac_bus_input is for virtual mode; use vmac_bus_request_input");
 		return -VMAC_EFAIL;
 	}
-	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping || !bus_machine_idle(bus, m)) {
+	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
 		snprintf(reply, replylen, "%s is not running (%s)", device,
 		         d ? bus_state_name(d->state) : "no such device");
 		return -VMAC_ENOTRUNNING;
+	}
+	if (!bus_machine_idle(bus, m)) {
+		snprintf(reply, replylen, "%s is busy: its driver's last call has not returned yet (driver_cost)",
+		         device);
+		return -VMAC_EBUSY;
 	}
 	/* One thread: the job runs and is collected before this returns. */
 	j = &bus->jobs[m - bus->mach];

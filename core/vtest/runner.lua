@@ -194,6 +194,7 @@ local function W()
 		current.world = world.new(current.settings, opts.seed)
 		methods = methods or getmetatable(current.world).__index
 		current.world:trace(current.trace_file, current.trace_name)
+		for _, c in ipairs(current.costs) do current.world:driver_cost(c[1], c[2]) end
 	end
 	return current.world
 end
@@ -407,6 +408,17 @@ local function config(settings)
 	for _, k in ipairs(keys) do current.settings[#current.settings + 1] = { k, tostring(settings[k]) } end
 end
 
+-- driver_cost(name, seconds): every call of driver `name` takes that much
+-- virtual time (a slow driver, modelled); a tick past its limit fails as on
+-- the host.
+local function driver_cost(name, seconds)
+	if type(name) ~= "string" or type(seconds) ~= "number" then
+		error("driver_cost(name, seconds) expects a driver name and a number of seconds", 2)
+	end
+	current.costs[#current.costs + 1] = { name, seconds }
+	if current.world then current.world:driver_cost(name, seconds) end
+end
+
 local function kitchen(spec)
 	spec = spec or {}
 	local params = spec.params or {}
@@ -470,7 +482,8 @@ local function load_file(file)
 		found[#found + 1] = { file = file, name = name, fn = fn, line = info and info.currentline or 0 }
 	end
 	for k, v in pairs {
-		board = make_board, kitchen = kitchen, config = config, run_for = run_for, run_until = run_until,
+		board = make_board, kitchen = kitchen, config = config, driver_cost = driver_cost,
+		run_for = run_for, run_until = run_until,
 		eventually = eventually, always = always, expect = expect, expect_eq = expect_eq,
 		expect_near = expect_near, expect_event = expect_event, events = events, now = now, fail = fail,
 		stop_host = stop_host, crash_host = crash_host, start_host = start_host, replay = replay,
@@ -580,7 +593,7 @@ local function details()
 end
 
 local function run_test(t)
-	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0,
+	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0, costs = {},
 		trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
 	if opts.drivers then current.settings[1] = { "drivers", opts.drivers } end
 	local wall0 = world.wall()

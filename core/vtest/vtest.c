@@ -555,6 +555,20 @@ static int l_config(lua_State *L)
 	return 0;
 }
 
+/* w:driver_cost(driver, seconds) */
+static int l_driver_cost(lua_State *L)
+{
+	struct lworld *lw = check_world(L);
+	const char *driver = luaL_checkstring(L, 2);
+	double s = luaL_checknumber(L, 3);
+	char err[128];
+	if (!(s >= 0 && s <= 60))
+		return luaL_error(L, "driver_cost: seconds must be in 0..60, got %f", s);
+	if (vt_driver_cost(lw->w, driver, (int64_t)(s * 1e9), err, sizeof(err)) != 0)
+		return luaL_error(L, "%s", err);
+	return 0;
+}
+
 static int l_slot(lua_State *L)
 {
 	lua_pushnumber(L, vmac_config_slot_us(&check_world(L)->w->cfg) / 1e6);
@@ -622,6 +636,7 @@ static int open_world(lua_State *L)
 	                                   {"free", l_gc},
 	                                   {"config", l_config},
 	                                   {"slot", l_slot},
+	                                   {"driver_cost", l_driver_cost},
 	                                   {NULL, NULL}};
 	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {"replay", l_replay}, {NULL, NULL}};
 	luaL_newmetatable(L, WORLD_MT);

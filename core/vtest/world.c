@@ -516,9 +516,27 @@ void vt_crash_host(struct vt_world *w)
 	w->moved = 1;
 }
 
+int vt_driver_cost(struct vt_world *w, const char *driver, int64_t cost_ns, char *err, size_t errlen)
+{
+	int i;
+	for (i = 0; i < VMAC_BUS_VIRTUAL_COSTS; i++)
+		if (!w->costs[i].driver[0] || strcmp(w->costs[i].driver, driver) == 0)
+			break;
+	if (i == VMAC_BUS_VIRTUAL_COSTS) {
+		snprintf(err, errlen, "driver_cost: at most %d drivers", VMAC_BUS_VIRTUAL_COSTS);
+		return -1;
+	}
+	snprintf(w->costs[i].driver, sizeof(w->costs[i].driver), "%s", driver);
+	w->costs[i].cost_ns = cost_ns;
+	if (w->bus)
+		vmac_bus_virtual_driver_cost(w->bus, driver, cost_ns);
+	return 0;
+}
+
 int vt_start_host(struct vt_world *w, char *err, size_t errlen)
 {
 	struct vmac_bus_link link;
+	int i;
 	if (w->bus) {
 		snprintf(err, errlen, "the host is running");
 		return -1;
@@ -529,6 +547,9 @@ int vt_start_host(struct vt_world *w, char *err, size_t errlen)
 	if (!w->bus)
 		return -1;
 	vmac_bus_virtual_start_at(w->bus, w->now_ns);
+	for (i = 0; i < VMAC_BUS_VIRTUAL_COSTS; i++)
+		if (w->costs[i].driver[0])
+			vmac_bus_virtual_driver_cost(w->bus, w->costs[i].driver, w->costs[i].cost_ns);
 	w->host_started_ns = w->now_ns;
 	w->moved = 1;
 	return 0;

@@ -109,6 +109,10 @@ struct vt_world {
 	struct vt_checkpoint checkpoints[VT_MAX_BOARDS];
 	int ncheckpoints;
 	int64_t host_started_ns; /* when the running host started (crash_host, start_host) */
+	struct {                 /* driver_cost: given to every host the world starts */
+		char driver[VMAC_NAME_MAX + 1];
+		int64_t cost_ns;
+	} costs[VMAC_BUS_VIRTUAL_COSTS];
 };
 
 /* cfg: drivers_dir, scripts_dir, stdlib_dir and limits as the test wants. */
@@ -146,6 +150,9 @@ int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, 
  * (their watchdogs turn the outputs off); the checkpoints it had handed
  * over stay. Until vt_start_host the world runs without a host (bus NULL). */
 void vt_crash_host(struct vt_world *w);
+/* Every call of driver `driver` takes cost_ns of virtual time, in this host
+ * and the ones started after it. 0, or -1 with err. */
+int vt_driver_cost(struct vt_world *w, const char *driver, int64_t cost_ns, char *err, size_t errlen);
 /* A new host, its bus clock starting now (also at the world's start). 0, or
  * -1 with err. */
 int vt_start_host(struct vt_world *w, char *err, size_t errlen);

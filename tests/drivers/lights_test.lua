@@ -68,3 +68,24 @@ test("stopping the host turns every board's outputs off", function()
 	expect(not k.lights.out.kitchen, "the light off")
 	expect(not k.washer.out.cold_valve and not k.washer.out.door_lock, "the washer's outputs off")
 end)
+
+test("a slow lights driver within its period still switches, one period later", function()
+	driver_cost("lights", 0.005) -- every call takes 5 ms of the 16 ms period
+	local l = lights()
+	l:set("toggle1")
+	run_until(function() return l.out.kitchen end, 0.2, "the kitchen light on")
+	expect_eq(l.state, "running", "the lights' state")
+end)
+
+test("a lights driver slower than its period is failed by the host, and the board goes safe", function()
+	local washer = board { name = "washer-1", plant = "washer" }
+	driver_cost("lights", 0.040) -- 40 ms, past the 16 ms period
+	local l = board { name = "lights-1", plant = "lights" }
+	local stalled = { kind = "driver_error", device = "lights-1", text = "tick still running after" }
+	run_until(function() return #events(stalled) > 0 end, 2, "the lights driver judged stalled")
+	local e = expect_event(stalled)
+	expect(e.text:find("stalled", 1, true), "the event says the driver stalled: " .. e.text)
+	run_until(function() return l.state ~= "running" end, 1, "the lights dropped")
+	expect(not (l.out.kitchen or l.out.dining or l.out.tv or l.out.disposal), "every relay off")
+	expect_eq(washer.state, "running", "the washer's state")
+end)
