@@ -721,8 +721,8 @@ void vmac_bus_free(struct vmac_bus *bus)
 		for (i = 0; i < bus->ndev; i++) {
 			struct job *j = &bus->jobs[i];
 			int st = atomic_load(&j->state);
-			if (st == JOB_RUNNING || st == JOB_DROPPED || st == JOB_STALLED)
-				continue;
+			if (!bus->virt && (st == JOB_RUNNING || st == JOB_DROPPED || st == JOB_STALLED))
+				continue; /* a worker's (virtual mode has none: a slow driver's call is the bus's) */
 			/* a host gone without stopping (vmac test's crash_host) */
 			vmac_driver_free(bus->mach[i].drv);
 			if (bus->mach[i].prev != bus->mach[i].drv)

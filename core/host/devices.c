@@ -121,11 +121,11 @@ void bus_free_machine(struct vmac_bus *bus, struct machine *m)
 		bus_unload(bus, m->drv);
 	if (!held || (m->prev != j->drv && m->prev != j->other))
 		bus_unload(bus, m->prev);
-	if (!held) {
+	if (!held) { /* held: the job is the worker's, and so are what it holds */
 		bus_unload_buffer(bus, j->ckpt);
 		j->ckpt = NULL;
+		j->drv = j->other = NULL;
 	}
-	j->drv = j->other = NULL;
 	if (m->worker >= 0 && bus->workers)
 		bus->workers[m->worker].nmach--;
 	memset(m, 0, sizeof(*m));
