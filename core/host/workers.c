@@ -239,9 +239,7 @@ static int start_worker(struct worker *w, int state)
 	w->out.head = w->out.tail = 0;
 	atomic_store(&w->quit, 0);
 	atomic_store(&w->sleeping, 0);
-	w->nmach = 0;
-	w->kick = 0;
-	w->demoted = 0;
+	w->demoted = 0; /* nmach and kick are the bus thread's: 0 since the machines left it */
 	atomic_store(&w->state, state);
 	sigfillset(&all); /* signals are the main thread's */
 	pthread_sigmask(SIG_BLOCK, &all, &old);
