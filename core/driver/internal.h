@@ -33,7 +33,9 @@
 #define REP_MAX 65536               /* bytes string.rep may build */
 #define PATTERN_STEPS_MAX (1 << 24) /* worst-case steps of one pattern call */
 #define EVENTS_PER_S 10
-#define HOST_RESERVE (64 * 1024) /* bytes past the cap the host's own work may use */
+#define HOST_RESERVE (64 * 1024)  /* bytes past the cap the host's own work may use */
+#define CHARGE_STEPS 65536        /* a library call estimated at this many steps is charged to the budget */
+#define STEPS_PER_INSTRUCTION 100 /* ... as one instruction per this many (a call at PATTERN_STEPS_MAX: 168,000) */
 
 #define IO_DI VMAC_IO_DI
 #define IO_AI VMAC_IO_AI
@@ -154,6 +156,7 @@ void *drv_alloc(void *ud, void *ptr, size_t osize, size_t nsize);
 int drv_on_panic(lua_State *L);
 int drv_make_entries(lua_State *L);
 int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned factor, char *err, size_t errlen);
+void drv_charge(lua_State *L, double steps);
 int drv_protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, size_t errlen);
 int drv_protect(struct vmac_driver *d, host_work fn, void *args, char *err, size_t errlen);
 void drv_protect_quiet(struct vmac_driver *d, host_work fn, void *args);

@@ -98,6 +98,32 @@ static void budget_hook(lua_State *L, lua_Debug *ar)
 		luaL_error(L, "%s", d->overrun_msg);
 }
 
+/* Before a library call the sandbox estimated at `steps`: the hook counts
+ * VM instructions, not the work inside C calls, so a costly call counts as
+ * one instruction per STEPS_PER_INSTRUCTION of its steps and looks at the
+ * wall-clock budget first. A loop of such calls ends at its budget instead
+ * of running on between two hooks, in virtual time (no wall clock) too. */
+void drv_charge(lua_State *L, double steps)
+{
+	struct vmac_driver *d = drv_of(L);
+	if (steps < CHARGE_STEPS || !d->in_driver)
+		return;
+	if (!d->overrun) {
+		d->hooks += (uint64_t)(steps / (STEPS_PER_INSTRUCTION * HOOK_EVERY));
+		if (d->hooks > d->budget_hooks) {
+			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%llu instructions)",
+			         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
+			d->overrun = 1;
+		} else if (d->deadline_ns && drv_mono_ns() > d->deadline_ns) {
+			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%lld us)",
+			         (long long)(d->budget_ns / 1000));
+			d->overrun = 1;
+		}
+	}
+	if (d->overrun)
+		luaL_error(L, "%s", d->overrun_msg);
+}
+
 /* The error handler of drv_guarded_call: the host's work, so it may use the
  * reserve (a driver at its cap still gets its traceback). */
 static int traceback(lua_State *L)
@@ -128,6 +154,7 @@ int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned fa
 	d->hooks = 0;
 	d->overrun = 0;
 	d->mem_refused = 0;
+	d->lib_call = NULL; /* a library call an escaped error left named */
 	d->budget_hooks = hooks * factor;
 	d->deadline_ns = d->budget_ns ? drv_mono_ns() + d->budget_ns * factor : 0;
 	d->in_driver = 1;

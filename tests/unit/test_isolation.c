@@ -5,7 +5,9 @@
  * white-box test: through core/driver/internal.h it sets a state's cap to
  * what it holds and raises outside protection, which no driver can do. Any of these
  * used to end the process (LuaJIT's panic) or hang it; here each must come
- * back as an error of that driver. */
+ * back as an error of that driver. At the end, the cost model of the
+ * bounded library functions (core/driver/sandbox.c): calls that would stall
+ * the bus are refused, ordinary ones run, and d->lib_call names the call. */
 #include <check.h>
 
 #include "../../core/driver/internal.h"
@@ -312,6 +314,124 @@ START_TEST(an_unprotected_error_stops_the_driver_not_the_process)
 }
 END_TEST
 
+/* The bounded library functions (core/driver/sandbox.c): a call whose
+ * worst case is over PATTERN_STEPS_MAX steps is refused before it runs,
+ * naming the function, each for the work the old cost model priced at
+ * nothing; the ordinary calls next to them still run. S is 64 KiB, the
+ * cap a driver's default. */
+START_TEST(costly_library_calls_are_refused_and_ordinary_ones_run)
+{
+	static const struct {
+		const char *code, *refusal; /* NULL: it must run */
+	} cases[] = {
+	    {"S:find('[' .. string.rep('b', 300) .. ']')", "string.find: pattern too costly"},
+	    {"S:find(string.rep('a', 300) .. '.b')", "string.find: pattern too costly"},
+	    {"(S .. S):find(string.rep('a', 60000) .. 'b', 1, true)", "string.find: plain search too costly"},
+	    {"(S .. S):find(string.rep('a', 60000) .. 'b')", "string.find: plain search too costly"},
+	    {"S:match('^.-' .. string.rep('a', 300) .. 'b')", "string.match: pattern too costly"},
+	    {"string.rep('(', 65536):find('%b()')", "string.find: pattern too costly"},
+	    {"S:find('%f[' .. string.rep('b', 300) .. ']')", "string.find: pattern too costly"},
+	    {"S:find('a*a*b')", "string.find: pattern too costly"},
+	    {"S:find('a*a*b', 2 ^ 32 + 1)", "string.find: pattern too costly"}, /* LuaJIT: the whole subject */
+	    {"string.gmatch(string.rep('^', 2000), '^.-.-b')", "string.gmatch: pattern too costly"},
+	    {"S:gsub('(x?)', string.rep('%1', 100))", "string.gsub: pattern too costly"},
+	    {"S:gsub('a', string.rep('y', 1000))", "string.gsub: pattern too costly"},
+	    {"(S .. S .. S .. S):gsub('', function() end)", "string.gsub: pattern too costly"},
+	    {"local a, b, t = S .. 'a', S .. 'b', {} for i = 1, 2000 do t[i] = i % 2 == 0 and a or b end "
+	     "table.sort(t)",
+	     "table.sort: too costly"},
+	    {"table.insert({}, -2 ^ 31 + 1, true)", "table.insert: too costly"},
+	    {"table.insert({}, 1e10, true)", "table.insert: too costly"},
+	    {"table.insert({}, '-100000000', true)", "table.insert: too costly"},
+	    {"assert(S:find('a*a*b', -40) == nil)", NULL},
+	    {"assert(select(2, S:gsub('a', string.rep('y', 1000), 1)) == 1)", NULL},
+	    {"assert((string.rep(' ', 500) .. 'x y' .. string.rep(' ', 500)):match('^%s*(.-)%s*$') == 'x y')", NULL},
+	    {"assert(select(2, (string.rep('word ', 13000) .. string.rep('word ', 13000)):gsub('%a+', 'w')) == 26000)",
+	     NULL},
+	    {"local n = 0 for k, v in string.rep('key=value,', 20):gmatch('(%w+)=(%w+)') do n = n + 1 end "
+	     "assert(n == 20)",
+	     NULL},
+	    {"assert(S:find(string.rep('a', 1000), 1, true) == 1 and S:find('[^a]') == nil)", NULL},
+	    {"assert(('f(a(b)c) g(d)'):gsub('%b()', '') == 'f g')", NULL},
+	    {"local t = {} for i = 1, 5000 do t[i] = i * 7919 % 5003 end table.sort(t) "
+	     "table.sort(t, function(x, y) return x > y end) for i = 2, 5000 do assert(t[i - 1] > t[i]) end",
+	     NULL},
+	    {"local t = {} for i = 1, 10000 do t[i] = i end table.insert(t, 1, 0) assert(t[1] == 0 and t[10001] == "
+	     "10000)",
+	     NULL},
+	};
+	size_t i;
+	limits.memory_bytes = 4096 * 1024; /* a driver's default cap */
+	for (i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+		char src[600], err[VMAC_DRIVER_ERR_MAX] = "";
+		struct vmac_outputs out;
+		struct vmac_driver *d;
+		int rc;
+		snprintf(src, sizeof(src),
+		         "local S = string.rep('a', 65536)\n"
+		         "return { name = 't', version = '1', io = {}, tick = function() %s end }\n",
+		         cases[i].code);
+		d = load_ok(src);
+		rc = tick1(d, 0, &out, err, sizeof(err));
+		if (cases[i].refusal) {
+			ck_assert_msg(rc != 0, "ran, though too costly: %s", cases[i].code);
+			says(err, cases[i].refusal, cases[i].code);
+		} else {
+			ck_assert_msg(rc == 0, "refused an ordinary call: %s: %s", cases[i].code, err);
+		}
+		ck_assert_msg(d->lib_call == NULL, "lib_call left at '%s' after %s", d->lib_call, cases[i].code);
+		vmac_driver_free(d);
+	}
+}
+END_TEST
+
+/* What the heap saw of d->lib_call: the names in the order they changed. */
+struct lib_call_watch {
+	struct vmac_driver *d;
+	char seen[8][24];
+	int n;
+};
+
+static void *watching_heap(void *ctx, void *ptr, size_t osize, size_t nsize)
+{
+	struct lib_call_watch *w = ctx;
+	const char *now = w->d ? w->d->lib_call : NULL;
+	(void)osize;
+	if (now && (w->n == 0 || strcmp(w->seen[w->n - 1], now) != 0) && w->n < 8)
+		snprintf(w->seen[w->n++], sizeof(w->seen[0]), "%s", now);
+	if (nsize == 0) {
+		free(ptr);
+		return NULL;
+	}
+	return realloc(ptr, nsize);
+}
+
+/* d->lib_call names the bounded function running (an inner one while it
+ * runs, then the outer one again), and nothing once it returns, even when
+ * an error inside it was caught. */
+START_TEST(lib_call_names_the_library_function_running)
+{
+	struct lib_call_watch w;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	struct vmac_driver *d;
+	memset(&w, 0, sizeof(w));
+	limits.heap = watching_heap;
+	limits.heap_ctx = &w;
+	d = load_ok("return { name = 't', version = '1', io = {}, tick = function()\n"
+	            "  pcall(string.gsub, 'abc', '%a', function() error('caught') end)\n"
+	            "  string.gsub('abc', '%a', function(c) return string.rep(c, 40) end) end }");
+	w.d = d;
+	ck_assert_msg(tick1(d, 0, &out, err, sizeof(err)) == 0, "tick: %s", err);
+	ck_assert_msg(d->lib_call == NULL, "lib_call left at '%s' after the tick", d->lib_call);
+	ck_assert_msg(w.n >= 3 && strcmp(w.seen[w.n - 3], "string.gsub") == 0 &&
+	                  strcmp(w.seen[w.n - 2], "string.rep") == 0 && strcmp(w.seen[w.n - 1], "string.gsub") == 0,
+	              "allocations saw lib_call as %d names, the last '%s'", w.n, w.n ? w.seen[w.n - 1] : "");
+	w.d = NULL;
+	vmac_driver_free(d);
+}
+END_TEST
+
 int main(void)
 {
 	Suite *s = suite_create("isolation");
@@ -327,6 +447,8 @@ int main(void)
 	tcase_add_test(tc, a_stack_overflow_says_so);
 	tcase_add_test(tc, metamethods_the_host_could_reach);
 	tcase_add_test(tc, an_unprotected_error_stops_the_driver_not_the_process);
+	tcase_add_test(tc, costly_library_calls_are_refused_and_ordinary_ones_run);
+	tcase_add_test(tc, lib_call_names_the_library_function_running);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);
