@@ -1,0 +1,170 @@
+"""No driver can hold the bus (docs/DRIVERS.md "Isolation", docs/HOST.md
+"Threads"): every call into a driver runs on a driver worker, and a call
+that runs past its limit (a tick past its period, an input or a take-over
+past its budget) is judged by the bus thread, not by the driver: the
+driver fails, named with what it was doing, its board is told to go safe,
+its worker is given up, and the machines beside it never notice. Each
+staller here spends seconds inside library calls the instruction budget
+cannot interrupt (its host gives it a billion instructions and no
+wall-clock budget, so that nothing but the bus's judgement stops it)."""
+
+import json
+import signal
+import time
+import urllib.error
+import urllib.request
+
+from harness import undisturbed
+
+NEIGHBOURS = ["lights-1", "washer-1"]
+
+# Seconds of string.find calls, each one a C call of about a millisecond
+# over a 60 KB string, from where the trigger says.
+STALLER = """-- %(name)s: stalls its worker in %(where)s
+local driver = { name = "%(name)s", version = "%(version)s", level = 0,
+	io = { lamp = "do0" }, variables = { v = {} },
+	commands = { go = {} } }
+local s = string.rep("a", 60000)
+local function stall()
+	local n = 0
+	for _ = 1, 3000 do
+		if string.find(s, "a.b") then n = n + 1 end
+	end
+	return n
+end
+function driver.tick(dev, inputs)
+	dev.out.lamp = true
+	dev.vars.v = %(tick)s
+end
+function driver.input(dev, name, value)
+	%(input)s
+	return true
+end
+function driver.migrate(dev, old)
+	%(migrate)s
+end
+function driver.detach(dev)
+	%(detach)s
+end
+return driver
+"""
+
+
+def staller(name, where, version="1"):
+    return STALLER % {
+        "name": name, "where": where, "version": version,
+        "tick": "stall()" if where == "tick" else "1",
+        "input": "stall()" if where == "input" else "",
+        "migrate": "stall()" if where == "migrate" else "",
+        "detach": "stall() stall()" if where == "detach" else "",
+    }
+
+
+def settings(*names):
+    s = {"sleep_s": 1}
+    for n in names:
+        s["driver.%s.instructions" % n] = 1000000000
+        s["driver.%s.budget_us" % n] = 0
+    return s
+
+
+def neighbours(t, host):
+    t.board("lights", "lights-1")
+    t.board("washer", "washer-1")
+    host.wait_running(NEIGHBOURS)
+
+
+def post(host, path, token, data, content_type="application/json"):
+    req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method="POST")
+    req.add_header("Content-Type", content_type)
+    req.add_header("Authorization", "Bearer " + token)
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, r.read().decode()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read().decode()
+
+
+def lamp_never_on(board, name):
+    lines = board.find_lines(r"outputs digital=")
+    assert not lines or "digital=0x00 pwm=0" in lines[-1].text, "%s left an output on: %s" % (
+        name, lines[-1].text)
+
+
+def test_a_stalled_tick_fails_its_driver_and_no_one_else_notices(t):
+    host = t.host(drivers=t.drivers(staller=staller("staller", "tick")), settings=settings("staller"))
+    neighbours(t, host)
+    board = t.board("generic", "stall-1", driver="staller")
+    quiet = undisturbed(NEIGHBOURS)
+    e = host.wait_event("driver_error", "stall-1", "stalled", timeout_s=30, invariant=quiet)
+    assert "tick still running after" in e["text"] and "string.find" in e["text"], (
+        "the stall is not named with what the driver was doing: %r" % e["text"])
+    host.wait_event("dropped", "stall-1", "its driver stalled", timeout_s=10, invariant=quiet)
+    board.wait_line(r"^stall-1: state (unknown|sleeping) ", 10, what="stall-1 told to go safe")
+    lamp_never_on(board, "stall-1")
+    # When it announces itself again, the version that stalled is not loaded.
+    e = host.wait_event("driver_error", "stall-1", "not loaded again until a new version", timeout_s=30,
+                        invariant=quiet)
+    served = {n: host.device(n)["served"] for n in NEIGHBOURS}
+    host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 20 for n in NEIGHBOURS), 30,
+                     "the neighbours served on", quiet)
+    lateness = host.status()["tick"]["lateness_us"]["max"]
+    assert lateness < 1000000, "the bus thread was held for %d us while a driver stalled" % lateness
+    host.signal(signal.SIGTERM)
+    rc = host.wait_exit(10)
+    assert rc == 0, "vmacd exited with %r when stopped: %s" % (rc, host.text()[-600:])
+
+
+def test_a_stall_in_detach_does_not_hold_up_the_stop(t):
+    host = t.host(drivers=t.drivers(stopper=staller("stopper", "detach")), settings=settings("stopper"))
+    neighbours(t, host)
+    board = t.board("generic", "stop-1", driver="stopper")
+    host.wait_running(["stop-1"])
+    host.signal(signal.SIGTERM)
+    rc = host.wait_exit(10)
+    assert rc == 0, "vmacd exited with %r: %s" % (rc, host.text()[-600:])
+    board.wait_line(r"^stop-1: state (unknown|sleeping) ", 10, what="stop-1 told to go safe")
+
+
+def test_a_stall_in_input_answers_the_operator_and_drops_only_its_machine(t):
+    host = t.host(drivers=t.drivers(inputter=staller("inputter", "input")), settings=settings("inputter"))
+    neighbours(t, host)
+    t.board("generic", "in-1", driver="inputter")
+    host.wait_running(["in-1"])
+    code, text = post(host, "/api/devices/in-1/input", t.token, json.dumps({"name": "go", "value": True}).encode())
+    assert code == 502 and "input still running after" in text, (
+        "the stalled input was answered %d %s" % (code, text[:300]))
+    quiet = undisturbed(NEIGHBOURS)
+    host.wait_event("dropped", "in-1", "its driver stalled", timeout_s=10, invariant=quiet)
+    quiet(host.status())
+
+
+def test_a_stall_in_a_reloads_migrate_is_refused_and_drops_only_its_machine(t):
+    host = t.host(drivers=t.drivers(migrator=staller("migrator", "none")), settings=settings("migrator"))
+    neighbours(t, host)
+    t.board("generic", "mig-1", driver="migrator")
+    host.wait_running(["mig-1"])
+    code, text = post(host, "/api/drivers/migrator", t.token,
+                      staller("migrator", "migrate", version="2").encode(), "text/x-lua")
+    assert code >= 400 and "still running after" in text, (
+        "the upload whose migrate stalled was answered %d %s" % (code, text[:400]))
+    quiet = undisturbed(NEIGHBOURS)
+    e = host.wait_event("driver_error", "mig-1", "stalled", timeout_s=10, invariant=quiet)
+    assert "take-over" in e["text"], "the stall does not say it was the take-over: %r" % e["text"]
+    host.wait_event("dropped", "mig-1", "its driver stalled", timeout_s=10, invariant=quiet)
+
+
+def test_a_held_host_shows_in_its_tick_lateness(t):
+    """The bus thread's lateness counts from the first tick it missed: a
+    host held for a second (SIGSTOP) never looks healthy in the status."""
+    host = t.host()
+    t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    host.signal(signal.SIGSTOP)
+    try:
+        time.sleep(1.0)  # the hold itself, not a wait for an event: nothing runs in the host meanwhile
+    finally:
+        host.signal(signal.SIGCONT)
+    s = host.wait_status(lambda s: s["tick"]["lateness_us"]["max"] > 0, 10, "a status after the hold")
+    late = s["tick"]["lateness_us"]["max"]
+    assert late >= 900000, "held for 1 s, the bus thread's lateness max is only %d us" % late
