@@ -102,6 +102,7 @@ struct vmac_device_status {
 	uint32_t period_us;
 	uint64_t misses, served;
 	uint64_t misses_host; /* of misses: the host's own fault */
+	uint64_t driver_late; /* ticks whose outputs came after the machine's next service (primary board only) */
 	unsigned protocol;    /* the version the board speaks (1 or 2) */
 	int cyclic;           /* served by the cyclic frame, at offset (else unicast UPDATEs) */
 	unsigned offset;
@@ -172,9 +173,9 @@ void vmac_bus_join(struct vmac_bus *bus);
  * thread) after pushing to the main ring; set it before start. */
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx);
 int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
-/* The main thread's care of the driver workers, on every wake-up: a
- * stalled worker's priority lowered, an ended one joined, a spare kept
- * ready for the next stall. */
+/* The main thread's care of the driver workers, on every wake-up: an
+ * ended one joined, a spare kept ready for the next stall (the bus thread
+ * lowers a stalled worker's priority itself). */
 void vmac_bus_workers_service(struct vmac_bus *bus);
 /* The oldest checkpoint not yet taken (NULL: none), valid until
  * vmac_bus_checkpoint_release; main thread (the one consumer). */

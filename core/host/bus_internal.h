@@ -55,59 +55,65 @@ enum job_kind {
  * until a worker takes it (QUEUED -> RUNNING), RUNNING the worker. The bus
  * thread may give up a RUNNING job: DROPPED (its machine went away) or
  * STALLED (it overran: its worker is retired); the worker that finishes it
- * then disposes of its instances and sets it IDLE. */
-enum job_state { JOB_IDLE, JOB_QUEUED, JOB_RUNNING, JOB_DONE, JOB_DROPPED, JOB_STALLED };
+ * then disposes of its instances and sets it DISPOSED, which the bus thread
+ * takes for IDLE (never for a job that held nothing). */
+enum job_state { JOB_IDLE, JOB_QUEUED, JOB_RUNNING, JOB_DONE, JOB_DROPPED, JOB_STALLED, JOB_DISPOSED };
 
 struct job {
+	/* Each side's fields of one call, first, on few cache lines: a tick
+	 * touches only these. */
 	_Atomic int state;
-	_Atomic int runner;         /* the worker that took it */
-	_Atomic int64_t started_ns; /* when it was taken (0: not yet) */
-	struct vmac_bus *bus;
-	int mach; /* its machine: bus->mach[mach] */
-	/* The bus thread's, written before QUEUED. */
+	_Atomic int runner; /* the worker that took it */
 	enum job_kind kind;
-	int64_t queued_ns;
+	int nboards;               /* the machine's boards, added to the driver first */
+	unsigned level;            /* the machine's level: told to the driver first */
+	int checkpoint;            /* TICK: one is due; STOP: the machine is attached */
+	int req;                   /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
 	double time_s;             /* bus time of the call */
 	struct vmac_driver *drv;   /* the instance it runs on */
 	struct vmac_driver *other; /* SWAP: the new instance; ROLLBACK: the one that failed */
-	unsigned level;            /* the machine's level: told to the driver first */
-	int nboards;               /* the machine's boards, added to the driver first */
-	uint32_t minor[VMAC_DRIVER_MAX_BOARDS];
-	char board[VMAC_DRIVER_MAX_BOARDS][VMAC_NAME_MAX + 1];
-	char device[VMAC_NAME_MAX + 1]; /* the primary's name and the driver's, for events */
-	char driver[VMAC_NAME_MAX + 1];
 	struct vmac_inputs in[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
-	int checkpoint;                                /* TICK: one is due; STOP: the machine is attached */
-	char name[VMAC_NAME_MAX + 1];                  /* INPUT */
-	struct vmac_value value;
-	int req;       /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
-	uint8_t *ckpt; /* the machine's checkpoint buffer, checkpoint_kib KiB */
 	/* The worker's, written before DONE. */
 	int rc;
+	int want_level; /* dev:set_level during the call; -1: none */
+	int ckpt_rc;    /* 1: ckpt_len bytes encoded; -1: refused (ckpt_err) */
 	int recover_rc; /* ATTACH */
-	char err[VMAC_DRIVER_ERR_MAX];
-	char reply[VMAC_EVENT_TEXT];                     /* INPUT */
-	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
-	int want_level;                                  /* dev:set_level during the call; -1: none */
-	int ckpt_rc;                                     /* 1: ckpt_len bytes encoded; -1: refused (ckpt_err) */
-	size_t ckpt_len;
-	char ckpt_err[256];
 	int vars_fresh; /* vars hold the instance's published values now */
-	int nvars, nparams;
-	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
 	int params_fresh;
-	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
 	size_t memory;
+	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
 	/* The bus thread's own notes on it. */
+	int64_t queued_ns;      /* when it was asked for (a tick: its primary's reply) */
+	int64_t seen_ns;        /* when the bus first saw it running (0: not yet) */
+	int64_t limit_ns;       /* how long it may run (jobs.c, limit_of), fixed when it is handed over */
 	int pushed;             /* QUEUED and in a worker's ring */
-	uint64_t rec_n;         /* INPUT: its event in the recorder */
+	int nnamed;             /* boards whose names board[] holds (they only ever grow) */
 	int64_t overdue_ns;     /* past its limit: when the bus last looked, */
 	int64_t overdue_cpu_ns; /* and its worker's CPU time then */
 	int64_t ready_ns;       /* virtual mode, a slow driver: when its results are ready */
+	uint64_t rec_n;         /* INPUT: its event in the recorder */
+	struct vmac_bus *bus;
+	int mach; /* its machine: bus->mach[mach] */
 	/* The worker's own memory, across jobs. */
 	const struct vmac_driver *vars_of;
 	uint64_t vars_version;
 	int64_t params_ns;
+	/* Rarely used: the bus thread's, written before QUEUED. */
+	uint32_t minor[VMAC_DRIVER_MAX_BOARDS];
+	char board[VMAC_DRIVER_MAX_BOARDS][VMAC_NAME_MAX + 1];
+	char device[VMAC_NAME_MAX + 1]; /* the primary's name and the driver's, for events */
+	char driver[VMAC_NAME_MAX + 1];
+	char name[VMAC_NAME_MAX + 1]; /* INPUT */
+	struct vmac_value value;
+	uint8_t *ckpt; /* the machine's checkpoint buffer, checkpoint_kib KiB */
+	/* Rarely used: the worker's, written before DONE. */
+	char err[VMAC_DRIVER_ERR_MAX]; /* rc != 0 */
+	char reply[VMAC_EVENT_TEXT];   /* INPUT */
+	size_t ckpt_len;
+	char ckpt_err[256];
+	int nvars, nparams;
+	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
+	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
 };
 
 enum worker_state { W_FREE, W_SPARE, W_ACTIVE, W_STALLED, W_EXITED };
@@ -125,9 +131,8 @@ struct worker {
 	struct vmac_ring out;  /* struct vmac_bus_msg, worker -> main thread (events, unloads) */
 	_Atomic uint64_t events_lost;
 	_Atomic int quit;
-	int nmach;   /* machines it runs (bus thread) */
-	int kick;    /* the bus thread pushed: wake it at the end of this pass */
-	int demoted; /* stalled, and its priority lowered (main thread) */
+	int nmach; /* machines it runs (bus thread) */
+	int kick;  /* the bus thread pushed: wake it at the end of this pass */
 };
 
 /* A machine: the boards that share a driver name and major id, run by one
@@ -219,7 +224,6 @@ struct request {
 	_Atomic int state;
 	sem_t done;
 	int kind;
-	int waiting; /* RUNNING, answered when its machine's job is collected (jobs.c) */
 	struct vmac_bus_input_request r;
 	struct vmac_driver *drv; /* REQ_SWAP: the new instance */
 	int64_t probation_ns;
@@ -329,9 +333,11 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m);
 void bus_input_now(struct vmac_bus *bus, struct machine *m);
 /* Every job done: what it gave applied; every job overrun: failed. */
 void bus_collect(struct vmac_bus *bus, int64_t now);
-/* m is going away: its job is given up; its drivers, if the job holds
- * them, are the worker's to dispose of (1), else the caller's (0). */
-int bus_job_release(struct vmac_bus *bus, struct machine *m);
+/* m is going away: its job is given up. 1 when a worker has (or had) it,
+ * with the instances *drv and *other it holds and its checkpoint buffer:
+ * those are the worker's to dispose of; 0: everything of m is the
+ * caller's. */
+int bus_job_release(struct vmac_bus *bus, struct machine *m, struct vmac_driver **drv, struct vmac_driver **other);
 /* Answer request slot i (rc and reply already in it). */
 void bus_answer(struct vmac_bus *bus, int i);
 /* The machine's job is free, and nothing is queued for it. */
@@ -381,7 +387,7 @@ void bus_end_probations(struct vmac_bus *bus, int64_t now);
 
 /* record.c: the flight recorder's bus side (no allocation) */
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
-void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns, const struct vmac_inputs *in,
+void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns, int n, const struct vmac_inputs *in,
                   const struct vmac_outputs *out);
 /* realtime.c, at the bus thread's start. */
 void bus_try_realtime(struct vmac_bus *bus);

@@ -114,17 +114,19 @@ static void refuse_waiting(struct vmac_bus *bus, struct machine *m)
 void bus_free_machine(struct vmac_bus *bus, struct machine *m)
 {
 	struct job *j = &bus->jobs[m - bus->mach];
-	int held = bus_job_release(bus, m);
+	struct vmac_driver *jdrv, *jother;
+	int held = bus_job_release(bus, m, &jdrv, &jother);
 	refuse_waiting(bus, m);
 	bus_rec_release(bus, m);
-	if (!held || (m->drv != j->drv && m->drv != j->other))
+	if (!held || (m->drv != jdrv && m->drv != jother))
 		bus_unload(bus, m->drv);
-	if (!held || (m->prev != j->drv && m->prev != j->other))
+	if (!held || (m->prev != jdrv && m->prev != jother))
 		bus_unload(bus, m->prev);
-	if (!held) { /* held: the job is the worker's, and so are what it holds */
+	if (!held) { /* held: the job is the worker's, and so is what it holds */
 		bus_unload_buffer(bus, j->ckpt);
 		j->ckpt = NULL;
 		j->drv = j->other = NULL;
+		j->req = -1;
 	}
 	if (m->worker >= 0 && bus->workers)
 		bus->workers[m->worker].nmach--;
@@ -400,6 +402,10 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
 	bus_event(bus, primary, "driver_error", "%s: driver %s %s failed%s: %s", primary->ann.board, m->driver,
 	          vmac_driver_version(m->drv), where, err);
 	bus_rec_failure(bus, m, VMAC_REC_ERROR, err);
+	if (bus->stopping) { /* its boards were told to go safe already */
+		bus_free_machine(bus, m);
+		return;
+	}
 	if (bus_roll_back(bus, m, err) == 0)
 		return;
 	bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
@@ -463,6 +469,8 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 	m->rec = c->rec;
 	m->level = vmac_driver_level(c->drv);
 	bus->jobs[mi].ckpt = c->ckpt;
+	bus->jobs[mi].nnamed = 0;
+	bus->jobs[mi].vars_of = NULL;
 	memcpy(bus->jobs[mi].device, d->ann.board, sizeof(bus->jobs[mi].device));
 	memcpy(bus->jobs[mi].driver, m->driver, sizeof(bus->jobs[mi].driver));
 	/* What the status shows until its first job: the declarations, their

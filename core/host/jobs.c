@@ -24,6 +24,7 @@ int bus_jobs_init(struct vmac_bus *bus)
 	for (i = 0; i < bus->ndev; i++) {
 		bus->jobs[i].bus = bus;
 		bus->jobs[i].mach = (int)i;
+		bus->jobs[i].req = -1;
 		atomic_init(&bus->jobs[i].state, JOB_IDLE);
 		atomic_init(&bus->jobs[i].runner, -1);
 	}
@@ -46,41 +47,53 @@ static struct job *job_of(struct vmac_bus *bus, const struct machine *m)
 	return &bus->jobs[m - bus->mach];
 }
 
+/* The job is free: IDLE, or DISPOSED by the worker that had it (made IDLE
+ * here, the bus thread's again). */
+static int job_free(struct job *j)
+{
+	int expect = JOB_DISPOSED;
+	return atomic_compare_exchange_strong(&j->state, &expect, JOB_IDLE) || expect == JOB_IDLE;
+}
+
 int bus_machine_idle(const struct vmac_bus *bus, const struct machine *m)
 {
-	return atomic_load(&bus->jobs[m - bus->mach].state) == JOB_IDLE;
+	return job_free(&bus->jobs[m - bus->mach]);
 }
 
 void bus_answer(struct vmac_bus *bus, int i)
 {
 	struct request *q = &bus->req[i];
-	q->waiting = 0;
 	atomic_store(&q->state, REQ_DONE);
 	sem_post(&q->done);
 }
+
+static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, const struct job *j);
 
 static void fill(struct vmac_bus *bus, struct machine *m, struct job *j, enum job_kind kind, int64_t t_ns)
 {
 	int i;
 	j->kind = kind;
-	j->queued_ns = bus_now(bus);
+	j->queued_ns = t_ns;
+	j->seen_ns = 0;
 	j->time_s = (double)(t_ns - bus->start_ns) / 1e9;
 	j->drv = m->drv;
 	j->other = NULL;
 	j->level = m->level;
 	j->nboards = m->nboards;
-	for (i = 0; i < m->nboards; i++) {
+	for (i = j->nnamed; i < m->nboards; i++) { /* a machine's boards only ever grow */
 		const struct device *b = &bus->dev[m->board[i]];
 		j->minor[i] = b->ann.minor;
 		memcpy(j->board[i], b->ann.board, sizeof(j->board[i]));
 	}
+	j->nnamed = m->nboards;
 	j->req = -1;
 	j->checkpoint = 0;
-	atomic_store(&j->started_ns, 0);
-	atomic_store(&j->runner, -1);
+	j->overdue_ns = 0;
+	j->limit_ns = limit_of(bus, m, j);
+	atomic_store_explicit(&j->runner, -1, memory_order_relaxed);
 }
 
-static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j);
+static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now);
 
 static int64_t virtual_cost(const struct vmac_bus *bus, const struct machine *m)
 {
@@ -120,13 +133,13 @@ static void hand_over(struct vmac_bus *bus, struct machine *m, struct job *j)
 		atomic_store(&j->state, JOB_RUNNING);
 		bus_run_job(j);
 		if (cost > 0) {
-			atomic_store(&j->started_ns, bus_now(bus));
-			j->ready_ns = bus_now(bus) + cost;
+			j->seen_ns = bus_now(bus);
+			j->ready_ns = j->seen_ns + cost;
 			j->overdue_ns = 0;
 			return;
 		}
 		atomic_store(&j->state, JOB_DONE);
-		collect_one(bus, m, j);
+		collect_one(bus, m, j, bus_now(bus));
 		bus_dispatch(bus, m); /* what the job's results asked for (a roll-back) */
 		return;
 	}
@@ -162,8 +175,21 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 {
 	struct job *j = job_of(bus, m);
 	int64_t now;
-	if (!m->used || !m->drv || atomic_load(&j->state) != JOB_IDLE)
+	if (!m->used || !m->drv || !job_free(j))
 		return;
+	if (m->want_tick && m->attached && !m->want_attach && !m->want_rollback && !m->want_stop && !m->want_swap &&
+	    m->ninputs == 0) {
+		/* The common case first, with the reply's time: no clock read. */
+		int i;
+		m->want_tick = 0;
+		fill(bus, m, j, JOB_TICK, m->tick_ns);
+		for (i = 0; i < m->nboards; i++)
+			j->in[i] = bus->dev[m->board[i]].inputs;
+		j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, m->tick_ns);
+		m->want_checkpoint = 0;
+		hand_over(bus, m, j);
+		return;
+	}
 	now = bus_now(bus);
 	if (m->want_attach) {
 		m->want_attach = 0;
@@ -216,21 +242,22 @@ static void copy_in(struct machine *m, const struct job *j)
 	m->memory = j->memory;
 }
 
-static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j)
+static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
 {
 	int64_t t_ns = (int64_t)(j->time_s * 1e9);
 	int i;
 	for (i = 0; i < j->nboards && i < m->nboards; i++)
 		bus->dev[m->board[i]].outputs = j->out[i];
-	if (bus_now(bus) - j->queued_ns > bus->slot_ns << m->level)
+	if (now - j->queued_ns > bus->slot_ns << m->level)
 		m->late++;
-	bus_rec_tick(bus, m, t_ns, j->in, j->out); /* a failed tick too: its inputs replay the failure */
+	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in,
+	             j->out); /* a failed tick too: its inputs replay the failure */
 	if (j->rc != 0) {
 		bus_driver_failed(bus, m, "", j->err);
 		return;
 	}
 	if (j->ckpt_rc != 0)
-		bus_checkpoint_taken(bus, m, j, bus_now(bus));
+		bus_checkpoint_taken(bus, m, j, now);
 }
 
 static void input_done(struct vmac_bus *bus, struct machine *m, struct job *j)
@@ -257,20 +284,20 @@ static void input_done(struct vmac_bus *bus, struct machine *m, struct job *j)
 /* A done job's results applied; the job is free again. The handlers
  * below only ask for what comes next (the caller dispatches it), and each
  * sets j->req to -1 once it has answered the request. */
-static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j)
+static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
 {
 	copy_in(m, j);
-	if (j->want_level >= 0 && j->kind != JOB_STOP)
+	if (j->want_level >= 0 && j->kind != JOB_STOP && !(j->kind == JOB_SWAP && j->rc != 0))
 		bus_apply_level(bus, m, (unsigned)j->want_level);
 	switch (j->kind) {
 	case JOB_ATTACH: bus_attach_done(bus, m, j); break;
-	case JOB_TICK: tick_done(bus, m, j); break;
+	case JOB_TICK: tick_done(bus, m, j, now); break;
 	case JOB_INPUT: input_done(bus, m, j); break;
 	case JOB_SWAP: bus_swapped(bus, m, j); break;
 	case JOB_ROLLBACK: bus_rolled_back(bus, m, j); break;
 	case JOB_STOP:
 		if (j->ckpt_rc != 0)
-			bus_checkpoint_taken(bus, m, j, bus_now(bus));
+			bus_checkpoint_taken(bus, m, j, now);
 		bus_free_machine(bus, m);
 		break;
 	}
@@ -293,7 +320,9 @@ static const char *job_name(enum job_kind k)
 }
 
 /* How long j may run: a tick, its machine's period or its driver's budget,
- * whichever is longer; anything else, bus->job_limit_ns. */
+ * whichever is longer; anything else, bus->job_limit_ns. A job no worker
+ * has taken for ten times that (at least a second) drops its machine. */
+#define QUEUED_MAX(limit) ((limit)*10 > 1000000000 ? (limit)*10 : 1000000000)
 static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, const struct job *j)
 {
 	int64_t period = bus->slot_ns << m->level, budget = vmac_driver_budget_ns(j->drv);
@@ -309,29 +338,35 @@ static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, con
 static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
 {
 	struct device *primary = &bus->dev[m->primary];
+	/* What the job holds is read before it is given up: after that, its
+	 * worker may dispose of it at any moment. */
+	struct vmac_driver *stuck = j->kind == JOB_SWAP ? j->other : j->drv, *jdrv = j->drv, *jother = j->other;
+	const char *call = vmac_driver_lib_call(stuck);
+	char version[VMAC_DRIVER_VERSION_MAX + 1];
+	int64_t tag = vmac_driver_tag(stuck);
+	uint8_t *ckpt = j->ckpt;
 	struct vmac_bus_msg msg;
 	char why[VMAC_DRIVER_ERR_MAX];
 	int expect = JOB_RUNNING, w = atomic_load(&j->runner);
-	const char *call = vmac_driver_lib_call(j->kind == JOB_SWAP ? j->other : j->drv);
-	struct vmac_driver *stuck = j->kind == JOB_SWAP ? j->other : j->drv;
+	snprintf(version, sizeof(version), "%s", vmac_driver_version(stuck));
+	snprintf(why, sizeof(why), "%s still running after %.3g ms (its limit %.3g ms)%s%s", job_name(j->kind),
+	         (double)(now - j->seen_ns) / 1e6, (double)j->limit_ns / 1e6, call ? ": inside " : "",
+	         call ? call : "");
 	if (!atomic_compare_exchange_strong(&j->state, &expect, JOB_STALLED))
 		return; /* it has just finished */
-	snprintf(why, sizeof(why), "%s still running after %.3g ms (its limit %.3g ms)%s%s", job_name(j->kind),
-	         (double)(now - atomic_load(&j->started_ns)) / 1e6, (double)limit_of(bus, m, j) / 1e6,
-	         call ? ": inside " : "", call ? call : "");
 	memset(&msg, 0, sizeof(msg));
 	msg.kind = VMAC_MSG_EVENT;
 	msg.code = VMAC_EVENT_STALLED;
 	msg.time_ns = now;
 	memcpy(msg.device, primary->ann.board, sizeof(msg.device));
 	memcpy(msg.driver, m->driver, sizeof(msg.driver));
-	snprintf(msg.version, sizeof(msg.version), "%s", vmac_driver_version(stuck));
-	msg.version_id = vmac_driver_tag(stuck);
+	memcpy(msg.version, version, sizeof(msg.version));
+	msg.version_id = tag;
 	snprintf(msg.event_kind, sizeof(msg.event_kind), "driver_error");
 	snprintf(msg.text, sizeof(msg.text),
 	         "%s: driver %s %s stalled: %s; its worker is given up, and this version is not loaded again "
 	         "until a new one arrives",
-	         primary->ann.board, m->driver, vmac_driver_version(stuck), why);
+	         primary->ann.board, m->driver, version, why);
 	bus_post(bus, &msg);
 	bus_rec_failure(bus, m, VMAC_REC_ERROR, why);
 	if (j->req >= 0) { /* the instances went with the worker: nothing to give back */
@@ -339,7 +374,7 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 		q->r.rc = -VMAC_EDRIVER;
 		snprintf(q->r.reply, sizeof(q->r.reply), "the driver failed: %s", why);
 		bus_answer(bus, j->req);
-		j->req = -1;
+		j->req = -1; /* the bus thread's field: no worker touches it */
 	}
 	if (m->prev && j->kind != JOB_ROLLBACK) {
 		/* On probation: the store goes back to the version before, which
@@ -350,50 +385,69 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 		msg.time_ns = now;
 		memcpy(msg.device, primary->ann.board, sizeof(msg.device));
 		memcpy(msg.driver, m->driver, sizeof(msg.driver));
-		msg.version_id = vmac_driver_tag(stuck);
+		msg.version_id = tag;
 		snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
 		snprintf(msg.text, sizeof(msg.text),
 		         "%s: driver %s %s stalled on probation; the version before it is active again",
-		         primary->ann.board, m->driver, vmac_driver_version(stuck));
+		         primary->ann.board, m->driver, version);
 		bus_post(bus, &msg);
 	}
 	if (w >= 0)
 		bus_worker_retire(bus, w);
-	bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver stalled");
+	if (bus->stopping) /* its boards were told to go safe already */
+		bus_free_machine(bus, m);
+	else
+		bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver stalled");
 	if (bus->virt) { /* no worker holds it: the job's instances go now */
-		bus_unload(bus, j->drv);
-		bus_unload(bus, j->other);
-		bus_unload_buffer(bus, j->ckpt);
+		bus_unload(bus, jdrv);
+		bus_unload(bus, jother);
+		bus_unload_buffer(bus, ckpt);
 		j->drv = j->other = NULL;
 		j->ckpt = NULL;
 		atomic_store(&j->state, JOB_IDLE);
 	}
 }
 
-/* A running job past its limit is judged stalled only while its worker
- * is on a CPU for it: a worker the machine kept waiting is not the
- * driver's fault. Past ten limits it is stalled whatever the reason. */
-static void judge(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
+/* Past its limit, is its worker on a CPU for it? 1 when it is (the
+ * worker's CPU time moved by at least half the time since the last look),
+ * or past ten limits whatever the reason; 0 while the machine kept the
+ * worker waiting (not the driver's fault). */
+static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 {
-	int64_t started = atomic_load(&j->started_ns), limit, cpu;
-	if (started == 0)
-		return;
-	limit = limit_of(bus, m, j);
-	if (now - started <= limit) {
+	int64_t cpu;
+	if (j->seen_ns == 0) { /* it began since the last look: counted from now (a slot late at most) */
+		j->seen_ns = now;
 		j->overdue_ns = 0;
-		return;
+		return 0;
 	}
+	if (now - j->seen_ns <= j->limit_ns)
+		return 0;
 	cpu = bus_worker_cpu_ns(bus, atomic_load(&j->runner));
-	if (now - started > 10 * limit || cpu < 0) {
-		stalled(bus, m, j, now);
-		return;
-	}
-	if (j->overdue_ns && now > j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns) {
-		stalled(bus, m, j, now);
-		return;
-	}
+	if (now - j->seen_ns > 10 * j->limit_ns || cpu < 0)
+		return 1;
+	if (j->overdue_ns && now > j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns)
+		return 1;
 	j->overdue_ns = now;
 	j->overdue_cpu_ns = cpu;
+	return 0;
+}
+
+/* A job given up when its machine went away (DROPPED) still holds its
+ * worker: past its limit, that worker is given up too, so that no new
+ * machine waits behind it. */
+static void orphan_overran(struct vmac_bus *bus, struct job *j, int64_t now)
+{
+	int expect = JOB_DROPPED, w = atomic_load(&j->runner);
+	char text[VMAC_EVENT_TEXT];
+	if (!overran(bus, j, now) || !atomic_compare_exchange_strong(&j->state, &expect, JOB_STALLED))
+		return;
+	snprintf(text, sizeof(text),
+	         "driver %s, whose machine %s was dropped during its %s, kept its worker past its limit (%.3g ms): "
+	         "the worker is given up",
+	         j->driver, j->device, job_name(j->kind), (double)j->limit_ns / 1e6);
+	bus_event(bus, NULL, "warning", "%s", text);
+	if (w >= 0)
+		bus_worker_retire(bus, w);
 }
 
 void bus_collect(struct vmac_bus *bus, int64_t now)
@@ -402,42 +456,56 @@ void bus_collect(struct vmac_bus *bus, int64_t now)
 	for (i = 0; i < bus->nused; i++) {
 		struct machine *m = &bus->mach[i];
 		struct job *j = &bus->jobs[i];
-		int st;
-		if (!m->used)
+		int st = atomic_load(&j->state);
+		if (!m->used) {
+			if (st == JOB_DROPPED)
+				orphan_overran(bus, j, now);
 			continue;
-		st = atomic_load(&j->state);
+		}
 		if (st == JOB_DONE) {
-			collect_one(bus, m, j);
+			collect_one(bus, m, j, now);
 			bus_dispatch(bus, m);
-		} else if (st == JOB_RUNNING && bus->virt && now >= j->ready_ns &&
-		           now - atomic_load(&j->started_ns) <= limit_of(bus, m, j)) {
+		} else if (st == JOB_RUNNING && bus->virt && now >= j->ready_ns && now - j->seen_ns <= j->limit_ns) {
 			atomic_store(&j->state, JOB_DONE); /* a slow driver's call, done in virtual time */
-			collect_one(bus, m, j);
+			collect_one(bus, m, j, now);
 			bus_dispatch(bus, m);
 		} else if (st == JOB_RUNNING) {
-			judge(bus, m, j, now);
+			if (overran(bus, j, now))
+				stalled(bus, m, j, now);
+		} else if (st == JOB_QUEUED && now - j->queued_ns > QUEUED_MAX(j->limit_ns)) {
+			/* No worker took it: the host is short of workers, not the
+			 * driver at fault; the machine cannot go on without its calls. */
+			char why[160];
+			snprintf(why, sizeof(why),
+			         "no driver worker took its %s within %.3g s (the host is short of workers)",
+			         job_name(j->kind), (double)(now - j->queued_ns) / 1e9);
+			bus_drop(bus, &bus->dev[m->primary], VMAC_SHUT_DROPPED, "dropped", why);
 		} else if (st == JOB_QUEUED && !j->pushed) {
 			j->pushed = bus_worker_push(bus, m) == 0;
-		} else if (st == JOB_IDLE) {
+		} else if (st == JOB_IDLE || st == JOB_DISPOSED) {
 			bus_dispatch(bus, m);
 		}
 	}
 	bus_workers_kick(bus);
 }
 
-int bus_job_release(struct vmac_bus *bus, struct machine *m)
+int bus_job_release(struct vmac_bus *bus, struct machine *m, struct vmac_driver **drv, struct vmac_driver **other)
 {
 	struct job *j = job_of(bus, m);
 	int expect = JOB_QUEUED, held = 0;
-	if (atomic_compare_exchange_strong(&j->state, &expect, JOB_IDLE)) {
+	*drv = j->drv; /* read while the job cannot be disposed of: before it is given up */
+	*other = j->other;
+	if (bus->virt) {
+		atomic_store(&j->state, JOB_IDLE); /* no worker: a slow driver's call is done, unread */
+	} else if (atomic_compare_exchange_strong(&j->state, &expect, JOB_IDLE)) {
 		held = 0; /* no worker took it: it never runs */
 	} else if (expect == JOB_RUNNING) {
 		if (atomic_compare_exchange_strong(&j->state, &expect, JOB_DROPPED))
 			held = 1; /* the worker disposes of what it holds */
 		else
 			atomic_store(&j->state, JOB_IDLE); /* it has just finished: the results go unread */
-	} else if (expect == JOB_STALLED || expect == JOB_DROPPED) {
-		held = 1;
+	} else if (expect == JOB_STALLED || expect == JOB_DROPPED || expect == JOB_DISPOSED) {
+		held = 1; /* the worker's, or disposed of already */
 	} else {
 		atomic_store(&j->state, JOB_IDLE); /* DONE, unread; or IDLE */
 	}
@@ -445,7 +513,8 @@ int bus_job_release(struct vmac_bus *bus, struct machine *m)
 		struct request *q = &bus->req[j->req];
 		if (j->kind == JOB_SWAP && held) {
 			q->r.rc = -VMAC_EDRIVER; /* the new instance went with the job */
-			snprintf(q->r.reply, sizeof(q->r.reply), "%s was dropped during the take-over", m->driver);
+			snprintf(q->r.reply, sizeof(q->r.reply), "the %s machine was dropped during the take-over",
+			         m->driver);
 		} else {
 			q->r.rc = -VMAC_ENOTRUNNING;
 			snprintf(q->r.reply, sizeof(q->r.reply), "the %s machine was dropped meanwhile", m->driver);

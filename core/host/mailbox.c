@@ -85,7 +85,6 @@ static void input_request(struct vmac_bus *bus, int i)
 		bus_answer(bus, i);
 		return;
 	}
-	q->waiting = 1;
 	m->inputs[m->ninputs++] = i; /* room: one per request slot */
 	bus_dispatch(bus, m);
 }
@@ -223,6 +222,8 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	m->input_rc = -VMAC_ENOTRUNNING;
 	bus_input_now(bus, m);
 	snprintf(reply, replylen, "%s", j->reply);
+	if (atomic_load(&j->state) == JOB_RUNNING) /* a slow driver (driver_cost): run, collected later */
+		return j->rc < 0 ? -VMAC_EDRIVER : j->rc;
 	return m->input_rc;
 }
 

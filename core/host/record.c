@@ -50,15 +50,15 @@ void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 	}
 }
 
-void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t, const struct vmac_inputs *in,
+void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t, int n, const struct vmac_inputs *in,
                   const struct vmac_outputs *out)
 {
 	int i;
 	(void)bus;
 	if (!m->rec)
 		return;
-	for (i = 0; i < m->nboards; i++)
-		vmac_rec_tick(m->rec, t, i, i == m->nboards - 1, &in[i], &out[i]);
+	for (i = 0; i < n; i++)
+		vmac_rec_tick(m->rec, t, i, i == n - 1, &in[i], &out[i]);
 }
 
 void bus_rec_state(struct vmac_bus *bus, struct machine *m, int64_t now, const uint8_t *data, size_t len)

@@ -58,6 +58,7 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->misses = d->misses;
 	o->served = d->served;
 	o->misses_host = d->misses_host;
+	o->driver_late = m && m->primary == i ? m->late : 0;
 	o->protocol = d->version;
 	o->cyclic = d->cyclic;
 	o->offset = i;

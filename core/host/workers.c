@@ -87,9 +87,7 @@ void bus_run_job(struct job *j)
 	j->want_level = -1;
 	j->ckpt_rc = 0;
 	j->vars_fresh = j->params_fresh = 0;
-	j->err[0] = 0;
-	j->reply[0] = 0;
-	j->recover_rc = VMAC_RECOVER_NONE;
+	j->recover_rc = VMAC_RECOVER_NONE; /* err and reply are written only when rc or the kind says so */
 	switch (j->kind) {
 	case JOB_ATTACH:
 		sync_instance(d, j);
@@ -200,6 +198,10 @@ static void *worker_main(void *arg)
 		struct job *j;
 		if (!vmac_ring_pop(&w->jobs, &mi)) {
 			atomic_store(&w->sleeping, 1);
+			/* Store, then load: the bus pushes, then exchanges sleeping
+			 * (bus_workers_kick); the fences keep either side from
+			 * reading before its own write is seen, or a wake is lost. */
+			atomic_thread_fence(memory_order_seq_cst);
 			if (vmac_ring_peek(&w->jobs) || atomic_load(&w->quit)) {
 				atomic_store(&w->sleeping, 0);
 				continue;
@@ -213,14 +215,13 @@ static void *worker_main(void *arg)
 		expect = JOB_QUEUED;
 		if (!atomic_compare_exchange_strong(&j->state, &expect, JOB_RUNNING))
 			continue; /* taken back, or moved to another worker that took it */
-		atomic_store(&j->runner, w->index);
-		atomic_store(&j->started_ns, vmac_now_ns());
+		atomic_store_explicit(&j->runner, w->index, memory_order_relaxed);
 		bus_run_job(j);
 		expect = JOB_RUNNING;
 		if (atomic_compare_exchange_strong(&j->state, &expect, JOB_DONE))
 			continue;
 		dispose(w, j); /* given up: DROPPED or STALLED */
-		atomic_store(&j->state, JOB_IDLE);
+		atomic_store(&j->state, JOB_DISPOSED);
 		if (expect == JOB_STALLED)
 			break; /* retired: another worker has its machines */
 	}
@@ -235,18 +236,18 @@ static int start_worker(struct worker *w, int state)
 {
 	sigset_t all, old;
 	int rc;
-	w->jobs.head = w->jobs.tail = 0;
-	w->out.head = w->out.tail = 0;
+	/* Its rings go on from where the thread before left them: a stale job
+	 * is skipped (its state says so), and what it left for the main thread
+	 * is still read. nmach and kick are the bus thread's (0 since the
+	 * machines left it). */
 	atomic_store(&w->quit, 0);
 	atomic_store(&w->sleeping, 0);
-	w->demoted = 0; /* nmach and kick are the bus thread's: 0 since the machines left it */
-	atomic_store(&w->state, state);
 	sigfillset(&all); /* signals are the main thread's */
 	pthread_sigmask(SIG_BLOCK, &all, &old);
 	rc = pthread_create(&w->thread, NULL, worker_main, w);
 	pthread_sigmask(SIG_SETMASK, &old, NULL);
-	if (rc != 0)
-		atomic_store(&w->state, W_FREE);
+	if (rc == 0)
+		atomic_store(&w->state, state); /* visible to the bus thread only once it runs */
 	return rc;
 }
 
@@ -435,6 +436,7 @@ void bus_workers_kick(struct vmac_bus *bus)
 	int i;
 	if (bus->virt)
 		return;
+	atomic_thread_fence(memory_order_seq_cst); /* the pushes before the looks at sleeping (worker_main) */
 	for (i = 0; i < bus->nworkers_max; i++) {
 		struct worker *w = &bus->workers[i];
 		if (!w->kick)
@@ -465,29 +467,30 @@ void bus_worker_retire(struct vmac_bus *bus, int wi)
 		if (spare >= 0)
 			bus->workers[spare].nmach++;
 		if (atomic_load(&bus->jobs[i].state) == JOB_QUEUED)
-			bus_worker_push(bus, m);
+			bus->jobs[i].pushed = bus_worker_push(bus, m) == 0;
 	}
 	bus_workers_kick(bus);
+	/* The lowest priority at once (a system call that does not block), not
+	 * when the main thread next runs: a stuck thread at SCHED_FIFO could
+	 * starve it. */
+	{
+		struct sched_param sp;
+		memset(&sp, 0, sizeof(sp));
+		pthread_setschedparam(old->thread, SCHED_IDLE, &sp);
+	}
 }
 
 /* ---- the main thread's care of the workers ---- */
 
 void vmac_bus_workers_service(struct vmac_bus *bus)
 {
-	struct sched_param sp;
 	int i, spares = 0, free_one = -1;
 	if (bus->virt || !bus->workers)
 		return;
 	for (i = 0; i < bus->nworkers_max; i++) {
 		struct worker *w = &bus->workers[i];
 		int st = atomic_load(&w->state);
-		if (st == W_STALLED && !w->demoted) {
-			/* The lowest priority: it may burn what is left of a core, never
-			 * what another thread needs. */
-			memset(&sp, 0, sizeof(sp));
-			pthread_setschedparam(w->thread, SCHED_IDLE, &sp);
-			w->demoted = 1;
-		} else if (st == W_EXITED) {
+		if (st == W_EXITED) {
 			pthread_join(w->thread, NULL);
 			atomic_store(&w->state, W_FREE);
 			st = W_FREE;

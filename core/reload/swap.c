@@ -91,7 +91,6 @@ void bus_swap(struct vmac_bus *bus, int i)
 		         vmac_driver_name(q->drv));
 		q->r.rc = -VMAC_EREFUSED;
 	} else {
-		q->waiting = 1;
 		m->want_swap = i + 1;
 		bus_dispatch(bus, m);
 		return;

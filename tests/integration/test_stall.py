@@ -10,6 +10,7 @@ wall-clock budget, so that nothing but the bus's judgement stops it)."""
 
 import json
 import signal
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -54,7 +55,7 @@ def staller(name, where, version="1"):
     return STALLER % {
         "name": name, "where": where, "version": version,
         "tick": "stall()" if where == "tick" else "1",
-        "input": "stall()" if where == "input" else "",
+        "input": "dev:event('stalling') stall()" if where == "input" else "",
         "migrate": "stall()" if where == "migrate" else "",
         "detach": "stall() stall()" if where == "detach" else "",
     }
@@ -168,3 +169,41 @@ def test_a_held_host_shows_in_its_tick_lateness(t):
     s = host.wait_status(lambda s: s["tick"]["lateness_us"]["max"] > 0, 10, "a status after the hold")
     late = s["tick"]["lateness_us"]["max"]
     assert late >= 900000, "held for 1 s, the bus thread's lateness max is only %d us" % late
+
+
+COUNTER = """local driver = { name = "counter", version = "1", level = 0, io = { lamp = "do0" }, variables = { n = {} } }
+local n = 0
+function driver.tick(dev, inputs) n = n + 1; dev.vars.n = n end
+return driver
+"""
+
+
+def test_a_worker_stalled_by_a_dropped_machine_is_given_up_too(t):
+    """The board of a machine whose input is stalling its (only) worker
+    goes away: the machine is dropped at once, and the call it left behind
+    still holds the worker past its limit, so the worker is given up and a
+    machine that attaches afterwards runs on the spare."""
+    st = dict(settings("inputter"), driver_threads=1)
+    host = t.host(drivers=t.drivers(inputter=staller("inputter", "input"), counter=COUNTER), settings=st)
+    board = t.board("generic", "in-1", driver="inputter")
+    host.wait_running(["in-1"])
+    answers = {}
+
+    def operator():
+        answers["go"] = post(host, "/api/devices/in-1/input", t.token,
+                             json.dumps({"name": "go", "value": True}).encode())
+
+    op = threading.Thread(target=operator)
+    op.start()
+    host.wait_event("driver", "in-1", "stalling", timeout_s=10)  # said by input() as it begins to stall
+    board.kill()
+    host.wait_event("dropped", "in-1", timeout_s=10)
+    op.join(30)
+    assert not op.is_alive(), "the operator's input was never answered"
+    code, text = answers["go"]
+    assert code in (404, 502), "the input to a dropped machine was answered %d %s" % (code, text[:200])
+    e = host.wait_event("warning", None, "kept its worker past its limit", timeout_s=10)
+    assert "inputter" in e["text"], "the warning does not name the driver: %r" % e["text"]
+    t.board("generic", "c-1", driver="counter")
+    host.wait_status(lambda s: (host.device("c-1", s) or {}).get("variables", {}).get("n", 0) > 20, 10,
+                     "a new machine ticking on the spare worker")
