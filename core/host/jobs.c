@@ -495,8 +495,10 @@ int bus_job_release(struct vmac_bus *bus, struct machine *m, struct vmac_driver 
 	int expect = JOB_QUEUED, held = 0;
 	*drv = j->drv; /* read while the job cannot be disposed of: before it is given up */
 	*other = j->other;
-	if (bus->virt) {
-		atomic_store(&j->state, JOB_IDLE); /* no worker: a slow driver's call is done, unread */
+	if (bus->virt) { /* no worker: a slow driver's call is done, unread; a stalled one stalled() frees */
+		held = atomic_load(&j->state) == JOB_STALLED;
+		if (!held)
+			atomic_store(&j->state, JOB_IDLE);
 	} else if (atomic_compare_exchange_strong(&j->state, &expect, JOB_IDLE)) {
 		held = 0; /* no worker took it: it never runs */
 	} else if (expect == JOB_RUNNING) {
