@@ -205,5 +205,5 @@ def test_a_worker_stalled_by_a_dropped_machine_is_given_up_too(t):
     e = host.wait_event("warning", None, "kept its worker past its limit", timeout_s=10)
     assert "inputter" in e["text"], "the warning does not name the driver: %r" % e["text"]
     t.board("generic", "c-1", driver="counter")
-    host.wait_status(lambda s: (host.device("c-1", s) or {}).get("variables", {}).get("n", 0) > 20, 10,
+    host.wait_status(lambda s: ((host.device("c-1", s) or {}).get("variables", {}).get("n") or 0) > 20, 10,
                      "a new machine ticking on the spare worker")
