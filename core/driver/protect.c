@@ -79,22 +79,31 @@ void *drv_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 /* Count hook, every HOOK_EVERY instructions: the instruction budget and the
  * wall-clock budget. Once over, it raises on every later hook too, so a
  * driver's pcall cannot swallow the error and carry on. */
+/* Whether the call is over its budget (hooks counted so far, or the wall
+ * clock): once it is, it stays so, with the message why. */
+static int over_budget(struct vmac_driver *d)
+{
+	if (d->overrun)
+		return 1;
+	if (d->hooks > d->budget_hooks)
+		snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%llu instructions)",
+		         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
+	else if (d->deadline_ns && drv_mono_ns() > d->deadline_ns)
+		snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%lld us)",
+		         (long long)(d->budget_ns / 1000));
+	else
+		return 0;
+	d->overrun = 1;
+	return 1;
+}
+
 static void budget_hook(lua_State *L, lua_Debug *ar)
 {
 	struct vmac_driver *d = drv_of(L);
 	(void)ar;
-	if (!d->overrun) {
-		if (++d->hooks > d->budget_hooks) {
-			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%llu instructions)",
-			         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
-			d->overrun = 1;
-		} else if (d->deadline_ns && drv_mono_ns() > d->deadline_ns) {
-			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%lld us)",
-			         (long long)(d->budget_ns / 1000));
-			d->overrun = 1;
-		}
-	}
-	if (d->overrun)
+	if (!d->overrun)
+		d->hooks++;
+	if (over_budget(d))
 		luaL_error(L, "%s", d->overrun_msg);
 }
 
@@ -108,19 +117,9 @@ void drv_charge(lua_State *L, double steps)
 	struct vmac_driver *d = drv_of(L);
 	if (steps < CHARGE_STEPS || !d->in_driver)
 		return;
-	if (!d->overrun) {
+	if (!d->overrun)
 		d->hooks += (uint64_t)(steps / (STEPS_PER_INSTRUCTION * HOOK_EVERY));
-		if (d->hooks > d->budget_hooks) {
-			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%llu instructions)",
-			         (unsigned long long)(d->budget_hooks * HOOK_EVERY));
-			d->overrun = 1;
-		} else if (d->deadline_ns && drv_mono_ns() > d->deadline_ns) {
-			snprintf(d->overrun_msg, sizeof(d->overrun_msg), "time budget exceeded (%lld us)",
-			         (long long)(d->budget_ns / 1000));
-			d->overrun = 1;
-		}
-	}
-	if (d->overrun)
+	if (over_budget(d))
 		luaL_error(L, "%s", d->overrun_msg);
 }
 

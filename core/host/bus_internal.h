@@ -310,6 +310,8 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations);
 int bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m);
 void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
+void bus_post_code(struct vmac_bus *bus, enum vmac_event_code code, const struct machine *m, const char *version,
+                   int64_t version_id, const char *kind, const char *text);
 void bus_requests(struct vmac_bus *bus);
 void bus_commands(struct vmac_bus *bus);
 /* wait.c: the bus thread's wait and loop. bus_wake: what to_bus and the

@@ -345,8 +345,7 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
 	int64_t tag = vmac_driver_tag(stuck);
 	uint8_t *ckpt = j->ckpt;
-	struct vmac_bus_msg msg;
-	char why[VMAC_DRIVER_ERR_MAX];
+	char why[VMAC_DRIVER_ERR_MAX], text[VMAC_EVENT_TEXT];
 	int expect = JOB_RUNNING, w = atomic_load(&j->runner);
 	snprintf(version, sizeof(version), "%s", vmac_driver_version(stuck));
 	snprintf(why, sizeof(why), "%s still running after %.3g ms (its limit %.3g ms)%s%s", job_name(j->kind),
@@ -354,20 +353,11 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 	         call ? call : "");
 	if (!atomic_compare_exchange_strong(&j->state, &expect, JOB_STALLED))
 		return; /* it has just finished */
-	memset(&msg, 0, sizeof(msg));
-	msg.kind = VMAC_MSG_EVENT;
-	msg.code = VMAC_EVENT_STALLED;
-	msg.time_ns = now;
-	memcpy(msg.device, primary->ann.board, sizeof(msg.device));
-	memcpy(msg.driver, m->driver, sizeof(msg.driver));
-	memcpy(msg.version, version, sizeof(msg.version));
-	msg.version_id = tag;
-	snprintf(msg.event_kind, sizeof(msg.event_kind), "driver_error");
-	snprintf(msg.text, sizeof(msg.text),
+	snprintf(text, sizeof(text),
 	         "%s: driver %s %s stalled: %s; its worker is given up, and this version is not loaded again "
 	         "until a new one arrives",
 	         primary->ann.board, m->driver, version, why);
-	bus_post(bus, &msg);
+	bus_post_code(bus, VMAC_EVENT_STALLED, m, version, tag, "driver_error", text);
 	bus_rec_failure(bus, m, VMAC_REC_ERROR, why);
 	if (j->req >= 0) { /* the instances went with the worker: nothing to give back */
 		struct request *q = &bus->req[j->req];
@@ -379,18 +369,10 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 	if (m->prev && j->kind != JOB_ROLLBACK) {
 		/* On probation: the store goes back to the version before, which
 		 * the boards load when they announce themselves again. */
-		memset(&msg, 0, sizeof(msg));
-		msg.kind = VMAC_MSG_EVENT;
-		msg.code = VMAC_EVENT_ROLLED_BACK;
-		msg.time_ns = now;
-		memcpy(msg.device, primary->ann.board, sizeof(msg.device));
-		memcpy(msg.driver, m->driver, sizeof(msg.driver));
-		msg.version_id = tag;
-		snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
-		snprintf(msg.text, sizeof(msg.text),
+		snprintf(text, sizeof(text),
 		         "%s: driver %s %s stalled on probation; the version before it is active again",
 		         primary->ann.board, m->driver, version);
-		bus_post(bus, &msg);
+		bus_post_code(bus, VMAC_EVENT_ROLLED_BACK, m, version, tag, "rolled_back", text);
 	}
 	if (w >= 0)
 		bus_worker_retire(bus, w);

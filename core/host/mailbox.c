@@ -55,6 +55,25 @@ void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, c
 	bus_post(bus, &m);
 }
 
+/* An event the main thread acts on besides recording it (code: a version
+ * rolled back or stalled, version_id and version saying which). */
+void bus_post_code(struct vmac_bus *bus, enum vmac_event_code code, const struct machine *m, const char *version,
+                   int64_t version_id, const char *kind, const char *text)
+{
+	struct vmac_bus_msg msg;
+	memset(&msg, 0, sizeof(msg));
+	msg.kind = VMAC_MSG_EVENT;
+	msg.code = code;
+	msg.time_ns = bus_now(bus);
+	memcpy(msg.device, bus->dev[m->primary].ann.board, sizeof(msg.device));
+	memcpy(msg.driver, m->driver, sizeof(msg.driver));
+	snprintf(msg.version, sizeof(msg.version), "%s", version);
+	msg.version_id = version_id;
+	snprintf(msg.event_kind, sizeof(msg.event_kind), "%s", kind);
+	snprintf(msg.text, sizeof(msg.text), "%s", text);
+	bus_post(bus, &msg);
+}
+
 /* Input request slot i: refused now (answered), or waiting for its
  * machine's job, which answers it (jobs.c); with persist, only to a
  * persist = true param. */

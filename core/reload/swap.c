@@ -27,8 +27,7 @@ void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j)
 {
 	struct vmac_driver *failed = j->other, *prev = j->drv;
 	struct device *primary = &bus->dev[m->primary];
-	struct vmac_bus_msg msg;
-	char why[VMAC_REC_TEXT_MAX + 1];
+	char why[VMAC_REC_TEXT_MAX + 1], text[VMAC_EVENT_TEXT];
 	int64_t tag = vmac_driver_tag(failed);
 	uint32_t i;
 	m->prev = NULL;
@@ -41,18 +40,10 @@ void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j)
 	}
 	m->drv = prev;
 	bus_rec_swap(bus, m);
-	memset(&msg, 0, sizeof(msg));
-	msg.kind = VMAC_MSG_EVENT;
-	msg.time_ns = bus_now(bus);
-	memcpy(msg.device, primary->ann.board, sizeof(msg.device));
-	memcpy(msg.driver, m->driver, sizeof(msg.driver));
-	snprintf(msg.event_kind, sizeof(msg.event_kind), "rolled_back");
-	msg.code = VMAC_EVENT_ROLLED_BACK;
-	msg.version_id = tag;
-	snprintf(msg.text, sizeof(msg.text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
+	snprintf(text, sizeof(text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
 	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev),
 	         m->rollback_why);
-	bus_post(bus, &msg);
+	bus_post_code(bus, VMAC_EVENT_ROLLED_BACK, m, vmac_driver_version(failed), tag, "rolled_back", text);
 	bus_unload(bus, failed);
 	snprintf(why, sizeof(why), "rolled back: %s", m->rollback_why);
 	bus_rec_capture(bus, m, why); /* the failing version's last seconds; the machine runs on */

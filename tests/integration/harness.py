@@ -15,6 +15,7 @@ import signal
 import subprocess
 import threading
 import time
+import urllib.error
 import urllib.request
 
 # Relaxed timing: a slow machine must never drop a healthy board. Tests check
@@ -294,6 +295,19 @@ class Host(Proc):
     def last_event_seq(self):
         self.status()
         return max(self.events) if self.events else 0
+
+
+def post(host, path, token, data, content_type="application/json"):
+    """POST data to host's API with token: (HTTP status, the answer's text),
+    an error status included."""
+    req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method="POST")
+    req.add_header("Content-Type", content_type)
+    req.add_header("Authorization", "Bearer " + token)
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, r.read().decode()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read().decode()
 
 
 def describe(status):

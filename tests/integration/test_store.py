@@ -9,10 +9,8 @@ import random
 import shutil
 import subprocess
 import time
-import urllib.error
-import urllib.request
 
-from harness import Skip
+from harness import Skip, post
 
 RUNS = 200
 
@@ -44,17 +42,6 @@ def test_kill_9_during_writes_loses_nothing_acknowledged(t):
             run + 1, RUNS, seed, acked, c.stderr.strip())
         shutil.rmtree(state)
     assert acked_total > RUNS, "the writer hardly wrote anything (%d writes in %d runs)" % (acked_total, RUNS)
-
-
-def post(host, path, token, data, content_type="application/json"):
-    req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method="POST")
-    req.add_header("Content-Type", content_type)
-    req.add_header("Authorization", "Bearer " + token)
-    try:
-        with urllib.request.urlopen(req, timeout=60) as r:
-            return r.status, r.read().decode()
-    except urllib.error.HTTPError as e:
-        return e.code, e.read().decode()
 
 
 def test_a_full_disk_is_an_error_not_a_crash(t):
