@@ -42,9 +42,15 @@ same run on the same machine, reported as ratios.
             next to off in alternating rounds: value messages per second
             to a subscriber, tick lateness p99 on/off, host CPU, misses
             (mosquitto and python3-paho-mqtt, else SKIPPED)
+  workers   drivers on driver workers next to a vmacd that ran them on its
+            bus thread (--base-bin; tests/bench/workers.py): host CPU per
+            device per tick at 100 boards and 1 kHz, how the tick lateness
+            grows with drivers that burn CPU, the washer's driver on one
+            worker next to two (else SKIPPED)
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers]
+                [--base-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
@@ -396,7 +402,10 @@ def main():
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
-    p.add_argument("--only", default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt")
+    p.add_argument("--only",
+                   default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers")
+    p.add_argument("--base-bin", default=None,
+                   help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
     p.add_argument("--cpu-awake", choices=("true", "false"), default="true",
                    help="vmacd's cpu_awake where lateness is compared with cyclictest (default true: like for like)")
     p.add_argument("--max-boards", type=int, default=None,
@@ -468,6 +477,12 @@ def main():
         from ethring import ethring
         print("ethring: raw Ethernet's receive ring next to recvmmsg, %d s windows" % args.seconds, flush=True)
         results["ethring"] = ethring(args)
+
+    if "workers" in only:
+        from workers import workers
+        print("workers: drivers on driver workers next to --base-bin's vmacd, %d s windows" % args.seconds,
+              flush=True)
+        results["workers"] = workers(args)
 
     if "mqtt" in only:
         from mqtt_bench import mqtt
@@ -554,6 +569,9 @@ def report(r):
     if r.get("mqtt"):
         from mqtt_bench import report_mqtt
         report_mqtt(r["mqtt"])
+    if r.get("workers"):
+        from workers import report_workers
+        report_workers(r["workers"])
 
 
 if __name__ == "__main__":

@@ -61,14 +61,18 @@ def run_seconds(pid):
     return total / 1e9
 
 
-def fieldbus_kitchen(ctx, mode, boards, period_us):
-    """vmacd and one vmac-board --count `boards` (running benchprobe) on the
-    bus of `mode`, every board running; returns (host, board process).
-    Raises Skip when eth-cyclic cannot make its namespace."""
+def fieldbus_kitchen(ctx, mode, boards, period_us, driver=None):
+    """vmacd and one vmac-board --count `boards` (running benchprobe, or
+    driver: (name, source, {its host settings})) on the bus of `mode`, every
+    board running; returns (host, board process). Raises Skip when
+    eth-cyclic cannot make its namespace."""
+    name, source, extra = driver or ("benchprobe", BENCH_LUA, {})
+    source = source or BENCH_LUA
     settings = {"reply_deadline_us": period_us, "realtime": "true", "cpu_awake": cpu_awake(),
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": min(MAX_DEVICES_RANGE, max(MAX_DEVICES_DEFAULT, boards + 8))}
     settings.update(schedule_for(boards, period_us))
+    settings.update(extra)
     host_bus = board_bus = None
     wrapper = board_wrapper()
     if mode == "udp-unicast":
@@ -77,10 +81,10 @@ def fieldbus_kitchen(ctx, mode, boards, period_us):
         host_if, ns, board_if = ctx.eth_link()  # removed by ctx.cleanup(), whatever happens
         host_bus, board_bus = "eth:" + host_if, "eth:" + board_if
         wrapper = ("ip", "netns", "exec", ns) + wrapper
-    host = ctx.host(drivers=ctx.drivers(benchprobe=BENCH_LUA), settings=settings, bus=host_bus)
+    host = ctx.host(drivers=ctx.drivers(**{name: source}), settings=settings, bus=host_bus)
     # --late-us = the reply deadline: every line it prints is a reply the
     # board itself sent too late to be in time, whatever the host did.
-    board = ctx.board("generic", "b", count=boards, driver="benchprobe", wrapper=wrapper, bus=board_bus,
+    board = ctx.board("generic", "b", count=boards, driver=name, wrapper=wrapper, bus=board_bus,
                       extra=("--late-us", str(period_us)))
     wait_attached(host, boards, timeout_s=30 + boards / 50)
     return host, board
@@ -122,10 +126,10 @@ def fresh_status(host):
         time.sleep(0.005)  # until the next publication, at most 100 ms away
 
 
-def fieldbus_run(ctx, mode, boards, period_us, seconds):
+def fieldbus_run(ctx, mode, boards, period_us, seconds, driver=None):
     """`boards` boards served in `mode` for `seconds` of steady state: the
-    figures of that window."""
-    host, board = fieldbus_kitchen(ctx, mode, boards, period_us)
+    figures of that window (driver: as fieldbus_kitchen's)."""
+    host, board = fieldbus_kitchen(ctx, mode, boards, period_us, driver)
     before = fresh_status(host)
     late_mark = board.mark()
     cpu0, run0, bcpu0, t0 = cpu_seconds(host.pid), run_seconds(host.pid), proc_cpu(board.pid), time.monotonic()
@@ -158,6 +162,8 @@ def fieldbus_run(ctx, mode, boards, period_us, seconds):
         "devices_missed": sum(1 for d in after["devices"] if d["misses"]),
         "devices_missed_host": sum(1 for d in after["devices"] if d.get("misses_host")),
         "drops": c1["drops"] - c0["drops"],
+        "driver_late": (sum(d.get("driver_late", 0) for d in after["devices"])
+                        - sum(d.get("driver_late", 0) for d in before["devices"])),
         "late_replies_host": c1["late_replies"] - c0["late_replies"],
         "late_replies_board": len(late), "late_reply_example": late[0].text if late else None,
         "running_at_end": sum(1 for d in after["devices"] if d["state"] == "running"),
