@@ -23,7 +23,10 @@
 
 #define WORKER_PRIORITY 40 /* SCHED_FIFO, below the bus thread's 50 */
 #define WORKER_OUT_SLOTS 256
-#define PARAMS_EVERY_NS 100000000LL /* params copied out at most this often after ticks */
+#define PARAMS_EVERY_NS 100000000LL
+/* A machine moves off its worker only when that many jobs wait there: a
+ * move costs the next call a cold state on the other core. */
+#define MOVE_BACKLOG 4 /* params copied out at most this often after ticks */
 
 /* ---- running a job (any thread but the bus thread; inline in virtual mode) ---- */
 
@@ -402,7 +405,7 @@ int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 	int mi = (int)(m - bus->mach);
 	struct worker *w;
 	if (m->worker >= 0 && atomic_load(&bus->workers[m->worker].state) == W_ACTIVE &&
-	    backlog(&bus->workers[m->worker]) > 0) {
+	    backlog(&bus->workers[m->worker]) >= MOVE_BACKLOG) {
 		/* Its worker is busy and another sleeps with nothing to do: the
 		 * machine moves (a worker keeps nothing of a machine between jobs). */
 		int b = idle_worker(bus, m->worker);
