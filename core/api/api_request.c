@@ -7,16 +7,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../common/name.h"
 #include "http_internal.h"
 
 int http_valid_name(const char *s, size_t max)
 {
-	size_t n = 0;
-	for (; *s; s++, n++)
-		if (n >= max || !((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ||
-		                  *s == '-' || *s == '_' || *s == '.'))
-			return 0;
-	return n > 0;
+	return vmac_valid_name(s, max); /* core/common/name.h: never "." or ".." */
 }
 
 /* PREFIX NAME SUFFIX: NAME into name (at most len - 1 bytes, no slash, a

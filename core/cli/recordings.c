@@ -143,6 +143,14 @@ static int get(int argc, char **argv)
 }
 
 /* vmac recording to-test FILE: a test file that replays it. */
+/* Text into a Lua comment: on the comment's one line (control bytes,
+ * newlines above all, become spaces), whatever the recording says. */
+static void comment_text(const char *s)
+{
+	for (; *s; s++)
+		putchar((unsigned char)*s < 0x20 || *s == 0x7f ? ' ' : *s);
+}
+
 static int to_test(int argc, char **argv)
 {
 	struct vmac_recording rec;
@@ -173,11 +181,19 @@ static int to_test(int argc, char **argv)
 		return 2;
 	}
 	/* A long bracket no line of the recording can close (it is JSON:
-	 * "]" followed by "=" signs only inside strings, so use enough). */
-	printf("-- Made by vmac recording to-test from %s: machine %s, driver %s %s,\n-- recorded because: %s\n"
-	       "-- It replays the recording against the driver under test (docs/RECORDING.md).\n\n"
+	 * "]" followed by "=" signs only inside strings, so use enough). What
+	 * goes into the comments is kept to one line each; the machine and the
+	 * driver are names (vmac_recording_read refuses others), safe in the
+	 * test's name. */
+	printf("-- Made by vmac recording to-test from ");
+	comment_text(file);
+	printf(": machine %s, driver %s ", rec.machine, rec.driver);
+	comment_text(rec.version);
+	printf(",\n-- recorded because: ");
+	comment_text(rec.reason);
+	printf("\n-- It replays the recording against the driver under test (docs/RECORDING.md).\n\n"
 	       "test(\"%s replays as recorded (%s)\", function()\n\treplay [=======[\n",
-	       file, rec.machine, rec.driver, rec.version, rec.reason, rec.machine, rec.driver);
+	       rec.machine, rec.driver);
 	for (i = 0; i < len; i++)
 		if (text[i] == ']' && strncmp(text + i, "]=======]", 9) == 0) {
 			fprintf(stderr, "vmac: %s: holds the text that would end the test's string\n", file);

@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../common/name.h"
+
 static const char *const kind_names[] = {NULL, "attach", "param", "input", "level", "miss", "error", "drop", "swap"};
 
 const char *vmac_rec_kind_name(int kind)
@@ -297,6 +299,9 @@ int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, 
 	if (!r->machine[0] || !r->driver[0] || !json_is_array(boards) || json_array_size(boards) == 0 ||
 	    json_array_size(boards) > VMAC_REC_BOARDS)
 		FAIL("recording damaged: its header lacks the machine, the driver or its boards");
+	/* Names, never paths: vmac test --replay looks the driver up by it. */
+	if (!vmac_valid_name(r->machine, sizeof(r->machine) - 1) || !vmac_valid_name(r->driver, sizeof(r->driver) - 1))
+		FAIL("recording damaged: its machine or driver is not a name ([A-Za-z0-9._-], not starting with '.')");
 	json_array_foreach(boards, i, b)
 	{
 		copy_str(r->boards[i].name, sizeof(r->boards[i].name), json_object_get(b, "name"));

@@ -387,3 +387,21 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
     assert [v["state"] for v in body["versions"]] == ["rolled_back"], \
         "the store does not record the rollback once the deploy is over: %r" % body
     assert host.device("lamp-1", host.status())["driver_version"] == "1.0.0", "lamp-1 is not back on 1.0.0"
+
+
+def test_dot_names_are_no_drivers(t):
+    """'.' and '..' (and any name starting with a dot) are no driver's or
+    device's name: refused by the routes, nothing compiled or stored."""
+    from harness import post
+    host = t.host()
+    for name in ("..", ".", ".hidden"):
+        code, text = post(host, "/api/drivers/" + name, t.token, b"return {}", "text/x-lua")
+        assert code in (400, 404), "POST /api/drivers/%s answered %d %s" % (name, code, text[:200])
+        try:
+            host.get("/api/drivers/" + name)
+            raise AssertionError("GET /api/drivers/%s answered 200" % name)
+        except urllib.error.HTTPError as e:
+            assert e.code in (400, 404), "GET /api/drivers/%s answered %d" % (name, e.code)
+    versions = host.get("/api/drivers")
+    assert not any(d.get("name", "").startswith(".") for d in versions.get("drivers", [])), (
+        "a dot name was stored: %r" % versions)

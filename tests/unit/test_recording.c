@@ -552,6 +552,35 @@ START_TEST(a_recording_without_the_source_reads_without_one)
 }
 END_TEST
 
+/* A recording names a machine and a driver, never a path: vmac test
+ * --replay looks the driver up by its name. Each writes fine and is
+ * refused when read. */
+START_TEST(a_machine_or_driver_that_is_no_name_is_refused)
+{
+	static const char *const bad[] = {"..", ".", "../../etc/x", "a/b", ".hidden", "two words"};
+	struct vmac_recording rec;
+	char err[256];
+	size_t i, len;
+	for (i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+		int as_driver;
+		for (as_driver = 0; as_driver < 2; as_driver++) {
+			struct vmac_recorder *r = recorded(3);
+			char *text;
+			snprintf(as_driver ? r->driver : r->machine, sizeof(r->driver), "%s", bad[i]);
+			text = vmac_recording_write(r, SOURCE, strlen(SOURCE), 1795000000.0, &len);
+			ck_assert_ptr_nonnull(text);
+			err[0] = 0;
+			ck_assert_msg(vmac_recording_read(text, len, &rec, err, sizeof(err)) == -1,
+			              "a recording whose %s is '%s' was read", as_driver ? "driver" : "machine",
+			              bad[i]);
+			ck_assert_msg(strstr(err, "not a name") != NULL, "the refusal does not say why: %s", err);
+			free(text);
+			vmac_recorder_free(r);
+		}
+	}
+}
+END_TEST
+
 int main(void)
 {
 	Suite *s = suite_create("recording");
@@ -569,6 +598,7 @@ int main(void)
 	tcase_add_test(tc, every_flipped_byte_is_refused);
 	tcase_add_test(tc, a_file_that_is_no_recording_or_of_another_format_is_refused);
 	tcase_add_test(tc, a_recording_without_the_source_reads_without_one);
+	tcase_add_test(tc, a_machine_or_driver_that_is_no_name_is_refused);
 	suite_add_tcase(s, tc);
 	sr = srunner_create(s);
 	srunner_run_all(sr, CK_NORMAL);
