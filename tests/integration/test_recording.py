@@ -6,6 +6,7 @@ the recorded driver or another one, and `vmac recording to-test FILE` turns
 it into a test file. A damaged file is refused with the reason, and the
 store keeps only the newest recordings_max."""
 
+import hashlib
 import json
 import os
 import re
@@ -203,6 +204,33 @@ def test_a_driver_failing_on_a_rare_input_becomes_a_failing_test(t):
     assert rc == 1, "the recording's test does not fail against the buggy driver (exit %d): %s%s" % (rc, out, err)
     assert "FAILS at tick %d" % failed_tick in out + err, (
         "the recording's test does not fail at tick %d: %s%s" % (failed_tick, out, err))
+
+    # A crafted recording, its hash made again: a reason with a line of
+    # code in it stays in the test's comment; a driver that is a path is
+    # refused by both readers.
+    def crafted(**header_fields):
+        with open(path, "rb") as f:
+            lines = f.read().split(b"\n")
+        head = json.loads(lines[0])
+        head.update(header_fields)
+        lines[0] = json.dumps(head, separators=(",", ":")).encode()
+        end = next(i for i, l in enumerate(lines) if l.startswith(b'{"end"'))
+        body = b"\n".join(lines[:end]) + b"\n"
+        tail = json.loads(lines[end])
+        tail["end"]["blake2b"] = hashlib.blake2b(body, digest_size=32).hexdigest()
+        return write_bytes(t, "crafted.rec", body + json.dumps(tail, separators=(",", ":")).encode() + b"\n")
+
+    injected = os.path.join(t.logdir, "injected_test.lua")
+    rc, _, err = vmac(t, "recording", "to-test", crafted(reason="x\nerror('injected')\n--"), stdout_file=injected)
+    assert rc == 0, "to-test of a recording with a multi-line reason failed (exit %d): %s" % (rc, err)
+    with open(injected) as f:
+        code = [l for l in f.read().split("replay [")[0].splitlines() if l.strip() and not l.startswith("--")]
+    assert all(l.startswith("test(") for l in code), "the recording's reason became code: %r" % code
+    bad = crafted(driver="../../x")
+    for argv in (("test", "--replay", bad), ("recording", "to-test", bad)):
+        rc, out, err = vmac(t, *argv)
+        assert rc == 2 and "not a name" in out + err, "vmac %s took a recording whose driver is a path: %d %s%s" % (
+            argv[0], rc, out, err)
 
 
 WASHER_SETTINGS = {"driver.washer.param.time_scale": "0.02", "driver.washer.param.program": "quick"}
