@@ -58,7 +58,7 @@ PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
                 firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
 # The driver sandbox (core/driver/internal.h says which file owns what) and
 # the bounded file reader (core/common/file.c) every whole-file read uses.
-DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/manifest.c core/driver/load.c \
+DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/bounded.c core/driver/manifest.c core/driver/load.c \
                 core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c core/common/file.c
 HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
                 core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/wait.c core/host/realtime.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/jobs.c core/host/workers.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \

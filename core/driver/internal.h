@@ -6,7 +6,9 @@
  *               the budget hook, the one guarded call of driver code, and
  *               drv_protect() around every piece of the host's own work
  *   sandbox.c   the environment a driver gets, built from the one
- *               allow-list, and the bounded library functions
+ *               allow-list
+ *   bounded.c   the bounded library functions: each priced before it
+ *               runs, refused past its bound
  *   manifest.c  reading and checking the manifest; its JSON description
  *   load.c      a driver file into a new state; dev, its methods, the keys
  *   instance.c  a running machine: boards, level, attach/detach, tick I/O,
@@ -162,6 +164,9 @@ int drv_protect(struct vmac_driver *d, host_work fn, void *args, char *err, size
 void drv_protect_quiet(struct vmac_driver *d, host_work fn, void *args);
 void drv_raw_getfield(lua_State *L, int i, const char *k);
 void drv_raw_setfield(lua_State *L, int i, const char *k);
+
+/* bounded.c: put the bounded functions of lib into the table on top: [-0, +0]. */
+void drv_wrap_bounded(lua_State *L, const char *lib);
 
 /* sandbox.c */
 void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg);

@@ -6,7 +6,7 @@
  * what it holds and raises outside protection, which no driver can do. Any of these
  * used to end the process (LuaJIT's panic) or hang it; here each must come
  * back as an error of that driver. At the end, the cost model of the
- * bounded library functions (core/driver/sandbox.c): calls that would stall
+ * bounded library functions (core/driver/bounded.c): calls that would stall
  * the bus are refused, ordinary ones run, and d->lib_call names the call. */
 #include <check.h>
 
@@ -314,7 +314,7 @@ START_TEST(an_unprotected_error_stops_the_driver_not_the_process)
 }
 END_TEST
 
-/* The bounded library functions (core/driver/sandbox.c): a call whose
+/* The bounded library functions (core/driver/bounded.c): a call whose
  * worst case is over PATTERN_STEPS_MAX steps is refused before it runs,
  * naming the function, each for the work the old cost model priced at
  * nothing; the ordinary calls next to them still run. S is 64 KiB, the
