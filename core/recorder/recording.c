@@ -263,26 +263,12 @@ static int read_event(json_t *j, struct vmac_rec_event *e)
 	return 0;
 }
 
-int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, char *err, size_t errlen)
+/* The header line's fields (j, a vmac-recording object) into r: 0, or -1
+ * with err (what r holds so far is freed by the caller). */
+static int read_header(json_t *j, struct vmac_recording *r, char *err, size_t errlen)
 {
-	const char *p = text, *end = text + len, *nl;
-	json_t *j = NULL, *boards, *b;
-	json_error_t je;
-	size_t lineno = 1, cap = 0, i;
-	int ended = 0;
-
-	memset(r, 0, sizeof(*r));
-	nl = memchr(p, '\n', (size_t)(end - p));
-	/* The header holds the driver's source: a file cut short is often cut in it. */
-	if (!nl && len > 0 &&
-	    memcmp(text, HEADER_START, len < sizeof(HEADER_START) - 1 ? len : sizeof(HEADER_START) - 1) == 0)
-		FAIL("recording truncated: its header line has no end");
-	if (!nl)
-		FAIL(len ? "not a vmac recording (no header line)" : "not a vmac recording (empty)");
-	j = json_loadb(p, (size_t)(nl - p), 0, &je);
-	if (!json_is_object(j) || !json_is_string(json_object_get(j, "format")) ||
-	    strcmp(json_string_value(json_object_get(j, "format")), "vmac-recording") != 0)
-		FAIL("not a vmac recording (line 1 is not its header)");
+	json_t *boards, *b;
+	size_t i;
 	if (json_integer_value(json_object_get(j, "version")) != VMAC_RECORDING_FORMAT)
 		FAIL("recording in format %lld, this vmac reads %d",
 		     (long long)json_integer_value(json_object_get(j, "version")), VMAC_RECORDING_FORMAT);
@@ -325,6 +311,33 @@ int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, 
 			FAIL("recording damaged: its header's state is not a time and hex data");
 		r->state_t_ns = json_integer_value(json_object_get(st, "t"));
 	}
+	return 0;
+fail:
+	return -1;
+}
+
+int vmac_recording_read(const char *text, size_t len, struct vmac_recording *r, char *err, size_t errlen)
+{
+	const char *p = text, *end = text + len, *nl;
+	json_t *j = NULL;
+	json_error_t je;
+	size_t lineno = 1, cap = 0;
+	int ended = 0;
+
+	memset(r, 0, sizeof(*r));
+	nl = memchr(p, '\n', (size_t)(end - p));
+	/* The header holds the driver's source: a file cut short is often cut in it. */
+	if (!nl && len > 0 &&
+	    memcmp(text, HEADER_START, len < sizeof(HEADER_START) - 1 ? len : sizeof(HEADER_START) - 1) == 0)
+		FAIL("recording truncated: its header line has no end");
+	if (!nl)
+		FAIL(len ? "not a vmac recording (no header line)" : "not a vmac recording (empty)");
+	j = json_loadb(p, (size_t)(nl - p), 0, &je);
+	if (!json_is_object(j) || !json_is_string(json_object_get(j, "format")) ||
+	    strcmp(json_string_value(json_object_get(j, "format")), "vmac-recording") != 0)
+		FAIL("not a vmac recording (line 1 is not its header)");
+	if (read_header(j, r, err, errlen) != 0)
+		goto fail;
 	json_decref(j);
 	j = NULL;
 	for (p = nl + 1; p < end; p = nl + 1) {
