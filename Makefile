@@ -1,4 +1,8 @@
-# vmac: one Makefile, meant to be read top to bottom.
+# vmac: the build, meant to be read top to bottom. Each module's fragment
+# (core/*/module.mk, firmware/module.mk) says what it is, what it uses and
+# what it links; tests/unit/unit.mk, tests/fuzz/fuzz.mk and
+# firmware/mcu/lm3s6965/mcu.mk hold the unit tests', the fuzzers' and the
+# Cortex-M3 firmware's rules.
 #
 #   make            build build/bin/{vmacd,vmac,vmac-board}
 #   make firmware   the board firmware for a Cortex-M3 (LM3S6965): build/firmware/vmac-board-lm3s6965.{elf,bin}
@@ -38,12 +42,9 @@ BENCH_DEBS := rt-tests
 
 PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
-PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lev -lpthread -lm
-# vmacd links the MQTT client (core/mqtt/, docs/MQTT.md), and protobuf-c for Sparkplug B; vmac links
-# libmosquitto alone, for `vmac site` (core/cli/site.c).
-MQTT_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto) \
-             $(shell pkg-config --libs libprotobuf-c 2>/dev/null || echo -lprotobuf-c)
-SITE_LIBS  = $(shell pkg-config --libs libmosquitto 2>/dev/null || echo -lmosquitto)
+# The fuzz harnesses and benchmarks link these; programs and unit tests link
+# what their modules' fragments (MODULE_LIBS) name.
+PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lpthread -lm
 
 # Strict warnings everywhere. -Wno-format-truncation: snprintf truncation
 # into fixed buffers is the intended behaviour (names and texts are capped).
@@ -54,36 +55,48 @@ PORTABLE_CFLAGS = -std=c99 -pedantic $(WARN) $(CFLAGS) $(SAN)
 HOST_CFLAGS     = -std=c11 -D_GNU_SOURCE $(WARN) $(CFLAGS) $(SAN) $(PKG_CFLAGS)
 LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 
-PORTABLE_SRC := core/proto/proto.c firmware/board.c firmware/plant.c \
-                firmware/plants/washer.c firmware/plants/dishwasher.c firmware/plants/lights.c firmware/plants/generic.c
-# The driver sandbox (core/driver/internal.h says which file owns what) and
-# the bounded file reader (core/common/file.c) every whole-file read uses.
-DRIVER_SRC   := core/driver/protect.c core/driver/sandbox.c core/driver/bounded.c core/driver/manifest.c core/driver/load.c \
-                core/driver/instance.c core/driver/takeover.c core/driver/checkpoint.c core/common/file.c
-HOST_SRC     := core/common/paths.c core/common/addr.c core/transport/transport.c core/transport/transport_udp.c \
-                core/transport/transport_eth.c $(DRIVER_SRC) core/host/bus.c core/host/wait.c core/host/realtime.c core/host/devices.c core/host/mailbox.c core/host/status.c core/host/jobs.c core/host/workers.c core/host/checkpoint.c core/host/record.c core/recorder/recorder.c core/recorder/recording.c core/reload/swap.c core/host/config.c core/reload/deploy.c \
-                core/host/events.c core/host/hist.c core/reload/loader.c core/host/ring.c core/api/http.c core/api/api_request.c core/api/api_devices.c core/api/api_drivers.c core/api/api_events.c core/api/api_recordings.c core/api/api_site.c core/mqtt/site.c core/api/console.c core/sched/sched.c core/sched/search.c \
-                core/store/store.c core/store/store_checkpoint.c core/store/store_recording.c
-# vmacd's MQTT client (core/mqtt/mqtt_internal.h says which file owns what).
-MQTT_SRC     := core/mqtt/mqtt_settings.c core/mqtt/mqtt_client.c core/mqtt/mqtt_devices.c core/mqtt/mqtt_native.c \
-                core/mqtt/mqtt_ha.c core/mqtt/mqtt_sparkplug.c core/mqtt/mqtt_site.c
-# vmac test: the host core and the board firmware on one virtual clock.
-VTEST_SRC    := core/vtest/world.c core/vtest/vtest.c core/vtest/replay.c
+# ---- the layers (docs/ARCHITECTURE.md) ----
+# Each module is a folder with a make fragment (module.mk: what it is, what
+# it uses, the libraries it needs) and is built as one static archive,
+# build/lib/libMODULE.a. MODULES lists them top to bottom: a module may use
+# the ones after it, never one before. Programs and tests link archives in
+# this order, each once, and scripts/check-layers.py reads every archive's
+# symbols (nm) and every include before anything links: an arrow upward is
+# a build error.
+MODULES := api mqtt vtest reload host loader config driver transport store recorder board sched proto common
+MODULE_DIR = $(if $(filter board,$(1)),firmware,core/$(1))
+pkg_libs = $(shell pkg-config --libs $(1) 2>/dev/null)
 OBJ = $(BUILD)/obj
+LIB = $(BUILD)/lib
+include $(foreach m,$(MODULES),$(call MODULE_DIR,$(m))/module.mk)
 
-portable_obj = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
-driver_obj   = $(DRIVER_SRC:%.c=$(OBJ)/%.o)
-host_obj     = $(HOST_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/ui_assets.o
-vtest_obj    = $(VTEST_SRC:%.c=$(OBJ)/%.o)
-mqtt_obj     = $(MQTT_SRC:%.c=$(OBJ)/%.o) $(OBJ)/gen/sparkplug_b.pb-c.o
+# A module's sources: its folder's .c files (board names its own).
+$(foreach m,$(filter-out board,$(MODULES)),$(eval $(m)_SRC ?= $$(sort $$(wildcard core/$(m)/*.c))))
+$(foreach m,$(MODULES),$(eval $(m)_OBJ = $$($(m)_SRC:%.c=$$(OBJ)/%.o) $$($(m)_EXTRA)))
+
+define archive_rule
+$(LIB)/lib$(1).a: $$($(1)_OBJ)
+	@mkdir -p $$(dir $$@)
+	@rm -f $$@ && $$(AR) rcs $$@ $$^
+endef
+$(foreach m,$(MODULES),$(eval $(call archive_rule,$(m))))
+
+# down_from(M): module M and every module below it, in link order;
+# archives(Ms) their archives; libs_of(Ms) the libraries they need.
+down_from = $(strip $(eval _on :=)$(foreach x,$(MODULES),$(if $(filter $(1),$(x)),$(eval _on := y))$(if $(_on),$(x))))
+archives  = $(foreach m,$(1),$(LIB)/lib$(m).a)
+libs_of   = $(sort $(foreach m,$(1),$($(m)_LIBS)))
+
+# Every archive's symbols and every include checked against MODULES.
+$(BUILD)/layers.ok: scripts/check-layers.py $(call archives,$(MODULES))
+	@python3 scripts/check-layers.py --lib $(LIB) --modules "$(MODULES)" && touch $@
+
+# The board firmware and the wire codec are portable C99 (no heap, no OS
+# header): the same files build for the Cortex-M3 (firmware/mcu/lm3s6965/mcu.mk).
+PORTABLE_SRC := $(proto_SRC) $(board_SRC)
+portable_obj  = $(PORTABLE_SRC:%.c=$(OBJ)/%.o)
 
 BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
-UNIT_TESTS := $(BUILD)/tests/test_proto $(BUILD)/tests/test_proto_reject $(BUILD)/tests/test_board $(BUILD)/tests/test_plant \
-              $(BUILD)/tests/test_host \
-              $(BUILD)/tests/test_driver $(BUILD)/tests/test_isolation $(BUILD)/tests/test_sched $(BUILD)/tests/test_store \
-              $(BUILD)/tests/test_proto_v2 $(BUILD)/tests/test_cyclic $(BUILD)/tests/test_board_v2 $(BUILD)/tests/test_board_cyclic \
-              $(BUILD)/tests/test_transport $(BUILD)/tests/test_checkpoint $(BUILD)/tests/test_recording
-
 
 .PHONY: format format-check test-build asan-build
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz fuzz test-integration test-ui test-asan bench clean
@@ -122,221 +135,34 @@ $(OBJ)/gen/sparkplug_b.pb-c.o: $(SPB_GEN).c $(SPB_GEN).h
 $(OBJ)/core/mqtt/mqtt_sparkplug.o: $(SPB_GEN).h
 $(OBJ)/core/mqtt/mqtt_sparkplug.o: HOST_CFLAGS += -I$(BUILD)/gen
 
-$(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(mqtt_obj) $(host_obj) $(portable_obj)
+# link(OBJECTS, MODULES, LIBS): a program or test from its own objects and
+# the archives of MODULES, in layer order; --as-needed keeps a library out
+# of a program that uses none of it (vmac has no HTTP server in it).
+in_order = $(filter $(1),$(MODULES))
+define link
 	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS) $(MQTT_LIBS)
+	$(CC) $(1) $(call archives,$(call in_order,$(2))) -o $@ $(LDFLAGS_ALL) -Wl,--as-needed \
+		$(call libs_of,$(2)) $(3)
+endef
 
-$(BUILD)/bin/vmac: $(OBJ)/core/cli/vmac.o $(OBJ)/core/cli/token.o $(OBJ)/core/cli/client.o \
-                   $(OBJ)/core/cli/console.o $(OBJ)/core/cli/events.o $(OBJ)/core/cli/reload.o $(OBJ)/core/cli/command.o $(OBJ)/core/cli/recordings.o $(OBJ)/core/cli/lint.o \
-                   $(OBJ)/core/cli/site.o $(OBJ)/core/mqtt/mqtt_settings.o \
-                   $(vtest_obj) $(host_obj) $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS) $(SITE_LIBS)
+# vmacd: every module; vmac: every module below the HTTP API (its commands,
+# `vmac test`, `vmac site`); vmac-board: the board and the transports.
+VMACD_MODULES      := $(MODULES)
+VMAC_MODULES       := $(call down_from,mqtt)
+VMAC_BOARD_MODULES := transport board proto common
+VMAC_OBJ           := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/cli/*.c))
+VMAC_BOARD_OBJ     := $(patsubst %.c,$(OBJ)/%.o,$(wildcard firmware/posix/*.c))
 
-$(BUILD)/bin/vmac-board: $(OBJ)/firmware/posix/main.o $(OBJ)/firmware/posix/boards.o $(OBJ)/firmware/posix/dispatch.o \
-                          $(OBJ)/core/transport/transport.o $(OBJ)/core/transport/transport_udp.o \
-                          $(OBJ)/core/transport/transport_eth.o $(OBJ)/core/common/addr.o \
-                          $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) -lm
+$(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(call archives,$(VMACD_MODULES)) $(BUILD)/layers.ok
+	$(call link,$(OBJ)/core/vmacd/main.o,$(VMACD_MODULES),-lev)
 
-# ---- the board firmware on a microcontroller ----
-# The same portable files (PORTABLE_SRC, unchanged) on a Cortex-M3, the TI
-# Stellaris LM3S6965 (QEMU's lm3s6965evb), with its HAL in MCU_DIR; picolibc
-# for memcpy and the plants' exp/expm1/floor, double precision in software
-# (the M3 has no FPU). docs/BOARD.md, "Firmware on a microcontroller".
-MCU_CC      := arm-none-eabi-gcc
-MCU_DIR     := firmware/mcu/lm3s6965
-MCU_ARCH    := -mcpu=cortex-m3 -mthumb -mfloat-abi=soft --specs=picolibc.specs --picolibc-buildtype=release
-MCU_CFLAGS  := $(MCU_ARCH) -std=c99 -pedantic $(WARN) -Os -g -ffunction-sections -fdata-sections
-MCU_SRC     := $(PORTABLE_SRC) $(MCU_DIR)/startup.c $(MCU_DIR)/clock.c $(MCU_DIR)/uart.c $(MCU_DIR)/enet.c \
-               $(MCU_DIR)/config.c $(MCU_DIR)/main.c
-mcu_obj     = $(MCU_SRC:%.c=$(OBJ)/mcu/%.o)
-FIRMWARE    = $(BUILD)/firmware/vmac-board-lm3s6965
-# The tests boot the firmware in QEMU; without the cross compiler they say SKIPPED.
-FIRMWARE_IF_TOOLS = $(if $(shell command -v $(MCU_CC)),$(FIRMWARE).elf $(FIRMWARE).bin)
+$(BUILD)/bin/vmac: $(VMAC_OBJ) $(call archives,$(VMAC_MODULES)) $(BUILD)/layers.ok
+	$(call link,$(VMAC_OBJ),$(VMAC_MODULES),$(call pkg_libs,libcurl libmosquitto jansson))
 
-$(mcu_obj): $(OBJ)/mcu/%.o: %.c
-	@mkdir -p $(dir $@)
-	$(MCU_CC) $(MCU_CFLAGS) -MMD -MP -c $< -o $@
+$(BUILD)/bin/vmac-board: $(VMAC_BOARD_OBJ) $(call archives,$(VMAC_BOARD_MODULES)) $(BUILD)/layers.ok
+	$(call link,$(VMAC_BOARD_OBJ),$(VMAC_BOARD_MODULES))
 
-$(FIRMWARE).elf: $(mcu_obj) $(MCU_DIR)/lm3s6965.ld
-	@mkdir -p $(dir $@)
-	$(MCU_CC) $(MCU_ARCH) -nostartfiles -T $(MCU_DIR)/lm3s6965.ld -Wl,--gc-sections -Wl,-Map=$(FIRMWARE).map \
-		$(mcu_obj) -lm -o $@
-
-$(FIRMWARE).bin: $(FIRMWARE).elf
-	arm-none-eabi-objcopy -O binary $< $@
-
-# Flash: code, constants and the initial values of .data; RAM: .data, .bss
-# and the stack (lm3s6965.ld), all of it, no heap.
-firmware: $(FIRMWARE).elf $(FIRMWARE).bin
-	@arm-none-eabi-size $(FIRMWARE).elf
-	@stack=$$(arm-none-eabi-size -A $(FIRMWARE).elf | awk '$$1 == ".stack" { print $$2 }'); \
-	arm-none-eabi-size $(FIRMWARE).elf | awk -v stack=$$stack 'NR == 2 { \
-		printf "firmware: %s.elf: flash %d bytes (%.1f KiB), RAM %d bytes (%.1f KiB, %d of them stack)\n", \
-		"$(FIRMWARE)", $$1 + $$2, ($$1 + $$2) / 1024, $$2 + $$3, ($$2 + $$3) / 1024, stack }'
-
-# The kitchen with its boards in QEMU on raw Ethernet (root: tap devices, a bridge).
-run-qemu: deps
-	@$(MAKE) --no-print-directory all firmware
-	@exec ./scripts/run-qemu-kitchen.sh $(BUILD)/bin $(FIRMWARE).elf
-
-# ---- tests ----
-CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
-
-$(BUILD)/tests/test_proto: $(OBJ)/tests/unit/test_proto.o $(OBJ)/core/proto/proto.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
-
-$(BUILD)/tests/test_board: $(OBJ)/tests/unit/test_board.o $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
-
-$(BUILD)/tests/test_plant: $(OBJ)/tests/unit/test_plant.o $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
-
-$(BUILD)/tests/test_proto_reject: $(OBJ)/tests/unit/test_proto_reject.o $(OBJ)/core/proto/proto.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
-
-$(BUILD)/tests/test_proto_v2: $(OBJ)/tests/unit/test_proto_v2.o $(OBJ)/core/proto/proto.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
-
-$(BUILD)/tests/test_cyclic: $(OBJ)/tests/unit/test_cyclic.o $(OBJ)/core/proto/proto.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
-
-$(BUILD)/tests/test_board_v2: $(OBJ)/tests/unit/test_board_v2.o $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
-
-$(BUILD)/tests/test_board_cyclic: $(OBJ)/tests/unit/test_board_cyclic.o $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) -lm
-
-$(BUILD)/tests/test_host: $(OBJ)/tests/unit/test_host.o $(host_obj) $(portable_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
-
-$(BUILD)/tests/test_driver: $(OBJ)/tests/unit/test_driver.o $(driver_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
-
-# White-box: reaches the driver's insides (core/driver/internal.h).
-$(BUILD)/tests/test_isolation: $(OBJ)/tests/unit/test_isolation.o $(driver_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
-
-$(BUILD)/tests/test_sched: $(OBJ)/tests/unit/test_sched.o $(OBJ)/core/sched/sched.o $(OBJ)/core/sched/search.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
-
-$(BUILD)/tests/test_store: $(OBJ)/tests/unit/test_store.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
-
-# Checkpoints: dev.state through the driver's encoder and decoder, and the
-# store's table of them (white-box: core/driver/internal.h).
-$(BUILD)/tests/test_checkpoint: $(OBJ)/tests/unit/test_checkpoint.o $(driver_obj) $(OBJ)/core/store/store.o \
-                                $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
-
-# The flight recorder's rings and its recordings as files.
-$(BUILD)/tests/test_recording: $(OBJ)/tests/unit/test_recording.o $(OBJ)/core/recorder/recorder.o \
-                               $(OBJ)/core/recorder/recording.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS) $(PKG_LIBS)
-
-# The transports; the raw-Ethernet round trip runs over a veth pair in a
-# network namespace of its own (root), else it is SKIPPED into $(SKIPPED).
-TRANSPORT_OBJ := $(OBJ)/core/transport/transport.o $(OBJ)/core/transport/transport_udp.o \
-                 $(OBJ)/core/transport/transport_eth.o $(OBJ)/core/common/addr.o $(OBJ)/core/proto/proto.o
-$(BUILD)/tests/test_transport: $(OBJ)/tests/unit/test_transport.o $(TRANSPORT_OBJ)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(CHECK_LIBS)
-
-# The stdlib's Lua tests, each case in a real driver sandbox (tests/lua/run.c;
-# white-box: core/driver/internal.h).
-$(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o $(driver_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
-
-# The store killed mid-write (tests/integration/test_store.py).
-$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(OBJ)/core/store/store.o $(OBJ)/core/store/store_checkpoint.o $(OBJ)/core/store/store_recording.o
-	@mkdir -p $(dir $@)
-	$(CC) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
-
-# ---- fuzzing (docs/TESTING.md, "Fuzzing") ----
-# One libFuzzer harness per parser, tests/fuzz/fuzz_NAME.c, its seeds in
-# tests/fuzz/corpus-NAME/ (and a dictionary tests/fuzz/NAME.dict where one
-# helps). Everything a harness links is built again with clang, libFuzzer's
-# coverage and ASan+UBSan, under $(BUILD)/fuzz/obj; what the fuzzer finds
-# goes to $(BUILD)/fuzz/work-NAME, never to the committed seeds.
-FUZZ_TARGETS := proto config console manifest values http checkpoint
-FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=all
-FUZZ_CFLAGS   = -std=c11 -D_GNU_SOURCE -g -O2 -fno-omit-frame-pointer $(WARN) -Wno-unknown-warning-option $(FUZZ_SAN) \
-                -fsanitize=fuzzer-no-link $(PKG_CFLAGS)
-FUZZ_LINK     = clang $(FUZZ_SAN) -fsanitize=fuzzer $^ -o $@
-FOBJ          = $(BUILD)/fuzz/obj
-fuzz_obj      = $(1:%.c=$(FOBJ)/%.o)
-
-$(FOBJ)/%.o: %.c
-	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -MMD -MP -c $< -o $@
-
-# The arena is the harnesses' heap, and fuzz_hostfiles.c the manifest
-# target's reader and compiler of the host's own Lua files, not code under
-# test: no coverage of them.
-$(FOBJ)/tests/fuzz/fuzz_arena.o $(FOBJ)/tests/fuzz/fuzz_hostfiles.o: $(FOBJ)/%.o: %.c
-	@mkdir -p $(dir $@)
-	clang $(filter-out -fsanitize=fuzzer-no-link,$(FUZZ_CFLAGS)) -MMD -MP -c $< -o $@
-
-# The wire codec and the board (portable C99).
-$(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c firmware/board.c
-	@mkdir -p $(dir $@)
-	clang -std=c99 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
-
-# The config file and key=value settings (vmac_config_load/set/check).
-$(BUILD)/fuzz/fuzz_config: $(call fuzz_obj,tests/fuzz/fuzz_config.c core/host/config.c core/common/addr.c core/common/file.c \
-                            core/transport/transport.c core/transport/transport_udp.c core/transport/transport_eth.c \
-                            core/proto/proto.c)
-	$(FUZZ_LINK) $(PKG_LIBS)
-
-# The line console's grammar (core/api/console.c), the host behind fakes.
-$(BUILD)/fuzz/fuzz_console: $(call fuzz_obj,tests/fuzz/fuzz_console.c core/api/console.c)
-	$(FUZZ_LINK)
-
-# A driver's source through load and manifest validation, then one run.
-# The stdlib's and the programmes' files read and compiled once
-# (fuzz_hostfiles.c wraps vmac_read_file and luaL_loadbufferx).
-$(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c tests/fuzz/fuzz_arena.c tests/fuzz/fuzz_hostfiles.c \
-                              $(DRIVER_SRC) core/api/api_request.c core/api/console.c)
-	$(FUZZ_LINK) -Wl,--wrap=vmac_read_file,--wrap=luaL_loadbufferx $(PKG_LIBS)
-
-# Lua values to outputs, variables and params and back (core/driver/instance.c).
-$(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c tests/fuzz/fuzz_arena.c $(DRIVER_SRC))
-	$(FUZZ_LINK) $(PKG_LIBS)
-
-# The HTTP API's routing, request bodies and arguments, and the console's
-# body (core/api/api_request.c), no sockets.
-$(BUILD)/fuzz/fuzz_http: $(call fuzz_obj,tests/fuzz/fuzz_http.c core/api/api_request.c core/api/console.c)
-	$(FUZZ_LINK) $(PKG_LIBS)
-
-# A checkpoint of dev.state offered to a driver (core/driver/checkpoint.c).
-$(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c tests/fuzz/fuzz_arena.c $(DRIVER_SRC))
-	$(FUZZ_LINK) $(PKG_LIBS)
-
-FUZZ_BINS := $(FUZZ_TARGETS:%=$(BUILD)/fuzz/fuzz_%)
-
-# Every target FUZZ_JOBS processes at once (default: one per CPU), then the
-# corpora of the Lua targets again in fresh sandboxes: tests/fuzz/run.sh.
-FUZZ_JOBS ?= $(shell nproc 2>/dev/null || echo 1)
-FUZZ_SECONDS ?= 60
-FUZZ_TEST_SECONDS ?= 4
+include firmware/mcu/lm3s6965/mcu.mk tests/unit/unit.mk tests/fuzz/fuzz.mk
 
 deps:
 	@if ! command -v dpkg-query >/dev/null; then \
@@ -440,21 +266,16 @@ test: deps
 		echo "################################################################################"; \
 	else echo "make test: every suite passed"; fi
 
-$(BUILD)/bench/bare_loop: tests/bench/bare_loop.c $(OBJ)/core/transport/transport.o $(OBJ)/core/transport/transport_udp.o \
-                          $(OBJ)/core/transport/transport_eth.o $(OBJ)/core/common/addr.o \
-                          $(OBJ)/core/proto/proto.o
-	@mkdir -p $(dir $@)
-	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL)
+$(BUILD)/bench/bare_loop: $(OBJ)/tests/bench/bare_loop.o $(call archives,transport proto common)
+	$(call link,$<,transport proto common)
 
 # How late a real-time thread wakes, by the way it waits (tests/bench/wakeup.c).
-$(BUILD)/bench/wakeup: tests/bench/wakeup.c
-	@mkdir -p $(dir $@)
-	$(CC) $(HOST_CFLAGS) $< -o $@
+$(BUILD)/bench/wakeup: $(OBJ)/tests/bench/wakeup.o
+	$(call link,$<,)
 
 # One driver tick through the driver API, in microseconds (tests/bench/driver_tick.c).
-$(BUILD)/bench/driver_tick: tests/bench/driver_tick.c $(driver_obj)
-	@mkdir -p $(dir $@)
-	$(CC) $(HOST_CFLAGS) $^ -o $@ $(LDFLAGS_ALL) $(PKG_LIBS)
+$(BUILD)/bench/driver_tick: $(OBJ)/tests/bench/driver_tick.o $(call archives,$(call down_from,driver))
+	$(call link,$<,$(call down_from,driver))
 
 BENCH_SECONDS ?= 60
 bench:

@@ -17,8 +17,8 @@
 
 #include "../common/addr.h"
 #include "../common/errors.h"
+#include "../loader/loader.h"
 #include "../reload/deploy.h"
-#include "../reload/loader.h"
 #include "console.h"
 #include "ui_assets.h"
 

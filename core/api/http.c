@@ -20,8 +20,8 @@
 #include "../common/addr.h"
 #include "../common/errors.h"
 #include "../common/file.h"
+#include "../loader/loader.h"
 #include "../reload/deploy.h"
-#include "../reload/loader.h"
 #include "console.h"
 #include "ui_assets.h"
 

@@ -13,7 +13,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../host/config.h"
+#include "../config/config.h"
 #include "../mqtt/mqtt.h"
 #include "../mqtt/site.h"
 

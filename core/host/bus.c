@@ -7,7 +7,7 @@
  * runs its machine's driver at once, and the outputs leave with each
  * board's next service (one period's delay, a phase-aligned transaction).
  * The rest of the thread: devices.c (device and machine lifecycle, the drop
- * policy), mailbox.c (between threads), status.c, ../reload/swap.c (hot
+ * policy), mailbox.c (between threads), status.c, swap.c (hot
  * reload at a slot boundary); bus_internal.h holds what they share. */
 #include "bus_internal.h"
 

@@ -11,12 +11,12 @@
 #include <stdint.h>
 
 #include "../common/errors.h"
+#include "../common/hist.h"
+#include "../common/ring.h"
+#include "../config/config.h"
 #include "../driver/driver.h"
 #include "../recorder/recorder.h"
 #include "../transport/transport.h"
-#include "config.h"
-#include "hist.h"
-#include "ring.h"
 
 #define VMAC_EVENT_TEXT 640
 

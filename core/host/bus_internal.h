@@ -1,6 +1,6 @@
-/* The bus thread's insides, shared by its files (bus.c, devices.c,
- * mailbox.c, status.c, jobs.c, workers.c, ../reload/swap.c); the rest of
- * the host sees only bus.h. Everything here runs on the bus thread unless
+/* The bus thread's insides, shared by its files (every file in core/host/
+ * but events.c, the main thread's event log); the rest of the host sees
+ * only bus.h. Everything here runs on the bus thread unless
  * it says otherwise. Names shared between the files carry the prefix bus_.
  *
  * The bus thread never runs a driver: every call into a driver's state is
@@ -378,7 +378,7 @@ void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level);
 void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_host_cmd *c);
 struct device *bus_find_by_name(struct vmac_bus *bus, const char *name);
 
-/* ../reload/swap.c */
+/* swap.c */
 /* Roll m back to m->prev (asked: done by a job); -1 when there is none. */
 int bus_roll_back(struct vmac_bus *bus, struct machine *m, const char *why);
 void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j);

@@ -9,8 +9,8 @@
 
 #include <stddef.h>
 
+#include "../config/config.h"
 #include "../host/bus.h"
-#include "../host/config.h"
 #include "../host/events.h"
 
 #define VMAC_MQTT_TOPIC_MAX 128 /* a prefix, or a host id */

@@ -12,7 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../reload/loader.h"
+#include "../loader/loader.h"
 
 struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name)
 {

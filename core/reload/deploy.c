@@ -10,7 +10,7 @@
 #include <unistd.h>
 
 #include "../common/errors.h"
-#include "loader.h"
+#include "../loader/loader.h"
 
 #define SWAP_TIMEOUT_MS 2000 /* the bus thread takes a request within a tick */
 #define ATTACH_POLL_US 5000  /* how often a machine still registering is looked at again */

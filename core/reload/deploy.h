@@ -11,8 +11,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../config/config.h"
 #include "../host/bus.h"
-#include "../host/config.h"
 #include "../store/store.h"
 
 #define VMAC_DEPLOY_MACHINES 64 /* machines reported one by one */

@@ -17,14 +17,14 @@
 #include "../api/http.h"
 #include "../common/file.h"
 #include "../common/paths.h"
+#include "../config/config.h"
 #include "../host/bus.h"
-#include "../host/config.h"
 #include "../host/events.h"
+#include "../loader/loader.h"
 #include "../mqtt/mqtt.h"
 #include "../mqtt/site.h"
 #include "../recorder/recording.h"
 #include "../reload/deploy.h"
-#include "../reload/loader.h"
 #include "../store/store.h"
 
 struct host {

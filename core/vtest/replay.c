@@ -12,8 +12,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../loader/loader.h"
 #include "../recorder/recording.h"
-#include "../reload/loader.h"
 
 struct report {
 	char *buf;

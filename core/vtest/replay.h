@@ -4,7 +4,7 @@
 
 #include <stddef.h>
 
-#include "../host/config.h"
+#include "../config/config.h"
 
 /* Replay the recording text (len bytes) with cfg's drivers and stdlib: the
  * driver source in the recording (use_recorded, when it has one) or the

@@ -6,7 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../reload/loader.h"
+#include "../loader/loader.h"
 
 struct vt_pkt {
 	int64_t at;

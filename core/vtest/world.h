@@ -16,8 +16,8 @@
 
 #include "../../firmware/board.h"
 #include "../../firmware/plant.h"
+#include "../config/config.h"
 #include "../host/bus.h"
-#include "../host/config.h"
 
 #define VT_WIRE_NS 50000LL          /* one way, host <-> board */
 #define VT_PLANT_STEP_NS 10000000LL /* physics and board watchdog grid: vmac-board's largest physics sub-step */

@@ -1,4 +1,4 @@
-/* libFuzzer harness for the host's settings (core/host/config.c): the input
+/* libFuzzer harness for the host's settings (core/config/config.c): the input
  * is a config file's text for vmac_config_load_text (it runs as Lua with
  * no library, an instruction limit and a memory cap), then the same bytes
  * as command-line settings, one KEY=VALUE a line, for vmac_config_set;
@@ -10,7 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../core/host/config.h"
+#include "../../core/config/config.h"
 #include "fuzz.h"
 
 static int terminated(const char *s, size_t size)

@@ -12,11 +12,11 @@
 #include <unistd.h>
 
 #include "../../core/common/errors.h"
+#include "../../core/common/hist.h"
+#include "../../core/common/ring.h"
+#include "../../core/config/config.h"
 #include "../../core/driver/driver.h"
 #include "../../core/host/bus.h"
-#include "../../core/host/config.h"
-#include "../../core/host/hist.h"
-#include "../../core/host/ring.h"
 
 /* ---- config ---- */
 

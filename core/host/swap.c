@@ -1,9 +1,9 @@
 /* Hot reload on the bus thread (docs/DRIVERS.md "Hot reload"): a new
  * instance takes over a machine at a slot boundary (a job on the machine's
  * driver worker, between two of its ticks), is on probation for a while,
- * and the old one takes over again if it fails; deploy.c drives it from an
+ * and the old one takes over again if it fails; core/reload/deploy.c drives it from an
  * HTTP thread through the request slots. */
-#include "../host/bus_internal.h"
+#include "bus_internal.h"
 
 #include <stdio.h>
 #include <string.h>

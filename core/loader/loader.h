@@ -8,8 +8,8 @@
 
 #include <stddef.h>
 
+#include "../config/config.h"
 #include "../driver/driver.h"
-#include "../host/config.h"
 
 /* Load driver `driver` for board `device`. Returns 0 and *out; or -ENOENT
  * (no such file) or another negative errno, with text saying why in words a

@@ -1,0 +1,29 @@
+# The unit tests (Check) and the programs the integration tests drive beside
+# vmacd: each tests/unit/test_NAME.c is linked with the archives of the
+# module it tests and every module below it (the Makefile's MODULES).
+CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
+
+# test NAME : the module it tests. test_isolation and test_checkpoint are
+# white-box (core/driver/internal.h); test_transport's raw-Ethernet round
+# trip runs over a veth pair in a network namespace of its own (root), else
+# it is SKIPPED into $(SKIPPED).
+UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto test_cyclic:proto \
+                    test_board:board test_plant:board test_board_v2:board test_board_cyclic:board \
+                    test_sched:sched test_store:store test_recording:recorder test_transport:transport \
+                    test_driver:driver test_isolation:driver test_checkpoint:driver test_host:host
+UNIT_TESTS := $(foreach t,$(UNIT_TEST_MODULE),$(BUILD)/tests/$(firstword $(subst :, ,$(t))))
+
+define unit_test_rule
+$(BUILD)/tests/$(1): $(OBJ)/tests/unit/$(1).o $(call archives,$(call down_from,$(2))) $(BUILD)/layers.ok
+	$$(call link,$(OBJ)/tests/unit/$(1).o,$(call down_from,$(2)),$$(CHECK_LIBS))
+endef
+$(foreach t,$(UNIT_TEST_MODULE),$(eval $(call unit_test_rule,$(firstword $(subst :, ,$(t))),$(lastword $(subst :, ,$(t))))))
+
+# The stdlib's Lua tests, each case in a real driver sandbox (tests/lua/run.c;
+# white-box: core/driver/internal.h).
+$(BUILD)/tests/lua_tests: $(OBJ)/tests/lua/run.o $(call archives,$(call down_from,driver)) $(BUILD)/layers.ok
+	$(call link,$<,$(call down_from,driver))
+
+# The store killed mid-write (tests/integration/test_store.py).
+$(BUILD)/tests/store_crash: $(OBJ)/tests/store/store_crash.o $(call archives,$(call down_from,store)) $(BUILD)/layers.ok
+	$(call link,$<,$(call down_from,store))
