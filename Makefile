@@ -63,7 +63,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 # this order, each once, and scripts/check-layers.py reads every archive's
 # symbols (nm) and every include before anything links: an arrow upward is
 # a build error.
-MODULES := api mqtt vtest reload host loader config driver transport store recorder board sched proto common
+MODULES := api mqtt vtest mainloop reload host loader config driver transport store recorder board sched proto common
 MODULE_DIR = $(if $(filter board,$(1)),firmware,core/$(1))
 pkg_libs = $(shell pkg-config --libs $(1) 2>/dev/null)
 OBJ = $(BUILD)/obj

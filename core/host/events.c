@@ -27,18 +27,34 @@ void vmac_event_log_start_at(struct vmac_event_log *log, uint64_t seq)
 void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char *device, const char *text)
 {
 	struct timespec ts;
-	struct vmac_event *e;
 	clock_gettime(CLOCK_REALTIME, &ts);
+	vmac_event_log_add_at(log, (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec, kind, device, text);
+}
+
+void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const char *kind, const char *device,
+                           const char *text)
+{
+	struct vmac_event *e;
 	pthread_mutex_lock(&log->lock);
 	e = &log->ring[log->next_seq % VMAC_EVENT_LOG_SIZE];
 	e->seq = log->next_seq++;
-	e->time_ns = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+	e->time_ns = time_ns;
 	snprintf(e->kind, sizeof(e->kind), "%s", kind);
 	snprintf(e->device, sizeof(e->device), "%s", device ? device : "");
 	snprintf(e->text, sizeof(e->text), "%s", text);
 	pthread_cond_broadcast(&log->grew);
 	pthread_mutex_unlock(&log->lock);
-	fprintf(stderr, "vmacd: [%s] %s\n", kind, text);
+	if (log->echo)
+		fprintf(stderr, "%s: [%s] %s\n", log->echo, kind, text);
+}
+
+uint64_t vmac_event_log_next_seq(struct vmac_event_log *log)
+{
+	uint64_t seq;
+	pthread_mutex_lock(&log->lock);
+	seq = log->next_seq;
+	pthread_mutex_unlock(&log->lock);
+	return seq;
 }
 
 int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, int max)

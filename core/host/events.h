@@ -1,6 +1,6 @@
 /* The host's event log: the last events (attached, dropped, driver errors,
  * missing drivers, malformed frames) kept in memory for the status API and
- * the event stream, printed to stderr, and copied into the store by the main
+ * the event stream, echoed to stderr, and copied into the store by the main
  * thread (vmac_store_events_add). Written by the main thread, read by the HTTP threads. */
 #ifndef VMAC_EVENTS_H
 #define VMAC_EVENTS_H
@@ -24,6 +24,7 @@ struct vmac_event_log {
 	pthread_mutex_t lock;
 	pthread_cond_t grew; /* broadcast on every add (CLOCK_MONOTONIC) */
 	uint64_t next_seq;
+	const char *echo; /* each event also goes to stderr after this name ("vmacd"); NULL: not */
 	struct vmac_event ring[VMAC_EVENT_LOG_SIZE];
 };
 
@@ -32,6 +33,11 @@ void vmac_event_log_init(struct vmac_event_log *log);
  * before the first is added. */
 void vmac_event_log_start_at(struct vmac_event_log *log, uint64_t seq);
 void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char *device, const char *text);
+/* The same at time_ns (Unix time in ns: vmac test's events carry its virtual clock). */
+void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const char *kind, const char *device,
+                           const char *text);
+/* The seq the next event will have. */
+uint64_t vmac_event_log_next_seq(struct vmac_event_log *log);
 /* Copy the newest events, oldest first, into out (room for max). Returns how many. */
 int vmac_event_log_latest(struct vmac_event_log *log, struct vmac_event *out, int max);
 /* The events after seq `after`, oldest first, at most max; when there is

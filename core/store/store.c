@@ -148,35 +148,21 @@ static int migrate(struct vmac_store *s, char *err, size_t errlen)
 	return 0;
 }
 
-int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t errlen)
+/* The store at path (":memory:" for one in memory), its schema brought up
+ * to date. */
+static int open_at(const char *path, struct vmac_store **out, char *err, size_t errlen)
 {
-	struct vmac_store *s;
-	char path[4096];
-	*out = NULL;
-	if (sodium_init() < 0) {
-		snprintf(err, errlen, "store: libsodium cannot start");
-		return -1;
-	}
-	if (snprintf(path, sizeof(path), "%s/vmac.db", dir) >= (int)sizeof(path)) {
-		snprintf(err, errlen, "store: state folder path too long");
-		return -1;
-	}
-	if (mkdir(dir, 0700) != 0 && errno != EEXIST) {
-		snprintf(err, errlen, "store: cannot create the state folder %s: %s (choose one with --state DIR)", dir,
-		         strerror(errno));
-		return -1;
-	}
-	s = calloc(1, sizeof(*s));
+	struct vmac_store *s = calloc(1, sizeof(*s));
 	if (!s) {
 		snprintf(err, errlen, "store: out of memory");
-		return -1;
+		return -ENOMEM;
 	}
 	pthread_mutex_init(&s->lock, NULL);
 	if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, NULL) !=
 	    SQLITE_OK) {
 		snprintf(err, errlen, "store: %s: %s", path, s->db ? sqlite3_errmsg(s->db) : "cannot open");
 		vmac_store_close(s);
-		return -1;
+		return -EIO;
 	}
 	sqlite3_busy_timeout(s->db, BUSY_MS);
 	/* WAL: readers never wait for the writer; synchronous FULL: a commit
@@ -192,10 +178,41 @@ int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t 
 		snprintf(why, sizeof(why), "%s", err);
 		snprintf(err, errlen, "%s (database %s)", why, path);
 		vmac_store_close(s);
-		return -1;
+		return -EIO;
 	}
 	*out = s;
 	return 0;
+}
+
+int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t errlen)
+{
+	char path[4096];
+	*out = NULL;
+	if (sodium_init() < 0) {
+		snprintf(err, errlen, "store: libsodium cannot start");
+		return -EIO;
+	}
+	if (snprintf(path, sizeof(path), "%s/vmac.db", dir) >= (int)sizeof(path)) {
+		snprintf(err, errlen, "store: state folder path too long");
+		return -ENAMETOOLONG;
+	}
+	if (mkdir(dir, 0700) != 0 && errno != EEXIST) {
+		int e = errno;
+		snprintf(err, errlen, "store: cannot create the state folder %s: %s (choose one with --state DIR)", dir,
+		         strerror(e));
+		return -e;
+	}
+	return open_at(path, out, err, errlen);
+}
+
+int vmac_store_open_memory(struct vmac_store **out, char *err, size_t errlen)
+{
+	*out = NULL;
+	if (sodium_init() < 0) {
+		snprintf(err, errlen, "store: libsodium cannot start");
+		return -EIO;
+	}
+	return open_at(":memory:", out, err, errlen);
 }
 
 void vmac_store_close(struct vmac_store *s)

@@ -43,9 +43,11 @@ const char *vmac_scope_name(enum vmac_scope scope);
 int vmac_scope_parse(const char *name, enum vmac_scope *scope);
 
 /* Open the store of state folder dir, creating the folder (mode 0700; its
- * parent must exist), the database and its tables when missing. 0, or -1
- * with err. */
+ * parent must exist), the database and its tables when missing. 0, or a
+ * negative errno with err. */
 int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t errlen);
+/* A store of the same tables in memory, gone when closed (`vmac test`). */
+int vmac_store_open_memory(struct vmac_store **out, char *err, size_t errlen);
 void vmac_store_close(struct vmac_store *s);
 
 struct vmac_token_info {

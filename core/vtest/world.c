@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "../loader/loader.h"
+#include "../mainloop/mainloop.h"
 
 struct vt_pkt {
 	int64_t at;
@@ -130,10 +131,18 @@ static void host_send(void *ctx, const struct vmac_packet *pkts, int n)
 	}
 }
 
-/* ---- the host's messages (the main thread's job in vmacd) ---- */
+/* ---- the host's main thread: vmacd's own loop (core/mainloop/) ---- */
 
-static void record_event(struct vt_world *w, const struct vmac_bus_msg *m)
+static int64_t world_ns(void *ctx)
 {
+	const struct vt_world *w = ctx;
+	return w->now_ns;
+}
+
+/* Every event, kept for the checks (w:events()). */
+static void keep_event(void *ctx, const struct vmac_event *ev)
+{
+	struct vt_world *w = ctx;
 	struct vt_event *e;
 	if (w->nevents == w->capevents) {
 		size_t cap = w->capevents ? 2 * w->capevents : 64;
@@ -145,104 +154,23 @@ static void record_event(struct vt_world *w, const struct vmac_bus_msg *m)
 	}
 	e = &w->events[w->nevents++];
 	w->moved = 1;
-	e->t_ns = m->time_ns;
-	memcpy(e->kind, m->event_kind, sizeof(e->kind));
-	memcpy(e->device, m->device, sizeof(e->device));
-	memcpy(e->text, m->text, sizeof(e->text));
+	e->t_ns = ev->time_ns;
+	memcpy(e->kind, ev->kind, sizeof(e->kind));
+	memcpy(e->device, ev->device, sizeof(e->device));
+	memcpy(e->text, ev->text, sizeof(e->text));
 }
 
-/* The host's checkpoints, kept as vmacd's store keeps them: the newest of
- * each machine (the store of a host that crashes survives it). */
-static void keep_checkpoints(struct vt_world *w)
+/* In virtual mode the bus takes a loaded driver at once. */
+static void run_commands(void *ctx)
 {
-	const struct vmac_bus_checkpoint *c;
-	while ((c = vmac_bus_checkpoint_peek(w->bus)) != NULL) {
-		struct vt_checkpoint *k = NULL;
-		uint8_t *data = malloc(c->len ? c->len : 1);
-		int i;
-		for (i = 0; i < w->ncheckpoints && !k; i++)
-			if (strcmp(w->checkpoints[i].machine, c->machine) == 0)
-				k = &w->checkpoints[i];
-		if (!k && w->ncheckpoints < VT_MAX_BOARDS)
-			k = &w->checkpoints[w->ncheckpoints++];
-		if (k && data) {
-			free(k->data);
-			memcpy(k->machine, c->machine, sizeof(k->machine));
-			memcpy(k->driver, c->driver, sizeof(k->driver));
-			memcpy(k->version, c->version, sizeof(k->version));
-			k->t_ns = c->time_ns;
-			k->data = data;
-			k->len = c->len;
-			memcpy(data, c->data, c->len);
-		} else {
-			free(data);
-		}
-		vmac_bus_checkpoint_release(w->bus);
-	}
-}
-
-/* A freshly loaded driver of machine `device` gets its checkpoint, as
- * vmacd's main thread offers it (virtual time for the age). */
-static void offer_checkpoint(struct vt_world *w, struct vmac_driver *drv, const char *device)
-{
-	struct vmac_checkpoint_info info;
-	char err[VMAC_DRIVER_ERR_MAX];
-	int i;
-	for (i = 0; i < w->ncheckpoints; i++) {
-		const struct vt_checkpoint *k = &w->checkpoints[i];
-		if (strcmp(k->machine, device) != 0 || strcmp(k->driver, vmac_driver_name(drv)) != 0)
-			continue;
-		info.time = (double)k->t_ns / 1e9;
-		info.age_s = (double)(w->now_ns - k->t_ns) / 1e9;
-		info.version = k->version;
-		info.restarted = k->t_ns < w->host_started_ns;
-		if (vmac_driver_offer_checkpoint(drv, k->data, k->len, &info, err, sizeof(err)) != 0) {
-			struct vmac_bus_msg m;
-			memset(&m, 0, sizeof(m));
-			m.time_ns = w->now_ns;
-			snprintf(m.event_kind, sizeof(m.event_kind), "warning");
-			snprintf(m.device, sizeof(m.device), "%s", device);
-			snprintf(m.text, sizeof(m.text), "%s: checkpoint not offered: %s", device, err);
-			record_event(w, &m);
-		}
-		return;
-	}
+	struct vt_world *w = ctx;
+	vmac_bus_virtual_commands(w->bus);
 }
 
 static void pump(struct vt_world *w)
 {
-	struct vmac_bus_msg m;
-	int loaded = 0;
-	if (!w->bus)
-		return;
-	keep_checkpoints(w);
-	while (vmac_bus_poll_msg(w->bus, &m)) {
-		struct vmac_driver *drv = NULL;
-		char text[VMAC_EVENT_TEXT];
-		int rc;
-		switch (m.kind) {
-		case VMAC_MSG_EVENT: record_event(w, &m); break;
-		case VMAC_MSG_LOAD:
-			text[0] = 0;
-			rc = vmac_load_driver(&w->cfg, m.driver, m.device, &drv, text, sizeof(text));
-			if (drv)
-				offer_checkpoint(w, drv, m.device);
-			vmac_bus_loaded(w->bus, &m, rc, drv, text);
-			loaded = 1;
-			break;
-		case VMAC_MSG_UNLOAD:
-			vmac_driver_free(m.drv);
-			vmac_recorder_free(m.rec);
-			free(m.buf);
-			break;
-		case VMAC_MSG_RECORDING: vmac_recorder_free(m.rec); break;
-		default: break;
-		}
-		if (loaded) {
-			vmac_bus_virtual_commands(w->bus);
-			loaded = 0;
-		}
-	}
+	if (w->main)
+		vmac_mainloop_service(w->main);
 }
 
 /* ---- boards ---- */
@@ -510,7 +438,9 @@ void vt_crash_host(struct vt_world *w)
 {
 	if (!w->bus)
 		return;
-	pump(w);               /* what reached the store before the crash */
+	pump(w); /* what reached the store before the crash */
+	vmac_mainloop_free(w->main);
+	w->main = NULL;
 	vmac_bus_free(w->bus); /* no detach, no SHUTDOWN: the boards' watchdogs end it */
 	w->bus = NULL;
 	w->moved = 1;
@@ -547,10 +477,20 @@ int vt_start_host(struct vt_world *w, char *err, size_t errlen)
 	if (!w->bus)
 		return -1;
 	vmac_bus_virtual_start_at(w->bus, w->now_ns);
+	{
+		const struct vmac_mainloop_hooks hooks = {
+		    .ctx = w, .wall_ns = world_ns, .bus_ns = world_ns, .event = keep_event, .loaded = run_commands};
+		vmac_event_log_init(&w->log); /* a new process's log: its numbering goes on from the store */
+		w->main = vmac_mainloop_new(&w->cfg, w->bus, w->store, &w->log, &hooks, err, errlen);
+		if (!w->main) {
+			vmac_bus_free(w->bus);
+			w->bus = NULL;
+			return -1;
+		}
+	}
 	for (i = 0; i < VMAC_BUS_VIRTUAL_COSTS; i++)
 		if (w->costs[i].driver[0])
 			vmac_bus_virtual_driver_cost(w->bus, w->costs[i].driver, w->costs[i].cost_ns);
-	w->host_started_ns = w->now_ns;
 	w->moved = 1;
 	return 0;
 }
@@ -574,7 +514,12 @@ struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char
 	sin->sin_addr.s_addr = htonl(0xEFFF564Du); /* 239.255.86.77 */
 	w->bus_group.len = sizeof(*sin);
 	(void)link;
+	if (vmac_store_open_memory(&w->store, err, errlen) != 0) {
+		free(w);
+		return NULL;
+	}
 	if (vt_start_host(w, err, errlen) != 0) {
+		vmac_store_close(w->store);
 		free(w);
 		return NULL;
 	}
@@ -589,12 +534,12 @@ void vt_world_free(struct vt_world *w)
 		return;
 	if (w->bus) {
 		pump(w);
+		vmac_mainloop_free(w->main);
 		vmac_bus_free(w->bus);
 	}
+	vmac_store_close(w->store);
 	for (i = 0; i < w->nboards; i++)
 		free(w->boards[i]);
-	for (i = 0; i < w->ncheckpoints; i++)
-		free(w->checkpoints[i].data);
 	free(w->q);
 	free(w->events);
 	free(w);

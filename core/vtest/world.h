@@ -18,6 +18,9 @@
 #include "../../firmware/plant.h"
 #include "../config/config.h"
 #include "../host/bus.h"
+#include "../host/events.h"
+#include "../mainloop/mainloop.h"
+#include "../store/store.h"
 
 #define VT_WIRE_NS 50000LL          /* one way, host <-> board */
 #define VT_PLANT_STEP_NS 10000000LL /* physics and board watchdog grid: vmac-board's largest physics sub-step */
@@ -70,16 +73,6 @@ struct vt_event {
 
 struct vt_pkt; /* in flight */
 
-/* A machine's newest checkpoint, as vmacd's store keeps it. */
-struct vt_checkpoint {
-	char machine[VMAC_NAME_MAX + 1];
-	char driver[VMAC_NAME_MAX + 1];
-	char version[VMAC_DRIVER_VERSION_MAX + 1];
-	int64_t t_ns;
-	uint8_t *data;
-	size_t len;
-};
-
 struct vt_world {
 	struct vmac_config cfg;
 	struct vmac_bus *bus;
@@ -106,10 +99,12 @@ struct vt_world {
 	FILE *trace;                      /* CSV of every service, or NULL */
 	char trace_test[128];             /* the running test's name, the CSV's first column */
 	struct vmac_device_status status; /* scratch for vt_device */
-	struct vt_checkpoint checkpoints[VT_MAX_BOARDS];
-	int ncheckpoints;
-	int64_t host_started_ns; /* when the running host started (crash_host, start_host) */
-	struct {                 /* driver_cost: given to every host the world starts */
+	/* The host's main thread (core/mainloop/, as in vmacd) and what it
+	 * keeps: the store, in memory, outlives a host (crash_host). */
+	struct vmac_mainloop *main;
+	struct vmac_event_log log;
+	struct vmac_store *store;
+	struct { /* driver_cost: given to every host the world starts */
 		char driver[VMAC_NAME_MAX + 1];
 		int64_t cost_ns;
 	} costs[VMAC_BUS_VIRTUAL_COSTS];

@@ -1,0 +1,382 @@
+/* The host's main thread: see mainloop.h. */
+#include "mainloop.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../common/file.h"
+#include "../loader/loader.h"
+#include "../recorder/recording.h"
+#include "../reload/deploy.h"
+
+#define STALLED_KEPT 32
+
+struct vmac_mainloop {
+	const struct vmac_config *cfg;
+	struct vmac_bus *bus;
+	struct vmac_store *store;
+	struct vmac_event_log *log;
+	struct vmac_mainloop_hooks hooks;
+	uint64_t stored_seq;     /* events up to this one are in the store */
+	int store_failing;       /* the last copy of events failed: said once, retried */
+	int checkpoints_failing; /* the last save of checkpoints failed: said once, retried */
+	int64_t started_ns;      /* wall time this host began: older checkpoints are from before a restart */
+	/* Versions that stalled a driver worker: not loaded again until a new
+	 * version arrives (a reload gives a new version id). The newest few. */
+	struct stalled {
+		char driver[VMAC_NAME_MAX + 1];
+		char version[VMAC_DRIVER_VERSION_MAX + 1];
+		int64_t id;
+	} stalled[STALLED_KEPT];
+	unsigned nstalled;
+};
+
+static double wall_s(const struct vmac_mainloop *l)
+{
+	return (double)l->hooks.wall_ns(l->hooks.ctx) / 1e9;
+}
+
+static void say(struct vmac_mainloop *l, const char *kind, const char *device, const char *text)
+{
+	vmac_event_log_add_at(l->log, l->hooks.wall_ns(l->hooks.ctx), kind, device, text);
+}
+
+struct restore {
+	struct vmac_mainloop *l;
+	struct vmac_driver *drv;
+	const char *device;
+};
+
+static void restore_one(void *ctx, const char *name, const struct vmac_value *v)
+{
+	struct restore *r = ctx;
+	char why[200], text[300];
+	if (vmac_driver_restore_param(r->drv, name, v, why, sizeof(why)) != 0) {
+		snprintf(text, sizeof(text), "%s: persisted param not restored: %s", r->device, why);
+		say(r->l, "warning", r->device, text);
+	}
+}
+
+/* The params persisted for the machine whose primary is device go back
+ * into its freshly loaded driver (before it runs). */
+static void restore_params(struct vmac_mainloop *l, struct vmac_driver *drv, const char *device)
+{
+	struct restore r = {l, drv, device};
+	char err[512];
+	if (vmac_store_param_list(l->store, device, restore_one, &r, err, sizeof(err)) < 0)
+		say(l, "warning", device, err);
+}
+
+/* The checkpoints the bus thread has handed over go to the store, in one
+ * transaction (a batch at most the ring's size; the store keeps the newest
+ * of each machine). A failure (a full disk) is said once; those checkpoints
+ * are lost, newer ones follow. */
+static void store_checkpoints(struct vmac_mainloop *l)
+{
+	enum { BATCH = 16 };
+	struct vmac_checkpoint cp[BATCH];
+	struct vmac_bus_checkpoint head[BATCH]; /* names and time, copied out of the ring */
+	uint8_t *data[BATCH];
+	const struct vmac_bus_checkpoint *c;
+	double bus_to_wall = wall_s(l) - (double)l->hooks.bus_ns(l->hooks.ctx) / 1e9;
+	char err[512], text[600];
+	int n, i;
+	do {
+		for (n = 0; n < BATCH && (c = vmac_bus_checkpoint_peek(l->bus)) != NULL; n++) {
+			/* Copied out so that the slot goes back to the bus thread at once. */
+			memcpy(&head[n], c, sizeof(head[n]));
+			data[n] = malloc(c->len ? c->len : 1);
+			if (data[n])
+				memcpy(data[n], c->data, c->len);
+			vmac_bus_checkpoint_release(l->bus);
+			if (!data[n]) {
+				n--; /* out of memory: this one is lost, a newer one follows */
+				continue;
+			}
+			cp[n].machine = head[n].machine;
+			cp[n].driver = head[n].driver;
+			cp[n].version = head[n].version;
+			cp[n].time = bus_to_wall + (double)head[n].time_ns / 1e9;
+			cp[n].data = data[n];
+			cp[n].len = head[n].len;
+		}
+		if (n == 0)
+			return;
+		if (vmac_store_checkpoints_put(l->store, cp, n, err, sizeof(err)) != 0) {
+			if (!l->checkpoints_failing) {
+				snprintf(text, sizeof(text), "checkpoints are not being saved: %s", err);
+				say(l, "warning", "", text);
+			}
+			l->checkpoints_failing = 1;
+		} else {
+			l->checkpoints_failing = 0;
+		}
+		for (i = 0; i < n; i++)
+			free(data[i]);
+	} while (n == BATCH);
+}
+
+/* The checkpoint of machine `device`, if the store has one of this driver,
+ * offered to its freshly loaded instance (for recover, after attach). */
+static void offer_checkpoint(struct vmac_mainloop *l, struct vmac_driver *drv, const char *device)
+{
+	struct vmac_checkpoint_info info;
+	char driver[VMAC_NAME_MAX + 1], version[VMAC_DRIVER_VERSION_MAX + 1], err[512], text[700];
+	uint8_t *data;
+	size_t len;
+	double time;
+	int rc = vmac_store_checkpoint_get(l->store, device, &data, &len, driver, sizeof(driver), version,
+	                                   sizeof(version), &time, err, sizeof(err));
+	if (rc < 0)
+		say(l, "warning", device, err);
+	if (rc != 1)
+		return;
+	if (strcmp(driver, vmac_driver_name(drv)) == 0) {
+		info.time = time;
+		info.age_s = wall_s(l) - time;
+		if (info.age_s < 0)
+			info.age_s = 0; /* the clock was set back */
+		info.version = version;
+		info.restarted = time < (double)l->started_ns / 1e9;
+		if (vmac_driver_offer_checkpoint(drv, data, len, &info, err, sizeof(err)) != 0) {
+			snprintf(text, sizeof(text), "%s: checkpoint not offered: %s", device, err);
+			say(l, "warning", device, text);
+		}
+	}
+	free(data);
+}
+
+/* The source of the driver version a recording ran: the store's version,
+ * or the driver's file as it is now (malloc'd; NULL when neither). */
+static char *recorded_source(struct vmac_mainloop *l, const struct vmac_recorder *r, size_t *len)
+{
+	struct vmac_driver_version v;
+	char path[VMAC_PATH_MAX + 64], err[VMAC_PATH_MAX + 128], *src = NULL;
+	int code = 0;
+	*len = 0;
+	if (r->version_id > 0)
+		return vmac_store_driver_get(l->store, r->version_id, &v, &src, len, err, sizeof(err)) == 1 ? src
+		                                                                                            : NULL;
+	if (vmac_driver_path(l->cfg, r->driver, path, sizeof(path)) != 0)
+		return NULL;
+	return vmac_read_file(path, VMAC_DRIVER_FILE_MAX, len, err, sizeof(err), &code);
+}
+
+/* The machine runs on after a capture: a new recorder takes the place of
+ * the one captured. */
+static void replace_recorder(struct vmac_mainloop *l, const struct vmac_bus_msg *m, double period_s)
+{
+	struct vmac_host_cmd c;
+	memset(&c, 0, sizeof(c));
+	c.kind = VMAC_CMD_RECORDER;
+	c.slot = m->slot;
+	c.generation = m->generation;
+	c.rec = vmac_recorder_new(l->cfg->recorder_s, period_s);
+	if (c.rec && vmac_bus_send_cmd(l->bus, &c) != 0)
+		vmac_recorder_free(c.rec);
+}
+
+/* A machine's flight recorder, captured (a drop, a driver failure), goes
+ * to the store as a recording file (docs/RECORDING.md); an event says
+ * where to find it. */
+static void store_recording(struct vmac_mainloop *l, const struct vmac_bus_msg *m)
+{
+	struct vmac_recorder *r = m->rec;
+	struct vmac_recording_info info;
+	char err[512], text[700], *file, *src;
+	size_t len, srclen;
+	int64_t id;
+	memset(&info, 0, sizeof(info));
+	snprintf(info.machine, sizeof(info.machine), "%s", r->machine);
+	snprintf(info.driver, sizeof(info.driver), "%s", r->driver);
+	snprintf(info.version, sizeof(info.version), "%s", r->version);
+	snprintf(info.reason, sizeof(info.reason), "%s", r->reason);
+	info.time = wall_s(l) - (double)(l->hooks.bus_ns(l->hooks.ctx) - r->when_ns) / 1e9;
+	src = recorded_source(l, r, &srclen);
+	file = vmac_recording_write(r, src, srclen, info.time, &len);
+	free(src);
+	if (m->replace)
+		replace_recorder(l, m, r->period_s);
+	vmac_recorder_free(r);
+	if (!file) {
+		say(l, "warning", info.machine, "recording lost: out of memory");
+		return;
+	}
+	if (vmac_store_recording_add(l->store, &info, file, len, (int)l->cfg->recordings_max, &id, err,
+	                             sizeof(err)) != 0) {
+		snprintf(text, sizeof(text), "%s: recording lost: %s", info.machine, err);
+		say(l, "warning", info.machine, text);
+	} else {
+		snprintf(text, sizeof(text), "%s: recording %lld kept (%zu bytes): %s; vmac recording get %lld",
+		         info.machine, (long long)id, len, info.reason, (long long)id);
+		say(l, "recording", info.machine, text);
+	}
+	free(file);
+}
+
+static int has_stalled(const struct vmac_mainloop *l, const struct vmac_driver *drv)
+{
+	unsigned i;
+	for (i = 0; i < l->nstalled && i < STALLED_KEPT; i++)
+		if (l->stalled[i].id == vmac_driver_tag(drv) && strcmp(l->stalled[i].driver, vmac_driver_name(drv)) == 0 &&
+		    strcmp(l->stalled[i].version, vmac_driver_version(drv)) == 0)
+			return 1;
+	return 0;
+}
+
+struct load {
+	struct vmac_mainloop *l;
+	const struct vmac_bus_msg *m;
+};
+
+/* vmac_deploy_load's result goes to the bus thread, with the machine's
+ * persisted params and checkpoint in the driver; a version that stalled a
+ * worker is refused. */
+static void hand_over(void *ctx, int rc, struct vmac_driver *drv, const char *text)
+{
+	struct load *ld = ctx;
+	char why[VMAC_EVENT_TEXT];
+	if (drv && has_stalled(ld->l, drv)) {
+		snprintf(why, sizeof(why),
+		         "driver %s %s stalled a driver worker on this host; it is not loaded again until a new "
+		         "version arrives (vmac reload)",
+		         vmac_driver_name(drv), vmac_driver_version(drv));
+		vmac_driver_free(drv);
+		drv = NULL;
+		rc = -EPERM;
+		text = why;
+	}
+	if (drv) {
+		restore_params(ld->l, drv, ld->m->device);
+		offer_checkpoint(ld->l, drv, ld->m->device);
+	}
+	if (vmac_bus_loaded(ld->l->bus, ld->m, rc, drv, text) != 0)
+		say(ld->l, "warning", ld->m->device, "command ring full; device will retry on discovery");
+}
+
+static void load_driver(struct vmac_mainloop *l, const struct vmac_bus_msg *m)
+{
+	struct load ld = {l, m};
+	store_checkpoints(l); /* one taken before this load is found by it */
+	vmac_deploy_load(l->store, l->cfg, m->driver, m->device, hand_over, &ld);
+	if (l->hooks.loaded)
+		l->hooks.loaded(l->hooks.ctx);
+}
+
+/* The events not yet in the store go there, in one transaction. An event
+ * the in-memory log has already dropped is counted. */
+static void store_events(struct vmac_mainloop *l)
+{
+	struct vmac_event ev[VMAC_EVENT_LOG_SIZE];
+	struct vmac_stored_event st[VMAC_EVENT_LOG_SIZE];
+	char err[512], text[600];
+	uint64_t lost;
+	int n, i;
+	for (;;) {
+		n = vmac_event_log_since(l->log, l->stored_seq, ev, VMAC_EVENT_LOG_SIZE, 0, &lost);
+		if (n == 0)
+			return;
+		for (i = 0; i < n; i++) {
+			st[i].seq = ev[i].seq;
+			st[i].time = (double)ev[i].time_ns / 1e9;
+			st[i].kind = ev[i].kind;
+			st[i].device = ev[i].device;
+			st[i].text = ev[i].text;
+		}
+		if (vmac_store_events_add(l->store, st, n, err, sizeof(err)) != 0) {
+			if (!l->store_failing) { /* this warning is not stored either: it would fail the same way */
+				l->store_failing = 1;
+				snprintf(text, sizeof(text), "events are not being stored: %s", err);
+				say(l, "warning", "", text);
+			}
+			return;
+		}
+		l->store_failing = 0;
+		l->stored_seq = ev[n - 1].seq;
+		if (l->hooks.event)
+			for (i = 0; i < n; i++)
+				l->hooks.event(l->hooks.ctx, &ev[i]);
+		if (lost) {
+			snprintf(text, sizeof(text), "%llu events came too fast to be stored", (unsigned long long)lost);
+			say(l, "warning", "", text);
+		}
+	}
+}
+
+static void on_event(struct vmac_mainloop *l, const struct vmac_bus_msg *m)
+{
+	char err[512];
+	say(l, m->event_kind, m->device, m->text);
+	if (m->code == VMAC_EVENT_ROLLED_BACK && m->version_id) {
+		/* A version on probation failed and its machines went back: the
+		 * store says so too, so that boards attaching later load the
+		 * version before (under the deploy lock: never in the middle of
+		 * a deploy). */
+		if (vmac_deploy_rolled_back(l->store, m->driver, m->version_id, m->text, err, sizeof(err)) < 0)
+			say(l, "warning", m->device, err);
+	}
+	if (m->code == VMAC_EVENT_STALLED) {
+		struct stalled *x = &l->stalled[l->nstalled++ % STALLED_KEPT];
+		memcpy(x->driver, m->driver, sizeof(x->driver));
+		memcpy(x->version, m->version, sizeof(x->version));
+		x->id = m->version_id;
+	}
+}
+
+void vmac_mainloop_service(struct vmac_mainloop *l)
+{
+	struct vmac_bus_msg m;
+	while (vmac_bus_poll_msg(l->bus, &m)) {
+		switch (m.kind) {
+		case VMAC_MSG_EVENT: on_event(l, &m); break;
+		case VMAC_MSG_LOAD: load_driver(l, &m); break;
+		case VMAC_MSG_UNLOAD:
+			vmac_driver_free(m.drv);
+			vmac_recorder_free(m.rec);
+			free(m.buf);
+			break;
+		case VMAC_MSG_RECORDING: store_recording(l, &m); break;
+		case VMAC_MSG_STOPPED:
+			if (l->hooks.stopped)
+				l->hooks.stopped(l->hooks.ctx);
+			break;
+		}
+		/* A burst of events goes to the store before the log's ring
+		 * wraps over the ones not yet copied. */
+		if (vmac_event_log_next_seq(l->log) - l->stored_seq > VMAC_EVENT_LOG_SIZE / 2)
+			store_events(l);
+	}
+	vmac_bus_workers_service(l->bus);
+	store_checkpoints(l);
+	store_events(l);
+}
+
+struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vmac_bus *bus, struct vmac_store *store,
+                                        struct vmac_event_log *log, const struct vmac_mainloop_hooks *hooks,
+                                        char *err, size_t errlen)
+{
+	struct vmac_mainloop *l = calloc(1, sizeof(*l));
+	if (!l) {
+		snprintf(err, errlen, "out of memory");
+		return NULL;
+	}
+	l->cfg = cfg;
+	l->bus = bus;
+	l->store = store;
+	l->log = log;
+	l->hooks = *hooks;
+	if (vmac_store_events_last(store, &l->stored_seq, err, errlen) != 0) {
+		free(l);
+		return NULL;
+	}
+	vmac_event_log_start_at(log, l->stored_seq + 1); /* seq goes on across restarts */
+	l->started_ns = hooks->wall_ns(hooks->ctx);
+	return l;
+}
+
+void vmac_mainloop_free(struct vmac_mainloop *l)
+{
+	free(l);
+}
