@@ -204,8 +204,8 @@ static void store_recording(struct vmac_mainloop *l, const struct vmac_bus_msg *
 		say(l, "warning", info.machine, "recording lost: out of memory");
 		return;
 	}
-	if (vmac_store_recording_add(l->store, &info, file, len, (int)l->cfg->recordings_max, &id, err,
-	                             sizeof(err)) != 0) {
+	if (vmac_store_recording_add(l->store, &info, file, len, (int)l->cfg->recordings_max, &id, err, sizeof(err)) !=
+	    0) {
 		snprintf(text, sizeof(text), "%s: recording lost: %s", info.machine, err);
 		say(l, "warning", info.machine, text);
 	} else {
@@ -220,7 +220,8 @@ static int has_stalled(const struct vmac_mainloop *l, const struct vmac_driver *
 {
 	unsigned i;
 	for (i = 0; i < l->nstalled && i < STALLED_KEPT; i++)
-		if (l->stalled[i].id == vmac_driver_tag(drv) && strcmp(l->stalled[i].driver, vmac_driver_name(drv)) == 0 &&
+		if (l->stalled[i].id == vmac_driver_tag(drv) &&
+		    strcmp(l->stalled[i].driver, vmac_driver_name(drv)) == 0 &&
 		    strcmp(l->stalled[i].version, vmac_driver_version(drv)) == 0)
 			return 1;
 	return 0;
@@ -299,7 +300,8 @@ static void store_events(struct vmac_mainloop *l)
 			for (i = 0; i < n; i++)
 				l->hooks.event(l->hooks.ctx, &ev[i]);
 		if (lost) {
-			snprintf(text, sizeof(text), "%llu events came too fast to be stored", (unsigned long long)lost);
+			snprintf(text, sizeof(text), "%llu events came too fast to be stored",
+			         (unsigned long long)lost);
 			say(l, "warning", "", text);
 		}
 	}
@@ -354,8 +356,8 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 }
 
 struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vmac_bus *bus, struct vmac_store *store,
-                                        struct vmac_event_log *log, const struct vmac_mainloop_hooks *hooks,
-                                        char *err, size_t errlen)
+                                        struct vmac_event_log *log, const struct vmac_mainloop_hooks *hooks, char *err,
+                                        size_t errlen)
 {
 	struct vmac_mainloop *l = calloc(1, sizeof(*l));
 	if (!l) {

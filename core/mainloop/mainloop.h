@@ -35,8 +35,8 @@ struct vmac_mainloop;
  * HTTP and MQTT threads read; its numbering goes on from the store's last
  * event). NULL and err when out of memory or the store cannot be read. */
 struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vmac_bus *bus, struct vmac_store *store,
-                                        struct vmac_event_log *log, const struct vmac_mainloop_hooks *hooks,
-                                        char *err, size_t errlen);
+                                        struct vmac_event_log *log, const struct vmac_mainloop_hooks *hooks, char *err,
+                                        size_t errlen);
 /* Everything the bus thread has handed over, answered; then checkpoints
  * and events into the store. On every wake-up, and once more after the bus
  * thread has ended. */

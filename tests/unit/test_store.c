@@ -4,6 +4,7 @@
  * threads using every function at once on the one connection get the
  * answers each would get alone; a full disk is told by its own code. */
 #include <check.h>
+#include <errno.h>
 #include <pthread.h>
 #include <sqlite3.h>
 #include <stdio.h>
@@ -124,7 +125,7 @@ START_TEST(a_missing_folder_is_an_error)
 {
 	struct vmac_store *s = NULL;
 	char err[512] = "";
-	ck_assert_int_eq(vmac_store_open("/nonexistent/vmac-state", &s, err, sizeof(err)), -1);
+	ck_assert_int_eq(vmac_store_open("/nonexistent/vmac-state", &s, err, sizeof(err)), -ENOENT);
 	ck_assert_msg(s == NULL, "a store was returned for a missing folder");
 	ck_assert_msg(strstr(err, "/nonexistent/vmac-state") != NULL, "the error does not name the folder: %s", err);
 }
