@@ -70,160 +70,203 @@ static void value_text(const struct vmac_value *v, char *out, size_t len)
 		snprintf(out, len, "%s", v->str);
 }
 
+/* One replay under way. */
+struct replay {
+	struct report r;
+	struct vmac_recording rec;
+	struct vmac_driver *d;
+	size_t first;  /* the first line replayed */
+	size_t ticks;  /* ticks replayed */
+	size_t inputs; /* operator inputs replayed */
+	int attached;
+	int resume; /* the driver resumes from the recording's dev.state */
+	char err[VMAC_DRIVER_ERR_MAX];
+};
+
+/* The driver the recording ran (or the current one), with the params the
+ * machine had at attach as the host's settings. 0, or -1 said. */
+static int load(struct replay *p, const struct vmac_config *base, int use_recorded)
+{
+	struct vmac_config cfg = *base;
+	char msg[640], key[128], val[96];
+	size_t i;
+	int rc;
+	for (i = 0; i < p->rec.nlines; i++) {
+		const struct vmac_rec_event *e = &p->rec.lines[i].ev;
+		if (p->rec.lines[i].is_tick || e->kind != VMAC_REC_PARAM)
+			continue;
+		snprintf(key, sizeof(key), "driver.%s.param.%s", p->rec.driver, e->name);
+		value_text(&e->value, val, sizeof(val));
+		if (vmac_config_set(&cfg, key, val, p->err, sizeof(p->err)) != 0)
+			say(&p->r, "replay: param %s = %s not set: %s\n", e->name, val, p->err);
+	}
+	if (use_recorded && p->rec.source)
+		rc = vmac_load_driver_source(&cfg, p->rec.driver, p->rec.machine, p->rec.source, p->rec.source_len,
+		                             &p->d, msg, sizeof(msg));
+	else
+		rc = vmac_load_driver(&cfg, p->rec.driver, p->rec.machine, &p->d, msg, sizeof(msg));
+	if (rc != 0) {
+		say(&p->r, "replay: %s\n", msg);
+		return -1;
+	}
+	say(&p->r, "replay of %s (driver %s %s, recorded: %s) against %s %s\n", p->rec.machine, p->rec.driver,
+	    p->rec.version, p->rec.reason, vmac_driver_name(p->d),
+	    use_recorded && p->rec.source ? "as recorded" : vmac_driver_version(p->d));
+	return 0;
+}
+
+/* The machine's boards and level; a recording that starts after attach
+ * resumes from the dev.state it holds (the oldest its ring still covered),
+ * as a hot reload would: what came before is skipped, the levels it set
+ * kept. */
+static void prepare(struct replay *p)
+{
+	const struct vmac_recording *rec = &p->rec;
+	double starts = rec->nlines ? (double)(rec->lines[0].t_ns - rec->attach_ns) / 1e9 : 0.0;
+	int b;
+	for (b = 0; b < rec->nboards; b++)
+		vmac_driver_add_board(p->d, rec->boards[b].minor, rec->boards[b].name);
+	vmac_driver_set_level_now(p->d, rec->level);
+	if (rec->complete)
+		return;
+	if (rec->state) {
+		for (; p->first < rec->nlines && rec->lines[p->first].t_ns <= rec->state_t_ns; p->first++)
+			if (!rec->lines[p->first].is_tick && rec->lines[p->first].ev.kind == VMAC_REC_LEVEL)
+				vmac_driver_set_level_now(p->d, (unsigned)rec->lines[p->first].ev.code);
+		p->resume = p->first < rec->nlines;
+	}
+	if (p->resume)
+		say(&p->r,
+		    "  the recording starts %.3f s after attach: the driver resumes from its dev.state at %.3f s "
+		    "(its migrate(dev, state), as at a hot reload); %zu records before it are skipped\n",
+		    starts, (double)(rec->state_t_ns - rec->attach_ns) / 1e9, p->first);
+	else
+		say(&p->r,
+		    "  the recording starts %.3f s after attach%s: the driver starts afresh at its first tick, so what "
+		    "it did before is not known\n",
+		    starts, rec->state ? "" : " and holds no dev.state to resume from");
+}
+
+/* attach (and resume) before the first line that needs a running driver.
+ * 0, or 1 said. */
+static int attach(struct replay *p, double t)
+{
+	double at = p->rec.complete ? (double)p->rec.attach_ns / 1e9 : t;
+	int got;
+	p->attached = 1;
+	if (vmac_driver_attach(p->d, at, p->err, sizeof(p->err)) != 0) {
+		say(&p->r, "  attach failed: %s\n", p->err);
+		return 1;
+	}
+	if (!p->resume)
+		return 0;
+	got = vmac_driver_resume_from(p->d, p->rec.state, p->rec.state_len, at, p->err, sizeof(p->err));
+	if (got < 0) {
+		say(&p->r, "  resuming from the recorded dev.state failed: %s\n", p->err);
+		return 1;
+	}
+	if (got == 1)
+		say(&p->r, "  (%s has no migrate(dev, state): it starts afresh instead)\n", vmac_driver_name(p->d));
+	return 0;
+}
+
+static const char *outcome(int code)
+{
+	return code == 0 ? "accepted" : code < 0 ? "a failure" : "refused";
+}
+
+/* A recorded event other than a tick: an operator input (its outcome
+ * compared) or a level. 0, or 1 when it differs. */
+static int replay_event(struct replay *p, const struct vmac_recording_line *l, double t)
+{
+	char reply[256], val[96];
+	int got;
+	if (l->ev.kind == VMAC_REC_LEVEL)
+		vmac_driver_set_level_now(p->d, (unsigned)l->ev.code);
+	if (l->ev.kind != VMAC_REC_INPUT)
+		return 0;
+	got = vmac_driver_input(p->d, t, l->ev.name, &l->ev.value, reply, sizeof(reply), p->err, sizeof(p->err));
+	p->inputs++;
+	if ((got == 0) == (l->ev.code == 0) && (got < 0) == (l->ev.code < 0))
+		return 0;
+	value_text(&l->ev.value, val, sizeof(val));
+	say(&p->r, "  DIFFERS at %.6f s: operator input %s = %s was %s in the recording, %s now%s%s\n", t, l->ev.name,
+	    val, outcome(l->ev.code), outcome(got), got < 0 ? ": " : "", got < 0 ? p->err : "");
+	return 1;
+}
+
+/* A recorded tick, its outputs compared. 0 on, 1 differs or fails, 2 the
+ * recorded driver failed here and this one did not (the end). */
+static int replay_tick(struct replay *p, size_t i, double t)
+{
+	const struct vmac_recording_line *l = &p->rec.lines[i];
+	const struct vmac_inputs *in[VMAC_DRIVER_MAX_BOARDS];
+	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS], *outp[VMAC_DRIVER_MAX_BOARDS];
+	const char *failure = NULL;
+	int recorded_fail = recorded_failure(&p->rec, i, &failure), b;
+	memset(out, 0, sizeof(out));
+	for (b = 0; b < p->rec.nboards; b++) {
+		in[b] = &l->in[b < l->nboards ? b : 0];
+		outp[b] = &out[b];
+	}
+	p->ticks++;
+	if (vmac_driver_tick(p->d, t, in, outp, p->err, sizeof(p->err)) != 0) {
+		say(&p->r, "  FAILS at tick %zu (%.6f s)%s: %s\n", p->ticks, t,
+		    recorded_fail ? ", the same tick as in the recording" : "; the recording did not fail there",
+		    p->err);
+		for (b = 0; b < l->nboards; b++)
+			say_board(&p->r, "inputs of", b, &l->in[b]);
+		return 1;
+	}
+	if (recorded_fail) {
+		say(&p->r, "  at tick %zu (%.6f s) the recorded driver failed (%.*s); this one does not\n", p->ticks, t,
+		    (int)strcspn(failure, "\n"), failure);
+		return 2;
+	}
+	for (b = 0; b < l->nboards; b++)
+		if (out[b].digital != l->out[b].digital || out[b].pwm != l->out[b].pwm) {
+			say(&p->r, "  DIFFERS at tick %zu (%.6f s), board %d:\n", p->ticks, t, b);
+			say_board(&p->r, "inputs of", b, &l->in[b]);
+			say(&p->r, "    recorded outputs: digital 0x%02x, pwm %d\n", (unsigned)l->out[b].digital,
+			    (int)l->out[b].pwm);
+			say(&p->r, "    replayed outputs: digital 0x%02x, pwm %d\n", (unsigned)out[b].digital,
+			    (int)out[b].pwm);
+			return 1;
+		}
+	return 0;
+}
+
 int vt_replay(const char *text, size_t len, const struct vmac_config *base, int use_recorded, char *report,
               size_t reportlen)
 {
-	struct report r = {report, reportlen, 0};
-	struct vmac_recording rec;
-	struct vmac_config cfg = *base;
-	struct vmac_driver *d = NULL;
-	char err[VMAC_DRIVER_ERR_MAX], msg[640], key[128], val[96];
-	size_t i, first = 0, ticks = 0, inputs = 0;
-	int b, rc = 1, attached = 0, resume = 0;
+	struct replay p;
+	size_t i;
+	int rc = 0;
 
+	memset(&p, 0, sizeof(p));
+	p.r = (struct report){report, reportlen, 0};
 	report[0] = 0;
-	if (vmac_recording_read(text, len, &rec, err, sizeof(err)) != 0) {
-		say(&r, "replay: %s\n", err);
+	if (vmac_recording_read(text, len, &p.rec, p.err, sizeof(p.err)) != 0) {
+		say(&p.r, "replay: %s\n", p.err);
 		return -1;
 	}
-	/* The params the machine had at attach, as the host's settings. */
-	for (i = 0; i < rec.nlines; i++) {
-		const struct vmac_rec_event *e = &rec.lines[i].ev;
-		if (rec.lines[i].is_tick || e->kind != VMAC_REC_PARAM)
-			continue;
-		snprintf(key, sizeof(key), "driver.%s.param.%s", rec.driver, e->name);
-		value_text(&e->value, val, sizeof(val));
-		if (vmac_config_set(&cfg, key, val, err, sizeof(err)) != 0)
-			say(&r, "replay: param %s = %s not set: %s\n", e->name, val, err);
-	}
-	if (use_recorded && rec.source)
-		rc = vmac_load_driver_source(&cfg, rec.driver, rec.machine, rec.source, rec.source_len, &d, msg,
-		                             sizeof(msg));
-	else
-		rc = vmac_load_driver(&cfg, rec.driver, rec.machine, &d, msg, sizeof(msg));
-	if (rc != 0) {
-		say(&r, "replay: %s\n", msg);
-		vmac_recording_free(&rec);
+	if (load(&p, base, use_recorded) != 0) {
+		vmac_recording_free(&p.rec);
 		return -1;
 	}
-	say(&r, "replay of %s (driver %s %s, recorded: %s) against %s %s\n", rec.machine, rec.driver, rec.version,
-	    rec.reason, vmac_driver_name(d), use_recorded && rec.source ? "as recorded" : vmac_driver_version(d));
-	for (b = 0; b < rec.nboards; b++)
-		vmac_driver_add_board(d, rec.boards[b].minor, rec.boards[b].name);
-	vmac_driver_set_level_now(d, rec.level);
-	/* A recording that starts after attach resumes from the dev.state it
-	 * holds (the oldest its ring still covered), as a hot reload would:
-	 * what came before is skipped, the levels it set kept. */
-	if (!rec.complete && rec.state) {
-		for (; first < rec.nlines && rec.lines[first].t_ns <= rec.state_t_ns; first++)
-			if (!rec.lines[first].is_tick && rec.lines[first].ev.kind == VMAC_REC_LEVEL)
-				vmac_driver_set_level_now(d, (unsigned)rec.lines[first].ev.code);
-		resume = first < rec.nlines;
-	}
-	if (!rec.complete && resume)
-		say(&r,
-		    "  the recording starts %.3f s after attach: the driver resumes from its dev.state at %.3f s "
-		    "(its migrate(dev, state), as at a hot reload); %zu records before it are skipped\n",
-		    rec.nlines ? (double)(rec.lines[0].t_ns - rec.attach_ns) / 1e9 : 0.0,
-		    (double)(rec.state_t_ns - rec.attach_ns) / 1e9, first);
-	else if (!rec.complete)
-		say(&r,
-		    "  the recording starts %.3f s after attach%s: the driver starts afresh at its first tick, so what "
-		    "it did before is not known\n",
-		    rec.nlines ? (double)(rec.lines[0].t_ns - rec.attach_ns) / 1e9 : 0.0,
-		    rec.state ? "" : " and holds no dev.state to resume from");
-	rc = 0;
-	for (i = first; i < rec.nlines && rc == 0; i++) {
-		const struct vmac_recording_line *l = &rec.lines[i];
+	prepare(&p);
+	for (i = p.first; i < p.rec.nlines && rc == 0; i++) {
+		const struct vmac_recording_line *l = &p.rec.lines[i];
 		double t = (double)l->t_ns / 1e9;
-		if (!attached && (l->is_tick || l->ev.kind == VMAC_REC_ATTACH || l->ev.kind == VMAC_REC_INPUT)) {
-			double at = rec.complete ? (double)rec.attach_ns / 1e9 : t;
-			attached = 1;
-			if (vmac_driver_attach(d, at, err, sizeof(err)) != 0) {
-				say(&r, "  attach failed: %s\n", err);
-				rc = 1;
-				break;
-			}
-			if (resume) {
-				int got = vmac_driver_resume_from(d, rec.state, rec.state_len, at, err, sizeof(err));
-				if (got < 0) {
-					say(&r, "  resuming from the recorded dev.state failed: %s\n", err);
-					rc = 1;
-					break;
-				}
-				if (got == 1)
-					say(&r, "  (%s has no migrate(dev, state): it starts afresh instead)\n",
-					    vmac_driver_name(d));
-			}
-		}
-		if (!l->is_tick) {
-			if (l->ev.kind == VMAC_REC_INPUT) {
-				char reply[256];
-				int got = vmac_driver_input(d, t, l->ev.name, &l->ev.value, reply, sizeof(reply), err,
-				                            sizeof(err));
-				inputs++;
-				if ((got == 0) != (l->ev.code == 0) || (got < 0) != (l->ev.code < 0)) {
-					value_text(&l->ev.value, val, sizeof(val));
-					say(&r,
-					    "  DIFFERS at %.6f s: operator input %s = %s was %s in the recording, %s "
-					    "now%s%s\n",
-					    t, l->ev.name, val,
-					    l->ev.code == 0  ? "accepted"
-					    : l->ev.code < 0 ? "a failure"
-					                     : "refused",
-					    got == 0  ? "accepted"
-					    : got < 0 ? "a failure"
-					              : "refused",
-					    got < 0 ? ": " : "", got < 0 ? err : "");
-					rc = 1;
-				}
-			} else if (l->ev.kind == VMAC_REC_LEVEL) {
-				vmac_driver_set_level_now(d, (unsigned)l->ev.code);
-			}
-			continue;
-		}
-		{
-			const struct vmac_inputs *in[VMAC_DRIVER_MAX_BOARDS];
-			struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS], *outp[VMAC_DRIVER_MAX_BOARDS];
-			const char *failure = NULL;
-			int recorded_fail = recorded_failure(&rec, i, &failure), k;
-			memset(out, 0, sizeof(out));
-			for (b = 0; b < rec.nboards; b++) {
-				in[b] = &l->in[b < l->nboards ? b : 0];
-				outp[b] = &out[b];
-			}
-			ticks++;
-			if (vmac_driver_tick(d, t, in, outp, err, sizeof(err)) != 0) {
-				say(&r, "  FAILS at tick %zu (%.6f s)%s: %s\n", ticks, t,
-				    recorded_fail ? ", the same tick as in the recording"
-				                  : "; the recording did not fail there",
-				    err);
-				for (b = 0; b < l->nboards; b++)
-					say_board(&r, "inputs of", b, &l->in[b]);
-				rc = 1;
-				break;
-			}
-			if (recorded_fail) {
-				say(&r, "  at tick %zu (%.6f s) the recorded driver failed (%.*s); this one does not\n",
-				    ticks, t, (int)strcspn(failure, "\n"), failure);
-				break;
-			}
-			for (k = 0; k < l->nboards; k++)
-				if (out[k].digital != l->out[k].digital || out[k].pwm != l->out[k].pwm) {
-					say(&r, "  DIFFERS at tick %zu (%.6f s), board %d:\n", ticks, t, k);
-					say_board(&r, "inputs of", k, &l->in[k]);
-					say(&r, "    recorded outputs: digital 0x%02x, pwm %d\n",
-					    (unsigned)l->out[k].digital, (int)l->out[k].pwm);
-					say(&r, "    replayed outputs: digital 0x%02x, pwm %d\n",
-					    (unsigned)out[k].digital, (int)out[k].pwm);
-					rc = 1;
-					break;
-				}
-		}
+		if (!p.attached && (l->is_tick || l->ev.kind == VMAC_REC_ATTACH || l->ev.kind == VMAC_REC_INPUT))
+			rc = attach(&p, t);
+		if (rc == 0)
+			rc = l->is_tick ? replay_tick(&p, i, t) : replay_event(&p, l, t);
 	}
-	if (rc == 0)
-		say(&r, "  %zu ticks and %zu operator inputs replayed: every output as recorded\n", ticks, inputs);
-	vmac_driver_free(d);
-	vmac_recording_free(&rec);
-	return rc;
+	if (rc == 0 || rc == 2)
+		say(&p.r, "  %zu ticks and %zu operator inputs replayed: every output as recorded\n", p.ticks,
+		    p.inputs);
+	vmac_driver_free(p.d);
+	vmac_recording_free(&p.rec);
+	return rc == 2 ? 0 : rc;
 }
