@@ -119,6 +119,8 @@ json_t *http_status_json(struct vmac_http *h)
 		                    json_integer((json_int_t)s->counters.schedule_full));
 		json_object_set_new(json_object_get(root, "counters"), "misses_host",
 		                    json_integer((json_int_t)s->counters.misses_host));
+		json_object_set_new(json_object_get(root, "counters"), "attach_refused",
+		                    json_integer((json_int_t)s->counters.attach_refused));
 		json_object_set_new(
 		    root, "schedule",
 		    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",

@@ -50,6 +50,8 @@ static const struct key keys[] = {
     {U(miss_limit, 1, 1000)},
     {U(sleep_s, 1, 3600)},
     {U(max_devices, 1, 4096)},
+    {U(attach_max, 1, 4096)},
+    {U(attach_rate, 1, 100000)},
     {U(driver_memory_kib, 64, 1048576)},
     {U(driver_instructions, 1000, 1000000000)},
     {U(driver_budget_us, 0, 10000000)},
@@ -97,6 +99,8 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->miss_limit = 1;
 	c->sleep_s = 10;
 	c->max_devices = 1024;
+	c->attach_max = 32;
+	c->attach_rate = 100;
 	c->driver_memory_kib = 4096;
 	c->driver_instructions = 200000;
 	c->driver_budget_us = 2000;

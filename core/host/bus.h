@@ -120,6 +120,7 @@ struct vmac_bus_counters {
 	uint64_t ticks, ticks_skipped;
 	uint64_t events_lost; /* event ring full */
 	uint64_t table_full;
+	uint64_t attach_refused;       /* announcements not let attach: attach_max or attach_rate reached */
 	uint64_t schedule_full;        /* devices refused by admission control */
 	uint64_t checkpoints;          /* machine checkpoints handed to the main thread */
 	uint64_t checkpoints_deferred; /* ... put off a tick: the ring was full */

@@ -264,6 +264,13 @@ struct vmac_bus {
 	struct vmac_packet rx[RX_BATCH];
 	struct vmac_hist lateness;
 	struct vmac_bus_counters counters;
+	/* The attach limiter (devices.c, attach_allowed): credit in ns of
+	 * attach_rate, at most attach_max attaches' worth; what it refused
+	 * since the last warning, said at most every FLOOD_WARN_NS. */
+	int64_t attach_credit_ns, attach_credit_at_ns;
+	int attach_credit_set;
+	uint64_t refused_unsaid, table_full_unsaid;
+	int64_t flood_said_ns;
 	int realtime;
 	int stopping;
 	int64_t stop_deadline_ns;

@@ -348,11 +348,69 @@ static void join_or_load(struct vmac_bus *bus, struct device *d)
 	}
 }
 
+#define FLOOD_WARN_NS 10000000000LL /* a flood or a full table is said at most this often */
+
+/* Devices attaching: driver asked for, registration not yet answered. */
+static uint32_t attaching(const struct vmac_bus *bus)
+{
+	uint32_t i, n = 0;
+	for (i = 0; i < bus->nused; i++)
+		n += bus->dev[i].state == DEV_LOADING || bus->dev[i].state == DEV_REGISTERING;
+	return n;
+}
+
+/* May one more device attach now? At most attach_rate a second, in bursts
+ * of attach_max, and attach_max at once: a flood of announcements (fake
+ * boards, random identities) loads at most that many drivers. The credit
+ * is checked first, so that a flood costs a scan of the table only
+ * attach_rate times a second. */
+static int attach_allowed(struct vmac_bus *bus, int64_t now)
+{
+	int64_t cost = 1000000000LL / bus->cfg.attach_rate, most = cost * bus->cfg.attach_max;
+	if (!bus->attach_credit_set)
+		bus->attach_credit_ns = most;
+	else
+		bus->attach_credit_ns += now - bus->attach_credit_at_ns;
+	bus->attach_credit_set = 1;
+	if (bus->attach_credit_ns > most)
+		bus->attach_credit_ns = most;
+	bus->attach_credit_at_ns = now;
+	if (bus->attach_credit_ns < cost || attaching(bus) >= bus->cfg.attach_max)
+		return 0;
+	bus->attach_credit_ns -= cost;
+	return 1;
+}
+
+/* What the limiter and the full table refused, said at most every
+ * FLOOD_WARN_NS. */
+static void say_flood(struct vmac_bus *bus, int64_t now)
+{
+	if (bus->flood_said_ns && now - bus->flood_said_ns < FLOOD_WARN_NS)
+		return;
+	if (bus->refused_unsaid)
+		bus_event(bus, NULL, "flood",
+		          "%llu announcements not let attach: at most %u devices attach at once and %u a second "
+		          "(attach_max, attach_rate); they announce again at the next discovery",
+		          (unsigned long long)bus->refused_unsaid, bus->cfg.attach_max, bus->cfg.attach_rate);
+	if (bus->table_full_unsaid)
+		bus_event(bus, NULL, "table_full",
+		          "%llu announcements of new boards ignored: the device table is full (max_devices %u)",
+		          (unsigned long long)bus->table_full_unsaid, bus->cfg.max_devices);
+	bus->flood_said_ns = now;
+	bus->refused_unsaid = bus->table_full_unsaid = 0;
+}
+
 void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p)
 {
 	struct device *d = find_by_identity(bus, &m->u.announce);
 
 	bus->counters.announces++;
+	if ((!d || d->state != DEV_LOADING) && !attach_allowed(bus, p->rx_ns)) {
+		bus->counters.attach_refused++;
+		bus->refused_unsaid++;
+		say_flood(bus, p->rx_ns);
+		return;
+	}
 	if (d) {
 		switch (d->state) {
 		case DEV_LOADING: d->addr = p->addr; return;
@@ -369,6 +427,8 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 		d = new_slot(bus);
 		if (!d) {
 			bus->counters.table_full++;
+			bus->table_full_unsaid++;
+			say_flood(bus, p->rx_ns);
 			return;
 		}
 	}

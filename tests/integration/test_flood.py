@@ -1,0 +1,95 @@
+"""A flood of fake boards on the bus (issue #30, "Bounded under flood"): a
+process on the segment answers every DISCOVER with hundreds of ANNOUNCEs of
+made-up identities of the lights driver. The host lets at most attach_max
+of them attach at once and attach_rate a second, says so in a `flood`
+warning, and its memory, its real boards and its event log are unaffected."""
+
+import random
+import socket
+import struct
+import time
+
+from harness import KITCHEN_NAMES, undisturbed
+
+TOTAL = 10000
+PER_DISCOVER = 300
+SYS = 0xFF
+DISCOVER, ANNOUNCE = 0x01, 0x10
+REPLY = 0x01
+HEADER = struct.Struct(">2sBBHIBBB")  # core/proto/proto.h: magic, version, flags, seq, id, channel, op, len
+
+
+def announce(seq, major, board):
+    """An ANNOUNCE answering DISCOVER seq (docs/PROTOCOL.md), driver lights."""
+    driver = b"lights"
+    data = (bytes([len(driver)]) + driver + struct.pack(">II", major, 0) + bytes([len(board)]) + board +
+            bytes([1, 0]) + bytes((8, 7, 2, 1, 1)))
+    return HEADER.pack(b"VM", 1, REPLY, seq, 0, SYS, ANNOUNCE, len(data)) + data
+
+
+def rss_kib(pid):
+    with open("/proc/%d/status" % pid) as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    raise AssertionError("no VmRSS for pid %d" % pid)
+
+
+def listen(bus):
+    group, port = bus.rsplit(":", 1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    s.bind(("", int(port)))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+    s.settimeout(5)
+    return s
+
+
+def test_a_flood_of_fake_boards_is_bounded(t):
+    host = t.host()
+    t.kitchen(host)
+    before = host.status()
+    rss_before = rss_kib(host.pid)
+    target = before["bus"]["host_addr"].rsplit(":", 1)
+    target = (target[0], int(target[1]))
+    seed = random.SystemRandom().randrange(1 << 32)
+    rnd = random.Random(seed)
+    sock = listen(t.bus)
+    most_attaching = 0
+    sent = 0
+    try:
+        while sent < TOTAL:
+            data, _ = sock.recvfrom(2048)
+            if len(data) < HEADER.size:
+                continue
+            _, _, _, seq, _, channel, op, _ = HEADER.unpack_from(data)
+            if channel != SYS or op != DISCOVER:
+                continue
+            for _ in range(min(PER_DISCOVER, TOTAL - sent)):
+                n = rnd.randrange(1 << 31)
+                sock.sendto(announce(seq, n, b"fake-%d" % n), target)
+                sent += 1
+            s = host.status()
+            undisturbed(KITCHEN_NAMES)(s)
+            attaching = sum(1 for d in s["devices"] if d["state"] in ("loading", "registering"))
+            most_attaching = max(most_attaching, attaching)
+    finally:
+        sock.close()
+
+    flood = host.wait_event("flood", timeout_s=30, invariant=undisturbed(KITCHEN_NAMES))
+    assert "attach_max" in flood["text"], "the flood warning does not say which setting: %r" % flood["text"]
+    after = host.status()
+    assert host.alive(), "vmacd died under the flood"
+    refused = after["counters"]["attach_refused"] - before["counters"]["attach_refused"]
+    assert refused > TOTAL // 2, "only %d of %d fake announcements were refused (seed %d)" % (refused, TOTAL, seed)
+    assert most_attaching <= 32, "%d devices attaching at once, attach_max is 32" % most_attaching
+    floods = host.find_events("flood")
+    assert len(floods) <= 3, "%d flood warnings in one flood: they are said at most every 10 s" % len(floods)
+    # The driver states of the few let in are freed when they fail to
+    # register; what is left is the device table, allocated at start.
+    grown = rss_kib(host.pid) - rss_before
+    assert grown < 48 * 1024, "vmacd grew by %d KiB under a flood of %d fake boards (seed %d)" % (grown, TOTAL, seed)
+    # The real boards were served throughout, and still are.
+    served = {n: host.device(n, after)["served"] for n in KITCHEN_NAMES}
+    host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 5 for n in KITCHEN_NAMES), 30,
+                     "every real board served after the flood", undisturbed(KITCHEN_NAMES))
