@@ -6,8 +6,8 @@
 #ifndef VMAC_CLI_CONSOLE_H
 #define VMAC_CLI_CONSOLE_H
 
-int vmac_console_main(int argc, char **argv); /* vmac console */
-int vmac_get_main(int argc, char **argv);     /* vmac get DEVICE.NAME... */
-int vmac_set_main(int argc, char **argv);     /* vmac set DEVICE.NAME:VALUE|DEVICE.NAME!... */
+#include "command.h"
+
+extern const struct vmac_cmd vmac_console_cmd, vmac_get_cmd, vmac_set_cmd;
 
 #endif
