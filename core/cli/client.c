@@ -3,6 +3,7 @@
 
 #include <curl/curl.h>
 #include <errno.h>
+#include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -11,10 +12,6 @@ static char bearer[256];
 
 int vmac_client_token(const char *token, const char *file)
 {
-	if (!token)
-		token = getenv("VMAC_TOKEN");
-	if (!token && !file)
-		file = getenv("VMAC_TOKEN_FILE");
 	if (token) {
 		snprintf(bearer, sizeof(bearer), "%s", token);
 	} else if (file) {
@@ -181,4 +178,46 @@ int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *da
 		return *code ? 0 : -1;
 	}
 	return 0;
+}
+
+int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const char *path, const char *body, size_t len,
+                    void (*show)(json_t *answer))
+{
+	char url[512], err[600];
+	struct vmac_buffer b = {NULL, 0};
+	long code = 0;
+	json_t *answer;
+	json_error_t jerr;
+	int rc;
+	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
+	curl_global_init(CURL_GLOBAL_DEFAULT);
+	rc = body ? vmac_client_upload(url, body, len, &b, &code, err, sizeof(err))
+	          : vmac_client_call(method, url, NULL, &b, &code, err, sizeof(err));
+	curl_global_cleanup();
+	if (rc != 0) {
+		fprintf(stderr, "vmac: %s\n", err);
+		return 1;
+	}
+	if (a->opt[VMAC_CMD_JSON]) {
+		printf("%s\n", b.data ? b.data : "");
+		free(b.data);
+		return code == 200 ? 0 : 1;
+	}
+	answer = json_loads(b.data ? b.data : "", 0, &jerr);
+	free(b.data);
+	if (code == 401 || code == 403) {
+		fprintf(stderr, "vmac: HTTP %ld: %s\n%s\n", code, json_string_value(json_object_get(answer, "error")),
+		        vmac_client_auth_hint());
+		json_decref(answer);
+		return 1;
+	}
+	if (!answer) {
+		fprintf(stderr, "vmac: HTTP %ld, and the answer is not JSON (%s)\n", code, jerr.text);
+		return 1;
+	}
+	if (code != 200)
+		fprintf(stderr, "vmac: HTTP %ld: %s\n", code, json_string_value(json_object_get(answer, "error")));
+	show(answer);
+	json_decref(answer);
+	return code == 200 ? 0 : 1;
 }

@@ -3,7 +3,6 @@
  * (core/api/console.c): the console's rules live in one place. */
 #include "console.h"
 
-#include <getopt.h>
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -11,6 +10,7 @@
 #include <unistd.h>
 
 #include "client.h"
+#include "command.h"
 
 /* Error codes the client gives itself (docs/CLI.md, "Console"): the host
  * answers every other one. */
@@ -20,7 +20,7 @@ enum {
 };
 
 struct session {
-	char http[128];
+	const char *http;
 	int errors;
 	int verbose; /* say each error's message on stderr */
 };
@@ -84,59 +84,28 @@ static void line(struct session *s, const char *text)
 	fflush(stdout);
 }
 
-static int setup(struct session *s, int argc, char **argv, const char *usage, int *first_arg)
+static void setup(struct session *s, const struct vmac_cmd_args *a)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
-	                                     {"host", required_argument, 0, 'H'},
-	                                     {"token", required_argument, 0, 't'},
-	                                     {"token-file", required_argument, 0, 'f'},
-	                                     {"quiet", no_argument, 0, 'q'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {0, 0, 0, 0}};
-	const char *token = NULL, *file = NULL;
-	int opt;
 	memset(s, 0, sizeof(*s));
-	snprintf(s->http, sizeof(s->http), "%s", getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080");
-	s->verbose = 1;
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "hq", opts, NULL)) != -1) {
-		switch (opt) {
-		case 'H': snprintf(s->http, sizeof(s->http), "%s", optarg); break;
-		case 't': token = optarg; break;
-		case 'f': file = optarg; break;
-		case 'q': s->verbose = 0; break;
-		case 'h': fputs(usage, stdout); return 1;
-		default: return 2;
-		}
-	}
-	*first_arg = optind;
-	return vmac_client_token(token, file) != 0 ? 2 : 0;
+	s->http = a->opt[VMAC_CMD_HTTP];
+	s->verbose = !a->opt[VMAC_CMD_QUIET];
 }
 
-#define COMMON_OPTIONS                                                                                                 \
-	"  --http ADDR:PORT   the host (default $VMAC_HTTP or 127.0.0.1:8080)\n"                                       \
-	"  --token T, --token-file F   the token (default $VMAC_TOKEN, $VMAC_TOKEN_FILE): read for ?, operate for\n"   \
-	"                     : and !\n"                                                                               \
-	"  --quiet            no messages on stderr, only the answers\n"                                               \
-	"Answers DEVICE.NAME:VALUE, DEVICE.NAME! or DEVICE.NAME#CODE; codes in docs/CLI.md (\"Console\").\n"
+/* What console, get and set take. */
+#define CONSOLE_OPTIONS                                                                                                \
+	(VMAC_CMD_TAKES(VMAC_CMD_HTTP) | VMAC_CMD_TAKES(VMAC_CMD_TOKEN) | VMAC_CMD_TAKES(VMAC_CMD_TOKEN_FILE) |        \
+	 VMAC_CMD_TAKES(VMAC_CMD_QUIET))
 
-int vmac_console_main(int argc, char **argv)
+#define ANSWERS                                                                                                        \
+	"Answers DEVICE.NAME:VALUE, DEVICE.NAME! or DEVICE.NAME#CODE; codes in docs/CLI.md (\"Console\").\n"           \
+	"Exit 0 when every submessage was answered without #, else 1; 2 wrong usage.\n"
+
+static int console_run(const struct vmac_cmd_args *a)
 {
-	static const char usage[] = "usage: vmac console [--http ADDR:PORT] [--token T | --token-file F] [--quiet]\n"
-	                            "Read lines of DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME!  from standard input\n"
-	                            "(typed, or from a pipe) and answer each on one line.\n" COMMON_OPTIONS
-	                            "Exit 0 when every submessage was answered without #, else 1.\n";
 	struct session s;
 	char buf[4096];
-	int first, rc = setup(&s, argc, argv, usage, &first);
 	int interactive = isatty(STDIN_FILENO);
-	if (rc)
-		return rc == 1 ? 0 : rc;
-	if (first < argc) {
-		fprintf(stderr, "vmac console: unexpected argument '%s' (submessages come on standard input)\n",
-		        argv[first]);
-		return 2;
-	}
+	setup(&s, a);
 	for (;;) {
 		if (interactive) {
 			fputs("vmac> ", stderr);
@@ -149,22 +118,26 @@ int vmac_console_main(int argc, char **argv)
 	return s.errors ? 1 : 0;
 }
 
+const struct vmac_cmd vmac_console_cmd = {
+    .name = "console",
+    .summary = "the line console: DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME!",
+    .about = "Read lines of DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME!  DEVICE.NAME>VALUE  from standard\n"
+             "input (typed, or from a pipe; it takes no arguments) and answer each on one line. Needs a\n"
+             "token of scope read for ?, operate for the others.\n" ANSWERS,
+    .common = CONSOLE_OPTIONS,
+    .run = console_run};
+
 /* vmac get / set: the arguments as one console line. */
-static int one_line(int argc, char **argv, const char *usage, int get)
+static int one_line(const struct vmac_cmd_args *a, int get)
 {
 	struct session s;
 	char buf[4096] = "";
 	size_t n = 0;
-	int first, i, rc = setup(&s, argc, argv, usage, &first);
-	if (rc)
-		return rc == 1 ? 0 : rc;
-	if (first >= argc) {
-		fputs(usage, stderr);
-		return 2;
-	}
-	for (i = first; i < argc; i++) {
-		int w = snprintf(buf + n, sizeof(buf) - n, "%s%s%s", n ? " " : "", argv[i],
-		                 get && !strpbrk(argv[i], "?:>!") ? "?" : "");
+	int i;
+	setup(&s, a);
+	for (i = 0; i < a->nargs; i++) {
+		int w = snprintf(buf + n, sizeof(buf) - n, "%s%s%s", n ? " " : "", a->arg[i],
+		                 get && !strpbrk(a->arg[i], "?:>!") ? "?" : "");
 		if (w < 0 || (size_t)w >= sizeof(buf) - n) {
 			fprintf(stderr, "vmac: too many submessages for one line\n");
 			return 2;
@@ -175,19 +148,35 @@ static int one_line(int argc, char **argv, const char *usage, int get)
 	return s.errors ? 1 : 0;
 }
 
-int vmac_get_main(int argc, char **argv)
+static int get_run(const struct vmac_cmd_args *a)
 {
-	static const char usage[] =
-	    "usage: vmac get [options] DEVICE.NAME...\n"
-	    "Print published variables, e.g. vmac get washer-1.state washer-1.drum_rpm\n" COMMON_OPTIONS;
-	return one_line(argc, argv, usage, 1);
+	return one_line(a, 1);
 }
 
-int vmac_set_main(int argc, char **argv)
+static int set_run(const struct vmac_cmd_args *a)
 {
-	static const char usage[] =
-	    "usage: vmac set [options] DEVICE.NAME:VALUE|DEVICE.NAME!...\n"
-	    "Operator input, e.g. vmac set lights-1.kitchen:true, vmac set washer-1.start:quick,\n"
-	    "vmac set washer-1.cancel!\n" COMMON_OPTIONS;
-	return one_line(argc, argv, usage, 0);
+	return one_line(a, 0);
 }
+
+const struct vmac_cmd vmac_get_cmd = {
+    .name = "get",
+    .args = "DEVICE.NAME...",
+    .min_args = 1,
+    .max_args = -1,
+    .summary = "print published variables (DEVICE.NAME...)",
+    .about = "Print published variables and params, e.g. vmac get washer-1.state washer-1.drum_rpm\n"
+             "(a console line of DEVICE.NAME? each). Needs a token of scope read.\n" ANSWERS,
+    .common = CONSOLE_OPTIONS,
+    .run = get_run};
+
+const struct vmac_cmd vmac_set_cmd = {
+    .name = "set",
+    .args = "DEVICE.NAME:VALUE|DEVICE.NAME!|DEVICE.NAME>VALUE...",
+    .min_args = 1,
+    .max_args = -1,
+    .summary = "operator input (DEVICE.NAME:VALUE, DEVICE.NAME!)",
+    .about = "Operator input as one console line, e.g. vmac set lights-1.kitchen:true, vmac set\n"
+             "washer-1.start:quick, vmac set washer-1.cancel!, vmac set washer-1.program>wool (kept).\n"
+             "Needs a token of scope operate.\n" ANSWERS,
+    .common = CONSOLE_OPTIONS,
+    .run = set_run};

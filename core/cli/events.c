@@ -2,7 +2,6 @@
  * one line per event, as they happen (docs/CLI.md, "vmac events"). */
 #include "events.h"
 
-#include <getopt.h>
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -10,6 +9,7 @@
 #include <time.h>
 
 #include "client.h"
+#include "command.h"
 
 struct follow {
 	int json;
@@ -72,74 +72,42 @@ static int on_data(void *ctx, const char *data, size_t len)
 	return 0;
 }
 
-int vmac_events_main(int argc, char **argv)
+enum { EVENTS_AFTER = VMAC_CMD_OWN, EVENTS_COUNT };
+
+static const struct vmac_cmd_option events_options[] = {
+    [EVENTS_AFTER - VMAC_CMD_OWN] = {"after", NULL, 0, "SEQ", NULL, NULL,
+                                     "only the events after SEQ (default 0: all it keeps)"},
+    [EVENTS_COUNT - VMAC_CMD_OWN] = {"count", NULL, 0, "N", NULL, NULL, "stop after N events (default: never)"},
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+static int events_run(const struct vmac_cmd_args *a)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
-	                                     {"host", required_argument, 0, 'H'},
-	                                     {"token", required_argument, 0, 't'},
-	                                     {"token-file", required_argument, 0, 'f'},
-	                                     {"after", required_argument, 0, 'a'},
-	                                     {"count", required_argument, 0, 'n'},
-	                                     {"json", no_argument, 0, 'j'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {0, 0, 0, 0}};
-	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080", *token = NULL, *file = NULL;
-	struct follow *f = calloc(1, sizeof(*f));
+	struct follow *f;
 	unsigned long long after = 0;
+	long count = 0;
 	char url[256], path[64], err[512], *end;
 	long code;
-	int opt, rc;
-	if (!f)
-		return 2;
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		switch (opt) {
-		case 'H': http = optarg; break;
-		case 't': token = optarg; break;
-		case 'f': file = optarg; break;
-		case 'j': f->json = 1; break;
-		case 'a':
-			after = strtoull(optarg, &end, 10);
-			if (*end || end == optarg) {
-				fprintf(stderr, "vmac events: --after takes an event's seq, not '%s'\n", optarg);
-				free(f);
-				return 2;
-			}
-			break;
-		case 'n':
-			f->count = strtol(optarg, &end, 10);
-			if (*end || end == optarg || f->count < 1) {
-				fprintf(stderr, "vmac events: --count takes a number >= 1, not '%s'\n", optarg);
-				free(f);
-				return 2;
-			}
-			break;
-		case 'h':
-			printf("usage: vmac events [--http ADDR:PORT] [--token T | --token-file F] [--after SEQ] "
-			       "[--count N]"
-			       " [--json]\n"
-			       "Follow the host's events (attached, dropped, driver errors, ...) as they happen: the "
-			       "ones it\n"
-			       "still keeps after SEQ (default 0: all of them), then every new one, one line each.\n"
-			       "  --count N   stop after N events     --json   print each event's JSON\n"
-			       "Exit 0 when --count is reached or the host ends the stream, 1 when it cannot be "
-			       "followed.\n");
-			free(f);
-			return 0;
-		default: free(f); return 2;
+	int rc;
+	if (a->opt[EVENTS_AFTER]) {
+		after = strtoull(a->opt[EVENTS_AFTER], &end, 10);
+		if (*end || end == a->opt[EVENTS_AFTER]) {
+			fprintf(stderr, "vmac events: --after takes an event's seq, not '%s'\n", a->opt[EVENTS_AFTER]);
+			return 2;
 		}
 	}
-	if (optind < argc) {
-		fprintf(stderr, "vmac events: unexpected argument '%s'\n", argv[optind]);
-		free(f);
-		return 2;
+	if (a->opt[EVENTS_COUNT]) {
+		count = strtol(a->opt[EVENTS_COUNT], &end, 10);
+		if (*end || end == a->opt[EVENTS_COUNT] || count < 1) {
+			fprintf(stderr, "vmac events: --count takes a number >= 1, not '%s'\n", a->opt[EVENTS_COUNT]);
+			return 2;
+		}
 	}
-	if (vmac_client_token(token, file) != 0) {
-		free(f);
+	if (!(f = calloc(1, sizeof(*f))))
 		return 2;
-	}
+	f->json = a->opt[VMAC_CMD_JSON] != NULL;
+	f->count = count;
 	snprintf(path, sizeof(path), "/api/events?after=%llu", after);
-	vmac_client_url(url, sizeof(url), http, path);
+	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
 	rc = vmac_client_stream(url, on_data, f, &code, err, sizeof(err));
 	if (rc != 0) {
 		fprintf(stderr, "vmac events: %s\n", err);
@@ -155,3 +123,15 @@ int vmac_events_main(int argc, char **argv)
 	free(f);
 	return rc;
 }
+
+const struct vmac_cmd vmac_events_cmd = {
+    .name = "events",
+    .summary = "follow the host's events as they happen",
+    .about = "Follow the host's events (attached, dropped, driver errors, ...) as they happen: the ones it\n"
+             "still keeps after SEQ, then every new one, one line each: seq, local time, kind, text (with\n"
+             "--json: each event's JSON). Needs a token of scope read.\n"
+             "Exit 0 when --count is reached or the host ends the stream, 1 when it cannot be followed,\n"
+             "2 wrong usage.\n",
+    .common = VMAC_CMD_API,
+    .own = events_options,
+    .run = events_run};

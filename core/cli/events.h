@@ -2,6 +2,8 @@
 #ifndef VMAC_CLI_EVENTS_H
 #define VMAC_CLI_EVENTS_H
 
-int vmac_events_main(int argc, char **argv);
+#include "command.h"
+
+extern const struct vmac_cmd vmac_events_cmd;
 
 #endif

@@ -51,7 +51,7 @@ static int write_config(FILE *out, FILE *settings)
 	return ferror(settings) || fflush(out) != 0 || ferror(out) ? -1 : 0;
 }
 
-int vmac_lint_main(int argc, char **argv)
+static int lint_run(const struct vmac_cmd_args *a)
 {
 	static char luacheck[] = "luacheck", config_flag[] = "--config", no_color[] = "--no-color";
 	const char *tmpdir = getenv("TMPDIR");
@@ -61,13 +61,6 @@ int vmac_lint_main(int argc, char **argv)
 	int i, n = 0, fd, status;
 	pid_t pid;
 
-	if (argc < 2 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
-		printf("usage: vmac lint FILE.lua...\n"
-		       "Check driver and stdlib scripts with luacheck, knowing exactly the globals the driver\n"
-		       "sandbox provides: anything else (os, io, debug, load, ...) is reported.\n"
-		       "Exit 0 when clean, 1 on warnings or errors, 2 when luacheck is missing.\n");
-		return argc < 2 ? 2 : 0;
-	}
 	vmac_root_dir(root, sizeof(root));
 	snprintf(settings_path, sizeof(settings_path), "%s/scripts/luacheckrc", root);
 	if (!(settings = fopen(settings_path, "r"))) {
@@ -92,7 +85,7 @@ int vmac_lint_main(int argc, char **argv)
 		return 2;
 	}
 
-	args = calloc((size_t)argc + 6, sizeof(*args));
+	args = calloc((size_t)a->nargs + 6, sizeof(*args));
 	if (!args) {
 		unlink(config_path);
 		return 2;
@@ -102,8 +95,8 @@ int vmac_lint_main(int argc, char **argv)
 	args[n++] = config_path;
 	if (!isatty(STDOUT_FILENO))
 		args[n++] = no_color;
-	for (i = 1; i < argc; i++)
-		args[n++] = argv[i];
+	for (i = 0; i < a->nargs; i++)
+		args[n++] = a->arg[i];
 	fflush(stdout);
 	pid = fork();
 	if (pid == 0) {
@@ -126,3 +119,14 @@ int vmac_lint_main(int argc, char **argv)
 	unlink(config_path);
 	return WIFEXITED(status) ? WEXITSTATUS(status) : 2;
 }
+
+const struct vmac_cmd vmac_lint_cmd = {
+    .name = "lint",
+    .args = "FILE.lua...",
+    .min_args = 1,
+    .max_args = -1,
+    .summary = "check driver scripts with luacheck and the sandbox's globals",
+    .about = "Check driver and stdlib scripts with luacheck, knowing exactly the globals the driver\n"
+             "sandbox provides: anything else (os, io, debug, load, ...) is reported.\n"
+             "Exit 0 when clean, 1 on warnings or errors, 2 wrong usage or luacheck missing.\n",
+    .run = lint_run};

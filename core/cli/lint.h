@@ -1,8 +1,10 @@
 /* vmac lint FILE...: luacheck with exactly the driver sandbox's globals
- * (docs/CLI.md). Returns the exit code. */
+ * (docs/CLI.md). */
 #ifndef VMAC_CLI_LINT_H
 #define VMAC_CLI_LINT_H
 
-int vmac_lint_main(int argc, char **argv);
+#include "command.h"
+
+extern const struct vmac_cmd vmac_lint_cmd;
 
 #endif

@@ -3,7 +3,6 @@
 #include "recordings.h"
 
 #include <curl/curl.h>
-#include <getopt.h>
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -38,31 +37,36 @@ static void show_recordings(json_t *a)
 	}
 }
 
-int vmac_recordings_main(int argc, char **argv)
+/* A machine's name as an argument: it goes into a path or a query. */
+static int machine_name_ok(const char *name)
 {
-	struct vmac_cmd o;
+	return strlen(name) <= 63 && !strpbrk(name, "/&?#");
+}
+
+#define EXIT_CODES "Exit 0 done, 1 the host refused or could not be reached, 2 wrong usage.\n"
+
+static int recordings_run(const struct vmac_cmd_args *a)
+{
 	char path[256];
-	int rc;
-	if (vmac_cmd_only_common(
-	        argc, argv, &o,
-	        "usage: vmac recordings [options] [MACHINE]\n"
-	        "List the flight recordings a running vmacd keeps, newest first: id, when, machine,\n"
-	        "driver and version, size, why (a drop, a driver failure). Needs a token of scope read.\n"
-	        "Fetch one with vmac recording get ID > FILE; replay it with vmac test --replay FILE.\n",
-	        &rc))
-		return rc;
-	if (optind < argc - 1 || (optind == argc - 1 && (strlen(argv[optind]) > 63 || strpbrk(argv[optind], "/&?#")))) {
-		fprintf(stderr, "usage: vmac recordings [options] [MACHINE] (vmac recordings --help)\n");
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0)
-		return 2;
-	if (optind == argc - 1)
-		snprintf(path, sizeof(path), "/api/recordings?machine=%s", argv[optind]);
+	if (a->nargs == 1 && !machine_name_ok(a->arg[0]))
+		return vmac_cmd_usage_error(a, "'%s' is not a machine's name", a->arg[0]);
+	if (a->nargs == 1)
+		snprintf(path, sizeof(path), "/api/recordings?machine=%s", a->arg[0]);
 	else
 		snprintf(path, sizeof(path), "/api/recordings");
-	return vmac_cmd_run(&o, "GET", path, NULL, 0, show_recordings);
+	return vmac_client_run(a, "GET", path, NULL, 0, show_recordings);
 }
+
+const struct vmac_cmd vmac_recordings_cmd = {
+    .name = "recordings",
+    .args = "[MACHINE]",
+    .max_args = 1,
+    .summary = "list the flight recordings the host keeps (drops, driver failures)",
+    .about = "List the flight recordings a running vmacd keeps, newest first: id, when, machine,\n"
+             "driver and version, size, why (a drop, a driver failure). Needs a token of scope read.\n"
+             "Fetch one with vmac recording get ID > FILE; replay it with vmac test --replay FILE.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .run = recordings_run};
 
 static void show_record(json_t *a)
 {
@@ -70,51 +74,38 @@ static void show_record(json_t *a)
 	       json_string_value(json_object_get(a, "text")) ? json_string_value(json_object_get(a, "text")) : "");
 }
 
-int vmac_record_main(int argc, char **argv)
+static int record_run(const struct vmac_cmd_args *a)
 {
-	struct vmac_cmd o;
 	char path[256];
-	int rc;
-	if (vmac_cmd_only_common(argc, argv, &o,
-	                         "usage: vmac record [options] MACHINE\n"
-	                         "Capture the flight recorder of a running machine now, without a drop: the last\n"
-	                         "seconds become a recording (vmac recordings lists it) and recording goes on.\n"
-	                         "Needs a token of scope operate.\n",
-	                         &rc))
-		return rc;
-	if (optind != argc - 1 || strlen(argv[optind]) > 63 || strpbrk(argv[optind], "/&?#")) {
-		fprintf(stderr, "usage: vmac record [options] MACHINE (vmac record --help)\n");
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0)
-		return 2;
-	snprintf(path, sizeof(path), "/api/devices/%s/record", argv[optind]);
-	return vmac_cmd_run(&o, "POST", path, NULL, 0, show_record) == 0 ? 0 : 1;
+	if (!machine_name_ok(a->arg[0]))
+		return vmac_cmd_usage_error(a, "'%s' is not a machine's name", a->arg[0]);
+	snprintf(path, sizeof(path), "/api/devices/%s/record", a->arg[0]);
+	return vmac_client_run(a, "POST", path, NULL, 0, show_record) == 0 ? 0 : 1;
 }
 
+const struct vmac_cmd vmac_record_cmd = {
+    .name = "record",
+    .args = "MACHINE",
+    .min_args = 1,
+    .max_args = 1,
+    .summary = "capture a running machine's flight recorder now",
+    .about = "Capture the flight recorder of a running machine now, without a drop: the last\n"
+             "seconds become a recording (vmac recordings lists it) and recording goes on.\n"
+             "Needs a token of scope operate.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .run = record_run};
+
 /* vmac recording get ID: the file on standard output. */
-static int get(int argc, char **argv)
+static int get_run(const struct vmac_cmd_args *a)
 {
-	struct vmac_cmd o;
 	struct vmac_buffer b = {NULL, 0};
 	char path[64], url[512], err[600];
 	long code = 0;
 	int rc;
-	if (vmac_cmd_only_common(argc, argv, &o,
-	                         "usage: vmac recording get [options] ID > FILE\n"
-	                         "Write recording ID (vmac recordings lists them) to standard output: the file\n"
-	                         "vmac test --replay FILE replays (docs/RECORDING.md). Needs a token of scope read.\n",
-	                         &rc))
-		return rc;
-	if (optind != argc - 1 || strspn(argv[optind], "0123456789") != strlen(argv[optind]) || !argv[optind][0] ||
-	    strlen(argv[optind]) > 18) {
-		fprintf(stderr, "usage: vmac recording get [options] ID (a number; vmac recordings lists them)\n");
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0)
-		return 2;
-	snprintf(path, sizeof(path), "/api/recordings/%s", argv[optind]);
-	vmac_client_url(url, sizeof(url), o.http, path);
+	if (strspn(a->arg[0], "0123456789") != strlen(a->arg[0]) || !a->arg[0][0] || strlen(a->arg[0]) > 18)
+		return vmac_cmd_usage_error(a, "ID is a number (vmac recordings lists them), not '%s'", a->arg[0]);
+	snprintf(path, sizeof(path), "/api/recordings/%s", a->arg[0]);
+	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
 	curl_global_init(CURL_GLOBAL_DEFAULT);
 	rc = vmac_client_call("GET", url, NULL, &b, &code, err, sizeof(err));
 	curl_global_cleanup();
@@ -123,15 +114,15 @@ static int get(int argc, char **argv)
 		return 1;
 	}
 	if (code != 200) {
-		json_t *a = json_loads(b.data ? b.data : "", 0, NULL);
+		json_t *answer = json_loads(b.data ? b.data : "", 0, NULL);
 		fprintf(stderr, "vmac: HTTP %ld: %s\n%s", code,
-		        a && json_is_string(json_object_get(a, "error"))
-		            ? json_string_value(json_object_get(a, "error"))
+		        answer && json_is_string(json_object_get(answer, "error"))
+		            ? json_string_value(json_object_get(answer, "error"))
 		            : "(no message)",
 		        code == 401 || code == 403 ? vmac_client_auth_hint() : "");
 		if (code == 401 || code == 403)
 			fputc('\n', stderr);
-		json_decref(a);
+		json_decref(answer);
 		free(b.data);
 		return 1;
 	}
@@ -151,25 +142,13 @@ static void comment_text(const char *s)
 		putchar((unsigned char)*s < 0x20 || *s == 0x7f ? ' ' : *s);
 }
 
-static int to_test(int argc, char **argv)
+static int to_test_run(const struct vmac_cmd_args *a)
 {
 	struct vmac_recording rec;
 	char err[600], *text;
-	const char *file;
+	const char *file = a->arg[0];
 	size_t len, i;
 	int code = 0;
-	if (argc == 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf("usage: vmac recording to-test FILE > NAME_test.lua\n"
-		       "Write a vmac test file that replays recording FILE against the driver under test and\n"
-		       "fails where an output differs or the driver fails: keep it in tests/drivers/ (the\n"
-		       "recording is inside it). docs/RECORDING.md, \"A recording as a test\".\n");
-		return 0;
-	}
-	if (argc != 2) {
-		fprintf(stderr, "usage: vmac recording to-test FILE (vmac recording to-test --help)\n");
-		return 2;
-	}
-	file = argv[1];
 	text = vmac_read_file(file, RECORDING_FILE_MAX, &len, err, sizeof(err), &code);
 	if (!text) {
 		fprintf(stderr, "vmac: %s\n", err);
@@ -208,18 +187,35 @@ static int to_test(int argc, char **argv)
 	return 0;
 }
 
-int vmac_recording_main(int argc, char **argv)
-{
-	if (argc >= 2 && strcmp(argv[1], "get") == 0)
-		return get(argc - 1, argv + 1);
-	if (argc >= 2 && strcmp(argv[1], "to-test") == 0)
-		return to_test(argc - 1, argv + 1);
-	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf("usage: vmac recording get ID > FILE      fetch a flight recording of a running vmacd\n"
-		       "       vmac recording to-test FILE       write a test that replays it\n"
-		       "Replay one with vmac test --replay FILE [--drivers DIR]. docs/RECORDING.md.\n");
-		return 0;
-	}
-	fprintf(stderr, "usage: vmac recording get ID | vmac recording to-test FILE (vmac recording --help)\n");
-	return 2;
-}
+static const struct vmac_cmd get_cmd = {
+    .name = "get",
+    .args = "ID",
+    .min_args = 1,
+    .max_args = 1,
+    .summary = "write recording ID to standard output (> FILE)",
+    .about = "Write recording ID (vmac recordings lists them) to standard output: the file\n"
+             "vmac test --replay FILE replays (docs/RECORDING.md). Needs a token of scope read.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .run = get_run};
+
+static const struct vmac_cmd to_test_cmd = {
+    .name = "to-test",
+    .args = "FILE",
+    .min_args = 1,
+    .max_args = 1,
+    .summary = "write a test that replays recording FILE (> NAME_test.lua)",
+    .about = "Write a vmac test file that replays recording FILE against the driver under test and\n"
+             "fails where an output differs or the driver fails: keep it in tests/drivers/ (the\n"
+             "recording is inside it). docs/RECORDING.md, \"A recording as a test\". No host needed.\n"
+             "Exit 0 done, 1 the recording cannot be made a test, 2 wrong usage or FILE not a recording.\n",
+    .run = to_test_run};
+
+static const struct vmac_cmd *const actions[] = {&get_cmd, &to_test_cmd, NULL};
+
+const struct vmac_cmd vmac_recording_cmd = {
+    .name = "recording",
+    .args = "ACTION",
+    .summary = "fetch a flight recording (get ID > FILE), make one a test (to-test FILE)",
+    .about = "One flight recording of a running vmacd (docs/RECORDING.md). Replay one with\n"
+             "vmac test --replay FILE [--drivers DIR].\n",
+    .sub = actions};

@@ -1,10 +1,10 @@
-/* vmac recordings, vmac recording get / to-test (recordings.c). Each
- * returns the exit code. */
+/* vmac recordings, vmac record, vmac recording get / to-test: a running
+ * host's flight recordings (recordings.c, docs/CLI.md). */
 #ifndef VMAC_CLI_RECORDINGS_H
 #define VMAC_CLI_RECORDINGS_H
 
-int vmac_recordings_main(int argc, char **argv);
-int vmac_recording_main(int argc, char **argv);
-int vmac_record_main(int argc, char **argv);
+#include "command.h"
+
+extern const struct vmac_cmd vmac_recordings_cmd, vmac_recording_cmd, vmac_record_cmd;
 
 #endif

@@ -1,9 +1,7 @@
-/* vmac reload, rollback and drivers: hot reload of a running host's drivers
+/* vmac reload, rollback, activate and drivers: hot reload of a running host's drivers
  * over its HTTP API (docs/CLI.md, docs/API.md "Drivers"). */
 #include "reload.h"
 
-#include <curl/curl.h>
-#include <getopt.h>
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -82,161 +80,144 @@ static int name_of(const char *path, char *name, size_t len)
 	return 0;
 }
 
-int vmac_reload_main(int argc, char **argv)
+/* A driver's name as an argument: one path segment that fits. */
+static int driver_name_ok(const char *name)
 {
-	static const struct option opts[] = {VMAC_CMD_OPTS,
-	                                     {"probation", required_argument, 0, 'p'},
-	                                     {"driver", required_argument, 0, 'd'},
-	                                     {0, 0, 0, 0}};
-	struct vmac_cmd o;
-	const char *probation = NULL, *driver = NULL;
+	return strlen(name) <= 63 && !strchr(name, '/');
+}
+
+enum { RELOAD_DRIVER = VMAC_CMD_OWN, RELOAD_PROBATION };
+
+#define PROBATION_OPTION                                                                                               \
+	{                                                                                                              \
+		"probation", NULL, 0, "S", NULL, NULL,                                                                 \
+		    "seconds of probation, 0: none (default: the host's reload_probation_s)"                           \
+	}
+
+static const struct vmac_cmd_option reload_options[] = {
+    [RELOAD_DRIVER - VMAC_CMD_OWN] = {"driver", NULL, 0, "NAME", NULL, NULL,
+                                      "the driver's name (default: FILE's name without .lua)"},
+    [RELOAD_PROBATION - VMAC_CMD_OWN] = PROBATION_OPTION,
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+static int reload_run(const struct vmac_cmd_args *a)
+{
+	const char *file = a->arg[0], *probation = a->opt[RELOAD_PROBATION], *driver = a->opt[RELOAD_DRIVER];
 	char name[64], path[256], why[600];
 	size_t len = 0;
 	char *src;
-	int opt, rc, code = 0;
-	vmac_cmd_init(&o);
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (vmac_cmd_opt(opt, &o))
-			continue;
-		switch (opt) {
-		case 'p': probation = optarg; break;
-		case 'd': driver = optarg; break;
-		case 'h':
-			printf(
-			    "usage: vmac reload [options] FILE.lua\n"
-			    "Upload a new version of a driver to a running vmacd: the host compiles it in a fresh\n"
-			    "sandbox, refuses it with the error and line if it does not compile or its manifest is\n"
-			    "wrong, and otherwise switches every running machine of that driver at a slot boundary,\n"
-			    "handing the old state to the new version's migrate(). A version that fails within its\n"
-			    "probation is rolled back by the host. Needs a token of scope deploy.\n"
-			    "  --driver NAME      the driver's name (default: FILE's name without .lua)\n"
-			    "  --probation S      seconds of probation (default: the host's reload_probation_s, 30)\n"
-			    "%s",
-			    VMAC_CMD_HELP);
-			return 0;
-		default: return 2;
-		}
-	}
-	if (optind != argc - 1) {
-		fprintf(stderr, "usage: vmac reload [options] FILE.lua (vmac reload --help)\n");
-		return 2;
-	}
+	int rc, code = 0;
 	if (driver ? snprintf(name, sizeof(name), "%s", driver) >= (int)sizeof(name)
-	           : name_of(argv[optind], name, sizeof(name)) != 0) {
-		fprintf(stderr, "vmac reload: cannot take a driver name from '%s' (use --driver NAME)\n", argv[optind]);
+	           : name_of(file, name, sizeof(name)) != 0) {
+		fprintf(stderr, "vmac reload: cannot take a driver name from '%s' (use --driver NAME)\n", file);
 		return 2;
 	}
-	src = vmac_read_file(argv[optind], VMAC_DRIVER_FILE_MAX, &len, why, sizeof(why), &code);
+	src = vmac_read_file(file, VMAC_DRIVER_FILE_MAX, &len, why, sizeof(why), &code);
 	if (!src) {
 		fprintf(stderr, "vmac reload: %s\n", why);
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0) {
-		free(src);
 		return 2;
 	}
 	if (probation)
 		snprintf(path, sizeof(path), "/api/drivers/%s?probation=%s", name, probation);
 	else
 		snprintf(path, sizeof(path), "/api/drivers/%s", name);
-	rc = vmac_cmd_run(&o, "POST", path, src, len, show_deploy);
+	rc = vmac_client_run(a, "POST", path, src, len, show_deploy);
 	free(src);
 	return rc;
 }
 
-/* The options of a command that takes only the common ones: 0 to go on
- * (optind at the first argument), else the exit code (--help: 0, printed). */
+#define EXIT_CODES "Exit 0 done, 1 the host refused or could not be reached (the reason on stderr), 2 wrong usage.\n"
 
-int vmac_rollback_main(int argc, char **argv)
+const struct vmac_cmd vmac_reload_cmd = {
+    .name = "reload",
+    .args = "FILE.lua",
+    .min_args = 1,
+    .max_args = 1,
+    .summary = "upload a new version of a driver; machines switch at a slot boundary",
+    .about = "Upload a new version of a driver to a running vmacd: the host compiles it in a fresh\n"
+             "sandbox, refuses it with the error and line if it does not compile or its manifest is\n"
+             "wrong, and otherwise switches every running machine of that driver at a slot boundary,\n"
+             "handing the old state to the new version's migrate(). A version that fails within its\n"
+             "probation is rolled back by the host. Needs a token of scope deploy.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .own = reload_options,
+    .run = reload_run};
+
+static int rollback_run(const struct vmac_cmd_args *a)
 {
-	struct vmac_cmd o;
 	char path[256];
-	int rc;
-	if (vmac_cmd_only_common(argc, argv, &o,
-	                         "usage: vmac rollback [options] DRIVER\n"
-	                         "Go back to the version of DRIVER that was active before the active one (or to the\n"
-	                         "driver's file), on every running machine, each at a slot boundary with migrate().\n"
-	                         "Needs a token of scope deploy.\n",
-	                         &rc))
-		return rc;
-	if (optind != argc - 1 || strlen(argv[optind]) > 63 || strchr(argv[optind], '/')) {
-		fprintf(stderr, "usage: vmac rollback [options] DRIVER (vmac rollback --help)\n");
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0)
-		return 2;
-	snprintf(path, sizeof(path), "/api/drivers/%s/rollback", argv[optind]);
-	return vmac_cmd_run(&o, "POST", path, NULL, 0, show_deploy);
+	if (!driver_name_ok(a->arg[0]))
+		return vmac_cmd_usage_error(a, "'%s' is not a driver's name", a->arg[0]);
+	snprintf(path, sizeof(path), "/api/drivers/%s/rollback", a->arg[0]);
+	return vmac_client_run(a, "POST", path, NULL, 0, show_deploy);
 }
 
-int vmac_activate_main(int argc, char **argv)
+const struct vmac_cmd vmac_rollback_cmd = {
+    .name = "rollback",
+    .args = "DRIVER",
+    .min_args = 1,
+    .max_args = 1,
+    .summary = "go back to a driver's previous version",
+    .about = "Go back to the version of DRIVER that was active before the active one (or to the\n"
+             "driver's file), on every running machine, each at a slot boundary with migrate().\n"
+             "Needs a token of scope deploy.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .run = rollback_run};
+
+enum { ACTIVATE_PROBATION = VMAC_CMD_OWN };
+
+static const struct vmac_cmd_option activate_options[] = {[ACTIVATE_PROBATION - VMAC_CMD_OWN] = PROBATION_OPTION,
+                                                          {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+static int activate_run(const struct vmac_cmd_args *a)
 {
-	static const struct option opts[] = {VMAC_CMD_OPTS, {"probation", required_argument, 0, 'p'}, {0, 0, 0, 0}};
-	struct vmac_cmd o;
-	const char *probation = NULL;
+	const char *probation = a->opt[ACTIVATE_PROBATION];
 	char path[256], *end;
-	long long id;
-	int opt;
-	vmac_cmd_init(&o);
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		if (vmac_cmd_opt(opt, &o))
-			continue;
-		if (opt == 'p') {
-			probation = optarg;
-			continue;
-		}
-		if (opt == 'h') {
-			printf(
-			    "usage: vmac activate [options] DRIVER ID\n"
-			    "Make version ID of DRIVER (vmac drivers lists them) the active one again: its source is\n"
-			    "deployed as vmac reload would (a new entry in the list, the same hash), with migrate()\n"
-			    "and probation. Needs a token of scope deploy.\n"
-			    "  --probation S      seconds of probation (default: the host's reload_probation_s, "
-			    "30)\n%s",
-			    VMAC_CMD_HELP);
-			return 0;
-		}
-		return 2;
-	}
-	if (optind != argc - 2 || strlen(argv[optind]) > 63 || strchr(argv[optind], '/') ||
-	    (id = strtoll(argv[optind + 1], &end, 10)) < 1 || *end) {
-		fprintf(stderr, "usage: vmac activate [options] DRIVER ID (vmac activate --help)\n");
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0)
-		return 2;
+	long long id = strtoll(a->arg[1], &end, 10);
+	if (!driver_name_ok(a->arg[0]))
+		return vmac_cmd_usage_error(a, "'%s' is not a driver's name", a->arg[0]);
+	if (id < 1 || *end || end == a->arg[1])
+		return vmac_cmd_usage_error(a, "ID is a version's number (vmac drivers lists them), not '%s'",
+		                            a->arg[1]);
 	if (probation)
-		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld&probation=%s", argv[optind], id,
-		         probation);
+		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld&probation=%s", a->arg[0], id, probation);
 	else
-		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld", argv[optind], id);
-	return vmac_cmd_run(&o, "POST", path, NULL, 0, show_deploy);
+		snprintf(path, sizeof(path), "/api/drivers/%s/activate?id=%lld", a->arg[0], id);
+	return vmac_client_run(a, "POST", path, NULL, 0, show_deploy);
 }
 
-int vmac_drivers_main(int argc, char **argv)
+const struct vmac_cmd vmac_activate_cmd = {
+    .name = "activate",
+    .args = "DRIVER ID",
+    .min_args = 2,
+    .max_args = 2,
+    .summary = "make a kept driver version the active one again",
+    .about = "Make version ID of DRIVER (vmac drivers lists them) the active one again: its source is\n"
+             "deployed as vmac reload would (a new entry in the list, the same hash), with migrate()\n"
+             "and probation. Needs a token of scope deploy.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .own = activate_options,
+    .run = activate_run};
+
+static int drivers_run(const struct vmac_cmd_args *a)
 {
-	struct vmac_cmd o;
 	char path[256];
-	int rc;
-	if (vmac_cmd_only_common(
-	        argc, argv, &o,
-	        "usage: vmac drivers [options] [DRIVER]\n"
-	        "List the driver versions a running vmacd keeps (uploaded with vmac reload): id, version,\n"
-	        "state (active, replaced, rolled_back, refused, pending), when, by which token, hash.\n"
-	        "Needs a token of scope read.\n",
-	        &rc))
-		return rc;
-	if (optind < argc - 1 || (optind == argc - 1 && (strlen(argv[optind]) > 63 || strchr(argv[optind], '/')))) {
-		fprintf(stderr, "usage: vmac drivers [options] [DRIVER] (vmac drivers --help)\n");
-		return 2;
-	}
-	if (vmac_client_token(o.token, o.token_file) != 0)
-		return 2;
-	if (optind == argc - 1)
-		snprintf(path, sizeof(path), "/api/drivers/%s", argv[optind]);
+	if (a->nargs == 1 && !driver_name_ok(a->arg[0]))
+		return vmac_cmd_usage_error(a, "'%s' is not a driver's name", a->arg[0]);
+	if (a->nargs == 1)
+		snprintf(path, sizeof(path), "/api/drivers/%s", a->arg[0]);
 	else
 		snprintf(path, sizeof(path), "/api/drivers");
-	return vmac_cmd_run(&o, "GET", path, NULL, 0, show_versions);
+	return vmac_client_run(a, "GET", path, NULL, 0, show_versions);
 }
+
+const struct vmac_cmd vmac_drivers_cmd = {
+    .name = "drivers",
+    .args = "[DRIVER]",
+    .max_args = 1,
+    .summary = "list the driver versions the host keeps",
+    .about = "List the driver versions a running vmacd keeps (uploaded with vmac reload): id, version,\n"
+             "state (active, replaced, rolled_back, refused, pending), when, by which token, hash.\n"
+             "Needs a token of scope read.\n" EXIT_CODES,
+    .common = VMAC_CMD_API,
+    .run = drivers_run};

@@ -1,11 +1,10 @@
-/* vmac reload FILE, vmac rollback DRIVER, vmac drivers [DRIVER]: hot reload
- * of a running host's drivers (docs/CLI.md). Each returns the exit code. */
+/* vmac reload FILE, rollback DRIVER, activate DRIVER ID, drivers [DRIVER]:
+ * hot reload of a running host's drivers (docs/CLI.md). */
 #ifndef VMAC_CLI_RELOAD_H
 #define VMAC_CLI_RELOAD_H
 
-int vmac_reload_main(int argc, char **argv);
-int vmac_rollback_main(int argc, char **argv);
-int vmac_drivers_main(int argc, char **argv);
-int vmac_activate_main(int argc, char **argv);
+#include "command.h"
+
+extern const struct vmac_cmd vmac_reload_cmd, vmac_rollback_cmd, vmac_activate_cmd, vmac_drivers_cmd;
 
 #endif

@@ -4,7 +4,6 @@
  * and prints it. Needs no vmacd and no token: only the broker. */
 #include "site.h"
 
-#include <getopt.h>
 #include <jansson.h>
 #include <mosquitto.h>
 #include <stdio.h>
@@ -16,23 +15,10 @@
 #include "../config/config.h"
 #include "../mqtt/mqtt.h"
 #include "../mqtt/site.h"
+#include "command.h"
 
 /* Exit codes (docs/CLI.md). */
-enum { SITE_OK = 0, SITE_BROKER = 1, SITE_USAGE = 2, SITE_EMPTY = 3 };
-
-static const char help[] =
-    "usage: vmac site --mqtt URL [--prefix P] [--json] [--wait S] [--user U --password-file F] [--cafile F]\n"
-    "Every vmac host on an MQTT broker, its devices (online/offline) and their last values, from the\n"
-    "broker's retained messages alone (no vmacd HTTP, no token).\n"
-    "  --mqtt URL          the broker: mqtt://HOST[:PORT] or mqtts://HOST[:PORT] (default $VMAC_MQTT)\n"
-    "  --prefix P          the hosts' mqtt_prefix (default vmac)\n"
-    "  --json              print the site as JSON (as GET /api/site answers)\n"
-    "  --wait S            wait S seconds for the retained messages, 0.1..60 (default 2)\n"
-    "  --user U            user name for the broker\n"
-    "  --password-file F   the password: F's first line\n"
-    "  --cafile F          mqtts: the CA of the broker's certificate (default: the system's)\n"
-    "Exit codes: 0 the site printed, 1 the broker unreachable or refusing, 2 wrong usage,\n"
-    "3 no vmac host under the prefix.\n";
+enum { SITE_OK = 0, SITE_BROKER = 1, SITE_USAGE = VMAC_CMD_USAGE, SITE_EMPTY = 3 };
 
 struct session {
 	struct mosquitto *mosq;
@@ -181,53 +167,42 @@ static int collect(struct session *k, const struct vmac_mqtt_settings *s, double
 	return SITE_OK;
 }
 
-int vmac_site_main(int argc, char **argv)
+enum { SITE_MQTT = VMAC_CMD_OWN, SITE_PREFIX, SITE_WAIT, SITE_USER, SITE_PASSWORD_FILE, SITE_CAFILE };
+
+static const struct vmac_cmd_option site_options[] = {
+    [SITE_MQTT - VMAC_CMD_OWN] = {"mqtt", NULL, 0, "URL", "VMAC_MQTT", NULL,
+                                  "the broker: mqtt://HOST[:PORT] or mqtts://HOST[:PORT]"},
+    [SITE_PREFIX - VMAC_CMD_OWN] = {"prefix", NULL, 0, "P", NULL, NULL, "the hosts' mqtt_prefix (default vmac)"},
+    [SITE_WAIT - VMAC_CMD_OWN] = {"wait", NULL, 0, "S", NULL, NULL,
+                                  "wait S seconds for the retained messages, 0.1..60 (default 2)"},
+    [SITE_USER - VMAC_CMD_OWN] = {"user", NULL, 0, "U", NULL, NULL, "user name for the broker"},
+    [SITE_PASSWORD_FILE - VMAC_CMD_OWN] = {"password-file", NULL, 0, "F", NULL, NULL, "the password: F's first line"},
+    [SITE_CAFILE - VMAC_CMD_OWN] = {"cafile", NULL, 0, "F", NULL, NULL,
+                                    "mqtts: the CA of the broker's certificate (default: the system's)"},
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+static int site_run(const struct vmac_cmd_args *a)
 {
-	static const struct option opts[] = {{"mqtt", required_argument, 0, 'm'},
-	                                     {"prefix", required_argument, 0, 'p'},
-	                                     {"json", no_argument, 0, 'j'},
-	                                     {"wait", required_argument, 0, 'w'},
-	                                     {"user", required_argument, 0, 'u'},
-	                                     {"password-file", required_argument, 0, 'P'},
-	                                     {"cafile", required_argument, 0, 'c'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {0, 0, 0, 0}};
-	const char *url = getenv("VMAC_MQTT"), *prefix = NULL, *user = NULL, *password_file = NULL, *cafile = NULL;
+	const char *url = a->opt[SITE_MQTT];
 	struct vmac_mqtt_settings s;
 	struct session k = {NULL, NULL, -1};
 	double wait_s = 2.0;
 	char broker[300], *end;
-	int json = 0, opt, rc;
+	int rc;
 	json_t *view;
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		switch (opt) {
-		case 'm': url = optarg; break;
-		case 'p': prefix = optarg; break;
-		case 'j': json = 1; break;
-		case 'u': user = optarg; break;
-		case 'P': password_file = optarg; break;
-		case 'c': cafile = optarg; break;
-		case 'w':
-			wait_s = strtod(optarg, &end);
-			if (!*optarg || *end || !(wait_s >= 0.1 && wait_s <= 60)) {
-				fprintf(stderr, "vmac site: --wait '%s': expected seconds, 0.1..60\n", optarg);
-				return SITE_USAGE;
-			}
-			break;
-		case 'h': printf("%s", help); return SITE_OK;
-		default: return SITE_USAGE;
+	if (a->opt[SITE_WAIT]) {
+		wait_s = strtod(a->opt[SITE_WAIT], &end);
+		if (!*a->opt[SITE_WAIT] || *end || !(wait_s >= 0.1 && wait_s <= 60)) {
+			fprintf(stderr, "vmac site: --wait '%s': expected seconds, 0.1..60\n", a->opt[SITE_WAIT]);
+			return SITE_USAGE;
 		}
-	}
-	if (optind < argc) {
-		fprintf(stderr, "vmac site: unexpected argument '%s' (see --help)\n", argv[optind]);
-		return SITE_USAGE;
 	}
 	if (!url || !url[0]) {
 		fprintf(stderr, "vmac site: --mqtt URL is needed (or $VMAC_MQTT), e.g. --mqtt mqtt://127.0.0.1:1883\n");
 		return SITE_USAGE;
 	}
-	if (settings(url, prefix, user, password_file, cafile, &s) != 0)
+	if (settings(url, a->opt[SITE_PREFIX], a->opt[SITE_USER], a->opt[SITE_PASSWORD_FILE], a->opt[SITE_CAFILE],
+	             &s) != 0)
 		return SITE_USAGE;
 	if (!(k.site = vmac_site_new(s.prefix, NULL))) {
 		fprintf(stderr, "vmac site: out of memory\n");
@@ -245,7 +220,7 @@ int vmac_site_main(int argc, char **argv)
 		fprintf(stderr, "vmac site: out of memory\n");
 		return SITE_BROKER;
 	}
-	if (json) {
+	if (a->opt[VMAC_CMD_JSON]) {
 		char *text = json_dumps(view, JSON_COMPACT);
 		printf("%s\n", text ? text : "{}");
 		free(text);
@@ -259,3 +234,15 @@ int vmac_site_main(int argc, char **argv)
 	json_decref(view);
 	return rc;
 }
+
+const struct vmac_cmd vmac_site_cmd = {
+    .name = "site",
+    .summary = "every host on an MQTT broker, its devices and values (the broker alone)",
+    .about = "Every vmac host on an MQTT broker, its devices (online/offline) and their last values, from the\n"
+             "broker's retained messages alone (no vmacd HTTP, no token); with --json as GET /api/site\n"
+             "answers it.\n"
+             "Exit codes: 0 the site printed, 1 the broker unreachable or refusing, 2 wrong usage,\n"
+             "3 no vmac host under the prefix.\n",
+    .common = VMAC_CMD_TAKES(VMAC_CMD_JSON),
+    .own = site_options,
+    .run = site_run};

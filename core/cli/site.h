@@ -3,6 +3,8 @@
 #ifndef VMAC_CLI_SITE_H
 #define VMAC_CLI_SITE_H
 
-int vmac_site_main(int argc, char **argv);
+#include "command.h"
+
+extern const struct vmac_cmd vmac_site_cmd;
 
 #endif

@@ -4,28 +4,13 @@
  * the store keeps only its hash (core/store/store.h). */
 #include "token.h"
 
-#include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "../store/store.h"
-
-#define DEFAULT_STATE "/var/lib/vmac" /* vmacd's default state_dir (docs/HOST.md) */
-
-static void usage(FILE *f)
-{
-	fprintf(f,
-	        "usage: vmac token create --scope read|operate|deploy [--note TEXT] [--state DIR]\n"
-	        "       vmac token list [--state DIR]\n"
-	        "       vmac token revoke ID [--state DIR]\n"
-	        "Access tokens of the host whose state folder is DIR (default $VMAC_STATE, else %s).\n"
-	        "Scopes: read (status, devices, events), operate (+ operator input, cycles, parameters),\n"
-	        "deploy (+ drivers). create prints the new token once on standard output; the host keeps\n"
-	        "only its hash. revoke takes effect at once, host running or not.\n",
-	        DEFAULT_STATE);
-}
+#include "command.h"
 
 static void print_token(void *ctx, const struct vmac_token_info *t)
 {
@@ -38,99 +23,127 @@ static void print_token(void *ctx, const struct vmac_token_info *t)
 	printf("%-16s  %-7s  %-19s  %-19s  %s\n", t->id, vmac_scope_name(t->scope), created, revoked, t->note);
 }
 
-int vmac_token_main(int argc, char **argv)
+/* The token store of a's --state: 0, or 1 after saying why. */
+static int open_store(const struct vmac_cmd_args *a, struct vmac_store **store)
 {
-	static const struct option opts[] = {{"state", required_argument, 0, 's'},
-	                                     {"scope", required_argument, 0, 'c'},
-	                                     {"note", required_argument, 0, 'n'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {0, 0, 0, 0}};
-	const char *state = getenv("VMAC_STATE") ? getenv("VMAC_STATE") : DEFAULT_STATE, *scope_name = NULL, *note = "",
-	           *action;
-	struct vmac_store *store;
 	char err[1024];
-	int opt, rc = 0;
-
-	if (argc < 2 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
-		usage(argc < 2 ? stderr : stdout);
-		return argc < 2 ? 2 : 0;
+	if (vmac_store_open(a->opt[VMAC_CMD_STATE], store, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmac token: %s\n", err);
+		return 1;
 	}
-	action = argv[1];
-	if (strcmp(action, "create") != 0 && strcmp(action, "list") != 0 && strcmp(action, "revoke") != 0) {
-		fprintf(stderr, "vmac token: unknown action '%s' (create, list or revoke)\n", action);
+	return 0;
+}
+
+enum { CREATE_SCOPE = VMAC_CMD_OWN, CREATE_NOTE };
+
+static const struct vmac_cmd_option create_options[] = {
+    [CREATE_SCOPE - VMAC_CMD_OWN] = {"scope", NULL, 0, "read|operate|deploy", NULL, NULL,
+                                     "what the token may do (needed)"},
+    [CREATE_NOTE - VMAC_CMD_OWN] = {"note", NULL, 0, "TEXT", NULL, NULL, "a note on what it is for"},
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+static int create_run(const struct vmac_cmd_args *a)
+{
+	const char *scope_name = a->opt[CREATE_SCOPE], *note = a->opt[CREATE_NOTE] ? a->opt[CREATE_NOTE] : "";
+	struct vmac_store *store;
+	enum vmac_scope scope;
+	char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1], err[1024];
+	int rc = 0;
+	if (!scope_name || vmac_scope_parse(scope_name, &scope) != 0) {
+		fprintf(stderr, "vmac token create: --scope must be read, operate or deploy%s%s\n",
+		        scope_name ? ", not " : "", scope_name ? scope_name : "");
 		return 2;
 	}
-	optind = 2;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		switch (opt) {
-		case 's': state = optarg; break;
-		case 'c': scope_name = optarg; break;
-		case 'n': note = optarg; break;
-		case 'h': usage(stdout); return 0;
-		default: return 2;
-		}
+	if (strlen(note) > VMAC_TOKEN_NOTE_MAX) {
+		fprintf(stderr, "vmac token create: --note is longer than %d characters\n", VMAC_TOKEN_NOTE_MAX);
+		return 2;
 	}
-	if (strcmp(action, "create") == 0) {
-		enum vmac_scope scope;
-		char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1];
-		if (optind < argc) {
-			fprintf(stderr, "vmac token create: unexpected argument '%s'\n", argv[optind]);
-			return 2;
-		}
-		if (!scope_name || vmac_scope_parse(scope_name, &scope) != 0) {
-			fprintf(stderr, "vmac token create: --scope must be read, operate or deploy%s%s\n",
-			        scope_name ? ", not " : "", scope_name ? scope_name : "");
-			return 2;
-		}
-		if (strlen(note) > VMAC_TOKEN_NOTE_MAX) {
-			fprintf(stderr, "vmac token create: --note is longer than %d characters\n",
-			        VMAC_TOKEN_NOTE_MAX);
-			return 2;
-		}
-		if (vmac_store_open(state, &store, err, sizeof(err)) != 0) {
-			fprintf(stderr, "vmac token: %s\n", err);
-			return 1;
-		}
-		if (vmac_token_create(store, scope, note, token, id, err, sizeof(err)) != 0) {
-			fprintf(stderr, "vmac token: %s\n", err);
-			rc = 1;
-		} else {
-			printf("%s\n", token);
-			fprintf(stderr, "vmac token: created %s (scope %s) in %s; this is the only time it is shown\n",
-			        id, vmac_scope_name(scope), state);
-		}
-	} else if (strcmp(action, "list") == 0) {
-		if (optind < argc) {
-			fprintf(stderr, "vmac token list: unexpected argument '%s'\n", argv[optind]);
-			return 2;
-		}
-		if (vmac_store_open(state, &store, err, sizeof(err)) != 0) {
-			fprintf(stderr, "vmac token: %s\n", err);
-			return 1;
-		}
-		printf("%-16s  %-7s  %-19s  %-19s  %s\n", "ID", "SCOPE", "CREATED", "REVOKED", "NOTE");
-		if (vmac_token_list(store, print_token, NULL, err, sizeof(err)) < 0) {
-			fprintf(stderr, "vmac token: %s\n", err);
-			rc = 1;
-		}
+	if (open_store(a, &store))
+		return 1;
+	if (vmac_token_create(store, scope, note, token, id, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmac token: %s\n", err);
+		rc = 1;
 	} else {
-		if (optind != argc - 1) {
-			fprintf(stderr, "vmac token revoke: give exactly one token ID (vmac token list shows them)\n");
-			return 2;
-		}
-		if (vmac_store_open(state, &store, err, sizeof(err)) != 0) {
-			fprintf(stderr, "vmac token: %s\n", err);
-			return 1;
-		}
-		rc = vmac_token_revoke(store, argv[optind], err, sizeof(err));
-		if (rc < 0)
-			fprintf(stderr, "vmac token: %s\n", err);
-		else if (rc == 1)
-			fprintf(stderr, "vmac token: no valid token with ID %s in %s\n", argv[optind], state);
-		else
-			fprintf(stderr, "vmac token: revoked %s\n", argv[optind]);
-		rc = rc != 0;
+		printf("%s\n", token);
+		fprintf(stderr, "vmac token: created %s (scope %s) in %s; this is the only time it is shown\n", id,
+		        vmac_scope_name(scope), a->opt[VMAC_CMD_STATE]);
 	}
 	vmac_store_close(store);
 	return rc;
 }
+
+static int list_run(const struct vmac_cmd_args *a)
+{
+	struct vmac_store *store;
+	char err[1024];
+	int rc = 0;
+	if (open_store(a, &store))
+		return 1;
+	printf("%-16s  %-7s  %-19s  %-19s  %s\n", "ID", "SCOPE", "CREATED", "REVOKED", "NOTE");
+	if (vmac_token_list(store, print_token, NULL, err, sizeof(err)) < 0) {
+		fprintf(stderr, "vmac token: %s\n", err);
+		rc = 1;
+	}
+	vmac_store_close(store);
+	return rc;
+}
+
+static int revoke_run(const struct vmac_cmd_args *a)
+{
+	struct vmac_store *store;
+	char err[1024];
+	int rc;
+	if (open_store(a, &store))
+		return 1;
+	rc = vmac_token_revoke(store, a->arg[0], err, sizeof(err));
+	if (rc < 0)
+		fprintf(stderr, "vmac token: %s\n", err);
+	else if (rc == 1)
+		fprintf(stderr, "vmac token: no valid token with ID %s in %s\n", a->arg[0], a->opt[VMAC_CMD_STATE]);
+	else
+		fprintf(stderr, "vmac token: revoked %s\n", a->arg[0]);
+	vmac_store_close(store);
+	return rc != 0;
+}
+
+#define EXIT_CODES "Exit 0 done, 1 the store cannot be opened or written, 2 wrong usage.\n"
+
+static const struct vmac_cmd create_cmd = {
+    .name = "create",
+    .summary = "a new token, printed once on standard output; the host keeps only its hash",
+    .about = "Make a token of the given scope: read (status, devices, events), operate (+ operator\n"
+             "input, cycles, parameters), deploy (+ drivers). It is printed once on standard output and\n"
+             "never again: the host keeps only its hash.\n" EXIT_CODES,
+    .common = VMAC_CMD_TAKES(VMAC_CMD_STATE),
+    .own = create_options,
+    .run = create_run};
+
+static const struct vmac_cmd list_cmd = {
+    .name = "list",
+    .summary = "every token: ID, scope, when made, when revoked, note (never a secret)",
+    .about = "List every token: ID, scope, when made, when revoked, note (never a secret).\n" EXIT_CODES,
+    .common = VMAC_CMD_TAKES(VMAC_CMD_STATE),
+    .run = list_run};
+
+static const struct vmac_cmd revoke_cmd = {
+    .name = "revoke",
+    .args = "ID",
+    .expect = "one token ID (vmac token list shows them)",
+    .min_args = 1,
+    .max_args = 1,
+    .summary = "the token stops working at the host's next request",
+    .about = "Revoke token ID (vmac token list shows them): it stops working at the host's next request,\n"
+             "host running or not.\n"
+             "Exit 0 done, 1 the store cannot be opened or written or no valid token has that ID, 2 wrong\n"
+             "usage.\n",
+    .common = VMAC_CMD_TAKES(VMAC_CMD_STATE),
+    .run = revoke_run};
+
+static const struct vmac_cmd *const actions[] = {&create_cmd, &list_cmd, &revoke_cmd, NULL};
+
+const struct vmac_cmd vmac_token_cmd = {
+    .name = "token",
+    .args = "ACTION",
+    .summary = "create, list and revoke the host's access tokens",
+    .about = "The access tokens in the store of a host's state folder (--state DIR), host running or not.\n",
+    .sub = actions};

@@ -2,6 +2,8 @@
 #ifndef VMAC_CLI_TOKEN_H
 #define VMAC_CLI_TOKEN_H
 
-int vmac_token_main(int argc, char **argv);
+#include "command.h"
+
+extern const struct vmac_cmd vmac_token_cmd;
 
 #endif

@@ -1,9 +1,9 @@
-/* vmac: the command line for a running host. `vmac status` fetches
- * GET /api/status (libcurl) and prints it for people, or raw with --json.
- * Subcommands and flags: docs/CLI.md. */
+/* vmac: the command line for vmac hosts. Its commands, in one table here
+ * (each declared beside its code, parsed by command.c); `vmac status`
+ * (GET /api/status for people) and `vmac bench` live in this file.
+ * Commands and options: docs/CLI.md. */
 #include <curl/curl.h>
 #include <errno.h>
-#include <getopt.h>
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -14,6 +14,7 @@
 #include "../common/paths.h"
 #include "../vtest/vtest.h"
 #include "client.h"
+#include "command.h"
 #include "console.h"
 #include "events.h"
 #include "lint.h"
@@ -148,48 +149,15 @@ static void print_status(json_t *s)
 	}
 }
 
-static int cmd_status(int argc, char **argv)
+static int status_run(const struct vmac_cmd_args *a)
 {
-	static const struct option opts[] = {{"http", required_argument, 0, 'H'},
-	                                     {"host", required_argument, 0, 'H'},
-	                                     {"json", no_argument, 0, 'j'},
-	                                     {"token", required_argument, 0, 't'},
-	                                     {"token-file", required_argument, 0, 'f'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {0, 0, 0, 0}};
-	const char *http = getenv("VMAC_HTTP") ? getenv("VMAC_HTTP") : "127.0.0.1:8080", *token = NULL,
-	           *token_file = NULL;
-	int raw = 0, opt, rc;
 	char url[256];
 	struct vmac_buffer b = {NULL, 0};
 	json_t *s;
 	json_error_t jerr;
+	int rc;
 
-	optind = 1;
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		switch (opt) {
-		case 'H': http = optarg; break;
-		case 'j': raw = 1; break;
-		case 't': token = optarg; break;
-		case 'f': token_file = optarg; break;
-		case 'h':
-			printf("usage: vmac status [--http ADDR:PORT] [--json] [--token T | --token-file F]\n"
-			       "Show the devices, tick lateness, counters and recent events of a running vmacd.\n"
-			       "  --http ADDR:PORT   the host's HTTP address (default $VMAC_HTTP or 127.0.0.1:8080)\n"
-			       "  --json             print the raw JSON of GET /api/status\n"
-			       "  --token T          a token of scope read or more (default $VMAC_TOKEN)\n"
-			       "  --token-file F     read the token from F's first line (default $VMAC_TOKEN_FILE)\n");
-			return 0;
-		default: return 2;
-		}
-	}
-	if (optind < argc) {
-		fprintf(stderr, "vmac status: unexpected argument '%s'\n", argv[optind]);
-		return 2;
-	}
-	if (vmac_client_token(token, token_file) != 0)
-		return 2;
-	vmac_client_url(url, sizeof(url), http, "/api/status");
+	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], "/api/status");
 	curl_global_init(CURL_GLOBAL_DEFAULT);
 	rc = http_get(url, &b);
 	curl_global_cleanup();
@@ -197,7 +165,7 @@ static int cmd_status(int argc, char **argv)
 		free(b.data);
 		return 1;
 	}
-	if (raw) {
+	if (a->opt[VMAC_CMD_JSON]) {
 		printf("%s\n", b.data);
 		free(b.data);
 		return 0;
@@ -213,30 +181,40 @@ static int cmd_status(int argc, char **argv)
 	return 0;
 }
 
-/* vmac bench [bench.py options]: the timing benchmark (tests/bench/bench.py)
- * against the programs beside this vmac. */
-static int cmd_bench(int argc, char **argv)
+static const struct vmac_cmd status_cmd = {
+    .name = "status",
+    .summary = "devices, tick lateness, counters and events of a running vmacd",
+    .about = "Show the devices, tick lateness, counters and recent events of a running vmacd (the JSON\n"
+             "of GET /api/status with --json). Needs a token of scope read or more.\n"
+             "Exit 0 done, 1 the host unreachable, the token refused or an unusable answer, 2 wrong usage.\n",
+    .common = VMAC_CMD_API,
+    .run = status_run};
+
+/* vmac bench's options: handed to tests/bench/bench.py as they are. */
+static const struct vmac_cmd_option bench_options[] = {
+    {"seconds", NULL, 0, "N", NULL, NULL, "length of each measurement (default 60)"},
+    {"only", NULL, 0, "LIST", NULL, NULL,
+     "the figures to take, of lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,"
+     "workers (default all)"},
+    {"max-boards", NULL, 0, "N", NULL, NULL,
+     "most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)"},
+    {"cpu-awake", NULL, 0, "true|false", NULL, NULL,
+     "vmacd's cpu_awake where lateness is compared with cyclictest (default true: like for like)"},
+    {"out", NULL, 0, "FILE", NULL, NULL, "where the results go as JSON (default build/bench/results.json)"},
+    {"base-bin", NULL, 0, "DIR", NULL, NULL,
+     "workers: a folder with a vmacd of the code that ran drivers on its bus thread"},
+    {"bisect", NULL, 0, "N", NULL, NULL, "bisection steps per capacity search (default 3)"},
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+/* vmac bench: the timing benchmark (tests/bench/bench.py) against the
+ * programs beside this vmac. */
+static int bench_run(const struct vmac_cmd_args *a)
 {
 	static char python[] = "python3", bin_flag[] = "--bin", bare_flag[] = "--bare";
-	char root[1024], script[1100], bindir[1100], bare[1200], self[1024];
-	char **args;
+	char root[1024], script[1100], bindir[1100], bare[1200], self[1024], flags[VMAC_CMD_OPT_MAX][32];
+	char *args[2 * VMAC_CMD_OPT_MAX + 8];
 	ssize_t len;
 	int i, n = 0;
-	if (argc >= 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
-		printf("usage: vmac bench [--seconds N] [--max-boards N] [--cpu-awake true|false] [--out FILE]\n"
-		       "                  [--only "
-		       "lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt]\n"
-		       "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
-		       "per device per tick (next to a bare sendmmsg loop), the speed of vmac test (wall time of a\n"
-		       "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
-		       "same window without), tick lateness with 50 web UI clients (next to none), the fieldbus\n"
-		       "modes, the firmware in QEMU, the flight recorder and checkpoints, raw Ethernet's receive\n"
-		       "ring, and MQTT through Mosquitto (each next to its own baseline). Figures are ratios "
-		       "to baselines run in the same run on the same\n"
-		       "machine. Needs cyclictest (Debian rt-tests) and the bare loop built by 'make bench'\n"
-		       "(build/bench/bare_loop). See docs/PERFORMANCE.md.\n");
-		return 0;
-	}
 	vmac_root_dir(root, sizeof(root));
 	snprintf(script, sizeof(script), "%s/tests/bench/bench.py", root);
 	len = readlink("/proc/self/exe", self, sizeof(self) - 1);
@@ -248,96 +226,63 @@ static int cmd_bench(int argc, char **argv)
 	*strrchr(self, '/') = 0;
 	snprintf(bindir, sizeof(bindir), "%s", self);
 	snprintf(bare, sizeof(bare), "%s/../bench/bare_loop", self);
-	args = calloc((size_t)argc + 8, sizeof(*args));
-	if (!args)
-		return 2;
 	args[n++] = python;
 	args[n++] = script;
 	args[n++] = bin_flag;
 	args[n++] = bindir;
 	args[n++] = bare_flag;
 	args[n++] = bare;
-	for (i = 1; i < argc; i++)
-		args[n++] = argv[i];
+	for (i = 0; bench_options[i].name; i++) {
+		if (!a->opt[VMAC_CMD_OWN + i])
+			continue;
+		snprintf(flags[i], sizeof(flags[i]), "--%s", bench_options[i].name);
+		args[n++] = flags[i];
+		args[n++] = (char *)a->opt[VMAC_CMD_OWN + i];
+	}
+	args[n] = NULL;
 	execvp("python3", args);
 	fprintf(stderr, "vmac bench: cannot run python3 (%s)\n", strerror(errno));
-	free(args);
 	return 2;
 }
 
-static void usage(FILE *f)
-{
-	fprintf(f, "usage: vmac COMMAND [options]\n"
-	           "The command line for vmac hosts.\n\n"
-	           "  status    devices, tick lateness, counters and events of a running vmacd\n"
-	           "  lint      check driver scripts with luacheck and the sandbox's globals\n"
-	           "  test      run driver tests against mock boards in virtual time\n"
-	           "  token     create, list and revoke the host's access tokens\n"
-	           "  console   the line console: DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME!\n"
-	           "  get       print published variables (DEVICE.NAME...)\n"
-	           "  set       operator input (DEVICE.NAME:VALUE, DEVICE.NAME!)\n"
-	           "  events    follow the host's events as they happen\n"
-	           "  site      every host on an MQTT broker, its devices and values (the broker alone)\n"
-	           "  reload    upload a new version of a driver; machines switch at a slot boundary\n"
-	           "  rollback  go back to a driver's previous version\n"
-	           "  drivers   list the driver versions the host keeps\n"
-	           "  activate  make a kept driver version the active one again\n"
-	           "  recordings  list the flight recordings the host keeps (drops, driver failures)\n"
-	           "  recording get ID > FILE, recording to-test FILE: fetch one, make it a test\n"
-	           "  record    capture a running machine's flight recorder now\n"
-	           "  bench     timing figures as ratios to baselines (cyclictest, a bare loop)\n\n"
-	           "Run 'vmac COMMAND --help' for a command's options.\n");
-}
+static const struct vmac_cmd bench_cmd = {
+    .name = "bench",
+    .summary = "timing figures as ratios to baselines (cyclictest, a bare loop)",
+    .about = "Measure tick lateness (next to cyclictest), capacity at 1 kHz, 100 Hz and 10 Hz, host CPU\n"
+             "per device per tick (next to a bare sendmmsg loop), the speed of vmac test (wall time of a\n"
+             "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
+             "same window without), tick lateness with 50 web UI clients (next to none), the fieldbus\n"
+             "modes, the firmware in QEMU, the flight recorder and checkpoints, raw Ethernet's receive\n"
+             "ring, and MQTT through Mosquitto (each next to its own baseline). Figures are ratios to\n"
+             "baselines run in the same run on the same machine. Needs cyclictest (Debian rt-tests) and\n"
+             "the bare loop built by 'make bench' (build/bench/bare_loop). See docs/PERFORMANCE.md.\n",
+    .own = bench_options,
+    .run = bench_run};
+
+/* vmac test: its options are the runner's (core/vtest/runner.lua), which
+ * parses them and answers --help. */
+static const struct vmac_cmd test_cmd = {
+    .name = "test", .summary = "run driver tests against mock boards in virtual time", .run_raw = vmac_test_main};
+
+static const struct vmac_cmd *const commands[] = {&status_cmd,        &vmac_lint_cmd,       &test_cmd,
+                                                  &vmac_token_cmd,    &vmac_console_cmd,    &vmac_get_cmd,
+                                                  &vmac_set_cmd,      &vmac_events_cmd,     &vmac_site_cmd,
+                                                  &vmac_reload_cmd,   &vmac_rollback_cmd,   &vmac_drivers_cmd,
+                                                  &vmac_activate_cmd, &vmac_recordings_cmd, &vmac_recording_cmd,
+                                                  &vmac_record_cmd,   &bench_cmd,           NULL};
+
+static const struct vmac_cmd vmac = {
+    .name = "vmac", .args = "COMMAND", .about = "The command line for vmac hosts (docs/CLI.md).\n", .sub = commands};
 
 int main(int argc, char **argv)
 {
-	if (argc < 2) {
-		usage(stderr);
-		return 2;
-	}
-	if (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "help") == 0) {
-		usage(stdout);
-		return 0;
-	}
-	if (strcmp(argv[1], "--version") == 0) {
+	if (argc >= 2 && strcmp(argv[1], "--version") == 0) {
 		printf("vmac 0.1.0\n");
 		return 0;
 	}
-	if (strcmp(argv[1], "status") == 0)
-		return cmd_status(argc - 1, argv + 1);
-	if (strcmp(argv[1], "lint") == 0)
-		return vmac_lint_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "test") == 0)
-		return vmac_test_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "bench") == 0)
-		return cmd_bench(argc - 1, argv + 1);
-	if (strcmp(argv[1], "token") == 0)
-		return vmac_token_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "site") == 0)
-		return vmac_site_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "events") == 0)
-		return vmac_events_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "console") == 0)
-		return vmac_console_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "get") == 0)
-		return vmac_get_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "set") == 0)
-		return vmac_set_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "reload") == 0)
-		return vmac_reload_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "rollback") == 0)
-		return vmac_rollback_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "drivers") == 0)
-		return vmac_drivers_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "activate") == 0)
-		return vmac_activate_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "recordings") == 0)
-		return vmac_recordings_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "recording") == 0)
-		return vmac_recording_main(argc - 1, argv + 1);
-	if (strcmp(argv[1], "record") == 0)
-		return vmac_record_main(argc - 1, argv + 1);
-	fprintf(stderr, "vmac: unknown command '%s'\n", argv[1]);
-	usage(stderr);
-	return 2;
+	if (argc >= 2 && strcmp(argv[1], "help") == 0) {
+		vmac_cmd_help(&vmac, NULL, stdout);
+		return 0;
+	}
+	return vmac_cmd_main(&vmac, NULL, argc, argv);
 }

@@ -5,6 +5,7 @@ import glob
 import os
 import re
 import socket
+import subprocess
 
 EXIT_S = 30  # a refused flag should end the program at once; this is the bound
 SANITIZER_MARKS = ("AddressSanitizer", "LeakSanitizer", "runtime error:")
@@ -126,3 +127,173 @@ def test_lint_knows_the_sandbox(t):
     for name in ("debug", "io"):
         assert re.search(r"escape\.lua:\d+:\d+: accessing undefined variable '?%s'?" % name, out), (
             "vmac lint did not report %s:\n%s" % (name, out))
+
+
+# Every vmac command and action (docs/CLI.md) with the options it takes
+# beside --help, as the documentation names them. A command that loses one
+# of them, or its --help, or a command added without an entry here, fails the
+# tests below.
+API = ["--http", "--host", "--token", "--token-file", "--json"]  # "Reaching a host", "Tokens"
+CONSOLE = ["--http", "--host", "--token", "--token-file", "--quiet"]
+COMMANDS = {
+    "status": API,
+    "events": API + ["--after", "--count"],
+    "reload": API + ["--driver", "--probation"],
+    "rollback": API,
+    "activate": API + ["--probation"],
+    "drivers": API,
+    "recordings": API,
+    "recording get": API,
+    "recording to-test": [],
+    "record": API,
+    "console": CONSOLE,
+    "get": CONSOLE,
+    "set": CONSOLE,
+    "token create": ["--state", "--scope", "--note"],
+    "token list": ["--state"],
+    "token revoke": ["--state"],
+    "site": ["--mqtt", "--prefix", "--json", "--wait", "--user", "--password-file", "--cafile"],
+    "lint": [],
+    "bench": ["--seconds", "--only", "--max-boards", "--cpu-awake", "--out"],
+    "test": ["--drivers", "--replay", "--filter", "--seed", "--list", "--tap", "--junit", "--trace", "--time-limit",
+             "--timeout", "--history"],
+}
+PARENTS = {"": ["status", "lint", "test", "token", "console", "get", "set", "events", "site", "reload", "rollback",
+                "drivers", "activate", "recordings", "recording", "record", "bench"],
+           "token": ["create", "list", "revoke"], "recording": ["get", "to-test"]}
+FLAGS = {"--json", "--quiet", "--list", "--tap"}  # the options that take no value
+
+
+def names_option(text, option):
+    """Whether text names option as a whole word (--token, not --token-file)."""
+    return re.search(r"(?<![\w-])%s(?![\w-])" % re.escape(option), text) is not None
+
+
+def vmac_run(t, words, env=None, stdin=None):
+    """vmac WORDS with env as its only VMAC_* variables: (exit code, stdout, stderr)."""
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("VMAC_")}
+    p = subprocess.run([t.path("vmac")] + words, input=stdin, capture_output=True, text=True,
+                       env=dict(clean, **(env or {})), timeout=EXIT_S)
+    return p.returncode, p.stdout, p.stderr
+
+
+def test_cli_every_command_has_help_naming_its_options(t):
+    """vmac CMD --help exits 0 with a usage on stdout that names every option
+    docs/CLI.md gives CMD, and each of them is taken: CMD OPTION [1] --help
+    still exits 0 (an option it did not know would stop it with 2 first)."""
+    problems = []
+    for command, options in sorted(COMMANDS.items()):
+        words = command.split()
+        rc, out, err = vmac_run(t, words + ["--help"])
+        if rc != 0 or not out.startswith("usage: vmac %s" % command):
+            problems.append("'vmac %s --help' exited %d, printed %r %r" % (command, rc, out[:80], err[:200]))
+            continue
+        for option in options + ["--help"]:
+            if not names_option(out, option):
+                problems.append("'vmac %s --help' does not name %s" % (command, option))
+        for option in options:
+            given = [option] if option in FLAGS else [option, "1"]
+            rc, out, err = vmac_run(t, words + given + ["--help"])
+            if rc != 0:
+                problems.append("'vmac %s %s --help' exited %d: %r" % (command, " ".join(given), rc, err.strip()))
+    assert not problems, "\n".join(problems)
+
+
+def test_cli_help_lists_every_command_and_action(t):
+    """vmac --help, vmac token --help and vmac recording --help list exactly
+    the commands and actions above (so a new one comes with its entry)."""
+    for parent, expected in PARENTS.items():
+        words = parent.split()
+        rc, out, err = vmac_run(t, words + ["--help"])
+        assert rc == 0, "'vmac %s --help' exited %d: %s" % (parent, rc, err)
+        listed = re.findall(r"^  ([a-z][a-z-]*) ", out, re.M)
+        assert listed == expected, "'vmac %s --help' lists %s, expected %s" % (parent, listed, expected)
+        rc, out, err = vmac_run(t, words)
+        assert rc == 2 and err.startswith("usage: "), "'vmac %s' alone: exit %d, stderr %r" % (parent, rc, err[:100])
+        rc, out, err = vmac_run(t, words + ["nosuch"])
+        assert rc == 2 and "'nosuch'" in err, "'vmac %s nosuch': exit %d, stderr %r" % (parent, rc, err)
+
+
+def test_cli_unknown_options_and_missing_values_are_refused(t):
+    """An option a command does not take, and an option without its value,
+    stop it with exit code 2 and a message naming the command and the option."""
+    problems = []
+    for command, options in sorted(COMMANDS.items()):
+        words = command.split()
+        rc, out, err = vmac_run(t, words + ["--no-such-option"])
+        if rc != 2 or "vmac %s" % command not in err or "--no-such-option" not in err:
+            problems.append("'vmac %s --no-such-option': exit %d, stderr %r" % (command, rc, err.strip()))
+        for option in options:
+            if option in FLAGS:
+                continue
+            rc, out, err = vmac_run(t, words + [option])  # the value missing at the end of the line
+            if rc != 2 or not names_option(err, option) or "value" not in err:
+                problems.append("'vmac %s %s' without a value: exit %d, stderr %r" % (command, option, rc,
+                                                                                       err.strip()))
+    rc, out, err = vmac_run(t, ["status", "--json=yes"])
+    if rc != 2 or "--json" not in err:
+        problems.append("'vmac status --json=yes': exit %d, stderr %r" % (rc, err.strip()))
+    rc, out, err = vmac_run(t, ["status", "--tok", "x"])  # no abbreviations: --tok is not --token
+    if rc != 2 or "--tok" not in err:
+        problems.append("'vmac status --tok x': exit %d, stderr %r" % (rc, err.strip()))
+    assert not problems, "\n".join(problems)
+
+
+def test_cli_every_api_command_reaches_the_host_it_is_given(t):
+    """Each command on the HTTP API goes to the host of --http, --host,
+    --http=ADDR or $VMAC_HTTP (exit 1 and the address said when nothing
+    listens there), and reads its token from --token-file or $VMAC_TOKEN_FILE
+    (exit 2 naming the file when it cannot be read). docs/CLI.md, "Reaching a
+    host", "Tokens"."""
+    driver = os.path.join(t.logdir, "counter.lua")
+    with open(driver, "w") as f:
+        f.write("return {}\n")
+    arguments = {"status": [], "events": [], "reload": [driver], "rollback": ["counter"],
+                 "activate": ["counter", "2"], "drivers": [], "recordings": [], "recording get": ["1"],
+                 "record": ["washer-1"], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": []}
+    assert sorted(arguments) == sorted(c for c, o in COMMANDS.items() if "--http" in o), (
+        "a command that takes --http has no arguments here")
+    closed = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    closed.bind(("127.0.0.1", 0))  # bound, never listening: connections are refused
+    addr = "127.0.0.1:%d" % closed.getsockname()[1]
+    missing = os.path.join(t.logdir, "no-such-token")
+    problems = []
+    try:
+        for command, args in sorted(arguments.items()):
+            words = command.split() + args
+            for how, extra, env in (("--http", ["--http", addr], None), ("--host", ["--host", addr], None),
+                                    ("--http=", ["--http=" + addr], None), ("$VMAC_HTTP", [], {"VMAC_HTTP": addr})):
+                rc, out, err = vmac_run(t, words + extra, env, stdin="lights-1.tv?\n")
+                if rc != 1 or addr not in err:
+                    problems.append("vmac %s with the host in %s: exit %d, stderr %r" % (command, how, rc,
+                                                                                          err.strip()[:200]))
+            for how, extra, env in (("--token-file", ["--token-file", missing], None),
+                                    ("$VMAC_TOKEN_FILE", [], {"VMAC_TOKEN_FILE": missing})):
+                rc, out, err = vmac_run(t, words + ["--http", addr] + extra, env, stdin="lights-1.tv?\n")
+                if rc != 2 or missing not in err:
+                    problems.append("vmac %s with an unreadable %s: exit %d, stderr %r" % (command, how, rc,
+                                                                                            err.strip()[:200]))
+            rc, out, err = vmac_run(t, words + ["--http", addr, "--token", "x", "--token-file", missing],
+                                    stdin="lights-1.tv?\n")
+            if rc != 1:  # --token wins: the file is never read
+                problems.append("vmac %s with --token and a missing --token-file: exit %d, stderr %r" % (
+                    command, rc, err.strip()[:200]))
+    finally:
+        closed.close()
+    assert not problems, "\n".join(problems)
+
+
+def test_cli_token_commands_use_the_state_folder_they_are_given(t):
+    """vmac token works on --state DIR, else $VMAC_STATE (docs/CLI.md)."""
+    a, b = os.path.join(t.logdir, "state-a"), os.path.join(t.logdir, "state-b")
+    rc, token, err = vmac_run(t, ["token", "create", "--scope", "read", "--note", "in-a", "--state", a])
+    assert rc == 0 and token.startswith("vmac_"), "token create --state: exit %d, %r" % (rc, err)
+    rc, out, err = vmac_run(t, ["token", "create", "--scope", "read", "--note", "in-b"], {"VMAC_STATE": b})
+    assert rc == 0, "token create with $VMAC_STATE: exit %d, %r" % (rc, err)
+    rc, out, err = vmac_run(t, ["token", "list"], {"VMAC_STATE": a})
+    assert rc == 0 and "in-a" in out and "in-b" not in out, "token list with $VMAC_STATE=a: %d %r %r" % (rc, out, err)
+    rc, out, err = vmac_run(t, ["token", "list", "--state", b], {"VMAC_STATE": a})
+    assert rc == 0 and "in-b" in out and "in-a" not in out, "token list --state b: %d %r %r" % (rc, out, err)
+    token_id = token.split("_")[1]
+    rc, out, err = vmac_run(t, ["token", "revoke", token_id], {"VMAC_STATE": a})
+    assert rc == 0 and "revoked" in err, "token revoke with $VMAC_STATE: exit %d, %r" % (rc, err)
