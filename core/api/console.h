@@ -1,5 +1,6 @@
-/* The line console of docs/CLI.md ("Console"), after the symbolic-access
- * article (../shared/seeds/001), on the host: a line of submessages
+/* The line console of docs/CLI.md ("Console"), after Olsen and Heyerdahl,
+ * "Symbolic Access To Embedded Controllers" (1994), on the host: a line of
+ * submessages
  *   DEVICE.NAME?  DEVICE.NAME:VALUE  DEVICE.NAME>VALUE  DEVICE.NAME!
  * answered on one line, DEVICE.NAME:VALUE (or > or !) or DEVICE.NAME#CODE.
  * Served as POST /api/console (docs/API.md); `vmac console` is its client.
