@@ -95,6 +95,13 @@ double store_now_s(void)
  * is full (SQLITE_FULL), or any other failure. */
 int store_fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
 {
+	if (s && s->gone) {
+		snprintf(err, errlen,
+		         "store: %s: the database %s was removed or replaced while the host ran; nothing more is "
+		         "written to it (restart the host to open the store again)",
+		         what, s->path);
+		return -VMAC_ESTORE;
+	}
 	snprintf(err, errlen, "store: %s: %s", what, s && s->db ? sqlite3_errmsg(s->db) : "cannot open");
 	return s && s->db && (sqlite3_extended_errcode(s->db) & 0xff) == SQLITE_FULL ? -VMAC_ESTOREFULL : -VMAC_ESTORE;
 }
@@ -165,6 +172,17 @@ static int open_at(const char *path, struct vmac_store **out, char *err, size_t 
 		return -EIO;
 	}
 	sqlite3_busy_timeout(s->db, BUSY_MS);
+	if (strcmp(path, ":memory:") != 0) {
+		struct stat st;
+		if (stat(path, &st) != 0) {
+			snprintf(err, errlen, "store: %s: %s", path, strerror(errno));
+			vmac_store_close(s);
+			return -EIO;
+		}
+		snprintf(s->path, sizeof(s->path), "%s", path);
+		s->dev = st.st_dev;
+		s->ino = st.st_ino;
+	}
 	/* WAL: readers never wait for the writer; synchronous FULL: a commit
 	 * that returned is on the disk, power loss included. A page cache of
 	 * 512 KiB, not SQLite's 2 MiB: the store mostly appends, its reads are
@@ -267,8 +285,8 @@ int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *n
 	hex(rid, sizeof(rid), id_hex);
 	hex(secret, sizeof(secret), secret_hex);
 	hash_secret(secret_hex, h);
-	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db, "INSERT INTO tokens (id, hash, scope, created, note) VALUES (?, ?, ?, ?, ?)", -1,
+	if (store_lock_write(s) != 0 ||
+	    sqlite3_prepare_v2(s->db, "INSERT INTO tokens (id, hash, scope, created, note) VALUES (?, ?, ?, ?, ?)", -1,
 	                       &st, NULL) != SQLITE_OK) {
 		sodium_memzero(secret, sizeof(secret));
 		sodium_memzero(secret_hex, sizeof(secret_hex));
@@ -299,8 +317,8 @@ int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t er
 {
 	sqlite3_stmt *st;
 	int rc, changed;
-	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db, "UPDATE tokens SET revoked = ? WHERE id = ? AND revoked IS NULL", -1, &st,
+	if (store_lock_write(s) != 0 ||
+	    sqlite3_prepare_v2(s->db, "UPDATE tokens SET revoked = ? WHERE id = ? AND revoked IS NULL", -1, &st,
 	                       NULL) != SQLITE_OK)
 		return store_fail_unlock(s, "revoking a token", err, errlen);
 	sqlite3_bind_double(st, 1, store_now_s());
@@ -436,7 +454,8 @@ int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *
 	int rc;
 	crypto_generichash(h, sizeof(h), (const unsigned char *)src, len, NULL, 0);
 	hex(h, sizeof(h), hash);
-	pthread_mutex_lock(&s->lock);
+	if (store_lock_write(s) != 0)
+		return store_fail_unlock(s, "storing a driver version", err, errlen);
 	prev = active_id(s, driver);
 	if (prev < 0)
 		return store_fail_unlock(s, "reading driver versions", err, errlen);
@@ -484,11 +503,23 @@ static int set_state(struct vmac_store *s, int64_t id, const char *state, const 
 	return rc == SQLITE_DONE ? 0 : -1;
 }
 
+int store_lock_write(struct vmac_store *s)
+{
+	struct stat now;
+	pthread_mutex_lock(&s->lock);
+	if (!s->path[0])
+		return 0;
+	if (!s->gone && (stat(s->path, &now) != 0 || now.st_dev != s->dev || now.st_ino != s->ino))
+		s->gone = 1;
+	return s->gone ? -1 : 0;
+}
+
 /* Take the lock and open a write transaction: 0, or -1 still holding the
  * lock (the caller says why with fail_unlock). */
 int store_begin(struct vmac_store *s)
 {
-	pthread_mutex_lock(&s->lock);
+	if (store_lock_write(s) != 0)
+		return -1;
 	return sqlite3_exec(s->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) == SQLITE_OK ? 0 : -1;
 }
 
@@ -521,8 +552,7 @@ int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t
 
 int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, char *err, size_t errlen)
 {
-	pthread_mutex_lock(&s->lock);
-	if (set_state(s, id, "refused", why) != 0)
+	if (store_lock_write(s) != 0 || set_state(s, id, "refused", why) != 0)
 		return store_fail_unlock(s, "marking a driver version refused", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
@@ -643,8 +673,8 @@ int vmac_store_param_set(struct vmac_store *s, const char *machine, const char *
 {
 	sqlite3_stmt *st;
 	int rc;
-	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db,
+	if (store_lock_write(s) != 0 ||
+	    sqlite3_prepare_v2(s->db,
 	                       "INSERT OR REPLACE INTO params (machine, name, type, number, string, updated) "
 	                       "VALUES (?, ?, ?, ?, ?, ?)",
 	                       -1, &st, NULL) != SQLITE_OK)

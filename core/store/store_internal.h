@@ -8,6 +8,7 @@
 
 #include <pthread.h>
 #include <sqlite3.h>
+#include <sys/types.h>
 
 struct vmac_store {
 	sqlite3 *db;
@@ -18,6 +19,14 @@ struct vmac_store {
 	 * which transaction a statement joins is only true while no other
 	 * thread's statement runs in between. */
 	pthread_mutex_t lock;
+	/* The database file as opened ("" in memory): a write first checks
+	 * that it is still there, the same file (device and inode), so that a
+	 * store removed or replaced under a running host stops it writing, and
+	 * says why, instead of its writes going to a deleted file. */
+	char path[4096];
+	dev_t dev;
+	ino_t ino;
+	int gone; /* it was removed or replaced: nothing more is written */
 };
 
 /* Unix time now. */
@@ -28,6 +37,9 @@ int store_fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
 int store_fail_unlock(struct vmac_store *s, const char *what, char *err, size_t errlen);
 /* Column i of a row as text into out. */
 void store_text_col(sqlite3_stmt *st, int i, char *out, size_t len);
+/* Take the lock for a write: 0, or -1 still holding it when the database
+ * file was removed or replaced (store_fail says so). */
+int store_lock_write(struct vmac_store *s);
 /* Take the lock and open a write transaction: 0, or -1 still holding the lock. */
 int store_begin(struct vmac_store *s);
 /* Commit when ok, else roll back; let the other threads in. 0, or < 0 with err. */

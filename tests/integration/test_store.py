@@ -2,15 +2,17 @@
 writing to it is killed with SIGKILL at random points, 200 times; each time
 the database opens, passes SQLite's integrity check and holds every write
 that was acknowledged. And a full disk is an error on the request, not a
-crash: the host keeps running and nothing changes."""
+crash: the host keeps running and nothing changes. A store removed under
+a running host is said, once, and written no more."""
 
+import glob
 import os
 import random
 import shutil
 import subprocess
 import time
 
-from harness import Skip, post
+from harness import KITCHEN_NAMES, Skip, post, undisturbed
 
 RUNS = 200
 
@@ -86,3 +88,27 @@ def test_a_full_disk_is_an_error_not_a_crash(t):
     assert d["state"] == "running" and d["driver_version"] == version, \
         "the full disk changed the running machine: %s %s" % (d["state"], d["driver_version"])
     assert host.alive(), "vmacd died on a full disk"
+
+
+def test_a_store_removed_under_the_host_is_said_not_lost_silently(t):
+    """The database deleted (or replaced) under a running host: its writes
+    would go to a file no one can open again. The host notices on its next
+    write, says so once, and writes no more; the machines run on."""
+    host = t.host()
+    t.kitchen(host)
+    db = os.path.join(t.logdir, "vmac.db")
+    assert os.path.exists(db), "no store at %s" % db
+    for f in glob.glob(db + "*"):
+        os.unlink(f)
+    # Something to store: a board attaching is an event.
+    t.board("lights", "lights-2")
+    warning = host.wait_event("warning", text="removed or replaced", timeout_s=30,
+                              invariant=undisturbed(KITCHEN_NAMES))
+    assert "events are not being stored" in warning["text"] and db in warning["text"], (
+        "the warning does not say what stopped and which file: %r" % warning["text"])
+    host.wait_running(["lights-2"])
+    assert not os.path.exists(db), "the host made a new, empty store at %s" % db
+    # Each kind of write (events, checkpoints) says it once, not at every try.
+    for what in ("events are not being stored", "checkpoints are not being saved"):
+        said = [e for e in host.find_events("warning", text="removed or replaced") if e["text"].startswith(what)]
+        assert len(said) <= 1, "'%s' was said %d times" % (what, len(said))
