@@ -496,6 +496,17 @@ static int metric_input(const Metric *mt, struct vmac_value *v, const char **why
 	}
 }
 
+/* A DCMD not carried out: the error answered on PREFIX/HOST/DEVICE/error
+ * (the native profile's), and an event in the host's log, as for an NCMD,
+ * so that what the broker's clients asked and were refused is on record. */
+static void dcmd_refused(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,
+                         const char *text)
+{
+	mqtt_publish_error(m, device, topic, name, code, text);
+	mqtt_event(m, device ? device : "", "Sparkplug: a DCMD%s%s on %s refused (%s): %s", name ? " metric " : "",
+	           name ? name : "", topic, code, text);
+}
+
 /* One DCMD metric into the bus, as the native profile's set/cmd topics. */
 static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *topic, const Metric *mt)
 {
@@ -504,8 +515,7 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 	int command = 0;
 	size_t i;
 	if (!name || !name[0]) {
-		mqtt_publish_error(m, device, topic, NULL, "malformed",
-		                   "a metric without a name (vmacd uses no aliases)");
+		dcmd_refused(m, device, topic, NULL, "malformed", "a metric without a name (vmacd uses no aliases)");
 		return;
 	}
 	if (strncmp(name, COMMANDS, strlen(COMMANDS)) == 0) {
@@ -516,20 +526,20 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 		if (!islower((unsigned char)name[i]) && !isdigit((unsigned char)name[i]) && name[i] != '_')
 			break;
 	if (!name[0] || name[i] || i > VMAC_DRIVER_NAME_MAX || !islower((unsigned char)name[0])) {
-		mqtt_publish_error(m, device, topic, mt->name, "refused",
-		                   "no such metric: expected a variable, a param or Commands/NAME of the driver");
+		dcmd_refused(m, device, topic, mt->name, "refused",
+		             "no such metric: expected a variable, a param or Commands/NAME of the driver");
 		return;
 	}
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", name);
 	if (metric_input(mt, &req.value, &why) != 0) {
-		mqtt_publish_error(m, device, topic, mt->name, "malformed", why);
+		dcmd_refused(m, device, topic, mt->name, "malformed", why);
 		return;
 	}
 	if (command) { /* true runs it; false is no command */
 		if (req.value.type != VMAC_VALUE_BOOL) {
-			mqtt_publish_error(m, device, topic, mt->name, "malformed", "a command metric takes a Boolean");
+			dcmd_refused(m, device, topic, mt->name, "malformed", "a command metric takes a Boolean");
 			return;
 		}
 		if (req.value.number == 0)
@@ -537,19 +547,19 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 		req.value.type = VMAC_VALUE_NONE;
 		req.value.number = 0;
 	} else if (req.value.type == VMAC_VALUE_NONE) {
-		mqtt_publish_error(m, device, topic, mt->name, "malformed", "set needs a value");
+		dcmd_refused(m, device, topic, mt->name, "malformed", "set needs a value");
 		return;
 	}
 	if (vmac_bus_request_input(m->bus, &req, MQTT_INPUT_TIMEOUT_MS) != 0) {
-		mqtt_publish_error(m, device, topic, mt->name, "busy", req.reply);
+		dcmd_refused(m, device, topic, mt->name, "busy", req.reply);
 		return;
 	}
 	if (req.rc != 0)
-		mqtt_publish_error(m, device, topic, mt->name,
-		                   req.rc > 0                    ? "refused"
-		                   : req.rc == -VMAC_ENOTRUNNING ? "not_running"
-		                                                 : "driver_failed",
-		                   req.reply);
+		dcmd_refused(m, device, topic, mt->name,
+		             req.rc > 0                    ? "refused"
+		             : req.rc == -VMAC_ENOTRUNNING ? "not_running"
+		                                           : "driver_failed",
+		             req.reply);
 }
 
 /* A received payload, or NULL with why (malformed, too long). */
@@ -574,15 +584,15 @@ static void dcmd(struct vmac_mqtt *m, const struct mqtt_message *msg, const char
 		if (!isalnum((unsigned char)device[i]) && !strchr("._-", device[i]))
 			break;
 	if (!device[0] || device[i] || i > VMAC_NAME_MAX) {
-		mqtt_publish_error(m, NULL, msg->topic, NULL, "malformed", "no such device");
+		dcmd_refused(m, NULL, msg->topic, NULL, "malformed", "no such device");
 		return;
 	}
 	if (!(p = unpack(msg, &why))) {
-		mqtt_publish_error(m, device, msg->topic, NULL, "malformed", why);
+		dcmd_refused(m, device, msg->topic, NULL, "malformed", why);
 		return;
 	}
 	if (p->n_metrics == 0)
-		mqtt_publish_error(m, device, msg->topic, NULL, "malformed", "a DCMD without metrics");
+		dcmd_refused(m, device, msg->topic, NULL, "malformed", "a DCMD without metrics");
 	for (i = 0; i < p->n_metrics; i++)
 		dcmd_metric(m, device, msg->topic, p->metrics[i]);
 	sparkplug_b__payload__free_unpacked(p, NULL);

@@ -348,6 +348,12 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
             body, _ = sp.wait(PREFIX + "/washer-1/error", since=m, raw=True, what="an error for " + what)
             body = json.loads(body)
             assert body["code"] == code and body["topic"] == NODE % "DCMD" + "/washer-1", "%s: %s" % (what, body)
+            # And on record in the host's events, as an NCMD's refusal is.
+            audit = host.wait_event("mqtt", text="refused (%s)" % code, after_seq=seen[0], timeout_s=10)
+            assert "DCMD" in audit["text"], "%s: the event does not say it was a DCMD: %r" % (what, audit["text"])
+            seen[0] = audit["seq"]
+
+        seen = [host.last_event_seq()]
 
         before = host.device("washer-1", host.status())["params"]["time_scale"]
         refused(command([("time_scale", DOUBLE, 99.0)]), "refused", "a param out of range")
