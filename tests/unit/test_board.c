@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "../../firmware/board.h"
+#include "check_main.h"
 
 /* ---- fake HAL --------------------------------------------------------- */
 
@@ -621,7 +622,7 @@ START_TEST(small_reply_buffer_gets_silence_not_overflow)
 }
 END_TEST
 
-static Suite *board_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("board");
 	TCase *tc;
@@ -667,15 +668,4 @@ static Suite *board_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(board_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
+#include "check_main.h"
 #include "proto_helpers.h"
 
 /* ---- helpers ---------------------------------------------------------- */
@@ -319,7 +320,7 @@ START_TEST(opname_names_every_op)
 }
 END_TEST
 
-static Suite *proto_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("proto");
 	TCase *tc;
@@ -349,15 +350,4 @@ static Suite *proto_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(proto_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

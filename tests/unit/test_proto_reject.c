@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
+#include "check_main.h"
 #include "proto_helpers.h"
 
 /* ---- helpers ---------------------------------------------------------- */
@@ -618,7 +619,7 @@ START_TEST(encode_refuses_caps_beyond_the_board)
 }
 END_TEST
 
-static Suite *proto_reject_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("proto_reject");
 	TCase *tc;
@@ -653,15 +654,4 @@ static Suite *proto_reject_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(proto_reject_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }
