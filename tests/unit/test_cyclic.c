@@ -11,7 +11,7 @@
 
 #include "../../core/proto/proto.h"
 #include "check_main.h"
-#include "proto_v2_helpers.h"
+#include "proto_helpers.h"
 
 /* ---- CYCLIC frames ---------------------------------------------------- */
 

@@ -218,14 +218,6 @@ END_TEST
 
 /* ---- the wire format, byte for byte ----------------------------------- */
 
-static void expect_bytes(const uint8_t *got, int got_len, const uint8_t *want, int want_len, const char *what)
-{
-	int i;
-	ck_assert_msg(got_len == want_len, "%s: encoded %d bytes, want %d", what, got_len, want_len);
-	for (i = 0; i < want_len; i++)
-		ck_assert_msg(got[i] == want[i], "%s: byte %d is 0x%02x, want 0x%02x", what, i, got[i], want[i]);
-}
-
 START_TEST(update_request_has_pinned_wire_bytes)
 {
 	static const uint8_t want[] = {

@@ -29,6 +29,7 @@
 
 #include "../../core/transport/transport.h"
 #include "check_main.h"
+#include "frames.h"
 
 static const uint8_t board_mac[6] = {0x02, 0x00, 0x00, 0x00, 0x00, 0x07};
 static const uint8_t broadcast_mac[6] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
@@ -141,9 +142,7 @@ START_TEST(udp_carries_a_frame_over_loopback)
 	ck_assert_msg(vmac_transport_open_board(&board, &spec, err, sizeof(err)) == 0, "board: %s", err);
 	ck_assert_int_eq(host.kind, VMAC_TRANSPORT_UDP);
 
-	memset(&m, 0, sizeof(m));
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_DISCOVER;
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0);
 	memset(&out, 0, sizeof(out));
 	n = vmac_proto_encode(&m, out.data, sizeof(out.data));
 	ck_assert_int_eq(n, VMAC_HDR_LEN);
@@ -367,12 +366,7 @@ static void burst_in_order(struct vmac_transport *host, struct vmac_transport *b
 	int i, got = 0, calls = 0, first = -1;
 
 	for (i = 0; i < BURST; i++) {
-		memset(&m, 0, sizeof(m));
-		m.flags = VMAC_FLAG_REPLY;
-		m.seq = (uint16_t)(i + 1);
-		m.device_id = 0x00070001;
-		m.channel = VMAC_CH_DEVICE;
-		m.op = VMAC_OP_ERROR;
+		m = reply(VMAC_CH_DEVICE, VMAC_OP_ERROR, 0x00070001, (uint16_t)(i + 1));
 		m.u.error.code = VMAC_BERR_NOT_REGISTERED;
 		m.u.error.op = VMAC_OP_UPDATE;
 		memset(&out[i], 0, sizeof(out[i]));
@@ -381,9 +375,7 @@ static void burst_in_order(struct vmac_transport *host, struct vmac_transport *b
 		memcpy(out[i].mac, board_mac, 6);
 	}
 	memset(&own, 0, sizeof(own));
-	memset(&m, 0, sizeof(m));
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_DISCOVER;
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0);
 	encode(&m, &own);
 	own.addr = host->group;
 
@@ -476,11 +468,7 @@ static void veth_round_trip(int recvmmsg)
 
 	/* Frames the host must not see: another EtherType, and a vmac
 	 * payload behind a VLAN tag, both to the host's MAC. */
-	memset(&m, 0, sizeof(m));
-	m.flags = VMAC_FLAG_REPLY;
-	m.device_id = 0x00070001;
-	m.channel = VMAC_CH_DEVICE;
-	m.op = VMAC_OP_ERROR;
+	m = reply(VMAC_CH_DEVICE, VMAC_OP_ERROR, 0x00070001, 0);
 	m.u.error.code = VMAC_BERR_NOT_REGISTERED;
 	m.u.error.op = VMAC_OP_UPDATE;
 	memset(&out[0], 0, sizeof(out[0]));
@@ -513,9 +501,7 @@ static void veth_round_trip(int recvmmsg)
 
 	/* Host -> every board, broadcast from the interface's MAC: a
 	 * DISCOVER, 13 bytes. */
-	memset(&m, 0, sizeof(m));
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_DISCOVER;
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0);
 	memset(&out[0], 0, sizeof(out[0]));
 	discover_len = encode(&m, &out[0]);
 	EXPECT(discover_len == VMAC_HDR_LEN, "a DISCOVER is %zu bytes", discover_len);
@@ -555,10 +541,7 @@ static void veth_round_trip(int recvmmsg)
 
 	/* A batch larger than one sendmmsg and one recvmmsg. */
 	for (i = 0; i < BATCH_TEST; i++) {
-		memset(&m, 0, sizeof(m));
-		m.channel = VMAC_CH_SYSTEM;
-		m.op = VMAC_SYS_DISCOVER;
-		m.seq = (uint16_t)(i + 1);
+		m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, (uint16_t)(i + 1));
 		memset(&out[i], 0, sizeof(out[i]));
 		encode(&m, &out[i]);
 		out[i].addr = host.group;
