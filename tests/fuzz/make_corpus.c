@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
+#include "../unit/frames.h"
 #include "fuzz_session.h"
 
 #define SESSION_ID 0x00000101u
@@ -29,18 +30,6 @@ static void write_file(const char *name, const uint8_t *bytes, size_t len)
 		perror(path);
 		exit(1);
 	}
-}
-
-static struct vmac_msg msg(uint8_t flags, uint8_t channel, uint8_t op, uint16_t seq)
-{
-	struct vmac_msg m;
-	memset(&m, 0, sizeof(m));
-	m.flags = flags;
-	m.seq = seq;
-	m.channel = channel;
-	m.op = op;
-	m.device_id = channel == VMAC_CH_SYSTEM ? 0 : SESSION_ID;
-	return m;
 }
 
 static int encode(const struct vmac_msg *m, uint8_t *buf)
@@ -88,10 +77,10 @@ int main(int argc, char **argv)
 	}
 	out_dir = argv[1];
 
-	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 1);
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 1);
 	seed("discover", &m);
 
-	m = msg(VMAC_FLAG_REPLY, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, 1);
+	m = reply(VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, 0, 1);
 	strcpy(m.u.announce.driver, "fuzz_motor");
 	strcpy(m.u.announce.board, "fuzz-board");
 	m.u.announce.major = FUZZ_BOARD_MAJOR;
@@ -104,39 +93,39 @@ int main(int argc, char **argv)
 	m.u.announce.caps.encoders = 1;
 	seed("announce", &m);
 
-	reg = msg(0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 2);
+	reg = request(VMAC_CH_DEVICE, VMAC_OP_REGISTER, SESSION_ID, 2);
 	reg.u.reg.major = FUZZ_BOARD_MAJOR;
 	reg.u.reg.minor = FUZZ_BOARD_MINOR;
 	reg.u.reg.watchdog_ms = 200;
 	seed("register", &reg);
-	m = msg(VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_REGISTER, 2);
+	m = reply(VMAC_CH_DEVICE, VMAC_OP_REGISTER, SESSION_ID, 2);
 	seed("register_ack", &m);
 
-	update = msg(0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 3);
+	update = request(VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION_ID, 3);
 	update.u.outputs.digital = 0x55;
 	update.u.outputs.pwm = -500;
 	seed("update", &update);
-	m = msg(VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_UPDATE, 3);
+	m = reply(VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION_ID, 3);
 	m.u.inputs.digital = 0xA5;
 	m.u.inputs.analog[1] = VMAC_ANALOG_MAX;
 	m.u.inputs.encoder = -1;
 	m.u.inputs.applied = update.u.outputs;
 	seed("update_reply", &m);
 
-	idle = msg(0, VMAC_CH_DEVICE, VMAC_OP_IDLE, 4);
+	idle = request(VMAC_CH_DEVICE, VMAC_OP_IDLE, SESSION_ID, 4);
 	seed("idle", &idle);
-	m = msg(VMAC_FLAG_REPLY, VMAC_CH_DEVICE, VMAC_OP_ERROR, 4);
+	m = reply(VMAC_CH_DEVICE, VMAC_OP_ERROR, SESSION_ID, 4);
 	m.u.error.code = VMAC_BERR_NOT_REGISTERED;
 	m.u.error.op = VMAC_OP_IDLE;
 	seed("error_reply", &m);
 
-	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, 5);
+	m = request(VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, SESSION_ID, 5);
 	m.u.shutdown_reason = VMAC_SHUT_DROPPED;
 	seed("shutdown", &m);
-	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 6);
+	m = request(VMAC_CH_DEVICE, VMAC_OP_SLEEP, SESSION_ID, 6);
 	m.u.sleep_s = 1;
 	seed("sleep", &m);
-	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, 7);
+	m = request(VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, SESSION_ID, 7);
 	m.u.watchdog_ms = 60000;
 	seed("watchdog", &m);
 
@@ -147,7 +136,7 @@ int main(int argc, char **argv)
 	append(&s, 10, &update);
 	append(&s, 10, &idle);
 	append(&s, 60, &update);
-	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 8);
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 8);
 	append(&s, 1, &m);
 	write_file("session_watchdog", s.bytes, s.len);
 
@@ -155,22 +144,16 @@ int main(int argc, char **argv)
 	reg.version = 2;
 	reg.device_id = SESSION_V2;
 	seed("register_v2", &reg);
-	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SIZE, 11);
-	m.version = 2;
-	m.device_id = SESSION_V2;
+	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_SIZE, SESSION_V2, 11);
 	seed("size", &m);
-	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_OFFSET, 12);
-	m.version = 2;
-	m.device_id = SESSION_V2;
+	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_OFFSET, SESSION_V2, 12);
 	m.u.offset = SESSION_V2 & 0xFFFF;
 	seed("offset", &m);
 	{
-		struct vmac_msg offset = m, get = msg(0, VMAC_CH_DEVICE, VMAC_OP_OFFSET_GET, 13);
+		struct vmac_msg offset = m, get = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_OFFSET_GET, SESSION_V2, 13);
 		uint8_t frame[VMAC_PACKET_MAX];
 		int n = vmac_proto_cyclic_begin(frame, sizeof(frame), 14, 0, 8);
 		struct vmac_outputs out = {0x15, 300};
-		get.version = 2;
-		get.device_id = SESSION_V2;
 		seed("offset_get", &get);
 		vmac_proto_cyclic_put(frame, SESSION_V2 & 0xFFFF, SESSION_V2 >> 16, VMAC_CYCLIC_DUE, &out);
 		vmac_proto_cyclic_put(frame, 2, 7, 0, &out);
@@ -192,10 +175,10 @@ int main(int argc, char **argv)
 	memset(&s, 0, sizeof(s));
 	append(&s, 0, &reg);
 	append(&s, 5, &update);
-	m = msg(0, VMAC_CH_DEVICE, VMAC_OP_SLEEP, 9);
+	m = request(VMAC_CH_DEVICE, VMAC_OP_SLEEP, SESSION_ID, 9);
 	m.u.sleep_s = 1;
 	append(&s, 5, &m);
-	m = msg(0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 10);
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 10);
 	append(&s, 255, &m);
 	append(&s, 0, &m);
 	write_file("session_sleep", s.bytes, s.len);

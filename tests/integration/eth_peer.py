@@ -15,27 +15,14 @@ It prints one line per thing it did, so the test can wait for them.
 
 import argparse
 import socket
-import struct
 import sys
 
-ETH_P_VMAC = 0x88B5
-SYS, DEV = 0xFF, 0x00
-DISCOVER, ANNOUNCE = 0x01, 0x10
-REGISTER, SIZE, OFFSET = 0x00, 0x07, 0x08
-REPLY = 0x01
+from frames import ANNOUNCE, DEV, DISCOVER, ETH_P_VMAC, OFFSET, REGISTER, REPLY, SIZE, SYS, announce, ethernet, parse, \
+    reply, u16
 
 
 def mac_bytes(text):
     return bytes(int(x, 16) for x in text.split(":"))
-
-
-def vmac(op, data=b"", channel=DEV, device_id=0, seq=0, flags=REPLY, version=2):
-    return b"VM" + struct.pack(">BBHIBBB", version, flags, seq, device_id, channel, op, len(data)) + data
-
-
-def announce(driver, board, major, minor):
-    return (bytes([len(driver)]) + driver + struct.pack(">II", major, minor) + bytes([len(board)]) + board +
-            bytes([1, 0, 8, 7, 2, 1, 1]))
 
 
 def main():
@@ -61,29 +48,27 @@ def main():
         return 0
 
     while True:
-        frame = s.recv(2048)
-        if len(frame) < 14 + 13:
+        eth = s.recv(2048)
+        dst, src, parsed = eth[0:6], eth[6:12], parse(eth[14:])
+        if parsed is None or dst not in (me, b"\xff" * 6) or parsed[0].flags & REPLY:
             continue
-        dst, src, payload = frame[0:6], frame[6:12], frame[14:]
-        if dst not in (me, b"\xff" * 6) or payload[0:2] != b"VM" or payload[3] & REPLY:
-            continue
-        version, _flags, seq, device_id, channel, op, n = struct.unpack(">BBHIBBB", payload[2:13])
-        data = payload[13:13 + n]
-        if channel == SYS and op == DISCOVER:
-            answer = vmac(ANNOUNCE, announce(args.driver.encode(), args.name.encode(), args.major, 0), SYS, 0, seq)
-        elif channel == DEV and dst == me and op == REGISTER:
-            answer = vmac(REGISTER, b"", DEV, device_id, seq, version=version)
-        elif channel == DEV and dst == me and op == SIZE:
-            answer = vmac(SIZE, bytes([8 if args.mode == "size" else 6]), DEV, device_id, seq, version=version)
-        elif channel == DEV and dst == me and op == OFFSET:
-            given = struct.unpack(">H", data)[0]
-            answer = vmac(OFFSET, struct.pack(">H", (given + 1) & 0xFFFF), DEV, device_id, seq, version=version)
+        h, data = parsed
+        if h.channel == SYS and h.op == DISCOVER:
+            answer = reply(ANNOUNCE, announce(args.driver.encode(), args.name.encode(), args.major, 0), channel=SYS,
+                           seq=h.seq, version=2)
+        elif h.channel == DEV and dst == me and h.op == REGISTER:
+            answer = reply(REGISTER, b"", device_id=h.device_id, seq=h.seq, version=h.version)
+        elif h.channel == DEV and dst == me and h.op == SIZE:
+            size = 8 if args.mode == "size" else 6
+            answer = reply(SIZE, bytes([size]), device_id=h.device_id, seq=h.seq, version=h.version)
+        elif h.channel == DEV and dst == me and h.op == OFFSET:
+            given = int.from_bytes(data, "big")
+            answer = reply(OFFSET, u16((given + 1) & 0xFFFF), device_id=h.device_id, seq=h.seq, version=h.version)
             print("eth_peer: given offset %d, confirmed %d" % (given, (given + 1) & 0xFFFF), flush=True)
         else:
             continue
-        answer += b"\0" * max(0, 46 - len(answer))
-        s.send(src + me + struct.pack(">H", ETH_P_VMAC) + answer)
-        print("eth_peer: answered op 0x%02x" % op, flush=True)
+        s.send(ethernet(src, me, answer, pad=True))
+        print("eth_peer: answered op 0x%02x" % h.op, flush=True)
 
 
 if __name__ == "__main__":

@@ -6,11 +6,11 @@ cyclic frame on UDP, and version-1 boards served beside version-2 ones."""
 import os
 import re
 import signal
-import struct
 import subprocess
 import sys
 import time
 
+from frames import HDR_LEN, UPDATE, ethernet, inputs, reply
 from harness import KITCHEN, KITCHEN_NAMES, TIMING, undisturbed
 
 PEER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "eth_peer.py")
@@ -169,21 +169,21 @@ def test_short_frames_and_spoofed_replies_are_counted_and_ignored(t):
         host_mac = bytes(int(x, 16) for x in f.read().strip().split(":"))
     washer = host.device("washer-1")
     spoofer = bytes([0x02, 0, 0, 0, 0xee, 0x03])
-    eth = host_mac + spoofer + struct.pack(">H", 0x88B5)
-    inputs = struct.pack(">BHHiBh", 0xFF, 4095, 4095, 0, 0x7F, 1000)
-    update_reply = b"VM" + struct.pack(">BBHIBBB", 2, 1, 1, washer["id"], 0, 0x02, 12) + inputs
-    frames = {
-        "short": eth + b"VM\x02\x01\x00",  # 5 bytes: shorter than a header (no padding on veth)
-        "length": eth + update_reply[:13] + inputs[:3],  # len says 12, 3 follow
-        "unknown_sender": eth + update_reply,  # the washer's session, from another MAC
+    spoofed = inputs(digital=0xFF, analog=(4095, 4095), applied_digital=0x7F, pwm=1000)
+    update_reply = reply(UPDATE, spoofed, device_id=washer["id"], seq=1, version=2)
+    junk = {
+        "short": update_reply[:5],  # shorter than a header (no padding on veth)
+        "length": update_reply[:HDR_LEN + 3],  # len says 12, 3 follow
+        "unknown_sender": update_reply,  # the washer's session, from another MAC
     }
+    on_wire = {reason: ethernet(host_mac, spoofer, payload) for reason, payload in junk.items()}
     before = counters(host)["malformed_by_reason"]
-    p = peer(t, ns, board_if, "junk", *sum((["--frame", f.hex()] for f in frames.values()), []))
+    p = peer(t, ns, board_if, "junk", *sum((["--frame", f.hex()] for f in on_wire.values()), []))
     p.wait_line(r"^eth_peer: sent 3 frames", 30, what="the junk sent")
 
     def counted(s):
         now = s["counters"]["malformed_by_reason"]
-        return all(now[k] > before[k] for k in frames)
+        return all(now[k] > before[k] for k in on_wire)
 
     s = host.wait_status(counted, 10, "every junk frame counted under its reason", undisturbed(KITCHEN_NAMES))
     assert host.device("washer-1", s)["inputs"]["analog"] != [4095, 4095], \

@@ -1,37 +1,24 @@
 """Junk on the host's own bus address: every datagram is counted as
 malformed under the right reason, and the host and its boards carry on."""
 
+import functools
 import random
 import socket
-import struct
 import time
 
+from frames import ANNOUNCE, DISCOVER, ERROR, IDLE, REGISTER, SYS, UPDATE, announce, frame, inputs, outputs, patch, \
+    register, reply
 from harness import KITCHEN_NAMES, undisturbed
 
 TOTAL = 10000
 BATCH = 500
 
-SYS, DEV = 0xFF, 0x00
-DISCOVER, ANNOUNCE = 0x01, 0x10
-REGISTER, SHUTDOWN, UPDATE, ERROR, IDLE, SLEEP, WATCHDOG = range(7)
-REPLY = 0x01
-
-
-def frame(op, data=b"", channel=DEV, device_id=0x00010000, seq=1, flags=REPLY, version=1, magic=b"VM",
-          length=None):
-    """A frame laid out as core/proto/proto.h says; length overrides the len byte."""
-    n = len(data) if length is None else length
-    return magic + struct.pack(">BBHIBBB", version, flags, seq, device_id, channel, op, n) + data
-
-
-def inputs(digital=0, analog=(0, 0), encoder=0, applied_digital=0, pwm=0):
-    """UPDATE/IDLE reply data (12 bytes)."""
-    return struct.pack(">BHHiBh", digital, analog[0], analog[1], encoder, applied_digital, pwm)
-
-
-def announce_data(driver=b"washer", board=b"junk-1", major=1, minor=0, caps=(8, 7, 2, 1, 1)):
-    return (bytes([len(driver)]) + driver + struct.pack(">II", major, minor) + bytes([len(board)]) + board +
-            bytes([1, 0]) + bytes(caps))
+# The junk's frames unless one says otherwise: device 0x00010000, seq 1, a
+# board's reply (or, where that is the fault, the host's request); an
+# ANNOUNCE names a washer junk-1.
+junk_reply = functools.partial(reply, device_id=0x00010000, seq=1)
+junk_request = functools.partial(frame, device_id=0x00010000, seq=1)
+junk_announce = functools.partial(announce, driver=b"washer", board=b"junk-1")
 
 
 class Junk:
@@ -58,100 +45,100 @@ class Junk:
         return bytes(data), "short" if len(data) < 13 else "magic"
 
     def k_truncated(self):
-        whole = frame(UPDATE, inputs(), device_id=self.unknown_id())
+        whole = junk_reply(UPDATE, inputs(), device_id=self.unknown_id())
         cut = self.rnd.randint(0, len(whole) - 1)
         return whole[:cut], "short" if cut < 13 else "length"
 
     def k_bad_magic(self):
         magic = self.rnd.choice([b"MV", b"VN", b"\0\0", b"vm"])
-        return frame(UPDATE, inputs(), magic=magic), "magic"
+        return patch(junk_reply(UPDATE, inputs()), "magic", magic), "magic"
 
     def k_wrong_version(self):
-        return frame(UPDATE, inputs(), version=self.rnd.choice([0, 3, 0x7F, 0xFF])), "version"
+        return patch(junk_reply(UPDATE, inputs()), "version", self.rnd.choice([0, 3, 0x7F, 0xFF])), "version"
 
     def k_length_mismatch(self):
-        good = frame(UPDATE, inputs(), device_id=self.unknown_id())
+        good = junk_reply(UPDATE, inputs(), device_id=self.unknown_id())
         choice = self.rnd.randint(0, 3)
         if choice == 0:
-            return frame(UPDATE, inputs(), length=self.rnd.choice([0, 11, 13, 96])), "length"
+            return patch(junk_reply(UPDATE, inputs()), "len", self.rnd.choice([0, 11, 13, 96])), "length"
         if choice == 1:
-            return frame(UPDATE, inputs(), length=self.rnd.randint(97, 255)), "length"
+            return patch(junk_reply(UPDATE, inputs()), "len", self.rnd.randint(97, 255)), "length"
         if choice == 2:
             return good + b"\0", "length"
         return good[:-1], "length"
 
     def k_oversize(self):
         data = bytes(self.rnd.getrandbits(8) for _ in range(self.rnd.randint(97, 187)))
-        return frame(UPDATE, data, length=96), "length"
+        return patch(junk_reply(UPDATE, data), "len", 96), "length"
 
     def k_unknown_op(self):
         choice = self.rnd.randint(0, 3)
         if choice == 0:
-            return frame(self.rnd.randint(0x07, 0xFF), b""), "op"
+            return junk_reply(self.rnd.randint(0x07, 0xFF), b""), "op"
         if choice == 1:  # a channel that does not exist
-            return frame(UPDATE, inputs(), channel=self.rnd.randint(0x01, 0xFE)), "op"
+            return patch(junk_reply(UPDATE, inputs()), "channel", self.rnd.randint(0x01, 0xFE)), "op"
         if choice == 2:  # DISCOVER is never a reply; no other system op exists
-            return frame(self.rnd.choice([DISCOVER, 0x02, 0x11, 0x7F]), b"", channel=SYS, device_id=0), "op"
-        return frame(UPDATE, inputs(), flags=self.rnd.choice([0x02, 0x03, 0x80, 0xFF])), "op"
+            return junk_reply(self.rnd.choice([DISCOVER, 0x02, 0x11, 0x7F]), b"", channel=SYS, device_id=0), "op"
+        return patch(junk_reply(UPDATE, inputs()), "flags", self.rnd.choice([0x02, 0x03, 0x80, 0xFF])), "op"
 
     def k_request(self):
         choice = self.rnd.randint(0, 3)
         if choice == 0:
-            return frame(DISCOVER, b"", channel=SYS, device_id=0, flags=0), "not_reply"
+            return junk_request(DISCOVER, b"", channel=SYS, device_id=0), "not_reply"
         if choice == 1:
-            return frame(UPDATE, struct.pack(">Bh", 0x01, 0), flags=0), "not_reply"
+            return junk_request(UPDATE, outputs(0x01, 0)), "not_reply"
         if choice == 2:
-            return frame(REGISTER, struct.pack(">IIH", 1, 0, 500), flags=0), "not_reply"
-        return frame(IDLE, b"", flags=0), "not_reply"
+            return junk_request(REGISTER, register(1, 0, 500)), "not_reply"
+        return junk_request(IDLE, b""), "not_reply"
 
     def k_unknown_device(self):
         dev = self.unknown_id()
         choice = self.rnd.randint(0, 3)
         if choice == 0:
-            return frame(UPDATE, inputs(digital=0xFF, analog=(4095, 0)), device_id=dev), "unknown_sender"
+            return junk_reply(UPDATE, inputs(digital=0xFF, analog=(4095, 0)), device_id=dev), "unknown_sender"
         if choice == 1:
-            return frame(IDLE, inputs(), device_id=dev), "unknown_sender"
+            return junk_reply(IDLE, inputs(), device_id=dev), "unknown_sender"
         if choice == 2:
-            return frame(REGISTER, b"", device_id=dev), "unknown_sender"
-        return frame(ERROR, bytes([1, UPDATE]), device_id=dev), "unknown_sender"
+            return junk_reply(REGISTER, b"", device_id=dev), "unknown_sender"
+        return junk_reply(ERROR, bytes([1, UPDATE]), device_id=dev), "unknown_sender"
 
     def k_stale_announce(self):
-        return frame(ANNOUNCE, announce_data(), channel=SYS, device_id=0, seq=self.stale_seq), "stale_seq"
+        return junk_reply(ANNOUNCE, junk_announce(), channel=SYS, device_id=0, seq=self.stale_seq), "stale_seq"
 
     def k_bad_name(self):
         choice = self.rnd.randint(0, 4)
         if choice == 0:
-            data = announce_data(driver=b"../etc/passwd")
+            data = junk_announce(driver=b"../etc/passwd")
         elif choice == 1:
-            data = announce_data(board=b"bo\x07rd")
+            data = junk_announce(board=b"bo\x07rd")
         elif choice == 2:
-            data = announce_data(driver=b"wa sher")
+            data = junk_announce(driver=b"wa sher")
         elif choice == 3:
-            data = announce_data(board=b"")
+            data = junk_announce(board=b"")
         else:
-            data = announce_data(driver=b"d" * 32)
-        return frame(ANNOUNCE, data, channel=SYS, device_id=0, seq=self.stale_seq), "name"
+            data = junk_announce(driver=b"d" * 32)
+        return junk_reply(ANNOUNCE, data, channel=SYS, device_id=0, seq=self.stale_seq), "name"
 
     def k_bad_value(self):
         choice = self.rnd.randint(0, 4)
         if choice == 0:
-            return frame(UPDATE, inputs(analog=(4096, 0))), "value"
+            return junk_reply(UPDATE, inputs(analog=(4096, 0))), "value"
         if choice == 1:
-            return frame(UPDATE, inputs(applied_digital=0x80)), "value"
+            return junk_reply(UPDATE, inputs(applied_digital=0x80)), "value"
         if choice == 2:
-            return frame(ERROR, bytes([self.rnd.choice([0, 4, 0xFF]), UPDATE])), "value"
+            return junk_reply(ERROR, bytes([self.rnd.choice([0, 4, 0xFF]), UPDATE])), "value"
         if choice == 3:  # system frame with a device id
-            return frame(ANNOUNCE, announce_data(), channel=SYS, device_id=7, seq=self.stale_seq), "value"
-        return frame(ANNOUNCE, announce_data(caps=(9, 7, 2, 1, 1)), channel=SYS, device_id=0,
-                     seq=self.stale_seq), "value"
+            return junk_reply(ANNOUNCE, junk_announce(), channel=SYS, device_id=7, seq=self.stale_seq), "value"
+        return junk_reply(ANNOUNCE, junk_announce(caps=(9, 7, 2, 1, 1)), channel=SYS, device_id=0,
+                          seq=self.stale_seq), "value"
 
     def k_bad_payload(self):
         choice = self.rnd.randint(0, 2)
         if choice == 0:
-            return frame(UPDATE, inputs()[:11]), "payload"
+            return junk_reply(UPDATE, inputs()[:11]), "payload"
         if choice == 1:
-            return frame(REGISTER, b"\0"), "payload"
-        return frame(ANNOUNCE, announce_data()[:-1], channel=SYS, device_id=0, seq=self.stale_seq), "payload"
+            return junk_reply(REGISTER, b"\0"), "payload"
+        return junk_reply(ANNOUNCE, junk_announce()[:-1], channel=SYS, device_id=0, seq=self.stale_seq), "payload"
 
 
 def test_malformed_flood(t):

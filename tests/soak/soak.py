@@ -43,13 +43,13 @@ import shutil
 import signal
 import socket
 import statistics
-import struct
 import subprocess
 import sys
 import threading
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "integration"))
+from frames import UPDATE, inputs, patch, reply  # noqa: E402  (the tests' vmac frames)
 from harness import Context, TIMING  # noqa: E402  (the integration tests' process handling)
 
 SAMPLE_S = 10
@@ -123,7 +123,7 @@ def junk_datagrams(rnd, count):
     out = []
     for _ in range(count):
         dev = rnd.randint(0x40000000, 0xFFFFFFFF)  # never an id this host gave out
-        update = b"VM" + struct.pack(">BBHIBBB", 1, 0x01, rnd.randint(0, 65535), dev, 0, 2, 12) + bytes(12)
+        update = reply(UPDATE, inputs(), seq=rnd.randint(0, 65535), device_id=dev)
         kind = rnd.randint(0, 4)
         if kind == 0:
             data = bytearray(rnd.getrandbits(8) for _ in range(rnd.randint(0, 120)))
@@ -133,9 +133,9 @@ def junk_datagrams(rnd, count):
         elif kind == 1:
             out.append(update[:rnd.randint(0, len(update) - 1)])
         elif kind == 2:
-            out.append(rnd.choice([b"MV", b"vm", b"\0\0"]) + update[2:])
+            out.append(patch(update, "magic", rnd.choice([b"MV", b"vm", b"\0\0"])))
         elif kind == 3:
-            out.append(update[:2] + bytes([rnd.choice([0, 3, 0xFF])]) + update[3:])
+            out.append(patch(update, "version", rnd.choice([0, 3, 0xFF])))
         else:
             out.append(update)
     return out

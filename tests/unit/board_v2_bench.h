@@ -7,7 +7,7 @@
 #define VMAC_TESTS_BOARD_V2_BENCH_H
 
 #include "../../firmware/board.h"
-#include "proto_v2_helpers.h"
+#include "proto_helpers.h"
 
 /* ---- the board: fake HAL ---------------------------------------------- */
 

@@ -1,9 +1,11 @@
-/* Helpers shared by the wire codec's unit tests (core/proto), both protocol
- * versions: error names, decoding from an exact-length heap copy, the
- * expected encode and decode errors, and the version-1 message builders.
- * All static inline, each test program using what it needs. Used by
- * test_proto.c, test_proto_reject.c, test_proto_v2.c, test_cyclic.c and,
- * through board_v2_bench.h, test_board_v2.c and test_board_cyclic.c. */
+/* The codec's checks shared by the unit tests that decode and encode
+ * (core/proto, both protocol versions): error names, decoding from an
+ * exact-length heap copy, the expected encode and decode errors, pinned
+ * bytes. The frames themselves come from frames.h, included here. All
+ * static inline, each test program using what it needs. Used by
+ * test_proto.c, test_proto_reject.c, test_proto_v2.c, test_cyclic.c,
+ * test_board.c, test_transport.c and, through board_v2_bench.h,
+ * test_board_v2.c and test_board_cyclic.c. */
 #ifndef VMAC_TESTS_PROTO_HELPERS_H
 #define VMAC_TESTS_PROTO_HELPERS_H
 
@@ -13,6 +15,7 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
+#include "frames.h"
 
 static inline const char *errname(int err)
 {
@@ -61,53 +64,12 @@ static inline void expect_encode_err(const struct vmac_msg *m, int want, const c
 	ck_assert_msg(rc == want, "encode %s: got %s, want %s", what, got, errname(want));
 }
 
-/* ---- version-1 messages ---------------------------------------------- */
-
-static inline struct vmac_msg request(uint8_t channel, uint8_t op, uint32_t device_id, uint16_t seq)
+static inline void expect_bytes(const uint8_t *got, int got_len, const uint8_t *want, int want_len, const char *what)
 {
-	struct vmac_msg m;
-	memset(&m, 0, sizeof(m));
-	m.seq = seq;
-	m.device_id = device_id;
-	m.channel = channel;
-	m.op = op;
-	return m;
-}
-
-static inline struct vmac_msg reply(uint8_t channel, uint8_t op, uint32_t device_id, uint16_t seq)
-{
-	struct vmac_msg m = request(channel, op, device_id, seq);
-	m.flags = VMAC_FLAG_REPLY;
-	return m;
-}
-
-static inline struct vmac_msg sample_announce(void)
-{
-	struct vmac_msg m = reply(VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, 0, 7);
-	strcpy(m.u.announce.driver, "motor_x");
-	strcpy(m.u.announce.board, "bench-1");
-	m.u.announce.major = 2;
-	m.u.announce.minor = 5;
-	m.u.announce.firmware_major = 1;
-	m.u.announce.firmware_minor = 0;
-	m.u.announce.caps.digital_inputs = 8;
-	m.u.announce.caps.digital_outputs = 7;
-	m.u.announce.caps.analog_inputs = 2;
-	m.u.announce.caps.pwm_outputs = 1;
-	m.u.announce.caps.encoders = 1;
-	return m;
-}
-
-static inline struct vmac_msg sample_inputs_reply(uint8_t op)
-{
-	struct vmac_msg m = reply(VMAC_CH_DEVICE, op, 0x01020304u, 99);
-	m.u.inputs.digital = 0xA5;
-	m.u.inputs.analog[0] = 0;
-	m.u.inputs.analog[1] = VMAC_ANALOG_MAX;
-	m.u.inputs.encoder = -123456789;
-	m.u.inputs.applied.digital = 0x7F;
-	m.u.inputs.applied.pwm = -VMAC_PWM_MAX;
-	return m;
+	int i;
+	ck_assert_msg(got_len == want_len, "%s: encoded %s, want %d bytes", what, errname(got_len), want_len);
+	for (i = 0; i < want_len; i++)
+		ck_assert_msg(got[i] == want[i], "%s: byte %d is 0x%02x, want 0x%02x", what, i, got[i], want[i]);
 }
 
 #endif

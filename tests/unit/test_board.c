@@ -7,6 +7,8 @@
 #include <string.h>
 
 #include "../../firmware/board.h"
+#include "check_main.h"
+#include "frames.h"
 
 /* ---- fake HAL --------------------------------------------------------- */
 
@@ -131,27 +133,15 @@ static int send_msg(const struct vmac_msg *m)
 	return deliver(frame, (size_t)n);
 }
 
-static struct vmac_msg req(uint8_t op, uint32_t device_id, uint16_t seq)
-{
-	struct vmac_msg m;
-	memset(&m, 0, sizeof(m));
-	m.seq = seq;
-	m.device_id = device_id;
-	m.channel = VMAC_CH_DEVICE;
-	m.op = op;
-	return m;
-}
-
 static int send_discover(uint16_t seq)
 {
-	struct vmac_msg m = req(VMAC_SYS_DISCOVER, 0, seq);
-	m.channel = VMAC_CH_SYSTEM;
+	struct vmac_msg m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, seq);
 	return send_msg(&m);
 }
 
 static int send_register(uint16_t seq, uint32_t device_id, uint32_t major, uint32_t minor, uint16_t watchdog_ms)
 {
-	struct vmac_msg m = req(VMAC_OP_REGISTER, device_id, seq);
+	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_REGISTER, device_id, seq);
 	m.u.reg.major = major;
 	m.u.reg.minor = minor;
 	m.u.reg.watchdog_ms = watchdog_ms;
@@ -160,7 +150,7 @@ static int send_register(uint16_t seq, uint32_t device_id, uint32_t major, uint3
 
 static int send_update(uint16_t seq, uint32_t device_id, uint8_t digital, int16_t pwm)
 {
-	struct vmac_msg m = req(VMAC_OP_UPDATE, device_id, seq);
+	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_UPDATE, device_id, seq);
 	m.u.outputs.digital = digital;
 	m.u.outputs.pwm = pwm;
 	return send_msg(&m);
@@ -168,7 +158,7 @@ static int send_update(uint16_t seq, uint32_t device_id, uint8_t digital, int16_
 
 static int send_u16(uint8_t op, uint16_t seq, uint16_t value)
 {
-	struct vmac_msg m = req(op, SESSION_ID, seq);
+	struct vmac_msg m = request(VMAC_CH_DEVICE, op, SESSION_ID, seq);
 	if (op == VMAC_OP_SLEEP)
 		m.u.sleep_s = value;
 	else
@@ -496,7 +486,7 @@ END_TEST
 
 START_TEST(shutdown_turns_outputs_off_and_forgets_session)
 {
-	struct vmac_msg m = req(VMAC_OP_SHUTDOWN, SESSION_ID, 0x0A0B);
+	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_SHUTDOWN, SESSION_ID, 0x0A0B);
 	register_and_drive(500);
 	m.u.shutdown_reason = VMAC_SHUT_HOST_STOP;
 	send_msg(&m);
@@ -545,9 +535,8 @@ END_TEST
 
 START_TEST(malformed_frames_are_counted_and_not_answered)
 {
-	static const uint8_t garbage[] = {'V', 'M', 1, 0, 0, 1};
 	uint8_t frame[VMAC_FRAME_MAX];
-	struct vmac_msg m = req(VMAC_OP_UPDATE, SESSION_ID, 1);
+	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION_ID, 1);
 	int n, writes_before;
 
 	register_and_drive(100);
@@ -561,7 +550,7 @@ START_TEST(malformed_frames_are_counted_and_not_answered)
 	frame[0] = VMAC_MAGIC0;
 	frame[14] = 0x04; /* pwm 0x0400 = 1024 */
 	ck_assert_msg(deliver(frame, (size_t)n) == 0, "out-of-range UPDATE answered with %d bytes", rig.reply_len);
-	ck_assert_msg(deliver(garbage, sizeof(garbage)) == 0, "6-byte frame answered with %d bytes", rig.reply_len);
+	ck_assert_msg(deliver(frame, 6) == 0, "the UPDATE cut to 6 bytes answered with %d bytes", rig.reply_len);
 	ck_assert_msg(deliver(frame, 0) == 0, "empty datagram answered with %d bytes", rig.reply_len);
 
 	ck_assert_msg(rig.board.counters.frames_malformed == 4, "frames_malformed %u, want 4",
@@ -579,11 +568,7 @@ START_TEST(reply_flagged_frames_are_ignored)
 	register_and_drive(500);
 	writes_before = rig.io.n_writes;
 
-	memset(&m, 0, sizeof(m));
-	m.flags = VMAC_FLAG_REPLY;
-	m.device_id = SESSION_ID;
-	m.channel = VMAC_CH_DEVICE;
-	m.op = VMAC_OP_UPDATE;
+	m = reply(VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION_ID, 0);
 	m.u.inputs.applied.digital = 0x7F;
 	ck_assert_msg(send_msg(&m) == 0, "board answered an UPDATE reply with %d bytes", rig.reply_len);
 	m.op = VMAC_OP_REGISTER;
@@ -607,11 +592,10 @@ END_TEST
 START_TEST(small_reply_buffer_gets_silence_not_overflow)
 {
 	uint8_t frame[VMAC_FRAME_MAX], small[VMAC_HDR_LEN + 16];
-	struct vmac_msg m = req(VMAC_SYS_DISCOVER, 0, 1);
+	struct vmac_msg m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 1);
 	int n, got;
 	size_t i;
 
-	m.channel = VMAC_CH_SYSTEM;
 	n = vmac_proto_encode(&m, frame, sizeof(frame));
 	memset(small, 0xA5, sizeof(small));
 	got = vmac_board_receive(&rig.board, frame, (size_t)n, rig.now_ms, small, VMAC_HDR_LEN);
@@ -621,7 +605,7 @@ START_TEST(small_reply_buffer_gets_silence_not_overflow)
 }
 END_TEST
 
-static Suite *board_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("board");
 	TCase *tc;
@@ -667,15 +651,4 @@ static Suite *board_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(board_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

@@ -13,6 +13,7 @@
 #include "../../core/proto/proto.h"
 #include "../../firmware/board.h"
 #include "board_v2_bench.h"
+#include "check_main.h"
 
 /* ---- board: CYCLIC service -------------------------------------------- */
 
@@ -292,7 +293,7 @@ START_TEST(cyclic_the_decoder_refuses_is_malformed_to_the_board)
 }
 END_TEST
 
-static Suite *board_cyclic_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("board_cyclic");
 	TCase *tc;
@@ -313,15 +314,4 @@ static Suite *board_cyclic_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(board_cyclic_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

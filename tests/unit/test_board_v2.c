@@ -12,6 +12,7 @@
 #include "../../core/proto/proto.h"
 #include "../../firmware/board.h"
 #include "board_v2_bench.h"
+#include "check_main.h"
 
 /* ---- board: versions -------------------------------------------------- */
 
@@ -236,7 +237,7 @@ START_TEST(empty_record_never_feeds_a_session_of_generation_0)
 }
 END_TEST
 
-static Suite *board_v2_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("board_v2");
 	TCase *tc;
@@ -262,15 +263,4 @@ static Suite *board_v2_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(board_v2_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

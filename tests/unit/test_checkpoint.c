@@ -15,6 +15,7 @@
 
 #include "../../core/driver/internal.h"
 #include "../../core/store/store.h"
+#include "check_main.h"
 
 #define BUF_CAP (256 * 1024)
 
@@ -756,12 +757,10 @@ START_TEST(store_keeps_the_newest_checkpoint_per_machine)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("checkpoint");
 	TCase *tc = tcase_create("checkpoint");
-	SRunner *sr;
-	int failed;
 	tcase_add_checked_fixture(tc, setup, NULL);
 	tcase_set_timeout(tc, 120);
 	tcase_add_test(tc, round_trip_keeps_plain_data_sharing_and_cycles);
@@ -779,9 +778,5 @@ int main(void)
 	tcase_add_test(tc, dev_checkpoint_asks_and_a_checkpoint_clears);
 	tcase_add_test(tc, store_keeps_the_newest_checkpoint_per_machine);
 	suite_add_tcase(s, tc);
-	sr = srunner_create(s);
-	srunner_run_all(sr, CK_NORMAL);
-	failed = srunner_ntests_failed(sr);
-	srunner_free(sr);
-	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+	return s;
 }

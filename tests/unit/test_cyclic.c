@@ -10,7 +10,8 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
-#include "proto_v2_helpers.h"
+#include "check_main.h"
+#include "proto_helpers.h"
 
 /* ---- CYCLIC frames ---------------------------------------------------- */
 
@@ -406,7 +407,7 @@ START_TEST(frame_length_refuses_garbage_and_short_buffers)
 }
 END_TEST
 
-static Suite *cyclic_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("cyclic");
 	TCase *tc;
@@ -430,15 +431,4 @@ static Suite *cyclic_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(cyclic_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

@@ -18,6 +18,7 @@
 #include <lualib.h>
 
 #include "../../core/driver/driver.h"
+#include "check_main.h"
 
 #define STDLIB_DIR "/tmp/vmac-test-driver-stdlib"
 #define CYCLES_DIR "/tmp/vmac-test-driver-cycles"
@@ -857,12 +858,10 @@ START_TEST(no_lua_runs_on_a_forbidden_thread)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("driver");
 	TCase *tc = tcase_create("driver");
-	SRunner *sr;
-	int failed;
 	tcase_add_checked_fixture(tc, setup, NULL);
 	tcase_set_timeout(tc, 60);
 	tcase_add_test(tc, manifest_errors_name_the_field);
@@ -886,9 +885,5 @@ int main(void)
 	tcase_add_test(tc, no_lua_runs_on_a_forbidden_thread);
 #endif
 	suite_add_tcase(s, tc);
-	sr = srunner_create(s);
-	srunner_run_all(sr, CK_NORMAL);
-	failed = srunner_ntests_failed(sr);
-	srunner_free(sr);
-	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+	return s;
 }

@@ -17,6 +17,7 @@
 #include "../../core/config/config.h"
 #include "../../core/driver/driver.h"
 #include "../../core/host/bus.h"
+#include "check_main.h"
 
 /* ---- config ---- */
 
@@ -380,12 +381,10 @@ START_TEST(ring_fifo_and_full)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("host");
 	TCase *tc = tcase_create("host");
-	SRunner *sr;
-	int failed;
 	tcase_set_timeout(tc, 30);
 	tcase_add_test(tc, config_defaults_are_valid);
 	tcase_add_test(tc, config_file_sets_keys);
@@ -398,9 +397,5 @@ int main(void)
 	tcase_add_test(tc, input_requests_time_out_and_run_out_without_a_bus_thread);
 	tcase_add_test(tc, the_bus_answers_with_codes);
 	suite_add_tcase(s, tc);
-	sr = srunner_create(s);
-	srunner_run_all(sr, CK_NORMAL);
-	failed = srunner_ntests_failed(sr);
-	srunner_free(sr);
-	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+	return s;
 }

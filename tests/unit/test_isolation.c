@@ -11,6 +11,7 @@
 #include <check.h>
 
 #include "../../core/driver/internal.h"
+#include "check_main.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -432,12 +433,10 @@ START_TEST(lib_call_names_the_library_function_running)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("isolation");
 	TCase *tc = tcase_create("isolation");
-	SRunner *sr;
-	int failed;
 	tcase_add_checked_fixture(tc, setup, NULL);
 	tcase_set_timeout(tc, 60);
 	tcase_add_test(tc, creeping_memory_fails_the_call_at_every_entry);
@@ -450,9 +449,5 @@ int main(void)
 	tcase_add_test(tc, costly_library_calls_are_refused_and_ordinary_ones_run);
 	tcase_add_test(tc, lib_call_names_the_library_function_running);
 	suite_add_tcase(s, tc);
-	sr = srunner_create(s);
-	srunner_run_all(sr, CK_NORMAL);
-	failed = srunner_ntests_failed(sr);
-	srunner_free(sr);
-	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+	return s;
 }

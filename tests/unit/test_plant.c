@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "../../firmware/plant.h"
+#include "check_main.h"
 
 #define OUT_DOOR_LOCK 0x08    /* do3 */
 #define OUT_MOTOR_ENABLE 0x10 /* do4 */
@@ -306,7 +307,7 @@ START_TEST(other_plants_have_no_unsafe_episodes)
 }
 END_TEST
 
-static Suite *plant_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("washer plant");
 	TCase *tc = tcase_create("PTC door lock");
@@ -331,15 +332,4 @@ static Suite *plant_suite(void)
 	tcase_add_test(tc, other_plants_have_no_unsafe_episodes);
 	suite_add_tcase(s, tc);
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(plant_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
+#include "check_main.h"
 #include "proto_helpers.h"
 
 /* ---- helpers ---------------------------------------------------------- */
@@ -217,14 +218,6 @@ END_TEST
 
 /* ---- the wire format, byte for byte ----------------------------------- */
 
-static void expect_bytes(const uint8_t *got, int got_len, const uint8_t *want, int want_len, const char *what)
-{
-	int i;
-	ck_assert_msg(got_len == want_len, "%s: encoded %d bytes, want %d", what, got_len, want_len);
-	for (i = 0; i < want_len; i++)
-		ck_assert_msg(got[i] == want[i], "%s: byte %d is 0x%02x, want 0x%02x", what, i, got[i], want[i]);
-}
-
 START_TEST(update_request_has_pinned_wire_bytes)
 {
 	static const uint8_t want[] = {
@@ -319,7 +312,7 @@ START_TEST(opname_names_every_op)
 }
 END_TEST
 
-static Suite *proto_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("proto");
 	TCase *tc;
@@ -349,15 +342,4 @@ static Suite *proto_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(proto_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

@@ -9,63 +9,17 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
+#include "check_main.h"
 #include "proto_helpers.h"
 
 /* ---- helpers ---------------------------------------------------------- */
 
-/* Build a raw frame byte by byte, bypassing the encoder's checks, so the
- * decoder can be shown frames the encoder would refuse to make. The len byte
- * is data_len; the caller may corrupt it afterwards. */
-static size_t raw_frame(uint8_t *buf, uint8_t flags, uint16_t seq, uint32_t device_id, uint8_t channel, uint8_t op,
-                        const uint8_t *data, size_t data_len)
-{
-	buf[0] = VMAC_MAGIC0;
-	buf[1] = VMAC_MAGIC1;
-	buf[2] = 1;
-	buf[3] = flags;
-	buf[4] = (uint8_t)(seq >> 8);
-	buf[5] = (uint8_t)seq;
-	buf[6] = (uint8_t)(device_id >> 24);
-	buf[7] = (uint8_t)(device_id >> 16);
-	buf[8] = (uint8_t)(device_id >> 8);
-	buf[9] = (uint8_t)device_id;
-	buf[10] = channel;
-	buf[11] = op;
-	buf[12] = (uint8_t)data_len;
-	if (data_len)
-		memcpy(buf + VMAC_HDR_LEN, data, data_len);
-	return VMAC_HDR_LEN + data_len;
-}
-
-/* ANNOUNCE data with arbitrary name bytes (valid caps). Returns its length. */
-static size_t raw_announce_data(uint8_t *d, const uint8_t *driver, size_t driver_len, const uint8_t *board,
-                                size_t board_len)
-{
-	size_t n = 0;
-	d[n++] = (uint8_t)driver_len;
-	memcpy(d + n, driver, driver_len);
-	n += driver_len;
-	memset(d + n, 0, 8); /* major, minor */
-	d[n + 3] = 2;
-	d[n + 7] = 5;
-	n += 8;
-	d[n++] = (uint8_t)board_len;
-	memcpy(d + n, board, board_len);
-	n += board_len;
-	d[n++] = 1; /* firmware major */
-	d[n++] = 0; /* firmware minor */
-	d[n++] = 8;
-	d[n++] = 7;
-	d[n++] = 2;
-	d[n++] = 1;
-	d[n++] = 1;
-	return n;
-}
-
+/* Frames of device 42, seq 1, built byte by byte (frames.h, raw_frame):
+ * each valid but for the value under test. */
 static size_t raw_update_request(uint8_t *buf, uint8_t digital, int16_t pwm)
 {
 	uint8_t d[3] = {digital, (uint8_t)((uint16_t)pwm >> 8), (uint8_t)pwm};
-	return raw_frame(buf, 0, 1, 42, VMAC_CH_DEVICE, VMAC_OP_UPDATE, d, sizeof(d));
+	return raw_frame(buf, 1, 0, 1, 42, VMAC_CH_DEVICE, VMAC_OP_UPDATE, d, sizeof(d));
 }
 
 static size_t raw_inputs_reply(uint8_t *buf, uint16_t analog0, uint16_t analog1, uint8_t applied_digital,
@@ -79,25 +33,25 @@ static size_t raw_inputs_reply(uint8_t *buf, uint16_t analog0, uint16_t analog1,
 	d[9] = applied_digital;
 	d[10] = (uint8_t)((uint16_t)applied_pwm >> 8);
 	d[11] = (uint8_t)applied_pwm;
-	return raw_frame(buf, VMAC_FLAG_REPLY, 1, 42, VMAC_CH_DEVICE, VMAC_OP_UPDATE, d, sizeof(d));
+	return raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 42, VMAC_CH_DEVICE, VMAC_OP_UPDATE, d, sizeof(d));
 }
 
 static size_t raw_u16_request(uint8_t *buf, uint8_t op, uint16_t value)
 {
 	uint8_t d[2] = {(uint8_t)(value >> 8), (uint8_t)value};
-	return raw_frame(buf, 0, 1, 42, VMAC_CH_DEVICE, op, d, sizeof(d));
+	return raw_frame(buf, 1, 0, 1, 42, VMAC_CH_DEVICE, op, d, sizeof(d));
 }
 
 static size_t raw_register_request(uint8_t *buf, uint16_t watchdog_ms)
 {
 	uint8_t d[10] = {0, 0, 0, 2, 0, 0, 0, 5, (uint8_t)(watchdog_ms >> 8), (uint8_t)watchdog_ms};
-	return raw_frame(buf, 0, 1, 42, VMAC_CH_DEVICE, VMAC_OP_REGISTER, d, sizeof(d));
+	return raw_frame(buf, 1, 0, 1, 42, VMAC_CH_DEVICE, VMAC_OP_REGISTER, d, sizeof(d));
 }
 
 static size_t raw_error_reply(uint8_t *buf, uint8_t code)
 {
 	uint8_t d[2] = {code, VMAC_OP_UPDATE};
-	return raw_frame(buf, VMAC_FLAG_REPLY, 1, 42, VMAC_CH_DEVICE, VMAC_OP_ERROR, d, sizeof(d));
+	return raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 42, VMAC_CH_DEVICE, VMAC_OP_ERROR, d, sizeof(d));
 }
 
 /* ---- header rejections ------------------------------------------------ */
@@ -105,7 +59,7 @@ static size_t raw_error_reply(uint8_t *buf, uint8_t code)
 START_TEST(frame_shorter_than_header_is_short)
 {
 	uint8_t buf[VMAC_FRAME_MAX];
-	size_t n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0), len;
+	size_t n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0), len;
 	ck_assert_msg(n == VMAC_HDR_LEN, "a DISCOVER is %zu bytes, want %d", n, VMAC_HDR_LEN);
 	for (len = 0; len < VMAC_HDR_LEN; len++)
 		expect_decode_err(buf, len, VMAC_EPROTO_SHORT, "header prefix");
@@ -115,7 +69,7 @@ END_TEST
 START_TEST(bad_magic_is_rejected)
 {
 	uint8_t buf[VMAC_FRAME_MAX];
-	size_t n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
+	size_t n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
 	buf[0] = 'X';
 	expect_decode_err(buf, n, VMAC_EPROTO_MAGIC, "first magic byte 'X'");
 	buf[0] = VMAC_MAGIC0;
@@ -131,7 +85,7 @@ START_TEST(wrong_version_is_rejected)
 {
 	static const uint8_t versions[] = {0, 3, 0xFF};
 	uint8_t buf[VMAC_FRAME_MAX];
-	size_t n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0), i;
+	size_t n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0), i;
 	for (i = 0; i < sizeof(versions); i++) {
 		buf[2] = versions[i];
 		expect_decode_err(buf, n, VMAC_EPROTO_VERSION, "version byte 0/3/255");
@@ -153,7 +107,7 @@ START_TEST(length_byte_disagreeing_with_size_is_rejected)
 	expect_decode_err(buf, n + 1, VMAC_EPROTO_LENGTH, "UPDATE with a trailing byte");
 	expect_decode_err(buf, n - 1, VMAC_EPROTO_LENGTH, "UPDATE missing its last byte");
 
-	n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
+	n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
 	buf[12] = 0xFF;
 	expect_decode_err(buf, n, VMAC_EPROTO_LENGTH, "DISCOVER whose len byte says 255");
 	memset(buf + n, 0, VMAC_DATA_MAX + 1);
@@ -171,20 +125,20 @@ START_TEST(unknown_op_or_channel_is_rejected)
 	struct vmac_msg m;
 
 	for (i = 0; i < sizeof(device_ops); i++) {
-		n = raw_frame(buf, 0, 1, 42, VMAC_CH_DEVICE, device_ops[i], NULL, 0);
+		n = raw_frame(buf, 1, 0, 1, 42, VMAC_CH_DEVICE, device_ops[i], NULL, 0);
 		expect_decode_err(buf, n, VMAC_EPROTO_OP, "device request with unknown op");
-		n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 42, VMAC_CH_DEVICE, device_ops[i], NULL, 0);
+		n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 42, VMAC_CH_DEVICE, device_ops[i], NULL, 0);
 		expect_decode_err(buf, n, VMAC_EPROTO_OP, "device reply with unknown op");
 		m = request(VMAC_CH_DEVICE, device_ops[i], 42, 1);
 		expect_encode_err(&m, VMAC_EPROTO_OP, "device request with unknown op");
 	}
 	for (i = 0; i < sizeof(system_ops); i++) {
-		n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, system_ops[i], NULL, 0);
+		n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_SYSTEM, system_ops[i], NULL, 0);
 		expect_decode_err(buf, n, VMAC_EPROTO_OP, "system request with unknown op");
 		m = request(VMAC_CH_SYSTEM, system_ops[i], 0, 1);
 		expect_encode_err(&m, VMAC_EPROTO_OP, "system request with unknown op");
 	}
-	n = raw_frame(buf, 0, 1, 42, 0x01, VMAC_OP_IDLE, NULL, 0);
+	n = raw_frame(buf, 1, 0, 1, 42, 0x01, VMAC_OP_IDLE, NULL, 0);
 	expect_decode_err(buf, n, VMAC_EPROTO_OP, "IDLE on channel 0x01");
 	m = request(0x01, VMAC_OP_IDLE, 42, 1);
 	expect_encode_err(&m, VMAC_EPROTO_OP, "IDLE on channel 0x01");
@@ -198,13 +152,13 @@ START_TEST(op_in_wrong_direction_is_rejected)
 	struct vmac_msg m;
 
 	/* Requests sent with the reply flag. */
-	n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
+	n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
 	expect_decode_err(buf, n, VMAC_EPROTO_OP, "DISCOVER flagged as a reply");
 	m = reply(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 1);
 	expect_encode_err(&m, VMAC_EPROTO_OP, "DISCOVER flagged as a reply");
 
 	/* Replies sent as requests. */
-	n = raw_frame(buf, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data,
+	n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data,
 	              raw_announce_data(data, (const uint8_t *)"drv", 3, (const uint8_t *)"brd", 3));
 	expect_decode_err(buf, n, VMAC_EPROTO_OP, "ANNOUNCE without the reply flag");
 	m = sample_announce();
@@ -213,7 +167,7 @@ START_TEST(op_in_wrong_direction_is_rejected)
 
 	data[0] = VMAC_BERR_BAD_REQUEST;
 	data[1] = VMAC_OP_UPDATE;
-	n = raw_frame(buf, 0, 1, 42, VMAC_CH_DEVICE, VMAC_OP_ERROR, data, 2);
+	n = raw_frame(buf, 1, 0, 1, 42, VMAC_CH_DEVICE, VMAC_OP_ERROR, data, 2);
 	expect_decode_err(buf, n, VMAC_EPROTO_OP, "ERROR without the reply flag");
 	m = request(VMAC_CH_DEVICE, VMAC_OP_ERROR, 42, 1);
 	m.u.error.code = VMAC_BERR_BAD_REQUEST;
@@ -228,9 +182,9 @@ START_TEST(unknown_flag_bits_are_rejected)
 	size_t n, i;
 	struct vmac_msg m;
 	for (i = 0; i < sizeof(flags); i++) {
-		n = raw_frame(buf, flags[i], 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
+		n = raw_frame(buf, 1, flags[i], 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
 		expect_decode_err(buf, n, VMAC_EPROTO_OP, "DISCOVER with unknown flag bits");
-		n = raw_frame(buf, flags[i], 1, 42, VMAC_CH_DEVICE, VMAC_OP_IDLE, NULL, 0);
+		n = raw_frame(buf, 1, flags[i], 1, 42, VMAC_CH_DEVICE, VMAC_OP_IDLE, NULL, 0);
 		expect_decode_err(buf, n, VMAC_EPROTO_OP, "IDLE with unknown flag bits");
 		m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 1);
 		m.flags = flags[i];
@@ -245,12 +199,12 @@ START_TEST(device_id_must_match_channel)
 	size_t n;
 	struct vmac_msg m;
 
-	n = raw_frame(buf, 0, 1, 1, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
+	n = raw_frame(buf, 1, 0, 1, 1, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, NULL, 0);
 	expect_decode_err(buf, n, VMAC_EPROTO_VALUE, "DISCOVER with device id 1");
 	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0x80000000u, 1);
 	expect_encode_err(&m, VMAC_EPROTO_VALUE, "DISCOVER with device id 0x80000000");
 
-	n = raw_frame(buf, 0, 1, 0, VMAC_CH_DEVICE, VMAC_OP_IDLE, NULL, 0);
+	n = raw_frame(buf, 1, 0, 1, 0, VMAC_CH_DEVICE, VMAC_OP_IDLE, NULL, 0);
 	expect_decode_err(buf, n, VMAC_EPROTO_VALUE, "IDLE with device id 0");
 	m = request(VMAC_CH_DEVICE, VMAC_OP_IDLE, 0, 1);
 	expect_encode_err(&m, VMAC_EPROTO_VALUE, "IDLE with device id 0");
@@ -290,7 +244,7 @@ START_TEST(payload_size_wrong_for_op_is_rejected)
 	memset(data, 0x01, sizeof(data));
 	for (i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
 		uint32_t id = cases[i].channel == VMAC_CH_SYSTEM ? 0 : 42;
-		n = raw_frame(buf, cases[i].flags, 1, id, cases[i].channel, cases[i].op, data, cases[i].bad_len);
+		n = raw_frame(buf, 1, cases[i].flags, 1, id, cases[i].channel, cases[i].op, data, cases[i].bad_len);
 		expect_decode_err(buf, n, VMAC_EPROTO_PAYLOAD, cases[i].what);
 	}
 }
@@ -302,14 +256,14 @@ START_TEST(announce_with_inconsistent_name_lengths_is_payload_error)
 	size_t dn = raw_announce_data(data, (const uint8_t *)"drv", 3, (const uint8_t *)"brd", 3), n;
 
 	data[0] = 4; /* driver length one too long: board length lands elsewhere */
-	n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
+	n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
 	expect_decode_err(buf, n, VMAC_EPROTO_PAYLOAD, "ANNOUNCE whose driver length overshoots");
 	data[0] = 0xFF;
-	n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
+	n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
 	expect_decode_err(buf, n, VMAC_EPROTO_PAYLOAD, "ANNOUNCE whose driver length is 255");
 	data[0] = 3;
 	data[1 + 3 + 8] = 2; /* board length one too short: a trailing byte left */
-	n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
+	n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
 	expect_decode_err(buf, n, VMAC_EPROTO_PAYLOAD, "ANNOUNCE whose board length undershoots");
 }
 END_TEST
@@ -322,12 +276,12 @@ static void expect_bad_name_decode(const uint8_t *name, size_t len, const char *
 	char label[128];
 
 	dn = raw_announce_data(data, name, len, (const uint8_t *)"board", 5);
-	n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
+	n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
 	snprintf(label, sizeof(label), "ANNOUNCE with driver name %s", what);
 	expect_decode_err(buf, n, VMAC_EPROTO_NAME, label);
 
 	dn = raw_announce_data(data, (const uint8_t *)"driver", 6, name, len);
-	n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
+	n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
 	snprintf(label, sizeof(label), "ANNOUNCE with board name %s", what);
 	expect_decode_err(buf, n, VMAC_EPROTO_NAME, label);
 }
@@ -384,7 +338,7 @@ START_TEST(announce_caps_beyond_the_board_are_rejected)
 	for (i = 0; i < 5; i++) {
 		uint8_t saved = data[dn - 5 + i];
 		data[dn - 5 + i] = too_many[i];
-		n = raw_frame(buf, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
+		n = raw_frame(buf, 1, VMAC_FLAG_REPLY, 1, 0, VMAC_CH_SYSTEM, VMAC_SYS_ANNOUNCE, data, dn);
 		expect_decode_err(buf, n, VMAC_EPROTO_VALUE, "ANNOUNCE with one capability over its maximum");
 		data[dn - 5 + i] = saved;
 	}
@@ -618,7 +572,7 @@ START_TEST(encode_refuses_caps_beyond_the_board)
 }
 END_TEST
 
-static Suite *proto_reject_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("proto_reject");
 	TCase *tc;
@@ -653,15 +607,4 @@ static Suite *proto_reject_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(proto_reject_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

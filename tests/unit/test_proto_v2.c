@@ -10,7 +10,8 @@
 #include <string.h>
 
 #include "../../core/proto/proto.h"
-#include "proto_v2_helpers.h"
+#include "check_main.h"
+#include "proto_helpers.h"
 
 /* ---- codec helpers ---------------------------------------------------- */
 
@@ -347,7 +348,7 @@ START_TEST(encode_refuses_to_build_a_cyclic)
 }
 END_TEST
 
-static Suite *proto_v2_suite(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("proto_v2");
 	TCase *tc;
@@ -370,15 +371,4 @@ static Suite *proto_v2_suite(void)
 	suite_add_tcase(s, tc);
 
 	return s;
-}
-
-int main(void)
-{
-	SRunner *runner = srunner_create(proto_v2_suite());
-	int failed;
-
-	srunner_run_all(runner, CK_NORMAL);
-	failed = srunner_ntests_failed(runner);
-	srunner_free(runner);
-	return failed == 0 ? EXIT_SUCCESS : EXIT_FAILURE;
 }

@@ -13,6 +13,7 @@
 
 #include "../../core/recorder/recorder.h"
 #include "../../core/recorder/recording.h"
+#include "check_main.h"
 
 #define NS_PER_S 1000000000LL
 #define PERIOD_NS 100000000LL /* the recorders here tick every 100 ms */
@@ -581,12 +582,10 @@ START_TEST(a_machine_or_driver_that_is_no_name_is_refused)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("recording");
 	TCase *tc = tcase_create("recording");
-	SRunner *sr;
-	int failed;
 	tcase_set_timeout(tc, 120);
 	tcase_add_test(tc, the_tick_ring_keeps_the_newest_in_order_and_says_it_is_incomplete);
 	tcase_add_test(tc, every_count_of_ticks_reads_back_whether_staged_or_in_the_ring);
@@ -600,9 +599,5 @@ int main(void)
 	tcase_add_test(tc, a_recording_without_the_source_reads_without_one);
 	tcase_add_test(tc, a_machine_or_driver_that_is_no_name_is_refused);
 	suite_add_tcase(s, tc);
-	sr = srunner_create(s);
-	srunner_run_all(sr, CK_NORMAL);
-	failed = srunner_ntests_failed(sr);
-	srunner_free(sr);
-	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+	return s;
 }

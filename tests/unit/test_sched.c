@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "../../core/sched/sched.h"
+#include "check_main.h"
 
 #define MAX_S 16
 
@@ -752,13 +753,11 @@ START_TEST(property_random_sequences)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("sched");
 	TCase *unit = tcase_create("unit");
 	TCase *prop = tcase_create("property");
-	SRunner *sr;
-	int failed;
 	tcase_set_timeout(unit, 60);
 	tcase_add_test(unit, admission_fills_exactly_and_refuses_one_more);
 	tcase_add_test(unit, admission_message_names_need_and_free_capacity);
@@ -774,9 +773,5 @@ int main(void)
 	tcase_set_timeout(prop, 900);
 	tcase_add_test(prop, property_random_sequences);
 	suite_add_tcase(s, prop);
-	sr = srunner_create(s);
-	srunner_run_all(sr, CK_NORMAL);
-	failed = srunner_ntests_failed(sr);
-	srunner_free(sr);
-	return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+	return s;
 }

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "../../core/store/store.h"
+#include "check_main.h"
 
 static char dir[] = "/tmp/vmac-test-store-XXXXXX";
 static struct vmac_store *store;
@@ -428,12 +429,10 @@ START_TEST(a_full_disk_is_told_by_its_own_code)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("store");
 	TCase *tc = tcase_create("tokens");
-	SRunner *r;
-	int failed;
 	tcase_add_checked_fixture(tc, setup, teardown);
 	tcase_add_test(tc, tokens_carry_their_scope);
 	tcase_add_test(tc, wrong_tokens_are_refused);
@@ -443,9 +442,5 @@ int main(void)
 	tcase_add_test(tc, a_full_disk_is_told_by_its_own_code);
 	tcase_set_timeout(tc, 60);
 	suite_add_tcase(s, tc);
-	r = srunner_create(s);
-	srunner_run_all(r, CK_NORMAL);
-	failed = srunner_ntests_failed(r);
-	srunner_free(r);
-	return failed ? 1 : 0;
+	return s;
 }

@@ -8,7 +8,8 @@
  * (VMAC_ETH_RECVMMSG=1, what it falls back to); and without CAP_NET_RAW it
  * says so in one line. The veth tests need root and network namespaces:
  * elsewhere they are SKIPPED loudly and the reason appended to
- * $VMAC_SKIP_FILE (make test lists it), or they fail when CI=true. */
+ * $VMAC_SKIP_FILE (make test lists it), or they fail when CI=true
+ * (vmac_test_cannot_run, check_main.h). */
 #include <arpa/inet.h>
 #include <check.h>
 #include <errno.h>
@@ -27,6 +28,8 @@
 #include <unistd.h>
 
 #include "../../core/transport/transport.h"
+#include "check_main.h"
+#include "frames.h"
 
 static const uint8_t board_mac[6] = {0x02, 0x00, 0x00, 0x00, 0x00, 0x07};
 static const uint8_t broadcast_mac[6] = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
@@ -139,9 +142,7 @@ START_TEST(udp_carries_a_frame_over_loopback)
 	ck_assert_msg(vmac_transport_open_board(&board, &spec, err, sizeof(err)) == 0, "board: %s", err);
 	ck_assert_int_eq(host.kind, VMAC_TRANSPORT_UDP);
 
-	memset(&m, 0, sizeof(m));
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_DISCOVER;
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0);
 	memset(&out, 0, sizeof(out));
 	n = vmac_proto_encode(&m, out.data, sizeof(out.data));
 	ck_assert_int_eq(n, VMAC_HDR_LEN);
@@ -365,12 +366,7 @@ static void burst_in_order(struct vmac_transport *host, struct vmac_transport *b
 	int i, got = 0, calls = 0, first = -1;
 
 	for (i = 0; i < BURST; i++) {
-		memset(&m, 0, sizeof(m));
-		m.flags = VMAC_FLAG_REPLY;
-		m.seq = (uint16_t)(i + 1);
-		m.device_id = 0x00070001;
-		m.channel = VMAC_CH_DEVICE;
-		m.op = VMAC_OP_ERROR;
+		m = reply(VMAC_CH_DEVICE, VMAC_OP_ERROR, 0x00070001, (uint16_t)(i + 1));
 		m.u.error.code = VMAC_BERR_NOT_REGISTERED;
 		m.u.error.op = VMAC_OP_UPDATE;
 		memset(&out[i], 0, sizeof(out[i]));
@@ -379,9 +375,7 @@ static void burst_in_order(struct vmac_transport *host, struct vmac_transport *b
 		memcpy(out[i].mac, board_mac, 6);
 	}
 	memset(&own, 0, sizeof(own));
-	memset(&m, 0, sizeof(m));
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_DISCOVER;
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0);
 	encode(&m, &own);
 	own.addr = host->group;
 
@@ -474,11 +468,7 @@ static void veth_round_trip(int recvmmsg)
 
 	/* Frames the host must not see: another EtherType, and a vmac
 	 * payload behind a VLAN tag, both to the host's MAC. */
-	memset(&m, 0, sizeof(m));
-	m.flags = VMAC_FLAG_REPLY;
-	m.device_id = 0x00070001;
-	m.channel = VMAC_CH_DEVICE;
-	m.op = VMAC_OP_ERROR;
+	m = reply(VMAC_CH_DEVICE, VMAC_OP_ERROR, 0x00070001, 0);
 	m.u.error.code = VMAC_BERR_NOT_REGISTERED;
 	m.u.error.op = VMAC_OP_UPDATE;
 	memset(&out[0], 0, sizeof(out[0]));
@@ -511,9 +501,7 @@ static void veth_round_trip(int recvmmsg)
 
 	/* Host -> every board, broadcast from the interface's MAC: a
 	 * DISCOVER, 13 bytes. */
-	memset(&m, 0, sizeof(m));
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_DISCOVER;
+	m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 0);
 	memset(&out[0], 0, sizeof(out[0]));
 	discover_len = encode(&m, &out[0]);
 	EXPECT(discover_len == VMAC_HDR_LEN, "a DISCOVER is %zu bytes", discover_len);
@@ -553,10 +541,7 @@ static void veth_round_trip(int recvmmsg)
 
 	/* A batch larger than one sendmmsg and one recvmmsg. */
 	for (i = 0; i < BATCH_TEST; i++) {
-		memset(&m, 0, sizeof(m));
-		m.channel = VMAC_CH_SYSTEM;
-		m.op = VMAC_SYS_DISCOVER;
-		m.seq = (uint16_t)(i + 1);
+		m = request(VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, (uint16_t)(i + 1));
 		memset(&out[i], 0, sizeof(out[i]));
 		encode(&m, &out[i]);
 		out[i].addr = host.group;
@@ -583,26 +568,8 @@ static void veth_round_trip(int recvmmsg)
 	child_report("OK", "%s", "");
 }
 
-/* The suite cannot run here: fail under CI=true, else skip loudly and say
- * so in $VMAC_SKIP_FILE (as tests/ui/run.sh and tests/integration/run.py). */
-static void cannot_run(const char *reason)
-{
-	const char *ci = getenv("CI"), *skip_file = getenv("VMAC_SKIP_FILE");
-	ck_assert_msg(!ci || strcmp(ci, "true") != 0,
-	              "the raw Ethernet test cannot run, and CI=true makes that a failure: %s", reason);
-	fprintf(stderr,
-	        "################################################################################\n"
-	        "## SKIPPED: raw Ethernet test needs root and network namespaces (%s)\n"
-	        "################################################################################\n",
-	        reason);
-	if (skip_file) {
-		FILE *f = fopen(skip_file, "a");
-		if (f) {
-			fprintf(f, "test_transport: raw Ethernet round trip over veth: %s\n", reason);
-			fclose(f);
-		}
-	}
-}
+/* What a veth round trip needs, for vmac_test_cannot_run. */
+#define VETH_NEEDS "raw Ethernet round trip over veth (needs root and network namespaces)"
 
 /* The veth round trip in a child; recvmmsg: without the receive ring. */
 static void run_veth_round_trip(int recvmmsg)
@@ -613,7 +580,7 @@ static void run_veth_round_trip(int recvmmsg)
 	pid_t pid;
 
 	if (geteuid() != 0) {
-		cannot_run("not root");
+		vmac_test_cannot_run(VETH_NEEDS, "not root");
 		return;
 	}
 	ck_assert_int_eq(pipe(pipefd), 0);
@@ -632,7 +599,7 @@ static void run_veth_round_trip(int recvmmsg)
 	ck_assert_int_eq(waitpid(pid, &status, 0), pid);
 	text[total] = '\0';
 	if (strncmp(text, "SKIP ", 5) == 0) {
-		cannot_run(text + 5);
+		vmac_test_cannot_run(VETH_NEEDS, text + 5);
 		return;
 	}
 	ck_assert_msg(strncmp(text, "OK", 2) == 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0,
@@ -652,12 +619,10 @@ START_TEST(ethernet_round_trip_over_veth_with_recvmmsg)
 }
 END_TEST
 
-int main(void)
+Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("transport");
 	TCase *tc = tcase_create("transport");
-	SRunner *r;
-	int failed;
 	tcase_add_test(tc, bus_specs_parse_to_their_transport);
 	tcase_add_test(tc, ethernet_addresses_compare_and_print_as_macs);
 	tcase_add_test(tc, udp_carries_a_frame_over_loopback);
@@ -667,9 +632,5 @@ int main(void)
 	tcase_add_test(tc, ethernet_round_trip_over_veth_with_recvmmsg);
 	tcase_set_timeout(tc, 30);
 	suite_add_tcase(s, tc);
-	r = srunner_create(s);
-	srunner_run_all(r, CK_NORMAL);
-	failed = srunner_ntests_failed(r);
-	srunner_free(r);
-	return failed ? 1 : 0;
+	return s;
 }

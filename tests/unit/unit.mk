@@ -13,9 +13,13 @@ UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto
                     test_driver:driver test_isolation:driver test_checkpoint:driver test_host:host
 UNIT_TESTS := $(foreach t,$(UNIT_TEST_MODULE),$(BUILD)/tests/$(firstword $(subst :, ,$(t))))
 
+# Every test program's main() is check_main.c's (check_main.h): it runs the
+# suite test_NAME.c gives through vmac_test_suite().
+UNIT_MAIN := $(OBJ)/tests/unit/check_main.o
+
 define unit_test_rule
-$(BUILD)/tests/$(1): $(OBJ)/tests/unit/$(1).o $(call archives,$(call down_from,$(2))) $(BUILD)/layers.ok
-	$$(call link,$(OBJ)/tests/unit/$(1).o,$(call down_from,$(2)),$$(CHECK_LIBS))
+$(BUILD)/tests/$(1): $(OBJ)/tests/unit/$(1).o $(UNIT_MAIN) $(call archives,$(call down_from,$(2))) $(BUILD)/layers.ok
+	$$(call link,$(OBJ)/tests/unit/$(1).o $(UNIT_MAIN),$(call down_from,$(2)),$$(CHECK_LIBS))
 endef
 $(foreach t,$(UNIT_TEST_MODULE),$(eval $(call unit_test_rule,$(firstword $(subst :, ,$(t))),$(lastword $(subst :, ,$(t))))))
 

@@ -1,0 +1,105 @@
+"""vmac frames for the Python tests, laid out in one place (docs/PROTOCOL.md,
+"Frame layout"; the C tests' twin is tests/unit/frames.h).
+
+frame() and reply() write any header and data, in range or not; the data
+builders (inputs, outputs, register, u16, announce) write a payload field by
+field. A test that needs a frame the host must refuse builds it right and
+then corrupts it, with patch() or a slice, so the corruption is what the
+reader sees. parse() reads a header back, ethernet() wraps a frame for raw
+Ethernet.
+
+Used by test_malformed.py, test_eth.py and eth_peer.py here, and by
+tests/soak/soak.py (which puts this folder on sys.path, as for harness)."""
+
+import collections
+import struct
+
+MAGIC = b"VM"
+HEADER = struct.Struct(">2sBBHIBBB")  # magic, version, flags, seq, device_id, channel, op, len
+HDR_LEN = HEADER.size  # 13
+REPLY = 0x01  # flags bit 0: set on every frame a board sends
+
+SYS, DEV = 0xFF, 0x00  # the system channel and the device channel
+DISCOVER, CYCLIC, ANNOUNCE = 0x01, 0x04, 0x10  # ops of the system channel
+REGISTER, SHUTDOWN, UPDATE, ERROR, IDLE, SLEEP, WATCHDOG, SIZE, OFFSET, OFFSET_GET = range(10)  # device channel
+
+ETH_P_VMAC = 0x88B5  # the EtherType of raw Ethernet (protocol version 2)
+ETH_MIN_PAYLOAD = 46  # shorter payloads are padded with zeros
+
+# Each header field's offset and size in bytes, for patch().
+FIELDS = {"magic": (0, 2), "version": (2, 1), "flags": (3, 1), "seq": (4, 2), "device_id": (6, 4),
+          "channel": (10, 1), "op": (11, 1), "len": (12, 1)}
+
+Header = collections.namedtuple("Header", "version flags seq device_id channel op len")
+
+
+def frame(op, data=b"", channel=DEV, device_id=0, seq=0, flags=0, version=1):
+    """A frame: the 13-byte header with len = len(data), then data. Flags 0
+    make it the host's request; nothing is checked."""
+    return HEADER.pack(MAGIC, version, flags, seq, device_id, channel, op, len(data)) + data
+
+
+def reply(op, data=b"", **fields):
+    """A board's frame: frame() with the REPLY flag."""
+    return frame(op, data, flags=REPLY, **fields)
+
+
+def patch(whole, field, value):
+    """whole with one header field overwritten (value: bytes of the field's
+    size, or an int written big-endian in it), every other byte as it was."""
+    offset, size = FIELDS[field]
+    if isinstance(value, int):
+        value = value.to_bytes(size, "big")
+    assert len(value) == size, "%s is %d bytes, not %d" % (field, size, len(value))
+    return whole[:offset] + value + whole[offset + size:]
+
+
+def outputs(digital=0, pwm=0):
+    """UPDATE request data (3 bytes): digital outputs, pwm in per-mille."""
+    return struct.pack(">Bh", digital, pwm)
+
+
+def inputs(digital=0, analog=(0, 0), encoder=0, applied_digital=0, pwm=0):
+    """UPDATE and IDLE reply data (12 bytes): the inputs, then the outputs
+    the board drives now."""
+    return struct.pack(">BHHiBh", digital, analog[0], analog[1], encoder, applied_digital, pwm)
+
+
+def register(major, minor, watchdog_ms):
+    """REGISTER request data (10 bytes)."""
+    return struct.pack(">IIH", major, minor, watchdog_ms)
+
+
+def u16(value):
+    """The data of SLEEP (seconds), WATCHDOG (ms) and OFFSET (the offset)."""
+    return struct.pack(">H", value)
+
+
+def announce(driver, board, major=1, minor=0, firmware=(1, 0), caps=(8, 7, 2, 1, 1)):
+    """ANNOUNCE data: driver and board are bytes (any, so a test can send a
+    name the host must refuse); caps are digital inputs, digital outputs,
+    analog inputs, PWM outputs, encoders."""
+    return (bytes([len(driver)]) + driver + struct.pack(">II", major, minor) + bytes([len(board)]) + board +
+            bytes(firmware) + bytes(caps))
+
+
+def parse(payload):
+    """(Header, data) of a vmac frame, data being the len bytes after the
+    header (a CYCLIC's len counts records: read those from payload); None
+    when payload is shorter than a header or has another magic."""
+    if len(payload) < HDR_LEN:
+        return None
+    magic, *fields = HEADER.unpack_from(payload)
+    if magic != MAGIC:
+        return None
+    header = Header(*fields)
+    return header, payload[HDR_LEN:HDR_LEN + header.len]
+
+
+def ethernet(dst, src, payload, pad=False):
+    """An Ethernet frame of EtherType 0x88B5 from MAC src to MAC dst (6 bytes
+    each) carrying payload; pad: zeros up to the 46-byte minimum payload, as
+    a board's network interface sends it."""
+    if pad:
+        payload += bytes(max(0, ETH_MIN_PAYLOAD - len(payload)))
+    return dst + src + struct.pack(">H", ETH_P_VMAC) + payload
