@@ -6,25 +6,12 @@ warning, and its memory, its real boards and its event log are unaffected."""
 
 import random
 import socket
-import struct
-import time
 
+from frames import ANNOUNCE, DISCOVER, SYS, announce, parse, reply
 from harness import KITCHEN_NAMES, undisturbed
 
 TOTAL = 10000
 PER_DISCOVER = 300
-SYS = 0xFF
-DISCOVER, ANNOUNCE = 0x01, 0x10
-REPLY = 0x01
-HEADER = struct.Struct(">2sBBHIBBB")  # core/proto/proto.h: magic, version, flags, seq, id, channel, op, len
-
-
-def announce(seq, major, board):
-    """An ANNOUNCE answering DISCOVER seq (docs/PROTOCOL.md), driver lights."""
-    driver = b"lights"
-    data = (bytes([len(driver)]) + driver + struct.pack(">II", major, 0) + bytes([len(board)]) + board +
-            bytes([1, 0]) + bytes((8, 7, 2, 1, 1)))
-    return HEADER.pack(b"VM", 1, REPLY, seq, 0, SYS, ANNOUNCE, len(data)) + data
 
 
 def rss_kib(pid):
@@ -59,15 +46,13 @@ def test_a_flood_of_fake_boards_is_bounded(t):
     sent = 0
     try:
         while sent < TOTAL:
-            data, _ = sock.recvfrom(2048)
-            if len(data) < HEADER.size:
-                continue
-            _, _, _, seq, _, channel, op, _ = HEADER.unpack_from(data)
-            if channel != SYS or op != DISCOVER:
+            got = parse(sock.recvfrom(2048)[0])
+            if not got or got[0].channel != SYS or got[0].op != DISCOVER:
                 continue
             for _ in range(min(PER_DISCOVER, TOTAL - sent)):
-                n = rnd.randrange(1 << 31)
-                sock.sendto(announce(seq, n, b"fake-%d" % n), target)
+                n = rnd.randrange(1 << 31)  # a made-up identity of the lights driver
+                sock.sendto(reply(ANNOUNCE, announce(b"lights", b"fake-%d" % n, major=n), channel=SYS,
+                                  seq=got[0].seq), target)
                 sent += 1
             s = host.status()
             undisturbed(KITCHEN_NAMES)(s)
