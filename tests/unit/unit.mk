@@ -10,8 +10,13 @@ CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
 UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto test_cyclic:proto \
                     test_board:board test_plant:board test_board_v2:board test_board_cyclic:board \
                     test_sched:sched test_store:store test_recording:recorder test_transport:transport \
-                    test_driver:driver test_isolation:driver test_checkpoint:driver test_host:host
+                    test_driver:driver test_isolation:driver test_checkpoint:driver test_host:host \
+                    test_siphash:proto
 UNIT_TESTS := $(foreach t,$(UNIT_TEST_MODULE),$(BUILD)/tests/$(firstword $(subst :, ,$(t))))
+
+# Libraries a test needs beyond its modules': libsodium is the reference
+# test_siphash checks the portable SipHash against.
+test_siphash_LIBS = $(call pkg_libs,libsodium)
 
 # Every test program's main() is check_main.c's (check_main.h): it runs the
 # suite test_NAME.c gives through vmac_test_suite().
@@ -19,7 +24,7 @@ UNIT_MAIN := $(OBJ)/tests/unit/check_main.o
 
 define unit_test_rule
 $(BUILD)/tests/$(1): $(OBJ)/tests/unit/$(1).o $(UNIT_MAIN) $(call archives,$(call down_from,$(2))) $(BUILD)/layers.ok
-	$$(call link,$(OBJ)/tests/unit/$(1).o $(UNIT_MAIN),$(call down_from,$(2)),$$(CHECK_LIBS))
+	$$(call link,$(OBJ)/tests/unit/$(1).o $(UNIT_MAIN),$(call down_from,$(2)),$$(CHECK_LIBS) $$($(1)_LIBS))
 endef
 $(foreach t,$(UNIT_TEST_MODULE),$(eval $(call unit_test_rule,$(firstword $(subst :, ,$(t))),$(lastword $(subst :, ,$(t))))))
 
