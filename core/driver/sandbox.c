@@ -104,8 +104,7 @@ int drv_valid_module_name(const char *name, size_t maxlen)
 /* stdlib/NAME.lua run in the driver's sandbox: [-0, +1] what it returned
  * (true for nothing). Apart from sandbox_require so that requiring a module
  * already loaded, which a loop may do thousands of times, has no buffers on
- * its stack (under ASan each call poisoned and cleared them: a fifth of
- * fuzz_manifest's time). */
+ * its stack (under ASan every call would poison and clear them). */
 static void load_module(lua_State *L, const struct vmac_driver *d, const char *name)
 {
 	char path[600], chunk[80];

@@ -440,7 +440,7 @@ end
 
 -- A flight recording (its text) replayed against the driver under test
 -- (--drivers DIR, else the shipped one): the test fails where an output
--- differs or the driver fails (docs/RECORDING.md, "A recording as a test").
+-- differs or the driver fails (docs/RECORDING.md, "Replay").
 local function replay(text)
 	if type(text) ~= "string" then error("replay: expects the recording's text", 2) end
 	checked()

@@ -101,9 +101,9 @@ def test_what_did_not_run_does_not_pass(t):
 
 
 def test_a_creeping_driver_fails_alone(t):
-    """The driver that filled its heap catching every refusal used to end
-    vmac test (and report ok for a body that never finished): now it fails
-    by itself, the test goes on to its end, and the next test runs."""
+    """A driver that fills its heap, catching every refusal, is dropped for
+    its memory cap and nothing else ends: its test goes on to its end (no
+    ok for a body that never finished), and the next test runs."""
     home = os.path.join(t.logdir, "creep")
     os.makedirs(os.path.join(home, "drivers"))
     os.makedirs(os.path.join(home, "tests"))
