@@ -15,9 +15,9 @@
 # VMAC_QEMU_BOARDS (PLANT:NAME ..., default "washer:washer-1
 # dishwasher:dishwasher-1 lights:lights-1"), VMAC_QEMU_NET (prefix of the
 # device names, default vmq: bridge vmqbr, taps vmqtap1..), VMAC_QEMU_DEADLINE_US
-# (the host's reply deadline, default 20000: an emulated board answers in
-# about 0.2 ms, but now and then QEMU takes a few ms, more than vmacd's
-# default 4 ms, on a small machine running three of them).
+# (the host's reply deadline, default 20000: an emulated board usually
+# answers well within vmacd's default 4 ms, but on a small machine running
+# three of them QEMU now and then takes longer).
 set -u
 bin=${1:-build/bin}
 image=${2:-build/firmware/vmac-board-lm3s6965.elf}

@@ -10,15 +10,17 @@
  * the wrapper prices the call's worst case in steps before making it, and
  * refuses, naming the function, a call that could take more than
  * PATTERN_STEPS_MAX of them. A step is one character test of the pattern
- * matcher; the STEP_ weights price the rest of the work in those steps, as
- * measured here (about 1 ns a step; the worst case of a call let through
- * takes some 25 ms). table.sort alone counts as it goes: LuaJIT's
- * quicksort can be driven to n^2 comparisons, so no price from the table's
- * length alone would be sound without refusing ordinary sorts. What is not
- * wrapped costs time linear in what it is given and what it makes, and so
- * is bounded by the memory cap (docs/DRIVERS.md "The sandbox").
- * While LuaJIT's own function runs, d->lib_call names it (the host reads it
- * from another thread to say what a stalled driver was doing). */
+ * matcher; the STEP_ weights price the rest of the work in those steps,
+ * each what that work costs against one character test in LuaJIT
+ * (docs/DRIVERS.md, "The sandbox", says what a step is worth in time, and
+ * so how long a call let through may run). table.sort alone counts as it
+ * goes: LuaJIT's quicksort can be driven to n^2 comparisons, so no price
+ * from the table's length alone would be sound without refusing ordinary
+ * sorts. What is not wrapped costs time linear in what it is given and
+ * what it makes, and so is bounded by the memory cap (docs/DRIVERS.md "The
+ * sandbox"). While LuaJIT's own function runs, d->lib_call names it (the
+ * host reads it from another thread to say what a stalled driver was
+ * doing). */
 #include "internal.h"
 
 #include <stdarg.h>

@@ -50,7 +50,7 @@ struct vmac_driver_limits {
 	unsigned max_level;                         /* highest level the scheduler has */
 	int allow_jit;                              /* honour a manifest's jit = true */
 	const char *stdlib_dir;                     /* where the driver's require() looks; NULL: no require */
-	const char *cycles_dir;                     /* vmac.cycles() reads the .lua files here; NULL: none */
+	const char *cycles_dir;                     /* vmac.cycles() reads the .lua files here; NULL: it raises */
 	const char *expect_name;                    /* the driver name the board announced; NULL: any */
 	const struct vmac_driver_setting *settings; /* overrides for this driver */
 	int nsettings;

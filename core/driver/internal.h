@@ -1,6 +1,7 @@
 /* The driver module's insides, shared by its files and by the white-box
- * tests (tests/unit/test_isolation.c, tests/lua/run.c); the rest of the
- * host sees only driver.h. Who owns what:
+ * tests and fuzz harnesses that include it (they do what no driver can:
+ * set a cap, build an environment, call a guarded function); the rest of
+ * the host sees only driver.h. Who owns what:
  *
  *   protect.c   the protection rule: the counting allocator with its cap,
  *               the budget hook, the one guarded call of driver code, and

@@ -521,10 +521,10 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 
 /* What a description may still hold: values (a null filling a hole of an
  * array is one), and bytes of strings and keys. Without a bound, tables
- * that refer to each other (a cycle, or one table under many keys) made the
- * depth-limited walk exponential: a driver of 286 bytes took 0.7 s of its
- * load and 173 MB of the host's heap, one a little wider 22 s and 3.6 GB
- * (found by fuzz_manifest; docs/RELIABILITY.md). */
+ * that refer to each other (a cycle, or one table under many keys) make the
+ * depth-limited walk exponential: a driver of a few hundred bytes could
+ * hold its load for seconds and take gigabytes of the host's heap
+ * (docs/RELIABILITY.md). */
 struct describe_left {
 	long values;
 	size_t bytes;

@@ -259,7 +259,7 @@ int drv_protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, 
 	/* Restarts the hook's count. The hook stays set after the call: no
 	 * bytecode of this state runs outside drv_protect_any, and setting it
 	 * again as it is rewrites nothing, where turning it off and on again
-	 * rewrote LuaJIT's dispatch table twice a call (a tenth of a tick). */
+	 * would rewrite LuaJIT's dispatch table twice a call. */
 	lua_sethook(L, budget_hook, LUA_MASKCOUNT, HOOK_EVERY);
 	rc = lua_pcall(L, 1, 0, 0);
 	d->in_driver = 0;

@@ -104,8 +104,7 @@ int drv_valid_module_name(const char *name, size_t maxlen)
 /* stdlib/NAME.lua run in the driver's sandbox: [-0, +1] what it returned
  * (true for nothing). Apart from sandbox_require so that requiring a module
  * already loaded, which a loop may do thousands of times, has no buffers on
- * its stack (under ASan each call poisoned and cleared them: a fifth of
- * fuzz_manifest's time). */
+ * its stack (under ASan every call would poison and clear them). */
 static void load_module(lua_State *L, const struct vmac_driver *d, const char *name)
 {
 	char path[600], chunk[80];
@@ -154,23 +153,18 @@ static int sandbox_require(lua_State *L)
 	return 1;
 }
 
-/* vmac.cycles(): every CYCLES_DIR/NAME.lua, run in the driver's sandbox, as
- * a table NAME -> what the file returned, in name order. Load time only.
- * The names live on the C stack, so a file that raises leaks nothing. */
-static int sandbox_cycles(lua_State *L)
+/* The names of the programmes in folder `path` (NAME.lua, NAME a module
+ * name), at most CYCLES_MAX of them, sorted: how many. A missing folder
+ * holds none. */
+#define CYCLES_MAX 64
+static int cycle_names(const char *path, char names[CYCLES_MAX][48])
 {
-	struct vmac_driver *d = drv_of(L);
-	char names[64][48], path[900], chunk[120];
 	int n = 0, i, j;
-	DIR *dir;
+	DIR *dir = opendir(path);
 	struct dirent *e;
-
-	if (!d->loading)
-		return luaL_error(L, "vmac.cycles: call it when the driver loads (top of the file)");
-	lua_newtable(L);
-	if (!d->cycles_dir[0] || !(dir = opendir(d->cycles_dir)))
-		return 1;
-	while ((e = readdir(dir)) && n < 64) {
+	if (!dir)
+		return 0;
+	while ((e = readdir(dir)) && n < CYCLES_MAX) {
 		size_t len = strlen(e->d_name);
 		if (len < 5 || len - 4 >= sizeof(names[0]) || strcmp(e->d_name + len - 4, ".lua") != 0)
 			continue;
@@ -187,6 +181,28 @@ static int sandbox_cycles(lua_State *L)
 			memcpy(names[j], names[j - 1], sizeof(t));
 			memcpy(names[j - 1], t, sizeof(t));
 		}
+	return n;
+}
+
+/* vmac.cycles(): every CYCLES_DIR/NAME.lua, run in the driver's sandbox, as
+ * a table NAME -> what the file returned, in name order. Load time only. A
+ * driver that asks for its programmes needs one at least: with none (no
+ * folder, or no NAME.lua in it) it raises an error that names the folder it
+ * looked in, for the person who forgot to put them there. The names live on
+ * the C stack, so a file that raises leaks nothing. */
+static int sandbox_cycles(lua_State *L)
+{
+	struct vmac_driver *d = drv_of(L);
+	char names[CYCLES_MAX][48], path[900], chunk[120];
+	int n, i;
+
+	if (!d->loading)
+		return luaL_error(L, "vmac.cycles: call it when the driver loads (top of the file)");
+	if (!d->cycles_dir[0])
+		return luaL_error(L, "vmac.cycles: no programmes for %s (the host gave no folder)", d->name);
+	if ((n = cycle_names(d->cycles_dir, names)) == 0)
+		return luaL_error(L, "vmac.cycles: no programmes for %s in %s/", d->name, d->cycles_dir);
+	lua_newtable(L);
 	for (i = 0; i < n; i++) {
 		snprintf(path, sizeof(path), "%s/%s.lua", d->cycles_dir, names[i]);
 		snprintf(chunk, sizeof(chunk), "@cycles/%s/%s.lua", d->name, names[i]);

@@ -237,7 +237,7 @@ struct vmac_bus {
 	struct vmac_config cfg;
 	struct vmac_transport tr;
 	int epfd;         /* the bus thread's wait (bus.c, bus_loop): the socket, wakefd (and tfd) */
-	int wakefd;       /* eventfd: the main thread has commands or requests (vmac_bus_wake) */
+	int wakefd;       /* eventfd: the main thread has commands or requests (bus_wake) */
 	int timerfd_wait; /* no epoll_pwait2 on this kernel: ticks from tfd */
 	pthread_t thread;
 	int tfd;

@@ -27,7 +27,7 @@ static int pwait2(int epfd, struct epoll_event *ev, int max, int64_t timeout_ns)
  * else that is ready: a flood on the socket must not starve the schedule),
  * replies as they arrive, and the main thread's commands and requests when
  * it wakes the thread. It waits with epoll_pwait2 and a timeout to the next
- * tick: a wait on a timerfd wakes some 8 us later at p50 and 18 us at p99
+ * tick, which wakes it closer to the tick than a wait on a timerfd does
  * (docs/PERFORMANCE.md, "Tick lateness"); on a kernel without epoll_pwait2
  * the absolute timerfd is in the set instead. Ticks fall on start + k x
  * slot however late any one of them was handled. Returns when the bus has

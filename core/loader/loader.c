@@ -20,17 +20,26 @@ int vmac_driver_path(const struct vmac_config *cfg, const char *driver, char *pa
 	return stat(path, &st) == 0 ? 0 : -ENOENT;
 }
 
-/* cycles/NAME/ beside a --drivers folder if there is one, else the
- * shipped scripts/cycles/NAME/. */
-static void cycles_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
+static int is_dir(const char *path)
 {
 	struct stat st;
+	return stat(path, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+/* The folder of driver NAME's programmes: DIR/cycles/NAME/, inside the
+ * --drivers folder DIR, when there is one and it holds that folder; else the
+ * shipped scripts/cycles/NAME/. When neither exists, DIR's: the error of a
+ * driver that finds no programmes then names the folder to make. */
+static void cycles_path(const struct vmac_config *cfg, const char *name, char *path, size_t len)
+{
+	char shipped[VMAC_PATH_MAX + 64];
+	snprintf(shipped, sizeof(shipped), "%s/cycles/%s", cfg->scripts_dir, name);
 	if (cfg->drivers_dir[0]) {
 		snprintf(path, len, "%s/cycles/%s", cfg->drivers_dir, name);
-		if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+		if (is_dir(path) || !is_dir(shipped))
 			return;
 	}
-	snprintf(path, len, "%s/cycles/%s", cfg->scripts_dir, name);
+	snprintf(path, len, "%s", shipped);
 }
 
 /* The declarations of the driver versions loaded so far, newest first: a

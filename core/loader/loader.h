@@ -1,8 +1,11 @@
 /* Finding and loading a device's driver the way the host does: NAME.lua in
- * --drivers first, then the shipped scripts/drivers/; its cycles/NAME/
- * beside it; the limits and driver.NAME.* settings of the configuration.
- * Used by vmacd's main thread and by `vmac test` (docs/TESTING.md). Slow:
- * reads files and compiles; never on the bus thread. */
+ * the --drivers folder DIR first, then the shipped scripts/drivers/; its
+ * programmes in DIR/cycles/NAME/ when DIR holds that folder, else in the
+ * shipped scripts/cycles/NAME/ (docs/DRIVERS.md, "Cycles as scripts"); the
+ * limits and driver.NAME.* settings of the configuration. Used wherever a
+ * driver is loaded or described: vmacd's main thread, a deploy, the HTTP
+ * API, MQTT and `vmac test`. Slow: reads files and compiles; never on the
+ * bus thread. */
 #ifndef VMAC_LOADER_H
 #define VMAC_LOADER_H
 

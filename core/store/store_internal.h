@@ -1,6 +1,7 @@
 /* The store's insides, shared by its files (store.c: tokens, params,
  * driver versions, events, opening; store_checkpoint.c: checkpoints of
- * machine state). The rest of the host sees only store.h. */
+ * machine state; store_recording.c: flight recordings). The rest of the
+ * host sees only store.h. */
 #ifndef VMAC_STORE_INTERNAL_H
 #define VMAC_STORE_INTERNAL_H
 

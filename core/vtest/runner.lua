@@ -13,7 +13,7 @@ Run driver tests (*_test.lua) against the real host core and board firmware with
 simulated plants, in virtual time: no sockets, no sleeping, no hardware, no root.
 With no PATH: the project's own tests under tests/ and scripts/.
 
-  --drivers DIR      look for NAME.lua in DIR before the shipped scripts/drivers/
+  --drivers DIR      look for NAME.lua and its programmes (cycles/NAME/) in DIR before the shipped scripts/
   --replay FILE      replay a flight recording (vmac recording get ID > FILE) against
                      the driver it recorded, or with --drivers against DIR's version;
                      say where an output first differs (docs/RECORDING.md)
@@ -440,7 +440,7 @@ end
 
 -- A flight recording (its text) replayed against the driver under test
 -- (--drivers DIR, else the shipped one): the test fails where an output
--- differs or the driver fails (docs/RECORDING.md, "A recording as a test").
+-- differs or the driver fails (docs/RECORDING.md, "Replay").
 local function replay(text)
 	if type(text) ~= "string" then error("replay: expects the recording's text", 2) end
 	checked()

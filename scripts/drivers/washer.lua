@@ -290,7 +290,6 @@ function driver.attach(dev)
 	keep.drum_ramp, keep.drum_pid = drum_ramp, drum_pid
 end
 
--- name of the programme and its step, for events
 -- The first tick after recover resumed a programme: the plant must agree
 -- with the checkpoint (door closed, water within RECOVER_LEVEL_L; in a fill
 -- it may have risen more, as the valves stayed open until the board's

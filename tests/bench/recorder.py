@@ -219,8 +219,8 @@ def recorder(args):
                 if key in rw[name] and key in rw["off"] and rw["off"][key] > 0]
 
     # The ratio is taken on the on-CPU time (schedstat, nanoseconds): vmacd
-    # uses about 3% of a CPU here, and utime+stime, in 10 ms clock ticks,
-    # would be some 35 ticks per 10 s window: too coarse for a few percent.
+    # uses a few percent of a CPU, and utime+stime, in 10 ms clock ticks,
+    # would be a few dozen ticks per 10 s window: too coarse for a few percent.
     out["ratio"] = {}
     for name, _ in COST_CONFIGS[1:]:
         run, cpu = ratios(name, "run_us_per_device_tick"), ratios(name, "cpu_us_per_device_tick")

@@ -1,4 +1,4 @@
--- memory creeping under pcall in tick, every refusal caught (the 3-line driver that killed vmacd)
+-- memory creeping under pcall in tick, every refusal caught (three lines that end a host in which pcall can swallow the cap)
 -- expect: memory cap exceeded
 return { name = "creep_tick", version = "1.0.0", io = { do0 = "do0", di0 = "di0" },
   tick = function(dev, inputs) G = G or {} N = (N or 0) + 1

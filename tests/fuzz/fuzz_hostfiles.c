@@ -6,15 +6,16 @@
  * stdlib modules a driver requires, the programmes vmac.cycles() finds;
  * the driver's text, the input, comes in memory): each is read once and
  * handed out again as a copy, without the five system calls of every
- * read, which took a fifth of the target's time. And a chunk of those
+ * read, a large share of the target's time. And a chunk of those
  * files (chunk names "@stdlib/..." and "@cycles/...";
  * core/driver/sandbox.c) is compiled once, in a Lua state of its own, and
  * from then on loaded from its bytecode: the same functions, line numbers
- * and names, without parsing 57 KB of Lua again for every input that
- * loads the washer (bytecode loads in a sixth of the time). Anything
- * else, the driver's own text, is parsed as the host parses it. With the
- * arena off (VMAC_FUZZ_FRESH=1, the replay in fresh sandboxes) every file
- * is read and every chunk parsed. docs/TESTING.md, "Fuzzing". */
+ * and names, without parsing the washer's stdlib modules and programmes
+ * again for every input that loads the washer (bytecode loads several
+ * times faster than text). Anything else, the driver's own text, is
+ * parsed as the host parses it. With the arena off (VMAC_FUZZ_FRESH=1, the
+ * replay in fresh sandboxes) every file is read and every chunk parsed.
+ * docs/TESTING.md, "Fuzzing". */
 #include <lauxlib.h>
 #include <lua.h>
 #include <stdio.h>

@@ -40,7 +40,7 @@
  * is counted every 1,000; docs/TESTING.md, "Fuzzing"). An input that loops
  * reaches the budget's overrun, the same code at any budget, after about
  * 500,000 instructions of a load instead of 10 million: at the host's
- * budget a few dozen such inputs took over a third of the target's time. */
+ * budget a few such inputs would take most of the target's time. */
 #define INSTRUCTIONS 10000
 
 /* VMAC_FUZZ_MUST_LOAD=1: the input is one of the shipped drivers, which

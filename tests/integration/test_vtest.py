@@ -4,6 +4,7 @@ person uses it: on the shipped driver tests, on files that fail on purpose
 
 import os
 import re
+import shutil
 import xml.etree.ElementTree as ET
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -100,9 +101,9 @@ def test_what_did_not_run_does_not_pass(t):
 
 
 def test_a_creeping_driver_fails_alone(t):
-    """The driver that filled its heap catching every refusal used to end
-    vmac test (and report ok for a body that never finished): now it fails
-    by itself, the test goes on to its end, and the next test runs."""
+    """A driver that fills its heap, catching every refusal, is dropped for
+    its memory cap and nothing else ends: its test goes on to its end (no
+    ok for a body that never finished), and the next test runs."""
     home = os.path.join(t.logdir, "creep")
     os.makedirs(os.path.join(home, "drivers"))
     os.makedirs(os.path.join(home, "tests"))
@@ -228,6 +229,52 @@ end)
     rc, out, err = vtest(t, "vtest-mine-missing", tests)
     assert rc == 1, "without --drivers: exit %d, expected 1\n%s" % (rc, out)
     assert "blinker" in out, "the failure does not name the missing driver:\n%s" % out
+
+
+def test_programmes_come_from_the_drivers_folder(t):
+    """A driver's programmes (vmac.cycles()) come from DIR/cycles/NAME/,
+    inside the --drivers folder DIR, when it holds that folder, else from
+    the shipped scripts/cycles/NAME/; a driver that finds none fails to load
+    with an error naming the folder (docs/DRIVERS.md, "Cycles as scripts")."""
+    home = os.path.join(t.logdir, "mine")
+    drivers, tests = os.path.join(home, "drivers"), os.path.join(home, "tests")
+    os.makedirs(drivers)
+    os.makedirs(tests)
+    shutil.copy(os.path.join(ROOT, "scripts", "drivers", "washer.lua"), drivers)
+    with open(os.path.join(tests, "programmes_test.lua"), "w") as f:
+        f.write("""test("the washer attaches", function()
+	local w = board { name = "washer-1", plant = "washer" }
+	run_until(function() return w.var.state == "idle" end, 5, "the washer attached and idle")
+end)
+""")
+
+    # No DIR/cycles/washer/: the shipped programmes.
+    rc, out, err = vtest(t, "vtest-shipped-programmes", "--drivers", drivers, tests)
+    assert rc == 0, "a washer of one's own with the shipped programmes fails (exit %d):\n%s%s" % (rc, out, err)
+
+    # An empty DIR/cycles/washer/: no programmes, and the error says where it looked.
+    mine = os.path.join(drivers, "cycles", "washer")
+    os.makedirs(mine)
+    rc, out, err = vtest(t, "vtest-no-programmes", "--drivers", drivers, tests)
+    assert rc == 1, "a washer with no programmes: exit %d, expected 1\n%s%s" % (rc, out, err)
+    want = "no programmes for washer in %s/" % mine
+    assert want in out, "the failure does not say %r:\n%s" % (want, out[-2000:])
+
+    # DIR/cycles/washer/ with one programme: that one, not the shipped ones.
+    with open(os.path.join(mine, "normal.lua"), "w") as f:
+        f.write("return function(w) w.drain() end\n")
+    with open(os.path.join(tests, "programmes_test.lua"), "a") as f:
+        f.write("""test("its one programme is the folder's", function()
+	local w = board { name = "washer-1", plant = "washer" }
+	run_until(function() return w.var.state == "idle" end, 5, "the washer attached and idle")
+	local ok, why = w:try_input("start", "quick")
+	expect(not ok and tostring(why):find("quick", 1, true), "quick refused, got: " .. tostring(why))
+	w:input("start", "normal")
+	run_until(function() return w.var.step == "drain" end, 60, "the folder's normal programme draining")
+end)
+""")
+    rc, out, err = vtest(t, "vtest-own-programmes", "--drivers", drivers, tests)
+    assert rc == 0, "a washer with a programme of its own fails (exit %d):\n%s%s" % (rc, out, err)
 
 
 def test_bad_usage(t):

@@ -27,7 +27,7 @@
  * the whole case runs as a driver file's load, require works all through it
  * (and os.clock() is 0, as while a driver loads).
  *
- * What the real sandbox cannot give a test, the tests no longer do: one
+ * What the real sandbox cannot give a test, the tests do not do: one
  * state cannot load a module twice, so the reload tests of appliance and
  * cycle_restore build the new instance from the same modules (the copy the
  * new version gets is host_copy's plain data either way); and a test reads

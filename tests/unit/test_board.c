@@ -1,4 +1,4 @@
-/* Unit tests for the board state machine (firmware/board): discovery,
+/* Unit tests for the board state machine (firmware/board.c): discovery,
  * registration, updates, the comm-loss watchdog, shutdown and sleep, driven
  * through a fake HAL that records every output write. */
 #include <check.h>

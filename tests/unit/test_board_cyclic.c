@@ -1,5 +1,5 @@
 /* Unit tests for the board's CYCLIC service in protocol version 2
- * (firmware/board), driven through the fake HAL of board_v2_bench.h: a due
+ * (firmware/board.c), driven through the fake HAL of board_v2_bench.h: a due
  * record drives and answers, a record without DUE drives silently, records
  * of other sessions or bad records are never driven, and only a valid record
  * of its own session feeds the watchdog. Versions, registration and the

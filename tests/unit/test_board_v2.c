@@ -1,4 +1,4 @@
-/* Unit tests for the board's side of protocol version 2 (firmware/board),
+/* Unit tests for the board's side of protocol version 2 (firmware/board.c),
  * driven through the fake HAL of board_v2_bench.h: the version it announces
  * and speaks, registration with SIZE, OFFSET and OFFSET_GET, and the stale
  * session (the tag keeps a dropped board off its offset's next holder). The

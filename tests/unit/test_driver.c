@@ -779,6 +779,27 @@ START_TEST(load_gets_a_larger_budget_and_stdlib)
 }
 END_TEST
 
+/* A driver that asks for its programmes and has none fails to load, and
+ * the error names the folder the programmes were looked for in. */
+START_TEST(no_programmes_name_the_folder)
+{
+	static const char src[] =
+	    "vmac.cycles()\nreturn { name = 't', version = '1', io = {}, tick = function() end }\n";
+	const char *folder = "/tmp/vmac-test-driver-no-cycles";
+	unlink("/tmp/vmac-test-driver-no-cycles/notes.txt");
+	rmdir(folder);
+	limits.cycles_dir = folder; /* no such folder */
+	load_fails(src, "t.lua:1: vmac.cycles: no programmes for t in /tmp/vmac-test-driver-no-cycles/");
+	mkdir(folder, 0755); /* a folder with no NAME.lua in it */
+	write_file("/tmp/vmac-test-driver-no-cycles/notes.txt", "not a programme\n");
+	load_fails(src, "vmac.cycles: no programmes for t in /tmp/vmac-test-driver-no-cycles/");
+	unlink("/tmp/vmac-test-driver-no-cycles/notes.txt");
+	rmdir(folder);
+	limits.cycles_dir = NULL; /* a host that gives no folder */
+	load_fails(src, "vmac.cycles: no programmes for t (the host gave no folder)");
+}
+END_TEST
+
 /* A manifest's description is bounded: tables that refer to each other
  * made its walk exponential (fuzz_manifest: 286 bytes held a load for 7 s
  * under ASan and took a gigabyte of C heap), and one string under many keys
@@ -875,6 +896,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, sandbox_bounds);
 	tcase_add_test(tc, sandbox_is_exactly_the_allow_list);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
+	tcase_add_test(tc, no_programmes_name_the_folder);
 	tcase_add_test(tc, two_step_load_on_a_given_heap);
 	tcase_add_test(tc, a_description_past_its_bounds_is_refused);
 	tcase_add_test(tc, take_over_hands_plain_state_params_and_outputs);

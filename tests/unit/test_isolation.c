@@ -3,9 +3,9 @@
  * their cap when the host works on them, error objects with metamethods,
  * metamethods the host's reads could reach, and the atpanic handler. A
  * white-box test: through core/driver/internal.h it sets a state's cap to
- * what it holds and raises outside protection, which no driver can do. Any of these
- * used to end the process (LuaJIT's panic) or hang it; here each must come
- * back as an error of that driver. At the end, the cost model of the
+ * what it holds and raises outside protection, which no driver can do.
+ * Unprotected, any of these ends the process (LuaJIT's panic) or hangs it;
+ * here each must come back as an error of that driver. At the end, the cost model of the
  * bounded library functions (core/driver/bounded.c): calls that would stall
  * the bus are refused, ordinary ones run, and d->lib_call names the call. */
 #include <check.h>
@@ -29,8 +29,8 @@ static void setup(void)
 	limits.expect_name = "t";
 }
 
-/* Creeps up to the cap, catching every refused allocation: the pattern of
- * the driver that used to kill vmacd. */
+/* Creeps up to the cap, catching every refused allocation: the driver
+ * that ends a host in which pcall can swallow the cap. */
 #define CREEP                                                                                                          \
 	"local function creep() G = G or {} for i = 1, 1e7 do "                                                        \
 	"if not pcall(function() G[#G + 1] = { i, i, i } end) then break end end end\n"

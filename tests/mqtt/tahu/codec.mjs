@@ -2,7 +2,7 @@
 // package-lock.json) as a filter for tests/integration/test_sparkplug.py: it
 // decodes what vmacd published and encodes commands, so vmacd's payloads are
 // checked by the reference implementation and not only by the test's own
-// reader. Installed by tests/mqtt/tahu/install.sh (make test-integration).
+// reader. Installed by tests/npm_ci.sh (make test-integration).
 //
 // One JSON object per line on standard input, one answer per line out:
 //   {"decode": BASE64}  -> {"ok": true, "payload": {timestamp, seq, metrics:
