@@ -76,7 +76,7 @@ static json_t *device_json(const struct vmac_device_status *d)
 	return o;
 }
 
-json_t *http_status_json(struct vmac_http *h)
+static json_t *status_json(struct vmac_http *h)
 {
 	struct vmac_status *s = &h->status;
 	struct vmac_event ev[STATUS_EVENTS];
@@ -169,9 +169,9 @@ static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *re
 
 /* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input
  * to the device's driver, through the bus thread. */
-enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
-                                  const struct conn *k)
+enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *device = k->route.name;
 	struct vmac_bus_input_request req;
 	char msg[VMAC_EVENT_TEXT + 200];
 	const char *why;
@@ -189,9 +189,9 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
  * start (a programme, or the driver's default), pause, resume or cancel a
  * cycle: the commands of the same names of the driver (the stdlib's
  * appliance offers them), through the same way as input. */
-enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
-                                  const struct conn *k)
+enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *device = k->route.name;
 	struct vmac_bus_input_request req;
 	char msg[VMAC_EVENT_TEXT + 200];
 	const char *why;
@@ -205,8 +205,9 @@ enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c,
 }
 
 /* GET /api/devices and /api/devices/NAME: the devices of the status. */
-enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const char *name)
+enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *name = k->route.name[0] ? k->route.name : NULL;
 	struct vmac_status *s = &h->status;
 	json_t *list = json_array(), *one = NULL;
 	int i;
@@ -260,17 +261,20 @@ static void console_new_line(void *ctx)
 
 /* The body: lines of submessages. The answer: each line's answer and the
  * messages of its errors (api_request.c). */
-enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate)
+enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
-	struct console_ctx *x = malloc(sizeof(*x));
+	struct console_ctx *x;
 	struct vmac_console_ops ops;
 	json_t *answer;
+	if (k->too_big || k->len > INPUT_MAX)
+		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("the request body is over 64 KiB"));
+	x = malloc(sizeof(*x));
 	if (!x)
 		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
 	ops.device = console_device;
 	ops.input = console_input;
 	ops.ctx = x;
-	ops.may_operate = operate;
+	ops.may_operate = k->scope >= VMAC_SCOPE_OPERATE;
 	x->h = h;
 	answer = http_console_answer(&ops, console_new_line, k->body);
 	free(x);
@@ -296,7 +300,7 @@ static char *live_snapshot(struct vmac_http *h)
 	char *copy;
 	pthread_mutex_lock(&h->live_lock);
 	if (!h->live_json || now - h->live_at >= LIVE_PERIOD_MS / 1000.0 * 0.8) {
-		json_t *s = http_status_json(h);
+		json_t *s = status_json(h);
 		char *data = s ? json_dumps(s, JSON_COMPACT) : NULL;
 		json_decref(s);
 		if (data) {
@@ -356,9 +360,17 @@ static ssize_t live_read(void *cls, uint64_t pos, char *out, size_t max)
 	return (ssize_t)n;
 }
 
-enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c)
+/* GET /api/status: the status as JSON, at most 100 ms old. */
+enum MHD_Result http_status(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	(void)k;
+	return http_reply(c, MHD_HTTP_OK, status_json(h));
+}
+
+enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
 	struct live *l = calloc(1, sizeof(*l));
+	(void)k;
 	if (!l)
 		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body("out of memory"));
 	l->h = h;

@@ -38,8 +38,9 @@ static void append_version(void *ctx, const struct vmac_driver_version *v)
 }
 
 /* GET /api/drivers and /api/drivers/NAME: the versions kept. */
-enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *driver = k->route.name[0] ? k->route.name : NULL;
 	char err[512];
 	json_t *list = json_array(), *body;
 	struct vmac_driver_version active;
@@ -97,9 +98,9 @@ static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned
 }
 
 /* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
-enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
-                                   const struct conn *k)
+enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *driver = k->route.name;
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r;
 	double probation_s;
@@ -124,8 +125,9 @@ enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c
 }
 
 /* POST /api/drivers/NAME/activate?id=N[&probation=S] */
-enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *driver = k->route.name;
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r;
 	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
@@ -150,8 +152,9 @@ enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection 
 }
 
 /* POST /api/drivers/NAME/rollback */
-enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver)
+enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *driver = k->route.name;
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r = malloc(sizeof(*r));
 	char by[VMAC_TOKEN_ID_LEN + 1];
@@ -166,11 +169,13 @@ enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection 
 }
 
 /* GET /api/drivers/NAME/manifest?version=V: a loaded version's declarations. */
-enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *driver)
+enum MHD_Result http_driver_manifest(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *driver = k->route.name;
 	const char *version = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "version");
 	char *json = version ? vmac_loaded_manifest(driver, version) : NULL;
 	json_t *body;
+	(void)h;
 	if (!version)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
 		                  http_error_body("version is needed: ?version=V (a device's driver_version)"));

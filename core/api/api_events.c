@@ -29,7 +29,7 @@ static void append_event(void *ctx, const struct vmac_stored_event *e)
 	                                     "kind", e->kind, "device", e->device, "text", e->text));
 }
 
-enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c)
+enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
 	const char *after_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
 	const char *limit_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "limit");
@@ -38,6 +38,7 @@ enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c)
 	const char *why;
 	char err[512];
 	json_t *list;
+	(void)k;
 	if (http_parse_event_log(after_s, limit_s, &after, &limit, &why) != 0)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST, http_error_body(why));
 	list = json_array();
@@ -105,12 +106,13 @@ static ssize_t sse_read(void *cls, uint64_t pos, char *out, size_t max)
 	return (ssize_t)n;
 }
 
-enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c)
+enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
 	const char *after = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
 	const char *resume = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Last-Event-ID");
 	struct sse *e;
 	unsigned long long seq;
+	(void)k;
 	if (http_parse_events_from(after, resume, &seq) != 0)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
 		                  http_error_body("after (or Last-Event-ID) must be an event's seq"));

@@ -18,11 +18,12 @@ static void append(void *ctx, const struct vmac_recording_info *r)
 	                                     r->reason, "time", r->time, "size", (json_int_t)r->size));
 }
 
-enum MHD_Result http_recordings(struct vmac_http *h, struct MHD_Connection *c)
+enum MHD_Result http_recordings(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
 	const char *machine = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "machine");
 	char err[512];
 	json_t *list = json_array();
+	(void)k;
 	if (vmac_store_recording_list(h->store, machine, append, list, err, sizeof(err)) < 0) {
 		json_decref(list);
 		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body(err));
@@ -30,8 +31,9 @@ enum MHD_Result http_recordings(struct vmac_http *h, struct MHD_Connection *c)
 	return http_reply(c, MHD_HTTP_OK, json_pack("{s:o}", "recordings", list));
 }
 
-enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, const char *id)
+enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *id = k->route.name;
 	struct MHD_Response *r;
 	enum MHD_Result ret;
 	char err[512], *data;
@@ -53,8 +55,9 @@ enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, co
 	return ret;
 }
 
-enum MHD_Result http_record(struct vmac_http *h, struct MHD_Connection *c, const char *device)
+enum MHD_Result http_record(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *device = k->route.name;
 	char reply[300];
 	int rc = vmac_bus_request_record(h->bus, device, 2000, reply, sizeof(reply));
 	if (rc == -VMAC_ENOTRUNNING)

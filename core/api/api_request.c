@@ -1,5 +1,6 @@
-/* See api_request.h: routing, request bodies and arguments, and the
- * console's body, with nothing but text in and out. */
+/* See api_request.h: the route table and routing, request bodies and
+ * arguments, and the console's body, with nothing but text in and out (no
+ * libmicrohttpd: the answers are HTTP status numbers). */
 #include "api_request.h"
 
 #include <errno.h>
@@ -8,125 +9,76 @@
 #include <string.h>
 
 #include "../common/name.h"
-#include "http_internal.h"
 
 int http_valid_name(const char *s, size_t max)
 {
 	return vmac_valid_name(s, max); /* core/common/name.h: never "." or ".." */
 }
 
-/* PREFIX NAME SUFFIX: NAME into name (at most len - 1 bytes, no slash, a
- * valid name); 0 when url is not of that form. */
-static int named_path(const char *url, const char *prefix, const char *suffix, char *name, size_t len)
+#define HTTP_ROUTE_ROW(endpoint, method, pattern, scope, handler) [endpoint] = {method, pattern, scope},
+
+const struct http_route http_routes[HTTP_ROUTE_COUNT] = {HTTP_ROUTES(HTTP_ROUTE_ROW)};
+
+#define CAPITALS "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+
+/* path against a pattern of HTTP_ROUTES: 1 when it matches, with its NAME
+ * or ID in m->name or its FILE in m->file; 0 leaves m as it was. */
+static int match_pattern(const char *pattern, const char *path, struct http_match *m)
 {
-	size_t np = strlen(prefix), ns = strlen(suffix), n = strlen(url);
-	if (n <= np + ns || strncmp(url, prefix, np) != 0 || strcmp(url + n - ns, suffix) != 0)
+	const char *hole = strpbrk(pattern, CAPITALS), *suffix;
+	size_t np, nh, ns, n;
+	char name[sizeof(m->name)];
+	if (!hole)
+		return strcmp(pattern, path) == 0;
+	np = (size_t)(hole - pattern);
+	if (strncmp(path, pattern, np) != 0)
+		return 0;
+	if (strcmp(hole, "FILE") == 0) {
+		m->file = path + np;
+		return 1;
+	}
+	nh = strspn(hole, CAPITALS);
+	suffix = hole + nh;
+	ns = strlen(suffix);
+	n = strlen(path);
+	if (n < np + ns || strcmp(path + n - ns, suffix) != 0)
 		return 0;
 	n -= np + ns;
-	if (n >= len || memchr(url + np, '/', n))
+	if (n >= sizeof(name) || memchr(path + np, '/', n))
 		return 0;
-	memcpy(name, url + np, n);
+	memcpy(name, path + np, n);
 	name[n] = 0;
-	return http_valid_name(name, VMAC_NAME_MAX);
+	if (!http_valid_name(name, VMAC_NAME_MAX))
+		return 0;
+	if (nh == 2 && strncmp(hole, "ID", 2) == 0) {
+		if (strspn(name, "0123456789") != n)
+			return 0;
+	} else if (nh != 4 || strncmp(hole, "NAME", 4) != 0) {
+		return 0; /* no such placeholder: the row is wrong, and fuzz_http says so */
+	}
+	memcpy(m->name, name, n + 1);
+	return 1;
 }
 
-/* "/api/drivers/NAME" SUFFIX */
-static int driver_path(const char *url, const char *suffix, char *driver, size_t len)
-{
-	return named_path(url, "/api/drivers/", suffix, driver, len);
-}
-
-/* "/api/devices/NAME" SUFFIX */
-static int device_path(const char *url, const char *suffix, char *device, size_t len)
-{
-	return named_path(url, "/api/devices/", suffix, device, len);
-}
-
-/* The order of the tests is the order of precedence: the web UI and the
- * health check need no token; input and cycles need operate, drivers
- * deploy; everything else, a 404 too, needs read. */
-void http_route(const char *method, const char *url, struct http_route *r)
+void http_route_find(const char *method, const char *url, struct http_match *m)
 {
 	int get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0, post = strcmp(method, "POST") == 0;
-	char *name = r->name;
-	size_t len = sizeof(r->name);
-	name[0] = 0;
-	r->file = NULL;
-	r->need = VMAC_SCOPE_READ;
+	int i;
+	memset(m, 0, sizeof(*m));
 	if (!get && !post) {
-		r->endpoint = HTTP_BAD_METHOD;
-		r->need = VMAC_SCOPE_NONE;
-	} else if (get && (strcmp(url, "/") == 0 || strncmp(url, "/ui/", 4) == 0)) {
-		r->endpoint = HTTP_UI;
-		r->need = VMAC_SCOPE_NONE;
-		r->file = strcmp(url, "/") == 0 ? "index.html" : url + 4;
-	} else if (get && strcmp(url, "/api/health") == 0) {
-		r->endpoint = HTTP_HEALTH;
-		r->need = VMAC_SCOPE_NONE;
-	} else if (post && device_path(url, "/input", name, len)) {
-		r->endpoint = HTTP_INPUT;
-		r->need = VMAC_SCOPE_OPERATE;
-	} else if (post && device_path(url, "/cycle", name, len)) {
-		r->endpoint = HTTP_CYCLE;
-		r->need = VMAC_SCOPE_OPERATE;
-	} else if (post && device_path(url, "/record", name, len)) {
-		r->endpoint = HTTP_RECORD;
-		r->need = VMAC_SCOPE_OPERATE;
-	} else if (post && driver_path(url, "/rollback", name, len)) {
-		r->endpoint = HTTP_ROLLBACK;
-		r->need = VMAC_SCOPE_DEPLOY;
-	} else if (post && driver_path(url, "/activate", name, len)) {
-		r->endpoint = HTTP_ACTIVATE;
-		r->need = VMAC_SCOPE_DEPLOY;
-	} else if (post && driver_path(url, "", name, len)) {
-		r->endpoint = HTTP_UPLOAD;
-		r->need = VMAC_SCOPE_DEPLOY;
-	} else if (post && strcmp(url, "/api/console") == 0)
-		r->endpoint = HTTP_CONSOLE;
-	else if (get && strcmp(url, "/api/devices") == 0)
-		r->endpoint = HTTP_DEVICES;
-	else if (get && device_path(url, "", name, len))
-		r->endpoint = HTTP_DEVICE;
-	else if (get && strcmp(url, "/api/drivers") == 0)
-		r->endpoint = HTTP_DRIVERS;
-	else if (get && driver_path(url, "", name, len))
-		r->endpoint = HTTP_DRIVER;
-	else if (get && strcmp(url, "/api/status") == 0)
-		r->endpoint = HTTP_STATUS;
-	else if (get && strcmp(url, "/api/live") == 0)
-		r->endpoint = HTTP_LIVE;
-	else if (get && strcmp(url, "/api/whoami") == 0)
-		r->endpoint = HTTP_WHOAMI;
-	else if (get && driver_path(url, "/manifest", name, len))
-		r->endpoint = HTTP_MANIFEST;
-	else if (get && strcmp(url, "/api/events/log") == 0)
-		r->endpoint = HTTP_EVENT_LOG;
-	else if (get && strcmp(url, "/api/events") == 0)
-		r->endpoint = HTTP_EVENTS;
-	else if (get && strcmp(url, "/api/recordings") == 0)
-		r->endpoint = HTTP_RECORDINGS;
-	else if (get && named_path(url, "/api/recordings/", "", name, len) &&
-	         strspn(name, "0123456789") == strlen(name))
-		r->endpoint = HTTP_RECORDING;
-	else if (get && strcmp(url, "/api/site") == 0)
-		r->endpoint = HTTP_SITE;
-	else if (get && strcmp(url, "/api") == 0)
-		r->endpoint = HTTP_INDEX;
-	else
-		r->endpoint = HTTP_NOT_FOUND;
-	switch (r->endpoint) {
-	case HTTP_INPUT:
-	case HTTP_CYCLE:
-	case HTTP_RECORD:
-	case HTTP_ROLLBACK:
-	case HTTP_ACTIVATE:
-	case HTTP_UPLOAD:
-	case HTTP_DEVICE:
-	case HTTP_DRIVER:
-	case HTTP_RECORDING:
-	case HTTP_MANIFEST: break;
-	default: name[0] = 0; /* a path that did not match may have left part of itself there */
+		m->endpoint = HTTP_BAD_METHOD;
+		m->need = VMAC_SCOPE_NONE;
+		return;
 	}
+	for (i = 0; i < HTTP_ROUTE_COUNT; i++)
+		if (strcmp(http_routes[i].method, get ? "GET" : "POST") == 0 &&
+		    match_pattern(http_routes[i].pattern, url, m)) {
+			m->endpoint = (enum http_endpoint)i;
+			m->need = http_routes[i].need;
+			return;
+		}
+	m->endpoint = HTTP_NOT_FOUND;
+	m->need = VMAC_SCOPE_READ;
 }
 
 unsigned http_parse_input(const char *device, const char *body, size_t len, int too_big,
@@ -137,11 +89,11 @@ unsigned http_parse_input(const char *device, const char *body, size_t len, int 
 	memset(req, 0, sizeof(*req));
 	if (too_big || len > INPUT_MAX) {
 		*msg = "the request body is over 64 KiB";
-		return MHD_HTTP_CONTENT_TOO_LARGE;
+		return 413;
 	}
 	if (!http_valid_name(device, VMAC_NAME_MAX)) {
 		*msg = "no such device";
-		return MHD_HTTP_NOT_FOUND;
+		return 404;
 	}
 	root = json_loadb(body ? body : "", len, 0, &jerr);
 	name = json_object_get(root, "name");
@@ -155,7 +107,7 @@ unsigned http_parse_input(const char *device, const char *body, size_t len, int 
 		json_decref(root);
 		*msg = "expected {\"name\": NAME, \"value\": a number, string (at most 63 bytes), "
 		       "boolean or null, \"persist\": true or false (optional)}";
-		return MHD_HTTP_BAD_REQUEST;
+		return 400;
 	}
 	snprintf(req->device, sizeof(req->device), "%s", device);
 	snprintf(req->name, sizeof(req->name), "%s", json_string_value(name));
@@ -175,7 +127,7 @@ unsigned http_parse_input(const char *device, const char *body, size_t len, int 
 	json_decref(root);
 	if (req->persist && req->value.type == VMAC_VALUE_NONE) {
 		*msg = "a value to persist is needed";
-		return MHD_HTTP_BAD_REQUEST;
+		return 400;
 	}
 	return 0;
 }
@@ -190,7 +142,7 @@ unsigned http_parse_cycle(const char *device, const char *body, size_t len, int 
 	memset(req, 0, sizeof(*req));
 	if (too_big || len > INPUT_MAX) {
 		*msg = "the request body is over 64 KiB";
-		return MHD_HTTP_CONTENT_TOO_LARGE;
+		return 413;
 	}
 	root = json_loadb(body ? body : "", len, 0, &jerr);
 	action = json_object_get(root, "action");
@@ -202,7 +154,7 @@ unsigned http_parse_cycle(const char *device, const char *body, size_t len, int 
 		json_decref(root);
 		*msg = "expected {\"action\": \"start\", \"pause\", \"resume\" or \"cancel\", "
 		       "\"program\": a programme's name (start only, optional)}";
-		return MHD_HTTP_BAD_REQUEST;
+		return 400;
 	}
 	snprintf(req->device, sizeof(req->device), "%s", device);
 	snprintf(req->name, sizeof(req->name), "%s", actions[i]);

@@ -1,8 +1,9 @@
-/* The HTTP API's pure parts: which endpoint a request is for and the scope
- * it needs, and what its body and arguments say. No libmicrohttpd, no bus,
- * no store: http.c and the api_*.c files call these and do the rest, and
- * tests/fuzz/fuzz_http.c calls them directly (docs/TESTING.md, "Fuzzing").
- * Names carry the prefix http_, as in http_internal.h. */
+/* The HTTP API's pure parts: the table of its routes, which endpoint a
+ * request is for and the scope it needs, and what its body and arguments
+ * say. No libmicrohttpd, no bus, no store: http.c and the api_*.c files
+ * call these and do the rest, and tests/fuzz/fuzz_http.c calls them
+ * directly (docs/TESTING.md, "Fuzzing"). Names carry the prefix http_, as
+ * in http_internal.h. */
 #ifndef VMAC_API_REQUEST_H
 #define VMAC_API_REQUEST_H
 
@@ -13,47 +14,83 @@
 #include "../store/store.h"
 #include "console.h"
 
-/* Every request a client can make (docs/API.md). */
+/* Every route of the API (docs/API.md), declared once:
+ *
+ *   X(ENDPOINT, METHOD, PATTERN, SCOPE, HANDLER)
+ *
+ * METHOD is "GET" (HEAD too) or "POST". PATTERN is the path, in which one
+ * segment may be NAME (a device's or driver's name: http_valid_name, so
+ * never "." or ".."), ID (a name of digits only) or, last, FILE (the rest
+ * of the path, whatever it holds). SCOPE is the token the route takes
+ * (VMAC_SCOPE_NONE: none). HANDLER is the function of http_internal.h that
+ * answers it; only http.c reads that column, so this header and
+ * api_request.c stay free of libmicrohttpd. From this list api_request.c
+ * makes http_routes[] (below), http.c its handlers indexed the same way,
+ * and GET /api its list of endpoints; tests/fuzz/fuzz_http.c checks that
+ * every row routes back to itself. No path matches two rows (a NAME holds
+ * no slash), so the order is only the order GET /api lists them in. */
+#define HTTP_ROUTES(X)                                                                                                 \
+	X(HTTP_UI_PAGE, "GET", "/", VMAC_SCOPE_NONE, http_ui)                                                          \
+	X(HTTP_UI, "GET", "/ui/FILE", VMAC_SCOPE_NONE, http_ui)                                                        \
+	X(HTTP_HEALTH, "GET", "/api/health", VMAC_SCOPE_NONE, http_health)                                             \
+	X(HTTP_INDEX, "GET", "/api", VMAC_SCOPE_READ, http_index)                                                      \
+	X(HTTP_WHOAMI, "GET", "/api/whoami", VMAC_SCOPE_READ, http_whoami)                                             \
+	X(HTTP_STATUS, "GET", "/api/status", VMAC_SCOPE_READ, http_status)                                             \
+	X(HTTP_LIVE, "GET", "/api/live", VMAC_SCOPE_READ, http_live_stream)                                            \
+	X(HTTP_EVENTS, "GET", "/api/events", VMAC_SCOPE_READ, http_events_stream)                                      \
+	X(HTTP_EVENT_LOG, "GET", "/api/events/log", VMAC_SCOPE_READ, http_event_log)                                   \
+	X(HTTP_DEVICES, "GET", "/api/devices", VMAC_SCOPE_READ, http_devices)                                          \
+	X(HTTP_DEVICE, "GET", "/api/devices/NAME", VMAC_SCOPE_READ, http_devices)                                      \
+	X(HTTP_INPUT, "POST", "/api/devices/NAME/input", VMAC_SCOPE_OPERATE, http_device_input)                        \
+	X(HTTP_CYCLE, "POST", "/api/devices/NAME/cycle", VMAC_SCOPE_OPERATE, http_device_cycle)                        \
+	X(HTTP_RECORD, "POST", "/api/devices/NAME/record", VMAC_SCOPE_OPERATE, http_record)                            \
+	X(HTTP_CONSOLE, "POST", "/api/console", VMAC_SCOPE_READ, http_console)                                         \
+	X(HTTP_RECORDINGS, "GET", "/api/recordings", VMAC_SCOPE_READ, http_recordings)                                 \
+	X(HTTP_RECORDING, "GET", "/api/recordings/ID", VMAC_SCOPE_READ, http_recording)                                \
+	X(HTTP_SITE, "GET", "/api/site", VMAC_SCOPE_READ, http_site)                                                   \
+	X(HTTP_DRIVERS, "GET", "/api/drivers", VMAC_SCOPE_READ, http_driver_versions)                                  \
+	X(HTTP_DRIVER, "GET", "/api/drivers/NAME", VMAC_SCOPE_READ, http_driver_versions)                              \
+	X(HTTP_MANIFEST, "GET", "/api/drivers/NAME/manifest", VMAC_SCOPE_READ, http_driver_manifest)                   \
+	X(HTTP_UPLOAD, "POST", "/api/drivers/NAME", VMAC_SCOPE_DEPLOY, http_driver_upload)                             \
+	X(HTTP_ACTIVATE, "POST", "/api/drivers/NAME/activate", VMAC_SCOPE_DEPLOY, http_driver_activate)                \
+	X(HTTP_ROLLBACK, "POST", "/api/drivers/NAME/rollback", VMAC_SCOPE_DEPLOY, http_driver_rollback)
+
+#define HTTP_ROUTE_ENUM(endpoint, method, pattern, scope, handler) endpoint,
+
+/* The rows of HTTP_ROUTES, then what matches none of them. */
 enum http_endpoint {
-	HTTP_BAD_METHOD, /* not GET, HEAD or POST: 405 */
-	HTTP_UI,         /* GET / and /ui/FILE: the web UI's files, no token */
-	HTTP_HEALTH,     /* GET /api/health, no token */
-	HTTP_INPUT,      /* POST /api/devices/NAME/input */
-	HTTP_CYCLE,      /* POST /api/devices/NAME/cycle */
-	HTTP_RECORD,     /* POST /api/devices/NAME/record */
-	HTTP_ROLLBACK,   /* POST /api/drivers/NAME/rollback */
-	HTTP_ACTIVATE,   /* POST /api/drivers/NAME/activate */
-	HTTP_UPLOAD,     /* POST /api/drivers/NAME */
-	HTTP_CONSOLE,    /* POST /api/console */
-	HTTP_DEVICES,    /* GET /api/devices */
-	HTTP_DEVICE,     /* GET /api/devices/NAME */
-	HTTP_DRIVERS,    /* GET /api/drivers */
-	HTTP_DRIVER,     /* GET /api/drivers/NAME */
-	HTTP_STATUS,     /* GET /api/status */
-	HTTP_LIVE,       /* GET /api/live */
-	HTTP_WHOAMI,     /* GET /api/whoami */
-	HTTP_MANIFEST,   /* GET /api/drivers/NAME/manifest */
-	HTTP_EVENT_LOG,  /* GET /api/events/log */
-	HTTP_EVENTS,     /* GET /api/events */
-	HTTP_RECORDINGS, /* GET /api/recordings */
-	HTTP_RECORDING,  /* GET /api/recordings/ID */
-	HTTP_SITE,       /* GET /api/site */
-	HTTP_INDEX,      /* GET /api */
-	HTTP_NOT_FOUND,  /* anything else (after the token is checked): 404 */
+	HTTP_ROUTES(HTTP_ROUTE_ENUM) HTTP_ROUTE_COUNT,
+	HTTP_NOT_FOUND = HTTP_ROUTE_COUNT, /* no row (after the token is checked): 404 */
+	HTTP_BAD_METHOD,                   /* not GET, HEAD or POST: 405, no token */
 };
 
+/* A row of HTTP_ROUTES without its handler: http_routes[endpoint]. */
 struct http_route {
+	const char *method;
+	const char *pattern;
+	enum vmac_scope need;
+};
+
+extern const struct http_route http_routes[HTTP_ROUTE_COUNT];
+
+/* What http_route_find made of a request. */
+struct http_match {
 	enum http_endpoint endpoint;
 	enum vmac_scope need;         /* the token's scope it takes; VMAC_SCOPE_NONE: no token */
-	char name[VMAC_NAME_MAX + 2]; /* the device or driver NAME in the path, else "" */
-	const char *file;             /* HTTP_UI: the file's name (points into url or is static) */
+	char name[VMAC_NAME_MAX + 2]; /* the path's NAME or ID, else "" */
+	const char *file;             /* the path's FILE (points into it), else NULL */
 };
+
+/* A request body other than a driver's upload is at most this long. */
+#define INPUT_MAX 65536
 
 /* s is 1..max bytes of [A-Za-z0-9._-]: a device's or driver's name. */
 int http_valid_name(const char *s, size_t max);
 
-/* The route of method and url (the path, without its query). */
-void http_route(const char *method, const char *url, struct http_route *r);
+/* The route of method and url (the path, without its query): the first
+ * row of HTTP_ROUTES that matches, HTTP_NOT_FOUND (scope read), or
+ * HTTP_BAD_METHOD (scope none). */
+void http_route_find(const char *method, const char *url, struct http_match *m);
 
 /* POST /api/devices/DEVICE/input, its body {"name": , "value": ,
  * "persist": } (len bytes; too_big: it was cut at the limit) into req:

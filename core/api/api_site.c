@@ -5,10 +5,11 @@
 
 #include "../mqtt/site.h"
 
-enum MHD_Result http_site(struct vmac_http *h, struct MHD_Connection *c)
+enum MHD_Result http_site(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
 	struct vmac_site *site = atomic_load(&h->site);
 	json_t *body;
+	(void)k;
 	if (!site)
 		return http_reply(
 		    c, MHD_HTTP_OK,

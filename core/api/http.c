@@ -1,8 +1,10 @@
 /* The HTTP server (see http.h): libmicrohttpd with its own threads, TLS
  * when configured, bearer tokens checked against the store with failed
- * attempts rate-limited per client, and the routing of every request to
- * its endpoint (docs/API.md; which one, api_request.c): api_devices.c,
- * api_drivers.c, api_events.c. http_internal.h holds what they share. */
+ * attempts rate-limited per client, and every request handed to the
+ * handler its route names (docs/API.md; the routes are HTTP_ROUTES in
+ * api_request.h): the web UI's files, the health check, GET /api and
+ * whoami here, the others in api_devices.c, api_drivers.c, api_events.c,
+ * api_recordings.c and api_site.c. http_internal.h holds what they share. */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -169,12 +171,14 @@ enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReader
 	return ret;
 }
 
-/* GET / and /ui/NAME: the web UI's files (docs/UI.md), from the binary. */
-static enum MHD_Result ui_asset(struct MHD_Connection *c, const char *name)
+/* GET / and /ui/FILE: the web UI's files (docs/UI.md), from the binary. */
+enum MHD_Result http_ui(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
+	const char *name = k->route.file ? k->route.file : "index.html";
 	const struct vmac_ui_asset *a;
 	struct MHD_Response *r;
 	enum MHD_Result ret;
+	(void)h;
 	for (a = vmac_ui_assets; a->name && strcmp(a->name, name) != 0; a++)
 		;
 	if (!a->name)
@@ -192,14 +196,52 @@ static enum MHD_Result ui_asset(struct MHD_Connection *c, const char *name)
 	return ret;
 }
 
+/* GET /api/health */
+enum MHD_Result http_health(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	(void)h;
+	(void)k;
+	return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
+}
+
+/* GET /api: the path of every endpoint under /api/, once each, in the
+ * order of HTTP_ROUTES. */
+enum MHD_Result http_index(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	json_t *paths = json_array();
+	int i, j;
+	(void)h;
+	(void)k;
+	for (i = 0; i < HTTP_ROUTE_COUNT; i++) {
+		const char *p = http_routes[i].pattern;
+		for (j = 0; j < i && strcmp(http_routes[j].pattern, p) != 0; j++)
+			;
+		if (j == i && strncmp(p, "/api/", 5) == 0)
+			json_array_append_new(paths, json_string(p));
+	}
+	return http_reply(c, MHD_HTTP_OK, json_pack("{s:s, s:o}", "vmacd", VMAC_VERSION_STRING, "endpoints", paths));
+}
+
+/* GET /api/whoami */
+enum MHD_Result http_whoami(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	(void)h;
+	return http_reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(k->scope)));
+}
+
+#define HTTP_ROUTE_HANDLER(endpoint, method, pattern, scope, handler) [endpoint] = handler,
+
+/* The handler of each row of HTTP_ROUTES, indexed as http_routes[]. */
+static http_handler *const handlers[] = {HTTP_ROUTES(HTTP_ROUTE_HANDLER)};
+
+_Static_assert(sizeof(handlers) / sizeof(handlers[0]) == HTTP_ROUTE_COUNT, "a handler for every route");
+
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
                                   const char *version, const char *upload_data, size_t *upload_size, void **con_cls)
 {
 	struct vmac_http *h = cls;
 	struct conn *k = *con_cls;
 	enum MHD_Result ret;
-	enum vmac_scope scope;
-	struct http_route r;
 	(void)version;
 	if (!k) { /* first call: headers only */
 		k = calloc(1, sizeof(*k));
@@ -223,51 +265,15 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		*upload_size = 0;
 		return MHD_YES;
 	}
-	http_route(method, url, &r); /* which endpoint, and the scope it needs (api_request.c) */
-	if (r.endpoint == HTTP_BAD_METHOD)
+	http_route_find(method, url, &k->route); /* which endpoint, and the scope it needs (api_request.c) */
+	if (k->route.endpoint == HTTP_BAD_METHOD)
 		return http_reply(c, MHD_HTTP_METHOD_NOT_ALLOWED,
 		                  http_error_body("only GET, HEAD and POST are used here"));
-	if (r.endpoint == HTTP_UI) /* the web UI: no token, nothing secret */
-		return ui_asset(c, r.file);
-	if (r.endpoint == HTTP_HEALTH) /* the one request without a token */
-		return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "version", VMAC_VERSION_STRING));
-	if (!(scope = http_authorized(h, c, r.need, &ret)))
+	if (k->route.need != VMAC_SCOPE_NONE && !(k->scope = http_authorized(h, c, k->route.need, &ret)))
 		return ret;
-	switch (r.endpoint) {
-	case HTTP_INPUT: return http_device_input(h, c, r.name, k);
-	case HTTP_CYCLE: return http_device_cycle(h, c, r.name, k);
-	case HTTP_ROLLBACK: return http_driver_rollback(h, c, r.name);
-	case HTTP_ACTIVATE: return http_driver_activate(h, c, r.name);
-	case HTTP_UPLOAD: return http_driver_upload(h, c, r.name, k);
-	case HTTP_CONSOLE:
-		if (k->too_big || k->len > INPUT_MAX)
-			return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE,
-			                  http_error_body("the request body is over 64 KiB"));
-		return http_console(h, c, k, scope >= VMAC_SCOPE_OPERATE);
-	case HTTP_DEVICES: return http_devices(h, c, NULL);
-	case HTTP_DEVICE: return http_devices(h, c, r.name);
-	case HTTP_DRIVERS: return http_driver_versions(h, c, NULL);
-	case HTTP_DRIVER: return http_driver_versions(h, c, r.name);
-	case HTTP_STATUS: return http_reply(c, MHD_HTTP_OK, http_status_json(h));
-	case HTTP_LIVE: return http_live_stream(h, c);
-	case HTTP_WHOAMI: return http_reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(scope)));
-	case HTTP_MANIFEST: return http_driver_manifest(c, r.name);
-	case HTTP_EVENT_LOG: return http_event_log(h, c);
-	case HTTP_EVENTS: return http_events_stream(h, c);
-	case HTTP_RECORDINGS: return http_recordings(h, c);
-	case HTTP_RECORD: return http_record(h, c, r.name);
-	case HTTP_RECORDING: return http_recording(h, c, r.name);
-	case HTTP_SITE: return http_site(h, c);
-	case HTTP_INDEX:
-		return http_reply(
-		    c, MHD_HTTP_OK,
-		    json_pack("{s:s, s:[s,s,s,s,s,s,s,s,s,s,s,s,s,s,s,s]}", "vmacd", VMAC_VERSION_STRING, "endpoints",
-		              "/api/status", "/api/health", "/api/events", "/api/devices/NAME/input", "/api/drivers",
-		              "/api/drivers/NAME", "/api/drivers/NAME/rollback", "/api/console", "/api/devices",
-		              "/api/devices/NAME", "/api/devices/NAME/cycle", "/api/events/log",
-		              "/api/drivers/NAME/activate", "/api/recordings", "/api/recordings/ID", "/api/site"));
-	default: return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
-	}
+	if (k->route.endpoint == HTTP_NOT_FOUND)
+		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
+	return handlers[k->route.endpoint](h, c, k);
 }
 
 /* A PEM file's text (at most 64 KiB), or NULL with err. */

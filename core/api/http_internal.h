@@ -51,18 +51,23 @@ struct vmac_http {
 };
 
 /* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
- * upload); other requests take at most INPUT_MAX. */
+ * upload); other requests take at most INPUT_MAX (api_request.h). */
 #define BODY_MAX (1 << 20)
-
-#define INPUT_MAX 65536
 
 #define INPUT_TIMEOUT_MS 2000 /* the bus thread answers within a tick; this bounds a stuck host */
 
+/* A request as its handler gets it: the body, the route and the scope of
+ * the token sent. */
 struct conn {
 	char *body;
 	size_t len;
 	int too_big;
+	struct http_match route; /* route.name: the path's NAME or ID; "" when it has none */
+	enum vmac_scope scope;   /* the token's; VMAC_SCOPE_NONE for a route that takes none */
 };
+
+/* The HANDLER of a row of HTTP_ROUTES (api_request.h): answers k on c. */
+typedef enum MHD_Result http_handler(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k);
 
 /* ---- POST /api/console: the line console ---- */
 
@@ -109,34 +114,18 @@ enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, e
 enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
                                      MHD_ContentReaderFreeCallback done);
 
+/* The handlers of HTTP_ROUTES, by the file they are in. */
+/* http.c */
+http_handler http_ui, http_health, http_index, http_whoami;
 /* api_devices.c */
-json_t *http_status_json(struct vmac_http *h);
-enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const char *device,
-                                  const struct conn *k);
-enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c, const char *device,
-                                  const struct conn *k);
-enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, const char *name);
-enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, int operate);
-enum MHD_Result http_live_stream(struct vmac_http *h, struct MHD_Connection *c);
-
-/* api_site.c */
-enum MHD_Result http_site(struct vmac_http *h, struct MHD_Connection *c);
-
+http_handler http_status, http_devices, http_device_input, http_device_cycle, http_console, http_live_stream;
 /* api_events.c */
-enum MHD_Result http_event_log(struct vmac_http *h, struct MHD_Connection *c);
-enum MHD_Result http_events_stream(struct vmac_http *h, struct MHD_Connection *c);
-
+http_handler http_events_stream, http_event_log;
 /* api_recordings.c */
-enum MHD_Result http_recordings(struct vmac_http *h, struct MHD_Connection *c);
-enum MHD_Result http_recording(struct vmac_http *h, struct MHD_Connection *c, const char *id);
-enum MHD_Result http_record(struct vmac_http *h, struct MHD_Connection *c, const char *device);
-
+http_handler http_recordings, http_recording, http_record;
+/* api_site.c */
+http_handler http_site;
 /* api_drivers.c */
-enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
-enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
-                                   const struct conn *k);
-enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
-enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const char *driver);
-enum MHD_Result http_driver_manifest(struct MHD_Connection *c, const char *driver);
+http_handler http_driver_versions, http_driver_manifest, http_driver_upload, http_driver_activate, http_driver_rollback;
 
 #endif

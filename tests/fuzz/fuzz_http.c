@@ -1,12 +1,15 @@
 /* libFuzzer harness for the HTTP API's requests, without sockets or
  * threads (core/api/api_request.c): the input is a request as on the wire,
  *   METHOD PATH[?QUERY]\n  (Header: value\n)*  \n  BODY
- * routed by http_route as vmacd routes it, then what that endpoint reads
- * parsed by the same functions the endpoint calls: the input and cycle
- * bodies (JSON), the console's lines (against a fake host), the query
+ * routed by http_route_find as vmacd routes it, then what that endpoint
+ * reads parsed by the same functions the endpoint calls: the input and
+ * cycle bodies (JSON), the console's lines (against a fake host), the query
  * arguments (probation, id, after, limit), Last-Event-ID, and a manifest's
  * JSON. What only the real host can answer (tokens in the store, the bus
  * thread, the event log) is not reached; docs/TESTING.md, "Fuzzing".
+ * Before the first input, every row of the route table (HTTP_ROUTES) is
+ * routed from a path made of its pattern, and must come back as itself;
+ * with "." or ".." for its NAME or ID, as no route at all (404).
  * Seeds: tests/fuzz/corpus-http/. */
 #include <jansson.h>
 #include <stdint.h>
@@ -83,65 +86,147 @@ static int parse_request(char *text, size_t size, struct request *q)
 	return 0;
 }
 
-static int has_name(enum http_endpoint e)
+#define CAPITALS "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+
+/* The placeholder of a route's pattern (NAME, ID, FILE), or "". */
+static const char *placeholder(const char *pattern, size_t *len)
 {
-	return e == HTTP_INPUT || e == HTTP_CYCLE || e == HTTP_ROLLBACK || e == HTTP_ACTIVATE || e == HTTP_UPLOAD ||
-	       e == HTTP_DEVICE || e == HTTP_DRIVER || e == HTTP_MANIFEST || e == HTTP_RECORD || e == HTTP_RECORDING;
+	const char *hole = strpbrk(pattern, CAPITALS);
+	*len = hole ? strspn(hole, CAPITALS) : 0;
+	return hole ? hole : "";
 }
 
-/* The path of a named endpoint, made again from its name: one path per
- * route. */
-static void check_named_path(const struct http_route *r, const char *path)
+static int is_placeholder(const char *pattern, const char *word)
 {
-	static const struct {
-		enum http_endpoint e;
-		const char *prefix, *suffix;
-	} forms[] = {
-	    {HTTP_INPUT, "/api/devices/", "/input"},
-	    {HTTP_CYCLE, "/api/devices/", "/cycle"},
-	    {HTTP_ROLLBACK, "/api/drivers/", "/rollback"},
-	    {HTTP_ACTIVATE, "/api/drivers/", "/activate"},
-	    {HTTP_UPLOAD, "/api/drivers/", ""},
-	    {HTTP_DEVICE, "/api/devices/", ""},
-	    {HTTP_DRIVER, "/api/drivers/", ""},
-	    {HTTP_MANIFEST, "/api/drivers/", "/manifest"},
-	    {HTTP_RECORD, "/api/devices/", "/record"},
-	    {HTTP_RECORDING, "/api/recordings/", ""},
-	};
-	char again[256];
-	size_t i;
-	for (i = 0; i < sizeof(forms) / sizeof(forms[0]); i++)
-		if (forms[i].e == r->endpoint) {
-			snprintf(again, sizeof(again), "%s%s%s", forms[i].prefix, r->name, forms[i].suffix);
-			if (strcmp(again, path) != 0)
-				abort();
-			return;
-		}
+	size_t n;
+	const char *hole = placeholder(pattern, &n);
+	return n == strlen(word) && strncmp(hole, word, n) == 0;
+}
+
+/* The path of pattern with part for its placeholder. */
+static void make_path(const char *pattern, const char *part, char *path, size_t len)
+{
+	size_t n;
+	const char *hole = placeholder(pattern, &n);
+	if (!n)
+		snprintf(path, len, "%s", pattern);
+	else
+		snprintf(path, len, "%.*s%s%s", (int)(hole - pattern), pattern, part, hole + n);
+}
+
+/* The scope docs/API.md gives a request that found its route, said from
+ * the method and the path alone (not read from the table, which this
+ * checks): the web UI and the health check none, operator input under
+ * /api/devices/ operate, drivers deploy, everything else read. */
+static enum vmac_scope documented_scope(const char *method, const char *path)
+{
+	int post = strcmp(method, "POST") == 0;
+	if (!post && (strcmp(path, "/") == 0 || strncmp(path, "/ui/", 4) == 0 || strcmp(path, "/api/health") == 0))
+		return VMAC_SCOPE_NONE;
+	if (post && strncmp(path, "/api/devices/", 13) == 0)
+		return VMAC_SCOPE_OPERATE;
+	if (post && strncmp(path, "/api/drivers/", 13) == 0)
+		return VMAC_SCOPE_DEPLOY;
+	return VMAC_SCOPE_READ;
+}
+
+static void fail_route(const char *method, const char *path, const struct http_match *m, const char *why)
+{
+	fprintf(stderr, "fuzz_http: %s %s routed to endpoint %d (scope %d, name \"%s\"): %s\n", method, path,
+	        (int)m->endpoint, (int)m->need, m->name, why);
 	abort();
 }
 
-static void check_route(const char *method, const char *path, const struct http_route *r)
+/* What http_route_find made of method and path agrees with the table: a
+ * route's method, scope and path (made again from its NAME, ID or FILE),
+ * and with docs/API.md's scopes. */
+static void check_route(const char *method, const char *path, const struct http_match *m)
 {
 	int known = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0 || strcmp(method, "POST") == 0;
-	if (r->endpoint > HTTP_NOT_FOUND || (r->endpoint == HTTP_BAD_METHOD) == known)
-		abort();
-	if ((r->need == VMAC_SCOPE_NONE) !=
-	    (r->endpoint == HTTP_BAD_METHOD || r->endpoint == HTTP_UI || r->endpoint == HTTP_HEALTH))
-		abort(); /* a request without a token reaches only the UI and the health check */
-	if ((r->need == VMAC_SCOPE_OPERATE) !=
-	    (r->endpoint == HTTP_INPUT || r->endpoint == HTTP_CYCLE || r->endpoint == HTTP_RECORD))
-		abort();
-	if ((r->need == VMAC_SCOPE_DEPLOY) !=
-	    (r->endpoint == HTTP_ROLLBACK || r->endpoint == HTTP_ACTIVATE || r->endpoint == HTTP_UPLOAD))
-		abort();
-	if (r->endpoint == HTTP_UI && (!r->file || strcmp(method, "POST") == 0))
-		abort();
-	if (has_name(r->endpoint)) {
-		if (!http_valid_name(r->name, VMAC_NAME_MAX) || strchr(r->name, '/'))
-			abort();
-		check_named_path(r, path);
-	} else if (r->name[0]) {
-		abort();
+	const struct http_route *row;
+	char again[256];
+	if (m->endpoint > HTTP_BAD_METHOD || (m->endpoint == HTTP_BAD_METHOD) == known)
+		fail_route(method, path, m, "405 for a method of the API, or none for another");
+	if (m->endpoint >= HTTP_ROUTE_COUNT) {
+		if (m->need != (m->endpoint == HTTP_BAD_METHOD ? VMAC_SCOPE_NONE : VMAC_SCOPE_READ) || m->name[0] ||
+		    m->file)
+			fail_route(method, path, m,
+			           "a request of no route takes scope read (405: none) and has no name");
+		return;
+	}
+	row = &http_routes[m->endpoint];
+	if (strcmp(row->method, strcmp(method, "POST") == 0 ? "POST" : "GET") != 0)
+		fail_route(method, path, m, "not the route's method");
+	if (m->need != row->need || m->need != documented_scope(method, path))
+		fail_route(method, path, m, "not the scope of the table, or not the one docs/API.md gives");
+	if (is_placeholder(row->pattern, "FILE")) {
+		if (!m->file || m->name[0])
+			fail_route(method, path, m, "a FILE route without its file");
+		make_path(row->pattern, m->file, again, sizeof(again));
+	} else if (is_placeholder(row->pattern, "NAME") || is_placeholder(row->pattern, "ID")) {
+		if (m->file || !http_valid_name(m->name, VMAC_NAME_MAX) || strchr(m->name, '/') ||
+		    (is_placeholder(row->pattern, "ID") && strspn(m->name, "0123456789") != strlen(m->name)))
+			fail_route(method, path, m, "a NAME that is no name, or an ID that is no number");
+		make_path(row->pattern, m->name, again, sizeof(again));
+	} else {
+		if (m->file || m->name[0])
+			fail_route(method, path, m, "a name for a route without one");
+		make_path(row->pattern, "", again, sizeof(again));
+	}
+	if (strcmp(again, path) != 0)
+		fail_route(method, path, m, "the path made again from the route is another");
+}
+
+/* Every row of the table routes back to itself from a path made of its
+ * pattern (GET rows by HEAD too); with a dot name, a slash or a non-number
+ * for its NAME or ID, to no route (404); by another method, elsewhere. */
+static void check_table(void)
+{
+	static const char *const not_names[] = {".", "..", ".hidden", "a/b", "", "x y", "1.5/../2"};
+	struct http_match m;
+	char path[256];
+	int i;
+	size_t b;
+	memset(&m, 0, sizeof(m));
+	for (i = 0; i < HTTP_ROUTE_COUNT; i++) {
+		const struct http_route *row = &http_routes[i];
+		int get = strcmp(row->method, "GET") == 0;
+		const char *part = is_placeholder(row->pattern, "FILE")   ? "app.js"
+		                   : is_placeholder(row->pattern, "ID")   ? "12"
+		                   : is_placeholder(row->pattern, "NAME") ? "washer-1"
+		                                                          : "";
+		if (!get && strcmp(row->method, "POST") != 0)
+			fail_route(row->method, row->pattern, &m, "a row whose method is not GET or POST");
+		make_path(row->pattern, part, path, sizeof(path));
+		http_route_find(row->method, path, &m);
+		if ((int)m.endpoint != i)
+			fail_route(row->method, path, &m, "a route of the table does not route to itself");
+		check_route(row->method, path, &m);
+		if (get) {
+			http_route_find("HEAD", path, &m);
+			if ((int)m.endpoint != i)
+				fail_route("HEAD", path, &m, "HEAD does not route as GET");
+		}
+		http_route_find(get ? "POST" : "GET", path, &m);
+		if ((int)m.endpoint == i)
+			fail_route(get ? "POST" : "GET", path, &m, "a route taken by the other method");
+		http_route_find("PUT", path, &m);
+		if (m.endpoint != HTTP_BAD_METHOD)
+			fail_route("PUT", path, &m, "not 405");
+		if (!is_placeholder(row->pattern, "NAME") && !is_placeholder(row->pattern, "ID"))
+			continue;
+		for (b = 0; b < sizeof(not_names) / sizeof(not_names[0]); b++) {
+			make_path(row->pattern, not_names[b], path, sizeof(path));
+			http_route_find(row->method, path, &m);
+			if (m.endpoint != HTTP_NOT_FOUND)
+				fail_route(row->method, path, &m, "a path with no name in it is not a 404");
+		}
+		if (is_placeholder(row->pattern, "ID")) {
+			make_path(row->pattern, "12a", path, sizeof(path));
+			http_route_find(row->method, path, &m);
+			if (m.endpoint != HTTP_NOT_FOUND)
+				fail_route(row->method, path, &m, "an ID that is no number is not a 404");
+		}
 	}
 }
 
@@ -223,6 +308,7 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
 	snprintf(device.vars[0].name, sizeof(device.vars[0].name), "step");
 	device.vars[0].value.type = VMAC_VALUE_STRING;
 	snprintf(device.vars[0].value.str, sizeof(device.vars[0].value.str), "fill");
+	check_table();
 	return 0;
 }
 
@@ -260,7 +346,7 @@ static void probation(const struct request *q)
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-	struct http_route r;
+	struct http_match r;
 	struct request q;
 	struct vmac_bus_input_request req;
 	unsigned long long seq;
@@ -280,7 +366,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		free(text);
 		return 0;
 	}
-	http_route(q.method, q.path, &r);
+	http_route_find(q.method, q.path, &r);
 	check_route(q.method, q.path, &r);
 	switch (r.endpoint) {
 	case HTTP_INPUT:
