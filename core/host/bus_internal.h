@@ -218,12 +218,19 @@ struct device {
  * RUNNING, the caller waits for the answer, which comes without delay. */
 enum { REQ_FREE, REQ_FILLING, REQ_QUEUED, REQ_RUNNING, REQ_DONE, REQ_ABANDONED };
 
-enum { REQ_INPUT, REQ_SWAP, REQ_MACHINES, REQ_RECORD };
+/* What a request slot asks of the bus thread (mailbox.c, request_handlers). */
+enum bus_request_kind {
+	REQ_INPUT,    /* operator input to a machine's driver */
+	REQ_SWAP,     /* hot reload: drv takes over a machine (swap.c) */
+	REQ_MACHINES, /* the machines of a driver */
+	REQ_RECORD,   /* a flight recording of a machine, now */
+	REQ_KINDS
+};
 
 struct request {
 	_Atomic int state;
 	sem_t done;
-	int kind;
+	enum bus_request_kind kind;
 	struct vmac_bus_input_request r;
 	struct vmac_driver *drv; /* REQ_SWAP: the new instance */
 	int64_t probation_ns;
@@ -329,8 +336,6 @@ void bus_wait_fini(struct vmac_bus *bus);
 void bus_loop(struct vmac_bus *bus);
 void bus_wake(struct vmac_bus *bus);
 void bus_drain(struct vmac_bus *bus);
-int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
-                int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms);
 
 /* jobs.c: the bus thread's side of the driver workers */
 int bus_jobs_init(struct vmac_bus *bus);

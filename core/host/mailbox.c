@@ -2,7 +2,9 @@
  * allocating on the bus thread: events and unloaded drivers to the main
  * thread (a ring), commands from it (a ring and an eventfd), and the
  * request slots through which the HTTP threads hand in operator input, a
- * hot-reload swap or a question, and wait for the answer. */
+ * hot-reload swap or a question, and wait for the answer. What the bus
+ * thread does with each kind of request is request_handlers, apart from
+ * the slots' own mechanics. */
 #include "bus_internal.h"
 
 #include <arpa/inet.h>
@@ -74,6 +76,8 @@ void bus_post_code(struct vmac_bus *bus, enum vmac_event_code code, const struct
 	bus_post(bus, &msg);
 }
 
+/* ---- what each kind of request does, on the bus thread ---- */
+
 /* Input request slot i: refused now (answered), or waiting for its
  * machine's job, which answers it (jobs.c); with persist, only to a
  * persist = true param. */
@@ -125,8 +129,10 @@ static int list_machines(struct vmac_bus *bus, const char *driver, char (*names)
 	return n;
 }
 
-static void record_request(struct vmac_bus *bus, struct request *q)
+/* Record request slot i: the machine's flight recorder captured now. */
+static void record_request(struct vmac_bus *bus, int i)
 {
+	struct request *q = &bus->req[i];
 	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
 	struct device *d;
 	struct machine *m;
@@ -144,10 +150,37 @@ static void record_request(struct vmac_bus *bus, struct request *q)
 		snprintf(q->r.reply, sizeof(q->r.reply), "%s: captured; GET /api/recordings lists it", device);
 		q->r.rc = 0;
 	}
+	bus_answer(bus, i);
 }
 
-/* The requests other threads queued: each answered now, or (input, a hot
- * reload) handed to its machine's job, which answers it. */
+/* Machines request slot i: the machines of the driver q->r.name. Every
+ * command sent before it was queued is handled first: a driver the main
+ * thread handed over is in its machine when the list is made. */
+static void machines_request(struct vmac_bus *bus, int i)
+{
+	struct request *q = &bus->req[i];
+	bus_commands(bus);
+	q->r.rc = list_machines(bus, q->r.name, q->names, q->max_names);
+	bus_answer(bus, i);
+}
+
+/* What the bus thread does with request slot i of each kind: answer it
+ * (bus_answer), or hand it to its machine's job, which answers it. */
+typedef void request_handler(struct vmac_bus *bus, int i);
+
+static request_handler *const request_handlers[] = {
+    [REQ_INPUT] = input_request,
+    [REQ_SWAP] = bus_swap,
+    [REQ_MACHINES] = machines_request,
+    [REQ_RECORD] = record_request,
+};
+
+_Static_assert(sizeof(request_handlers) / sizeof(request_handlers[0]) == REQ_KINDS, "a handler for every kind");
+
+/* ---- the request slots (see struct request) ---- */
+
+/* The requests other threads queued: each slot QUEUED taken (RUNNING)
+ * and handed to the handler of its kind; each ABANDONED freed. */
 void bus_requests(struct vmac_bus *bus)
 {
 	int i, expect;
@@ -156,27 +189,112 @@ void bus_requests(struct vmac_bus *bus)
 	for (i = 0; i < VMAC_BUS_REQUESTS; i++) {
 		struct request *q = &bus->req[i];
 		expect = REQ_QUEUED;
-		if (!atomic_compare_exchange_strong(&q->state, &expect, REQ_RUNNING)) {
-			if (expect == REQ_ABANDONED)
-				atomic_store(&q->state, REQ_FREE);
-			continue;
-		}
-		switch (q->kind) {
-		case REQ_SWAP: bus_swap(bus, i); continue;
-		case REQ_INPUT: input_request(bus, i); continue;
-		case REQ_RECORD: record_request(bus, q); break;
-		case REQ_MACHINES:
-			/* Every command sent before this request was queued is
-			 * handled first: a driver the main thread handed over is
-			 * in its machine when the list is made. */
-			bus_commands(bus);
-			q->r.rc = list_machines(bus, q->r.name, q->names, q->max_names);
-			break;
-		}
-		bus_answer(bus, i);
+		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_RUNNING))
+			request_handlers[q->kind](bus, i);
+		else if (expect == REQ_ABANDONED)
+			atomic_store(&q->state, REQ_FREE);
 	}
 	bus_workers_kick(bus);
 }
+
+/* Hands req (and drv, probation_ns, names: what the kind needs) to the bus
+ * thread in a free slot and waits up to timeout_ms for the answer, which
+ * is copied back into req: 0, or -VMAC_EBUSY (no free slot, or not taken
+ * in time) with req->reply saying which. Any thread but the bus thread. */
+static int bus_request(struct vmac_bus *bus, enum bus_request_kind kind, struct vmac_bus_input_request *req,
+                       struct vmac_driver *drv, int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names,
+                       int timeout_ms)
+{
+	struct request *q = NULL;
+	struct timespec until;
+	int i, expect, rc;
+	for (i = 0; i < VMAC_BUS_REQUESTS && !q; i++) {
+		expect = REQ_FREE;
+		if (atomic_compare_exchange_strong(&bus->req[i].state, &expect, REQ_FILLING))
+			q = &bus->req[i];
+	}
+	if (!q) {
+		snprintf(req->reply, sizeof(req->reply), "the host is busy with other requests; try again");
+		return -VMAC_EBUSY;
+	}
+	q->kind = kind;
+	q->r = *req;
+	q->drv = drv;
+	q->probation_ns = probation_ns;
+	q->names = names;
+	q->max_names = max_names;
+	atomic_store(&q->state, REQ_QUEUED);
+	atomic_store(&bus->req_queued, 1);
+	if (!bus->virt)
+		bus_wake(bus);
+	clock_gettime(CLOCK_REALTIME, &until);
+	until.tv_sec += timeout_ms / 1000;
+	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
+	if (until.tv_nsec >= 1000000000L) {
+		until.tv_sec++;
+		until.tv_nsec -= 1000000000L;
+	}
+	while ((rc = sem_timedwait(&q->done, &until)) != 0 && errno == EINTR)
+		;
+	if (rc != 0) {
+		expect = REQ_QUEUED;
+		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_ABANDONED)) {
+			snprintf(req->reply, sizeof(req->reply), "the bus thread did not take the request within %d ms",
+			         timeout_ms);
+			return -VMAC_EBUSY;
+		}
+		while (sem_wait(&q->done) != 0 && errno == EINTR) /* RUNNING or DONE: the answer is on its way */
+			;
+	}
+	*req = q->r;
+	atomic_store(&q->state, REQ_FREE);
+	return 0;
+}
+
+int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
+{
+	return bus_request(bus, REQ_INPUT, req, NULL, 0, NULL, 0, timeout_ms);
+}
+
+int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
+                          int timeout_ms, int *rc, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	int r;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	r = bus_request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, NULL, 0, timeout_ms);
+	*rc = r == 0 ? req.rc : r;
+	snprintf(reply, replylen, "%s", req.reply);
+	return r;
+}
+
+int vmac_bus_request_record(struct vmac_bus *bus, const char *device, int timeout_ms, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	int r;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.device, sizeof(req.device), "%s", device);
+	r = bus_request(bus, REQ_RECORD, &req, NULL, 0, NULL, 0, timeout_ms);
+	snprintf(reply, replylen, "%s", req.reply);
+	return r != 0 ? r : req.rc;
+}
+
+int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
+                              int timeout_ms, char *reply, size_t replylen)
+{
+	struct vmac_bus_input_request req;
+	memset(&req, 0, sizeof(req));
+	snprintf(req.name, sizeof(req.name), "%s", driver);
+	int r = bus_request(bus, REQ_MACHINES, &req, NULL, 0, names, max, timeout_ms);
+	if (r != 0) {
+		snprintf(reply, replylen, "%s", req.reply);
+		return r;
+	}
+	return req.rc;
+}
+
+/* ---- commands from the main thread; input in virtual mode ---- */
 
 void bus_commands(struct vmac_bus *bus)
 {
@@ -259,98 +377,6 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
 	if (!bus->virt)
 		bus_wake(bus);
 	return 0;
-}
-
-int bus_request(struct vmac_bus *bus, int req_kind, struct vmac_bus_input_request *req, struct vmac_driver *drv,
-                int64_t probation_ns, char (*names)[VMAC_NAME_MAX + 1], int max_names, int timeout_ms)
-{
-	struct request *q = NULL;
-	struct timespec until;
-	int i, expect, rc;
-	for (i = 0; i < VMAC_BUS_REQUESTS && !q; i++) {
-		expect = REQ_FREE;
-		if (atomic_compare_exchange_strong(&bus->req[i].state, &expect, REQ_FILLING))
-			q = &bus->req[i];
-	}
-	if (!q) {
-		snprintf(req->reply, sizeof(req->reply), "the host is busy with other requests; try again");
-		return -VMAC_EBUSY;
-	}
-	q->kind = req_kind;
-	q->r = *req;
-	q->drv = drv;
-	q->probation_ns = probation_ns;
-	q->names = names;
-	q->max_names = max_names;
-	atomic_store(&q->state, REQ_QUEUED);
-	atomic_store(&bus->req_queued, 1);
-	if (!bus->virt)
-		bus_wake(bus);
-	clock_gettime(CLOCK_REALTIME, &until);
-	until.tv_sec += timeout_ms / 1000;
-	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
-	if (until.tv_nsec >= 1000000000L) {
-		until.tv_sec++;
-		until.tv_nsec -= 1000000000L;
-	}
-	while ((rc = sem_timedwait(&q->done, &until)) != 0 && errno == EINTR)
-		;
-	if (rc != 0) {
-		expect = REQ_QUEUED;
-		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_ABANDONED)) {
-			snprintf(req->reply, sizeof(req->reply), "the bus thread did not take the request within %d ms",
-			         timeout_ms);
-			return -VMAC_EBUSY;
-		}
-		while (sem_wait(&q->done) != 0 && errno == EINTR) /* RUNNING or DONE: the answer is on its way */
-			;
-	}
-	*req = q->r;
-	atomic_store(&q->state, REQ_FREE);
-	return 0;
-}
-
-int vmac_bus_request_input(struct vmac_bus *bus, struct vmac_bus_input_request *req, int timeout_ms)
-{
-	return bus_request(bus, REQ_INPUT, req, NULL, 0, NULL, 0, timeout_ms);
-}
-
-int vmac_bus_request_swap(struct vmac_bus *bus, const char *device, struct vmac_driver *drv, unsigned probation_ms,
-                          int timeout_ms, int *rc, char *reply, size_t replylen)
-{
-	struct vmac_bus_input_request req;
-	int r;
-	memset(&req, 0, sizeof(req));
-	snprintf(req.device, sizeof(req.device), "%s", device);
-	r = bus_request(bus, REQ_SWAP, &req, drv, (int64_t)probation_ms * 1000000, NULL, 0, timeout_ms);
-	*rc = r == 0 ? req.rc : r;
-	snprintf(reply, replylen, "%s", req.reply);
-	return r;
-}
-
-int vmac_bus_request_record(struct vmac_bus *bus, const char *device, int timeout_ms, char *reply, size_t replylen)
-{
-	struct vmac_bus_input_request req;
-	int r;
-	memset(&req, 0, sizeof(req));
-	snprintf(req.device, sizeof(req.device), "%s", device);
-	r = bus_request(bus, REQ_RECORD, &req, NULL, 0, NULL, 0, timeout_ms);
-	snprintf(reply, replylen, "%s", req.reply);
-	return r != 0 ? r : req.rc;
-}
-
-int vmac_bus_request_machines(struct vmac_bus *bus, const char *driver, char (*names)[VMAC_NAME_MAX + 1], int max,
-                              int timeout_ms, char *reply, size_t replylen)
-{
-	struct vmac_bus_input_request req;
-	memset(&req, 0, sizeof(req));
-	snprintf(req.name, sizeof(req.name), "%s", driver);
-	int r = bus_request(bus, REQ_MACHINES, &req, NULL, 0, names, max, timeout_ms);
-	if (r != 0) {
-		snprintf(reply, replylen, "%s", req.reply);
-		return r;
-	}
-	return req.rc;
 }
 
 int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int rc, struct vmac_driver *drv,
