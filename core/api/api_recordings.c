@@ -1,4 +1,4 @@
-/* The flight recordings (docs/API.md "Recordings", docs/RECORDING.md):
+/* The flight recordings (docs/API.md "GET /api/recordings", docs/RECORDING.md):
  * GET /api/recordings lists what the store keeps, newest first (?machine=
  * NAME: one machine's); GET /api/recordings/ID is the recording's file;
  * POST /api/devices/NAME/record captures a running machine's now. */

@@ -33,9 +33,7 @@ EXAMPLES = {
 # Section references known to be wrong, each with the fix it needs
 # ((file, doc, title): the reference to write instead); an entry goes when
 # its file is fixed.
-PENDING = {
-    ("core/api/api_recordings.c", "API.md", "Recordings"): 'docs/API.md "GET /api/recordings"',
-}
+PENDING = {}
 
 # The numbers README states, each beside the code that makes it true:
 # (what it counts, README's words with the number as group 1, the file

@@ -20,7 +20,8 @@ START_TEST(the_64_bit_hash_is_libsodiums)
 			randombytes_buf(msg, len);
 			vmac_siphash24(key, msg, len, ours);
 			crypto_shorthash_siphash24(theirs, msg, len, key);
-			ck_assert_msg(memcmp(ours, theirs, 8) == 0, "SipHash-2-4 of %zu bytes differs from libsodium's", len);
+			ck_assert_msg(memcmp(ours, theirs, 8) == 0, "SipHash-2-4 of %zu bytes differs from libsodium's",
+			              len);
 		}
 }
 END_TEST
@@ -37,8 +38,8 @@ START_TEST(the_128_bit_hash_is_libsodiums)
 			randombytes_buf(msg, len);
 			vmac_siphash24_128(key, msg, len, ours);
 			crypto_shorthash_siphashx24(theirs, msg, len, key);
-			ck_assert_msg(memcmp(ours, theirs, 16) == 0, "SipHash-2-4-128 of %zu bytes differs from libsodium's",
-			              len);
+			ck_assert_msg(memcmp(ours, theirs, 16) == 0,
+			              "SipHash-2-4-128 of %zu bytes differs from libsodium's", len);
 		}
 }
 END_TEST
@@ -55,8 +56,8 @@ START_TEST(the_papers_test_vector)
 	for (i = 0; i < 15; i++)
 		msg[i] = (uint8_t)i;
 	vmac_siphash24(key, msg, sizeof(msg), out);
-	ck_assert_msg(memcmp(out, want, 8) == 0, "the paper's test vector: got %02x%02x%02x%02x%02x%02x%02x%02x", out[0],
-	              out[1], out[2], out[3], out[4], out[5], out[6], out[7]);
+	ck_assert_msg(memcmp(out, want, 8) == 0, "the paper's test vector: got %02x%02x%02x%02x%02x%02x%02x%02x",
+	              out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7]);
 }
 END_TEST
 
