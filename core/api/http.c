@@ -1,6 +1,6 @@
 /* The HTTP server (see http.h): libmicrohttpd with its own threads, TLS
- * when configured, bearer tokens checked against the store with failed
- * attempts rate-limited per client, and every request handed to the
+ * when configured, bearer tokens checked against the store (guard.c: failed
+ * attempts locked out, a request's deadlines), and every request handed to the
  * handler its route names (docs/API.md; the routes are HTTP_ROUTES in
  * api_request.h): the web UI's files, the health check, GET /api and
  * whoami here, the others in api_devices.c, api_drivers.c, api_events.c,
@@ -35,7 +35,7 @@ double http_mono_s(void)
 }
 
 /* Queue code with body as JSON (consumed) and one extra header if given. */
-static enum MHD_Result reply_with(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
+enum MHD_Result http_reply_header(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
                                   const char *value)
 {
 	char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
@@ -62,7 +62,7 @@ static enum MHD_Result reply_with(struct MHD_Connection *c, unsigned code, json_
 
 enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body)
 {
-	return reply_with(c, code, body, NULL, NULL);
+	return http_reply_header(c, code, body, NULL, NULL);
 }
 
 json_t *http_error_body(const char *msg)
@@ -70,82 +70,11 @@ json_t *http_error_body(const char *msg)
 	return json_pack("{s:s}", "error", msg);
 }
 
-/* The failure record of the client's address (a new or the oldest slot). */
-static struct fail_count *fails_of(struct vmac_http *h, struct MHD_Connection *c, double now)
-{
-	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
-	struct in_addr addr = {0};
-	struct fail_count *oldest = &h->fails[0];
-	int i;
-	if (ci && ci->client_addr && ci->client_addr->sa_family == AF_INET)
-		addr = ((const struct sockaddr_in *)ci->client_addr)->sin_addr;
-	for (i = 0; i < FAIL_CLIENTS; i++) {
-		struct fail_count *f = &h->fails[i];
-		if (f->fails && f->addr.s_addr == addr.s_addr) {
-			if (now - f->window_start >= FAIL_WINDOW_S)
-				f->fails = 0, f->window_start = now;
-			return f;
-		}
-		if (!f->fails || f->window_start < oldest->window_start)
-			oldest = f;
-	}
-	memset(oldest, 0, sizeof(*oldest));
-	oldest->addr = addr;
-	oldest->window_start = now;
-	return oldest;
-}
-
-/* The scope of the request's token when it has at least `need`; else
- * VMAC_SCOPE_NONE (0), with the answer (401, 403 or 429) queued into *ret. */
-enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
-                                enum MHD_Result *ret)
-{
-	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
-	double now = http_mono_s(), wait_s = 0;
-	struct fail_count *f;
-	enum vmac_scope have = VMAC_SCOPE_NONE;
-	char msg[160];
-	int locked;
-	pthread_mutex_lock(&h->fails_lock);
-	f = fails_of(h, c, now);
-	locked = f->fails >= FAIL_LIMIT;
-	if (locked)
-		wait_s = FAIL_WINDOW_S - (now - f->window_start);
-	pthread_mutex_unlock(&h->fails_lock);
-	if (locked) {
-		snprintf(msg, sizeof(msg), "too many failed attempts from this address; try again in %.0f s",
-		         wait_s + 0.5);
-		*ret = http_reply(c, MHD_HTTP_TOO_MANY_REQUESTS, http_error_body(msg));
-		return VMAC_SCOPE_NONE;
-	}
-	if (auth && strncmp(auth, "Bearer ", 7) == 0)
-		have = vmac_token_check(h->store, auth + 7);
-	if (have == VMAC_SCOPE_NONE) {
-		pthread_mutex_lock(&h->fails_lock);
-		fails_of(h, c, now)->fails++; /* the record again: another thread may have reused it */
-		pthread_mutex_unlock(&h->fails_lock);
-		*ret = reply_with(
-		    c, MHD_HTTP_UNAUTHORIZED,
-		    http_error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
-		                         : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
-		    MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
-		return VMAC_SCOPE_NONE;
-	}
-	if (have < need) {
-		snprintf(msg, sizeof(msg), "this needs a token of scope %s; this one is %s", vmac_scope_name(need),
-		         vmac_scope_name(have));
-		*ret = http_reply(c, MHD_HTTP_FORBIDDEN, http_error_body(msg));
-		return VMAC_SCOPE_NONE;
-	}
-	return have;
-}
-
 static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, enum MHD_RequestTerminationCode why)
 {
 	struct conn *k = *con_cls;
-	(void)cls;
-	(void)c;
 	(void)why;
+	http_guard_phase(c, cls, GUARD_HEADERS); /* a kept-alive connection's next request: its deadline */
 	if (k) {
 		free(k->body);
 		free(k);
@@ -248,6 +177,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		if (!k)
 			return MHD_NO;
 		*con_cls = k;
+		http_guard_phase(c, h, GUARD_BODY); /* the headers came in time; now the body's deadline */
 		return MHD_YES;
 	}
 	if (*upload_size) {
@@ -265,6 +195,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		*upload_size = 0;
 		return MHD_YES;
 	}
+	http_guard_phase(c, h, GUARD_ANSWERING); /* the whole request is in: no deadline while answering */
 	http_route_find(method, url, &k->route); /* which endpoint, and the scope it needs (api_request.c) */
 	if (k->route.endpoint == HTTP_BAD_METHOD)
 		return http_reply(c, MHD_HTTP_METHOD_NOT_ALLOWED,
@@ -319,8 +250,12 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->log = log;
 	h->store = store;
 	h->cfg = *cfg;
+	if (http_guard_start(h) != 0) {
+		snprintf(err, errlen, "cannot start the API's guard thread");
+		free(h);
+		return NULL;
+	}
 	pthread_mutex_init(&h->status_lock, NULL);
-	pthread_mutex_init(&h->fails_lock, NULL);
 	pthread_mutex_init(&h->live_lock, NULL);
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
 	h->status.slot_load = calloc(1u << cfg->max_level, sizeof(*h->status.slot_load));
@@ -351,9 +286,11 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	 * without holding up other clients. */
 	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION |
 	                                 MHD_USE_ERROR_LOG | (h->tls_cert ? MHD_USE_TLS : 0),
-	                             0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, NULL,
-	                             MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin, MHD_OPTION_CONNECTION_TIMEOUT,
-	                             (unsigned)30, MHD_OPTION_CONNECTION_LIMIT, (unsigned)256,
+	                             0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
+	                             MHD_OPTION_NOTIFY_CONNECTION, http_guard_notify, h, MHD_OPTION_SOCK_ADDR,
+	                             (struct sockaddr *)&sin, MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)30,
+	                             MHD_OPTION_CONNECTION_LIMIT, (unsigned)HTTP_CONNECTIONS_MAX,
+	                             MHD_OPTION_PER_IP_CONNECTION_LIMIT, (unsigned)cfg->http_connections_per_address,
 	                             /* the certificate and key, or nothing */
 	                             h->tls_cert ? MHD_OPTION_HTTPS_MEM_CERT : MHD_OPTION_END, h->tls_cert,
 	                             MHD_OPTION_HTTPS_MEM_KEY, h->tls_key, MHD_OPTION_END);
@@ -391,7 +328,7 @@ void vmac_http_stop(struct vmac_http *h)
 	if (h->daemon)
 		MHD_stop_daemon(h->daemon);
 	pthread_mutex_destroy(&h->status_lock);
-	pthread_mutex_destroy(&h->fails_lock);
+	http_guard_stop(h);
 	pthread_mutex_destroy(&h->live_lock);
 	free(h->live_json);
 	free(h->status.devices);

@@ -15,20 +15,50 @@
 
 #define STATUS_EVENTS 20
 
-/* Failed attempts: at most FAIL_LIMIT per client address in FAIL_WINDOW_S;
- * past that, every request from there gets 429 until the window ends. The
- * table is small and reused oldest first: it only has to slow a guesser
- * down (a token has 256 random bits), not remember everyone. */
+/* Failed attempts (guard.c): at most FAIL_LIMIT per key (a token id, or
+ * the client's address for a request without a token of the right shape)
+ * in FAIL_WINDOW_S; past that, that key's failing requests get 429 until
+ * the window ends. A token has 256 random bits: the lock-out only slows a
+ * guesser down and keeps it from costing the store a check per request. */
 #define FAIL_LIMIT 10
 
 #define FAIL_WINDOW_S 60.0
 
-#define FAIL_CLIENTS 64
+#define GUARD_FAIL_SLOTS 1024
 
-struct fail_count {
-	struct in_addr addr;
+#define HTTP_CONNECTIONS_MAX 256 /* libmicrohttpd's connection limit */
+
+#define GUARD_CONNS HTTP_CONNECTIONS_MAX
+
+struct guard_fail {
+	char key[80]; /* "token ID" or "address A"; "" = unused */
 	double window_start;
 	unsigned fails;
+	int said; /* its lock-out is in the events */
+};
+
+/* Where a connection is: receiving a request's headers, its body, or
+ * answering (a stream may answer for hours). */
+enum guard_phase { GUARD_HEADERS, GUARD_BODY, GUARD_ANSWERING };
+
+struct guard_conn {
+	int fd; /* -1: unused */
+	double since;
+	enum guard_phase phase;
+	char addr[48];
+};
+
+struct http_guard {
+	pthread_mutex_t lock; /* the tables below; the reaper waits on wake */
+	pthread_cond_t wake;
+	pthread_t reaper;
+	int running, stop;
+	struct guard_fail fails[GUARD_FAIL_SLOTS];
+	int full_said; /* "every entry is locked" is in the events */
+	struct guard_conn conns[GUARD_CONNS];
+	double header_timeout_s, body_timeout_s;
+	unsigned long long cut_unsaid; /* connections cut off since the last event */
+	double cut_said_at;
 };
 
 struct vmac_http {
@@ -40,13 +70,12 @@ struct vmac_http {
 	struct vmac_status status;
 	unsigned port;
 	struct vmac_store *store;
-	char *tls_cert, *tls_key;   /* PEM texts while the daemon runs (TLS) */
-	pthread_mutex_t live_lock;  /* the live streams' shared message: */
-	double live_at;             /* when it was built */
-	char *live_json;            /* the newest status as JSON */
-	_Atomic int stopping;       /* event streams end */
-	pthread_mutex_t fails_lock; /* connection threads share the table */
-	struct fail_count fails[FAIL_CLIENTS];
+	char *tls_cert, *tls_key;       /* PEM texts while the daemon runs (TLS) */
+	pthread_mutex_t live_lock;      /* the live streams' shared message: */
+	double live_at;                 /* when it was built */
+	char *live_json;                /* the newest status as JSON */
+	_Atomic int stopping;           /* event streams end */
+	struct http_guard guard;        /* lock-outs and deadlines (guard.c) */
 	struct vmac_site *_Atomic site; /* GET /api/site (api_site.c); NULL: MQTT off */
 };
 
@@ -108,9 +137,24 @@ struct live {
 /* http.c */
 double http_mono_s(void);
 enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body);
+/* The same with one extra header. */
+enum MHD_Result http_reply_header(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
+                                  const char *value);
 json_t *http_error_body(const char *msg);
+
+/* guard.c: the scope of the request's token when it has at least `need`;
+ * else VMAC_SCOPE_NONE (0), with the answer (401, 403 or 429) queued into
+ * *ret. */
 enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
                                 enum MHD_Result *ret);
+/* MHD_OPTION_NOTIFY_CONNECTION: a connection's deadlines start and end. */
+void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_context,
+                       enum MHD_ConnectionNotificationCode code);
+/* The connection of c is now in phase (its deadline counts from now). */
+void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_phase phase);
+/* The reaper thread: 0, or a negative errno. */
+int http_guard_start(struct vmac_http *h);
+void http_guard_stop(struct vmac_http *h);
 enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
                                      MHD_ContentReaderFreeCallback done);
 

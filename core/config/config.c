@@ -50,6 +50,9 @@ static const struct key keys[] = {
     {U(miss_limit, 1, 1000)},
     {U(sleep_s, 1, 3600)},
     {U(max_devices, 1, 4096)},
+    {U(http_header_timeout_s, 1, 3600)},
+    {U(http_body_timeout_s, 1, 3600)},
+    {U(http_connections_per_address, 1, 256)},
     {U(attach_max, 1, 4096)},
     {U(attach_rate, 1, 100000)},
     {U(driver_memory_kib, 64, 1048576)},
@@ -99,6 +102,9 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->miss_limit = 1;
 	c->sleep_s = 10;
 	c->max_devices = 1024;
+	c->http_header_timeout_s = 10;
+	c->http_body_timeout_s = 60;
+	c->http_connections_per_address = 64;
 	c->attach_max = 32;
 	c->attach_rate = 100;
 	c->driver_memory_kib = 4096;

@@ -37,8 +37,11 @@ struct vmac_config {
 	uint32_t miss_limit;  /* consecutive misses that drop a device (1 = zero tolerance) */
 	uint32_t sleep_s;     /* how long a board without a driver sleeps */
 	uint32_t max_devices;
-	uint32_t attach_max;  /* devices attaching (driver asked for, not yet registered) at once */
-	uint32_t attach_rate; /* new attaches a second, in bursts of at most attach_max */
+	uint32_t http_header_timeout_s;        /* a request's headers must be in within this */
+	uint32_t http_body_timeout_s;          /* and its body within this after them */
+	uint32_t http_connections_per_address; /* open API connections from one client address */
+	uint32_t attach_max;                   /* devices attaching (driver asked for, not yet registered) at once */
+	uint32_t attach_rate;                  /* new attaches a second, in bursts of at most attach_max */
 	uint32_t driver_memory_kib;
 	uint32_t driver_instructions;
 	uint32_t driver_budget_us;   /* wall-clock per driver call; 0 = none */

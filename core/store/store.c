@@ -362,6 +362,17 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 	return n;
 }
 
+int vmac_token_id(const char *token, char id[VMAC_TOKEN_ID_LEN + 1])
+{
+	if (!token || strlen(token) != VMAC_TOKEN_LEN || strncmp(token, "vmac_", 5) != 0 ||
+	    token[5 + VMAC_TOKEN_ID_LEN] != '_' || !is_hex(token + 5, VMAC_TOKEN_ID_LEN) ||
+	    !is_hex(token + 5 + VMAC_TOKEN_ID_LEN + 1, SECRET_LEN))
+		return -1;
+	memcpy(id, token + 5, VMAC_TOKEN_ID_LEN);
+	id[VMAC_TOKEN_ID_LEN] = 0;
+	return 0;
+}
+
 enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
 {
 	static const unsigned char zero[HASH_LEN];
@@ -371,14 +382,9 @@ enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token)
 	enum vmac_scope scope = VMAC_SCOPE_NONE;
 	sqlite3_stmt *st;
 	int found = 0;
-	if (!token || strlen(token) != VMAC_TOKEN_LEN || strncmp(token, "vmac_", 5) != 0 ||
-	    token[5 + VMAC_TOKEN_ID_LEN] != '_' || !is_hex(token + 5, VMAC_TOKEN_ID_LEN))
+	if (vmac_token_id(token, id) != 0)
 		return VMAC_SCOPE_NONE;
 	secret = token + 5 + VMAC_TOKEN_ID_LEN + 1;
-	if (!is_hex(secret, SECRET_LEN))
-		return VMAC_SCOPE_NONE;
-	memcpy(id, token + 5, VMAC_TOKEN_ID_LEN);
-	id[VMAC_TOKEN_ID_LEN] = 0;
 	memcpy(stored, zero, sizeof(stored));
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "SELECT hash, scope FROM tokens WHERE id = ? AND revoked IS NULL", -1, &st,

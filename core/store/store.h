@@ -70,6 +70,9 @@ int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vma
 /* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
  * revoked, or when the store cannot be read. */
 enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
+/* Whether token has a token's shape (vmac_ID_SECRET, hex): 0 and its ID in
+ * id, or -1. Nothing is looked up. */
+int vmac_token_id(const char *token, char id[VMAC_TOKEN_ID_LEN + 1]);
 
 /* ---- persisted parameters (the console's `>`; docs/API.md) ----
  * A param value per machine (its primary board's name) and param name,

@@ -6,7 +6,9 @@ per client address."""
 import json
 import os
 import re
+import socket
 import subprocess
+import time
 import urllib.error
 import urllib.request
 
@@ -106,16 +108,85 @@ def test_tokens_are_listed_without_secrets_and_revoked_at_once(t):
         assert rc == 2 and mention in err, "vmac token %s: exit %d, %r" % (" ".join(args), rc, err)
 
 
-def test_guessing_is_slowed_down(t):
+def wrong(token_id, n=0):
+    """A token of the right shape with token_id and a wrong secret."""
+    return "vmac_%s_%064x" % (token_id, n)
+
+
+def test_guessing_is_locked_out_but_never_the_operator(t):
+    """docs/API.md "Abuse": failures count per token id (a token of the
+    right shape) or per address (anything else); ten in a minute lock that
+    key out, and a valid token always gets in."""
     host = t.host()
-    codes = [http_code(host, "/api/status", token="vmac_%016x_%s" % (i, "0" * 64))[0] for i in range(10)]
-    assert codes == [401] * 10, "the first ten wrong tokens: %s" % codes
-    code, body = http_code(host, "/api/status", token="vmac_%016x_%s" % (99, "0" * 64))
-    assert code == 429 and "too many failed attempts" in body.get("error", ""), (
-        "the eleventh wrong token within a minute: %d %r" % (code, body))
-    code, _ = http_code(host, "/api/status", token=t.token)
-    assert code == 429, "a right token from the same address during the lock-out: HTTP %d" % code
+    mine = t.token.split("_")[1]
+
+    codes = [http_code(host, "/api/status", token=wrong("%016x" % 7, i))[0] for i in range(10)]
+    assert codes == [401] * 10, "the first ten wrong secrets for one token id: %s" % codes
+    code, body = http_code(host, "/api/status", token=wrong("%016x" % 7, 99))
+    assert code == 429 and "token %016x" % 7 in body.get("error", ""), (
+        "the eleventh wrong secret for that id within a minute: %d %r" % (code, body))
+
+    codes = [http_code(host, "/api/status", header="Bearer junk-%d" % i)[0] for i in range(10)]
+    assert codes == [401] * 10, "the first ten malformed tokens: %s" % codes
+    code, body = http_code(host, "/api/status", header="Bearer junk")
+    assert code == 429 and "address 127.0.0.1" in body.get("error", ""), (
+        "the eleventh malformed token from this address: %d %r" % (code, body))
+
+    # The operator's own token id attacked: its guesses are refused, the token is not.
+    for i in range(11):
+        http_code(host, "/api/status", token=wrong(mine, i))
+    assert http_code(host, "/api/status", token=wrong(mine, 11))[0] == 429, "guesses at the operator's id go on"
+    assert http_code(host, "/api/status", token=t.token)[0] == 200, (
+        "the operator's valid token was locked out by someone guessing at it from the same address")
     assert http_code(host, "/api/health")[0] == 200, "the health check is locked out too"
+    host.wait_event("auth", text="token %s" % mine)
+    host.wait_event("auth", text="address 127.0.0.1")
+
+    # 1,100 more guessers cannot push a locked key out of the table (1,024 entries).
+    for i in range(1100):
+        http_code(host, "/api/status", token=wrong("%016x" % (1000 + i)))
+    code, _ = http_code(host, "/api/status", token=wrong("%016x" % 7, 100))
+    assert code == 429, "a locked token id got a fresh count after 1,100 other guessers: HTTP %d" % code
+    assert http_code(host, "/api/status", token=t.token)[0] == 200, "the operator's token after the crowd"
+
+
+def test_slow_clients_cannot_take_the_api_away(t):
+    """Slowloris: 300 connections from another address each dribbling a
+    header line. One address holds at most http_connections_per_address;
+    each is cut off when its headers are not in within
+    http_header_timeout_s; the operator's requests go through all along."""
+    host = t.host(settings={"http_header_timeout_s": 3})
+    port = int(host.http.rsplit(":", 1)[1])
+    slow = []
+    try:
+        for _ in range(300):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.bind(("127.0.0.2", 0))
+            s.settimeout(2)
+            try:
+                s.connect(("127.0.0.1", port))
+                s.sendall(b"GET /api/status HTTP/1.1\r\nHost: x\r\n")
+            except OSError:
+                s.close()
+                continue
+            slow.append(s)
+        started = time.monotonic()
+        while time.monotonic() - started < 8:  # past the header deadline, the attack going on
+            for s in slow:
+                try:
+                    s.sendall(b"X-Slow: 1\r\n")
+                except OSError:
+                    pass
+            code, _ = http_code(host, "/api/status", token=t.token)
+            assert code == 200, "the operator's request during the attack: HTTP %d" % code
+            time.sleep(0.5)  # the attacker's pace, not a synchronisation
+    finally:
+        for s in slow:
+            s.close()
+    cut = host.wait_event("http", text="connections cut off", timeout_s=20)
+    n = int(cut["text"].split()[0])
+    assert 0 < n <= 64 + 1, "%s (at most 64 from one address are let in)" % cut["text"]
+    assert "127.0.0.2" in cut["text"], "the event does not say where from: %r" % cut["text"]
 
 
 def test_a_state_folder_that_cannot_be_made_stops_the_host(t):

@@ -1,0 +1,291 @@
+/* What keeps the API the operator's under abuse (docs/API.md, "Abuse"):
+ * - failed attempts are counted per token id when the request presents a
+ *   token of the right shape, and per client address only when it does
+ *   not, so a guesser locks out what it guesses at and never a valid token
+ *   (a valid token is checked before any lock-out);
+ * - a locked entry is never evicted to make room: when every entry is
+ *   locked, a failing request of a new key is refused as if locked;
+ * - a connection must deliver a request's headers within
+ *   http_header_timeout_s and its body within http_body_timeout_s (a
+ *   slow client is cut off by a reaper thread that shuts its socket down;
+ *   libmicrohttpd's own timeout is reset by every byte);
+ * - libmicrohttpd bounds connections per address (http_connections_per_address).
+ * Each lock-out and each batch of cut-off connections is an event. */
+#include "http_internal.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <time.h>
+
+#define REAP_EVERY_MS 500
+#define CUT_SAID_EVERY_S 10.0
+
+/* The key of the request's failures ("token ID" or "address A"), and
+ * whether it presented a token of the right shape. */
+static int key_of(struct MHD_Connection *c, const char *token, char *key, size_t len)
+{
+	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+	char id[VMAC_TOKEN_ID_LEN + 1], addr[INET6_ADDRSTRLEN] = "?";
+	if (token && vmac_token_id(token, id) == 0) {
+		snprintf(key, len, "token %s", id);
+		return 1;
+	}
+	if (ci && ci->client_addr && ci->client_addr->sa_family == AF_INET)
+		inet_ntop(AF_INET, &((const struct sockaddr_in *)ci->client_addr)->sin_addr, addr, sizeof(addr));
+	snprintf(key, len, "address %s", addr);
+	return 0;
+}
+
+/* The entry of key (its window renewed when over), or a free or unlocked
+ * one for it when create; NULL when none can be had (every entry locked).
+ * Under g->lock. */
+static struct guard_fail *entry(struct http_guard *g, const char *key, double now, int create)
+{
+	struct guard_fail *unused = NULL, *oldest = NULL, *spare;
+	int i;
+	for (i = 0; i < GUARD_FAIL_SLOTS; i++) {
+		struct guard_fail *f = &g->fails[i];
+		int over = now - f->window_start >= FAIL_WINDOW_S;
+		if (f->key[0] && strcmp(f->key, key) == 0) {
+			if (over)
+				f->fails = 0, f->window_start = now, f->said = 0;
+			return f;
+		}
+		if (!f->key[0] || over) {
+			if (!unused)
+				unused = f;
+		} else if (f->fails < FAIL_LIMIT && (!oldest || f->window_start < oldest->window_start)) {
+			oldest = f; /* the oldest unlocked entry: a locked one is never taken */
+		}
+	}
+	spare = unused ? unused : oldest;
+	if (!create || !spare)
+		return NULL;
+	memset(spare, 0, sizeof(*spare));
+	snprintf(spare->key, sizeof(spare->key), "%s", key);
+	spare->window_start = now;
+	return spare;
+}
+
+/* One more failure of key: 1 when key was locked out already (answer 429),
+ * with *wait_s until it is not; the failure that locks it is answered 401
+ * and said in the events. */
+static int failed(struct vmac_http *h, const char *key, double now, double *wait_s)
+{
+	struct http_guard *g = &h->guard;
+	struct guard_fail *f;
+	int locked, say = 0;
+	pthread_mutex_lock(&g->lock);
+	f = entry(g, key, now, 1);
+	if (!f) {
+		locked = 1;
+		*wait_s = FAIL_WINDOW_S;
+		say = !g->full_said;
+		g->full_said = 1;
+	} else {
+		locked = f->fails >= FAIL_LIMIT; /* this one is answered 401 when it is the tenth */
+		if (!locked)
+			f->fails++;
+		*wait_s = FAIL_WINDOW_S - (now - f->window_start);
+		if (f->fails >= FAIL_LIMIT && !f->said)
+			f->said = say = 2;
+	}
+	pthread_mutex_unlock(&g->lock);
+	if (say == 1)
+		vmac_event_log_add(h->log, "auth", "",
+		                   "every entry of the API's failed-attempt table is locked out: a failing request of "
+		                   "anyone new is refused (429) until one expires");
+	else if (say == 2) {
+		char text[200];
+		snprintf(text, sizeof(text), "%u failed attempts with %s in %.0f s: locked out (429) for %.0f s", FAIL_LIMIT,
+		         key, FAIL_WINDOW_S, *wait_s + 0.5);
+		vmac_event_log_add(h->log, "auth", "", text);
+	}
+	return locked;
+}
+
+/* Whether key is locked out now (*wait_s until it is not). */
+static int locked_out(struct vmac_http *h, const char *key, double now, double *wait_s)
+{
+	struct guard_fail *f;
+	int locked;
+	pthread_mutex_lock(&h->guard.lock);
+	f = entry(&h->guard, key, now, 0);
+	locked = f && f->fails >= FAIL_LIMIT;
+	*wait_s = f ? FAIL_WINDOW_S - (now - f->window_start) : 0;
+	pthread_mutex_unlock(&h->guard.lock);
+	return locked;
+}
+
+static enum MHD_Result too_many(struct MHD_Connection *c, const char *key, double wait_s)
+{
+	char msg[200];
+	snprintf(msg, sizeof(msg), "too many failed attempts with %s; try again in %.0f s", key, wait_s + 0.5);
+	return http_reply(c, MHD_HTTP_TOO_MANY_REQUESTS, http_error_body(msg));
+}
+
+enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
+                                enum MHD_Result *ret)
+{
+	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
+	const char *token = auth && strncmp(auth, "Bearer ", 7) == 0 ? auth + 7 : NULL;
+	double now = http_mono_s(), wait_s = 0;
+	enum vmac_scope have = VMAC_SCOPE_NONE;
+	char key[80], msg[160];
+	int shaped = key_of(c, token, key, sizeof(key));
+	/* Without a token of the right shape nothing is looked up once the
+	 * address is locked; a token of the right shape is always checked. */
+	if (!shaped && locked_out(h, key, now, &wait_s)) {
+		*ret = too_many(c, key, wait_s);
+		return VMAC_SCOPE_NONE;
+	}
+	if (shaped)
+		have = vmac_token_check(h->store, token);
+	if (have == VMAC_SCOPE_NONE) {
+		if (failed(h, key, now, &wait_s)) {
+			*ret = too_many(c, key, wait_s);
+			return VMAC_SCOPE_NONE;
+		}
+		*ret = http_reply_header(c, MHD_HTTP_UNAUTHORIZED,
+		                         http_error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
+		                                              : "a token is needed: Authorization: Bearer TOKEN (vmac "
+		                                                "token create)"),
+		                         MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
+		return VMAC_SCOPE_NONE;
+	}
+	if (have < need) {
+		snprintf(msg, sizeof(msg), "this needs a token of scope %s; this one is %s", vmac_scope_name(need),
+		         vmac_scope_name(have));
+		*ret = http_reply(c, MHD_HTTP_FORBIDDEN, http_error_body(msg));
+		return VMAC_SCOPE_NONE;
+	}
+	return have;
+}
+
+/* ---- the deadlines of a request ---- */
+
+void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_context,
+                       enum MHD_ConnectionNotificationCode code)
+{
+	struct vmac_http *h = cls;
+	struct http_guard *g = &h->guard;
+	struct guard_conn *slot = *socket_context;
+	int i;
+	pthread_mutex_lock(&g->lock);
+	if (code == MHD_CONNECTION_NOTIFY_STARTED) {
+		const union MHD_ConnectionInfo *fd = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+		const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+		for (i = 0; i < GUARD_CONNS && g->conns[i].fd >= 0; i++)
+			;
+		if (i < GUARD_CONNS && fd) {
+			slot = &g->conns[i];
+			slot->fd = fd->connect_fd;
+			slot->since = http_mono_s();
+			slot->phase = GUARD_HEADERS;
+			snprintf(slot->addr, sizeof(slot->addr), "?");
+			if (ci && ci->client_addr && ci->client_addr->sa_family == AF_INET)
+				inet_ntop(AF_INET, &((const struct sockaddr_in *)ci->client_addr)->sin_addr, slot->addr,
+				          sizeof(slot->addr));
+			*socket_context = slot;
+		}
+	} else if (slot) { /* closed: libmicrohttpd says so before it closes the socket */
+		slot->fd = -1;
+		*socket_context = NULL;
+	}
+	pthread_mutex_unlock(&g->lock);
+}
+
+void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_phase phase)
+{
+	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+	struct guard_conn *slot = ci ? ci->socket_context : NULL;
+	if (!slot)
+		return;
+	pthread_mutex_lock(&h->guard.lock);
+	slot->phase = phase;
+	slot->since = http_mono_s();
+	pthread_mutex_unlock(&h->guard.lock);
+}
+
+/* Every REAP_EVERY_MS: a connection past its phase's deadline is cut off
+ * (its socket shut down: libmicrohttpd's thread then sees the end and
+ * closes it). */
+static void *reaper(void *arg)
+{
+	struct vmac_http *h = arg;
+	struct http_guard *g = &h->guard;
+	struct timespec until;
+	char last[INET6_ADDRSTRLEN] = "";
+	int i;
+	pthread_mutex_lock(&g->lock);
+	while (!g->stop) {
+		double now = http_mono_s();
+		for (i = 0; i < GUARD_CONNS; i++) {
+			struct guard_conn *k = &g->conns[i];
+			double limit = k->phase == GUARD_HEADERS ? g->header_timeout_s : g->body_timeout_s;
+			if (k->fd < 0 || k->phase == GUARD_ANSWERING || now - k->since < limit)
+				continue;
+			shutdown(k->fd, SHUT_RDWR);
+			k->phase = GUARD_ANSWERING; /* once */
+			g->cut_unsaid++;
+			snprintf(last, sizeof(last), "%s", k->addr);
+		}
+		if (g->cut_unsaid && now - g->cut_said_at >= CUT_SAID_EVERY_S) {
+			char text[240];
+			snprintf(text, sizeof(text),
+			         "%llu connections cut off: no complete request headers within %u s or body within %u s "
+			         "(http_header_timeout_s, http_body_timeout_s; the last from %s)",
+			         (unsigned long long)g->cut_unsaid, (unsigned)g->header_timeout_s, (unsigned)g->body_timeout_s,
+			         last);
+			g->cut_unsaid = 0;
+			g->cut_said_at = now;
+			pthread_mutex_unlock(&g->lock);
+			vmac_event_log_add(h->log, "http", "", text);
+			pthread_mutex_lock(&g->lock);
+		}
+		clock_gettime(CLOCK_MONOTONIC, &until);
+		until.tv_nsec += REAP_EVERY_MS * 1000000L;
+		until.tv_sec += until.tv_nsec / 1000000000L;
+		until.tv_nsec %= 1000000000L;
+		pthread_cond_timedwait(&g->wake, &g->lock, &until);
+	}
+	pthread_mutex_unlock(&g->lock);
+	return NULL;
+}
+
+int http_guard_start(struct vmac_http *h)
+{
+	struct http_guard *g = &h->guard;
+	pthread_condattr_t attr;
+	int i, rc;
+	pthread_mutex_init(&g->lock, NULL);
+	pthread_condattr_init(&attr);
+	pthread_condattr_setclock(&attr, CLOCK_MONOTONIC);
+	pthread_cond_init(&g->wake, &attr);
+	pthread_condattr_destroy(&attr);
+	for (i = 0; i < GUARD_CONNS; i++)
+		g->conns[i].fd = -1;
+	g->header_timeout_s = h->cfg.http_header_timeout_s;
+	g->body_timeout_s = h->cfg.http_body_timeout_s;
+	rc = pthread_create(&g->reaper, NULL, reaper, h);
+	g->running = rc == 0;
+	return -rc;
+}
+
+void http_guard_stop(struct vmac_http *h)
+{
+	struct http_guard *g = &h->guard;
+	if (g->running) {
+		pthread_mutex_lock(&g->lock);
+		g->stop = 1;
+		pthread_cond_signal(&g->wake);
+		pthread_mutex_unlock(&g->lock);
+		pthread_join(g->reaper, NULL);
+		g->running = 0;
+	}
+	pthread_cond_destroy(&g->wake);
+	pthread_mutex_destroy(&g->lock);
+}
