@@ -100,8 +100,8 @@ static int failed(struct vmac_http *h, const char *key, double now, double *wait
 		                   "anyone new is refused (429) until one expires");
 	else if (say == 2) {
 		char text[200];
-		snprintf(text, sizeof(text), "%u failed attempts with %s in %.0f s: locked out (429) for %.0f s", FAIL_LIMIT,
-		         key, FAIL_WINDOW_S, *wait_s + 0.5);
+		snprintf(text, sizeof(text), "%u failed attempts with %s in %.0f s: locked out (429) for %.0f s",
+		         FAIL_LIMIT, key, FAIL_WINDOW_S, *wait_s + 0.5);
 		vmac_event_log_add(h->log, "auth", "", text);
 	}
 	return locked;
@@ -235,11 +235,12 @@ static void *reaper(void *arg)
 		}
 		if (g->cut_unsaid && now - g->cut_said_at >= CUT_SAID_EVERY_S) {
 			char text[240];
-			snprintf(text, sizeof(text),
-			         "%llu connections cut off: no complete request headers within %u s or body within %u s "
-			         "(http_header_timeout_s, http_body_timeout_s; the last from %s)",
-			         (unsigned long long)g->cut_unsaid, (unsigned)g->header_timeout_s, (unsigned)g->body_timeout_s,
-			         last);
+			snprintf(
+			    text, sizeof(text),
+			    "%llu connections cut off: no complete request headers within %u s or body within %u s "
+			    "(http_header_timeout_s, http_body_timeout_s; the last from %s)",
+			    (unsigned long long)g->cut_unsaid, (unsigned)g->header_timeout_s,
+			    (unsigned)g->body_timeout_s, last);
 			g->cut_unsaid = 0;
 			g->cut_said_at = now;
 			pthread_mutex_unlock(&g->lock);

@@ -87,22 +87,37 @@ int vmac_client_upload(const char *url, const char *body, size_t len, struct vma
 	return call("POST", url, body, len, "Content-Type: text/x-lua", out, code, err, errlen);
 }
 
-static int call(const char *method, const char *url, const char *body, size_t len, const char *type,
-                struct vmac_buffer *out, long *code, char *err, size_t errlen)
+/* A libcurl handle for url with the bearer token's header in *headers and
+ * the host's certificate trusted; NULL with err. */
+static CURL *open_call(const char *url, struct curl_slist **headers, char *err, size_t errlen)
 {
 	CURL *c = curl_easy_init();
-	CURLcode rc;
-	struct curl_slist *headers = NULL;
 	char auth[300];
-	*code = 0;
+	*headers = NULL;
 	if (!c) {
 		snprintf(err, errlen, "cannot initialise libcurl");
-		return -1;
+		return NULL;
 	}
 	if (bearer[0]) {
 		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
-		headers = curl_slist_append(headers, auth);
+		*headers = curl_slist_append(*headers, auth);
 	}
+	curl_easy_setopt(c, CURLOPT_URL, url);
+	trust(c);
+	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
+	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+	return c;
+}
+
+static int call(const char *method, const char *url, const char *body, size_t len, const char *type,
+                struct vmac_buffer *out, long *code, char *err, size_t errlen)
+{
+	struct curl_slist *headers;
+	CURL *c = open_call(url, &headers, err, errlen);
+	CURLcode rc;
+	*code = 0;
+	if (!c)
+		return -1;
 	if (body) {
 		headers = curl_slist_append(headers, type);
 		curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE, (long)len);
@@ -110,13 +125,9 @@ static int call(const char *method, const char *url, const char *body, size_t le
 	}
 	curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
 	curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
-	curl_easy_setopt(c, CURLOPT_URL, url);
-	trust(c);
 	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
 	curl_easy_setopt(c, CURLOPT_WRITEDATA, out);
-	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
 	curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, 60000L); /* a reload of many machines takes a while */
-	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
 	rc = curl_easy_perform(c);
 	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, code);
 	curl_easy_cleanup(c);
@@ -145,30 +156,20 @@ static size_t stream_chunk(char *ptr, size_t size, size_t nmemb, void *ud)
 int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *data, size_t len), void *ctx, long *code,
                        char *err, size_t errlen)
 {
-	CURL *c = curl_easy_init();
+	struct curl_slist *headers;
+	CURL *c = open_call(url, &headers, err, errlen);
 	CURLcode rc;
-	struct curl_slist *headers = NULL;
 	struct stream st = {on_data, ctx};
-	char auth[300];
 	*code = 0;
-	if (!c) {
-		snprintf(err, errlen, "cannot initialise libcurl");
+	if (!c)
 		return -1;
-	}
-	if (bearer[0]) {
-		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
-		headers = curl_slist_append(headers, auth);
+	if (headers)
 		curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
-	}
-	curl_easy_setopt(c, CURLOPT_URL, url);
-	trust(c);
 	curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, stream_chunk);
 	curl_easy_setopt(c, CURLOPT_WRITEDATA, &st);
-	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
 	/* The host sends a keep-alive every 15 s: a minute of silence means it is gone. */
 	curl_easy_setopt(c, CURLOPT_LOW_SPEED_LIMIT, 1L);
 	curl_easy_setopt(c, CURLOPT_LOW_SPEED_TIME, 60L);
-	curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
 	rc = curl_easy_perform(c);
 	curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, code);
 	curl_easy_cleanup(c);

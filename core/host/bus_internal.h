@@ -388,6 +388,9 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
 void bus_run_machine(struct vmac_bus *bus, struct machine *m);
 void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level);
 void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_host_cmd *c);
+/* The device request slot i names (its name copied into device) and its
+ * machine (*m, or NULL); NULL when there is no such device. */
+struct device *bus_request_target(struct vmac_bus *bus, int i, char device[VMAC_NAME_MAX + 1], struct machine **m);
 struct device *bus_find_by_name(struct vmac_bus *bus, const char *name);
 
 /* swap.c */

@@ -81,14 +81,24 @@ void bus_post_code(struct vmac_bus *bus, enum vmac_event_code code, const struct
 /* Input request slot i: refused now (answered), or waiting for its
  * machine's job, which answers it (jobs.c); with persist, only to a
  * persist = true param. */
+struct device *bus_request_target(struct vmac_bus *bus, int i, char device[VMAC_NAME_MAX + 1], struct machine **m)
+{
+	struct device *d;
+	/* Copied out: the reply and the device's name are parts of one struct,
+	 * and the reply is written while the name is still needed. */
+	memcpy(device, bus->req[i].r.device, VMAC_NAME_MAX + 1);
+	d = bus_find_by_name(bus, device);
+	*m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	return d;
+}
+
 static void input_request(struct vmac_bus *bus, int i)
 {
 	struct request *q = &bus->req[i];
 	struct vmac_bus_input_request *r = &q->r;
-	struct device *d = bus_find_by_name(bus, r->device);
-	struct machine *m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
-	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
-	memcpy(device, r->device, sizeof(device));
+	char device[VMAC_NAME_MAX + 1];
+	struct machine *m;
+	struct device *d = bus_request_target(bus, i, device, &m);
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping) {
 		snprintf(r->reply, sizeof(r->reply), "%s is not running (%s)", device,
 		         d ? bus_state_name(d->state) : "no such device");
@@ -133,13 +143,10 @@ static int list_machines(struct vmac_bus *bus, const char *driver, char (*names)
 static void record_request(struct vmac_bus *bus, int i)
 {
 	struct request *q = &bus->req[i];
-	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
-	struct device *d;
+	char device[VMAC_NAME_MAX + 1];
 	struct machine *m;
-	memcpy(device, q->r.device, sizeof(device));
-	d = bus_find_by_name(bus, device);
-	m = d && d->mach >= 0 && d->state == DEV_RUNNING ? &bus->mach[d->mach] : NULL;
-	if (!m || !m->attached) {
+	struct device *d = bus_request_target(bus, i, device, &m);
+	if (!m || !m->attached || d->state != DEV_RUNNING) {
 		snprintf(q->r.reply, sizeof(q->r.reply), "%s: no running machine of that name", device);
 		q->r.rc = -VMAC_ENOTRUNNING;
 	} else if (bus_rec_capture(bus, m, "asked for (vmac record)") != 0) {

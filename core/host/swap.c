@@ -65,12 +65,9 @@ void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j)
 void bus_swap(struct vmac_bus *bus, int i)
 {
 	struct request *q = &bus->req[i];
-	char device[VMAC_NAME_MAX + 1]; /* copied out: reply and device are parts of one struct */
-	struct device *d;
+	char device[VMAC_NAME_MAX + 1];
 	struct machine *m;
-	memcpy(device, q->r.device, sizeof(device));
-	d = bus_find_by_name(bus, device);
-	m = d && d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	struct device *d = bus_request_target(bus, i, device, &m);
 	if (!m || !m->drv || !m->attached || d->state != DEV_RUNNING || bus->stopping || m->want_swap) {
 		snprintf(q->r.reply, sizeof(q->r.reply), "%s is not running (%s)", device,
 		         !d                  ? "no such device"
