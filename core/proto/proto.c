@@ -45,6 +45,12 @@ static int name_ok(const uint8_t *s, size_t len)
 	return 1;
 }
 
+/* A version-2 CYCLIC frame (its len counts records). */
+static int is_cyclic(const uint8_t *buf)
+{
+	return buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC;
+}
+
 static int outputs_ok(const struct vmac_outputs *o)
 {
 	return (o->digital & 0x80) == 0 && o->pwm >= -VMAC_PWM_MAX && o->pwm <= VMAC_PWM_MAX;
@@ -54,13 +60,14 @@ static int outputs_ok(const struct vmac_outputs *o)
  * that direction. ANNOUNCE is variable and checked by its own decoder. */
 #define LEN_ANNOUNCE -2 /* variable: checked by decode_announce */
 #define LEN_CYCLIC -3   /* len counts records: checked on its own */
+#define LEN_DISCOVER -4 /* none, or the host's nonce */
 #define SYS_KEY 0x200   /* switch key of a system-channel op (0x100 marks replies) */
 
 static int data_len_for(uint8_t version, uint8_t channel, uint8_t op, int reply)
 {
 	if (channel == VMAC_CH_SYSTEM) {
 		if (op == VMAC_SYS_DISCOVER && !reply)
-			return 0;
+			return LEN_DISCOVER;
 		if (op == VMAC_SYS_ANNOUNCE && reply)
 			return LEN_ANNOUNCE;
 		if (op == VMAC_SYS_CYCLIC && !reply && version >= 2)
@@ -184,12 +191,17 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		return VMAC_EPROTO_SPACE;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
 		return VMAC_EPROTO_VALUE;
+	if (want == LEN_DISCOVER)
+		want = m->u.discover.has_nonce ? VMAC_NONCE_LEN : 0;
 	if (want >= 0 && (size_t)want > cap - VMAC_HDR_LEN)
 		return VMAC_EPROTO_SPACE;
 
 	n = want;
 	switch (m->channel == VMAC_CH_SYSTEM ? SYS_KEY | m->op : (reply << 8) | m->op) {
-	case SYS_KEY | VMAC_SYS_DISCOVER: break;
+	case SYS_KEY | VMAC_SYS_DISCOVER:
+		if (n)
+			memcpy(d, m->u.discover.nonce, VMAC_NONCE_LEN);
+		break;
 	case SYS_KEY | VMAC_SYS_ANNOUNCE: {
 		size_t room = cap - VMAC_HDR_LEN;
 		n = encode_announce(&m->u.announce, d, room > VMAC_DATA_MAX ? VMAC_DATA_MAX : room);
@@ -276,14 +288,14 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	if (buf[2] < VMAC_PROTO_VERSION_MIN || buf[2] > VMAC_PROTO_VERSION)
 		return VMAC_EPROTO_VERSION;
 	n = buf[12];
-	if (buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC) {
-		/* len counts records; the frame has room for them and their first offset */
-		if (n < 1 || n > VMAC_CYCLIC_RECORDS_MAX || VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * n != len)
-			return VMAC_EPROTO_LENGTH;
-	} else if (n > VMAC_DATA_MAX || VMAC_HDR_LEN + n != len) {
+	/* len counts data bytes, or a CYCLIC frame's records; the frame has room
+	 * for them, their trailer or first offset, and nothing more */
+	if ((int)len != vmac_proto_frame_length(buf, len) ||
+	    (is_cyclic(buf)
+	         ? n < 1 || n > ((buf[3] & VMAC_FLAG_AUTH) ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX)
+	         : n > VMAC_DATA_MAX))
 		return VMAC_EPROTO_LENGTH;
-	}
-	if ((buf[3] & ~VMAC_FLAG_REPLY) != 0)
+	if ((buf[3] & ~(VMAC_FLAG_REPLY | VMAC_FLAG_AUTH)) != 0)
 		return VMAC_EPROTO_OP;
 
 	memset(m, 0, sizeof(*m));
@@ -300,17 +312,29 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		return VMAC_EPROTO_OP;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
 		return VMAC_EPROTO_VALUE;
-	if (want >= 0 && (size_t)want != n)
+	if (want == LEN_DISCOVER ? n != 0 && n != VMAC_NONCE_LEN : want >= 0 && (size_t)want != n)
 		return VMAC_EPROTO_PAYLOAD;
+	if ((m->flags & VMAC_FLAG_AUTH) && !is_cyclic(buf))
+		m->counter = get32(d + n);
 
 	switch (m->channel == VMAC_CH_SYSTEM ? SYS_KEY | m->op : (reply << 8) | m->op) {
+	case SYS_KEY | VMAC_SYS_DISCOVER:
+		m->u.discover.has_nonce = n != 0;
+		if (n)
+			memcpy(m->u.discover.nonce, d, VMAC_NONCE_LEN);
+		break;
 	case SYS_KEY | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
 	case SYS_KEY | VMAC_SYS_CYCLIC:
 		/* Records are checked one by one when read (a board reads only its
 		 * own): decoding stays O(1) however many the frame carries. */
 		m->u.cyclic.first = get16(d);
 		m->u.cyclic.count = (uint8_t)n;
+		m->u.cyclic.frame = buf;
 		m->u.cyclic.records = d + 2;
+		if (m->flags & VMAC_FLAG_AUTH) {
+			m->counter = get32(d + 2);
+			m->u.cyclic.records = d + 6;
+		}
 		if ((unsigned)m->u.cyclic.first + n > 0xFFFF) /* 0xFFFF is VMAC_OFFSET_NONE */
 			return VMAC_EPROTO_VALUE;
 		break;
@@ -372,39 +396,64 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 
 int vmac_proto_frame_length(const uint8_t *buf, size_t len)
 {
+	int auth;
 	if (len < VMAC_HDR_LEN)
 		return VMAC_EPROTO_SHORT;
 	if (buf[0] != VMAC_MAGIC0 || buf[1] != VMAC_MAGIC1)
 		return VMAC_EPROTO_MAGIC;
-	if (buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC)
-		return VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * buf[12];
-	return VMAC_HDR_LEN + buf[12];
+	auth = (buf[3] & VMAC_FLAG_AUTH) != 0;
+	if (is_cyclic(buf))
+		return auth ? VMAC_HDR_LEN + 2 + 4 + VMAC_CYCLIC_AUTH_RECORD_LEN * buf[12]
+		            : VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * buf[12];
+	return VMAC_HDR_LEN + buf[12] + (auth ? VMAC_AUTH_TRAILER_LEN : 0);
 }
 
-int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count)
+static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
+                        uint32_t counter)
 {
-	size_t n = VMAC_HDR_LEN + 2 + (size_t)VMAC_CYCLIC_RECORD_LEN * count;
-	if (count < 1 || count > VMAC_CYCLIC_RECORDS_MAX || (unsigned)first + count > 0xFFFF)
+	size_t head = VMAC_HDR_LEN + 2 + (auth ? 4 : 0);
+	size_t n = head + (size_t)(auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) * count;
+	if (count < 1 || count > (auth ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX) ||
+	    (unsigned)first + count > 0xFFFF)
 		return VMAC_EPROTO_VALUE;
 	if (n > cap)
 		return VMAC_EPROTO_SPACE;
 	buf[0] = VMAC_MAGIC0;
 	buf[1] = VMAC_MAGIC1;
 	buf[2] = 2;
-	buf[3] = 0;
+	buf[3] = auth ? VMAC_FLAG_AUTH : 0;
 	put16(buf + 4, seq);
 	put32(buf + 6, 0);
 	buf[10] = VMAC_CH_SYSTEM;
 	buf[11] = VMAC_SYS_CYCLIC;
 	buf[12] = (uint8_t)count;
 	put16(buf + VMAC_HDR_LEN, first);
-	memset(buf + VMAC_HDR_LEN + 2, 0, n - VMAC_HDR_LEN - 2);
+	if (auth)
+		put32(buf + VMAC_HDR_LEN + 2, counter);
+	memset(buf + head, 0, n - head);
 	return (int)n;
+}
+
+int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count)
+{
+	return cyclic_begin(buf, cap, seq, first, count, 0, 0);
+}
+
+int vmac_proto_cyclic_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count,
+                                 uint32_t counter)
+{
+	return cyclic_begin(buf, cap, seq, first, count, 1, counter);
+}
+
+uint8_t *vmac_proto_cyclic_slot(uint8_t *frame, unsigned index)
+{
+	return frame[3] & VMAC_FLAG_AUTH ? frame + VMAC_HDR_LEN + 6 + (size_t)VMAC_CYCLIC_AUTH_RECORD_LEN * index
+	                                 : frame + VMAC_HDR_LEN + 2 + (size_t)VMAC_CYCLIC_RECORD_LEN * index;
 }
 
 void vmac_proto_cyclic_put(uint8_t *frame, unsigned index, uint16_t tag, uint8_t flags, const struct vmac_outputs *out)
 {
-	uint8_t *r = frame + VMAC_HDR_LEN + 2 + (size_t)VMAC_CYCLIC_RECORD_LEN * index;
+	uint8_t *r = vmac_proto_cyclic_slot(frame, index);
 	put16(r, tag);
 	r[2] = flags;
 	r[3] = out->digital;
@@ -416,7 +465,9 @@ int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct v
 	const uint8_t *r;
 	if (offset < m->u.cyclic.first || offset - m->u.cyclic.first >= m->u.cyclic.count)
 		return 1;
-	r = m->u.cyclic.records + (size_t)VMAC_CYCLIC_RECORD_LEN * (offset - m->u.cyclic.first);
+	r = m->u.cyclic.records +
+	    (size_t)((m->flags & VMAC_FLAG_AUTH) ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) *
+	        (offset - m->u.cyclic.first);
 	rec->tag = get16(r);
 	rec->flags = r[2];
 	rec->outputs.digital = r[3];
@@ -439,6 +490,7 @@ const char *vmac_proto_strerror(int err)
 	case VMAC_EPROTO_NAME: return "empty, oversize or invalid name";
 	case VMAC_EPROTO_VALUE: return "field out of range";
 	case VMAC_EPROTO_SPACE: return "buffer too small";
+	case VMAC_EPROTO_AUTH: return "authentication failed (MAC)";
 	default: return "unknown protocol error";
 	}
 }

@@ -17,6 +17,18 @@
 #define VMAC_NAME_MAX 31                              /* printable ASCII bytes, no NUL on the wire */
 
 #define VMAC_FLAG_REPLY 0x01 /* set on every frame a board sends */
+#define VMAC_FLAG_AUTH 0x02  /* the frame is authenticated: a trailer (or CYCLIC's record MACs) follows */
+
+/* Authenticated frames (docs/PROTOCOL.md, "Authenticated frames"; the
+ * keyed functions are in auth.h). A frame with VMAC_FLAG_AUTH carries,
+ * after its data, a trailer: a freshness counter (u32) and an 8-byte MAC.
+ * A CYCLIC frame with it carries the counter after its first offset and a
+ * MAC in each record instead. DISCOVER may carry the host's nonce. */
+#define VMAC_AUTH_MAC_LEN 8
+#define VMAC_AUTH_TRAILER_LEN (4 + VMAC_AUTH_MAC_LEN)
+#define VMAC_NONCE_LEN 8
+#define VMAC_CYCLIC_AUTH_RECORD_LEN (6 + VMAC_AUTH_MAC_LEN)
+#define VMAC_CYCLIC_AUTH_RECORDS_MAX 100 /* 19 + 14 x 100 = 1,419 bytes: one Ethernet payload */
 
 /* Version 2: the cyclic frame (docs/PROTOCOL.md, "Version 2"). One CYCLIC
  * frame carries fixed-size records at the offsets the host gave each board
@@ -77,6 +89,7 @@ enum vmac_proto_err {
 	VMAC_EPROTO_NAME = -7,    /* empty, oversize or non-printable name */
 	VMAC_EPROTO_VALUE = -8,   /* a field out of its documented range */
 	VMAC_EPROTO_SPACE = -9,   /* encode: buffer too small */
+	VMAC_EPROTO_AUTH = -10,   /* an authenticated frame whose MAC does not verify */
 };
 
 #define VMAC_DIGITAL_OUTPUTS 7
@@ -125,8 +138,16 @@ struct vmac_cyclic_record {
  * frame's bytes (read one with vmac_proto_cyclic_record). */
 struct vmac_cyclic {
 	uint16_t first;         /* offset of the first record */
-	uint8_t count;          /* 1..VMAC_CYCLIC_RECORDS_MAX */
+	uint8_t count;          /* 1..VMAC_CYCLIC_RECORDS_MAX (authenticated: ..VMAC_CYCLIC_AUTH_RECORDS_MAX) */
 	const uint8_t *records; /* into the decoded buffer: valid while it is */
+	const uint8_t *frame;   /* the frame itself (an authenticated record's MAC covers its header) */
+};
+
+/* DISCOVER's data: none, or the host's nonce of this discovery (a host
+ * that authenticates boards sends one; an ANNOUNCE's MAC covers it). */
+struct vmac_discover {
+	uint8_t has_nonce;
+	uint8_t nonce[VMAC_NONCE_LEN];
 };
 
 struct vmac_error {
@@ -143,7 +164,9 @@ struct vmac_msg {
 	uint32_t device_id; /* session id the host gave in REGISTER; 0 before */
 	uint8_t channel;
 	uint8_t op;
+	uint32_t counter; /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC: the frame's) */
 	union {
+		struct vmac_discover discover; /* DISCOVER */
 		struct vmac_announce announce; /* ANNOUNCE */
 		struct vmac_register reg;      /* REGISTER request */
 		struct vmac_outputs outputs;   /* UPDATE request */
@@ -159,11 +182,14 @@ struct vmac_msg {
 };
 
 /* Encode msg into buf. Returns the frame length (> 0) or a negative
- * enum vmac_proto_err. Fields out of range are refused, never clipped. */
+ * enum vmac_proto_err. Fields out of range are refused, never clipped.
+ * An authenticated frame is encoded plain, then sealed (auth.h). */
 int vmac_proto_encode(const struct vmac_msg *msg, uint8_t *buf, size_t cap);
 
 /* Decode exactly len bytes of buf into msg. Returns 0 or a negative
- * enum vmac_proto_err; never reads past buf + len. */
+ * enum vmac_proto_err; never reads past buf + len. A frame with
+ * VMAC_FLAG_AUTH is decoded with its trailer (msg->counter) but its MAC is
+ * not checked here: that needs the key (vmac_proto_open, auth.h). */
 int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *msg);
 
 /* The total length a frame's header declares (for a transport that pads
@@ -175,6 +201,13 @@ int vmac_proto_frame_length(const uint8_t *buf, size_t len);
  * offset first, every record empty (tag 0). Returns the frame's length or a
  * negative enum vmac_proto_err. */
 int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count);
+/* The same, authenticated: the frame carries counter, and each record a
+ * MAC (vmac_proto_cyclic_seal_record, auth.h, after vmac_proto_cyclic_put). */
+int vmac_proto_cyclic_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count,
+                                 uint32_t counter);
+
+/* Where record index of a cyclic frame starts (either kind). */
+uint8_t *vmac_proto_cyclic_slot(uint8_t *frame, unsigned index);
 
 /* Write record index (0..count-1) of a frame made by vmac_proto_cyclic_begin.
  * The caller keeps outputs in range (the board refuses a bad record). */
@@ -182,7 +215,9 @@ void vmac_proto_cyclic_put(uint8_t *frame, unsigned index, uint16_t tag, uint8_t
 
 /* Read the record at offset from a decoded CYCLIC message. Returns 0, 1 when
  * the frame holds no record at that offset, or VMAC_EPROTO_VALUE for a
- * record with reserved flag bits or outputs out of range. */
+ * record with reserved flag bits or outputs out of range. An authenticated
+ * frame's record is read here; its MAC is checked by
+ * vmac_proto_cyclic_open_record (auth.h). */
 int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct vmac_cyclic_record *r);
 
 /* A short English text for a negative vmac_proto_err. Never NULL. */

@@ -2,7 +2,7 @@
  * 2012): the keyed hash of vmac's authenticated frames, written here in
  * portable C99 so that the board firmware computes it without a library;
  * the host's copy is checked against libsodium's crypto_shorthash
- * (tests/unit/test_siphash.c). 64-bit output (a frame's MAC) and the
+ * (tests/unit/test_auth.c). 64-bit output (a frame's MAC) and the
  * paper's 128-bit variant (deriving a session's keys). */
 #ifndef VMAC_SIPHASH_H
 #define VMAC_SIPHASH_H

@@ -62,37 +62,55 @@ static void check_board(const struct vmac_board *b, const struct fake_io *io)
 /* A decodable frame must re-encode byte for byte: one wire form per message.
  * A CYCLIC frame is built in place (vmac_proto_cyclic_begin/put), from the
  * records read back one by one; a record out of range is refused on reading
- * and copied raw. */
+ * and copied raw. An authenticated frame is encoded plain and given its
+ * trailer (or its records their MACs) from the input: the MACs themselves
+ * are the auth tests' (tests/unit/test_auth.c), not the codec's. */
 static void check_codec(const uint8_t *data, size_t size)
 {
 	struct vmac_msg msg;
 	uint8_t again[VMAC_PACKET_MAX];
-	int n;
+	int n, auth;
 
 	if (vmac_proto_decode(data, size, &msg) != 0)
 		return;
+	auth = (msg.flags & VMAC_FLAG_AUTH) != 0;
 	if (msg.channel == VMAC_CH_SYSTEM && msg.op == VMAC_SYS_CYCLIC) {
+		size_t len = auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN;
 		unsigned i;
-		n = vmac_proto_cyclic_begin(again, sizeof(again), msg.seq, msg.u.cyclic.first, msg.u.cyclic.count);
+		n = auth ? vmac_proto_cyclic_begin_auth(again, sizeof(again), msg.seq, msg.u.cyclic.first,
+		                                        msg.u.cyclic.count, msg.counter)
+		         : vmac_proto_cyclic_begin(again, sizeof(again), msg.seq, msg.u.cyclic.first, msg.u.cyclic.count);
 		if (n < 0 || (size_t)n != size)
 			abort();
 		for (i = 0; i < msg.u.cyclic.count; i++) {
 			struct vmac_cyclic_record r;
 			int rc = vmac_proto_cyclic_record(&msg, (uint16_t)(msg.u.cyclic.first + i), &r);
+			size_t at = (size_t)(vmac_proto_cyclic_slot(again, i) - again);
 			if (rc == 0)
 				vmac_proto_cyclic_put(again, i, r.tag, r.flags, &r.outputs);
 			else if (rc == VMAC_EPROTO_VALUE)
-				memcpy(again + VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * i,
-				       data + VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * i, VMAC_CYCLIC_RECORD_LEN);
+				memcpy(again + at, data + at, 6);
 			else
 				abort(); /* every offset of the frame holds a record */
+			if (auth)
+				memcpy(again + at + 6, data + at + 6, len - 6);
 		}
 		if (memcmp(again, data, size) != 0)
 			abort();
 		return;
 	}
+	msg.flags &= (uint8_t)~VMAC_FLAG_AUTH;
 	n = vmac_proto_encode(&msg, again, sizeof(again));
-	if (n < 0 || (size_t)n != size || memcmp(again, data, size) != 0)
+	if (n < 0 || (size_t)n + (auth ? VMAC_AUTH_TRAILER_LEN : 0) != size)
+		abort();
+	if (auth) {
+		again[3] |= VMAC_FLAG_AUTH;
+		memcpy(again + n, data + n, VMAC_AUTH_TRAILER_LEN);
+		if (msg.counter != ((uint32_t)data[n] << 24 | (uint32_t)data[n + 1] << 16 | (uint32_t)data[n + 2] << 8 |
+		                    data[n + 3]))
+			abort(); /* the counter decoded is the trailer's */
+	}
+	if (memcmp(again, data, size) != 0)
 		abort();
 }
 

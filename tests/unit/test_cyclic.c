@@ -280,8 +280,8 @@ START_TEST(cyclic_from_a_board_or_for_a_device_is_refused)
 
 	buf[3] = VMAC_FLAG_REPLY;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "CYCLIC with the REPLY flag");
-	buf[3] = 0x02;
-	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "CYCLIC with flag bit 1");
+	buf[3] = 0x04;
+	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "CYCLIC with flag bit 2");
 	buf[3] = 0;
 	buf[8] = 0x00;
 	buf[9] = 0x25;

@@ -177,7 +177,7 @@ END_TEST
 
 START_TEST(unknown_flag_bits_are_rejected)
 {
-	static const uint8_t flags[] = {0x02, 0x03, 0x80, 0x81, 0xFE};
+	static const uint8_t flags[] = {0x04, 0x05, 0x80, 0x81, 0xFC};
 	uint8_t buf[VMAC_FRAME_MAX];
 	size_t n, i;
 	struct vmac_msg m;

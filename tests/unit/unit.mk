@@ -11,12 +11,12 @@ UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto
                     test_board:board test_plant:board test_board_v2:board test_board_cyclic:board \
                     test_sched:sched test_store:store test_recording:recorder test_transport:transport \
                     test_driver:driver test_isolation:driver test_checkpoint:driver test_host:host \
-                    test_siphash:proto
+                    test_auth:proto
 UNIT_TESTS := $(foreach t,$(UNIT_TEST_MODULE),$(BUILD)/tests/$(firstword $(subst :, ,$(t))))
 
 # Libraries a test needs beyond its modules': libsodium is the reference
-# test_siphash checks the portable SipHash against.
-test_siphash_LIBS = $(call pkg_libs,libsodium)
+# test_auth checks the portable SipHash against.
+test_auth_LIBS = $(call pkg_libs,libsodium)
 
 # Every test program's main() is check_main.c's (check_main.h): it runs the
 # suite test_NAME.c gives through vmac_test_suite().
