@@ -17,6 +17,33 @@ void vmac_board_safe(struct vmac_board *b)
 	b->state = VMAC_BOARD_UNKNOWN;
 	b->device_id = 0;
 	b->offset = VMAC_OFFSET_NONE;
+	memset(b->to_board, 0, sizeof(b->to_board)); /* the session's keys go with it */
+	memset(b->to_host, 0, sizeof(b->to_host));
+}
+
+/* A reply of n bytes, sealed with the session's key when the board is
+ * keyed: its length, or 0 when it cannot be sent. */
+static int seal(struct vmac_board *b, uint8_t *reply, int n, size_t cap)
+{
+	if (n <= 0)
+		return 0;
+	if (!b->id.keyed)
+		return n;
+	n = vmac_proto_seal(reply, (size_t)n, cap, ++b->tx_counter, b->to_host, NULL, 0);
+	return n > 0 ? n : 0;
+}
+
+/* Keyed: whether the host's frame of the current session opens under its
+ * key with a counter above the last one (a replay does not). */
+static int opens(struct vmac_board *b, const uint8_t *frame, size_t len, const struct vmac_msg *req)
+{
+	if (!(req->flags & VMAC_FLAG_AUTH) || req->counter <= b->rx_counter ||
+	    vmac_proto_open(frame, len, b->to_board, NULL, 0) != 0) {
+		b->counters.auth_failed++;
+		return 0;
+	}
+	b->rx_counter = req->counter;
+	return 1;
 }
 
 void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id, const struct vmac_board_io *io,
@@ -45,18 +72,17 @@ int vmac_board_poll(struct vmac_board *b, uint64_t now_ms)
 	return 0;
 }
 
-static int answer(struct vmac_msg *r, const struct vmac_msg *req, uint8_t *reply, size_t cap)
+static int answer(struct vmac_board *b, struct vmac_msg *r, const struct vmac_msg *req, uint8_t *reply, size_t cap)
 {
-	int n;
 	r->version = req->version; /* a reply speaks the request's version */
 	r->flags = VMAC_FLAG_REPLY;
 	r->seq = req->seq;
 	r->channel = req->channel;
-	n = vmac_proto_encode(r, reply, cap);
-	return n > 0 ? n : 0;
+	return seal(b, reply, vmac_proto_encode(r, reply, cap), cap);
 }
 
-static int answer_error(const struct vmac_msg *req, uint32_t device_id, uint8_t code, uint8_t *reply, size_t cap)
+static int answer_error(struct vmac_board *b, const struct vmac_msg *req, uint32_t device_id, uint8_t code,
+                        uint8_t *reply, size_t cap)
 {
 	struct vmac_msg r;
 	memset(&r, 0, sizeof(r));
@@ -64,7 +90,7 @@ static int answer_error(const struct vmac_msg *req, uint32_t device_id, uint8_t 
 	r.op = VMAC_OP_ERROR;
 	r.u.error.code = code;
 	r.u.error.op = req->op;
-	return answer(&r, req, reply, cap);
+	return answer(b, &r, req, reply, cap);
 }
 
 static int answer_inputs(struct vmac_board *b, const struct vmac_msg *req, uint8_t *reply, size_t cap)
@@ -75,23 +101,26 @@ static int answer_inputs(struct vmac_board *b, const struct vmac_msg *req, uint8
 	r.op = req->op;
 	b->io->read_inputs(b->io_ctx, &r.u.inputs);
 	r.u.inputs.applied = b->outputs;
-	return answer(&r, req, reply, cap);
+	return answer(b, &r, req, reply, cap);
 }
 
-static int answer_ack(const struct vmac_msg *req, uint32_t device_id, uint8_t *reply, size_t cap)
+static int answer_ack(struct vmac_board *b, const struct vmac_msg *req, uint32_t device_id, uint8_t *reply, size_t cap)
 {
 	struct vmac_msg r;
 	memset(&r, 0, sizeof(r));
 	r.device_id = device_id;
 	r.op = req->op;
-	return answer(&r, req, reply, cap);
+	return answer(b, &r, req, reply, cap);
 }
 
 static int on_discover(struct vmac_board *b, const struct vmac_msg *req, uint8_t *reply, size_t cap)
 {
 	struct vmac_msg r;
+	int n;
 	if (b->state != VMAC_BOARD_UNKNOWN)
 		return 0; /* only unknown boards answer (thesis, device discovery) */
+	if (b->id.keyed && !req->u.discover.has_nonce)
+		return 0; /* a host that cannot authenticate us: we have nothing to say to it */
 	memset(&r, 0, sizeof(r));
 	r.op = VMAC_SYS_ANNOUNCE;
 	memcpy(r.u.announce.driver, b->id.driver, sizeof(r.u.announce.driver));
@@ -107,10 +136,16 @@ static int on_discover(struct vmac_board *b, const struct vmac_msg *req, uint8_t
 	r.flags = VMAC_FLAG_REPLY;
 	r.seq = req->seq;
 	r.channel = VMAC_CH_SYSTEM;
-	{
-		int n = vmac_proto_encode(&r, reply, cap);
+	n = vmac_proto_encode(&r, reply, cap);
+	if (n <= 0 || !b->id.keyed)
 		return n > 0 ? n : 0;
-	}
+	/* Sealed with the board's own key over this discovery's nonce: an old
+	 * ANNOUNCE replayed answers another nonce. The nonce is kept: the
+	 * REGISTER that follows is sealed with keys made from it. */
+	b->has_nonce = 1;
+	memcpy(b->nonce, req->u.discover.nonce, VMAC_NONCE_LEN);
+	n = vmac_proto_seal(reply, (size_t)n, cap, 0, b->id.key, b->nonce, VMAC_NONCE_LEN);
+	return n > 0 ? n : 0;
 }
 
 /* v2: the record at our offset, if it is our session's. Due: answer with
@@ -128,6 +163,16 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 	if (rc == 1 || rec.tag == 0 || rec.tag != (uint16_t)(b->device_id >> 16)) {
 		b->counters.frames_ignored++; /* not ours: no outputs, no watchdog */
 		return 0;
+	}
+	if (b->id.keyed) {
+		/* Ours by its tag: it must open under our session's key, in a
+		 * frame newer than the last we obeyed. */
+		if (!(req->flags & VMAC_FLAG_AUTH) || req->counter <= b->rx_cyclic_counter ||
+		    vmac_proto_cyclic_open_record(req, b->offset, b->to_board) != 0) {
+			b->counters.auth_failed++;
+			return 0;
+		}
+		b->rx_cyclic_counter = req->counter;
 	}
 	if (rc != 0) {
 		b->counters.frames_malformed++; /* our record, but out of range: never driven */
@@ -147,15 +192,39 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 	r.op = VMAC_OP_UPDATE;
 	b->io->read_inputs(b->io_ctx, &r.u.inputs);
 	r.u.inputs.applied = b->outputs;
-	rc = vmac_proto_encode(&r, reply, cap);
-	return rc > 0 ? rc : 0;
+	return seal(b, reply, vmac_proto_encode(&r, reply, cap), cap);
+}
+
+/* Keyed: a REGISTER opens under the keys of the session it starts (made
+ * from our key, the nonce we announced to and its device id); a replay of
+ * the current session's is refused by its counter. Then those keys are
+ * the session's. 1, or 0 (ignored, counted). */
+static int register_opens(struct vmac_board *b, const uint8_t *frame, size_t len, const struct vmac_msg *req)
+{
+	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
+	int replay = b->state == VMAC_BOARD_KNOWN && req->device_id == b->device_id && req->counter <= b->rx_counter;
+	if (!b->has_nonce || !(req->flags & VMAC_FLAG_AUTH) || replay) {
+		b->counters.auth_failed++;
+		return 0;
+	}
+	vmac_proto_session_keys(b->id.key, b->nonce, req->device_id, to_board, to_host);
+	if (vmac_proto_open(frame, len, to_board, NULL, 0) != 0) {
+		b->counters.auth_failed++;
+		return 0;
+	}
+	memcpy(b->to_board, to_board, VMAC_KEY_LEN);
+	memcpy(b->to_host, to_host, VMAC_KEY_LEN);
+	b->rx_counter = req->counter;
+	b->rx_cyclic_counter = 0;
+	b->tx_counter = 0;
+	return 1;
 }
 
 static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply, size_t cap)
 {
 	static const struct vmac_outputs off = {0, 0};
 	if (req->u.reg.major != b->id.major || req->u.reg.minor != b->id.minor)
-		return answer_error(req, 0, VMAC_BERR_IDENTITY, reply, cap);
+		return answer_error(b, req, 0, VMAC_BERR_IDENTITY, reply, cap);
 	/* A new session (or the host restarted): outputs stay off until the host
 	 * sends fresh values in an UPDATE. */
 	drive(b, &off);
@@ -165,7 +234,7 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	b->offset = VMAC_OFFSET_NONE; /* a v2 host tells it again */
 	b->last_valid_ms = now_ms;
 	b->counters.frames_ok++;
-	return answer_ack(req, b->device_id, reply, cap);
+	return answer_ack(b, req, b->device_id, reply, cap);
 }
 
 int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint8_t *reply,
@@ -188,13 +257,25 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 		b->counters.frames_ignored++;
 		return 0;
 	}
+	if (!b->id.keyed && (req.flags & VMAC_FLAG_AUTH)) {
+		b->counters.frames_ignored++; /* sealed for a keyed board: we cannot tell */
+		return 0;
+	}
 	if (req.channel == VMAC_CH_SYSTEM)
 		return req.op == VMAC_SYS_CYCLIC ? on_cyclic(b, &req, now_ms, reply, cap)
 		                                 : on_discover(b, &req, reply, cap);
 	if (req.op == VMAC_OP_REGISTER)
-		return on_register(b, &req, now_ms, reply, cap);
-	if (b->state != VMAC_BOARD_KNOWN || req.device_id != b->device_id)
-		return answer_error(&req, 0, VMAC_BERR_NOT_REGISTERED, reply, cap);
+		return b->id.keyed && !register_opens(b, frame, len, &req) ? 0
+		                                                           : on_register(b, &req, now_ms, reply, cap);
+	if (b->state != VMAC_BOARD_KNOWN || req.device_id != b->device_id) {
+		if (b->id.keyed) { /* another session's frame cannot be told from a forgery: silence */
+			b->counters.frames_ignored++;
+			return 0;
+		}
+		return answer_error(b, &req, 0, VMAC_BERR_NOT_REGISTERED, reply, cap);
+	}
+	if (b->id.keyed && !opens(b, frame, len, &req))
+		return 0; /* not the host's: no outputs, no watchdog, no answer */
 
 	b->last_valid_ms = now_ms;
 	b->counters.frames_ok++;
@@ -202,20 +283,28 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 	switch (req.op) {
 	case VMAC_OP_UPDATE: drive(b, &req.u.outputs); return answer_inputs(b, &req, reply, cap);
 	case VMAC_OP_IDLE: return answer_inputs(b, &req, reply, cap);
-	case VMAC_OP_SHUTDOWN: vmac_board_safe(b); return answer_ack(&req, id, reply, cap);
-	case VMAC_OP_SLEEP:
+	case VMAC_OP_SHUTDOWN: {
+		/* The acknowledgement is sealed with the session's key before
+		 * vmac_board_safe forgets it. */
+		int n = answer_ack(b, &req, id, reply, cap);
+		vmac_board_safe(b);
+		return n;
+	}
+	case VMAC_OP_SLEEP: {
+		int n = answer_ack(b, &req, id, reply, cap);
 		vmac_board_safe(b);
 		b->state = VMAC_BOARD_SLEEPING;
 		b->sleep_until_ms = now_ms + 1000u * req.u.sleep_s;
-		return answer_ack(&req, id, reply, cap);
-	case VMAC_OP_WATCHDOG: b->watchdog_ms = req.u.watchdog_ms; return answer_ack(&req, id, reply, cap);
+		return n;
+	}
+	case VMAC_OP_WATCHDOG: b->watchdog_ms = req.u.watchdog_ms; return answer_ack(b, &req, id, reply, cap);
 	case VMAC_OP_SIZE: {
 		struct vmac_msg r;
 		memset(&r, 0, sizeof(r));
 		r.device_id = id;
 		r.op = VMAC_OP_SIZE;
 		r.u.record_size = VMAC_CYCLIC_RECORD_LEN; /* the generic board's outputs */
-		return answer(&r, &req, reply, cap);
+		return answer(b, &r, &req, reply, cap);
 	}
 	case VMAC_OP_OFFSET:
 	case VMAC_OP_OFFSET_GET: {
@@ -226,9 +315,9 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
 		r.device_id = id;
 		r.op = req.op;
 		r.u.offset = b->offset; /* the echo is the confirmation (seed 004's 0x02) */
-		return answer(&r, &req, reply, cap);
+		return answer(b, &r, &req, reply, cap);
 	}
-	default: return answer_error(&req, id, VMAC_BERR_BAD_REQUEST, reply, cap);
+	default: return answer_error(b, &req, id, VMAC_BERR_BAD_REQUEST, reply, cap);
 	}
 }
 

@@ -8,11 +8,14 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../core/proto/auth.h"
 #include "../core/proto/proto.h"
 
 #define VMAC_FIRMWARE_MAJOR 1
 #define VMAC_FIRMWARE_MINOR 0
 #define VMAC_BOARD_DEFAULT_WATCHDOG_MS 500
+/* The largest reply a board sends: a frame and its authentication trailer. */
+#define VMAC_BOARD_REPLY_MAX (VMAC_FRAME_MAX + VMAC_AUTH_TRAILER_LEN)
 
 /* The board's I/O, provided by the HAL (real pins, or a simulated plant). */
 struct vmac_board_io {
@@ -34,10 +37,16 @@ struct vmac_board_identity {
 	uint32_t major, minor;
 	struct vmac_caps caps;
 	uint8_t protocol; /* the highest protocol version it speaks: 1, or 2 (0 means VMAC_PROTO_VERSION) */
+	/* Keyed (docs/PROTOCOL.md, "Authenticated frames"): the board answers
+	 * only a DISCOVER with a nonce, seals every frame it sends, and obeys
+	 * no frame that does not open under its session's key. */
+	uint8_t keyed;
+	uint8_t key[VMAC_KEY_LEN];
 };
 
 struct vmac_board_counters {
 	uint32_t frames_ok, frames_malformed, frames_ignored, watchdog_trips;
+	uint32_t auth_failed; /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
 };
 
 struct vmac_board {
@@ -50,6 +59,12 @@ struct vmac_board {
 	uint16_t offset;             /* v2: our record's offset in CYCLIC frames; VMAC_OFFSET_NONE until told */
 	struct vmac_outputs outputs; /* what we drive now */
 	struct vmac_board_counters counters;
+	/* Keyed: the nonce of the DISCOVER last answered, and the session's
+	 * keys and counters (the host's last accepted, unicast and cyclic; ours). */
+	uint8_t has_nonce;
+	uint8_t nonce[VMAC_NONCE_LEN];
+	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
+	uint32_t rx_counter, rx_cyclic_counter, tx_counter;
 	const struct vmac_board_io *io;
 	void *io_ctx;
 };
@@ -64,7 +79,7 @@ void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
 int vmac_board_poll(struct vmac_board *b, uint64_t now_ms);
 
 /* Handle one received datagram. Writes the reply frame into reply (cap bytes,
- * VMAC_FRAME_MAX is always enough) and returns its length, or 0 when the
+ * VMAC_BOARD_REPLY_MAX is always enough) and returns its length, or 0 when the
  * board stays silent (malformed frame, not addressed to it, or a discovery it
  * need not answer). A CYCLIC frame is answered only when the record at the
  * board's offset is its session's and due; reading it costs O(1) however

@@ -1,7 +1,9 @@
 /* libFuzzer harness for the wire codec and the board state machine: any bytes
  * that decode must re-encode to the same bytes, and a board fed any bytes must
  * answer only with well-formed replies and never drive outputs outside a
- * session. Build and run: see tests/fuzz/make_corpus.c. */
+ * session; a keyed board (docs/PROTOCOL.md, "Authenticated frames") fed the
+ * same bytes never starts a session at all: no input can forge its MACs.
+ * Build and run: see tests/fuzz/make_corpus.c. */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,7 +33,7 @@ static void fake_write_outputs(void *ctx, const struct vmac_outputs *out)
 
 static const struct vmac_board_io fake_hal = {fake_read_inputs, fake_write_outputs};
 
-static void board_start(struct vmac_board *b, struct fake_io *io)
+static void board_start(struct vmac_board *b, struct fake_io *io, int keyed)
 {
 	struct vmac_board_identity id;
 	memset(&id, 0, sizeof(id));
@@ -44,6 +46,8 @@ static void board_start(struct vmac_board *b, struct fake_io *io)
 	id.caps.analog_inputs = VMAC_ANALOG_INPUTS;
 	id.caps.pwm_outputs = 1;
 	id.caps.encoders = 1;
+	id.keyed = (uint8_t)keyed;
+	memset(id.key, 0x5a, sizeof(id.key)); /* a key the fuzzer is not told */
 	memset(io, 0, sizeof(*io));
 	vmac_board_init(b, &id, &fake_hal, io, 0);
 }
@@ -79,7 +83,8 @@ static void check_codec(const uint8_t *data, size_t size)
 		unsigned i;
 		n = auth ? vmac_proto_cyclic_begin_auth(again, sizeof(again), msg.seq, msg.u.cyclic.first,
 		                                        msg.u.cyclic.count, msg.counter)
-		         : vmac_proto_cyclic_begin(again, sizeof(again), msg.seq, msg.u.cyclic.first, msg.u.cyclic.count);
+		         : vmac_proto_cyclic_begin(again, sizeof(again), msg.seq, msg.u.cyclic.first,
+		                                   msg.u.cyclic.count);
 		if (n < 0 || (size_t)n != size)
 			abort();
 		for (i = 0; i < msg.u.cyclic.count; i++) {
@@ -106,8 +111,8 @@ static void check_codec(const uint8_t *data, size_t size)
 	if (auth) {
 		again[3] |= VMAC_FLAG_AUTH;
 		memcpy(again + n, data + n, VMAC_AUTH_TRAILER_LEN);
-		if (msg.counter != ((uint32_t)data[n] << 24 | (uint32_t)data[n + 1] << 16 | (uint32_t)data[n + 2] << 8 |
-		                    data[n + 3]))
+		if (msg.counter !=
+		    ((uint32_t)data[n] << 24 | (uint32_t)data[n + 1] << 16 | (uint32_t)data[n + 2] << 8 | data[n + 3]))
 			abort(); /* the counter decoded is the trailer's */
 	}
 	if (memcmp(again, data, size) != 0)
@@ -116,13 +121,15 @@ static void check_codec(const uint8_t *data, size_t size)
 
 static void deliver(struct vmac_board *b, struct fake_io *io, const uint8_t *frame, size_t len, uint64_t now_ms)
 {
-	uint8_t reply[VMAC_FRAME_MAX]; /* exactly the documented bound, so ASan sees overflow */
+	uint8_t reply[VMAC_BOARD_REPLY_MAX]; /* exactly the documented bound, so ASan sees overflow */
 	struct vmac_msg request, answer;
 	int request_ok = vmac_proto_decode(frame, len, &request) == 0;
 	int n = vmac_board_receive(b, frame, len, now_ms, reply, sizeof(reply));
 
-	if (n < 0 || n > VMAC_FRAME_MAX)
+	if (n < 0 || n > VMAC_BOARD_REPLY_MAX)
 		abort();
+	if (b->id.keyed && (b->state == VMAC_BOARD_KNOWN || (n > 0 && request.channel != VMAC_CH_SYSTEM)))
+		abort(); /* a keyed board obeyed or answered a frame no one could have sealed */
 	if (n > 0) {
 		if (!request_ok)
 			abort(); /* answered a frame it could not decode */
@@ -138,27 +145,30 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
 	struct vmac_board board;
 	struct fake_io io;
-	uint64_t now_ms = 0;
-	size_t at = 0;
+	uint64_t now_ms;
+	size_t at;
+	int keyed;
 
 	check_codec(data, size);
 
-	/* The whole input as one datagram to a fresh board. */
-	board_start(&board, &io);
-	deliver(&board, &io, data, size, 0);
+	for (keyed = 0; keyed <= 1; keyed++) {
+		/* The whole input as one datagram to a fresh board. */
+		board_start(&board, &io, keyed);
+		deliver(&board, &io, data, size, 0);
 
-	/* The input as a timed session of datagrams, see fuzz_session.h. */
-	board_start(&board, &io);
-	while (at + 2 <= size) {
-		size_t len = data[at + 1];
-		now_ms += (uint64_t)data[at] * FUZZ_STEP_MS;
-		at += 2;
-		if (len > size - at)
-			len = size - at;
-		vmac_board_poll(&board, now_ms);
-		check_board(&board, &io);
-		deliver(&board, &io, data + at, len, now_ms);
-		at += len;
+		/* The input as a timed session of datagrams, see fuzz_session.h. */
+		board_start(&board, &io, keyed);
+		for (at = 0, now_ms = 0; at + 2 <= size;) {
+			size_t len = data[at + 1];
+			now_ms += (uint64_t)data[at] * FUZZ_STEP_MS;
+			at += 2;
+			if (len > size - at)
+				len = size - at;
+			vmac_board_poll(&board, now_ms);
+			check_board(&board, &io);
+			deliver(&board, &io, data + at, len, now_ms);
+			at += len;
+		}
 	}
 	return 0;
 }

@@ -51,7 +51,7 @@ static struct {
 	struct vmac_board board;
 	struct fake_io io;
 	uint64_t now_ms;
-	uint8_t reply[VMAC_FRAME_MAX];
+	uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int reply_len;
 	struct vmac_msg answer; /* reply_len > 0: the decoded reply */
 } rig;

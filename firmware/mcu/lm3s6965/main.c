@@ -97,7 +97,7 @@ static void housekeep(uint64_t now_ms)
  * then the board, then its reply, if any, back to the sender. */
 static void handle_frame(const uint8_t *frame, size_t len, const uint8_t src[6], uint64_t now_ms)
 {
-	static uint8_t reply[VMAC_FRAME_MAX];
+	static uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int n;
 	poll_watchdog(now_ms);
 	n = vmac_board_receive(&board, frame, len, now_ms, reply, sizeof(reply));
