@@ -1,37 +1,51 @@
 /* Error codes that cross modules: what a caller branches on (a full disk
  * is a 507, a device that is not running a 404) instead of matching the
- * English text meant for people. A function returns 0 or one of these
- * negated; its message, for people, still goes in its err or reply buffer,
- * and vmac_strerror() names a code. -1 is VMAC_EFAIL, so a function that
- * returned -1 before still reads the same. Header only. */
+ * English text meant for people. A function returns 0, or a negative code:
+ * a negated errno (ENOENT: no such file), or a negated VMAC_E* below. Its
+ * message, for people, goes in its err or reply buffer; vmac_strerror()
+ * names a code of either kind.
+ *
+ * One int carries three kinds, in ranges that never meet:
+ *   -1 .. -4095              a negated errno (Linux's are all below 4096)
+ *   -10001 .. -10099         a negated VMAC_E* (this file)
+ *   -20001 .. -20099         a wire-codec error, VMAC_EPROTO_* (core/proto/proto.h),
+ *                            seen only by the codec's callers
+ *   1 .. 99                  a refusal of operator input, vmac_refusal
+ *                            (core/driver/driver.h): the driver said no
+ * Header only. */
 #ifndef VMAC_ERRORS_H
 #define VMAC_ERRORS_H
 
-enum vmac_err {
-	VMAC_OK = 0,
-	VMAC_EFAIL = 1,   /* anything without a code of its own: the message says what */
-	VMAC_ENOTRUNNING, /* no running machine of that name (or the host is stopping) */
-	VMAC_EDRIVER,     /* the driver failed in the call: its machine was dropped or rolled back */
-	VMAC_EREFUSED,    /* refused: a new version a machine would not take over */
-	VMAC_EBUSY,       /* the bus thread took no request, or did not take it in time */
-	VMAC_ESTORE,      /* the store could not read or write (not a full disk) */
-	VMAC_ESTOREFULL,  /* the store could not write: its disk is full */
-};
+#include <string.h>
 
-/* A short text for code (or -code), for people. */
+#define VMAC_ERR_BASE 10000
+
+/* Each code and its text. */
+#define VMAC_ERRORS(X)                                                                                                 \
+	X(VMAC_EFAIL, "failed")                        /* without a code of its own: the message says what */          \
+	X(VMAC_ENOTRUNNING, "not running")             /* no running machine of that name (or the host is stopping) */ \
+	X(VMAC_EDRIVER, "the driver failed")           /* in the call: its machine was dropped or rolled back */       \
+	X(VMAC_EREFUSED, "refused")                    /* a new version a machine would not take over */               \
+	X(VMAC_EBUSY, "the host is busy")              /* the bus thread took no request, or not in time */            \
+	X(VMAC_ESTORE, "the store failed")             /* the store could not read or write (not a full disk) */       \
+	X(VMAC_ESTOREFULL, "the store's disk is full") /* the store could not write: its disk is full */
+
+#define VMAC_ERR_ENUM(name, text) name,
+enum vmac_err { VMAC_OK = 0, VMAC_ERR_FIRST_ = VMAC_ERR_BASE, VMAC_ERRORS(VMAC_ERR_ENUM) VMAC_ERR_END_ };
+#undef VMAC_ERR_ENUM
+
+/* A short text for code (or -code), for people: a VMAC_E* code's, or
+ * strerror's for an errno. */
 static inline const char *vmac_strerror(int code)
 {
-	switch (code < 0 ? -code : code) {
-	case VMAC_OK: return "no error";
-	case VMAC_EFAIL: return "failed";
-	case VMAC_ENOTRUNNING: return "not running";
-	case VMAC_EDRIVER: return "the driver failed";
-	case VMAC_EREFUSED: return "refused";
-	case VMAC_EBUSY: return "the host is busy";
-	case VMAC_ESTORE: return "the store failed";
-	case VMAC_ESTOREFULL: return "the store's disk is full";
-	default: return "unknown error";
+#define VMAC_ERR_TEXT(name, text)                                                                                      \
+	case name: return text;
+	int c = code < 0 ? -code : code;
+	switch (c) {
+	case VMAC_OK: return "no error"; VMAC_ERRORS(VMAC_ERR_TEXT)
+	default: return c < VMAC_ERR_BASE ? strerror(c) : "unknown error";
 	}
+#undef VMAC_ERR_TEXT
 }
 
 #endif

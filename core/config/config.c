@@ -145,11 +145,11 @@ static int set_driver(struct vmac_config *c, const char *name, const char *value
 		         "'%s': expected driver.NAME.KEY (KEY: memory_kib, instructions, budget_us, "
 		         "param.NAME)",
 		         name);
-		return -1;
+		return -EINVAL;
 	}
 	if (strlen(value) >= sizeof(x->s.value)) {
 		snprintf(err, errlen, "%s: value too long", name);
-		return -1;
+		return -EINVAL;
 	}
 	for (i = 0; i < c->ndriver; i++) {
 		x = &c->driver[i];
@@ -159,7 +159,7 @@ static int set_driver(struct vmac_config *c, const char *name, const char *value
 	if (i == c->ndriver) {
 		if (c->ndriver == VMAC_CONFIG_DRIVER_SETTINGS) {
 			snprintf(err, errlen, "%s: more than %d driver settings", name, VMAC_CONFIG_DRIVER_SETTINGS);
-			return -1;
+			return -ENOSPC;
 		}
 		c->ndriver++;
 	}
@@ -191,14 +191,14 @@ int vmac_config_set(struct vmac_config *c, const char *name, const char *value, 
 		return set_driver(c, name, value, err, errlen);
 	if (!k) {
 		snprintf(err, errlen, "unknown setting '%s' (see docs/HOST.md)", name);
-		return -1;
+		return -EINVAL;
 	}
 	field = (char *)c + k->offset;
 	switch (k->kind) {
 	case STR:
 		if (strlen(value) >= k->size) {
 			snprintf(err, errlen, "%s: value too long (at most %zu characters)", name, k->size - 1);
-			return -1;
+			return -EINVAL;
 		}
 		memcpy(field, value, strlen(value) + 1);
 		return 0;
@@ -209,7 +209,7 @@ int vmac_config_set(struct vmac_config *c, const char *name, const char *value, 
 			*(int *)field = 0;
 		else {
 			snprintf(err, errlen, "%s: expected true or false, got '%s'", name, value);
-			return -1;
+			return -EINVAL;
 		}
 		return 0;
 	case U32:
@@ -218,12 +218,12 @@ int vmac_config_set(struct vmac_config *c, const char *name, const char *value, 
 		if (errno || *end || end == value || value[0] == '-' || v < k->min || v > k->max) {
 			snprintf(err, errlen, "%s: expected a whole number %u..%u, got '%s'", name, k->min, k->max,
 			         value);
-			return -1;
+			return -EINVAL;
 		}
 		*(uint32_t *)field = (uint32_t)v;
 		return 0;
 	}
-	return -1;
+	return -EINVAL;
 }
 
 /* Apply the settings in the table on top; nested tables (only under
@@ -237,7 +237,7 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
 		const char *name = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : NULL;
 		if (!name) {
 			snprintf(err, errlen, "%s: setting names must be strings", path);
-			return -1;
+			return -EINVAL;
 		}
 		snprintf(key, sizeof(key), "%s%s", prefix, name);
 		if (lua_type(L, -1) == LUA_TBOOLEAN)
@@ -247,19 +247,20 @@ static int apply_table(struct vmac_config *c, lua_State *L, const char *path, co
 		else if (lua_istable(L, -1) && depth < 3 && strncmp(key, "driver", 6) == 0) {
 			char sub[200];
 			snprintf(sub, sizeof(sub), "%s.", key);
-			if (apply_table(c, L, path, sub, depth + 1, err, errlen) != 0)
-				return -1;
+			int rc = apply_table(c, L, path, sub, depth + 1, err, errlen);
+			if (rc != 0)
+				return rc;
 			lua_pop(L, 1);
 			continue;
 		} else {
 			snprintf(err, errlen, "%s: %s must be a string, number or boolean", path, key);
-			return -1;
+			return -EINVAL;
 		}
 		if (vmac_config_set(c, key, value, err, errlen) != 0) {
 			char msg[256];
 			snprintf(msg, sizeof(msg), "%s", err);
 			snprintf(err, errlen, "%s: %s", path, msg);
-			return -1;
+			return -EINVAL;
 		}
 		lua_pop(L, 1);
 	}
@@ -363,7 +364,7 @@ int vmac_config_load_text(struct vmac_config *c, const char *name, const char *t
 
 	if (!L) {
 		snprintf(err, errlen, "%s: cannot create Lua state", name);
-		return -1;
+		return -ENOMEM;
 	}
 	if ((rc = lua_cpcall(L, config_load_protected, &a)) != 0) {
 		if (rc == LUA_ERRMEM && heap.refused == 2)
@@ -388,7 +389,7 @@ int vmac_config_load(struct vmac_config *c, const char *path, char *err, size_t 
 	int rc, code;
 	char *text = vmac_read_file(path, CONFIG_FILE_MAX, &len, err, errlen, &code);
 	if (!text)
-		return -1;
+		return code;
 	rc = vmac_config_load_text(c, path, text, len, err, errlen);
 	free(text);
 	return rc;
@@ -411,30 +412,30 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 		         "bus '%s': expected MULTICAST_GROUP:PORT (UDP, e.g. 239.255.86.77:5870) or eth:IFACE (raw "
 		         "Ethernet, e.g. eth:eth0)",
 		         c->bus);
-		return -1;
+		return -EINVAL;
 	}
 	if (spec.kind == VMAC_TRANSPORT_UDP && inet_pton(AF_INET, c->iface, &a) != 1) {
 		snprintf(err, errlen, "iface '%s': expected an IPv4 address of this machine, e.g. 127.0.0.1", c->iface);
-		return -1;
+		return -EINVAL;
 	}
 	if (!listen_ok(c->http)) {
 		snprintf(err, errlen, "http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:8080", c->http);
-		return -1;
+		return -EINVAL;
 	}
 	if (c->default_level > c->max_level) {
 		snprintf(err, errlen, "default_level (%u) must not exceed max_level (%u)", c->default_level,
 		         c->max_level);
-		return -1;
+		return -EINVAL;
 	}
 	if ((uint64_t)c->slice_us * c->slices_per_slot > 10000000) {
 		snprintf(err, errlen, "a slot (slice_us x slices_per_slot = %llu us) must not exceed 10 s",
 		         (unsigned long long)c->slice_us * c->slices_per_slot);
-		return -1;
+		return -EINVAL;
 	}
 	if ((uint64_t)c->watchdog_ms * 1000 < 2ull * vmac_config_slot_us(c)) {
 		snprintf(err, errlen, "watchdog_ms (%u) must be at least two slots (%u us)", c->watchdog_ms,
 		         2 * vmac_config_slot_us(c));
-		return -1;
+		return -EINVAL;
 	}
 	return 0;
 }

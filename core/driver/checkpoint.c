@@ -21,9 +21,12 @@
  * checkpoint is refused with the reason, never half taken. */
 #include "internal.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+
+#include "../common/errors.h"
 
 #define MAGIC "VMCK"
 #define FORMAT 1
@@ -57,7 +60,7 @@ static int put(struct enc *e, const void *p, size_t n)
 {
 	if (e->cap - e->len < n) {
 		snprintf(e->why, sizeof(e->why), "dev.state encodes to more than %zu bytes (checkpoint_kib)", e->cap);
-		return -1;
+		return -E2BIG;
 	}
 	if (e->buf)
 		memcpy(e->buf + e->len, p, n);
@@ -98,14 +101,14 @@ static int enc_table(struct enc *e, lua_State *L, int i, int depth)
 	lua_pop(L, 1);
 	if (depth > VMAC_CHECKPOINT_DEPTH) {
 		snprintf(e->why, sizeof(e->why), "dev.state is nested deeper than %d tables", VMAC_CHECKPOINT_DEPTH);
-		return -1;
+		return -E2BIG;
 	}
 	luaL_checkstack(L, 4, "checkpoint");
 	lua_pushvalue(L, i);
 	lua_pushnumber(L, ++e->tables);
 	lua_rawset(L, e->seen);
 	if (put_tag(e, '{'))
-		return -1;
+		return -E2BIG;
 	lua_pushnil(L);
 	while (lua_next(L, i)) {
 		int k = lua_gettop(L) - 1, v = k + 1;
@@ -113,10 +116,10 @@ static int enc_table(struct enc *e, lua_State *L, int i, int depth)
 			if (++e->entries > VMAC_CHECKPOINT_ENTRIES) {
 				snprintf(e->why, sizeof(e->why), "dev.state holds more than %d entries",
 				         VMAC_CHECKPOINT_ENTRIES);
-				return -1;
+				return -E2BIG;
 			}
 			if (enc_value(e, L, k, depth + 1) || enc_value(e, L, v, depth + 1))
-				return -1;
+				return -E2BIG;
 		}
 		lua_pop(L, 1);
 	}
@@ -154,7 +157,7 @@ static int enc_state(struct enc *e, lua_State *L, int state)
 	lua_newtable(L);
 	e->seen = lua_gettop(L);
 	if (put(e, MAGIC, 4) || put_tag(e, FORMAT))
-		return -1;
+		return -E2BIG;
 	return lua_istable(L, state) ? enc_table(e, L, state, 0) : (put_tag(e, '{') || put_tag(e, '}'));
 }
 
@@ -168,7 +171,7 @@ static int encode_work(struct vmac_driver *d, void *args, char *err, size_t errl
 	lua_rawget(L, -3);
 	if (enc_state(e, L, lua_gettop(L)) != 0) {
 		snprintf(err, errlen, "%s", e->why);
-		return -1;
+		return -E2BIG;
 	}
 	return 0;
 }
@@ -176,6 +179,7 @@ static int encode_work(struct vmac_driver *d, void *args, char *err, size_t errl
 int vmac_driver_checkpoint(struct vmac_driver *d, uint8_t *buf, size_t cap, size_t *len, char *err, size_t errlen)
 {
 	struct enc e;
+	int rc;
 	memset(&e, 0, sizeof(e));
 	e.buf = buf;
 	e.cap = cap;
@@ -183,8 +187,13 @@ int vmac_driver_checkpoint(struct vmac_driver *d, uint8_t *buf, size_t cap, size
 	*len = 0;
 	/* drv_protect_any: a failure here (too large, the cap) fails only the
 	 * checkpoint, never the running driver. */
-	if (d->failed || drv_protect_any(d, encode_work, &e, err, errlen) != 0)
-		return d->failed ? (snprintf(err, errlen, "%s", d->failure), -1) : -1;
+	if (d->failed) {
+		snprintf(err, errlen, "%s", d->failure);
+		return -VMAC_EDRIVER;
+	}
+	rc = drv_protect_any(d, encode_work, &e, err, errlen);
+	if (rc != 0) /* encode_work's -E2BIG, or the protection's own code (out of memory) */
+		return rc < 0 ? rc : -VMAC_EFAIL;
 	*len = e.len;
 	return 0;
 }
@@ -201,7 +210,7 @@ struct dec {
 static int damaged(struct dec *c, const char *what)
 {
 	snprintf(c->why, sizeof(c->why), "checkpoint damaged: %s", what);
-	return -1;
+	return -EBADMSG;
 }
 
 static int get_u32(struct dec *c, uint32_t *v)
@@ -240,7 +249,7 @@ static int dec_value(struct dec *c, lua_State *L, int depth)
 	case 'S': {
 		uint32_t n;
 		if (get_u32(c, &n))
-			return -1;
+			return -EBADMSG;
 		if ((size_t)(c->end - c->p) < n)
 			return damaged(c, "ends inside a string");
 		lua_pushlstring(L, (const char *)c->p, n);
@@ -250,7 +259,7 @@ static int dec_value(struct dec *c, lua_State *L, int depth)
 	case '@': {
 		uint32_t n;
 		if (get_u32(c, &n))
-			return -1;
+			return -EBADMSG;
 		if (n == 0 || n > (uint32_t)c->ntables)
 			return damaged(c, "refers to a table not yet seen");
 		lua_rawgeti(L, c->tables, (int)n);
@@ -272,7 +281,7 @@ static int dec_value(struct dec *c, lua_State *L, int depth)
 			if (++c->entries > VMAC_CHECKPOINT_ENTRIES)
 				return damaged(c, "too many entries");
 			if (dec_value(c, L, depth + 1) || dec_value(c, L, depth + 1))
-				return -1;
+				return -EBADMSG;
 			/* lua_type, not lua_isnumber: that takes the string key "nan" for NaN. */
 			if (lua_type(L, -2) == LUA_TNUMBER && lua_tonumber(L, -2) != lua_tonumber(L, -2))
 				return damaged(c, "a key is NaN");
@@ -304,7 +313,7 @@ static int would_encode(lua_State *L, int i, size_t cap, char *why, size_t whyle
 	lua_settop(L, top);
 	if (rc)
 		snprintf(why, whylen, "checkpoint damaged: its dev.state would not checkpoint again: %s", e.why);
-	return rc ? -1 : 0;
+	return rc ? -EBADMSG : 0;
 }
 
 /* [-0, +1] on success: the dev.state a checkpoint holds, decoded. */
@@ -332,7 +341,7 @@ static int decode_state(lua_State *L, const uint8_t *buf, size_t len, char *err,
 	return 0;
 fail:
 	snprintf(err, errlen, "%s", c.why);
-	return -1;
+	return -EBADMSG;
 }
 
 /* A checkpoint's header: 0, or -1 with err. */
@@ -340,11 +349,11 @@ static int check_header(const uint8_t *buf, size_t len, char *err, size_t errlen
 {
 	if (len < HEADER || memcmp(buf, MAGIC, 4) != 0) {
 		snprintf(err, errlen, "checkpoint damaged: not a vmac checkpoint");
-		return -1;
+		return -EBADMSG;
 	}
 	if (buf[4] != FORMAT) {
 		snprintf(err, errlen, "checkpoint in format %u, this host reads %u", (unsigned)buf[4], FORMAT);
-		return -1;
+		return -EPROTONOSUPPORT;
 	}
 	return 0;
 }
@@ -355,7 +364,7 @@ static int offer_work(struct vmac_driver *d, void *args, char *err, size_t errle
 	lua_State *L = d->L;
 	lua_createtable(L, 0, 5); /* saved */
 	if (decode_state(L, o->buf, o->len, err, errlen) != 0)
-		return -1;
+		return -EBADMSG;
 	lua_setfield(L, -2, "state");
 	lua_pushnumber(L, o->info->age_s);
 	lua_setfield(L, -2, "age_s");
@@ -375,8 +384,9 @@ int vmac_driver_offer_checkpoint(struct vmac_driver *d, const uint8_t *buf, size
                                  const struct vmac_checkpoint_info *info, char *err, size_t errlen)
 {
 	struct offer o = {buf, len, info};
-	if (check_header(buf, len, err, errlen) != 0)
-		return -1;
+	int rc = check_header(buf, len, err, errlen);
+	if (rc != 0)
+		return rc;
 	return drv_protect(d, offer_work, &o, err, errlen);
 }
 
@@ -389,7 +399,7 @@ static int resume_work(struct vmac_driver *d, void *args, char *err, size_t errl
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_migrate);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	if (decode_state(L, o->buf, o->len, err, errlen) != 0)
-		return -1;
+		return -EBADMSG;
 	return drv_guarded_call(d, 2, 0, 1, err, errlen);
 }
 
@@ -397,8 +407,9 @@ int vmac_driver_resume_from(struct vmac_driver *d, const uint8_t *buf, size_t le
                             size_t errlen)
 {
 	struct offer o = {buf, len, NULL};
-	if (check_header(buf, len, err, errlen) != 0)
-		return -1;
+	int rc = check_header(buf, len, err, errlen);
+	if (rc != 0)
+		return rc;
 	if (d->ref_migrate == LUA_NOREF)
 		return 1;
 	d->now_s = time_s;

@@ -209,9 +209,11 @@ int vmac_driver_take_over(struct vmac_driver *nd, struct vmac_driver *od, double
 int vmac_driver_checkpoint_asked(const struct vmac_driver *d);
 
 /* Bus thread: a plain-data copy of dev.state, encoded into buf (at most cap
- * bytes; *len of them used). Allocates only in the driver's heap. 0, or -1
- * with err (too large, too deep, a failed driver); the driver runs on
- * either way. Clears the checkpoint_asked flag. */
+ * bytes; *len of them used). Allocates only in the driver's heap. 0, or
+ * with err: -E2BIG (too large, too deep, too many entries),
+ * -VMAC_EDRIVER (the driver has failed), or the protection's code (its
+ * memory cap); the driver runs on either way. Clears the checkpoint_asked
+ * flag. */
 int vmac_driver_checkpoint(struct vmac_driver *d, uint8_t *buf, size_t cap, size_t *len, char *err, size_t errlen);
 
 /* What the host says of a checkpoint it offers. */
@@ -224,8 +226,9 @@ struct vmac_checkpoint_info {
 
 /* Main thread, after loading and before the hand over: checkpoint buf
  * (len bytes, as vmac_driver_checkpoint wrote it) decoded into the
- * instance, for its recover(dev, saved). 0, or -1 with err ("checkpoint
- * damaged: ..."): nothing is offered then. */
+ * instance, for its recover(dev, saved). 0, or with err: -EBADMSG
+ * ("checkpoint damaged: ..."), -EPROTONOSUPPORT (another format); nothing
+ * is offered then. */
 int vmac_driver_offer_checkpoint(struct vmac_driver *d, const uint8_t *buf, size_t len,
                                  const struct vmac_checkpoint_info *info, char *err, size_t errlen);
 

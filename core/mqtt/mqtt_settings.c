@@ -38,14 +38,14 @@ static int parse_url(const char *url, struct vmac_mqtt_settings *s, char *err, s
 		s->port = 8883;
 	} else {
 		snprintf(err, errlen, "mqtt_url '%s': expected mqtt://HOST:PORT or mqtts://HOST:PORT", url);
-		return -1;
+		return -EINVAL;
 	}
 	colon = strchr(rest, ':');
 	hostlen = colon ? (size_t)(colon - rest) : strlen(rest);
 	if (!host_ok(rest, hostlen) || hostlen >= sizeof(s->host)) {
 		snprintf(err, errlen, "mqtt_url '%s': expected a host name or IPv4 address after %s", url,
 		         s->tls ? "mqtts://" : "mqtt://");
-		return -1;
+		return -EINVAL;
 	}
 	memcpy(s->host, rest, hostlen);
 	s->host[hostlen] = 0;
@@ -56,7 +56,7 @@ static int parse_url(const char *url, struct vmac_mqtt_settings *s, char *err, s
 		port = strtol(colon + 1, &end, 10);
 		if (errno || end == colon + 1 || *end || port < 1 || port > 65535) {
 			snprintf(err, errlen, "mqtt_url '%s': the port must be 1..65535", url);
-			return -1;
+			return -EINVAL;
 		}
 		s->port = (int)port;
 	}
@@ -91,8 +91,9 @@ static int id_ok(const char *p)
 static int readable(const char *key, const char *path, char *err, size_t errlen)
 {
 	if (path[0] && access(path, R_OK) != 0) {
-		snprintf(err, errlen, "%s '%s': cannot be read (%s)", key, path, strerror(errno));
-		return -1;
+		int e = errno;
+		snprintf(err, errlen, "%s '%s': cannot be read (%s)", key, path, strerror(e));
+		return -e;
 	}
 	return 0;
 }
@@ -103,8 +104,9 @@ static int read_password(const char *path, struct vmac_mqtt_settings *s, char *e
 	FILE *f = fopen(path, "r");
 	size_t n;
 	if (!f) {
-		snprintf(err, errlen, "mqtt_password_file '%s': %s", path, strerror(errno));
-		return -1;
+		int e = errno;
+		snprintf(err, errlen, "mqtt_password_file '%s': %s", path, strerror(e));
+		return -e;
 	}
 	if (!fgets(s->password, sizeof(s->password), f))
 		s->password[0] = 0;
@@ -113,7 +115,7 @@ static int read_password(const char *path, struct vmac_mqtt_settings *s, char *e
 	s->password[n] = 0;
 	if (n == 0) {
 		snprintf(err, errlen, "mqtt_password_file '%s': the file is empty", path);
-		return -1;
+		return -EINVAL;
 	}
 	s->has_password = 1;
 	return 0;
@@ -123,13 +125,14 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 {
 	struct vmac_mqtt_settings *s = out;
 	char hostname[64];
+	int rc;
 	size_t i;
 	memset(s, 0, sizeof(*s));
 	if (!cfg->mqtt_url[0])
 		return 0; /* off: the other keys are not looked at */
 	s->enabled = 1;
-	if (parse_url(cfg->mqtt_url, s, err, errlen) != 0)
-		return -1;
+	if ((rc = parse_url(cfg->mqtt_url, s, err, errlen)) != 0)
+		return rc;
 	if (gethostname(hostname, sizeof(hostname)) != 0)
 		snprintf(hostname, sizeof(hostname), "vmac");
 	hostname[sizeof(hostname) - 1] = 0;
@@ -139,7 +142,7 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 	snprintf(s->host_id, sizeof(s->host_id), "%s", cfg->mqtt_host_id[0] ? cfg->mqtt_host_id : hostname);
 	if (!id_ok(s->host_id)) {
 		snprintf(err, errlen, "mqtt_host_id '%s': expected letters, digits, '_' and '-' only", s->host_id);
-		return -1;
+		return -EINVAL;
 	}
 	if (cfg->mqtt_client_id[0])
 		snprintf(s->client_id, sizeof(s->client_id), "%s", cfg->mqtt_client_id);
@@ -148,35 +151,35 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 	for (i = 0; s->client_id[i]; i++)
 		if ((unsigned char)s->client_id[i] < 0x21 || s->client_id[i] == 0x7f) {
 			snprintf(err, errlen, "mqtt_client_id '%s': no spaces or control characters", s->client_id);
-			return -1;
+			return -EINVAL;
 		}
 	snprintf(s->user, sizeof(s->user), "%s", cfg->mqtt_user);
 	if (cfg->mqtt_password[0] && cfg->mqtt_password_file[0]) {
 		snprintf(err, errlen, "mqtt_password and mqtt_password_file: give one or the other");
-		return -1;
+		return -EINVAL;
 	}
 	if (cfg->mqtt_password[0]) {
 		snprintf(s->password, sizeof(s->password), "%s", cfg->mqtt_password);
 		s->has_password = 1;
-	} else if (cfg->mqtt_password_file[0] && read_password(cfg->mqtt_password_file, s, err, errlen) != 0) {
-		return -1;
+	} else if (cfg->mqtt_password_file[0] && (rc = read_password(cfg->mqtt_password_file, s, err, errlen)) != 0) {
+		return rc;
 	}
 	if (s->has_password && !s->user[0]) {
 		snprintf(err, errlen, "a password for the broker needs mqtt_user too");
-		return -1;
+		return -EINVAL;
 	}
 	if (!s->tls && (cfg->mqtt_cafile[0] || cfg->mqtt_certfile[0] || cfg->mqtt_keyfile[0])) {
 		snprintf(err, errlen, "mqtt_cafile, mqtt_certfile and mqtt_keyfile need an mqtts:// mqtt_url");
-		return -1;
+		return -EINVAL;
 	}
 	if (!cfg->mqtt_certfile[0] != !cfg->mqtt_keyfile[0]) {
 		snprintf(err, errlen, "a client certificate needs both mqtt_certfile and mqtt_keyfile");
-		return -1;
+		return -EINVAL;
 	}
 	if (readable("mqtt_cafile", cfg->mqtt_cafile, err, errlen) ||
 	    readable("mqtt_certfile", cfg->mqtt_certfile, err, errlen) ||
 	    readable("mqtt_keyfile", cfg->mqtt_keyfile, err, errlen))
-		return -1;
+		return -EACCES;
 	snprintf(s->cafile, sizeof(s->cafile), "%s", cfg->mqtt_cafile);
 	snprintf(s->certfile, sizeof(s->certfile), "%s", cfg->mqtt_certfile);
 	snprintf(s->keyfile, sizeof(s->keyfile), "%s", cfg->mqtt_keyfile);
@@ -185,14 +188,14 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 		         "mqtt_prefix '%s': expected topic levels such as vmac or site/vmac (no +, #, "
 		         "spaces or empty levels)",
 		         cfg->mqtt_prefix);
-		return -1;
+		return -EINVAL;
 	}
 	if (!prefix_ok(cfg->mqtt_discovery_prefix) || strlen(cfg->mqtt_discovery_prefix) >= sizeof(s->prefix)) {
 		snprintf(err, errlen,
 		         "mqtt_discovery_prefix '%s': expected topic levels such as homeassistant (no +, #, spaces or "
 		         "empty levels)",
 		         cfg->mqtt_discovery_prefix);
-		return -1;
+		return -EINVAL;
 	}
 	snprintf(s->prefix, sizeof(s->prefix), "%s", cfg->mqtt_prefix);
 	snprintf(s->discovery_prefix, sizeof(s->discovery_prefix), "%s", cfg->mqtt_discovery_prefix);
@@ -205,7 +208,7 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 	    strlen(cfg->mqtt_sparkplug_group) >= sizeof(s->sparkplug_group)) {
 		snprintf(err, errlen, "mqtt_sparkplug_group '%s': expected letters, digits, '_', '-' and '.' only",
 		         cfg->mqtt_sparkplug_group);
-		return -1;
+		return -EINVAL;
 	}
 	snprintf(s->sparkplug_group, sizeof(s->sparkplug_group), "%s", cfg->mqtt_sparkplug_group);
 	s->sparkplug = cfg->mqtt_sparkplug;

@@ -78,18 +78,19 @@ enum vmac_shutdown_reason {
 	VMAC_SHUT_DRIVER = 2,
 };
 
-/* Decoder and encoder errors, always negative. */
+/* Decoder and encoder errors, always negative, in a range of their own
+ * (-20001 ..; core/common/errors.h lists the ranges). */
 enum vmac_proto_err {
-	VMAC_EPROTO_SHORT = -1,   /* fewer bytes than a header */
-	VMAC_EPROTO_MAGIC = -2,   /* not a vmac frame */
-	VMAC_EPROTO_VERSION = -3, /* protocol version we do not speak */
-	VMAC_EPROTO_LENGTH = -4,  /* len byte disagrees with the datagram size */
-	VMAC_EPROTO_OP = -5,      /* unknown channel/op, or op not valid in this direction */
-	VMAC_EPROTO_PAYLOAD = -6, /* data size wrong for the op */
-	VMAC_EPROTO_NAME = -7,    /* empty, oversize or non-printable name */
-	VMAC_EPROTO_VALUE = -8,   /* a field out of its documented range */
-	VMAC_EPROTO_SPACE = -9,   /* encode: buffer too small */
-	VMAC_EPROTO_AUTH = -10,   /* an authenticated frame whose MAC does not verify */
+	VMAC_EPROTO_SHORT = -20001,   /* fewer bytes than a header */
+	VMAC_EPROTO_MAGIC = -20002,   /* not a vmac frame */
+	VMAC_EPROTO_VERSION = -20003, /* protocol version we do not speak */
+	VMAC_EPROTO_LENGTH = -20004,  /* len byte disagrees with the datagram size */
+	VMAC_EPROTO_OP = -20005,      /* unknown channel/op, or op not valid in this direction */
+	VMAC_EPROTO_PAYLOAD = -20006, /* data size wrong for the op */
+	VMAC_EPROTO_NAME = -20007,    /* empty, oversize or non-printable name */
+	VMAC_EPROTO_VALUE = -20008,   /* a field out of its documented range */
+	VMAC_EPROTO_SPACE = -20009,   /* encode: buffer too small */
+	VMAC_EPROTO_AUTH = -20010,    /* an authenticated frame whose MAC does not verify */
 };
 
 #define VMAC_DIGITAL_OUTPUTS 7

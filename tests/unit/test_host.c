@@ -3,6 +3,7 @@
  * threads with. The driver module has its own tests (test_driver.c). */
 #include <arpa/inet.h>
 #include <check.h>
+#include <errno.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -381,11 +382,33 @@ START_TEST(ring_fifo_and_full)
 }
 END_TEST
 
+/* core/common/errors.h: a VMAC_E* code, an errno, a codec error and a
+ * refusal never share a value, and each has a name. */
+START_TEST(error_codes_have_ranges_of_their_own)
+{
+	static const int errnos[] = {EPERM, ENOENT, EIO, EAGAIN, ENOMEM, EACCES, ENAMETOOLONG, ENOSPC};
+	int code;
+	size_t i;
+	for (code = VMAC_EFAIL; code < VMAC_ERR_END_; code++) {
+		ck_assert_msg(code > 4095, "VMAC_E code %d is in errno's range", code);
+		ck_assert_msg(strcmp(vmac_strerror(-code), "unknown error") != 0, "VMAC_E code %d has no text", code);
+		ck_assert_msg(-code > VMAC_EPROTO_SHORT, "VMAC_E code %d reaches the codec's range", code);
+	}
+	ck_assert_msg(VMAC_ERR_END_ - VMAC_ERR_BASE < 100, "more VMAC_E codes than their range holds");
+	for (i = 0; i < sizeof(errnos) / sizeof(errnos[0]); i++)
+		ck_assert_msg(strcmp(vmac_strerror(-errnos[i]), strerror(errnos[i])) == 0,
+		              "errno %d is named '%s', not strerror's", errnos[i], vmac_strerror(-errnos[i]));
+	ck_assert_msg(VMAC_EPROTO_SHORT <= -20001 && VMAC_EPROTO_AUTH >= -20099, "codec errors outside -20001..-20099");
+	ck_assert_msg(VMAC_REFUSED_BY_DRIVER >= 1 && VMAC_REFUSED_NOT_PERSIST < 100, "refusals outside 1..99");
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("host");
 	TCase *tc = tcase_create("host");
 	tcase_set_timeout(tc, 30);
+	tcase_add_test(tc, error_codes_have_ranges_of_their_own);
 	tcase_add_test(tc, config_defaults_are_valid);
 	tcase_add_test(tc, config_file_sets_keys);
 	tcase_add_test(tc, config_file_errors_name_the_problem);
