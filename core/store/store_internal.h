@@ -1,5 +1,5 @@
-/* The store's insides, shared by its files (store.c: tokens, params,
- * driver versions, events, opening; store_checkpoint.c: checkpoints of
+/* The store's insides, shared by its files (store.c: params, driver
+ * versions, events, opening; store_token.c: access tokens; store_checkpoint.c: checkpoints of
  * machine state; store_recording.c: flight recordings). The rest of the
  * host sees only store.h. */
 #ifndef VMAC_STORE_INTERNAL_H
@@ -30,6 +30,8 @@ struct vmac_store {
 	int gone; /* it was removed or replaced: nothing more is written */
 };
 
+/* n bytes as 2n lower-case hex digits and a NUL into out. */
+void store_hex(const unsigned char *b, size_t n, char *out);
 /* Unix time now. */
 double store_now_s(void);
 /* err says what failed and SQLite's why; returns the code of it. */
