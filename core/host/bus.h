@@ -186,7 +186,7 @@ int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd);
 
 /* The answer to a VMAC_MSG_LOAD: the driver loaded for load's device (drv,
  * now the bus's), or NULL with rc (-ENOENT: no driver file) and text saying
- * why. 0, or -1 when the command ring is full: drv is freed, and the board
+ * why. 0, or -EAGAIN when the command ring is full: drv is freed, and the board
  * is tried again at its next announce. */
 int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int rc, struct vmac_driver *drv,
                     const char *text);

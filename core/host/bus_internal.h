@@ -320,7 +320,7 @@ void bus_begin_stop(struct vmac_bus *bus, int64_t now);
 int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations);
 
 /* mailbox.c */
-/* 0, or -1 when the ring to the main thread is full (counted in events_lost). */
+/* 0, or -EAGAIN when the ring to the main thread is full (counted in events_lost). */
 int bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m);
 void bus_event(struct vmac_bus *bus, const struct device *d, const char *kind, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));

@@ -32,7 +32,7 @@ int bus_post(struct vmac_bus *bus, const struct vmac_bus_msg *m)
 {
 	if (vmac_ring_push(&bus->to_main, m) != 0) {
 		bus->counters.events_lost++;
-		return -1;
+		return -EAGAIN;
 	}
 	if (bus->wakeup)
 		bus->wakeup(bus->wakeup_ctx);
@@ -405,7 +405,7 @@ int vmac_bus_loaded(struct vmac_bus *bus, const struct vmac_bus_msg *load, int r
 		vmac_driver_free(drv);
 		vmac_recorder_free(c.rec);
 		free(c.ckpt);
-		return -1;
+		return -EAGAIN;
 	}
 	return 0;
 }

@@ -261,7 +261,7 @@ int main(int argc, char **argv)
 		pthread_sigmask(SIG_SETMASK, &old, NULL);
 	}
 	if (rc != 0) {
-		fprintf(stderr, "vmacd: cannot start the bus thread: %s\n", strerror(-rc));
+		fprintf(stderr, "vmacd: cannot start the bus thread: %s\n", vmac_strerror(rc));
 		return 1;
 	}
 	if (h->mqtt_settings.enabled) { /* its threads too leave the stop signals to the main thread */

@@ -410,7 +410,7 @@ int vt_input(struct vt_world *w, const char *device, const char *name, const str
 	int rc;
 	if (!w->bus) {
 		snprintf(reply, replylen, "the host is down (crash_host)");
-		return -1;
+		return -VMAC_ENOTRUNNING;
 	}
 	rc = vmac_bus_input(w->bus, device, name, value, reply, replylen);
 	pump(w);
