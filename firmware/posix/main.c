@@ -168,7 +168,87 @@ static int read_commands(struct board_set *s)
 	return 0;
 }
 
-int main(int argc, char **argv)
+/* What the options ask for. */
+struct options {
+	struct boards_config cfg;
+	const char *bus, *iface;
+	struct vmac_bus_spec spec; /* from bus and iface */
+	long cpu, late_us;         /* cpu -1: any */
+	int commands, quiet;
+};
+
+/* The running process: its boards, its sockets and what poll watches
+ * (the board socket, on UDP the discovery listener, with --commands stdin). */
+struct runner {
+	struct board_set set;
+	struct vmac_transport transport;
+	int transport_open, listen_fd;
+	struct pollfd pfds[3];
+	int nsock, nfds, commands;
+	struct vmac_packet *pkts;
+};
+
+/* One option (getopt_long's opt and optarg) into o. Returns -1 to go on,
+ * or the exit code: 0 after --help, 2 for a wrong value. */
+static int take_option(struct options *o, int opt, const char *arg)
+{
+	long number;
+	switch (opt) {
+	case 'p':
+		if (vmac_plant_kind_from_name(arg, &o->cfg.kind) != 0) {
+			fprintf(stderr, "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic)\n", arg);
+			return 2;
+		}
+		return -1;
+	case 'n': o->cfg.name = arg; return -1;
+	case 'd': o->cfg.driver = arg; return -1;
+	case 'b': o->bus = arg; return -1;
+	case 'i': o->iface = arg; return -1;
+	case 'c': return parse_number("--count", arg, 1, BOARDS_MAX, 10, &o->cfg.count) != 0 ? 2 : -1;
+	case 'M': return parse_number("--major", arg, 0, 0xFFFFFFFFL, 0, &o->cfg.major) != 0 ? 2 : -1;
+	case 'm': return parse_number("--minor", arg, 0, 0xFFFFFFFFL, 0, &o->cfg.minor) != 0 ? 2 : -1;
+	case 'P':
+		if (parse_number("--protocol", arg, VMAC_PROTO_VERSION_MIN, VMAC_PROTO_VERSION, 10, &number) != 0)
+			return 2;
+		o->cfg.protocol = (uint8_t)number;
+		return -1;
+	case 'u': return parse_number("--cpu", arg, 0, CPU_SETSIZE - 1, 10, &o->cpu) != 0 ? 2 : -1;
+	case 'l': return parse_number("--late-us", arg, 0, LATE_US_MAX, 10, &o->late_us) != 0 ? 2 : -1;
+	case 'C': o->commands = 1; return -1;
+	case 'q': o->quiet = 1; return -1;
+	case 'h': usage(stdout); return 0;
+	default: usage(stderr); return 2;
+	}
+}
+
+/* The bus and the interface: the spec the transport opens. Returns -1 to
+ * go on, or 2 with what is wrong printed. */
+static int take_bus(struct options *o)
+{
+	if (vmac_bus_spec_parse(o->bus, &o->spec) != 0) {
+		fprintf(stderr,
+		        "vmac-board: --bus wants MULTICAST_GROUP:PORT (e.g. " DEFAULT_BUS ") or eth:IFACE (e.g. "
+		        "eth:eth0), got '%s'\n",
+		        o->bus);
+		return 2;
+	}
+	o->cfg.eth = o->spec.kind == VMAC_TRANSPORT_ETH;
+	if (o->cfg.eth && o->iface) {
+		fprintf(stderr, "vmac-board: --iface is for a UDP bus; on raw Ethernet the interface is the one "
+		                "in --bus eth:IFACE\n");
+		return 2;
+	}
+	if (!o->iface)
+		o->iface = "127.0.0.1";
+	if (!o->cfg.eth && inet_pton(AF_INET, o->iface, &o->spec.iface) != 1) {
+		fprintf(stderr, "vmac-board: --iface wants an IPv4 address, got '%s'\n", o->iface);
+		return 2;
+	}
+	return -1;
+}
+
+/* The command line into o. Returns -1 to go on, or the exit code. */
+static int parse_options(int argc, char **argv, struct options *o)
 {
 	static const struct option opts[] = {{"plant", required_argument, 0, 'p'},
 	                                     {"name", required_argument, 0, 'n'},
@@ -186,203 +266,185 @@ int main(int argc, char **argv)
 	                                     {"help", no_argument, 0, 'h'},
 	                                     {0, 0, 0, 0}};
 	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0};
-	const char *bus = DEFAULT_BUS, *iface = NULL;
-	long cpu = -1, late_us = DEFAULT_LATE_US, number;
-	int commands = 0, quiet = 0, opt, listen_fd = -1, nsock = 1, nfds, k, rc = 0;
-	struct vmac_bus_spec spec;
-	struct vmac_transport transport;
-	struct board_set set;
-	struct pollfd pfds[3];
-	struct vmac_packet *pkts;
-	struct sigaction sa;
-	char err[256];
-	int64_t last_housekeep_ns, last_sync_ns, last_error_ns = 0;
+	int opt, rc;
 
-	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1) {
-		switch (opt) {
-		case 'p':
-			if (vmac_plant_kind_from_name(optarg, &cfg.kind) != 0) {
-				fprintf(stderr,
-				        "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic)\n",
-				        optarg);
-				return 2;
-			}
-			break;
-		case 'n': cfg.name = optarg; break;
-		case 'd': cfg.driver = optarg; break;
-		case 'b': bus = optarg; break;
-		case 'i': iface = optarg; break;
-		case 'c':
-			if (parse_number("--count", optarg, 1, BOARDS_MAX, 10, &cfg.count) != 0)
-				return 2;
-			break;
-		case 'M':
-			if (parse_number("--major", optarg, 0, 0xFFFFFFFFL, 0, &cfg.major) != 0)
-				return 2;
-			break;
-		case 'm':
-			if (parse_number("--minor", optarg, 0, 0xFFFFFFFFL, 0, &cfg.minor) != 0)
-				return 2;
-			break;
-		case 'P':
-			if (parse_number("--protocol", optarg, VMAC_PROTO_VERSION_MIN, VMAC_PROTO_VERSION, 10,
-			                 &number) != 0)
-				return 2;
-			cfg.protocol = (uint8_t)number;
-			break;
-		case 'u':
-			if (parse_number("--cpu", optarg, 0, CPU_SETSIZE - 1, 10, &cpu) != 0)
-				return 2;
-			break;
-		case 'l':
-			if (parse_number("--late-us", optarg, 0, LATE_US_MAX, 10, &late_us) != 0)
-				return 2;
-			break;
-		case 'C': commands = 1; break;
-		case 'q': quiet = 1; break;
-		case 'h': usage(stdout); return 0;
-		default: usage(stderr); return 2;
-		}
-	}
+	memset(o, 0, sizeof(*o));
+	o->cfg = cfg;
+	o->bus = DEFAULT_BUS;
+	o->cpu = -1;
+	o->late_us = DEFAULT_LATE_US;
+	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1)
+		if ((rc = take_option(o, opt, optarg)) >= 0)
+			return rc;
 	if (optind < argc) {
 		fprintf(stderr, "vmac-board: unexpected argument '%s'\n", argv[optind]);
 		return 2;
 	}
-	if (!cfg.name)
-		cfg.name = vmac_plant_name(cfg.kind);
-	if (!cfg.driver)
-		cfg.driver = vmac_plant_default_driver(cfg.kind);
-	memset(&spec, 0, sizeof(spec));
-	if (vmac_bus_spec_parse(bus, &spec) != 0) {
-		fprintf(stderr,
-		        "vmac-board: --bus wants MULTICAST_GROUP:PORT (e.g. " DEFAULT_BUS ") or eth:IFACE (e.g. "
-		        "eth:eth0), got '%s'\n",
-		        bus);
-		return 2;
-	}
-	cfg.eth = spec.kind == VMAC_TRANSPORT_ETH;
-	if (cfg.eth && iface) {
-		fprintf(stderr, "vmac-board: --iface is for a UDP bus; on raw Ethernet the interface is the one "
-		                "in --bus eth:IFACE\n");
-		return 2;
-	}
-	if (!iface)
-		iface = "127.0.0.1";
-	if (!cfg.eth && inet_pton(AF_INET, iface, &spec.iface) != 1) {
-		fprintf(stderr, "vmac-board: --iface wants an IPv4 address, got '%s'\n", iface);
-		return 2;
-	}
-	if (cpu >= 0 && (rc = pin_to_cpu(cpu)) != 0)
-		return rc;
+	if (!o->cfg.name)
+		o->cfg.name = vmac_plant_name(o->cfg.kind);
+	if (!o->cfg.driver)
+		o->cfg.driver = vmac_plant_default_driver(o->cfg.kind);
+	return take_bus(o);
+}
 
-	setvbuf(stdout, NULL, _IOLBF, 0);
-	rc = boards_init(&set, &cfg, now_ms(), err, sizeof(err));
-	if (rc != 0) {
+/* One socket for every board; on UDP the discovery listener beside it;
+ * with --commands, stdin. Returns 0, or -1 with the reason printed. */
+static int open_sockets(struct runner *r, const struct options *o)
+{
+	char err[256];
+	if (vmac_transport_open_board(&r->transport, &o->spec, err, sizeof(err)) < 0) {
 		fprintf(stderr, "vmac-board: %s\n", err);
-		return rc == -2 ? 2 : 1;
+		return -1;
 	}
-	set.quiet = quiet;
-	set.late_ns = (int64_t)late_us * 1000;
-	set.transport = &transport;
-	pkts = malloc(VMAC_TRANSPORT_BATCH * sizeof(*pkts));
-	if (!pkts) {
-		fprintf(stderr, "vmac-board: out of memory\n");
-		boards_fini(&set);
-		return 1;
-	}
-	/* One socket for every board; on UDP the discovery listener beside it. */
-	if (vmac_transport_open_board(&transport, &spec, err, sizeof(err)) < 0) {
-		fprintf(stderr, "vmac-board: %s\n", err);
-		rc = 1;
-		goto out_boards;
-	}
-	pfds[0].fd = transport.fd;
-	pfds[0].events = POLLIN;
-	if (!cfg.eth) {
-		listen_fd = vmac_transport_listen(&spec, err, sizeof(err));
-		if (listen_fd < 0) {
+	r->transport_open = 1;
+	r->pfds[0].fd = r->transport.fd;
+	r->pfds[0].events = POLLIN;
+	r->nsock = 1;
+	if (!o->cfg.eth) {
+		r->listen_fd = vmac_transport_listen(&o->spec, err, sizeof(err));
+		if (r->listen_fd < 0) {
 			fprintf(stderr, "vmac-board: %s\n", err);
-			rc = 1;
-			goto out;
+			return -1;
 		}
-		pfds[nsock].fd = listen_fd;
-		pfds[nsock].events = POLLIN;
-		nsock++;
+		r->pfds[r->nsock].fd = r->listen_fd;
+		r->pfds[r->nsock].events = POLLIN;
+		r->nsock++;
 	}
-	nfds = nsock;
-	if (commands) {
-		pfds[nfds].fd = STDIN_FILENO;
-		pfds[nfds].events = POLLIN;
-		nfds++;
+	r->nfds = r->nsock;
+	r->commands = o->commands;
+	if (o->commands) {
+		r->pfds[r->nfds].fd = STDIN_FILENO;
+		r->pfds[r->nfds].events = POLLIN;
+		r->nfds++;
 	}
+	return 0;
+}
+
+static void catch_signals(void)
+{
+	struct sigaction sa;
 	memset(&sa, 0, sizeof(sa));
 	sa.sa_handler = on_signal;
 	sigemptyset(&sa.sa_mask);
 	sigaction(SIGINT, &sa, NULL);
 	sigaction(SIGTERM, &sa, NULL);
 	signal(SIGPIPE, SIG_IGN);
-	if (!quiet)
-		print_start(&set, &cfg, bus, iface, &transport, cpu);
+}
+
+/* One batch per ready socket: a flood cannot hold off the watchdogs, and a
+ * batch's replies leave together. t is now; a receive error is printed at
+ * most once a second. */
+static void receive_batches(struct runner *r, int64_t t, int64_t *last_error_ns)
+{
+	int k;
+	for (k = 0; k < r->nsock; k++) {
+		int n;
+		if (!(r->pfds[k].revents & (POLLIN | POLLERR)))
+			continue;
+		n = vmac_transport_recv(&r->transport, r->pfds[k].fd, r->pkts, VMAC_TRANSPORT_BATCH);
+		if (n > 0) {
+			boards_dispatch(&r->set, r->pkts, n, now_ms());
+			boards_flush(&r->set);
+		} else if (n < 0 && t - *last_error_ns >= CLOCK_SYNC_NS) {
+			fprintf(stderr, "vmac-board: receive: %s\n", strerror(-n));
+			*last_error_ns = t;
+		}
+	}
+}
+
+/* The loop, until a signal. Returns 0, or 1 when poll fails. */
+static int serve(struct runner *r)
+{
+	int64_t last_housekeep_ns, last_sync_ns, last_error_ns = 0;
 
 	last_housekeep_ns = last_sync_ns = vmac_now_ns();
 	while (!stop_signal) {
 		int64_t t = vmac_now_ns(), wait_ns = last_housekeep_ns + HOUSEKEEP_NS - t;
-		int ready = poll(pfds, (nfds_t)nfds, wait_ns <= 0 ? 0 : (int)((wait_ns + 999999) / 1000000));
+		int ready = poll(r->pfds, (nfds_t)r->nfds, wait_ns <= 0 ? 0 : (int)((wait_ns + 999999) / 1000000));
 		if (ready < 0 && errno != EINTR) {
 			perror("vmac-board: poll");
-			rc = 1;
-			break;
+			return 1;
 		}
 		/* Watchdogs first: frames that queued up while the process could
 		 * not run (stopped, starved) must not revive a session that has
 		 * already timed out. */
 		t = vmac_now_ns();
 		if (t - last_housekeep_ns >= HOUSEKEEP_NS) {
-			boards_housekeep(&set, (uint64_t)(t / 1000000));
+			boards_housekeep(&r->set, (uint64_t)(t / 1000000));
 			last_housekeep_ns = t;
 			if (t - last_sync_ns >= CLOCK_SYNC_NS) {
-				vmac_transport_clock_sync(&transport);
+				vmac_transport_clock_sync(&r->transport);
 				last_sync_ns = t;
 			}
 		}
 		if (ready <= 0)
 			continue;
-		/* One batch per socket per wake-up: a flood cannot hold off the
-		 * watchdogs, and a batch's replies leave together. */
-		for (k = 0; k < nsock; k++) {
-			int n;
-			if (!(pfds[k].revents & (POLLIN | POLLERR)))
-				continue;
-			n = vmac_transport_recv(&transport, pfds[k].fd, pkts, VMAC_TRANSPORT_BATCH);
-			if (n > 0) {
-				boards_dispatch(&set, pkts, n, now_ms());
-				boards_flush(&set);
-			} else if (n < 0 && t - last_error_ns >= CLOCK_SYNC_NS) {
-				fprintf(stderr, "vmac-board: receive: %s\n", strerror(-n));
-				last_error_ns = t;
-			}
-		}
-		if (commands && (pfds[nsock].revents & (POLLIN | POLLHUP)) && read_commands(&set) != 0)
-			pfds[nsock].fd = -1; /* end of input: stop reading */
+		receive_batches(r, t, &last_error_ns);
+		if (r->commands && (r->pfds[r->nsock].revents & (POLLIN | POLLHUP)) && read_commands(&r->set) != 0)
+			r->pfds[r->nsock].fd = -1; /* end of input: stop reading */
 	}
-	for (k = 0; k < set.count; k++) {
-		vmac_board_safe(&set.boards[k].board);
-		boards_report(&set, k);
+	return 0;
+}
+
+/* The exit: every board safe and reported, then the process's counts. */
+static void finish(struct runner *r, long late_us)
+{
+	struct board_set *s = &r->set;
+	int32_t k;
+	for (k = 0; k < s->count; k++) {
+		vmac_board_safe(&s->boards[k].board);
+		boards_report(s, k);
 	}
-	if (set.late_ns > 0)
-		printf("vmac-board: %" PRIu64 " late replies (board-side delay over %ld us)\n", set.late_replies,
+	if (s->late_ns > 0)
+		printf("vmac-board: %" PRIu64 " late replies (board-side delay over %ld us)\n", s->late_replies,
 		       late_us);
-	if (set.unroutable > 0)
-		printf("vmac-board: %" PRIu64 " frames for no board of this process, ignored\n", set.unroutable);
-	if (set.unsent > 0)
-		printf("vmac-board: %" PRIu64 " replies the kernel did not take\n", set.unsent);
+	if (s->unroutable > 0)
+		printf("vmac-board: %" PRIu64 " frames for no board of this process, ignored\n", s->unroutable);
+	if (s->unsent > 0)
+		printf("vmac-board: %" PRIu64 " replies the kernel did not take\n", s->unsent);
 	printf("vmac-board: stopped by signal %d, all outputs off\n", (int)stop_signal);
-out:
-	if (listen_fd >= 0)
-		close(listen_fd);
-	vmac_transport_close(&transport);
-out_boards:
-	free(pkts);
-	boards_fini(&set);
+}
+
+int main(int argc, char **argv)
+{
+	struct options o;
+	struct runner r;
+	char err[256];
+	int rc = parse_options(argc, argv, &o);
+
+	if (rc >= 0)
+		return rc;
+	if (o.cpu >= 0 && (rc = pin_to_cpu(o.cpu)) != 0)
+		return rc;
+	setvbuf(stdout, NULL, _IOLBF, 0);
+	memset(&r, 0, sizeof(r));
+	r.listen_fd = -1;
+	rc = boards_init(&r.set, &o.cfg, now_ms(), err, sizeof(err));
+	if (rc != 0) {
+		fprintf(stderr, "vmac-board: %s\n", err);
+		return rc == -2 ? 2 : 1;
+	}
+	r.set.quiet = o.quiet;
+	r.set.late_ns = (int64_t)o.late_us * 1000;
+	r.set.transport = &r.transport;
+	r.pkts = malloc(VMAC_TRANSPORT_BATCH * sizeof(*r.pkts));
+	if (!r.pkts) {
+		fprintf(stderr, "vmac-board: out of memory\n");
+		rc = 1;
+	} else if (open_sockets(&r, &o) != 0) {
+		rc = 1;
+	} else {
+		catch_signals();
+		if (!o.quiet)
+			print_start(&r.set, &o.cfg, o.bus, o.iface, &r.transport, o.cpu);
+		rc = serve(&r);
+		finish(&r, o.late_us);
+	}
+	if (r.listen_fd >= 0)
+		close(r.listen_fd);
+	if (r.transport_open)
+		vmac_transport_close(&r.transport);
+	free(r.pkts);
+	boards_fini(&r.set);
 	return rc;
 }
