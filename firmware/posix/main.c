@@ -2,7 +2,7 @@
  * boards, each with its own simulated plant, in one process on one socket
  * (UDP: plus the discovery listener); the board logic itself is
  * firmware/board.c, untouched by any OS. This file: options, set-up, the
- * loop and the exit; boards.c and dispatch.c do the rest. */
+ * loop and the exit; boards.c, dispatch.c and realtime.c do the rest. */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <getopt.h>
@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "boards.h"
+#include "realtime.h"
 
 /* The watchdogs, the plants and the printed lines are looked at this often
  * (and no more often, however many frames arrive): resolution enough for
@@ -60,6 +61,8 @@ static void usage(FILE *f)
 	           "                    (e.g. 'lights-1 toggle1 1', 'washer-1 door 0')\n"
 	           "  --quiet           print only state changes other than \"known\", safety events\n"
 	           "                    and late replies\n"
+	           "  --no-realtime     do not ask for SCHED_FIFO and locked memory (asked for by\n"
+	           "                    default; refused, one line on stderr and normal scheduling)\n"
 	           "  --help            this text\n\n"
 	           "Prints one line per state change and output change on stdout. On SIGINT or\n"
 	           "SIGTERM every board turns its outputs off before the process exits.\n");
@@ -174,7 +177,7 @@ struct options {
 	const char *bus, *iface;
 	struct vmac_bus_spec spec; /* from bus and iface */
 	long cpu, late_us;         /* cpu -1: any */
-	int commands, quiet;
+	int commands, quiet, realtime;
 };
 
 /* The running process: its boards, its sockets and what poll watches
@@ -216,6 +219,7 @@ static int take_option(struct options *o, int opt, const char *arg)
 	case 'l': return parse_number("--late-us", arg, 0, LATE_US_MAX, 10, &o->late_us) != 0 ? 2 : -1;
 	case 'C': o->commands = 1; return -1;
 	case 'q': o->quiet = 1; return -1;
+	case 'R': o->realtime = 0; return -1;
 	case 'h': usage(stdout); return 0;
 	default: usage(stderr); return 2;
 	}
@@ -250,21 +254,15 @@ static int take_bus(struct options *o)
 /* The command line into o. Returns -1 to go on, or the exit code. */
 static int parse_options(int argc, char **argv, struct options *o)
 {
-	static const struct option opts[] = {{"plant", required_argument, 0, 'p'},
-	                                     {"name", required_argument, 0, 'n'},
-	                                     {"driver", required_argument, 0, 'd'},
-	                                     {"bus", required_argument, 0, 'b'},
-	                                     {"iface", required_argument, 0, 'i'},
-	                                     {"count", required_argument, 0, 'c'},
-	                                     {"major", required_argument, 0, 'M'},
-	                                     {"minor", required_argument, 0, 'm'},
-	                                     {"protocol", required_argument, 0, 'P'},
-	                                     {"cpu", required_argument, 0, 'u'},
-	                                     {"late-us", required_argument, 0, 'l'},
-	                                     {"commands", no_argument, 0, 'C'},
-	                                     {"quiet", no_argument, 0, 'q'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {0, 0, 0, 0}};
+	static const struct option opts[] = {
+	    {"plant", required_argument, 0, 'p'},    {"name", required_argument, 0, 'n'},
+	    {"driver", required_argument, 0, 'd'},   {"bus", required_argument, 0, 'b'},
+	    {"iface", required_argument, 0, 'i'},    {"count", required_argument, 0, 'c'},
+	    {"major", required_argument, 0, 'M'},    {"minor", required_argument, 0, 'm'},
+	    {"protocol", required_argument, 0, 'P'}, {"cpu", required_argument, 0, 'u'},
+	    {"late-us", required_argument, 0, 'l'},  {"commands", no_argument, 0, 'C'},
+	    {"quiet", no_argument, 0, 'q'},          {"no-realtime", no_argument, 0, 'R'},
+	    {"help", no_argument, 0, 'h'},           {0, 0, 0, 0}};
 	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0};
 	int opt, rc;
 
@@ -273,6 +271,7 @@ static int parse_options(int argc, char **argv, struct options *o)
 	o->bus = DEFAULT_BUS;
 	o->cpu = -1;
 	o->late_us = DEFAULT_LATE_US;
+	o->realtime = 1;
 	while ((opt = getopt_long(argc, argv, "h", opts, NULL)) != -1)
 		if ((rc = take_option(o, opt, optarg)) >= 0)
 			return rc;
@@ -435,6 +434,8 @@ int main(int argc, char **argv)
 		rc = 1;
 	} else {
 		catch_signals();
+		if (o.realtime)
+			boards_try_realtime();
 		if (!o.quiet)
 			print_start(&r.set, &o.cfg, o.bus, o.iface, &r.transport, o.cpu);
 		rc = serve(&r);
