@@ -3,6 +3,7 @@
  * step, the lines printed for people and tests, and operator commands. */
 #include "boards.h"
 
+#include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -170,11 +171,18 @@ void boards_track(struct board_set *s, int32_t i)
 	}
 }
 
+/* The trip line carries the board's own times (CLOCK_MONOTONIC ms, the
+ * clock vmacd and a test's harness read too): when the last frame came and
+ * when the outputs went off, so a test judges the watchdog by them, not by
+ * when it happened to read the line. */
 void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms)
 {
 	struct vmac_board *b = &s->boards[i].board;
+	uint64_t last_ms = b->last_valid_ms;
 	if (vmac_board_poll(b, now_ms))
-		printf("%s: watchdog: no frame for %u ms, outputs off\n", b->id.board, (unsigned)b->watchdog_ms);
+		printf("%s: watchdog: no frame for %u ms, outputs off; last frame at %" PRIu64 " ms, off at %" PRIu64
+		       " ms\n",
+		       b->id.board, (unsigned)b->watchdog_ms, last_ms, now_ms);
 	boards_track(s, i);
 }
 

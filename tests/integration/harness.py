@@ -337,6 +337,32 @@ def undisturbed(names):
     return check
 
 
+class Trip:
+    """A board's watchdog trip as vmac-board printed it: the period the host
+    set and the board's own times (CLOCK_MONOTONIC, the clock of
+    time.monotonic() on Linux) of its last frame and of its outputs going
+    off, in seconds (period_s, ...) and as printed, in whole milliseconds
+    (period_ms, ...); line is the Line it came in."""
+
+    def __init__(self, line):
+        m = re.search(r": watchdog: no frame for (\d+) ms, outputs off; last frame at (\d+) ms, off at (\d+) ms$",
+                      line.text)
+        assert m, "a watchdog line without the board's times: %r" % line.text
+        self.period_ms, self.last_frame_ms, self.off_ms = (int(g) for g in m.groups())
+        self.period_s, self.last_frame_s, self.off_s = (int(g) / 1000.0 for g in m.groups())
+        self.line = line
+
+
+def watchdog_trip(board, name, since, timeout_s=30):
+    """The next watchdog trip board prints for its board name at or after
+    line since: a Trip. Judge it by trip.off_s, the moment the board turned
+    the outputs off, not by when the harness read the line (a busy machine
+    delays that by seconds)."""
+    line = board.wait_line(r"^%s: watchdog: no frame for \d+ ms, outputs off" % re.escape(name), timeout_s,
+                           since=since, what="%s's watchdog trip" % name)
+    return Trip(line)
+
+
 KITCHEN = (("washer", "washer-1"), ("dishwasher", "dish-1"), ("lights", "lights-1"))
 KITCHEN_NAMES = [name for _, name in KITCHEN]
 

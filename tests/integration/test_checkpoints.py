@@ -13,8 +13,9 @@ from test_kitchen_cycles import DOOR_LEVEL_L, DOOR_LOCKED_BIT, LOCK_BIT, door_gu
 from test_recovery import (CLEANUP_STEPS, RESTART_S, SHORT_LOCK_RELEASE_S, TUB_EMPTY_BIT, assert_safe_board, crash,
                            level_l, recovery_host, start_programme, var, washer, washer_board)
 
-# The board's watchdog line may reach the harness late while other tests
-# load the machine; the crash test measures it alone.
+# Judged by the board's own clock; a board that cannot have real-time
+# scheduling may still be held off the CPU while other tests load the
+# machine. The crash test measures it alone, tightly.
 LATE_S = 2.0
 
 
