@@ -28,6 +28,14 @@ from harness import TIMING, Skip, undisturbed
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONFIG_SCRIPT = os.path.join(HERE, "..", "..", "scripts", "qemu-board-config.py")
 BANNER = r"^vmac-board: 1 \S+ board on bus eth:lm3s6965"
+# For the tests that are not about timing: QEMU is an ordinary process,
+# which a busy machine holds off the CPU for a period or more now and then
+# (seen: over the harness's 80 ms deadline, so a drop at its miss_limit of
+# 1). A reply may take the device's whole period (the deadline is never
+# longer than that), and a board is dropped after 5 misses in a row: about
+# half a second without the CPU for the lights (100 ms), a second for the
+# idle washer (200 ms), both inside the boards' 1.5 s watchdog.
+RELAXED = {"reply_deadline_us": 250000, "miss_limit": 5}
 
 
 def firmware_image(t):
@@ -130,7 +138,7 @@ def test_a_qemu_washer_is_discovered_and_served(t):
     image = firmware_image(t)
     link = Link(t)
     board = qemu_board(t, image, link, "washer", "washer-1")
-    host = t.host(bus="eth:" + link.bridge)
+    host = t.host(bus="eth:" + link.bridge, settings=RELAXED)
     s = host.wait_running(["washer-1"], timeout_s=30)
     d = host.device("washer-1", s)
     assert d["driver"] == "washer", "the QEMU washer runs driver %r" % d["driver"]
@@ -138,15 +146,16 @@ def test_a_qemu_washer_is_discovered_and_served(t):
         d["service"], d["protocol"])
     assert d["address"] == board.find_lines(BANNER)[0].text.split()[-1], "the host knows it at another MAC"
     board.wait_line(r"^washer-1: state known device 0x%08x " % d["id"], 30, what="the board's session")
-    # 10 s at the driver's own period: running throughout, no miss the host caused.
+    # 10 s at the driver's own period: running throughout, no miss the host
+    # caused (undisturbed); a late reply of QEMU's is the machine's, not the
+    # firmware's, and counts only as a period not served.
     period_us, served, t0 = d["period_us"], d["served"], time.monotonic()
     s = host.wait_status(lambda s: time.monotonic() - t0 >= 10, 30, "10 s of service", undisturbed(["washer-1"]))
     d = host.device("washer-1", s)
     assert d["period_us"] == period_us, "the period changed from %d to %d us" % (period_us, d["period_us"])
     expected = 10e6 / period_us
-    assert d["served"] - served >= 0.8 * expected, "served %d times in 10 s at a period of %d us (expected %d)" % (
-        d["served"] - served, period_us, expected)
-    assert d["misses"] == 0, "the QEMU washer missed %d replies" % d["misses"]
+    assert d["served"] - served >= 0.8 * expected, "served %d times in 10 s at a period of %d us (expected %d; " \
+        "%d misses)" % (d["served"] - served, period_us, expected, d["misses"])
     # The washer's sensors as the plant has them at rest: door closed, tub empty, 20 C.
     assert d["inputs"]["digital"][0] and d["inputs"]["digital"][2], "door closed and tub empty not read: %r" % (
         d["inputs"],)
@@ -166,7 +175,7 @@ def test_the_wall_switch_of_a_qemu_lights_board_reaches_the_driver(t):
     image = firmware_image(t)
     link = Link(t)
     board = qemu_board(t, image, link, "lights", "lights-1")
-    host = t.host(bus="eth:" + link.bridge)
+    host = t.host(bus="eth:" + link.bridge, settings=RELAXED)
     host.wait_running(["lights-1"], timeout_s=30)
     first_tick(host)
     mark = board.mark()
