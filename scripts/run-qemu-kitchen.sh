@@ -17,7 +17,9 @@
 # device names, default vmq: bridge vmqbr, taps vmqtap1..), VMAC_QEMU_DEADLINE_US
 # (the host's reply deadline, default 20000: an emulated board usually
 # answers well within vmacd's default 4 ms, but on a small machine running
-# three of them QEMU now and then takes longer).
+# three of them QEMU now and then takes longer), VMAC_SET (more vmacd
+# settings, KEY=VALUE items separated by spaces, each passed as --set after
+# the script's own, so they win, as for scripts/run-kitchen.sh).
 set -u
 bin=${1:-build/bin}
 image=${2:-build/firmware/vmac-board-lm3s6965.elf}
@@ -29,6 +31,20 @@ net=${VMAC_QEMU_NET:-vmq}
 deadline_us=${VMAC_QEMU_DEADLINE_US:-20000}
 bridge=${net}br
 here=$(dirname "$0")
+
+settings=(--set "driver.washer.param.time_scale=$scale" --set "driver.dishwasher.param.time_scale=$scale")
+read -r -a extra <<<"${VMAC_SET:-}"
+for item in ${extra[@]+"${extra[@]}"}; do
+	case "$item" in
+	reply_deadline_us=*) deadline_us=${item#*=} ;;
+	?*=*) settings+=(--set "$item") ;;
+	*)
+		echo "run-qemu-kitchen: VMAC_SET takes KEY=VALUE items separated by spaces (docs/HOST.md lists the keys), got '$item'" >&2
+		exit 2
+		;;
+	esac
+done
+settings+=(--set "reply_deadline_us=$deadline_us")
 
 say() { echo "run-qemu-kitchen: $*"; }
 die() {
@@ -141,8 +157,7 @@ for spec in $boards; do
 	uart_fds+=("$fd")
 done
 
-"$bin/vmacd" --bus "eth:$bridge" --http "$http" --state "$state" --set "reply_deadline_us=$deadline_us" \
-	--set "driver.washer.param.time_scale=$scale" --set "driver.dishwasher.param.time_scale=$scale" &
+"$bin/vmacd" --bus "eth:$bridge" --http "$http" --state "$state" "${settings[@]}" &
 host_pid=$!
 
 cat <<EOT
@@ -154,7 +169,7 @@ The QEMU kitchen is running: ${names[*]} on emulated LM3S6965 boards, bridge $br
     lights-1 toggle1 1        flip the kitchen wall switch
     washer-1 start 1          press the washer's start button
     washer-1 status           the board's frame counters and stack use
-  programmes run at time scale $scale (VMAC_TIME_SCALE), reply deadline $deadline_us us (VMAC_QEMU_DEADLINE_US)
+  programmes run at time scale $scale (VMAC_TIME_SCALE), reply deadline $deadline_us us (VMAC_QEMU_DEADLINE_US)${VMAC_SET:+ (VMAC_SET: $VMAC_SET)}
   Ctrl-C stops the host, then the boards, and removes the devices.
 
 EOT
