@@ -1,5 +1,5 @@
 /* Access tokens: made, listed, revoked and checked, only their hash kept
- * (docs/API.md, "Authentication"); part of the store (store.h). */
+ * (docs/API.md, "Access"); part of the store (store.h). */
 #include "store_internal.h"
 
 #include <pthread.h>

@@ -79,7 +79,7 @@ class Junk:
             return patch(junk_reply(UPDATE, inputs()), "channel", self.rnd.randint(0x01, 0xFE)), "op"
         if choice == 2:  # DISCOVER is never a reply; no other system op exists
             return junk_reply(self.rnd.choice([DISCOVER, 0x02, 0x11, 0x7F]), b"", channel=SYS, device_id=0), "op"
-        return patch(junk_reply(UPDATE, inputs()), "flags", self.rnd.choice([0x02, 0x03, 0x80, 0xFF])), "op"
+        return patch(junk_reply(UPDATE, inputs()), "flags", self.rnd.choice([0x04, 0x05, 0x80, 0xFD])), "op"
 
     def k_request(self):
         choice = self.rnd.randint(0, 3)
