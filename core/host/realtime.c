@@ -13,6 +13,14 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+/* AddressSanitizer's shadow memory cannot be locked: GCC says it is on
+ * with __SANITIZE_ADDRESS__, clang with __has_feature. */
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define VMAC_ASAN 1
+#endif
+#endif
+
 void bus_try_realtime(struct vmac_bus *bus)
 {
 	struct sched_param sp;
@@ -27,7 +35,7 @@ void bus_try_realtime(struct vmac_bus *bus)
 		what = "SCHED_FIFO";
 	else
 		bus->realtime = 1;
-#if !defined(__SANITIZE_ADDRESS__)
+#if !defined(__SANITIZE_ADDRESS__) && !defined(VMAC_ASAN)
 	if (!what && mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
 		rc = errno;
 		what = "mlockall";
