@@ -120,7 +120,7 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 		}
 		vmac_plant_init(&pb->plant, cfg->kind);
 		vmac_board_init(&pb->board, &id, &plant_io, &pb->plant, now_ms);
-		pb->reported_state = pb->board.state;
+		vmac_report_init(&pb->report, &pb->board, &pb->plant, 0);
 		pb->routed_offset = VMAC_OFFSET_NONE;
 		memcpy(pb->mac, s->mac_prefix, sizeof(s->mac_prefix));
 		pb->mac[4] = (uint8_t)((i + 1) >> 8);
@@ -179,37 +179,21 @@ void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms)
 {
 	struct vmac_board *b = &s->boards[i].board;
 	uint64_t last_ms = b->last_valid_ms;
-	if (vmac_board_poll(b, now_ms))
-		printf("%s: watchdog: no frame for %u ms, outputs off; last frame at %" PRIu64 " ms, off at %" PRIu64
-		       " ms\n",
-		       b->id.board, (unsigned)b->watchdog_ms, last_ms, now_ms);
+	char line[VMAC_REPORT_LINE];
+	if (vmac_board_poll(b, now_ms)) {
+		vmac_report_watchdog(b, line, sizeof(line));
+		printf("%s; last frame at %" PRIu64 " ms, off at %" PRIu64 " ms\n", line, last_ms, now_ms);
+	}
 	boards_track(s, i);
 }
 
 void boards_report(struct board_set *s, int32_t i)
 {
 	struct posix_board *pb = &s->boards[i];
-	const struct vmac_board *b = &pb->board;
-	if (b->state != pb->reported_state) {
-		if (!s->quiet || b->state != VMAC_BOARD_KNOWN)
-			printf("%s: state %s device 0x%08x watchdog %u ms\n", b->id.board,
-			       vmac_board_state_name(b->state), (unsigned)b->device_id, (unsigned)b->watchdog_ms);
-		pb->reported_state = b->state;
-	}
-	if (b->outputs.digital != pb->reported.digital || b->outputs.pwm != pb->reported.pwm) {
-		if (!s->quiet)
-			printf("%s: outputs digital=0x%02x pwm=%d\n", b->id.board, (unsigned)b->outputs.digital,
-			       (int)b->outputs.pwm);
-		pb->reported = b->outputs;
-	}
-	if (vmac_plant_unsafe_episodes(&pb->plant) != pb->reported_unsafe) {
-		/* A safety event: printed even with --quiet. Episodes entered
-		 * within one housekeeping turn share the line of the last. */
-		char text[160];
-		vmac_plant_unsafe_text(&pb->plant, b->id.board, text, sizeof(text));
-		printf("%s\n", text);
-		pb->reported_unsafe = vmac_plant_unsafe_episodes(&pb->plant);
-	}
+	char line[VMAC_REPORT_LINE];
+	pb->report.quiet = s->quiet; /* --quiet is set after the boards are made */
+	while (vmac_report_next(&pb->report, &pb->board, &pb->plant, line, sizeof(line)))
+		printf("%s\n", line);
 }
 
 void boards_housekeep(struct board_set *s, uint64_t now_ms)

@@ -12,6 +12,7 @@
 #include "../../core/transport/transport.h"
 #include "../board.h"
 #include "../plant.h"
+#include "../report.h"
 
 #define BOARD_NONE (-1)        /* an empty entry of a routing table */
 #define BOARDS_MAX 65535       /* a board's number (1-based) is the last 16 bits of its MAC */
@@ -21,12 +22,10 @@
 struct posix_board {
 	struct vmac_board board;
 	struct vmac_plant plant;
-	struct vmac_outputs reported;         /* last outputs printed */
-	enum vmac_board_state reported_state; /* last state printed */
-	uint16_t routed_offset;               /* the by_offset entry held for it; VMAC_OFFSET_NONE */
-	uint32_t routed_device_id;            /* the session by_session points to it for; 0 none */
-	uint8_t mac[6];                       /* Ethernet: the source MAC of its replies */
-	uint32_t reported_unsafe;             /* the plant's unsafe episodes already printed */
+	struct vmac_report report; /* what its log last said (firmware/report.c) */
+	uint16_t routed_offset;    /* the by_offset entry held for it; VMAC_OFFSET_NONE */
+	uint32_t routed_device_id; /* the session by_session points to it for; 0 none */
+	uint8_t mac[6];            /* Ethernet: the source MAC of its replies */
 };
 
 /* What every board of the process is made from (main.c's options). */

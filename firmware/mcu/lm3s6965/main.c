@@ -19,9 +19,7 @@ static struct vmac_plant plant;
 static struct vmac_board board;
 static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
 
-static struct vmac_outputs reported; /* the outputs the log last named */
-static enum vmac_board_state reported_state;
-static uint32_t reported_unsafe; /* the plant's unsafe episodes the log already named */
+static struct vmac_report reported; /* what the log last said (firmware/report.c) */
 static uint64_t last_step_ms, last_housekeep_ms;
 
 static void put_name(void)
@@ -33,47 +31,21 @@ static void put_name(void)
 /* The state, output and unsafe lines of vmac-board, for what changed since the last. */
 static void report(void)
 {
-	if (board.state != reported_state) {
-		if (!settings.quiet || board.state != VMAC_BOARD_KNOWN) {
-			put_name();
-			vmac_mcu_uart_puts("state ");
-			vmac_mcu_uart_puts(vmac_board_state_name(board.state));
-			vmac_mcu_uart_puts(" device 0x");
-			vmac_mcu_uart_puthex(board.device_id, 8);
-			vmac_mcu_uart_puts(" watchdog ");
-			vmac_mcu_uart_putu(board.watchdog_ms);
-			vmac_mcu_uart_puts(" ms\n");
-		}
-		reported_state = board.state;
-	}
-	if (board.outputs.digital != reported.digital || board.outputs.pwm != reported.pwm) {
-		if (!settings.quiet) {
-			put_name();
-			vmac_mcu_uart_puts("outputs digital=0x");
-			vmac_mcu_uart_puthex(board.outputs.digital, 2);
-			vmac_mcu_uart_puts(" pwm=");
-			vmac_mcu_uart_putd(board.outputs.pwm);
-			vmac_mcu_uart_puts("\n");
-		}
-		reported = board.outputs;
-	}
-	if (vmac_plant_unsafe_episodes(&plant) != reported_unsafe) {
-		/* A safety event: logged even when quiet. */
-		char text[128];
-		vmac_plant_unsafe_text(&plant, board.id.board, text, sizeof(text));
-		vmac_mcu_uart_puts(text);
+	char line[VMAC_REPORT_LINE];
+	reported.quiet = settings.quiet;
+	while (vmac_report_next(&reported, &board, &plant, line, sizeof(line))) {
+		vmac_mcu_uart_puts(line);
 		vmac_mcu_uart_puts("\n");
-		reported_unsafe = vmac_plant_unsafe_episodes(&plant);
 	}
 }
 
 static void poll_watchdog(uint64_t now_ms)
 {
 	if (vmac_board_poll(&board, now_ms)) {
-		put_name();
-		vmac_mcu_uart_puts("watchdog: no frame for ");
-		vmac_mcu_uart_putu(board.watchdog_ms);
-		vmac_mcu_uart_puts(" ms, outputs off\n");
+		char line[VMAC_REPORT_LINE];
+		vmac_report_watchdog(&board, line, sizeof(line));
+		vmac_mcu_uart_puts(line);
+		vmac_mcu_uart_puts("\n");
 	}
 }
 
@@ -273,7 +245,7 @@ int main(void)
 	now_ms = vmac_mcu_now_ms();
 	vmac_plant_init(&plant, settings.kind);
 	vmac_board_init(&board, &settings.id, &plant_io, &plant, now_ms);
-	reported_state = board.state;
+	vmac_report_init(&reported, &board, &plant, settings.quiet);
 	last_step_ms = last_housekeep_ms = now_ms;
 	vmac_mcu_enet_init(settings.mac);
 	print_start();

@@ -10,6 +10,7 @@
 
 #include "../../board.h"
 #include "../../plant.h"
+#include "../../report.h"
 #include "config.h"
 
 /* ---- clock.c ---- */
@@ -28,7 +29,6 @@ void vmac_mcu_uart_init(void);
  * line never holds up a reply. When the queue is full, waits for room. */
 void vmac_mcu_uart_puts(const char *s);
 void vmac_mcu_uart_putu(uint32_t value);               /* decimal */
-void vmac_mcu_uart_putd(int32_t value);                /* signed decimal */
 void vmac_mcu_uart_puthex(uint32_t value, int digits); /* digits lowercase hex digits, no 0x */
 void vmac_mcu_uart_putmac(const uint8_t mac[6]);       /* 02:12:34:56:00:01 */
 /* Send what is queued while the hardware FIFO has room; never waits. */

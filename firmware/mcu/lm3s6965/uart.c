@@ -67,16 +67,6 @@ void vmac_mcu_uart_putu(uint32_t value)
 		put_char(digits[--n]);
 }
 
-void vmac_mcu_uart_putd(int32_t value)
-{
-	if (value < 0) {
-		put_char('-');
-		vmac_mcu_uart_putu(0u - (uint32_t)value);
-	} else {
-		vmac_mcu_uart_putu((uint32_t)value);
-	}
-}
-
 void vmac_mcu_uart_puthex(uint32_t value, int digits)
 {
 	while (digits-- > 0)

@@ -1,0 +1,39 @@
+/* The board's log lines (docs/BOARD.md, "What a board prints"), made in one
+ * place for vmac-board (firmware/posix/) and the firmware on a
+ * microcontroller (firmware/mcu/): what changed since the last report (its
+ * state, its outputs, the plant's unsafe episodes) and a watchdog trip,
+ * each one line of text that people and the tests read. Portable C99,
+ * no printf, no heap. */
+#ifndef VMAC_REPORT_H
+#define VMAC_REPORT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "board.h"
+#include "plant.h"
+
+#define VMAC_REPORT_LINE 160 /* room for any line, its NUL included */
+
+/* What the log last said of one board. */
+struct vmac_report {
+	enum vmac_board_state state;
+	struct vmac_outputs outputs;
+	uint32_t unsafe; /* the plant's unsafe episodes already named */
+	int quiet;       /* only what matters for safety: leaving a session, unsafe episodes */
+};
+
+/* Start from what board b and plant p are now: nothing to say yet. */
+void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant *p, int quiet);
+
+/* The next line about what changed since the last one said, into line
+ * (len bytes, VMAC_REPORT_LINE is enough): 1, or 0 when nothing more has
+ * changed. Call until 0. */
+int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant *p, char *line,
+                     size_t len);
+
+/* The line of a watchdog trip ("NAME: watchdog: no frame for N ms, outputs
+ * off"); the caller may add the times its clock gives. */
+void vmac_report_watchdog(const struct vmac_board *b, char *line, size_t len);
+
+#endif
