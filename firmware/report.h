@@ -1,4 +1,4 @@
-/* The board's log lines (docs/BOARD.md, "What a board prints"), made in one
+/* The board's log lines (docs/BOARD.md, "What it prints"), made in one
  * place for vmac-board (firmware/posix/) and the firmware on a
  * microcontroller (firmware/mcu/): what changed since the last report (its
  * state, its outputs, the plant's unsafe episodes) and a watchdog trip,
