@@ -97,64 +97,22 @@ static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned
 	return 0;
 }
 
-/* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
-enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
-{
-	const char *driver = k->route.name;
-	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
-	struct vmac_deploy_result *r;
-	double probation_s;
-	unsigned probation_ms;
-	char by[VMAC_TOKEN_ID_LEN + 1];
-	enum MHD_Result ret;
-	if (k->too_big)
-		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("a driver file is at most 1 MiB"));
-	if (!k->len)
-		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		                  http_error_body("the request body must be the driver's source (Lua text)"));
-	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
-		return ret;
-	r = malloc(sizeof(*r));
-	if (!r)
-		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
-	token_id(c, by, sizeof(by));
-	vmac_deploy(&x, driver, k->body, k->len, by, probation_ms, r);
-	ret = deploy_reply(c, driver, r, probation_s);
-	free(r);
-	return ret;
-}
-
-/* POST /api/drivers/NAME/activate?id=N[&probation=S] */
-enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
-{
-	const char *driver = k->route.name;
-	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
-	struct vmac_deploy_result *r;
-	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
-	double probation_s;
-	unsigned probation_ms;
-	char by[VMAC_TOKEN_ID_LEN + 1];
+/* What a deploy request asks: an upload (src), a version to activate (id)
+ * or a rollback, with its probation. */
+struct deploy_ask {
+	enum { ASK_UPLOAD, ASK_ACTIVATE, ASK_ROLLBACK } kind;
+	const char *src;
+	size_t len;
 	long long id;
-	enum MHD_Result ret;
-	if (http_parse_id(id_s, &id) != 0)
-		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		                  http_error_body("id must be a version's id (vmac drivers lists them)"));
-	if (probation_arg(h, c, &probation_ms, &probation_s, &ret) != 0)
-		return ret;
-	r = malloc(sizeof(*r));
-	if (!r)
-		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
-	token_id(c, by, sizeof(by));
-	vmac_deploy_activate(&x, driver, id, by, probation_ms, r);
-	ret = deploy_reply(c, driver, r, probation_s);
-	free(r);
-	return ret;
-}
+	unsigned probation_ms;
+	double probation_s;
+};
 
-/* POST /api/drivers/NAME/rollback */
-enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+/* Run a deploy request for driver and answer it (the result is large: on
+ * the heap, not the connection thread's stack). */
+static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
+                                        const struct deploy_ask *a)
 {
-	const char *driver = k->route.name;
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
 	struct vmac_deploy_result *r = malloc(sizeof(*r));
 	char by[VMAC_TOKEN_ID_LEN + 1];
@@ -162,10 +120,50 @@ enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection 
 	if (!r)
 		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
 	token_id(c, by, sizeof(by));
-	vmac_deploy_rollback(&x, driver, by, r);
-	ret = deploy_reply(c, driver, r, 0);
+	switch (a->kind) {
+	case ASK_UPLOAD: vmac_deploy(&x, driver, a->src, a->len, by, a->probation_ms, r); break;
+	case ASK_ACTIVATE: vmac_deploy_activate(&x, driver, a->id, by, a->probation_ms, r); break;
+	case ASK_ROLLBACK: vmac_deploy_rollback(&x, driver, by, r); break;
+	}
+	ret = deploy_reply(c, driver, r, a->probation_s);
 	free(r);
 	return ret;
+}
+
+/* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
+enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	struct deploy_ask a = {ASK_UPLOAD, k->body, k->len, 0, 0, 0};
+	enum MHD_Result ret;
+	if (k->too_big)
+		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("a driver file is at most 1 MiB"));
+	if (!k->len)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		                  http_error_body("the request body must be the driver's source (Lua text)"));
+	if (probation_arg(h, c, &a.probation_ms, &a.probation_s, &ret) != 0)
+		return ret;
+	return deploy_and_reply(h, c, k->route.name, &a);
+}
+
+/* POST /api/drivers/NAME/activate?id=N[&probation=S] */
+enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	struct deploy_ask a = {ASK_ACTIVATE, NULL, 0, 0, 0, 0};
+	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
+	enum MHD_Result ret;
+	if (http_parse_id(id_s, &a.id) != 0)
+		return http_reply(c, MHD_HTTP_BAD_REQUEST,
+		                  http_error_body("id must be a version's id (vmac drivers lists them)"));
+	if (probation_arg(h, c, &a.probation_ms, &a.probation_s, &ret) != 0)
+		return ret;
+	return deploy_and_reply(h, c, k->route.name, &a);
+}
+
+/* POST /api/drivers/NAME/rollback */
+enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
+{
+	struct deploy_ask a = {ASK_ROLLBACK, NULL, 0, 0, 0, 0};
+	return deploy_and_reply(h, c, k->route.name, &a);
 }
 
 /* GET /api/drivers/NAME/manifest?version=V: a loaded version's declarations. */
