@@ -259,10 +259,75 @@ static const struct vmac_cmd bench_cmd = {
     .own = bench_options,
     .run = bench_run};
 
-/* vmac test: its options are the runner's (core/vtest/runner.lua), which
- * parses them and answers --help. */
+/* vmac test's options (docs/TESTING.md), in the order of test_run's opt[]. */
+enum { T_DRIVERS, T_REPLAY, T_FILTER, T_SEED, T_LIST, T_TAP, T_JUNIT, T_TRACE, T_TIME_LIMIT, T_TIMEOUT, T_HISTORY };
+static const struct vmac_cmd_option test_options[] = {
+    {"drivers", NULL, 0, "DIR", NULL, NULL,
+     "look for NAME.lua and its programmes (cycles/NAME/) in DIR before the shipped scripts/"},
+    {"replay", NULL, 0, "FILE", NULL, NULL,
+     "replay a flight recording (vmac recording get ID > FILE) against the driver it recorded, or with "
+     "--drivers against DIR's version; say where an output first differs (docs/RECORDING.md)"},
+    {"filter", NULL, 0, "PATTERN", NULL, NULL, "run only tests whose \"file: name\" contains PATTERN (plain text)"},
+    {"seed", NULL, 0, "N", NULL, "1", "seed of the fault injector; a run is a function of it"},
+    {"list", NULL, 0, NULL, NULL, NULL, "list the tests and exit"},
+    {"tap", NULL, 0, NULL, NULL, NULL, "TAP version 13 on standard output instead of the human report"},
+    {"junit", NULL, 0, "FILE", NULL, NULL, "also write JUnit XML to FILE"},
+    {"trace", NULL, 0, "FILE", NULL, NULL, "write every board service as CSV (test,time_s,board,io,value)"},
+    {"time-limit", NULL, 0, "S", NULL, "21600", "virtual seconds a test may run (6 h)"},
+    {"timeout", NULL, 0, "S", NULL, "120",
+     "wall-clock seconds a test or a file's top level may take: catches endless loops"},
+    {"history", NULL, 0, "N", NULL, "8", "services per board shown when a test fails"},
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+/* A number option of vmac test: at least lo (whole when whole). */
+static int test_number(const struct vmac_cmd_args *a, int which, double lo, int whole, double *out)
+{
+	const char *v = a->opt[VMAC_CMD_OWN + which];
+	char *end;
+	errno = 0;
+	*out = strtod(v, &end);
+	if (errno || end == v || *end || *out < lo || (whole && *out != (double)(long)*out))
+		return vmac_cmd_usage_error(a, "--%s takes a %s >= %g, got '%s'", test_options[which].name,
+		                            whole ? "whole number" : "number", lo, v);
+	return 0;
+}
+
+static int test_run(const struct vmac_cmd_args *a)
+{
+	struct vmac_test_options o;
+	double seed, history;
+	const char *const *opt = a->opt + VMAC_CMD_OWN;
+	memset(&o, 0, sizeof(o));
+	if (test_number(a, T_SEED, 0, 1, &seed) || test_number(a, T_HISTORY, 0, 1, &history) ||
+	    test_number(a, T_TIME_LIMIT, 0.001, 0, &o.time_limit_s) ||
+	    test_number(a, T_TIMEOUT, 0.001, 0, &o.timeout_s))
+		return VMAC_CMD_USAGE;
+	o.seed = (long)seed;
+	o.history = (long)history;
+	o.drivers = opt[T_DRIVERS];
+	o.replay = opt[T_REPLAY];
+	o.filter = opt[T_FILTER];
+	o.junit = opt[T_JUNIT];
+	o.trace = opt[T_TRACE];
+	o.list = opt[T_LIST] != NULL;
+	o.tap = opt[T_TAP] != NULL;
+	o.paths = a->arg;
+	o.npaths = a->nargs;
+	return vmac_test_run(&o);
+}
+
 static const struct vmac_cmd test_cmd = {
-    .name = "test", .summary = "run driver tests against mock boards in virtual time", .run_raw = vmac_test_main};
+    .name = "test",
+    .args = "[PATH ...]",
+    .min_args = 0,
+    .max_args = -1,
+    .summary = "run driver tests against mock boards in virtual time",
+    .about = "Run driver tests (*_test.lua) against the real host core and board firmware with\n"
+             "simulated plants, in virtual time: no sockets, no sleeping, no hardware, no root.\n"
+             "With no PATH: the project's own tests under tests/ and scripts/. Exit status: 0 every\n"
+             "test passed, 1 a test failed, 2 bad usage. See docs/TESTING.md.\n",
+    .own = test_options,
+    .run = test_run};
 
 static const struct vmac_cmd *const commands[] = {&status_cmd,        &vmac_lint_cmd,       &test_cmd,
                                                   &vmac_token_cmd,    &vmac_console_cmd,    &vmac_get_cmd,

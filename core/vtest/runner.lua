@@ -7,71 +7,15 @@ local world = require "vmac.world"
 
 jit.off() -- count hooks (the runaway guard) do not fire inside JIT traces
 
-local USAGE = [[
-usage: vmac test [options] [PATH ...]
-Run driver tests (*_test.lua) against the real host core and board firmware with
-simulated plants, in virtual time: no sockets, no sleeping, no hardware, no root.
-With no PATH: the project's own tests under tests/ and scripts/.
-
-  --drivers DIR      look for NAME.lua and its programmes (cycles/NAME/) in DIR before the shipped scripts/
-  --replay FILE      replay a flight recording (vmac recording get ID > FILE) against
-                     the driver it recorded, or with --drivers against DIR's version;
-                     say where an output first differs (docs/RECORDING.md)
-  --filter PATTERN   run only tests whose "file: name" contains PATTERN (plain text)
-  --seed N           seed of the fault injector (default 1); a run is a function of it
-  --list             list the tests and exit
-  --tap              TAP version 13 on standard output instead of the human report
-  --junit FILE       also write JUnit XML to FILE
-  --trace FILE       write every board service as CSV (test,time_s,board,io,value)
-  --time-limit S     virtual seconds a test may run (default 21600 = 6 h)
-  --timeout S        wall-clock seconds a test or a file's top level may take (default 120): catches endless loops
-  --history N        services per board shown when a test fails (default 8)
-  -h, --help         this text
-Exit status: 0 every test passed, 1 a test failed, 2 bad usage.
-See docs/TESTING.md.]]
-
 -- ---- options ----
 
-local opts = { paths = {}, seed = 1, time_limit = 21600, timeout = 120, history = 8 }
+-- Parsed by vmac's option table (core/cli/vmac.c, test_cmd), which also
+-- answers --help and refuses unknown options and bad values.
+local opts = OPTS
 
 local function usage_error(msg)
 	io.stderr:write("vmac test: ", msg, "\n(vmac test --help for the options)\n")
 	os.exit(2)
-end
-
-do
-	local i = 1
-	local function value(name)
-		i = i + 1
-		if arg[i] == nil then usage_error(name .. " needs a value") end
-		return arg[i]
-	end
-	local function number(name, lo)
-		local v = tonumber(value(name))
-		if not v or v < lo then usage_error(name .. " takes a number >= " .. lo) end
-		return v
-	end
-	while arg[i] do
-		local a = arg[i]
-		if a == "-h" or a == "--help" then
-			print(USAGE)
-			os.exit(0)
-		elseif a == "--drivers" then opts.drivers = value(a)
-		elseif a == "--replay" then opts.replay = value(a)
-		elseif a == "--filter" then opts.filter = value(a)
-		elseif a == "--seed" then opts.seed = math.floor(number(a, 0))
-		elseif a == "--list" then opts.list = true
-		elseif a == "--tap" then opts.tap = true
-		elseif a == "--junit" then opts.junit = value(a)
-		elseif a == "--trace" then opts.trace = value(a)
-		elseif a == "--time-limit" then opts.time_limit = number(a, 0.001)
-		elseif a == "--timeout" then opts.timeout = number(a, 0.001)
-		elseif a == "--history" then opts.history = math.floor(number(a, 0))
-		elseif a:sub(1, 1) == "-" and a ~= "-" then usage_error("unknown option " .. a)
-		else opts.paths[#opts.paths + 1] = a
-		end
-		i = i + 1
-	end
 end
 
 if opts.drivers then

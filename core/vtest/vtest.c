@@ -653,11 +653,47 @@ static int open_world(lua_State *L)
 	return 1;
 }
 
-int vmac_test_main(int argc, char **argv)
+/* o as the runner's OPTS table (core/vtest/runner.lua). */
+static void push_options(lua_State *L, const struct vmac_test_options *o)
+{
+	int i;
+	lua_createtable(L, 0, 12);
+	lua_createtable(L, o->npaths, 0);
+	for (i = 0; i < o->npaths; i++) {
+		lua_pushstring(L, o->paths[i]);
+		lua_rawseti(L, -2, i + 1);
+	}
+	lua_setfield(L, -2, "paths");
+#define OPT_STRING(name)                                                                                               \
+	if (o->name) {                                                                                                 \
+		lua_pushstring(L, o->name);                                                                            \
+		lua_setfield(L, -2, #name);                                                                            \
+	}
+	OPT_STRING(drivers)
+	OPT_STRING(replay)
+	OPT_STRING(filter)
+	OPT_STRING(junit)
+	OPT_STRING(trace)
+#undef OPT_STRING
+	lua_pushnumber(L, (lua_Number)o->seed);
+	lua_setfield(L, -2, "seed");
+	lua_pushnumber(L, (lua_Number)o->history);
+	lua_setfield(L, -2, "history");
+	lua_pushnumber(L, o->time_limit_s);
+	lua_setfield(L, -2, "time_limit");
+	lua_pushnumber(L, o->timeout_s);
+	lua_setfield(L, -2, "timeout");
+	lua_pushboolean(L, o->list);
+	lua_setfield(L, -2, "list");
+	lua_pushboolean(L, o->tap);
+	lua_setfield(L, -2, "tap");
+}
+
+int vmac_test_run(const struct vmac_test_options *o)
 {
 	char root[VMAC_PATH_MAX], runner[VMAC_PATH_MAX + 32];
 	lua_State *L = luaL_newstate();
-	int i, rc;
+	int rc;
 	if (!L) {
 		fprintf(stderr, "vmac test: cannot create a Lua state\n");
 		return 2;
@@ -672,12 +708,8 @@ int vmac_test_main(int argc, char **argv)
 	snprintf(runner, sizeof(runner), "%s/core/vtest/runner.lua", root);
 	lua_pushstring(L, root);
 	lua_setglobal(L, "VMAC_ROOT");
-	lua_createtable(L, argc, 0);
-	for (i = 1; i < argc; i++) {
-		lua_pushstring(L, argv[i]);
-		lua_rawseti(L, -2, i);
-	}
-	lua_setglobal(L, "arg");
+	push_options(L, o);
+	lua_setglobal(L, "OPTS");
 	if (luaL_loadfile(L, runner) != 0 || lua_pcall(L, 0, 1, 0) != 0) {
 		fprintf(stderr, "vmac test: %s\n", lua_tostring(L, -1));
 		lua_close(L);

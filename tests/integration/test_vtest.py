@@ -281,7 +281,7 @@ def test_bad_usage(t):
     rc, out, err = vtest(t, "vtest-help", "--help")
     assert rc == 0 and out.startswith("usage: vmac test"), "--help: exit %d, %r" % (rc, out[:100])
     for args, mention in ((["--seed"], "--seed needs a value"), (["--timeout", "-1"], "--timeout"),
-                          (["--no-such"], "unknown option --no-such"),
+                          (["--no-such"], "unknown option '--no-such'"),
                           (["/nonexistent/x_test.lua"], "no such file or folder"),
                           (["--drivers", "/nonexistent"], "no such folder"),
                           (["--junit", "/nonexistent/dir/j.xml", case("expect")], "--junit")):
