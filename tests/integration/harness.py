@@ -316,6 +316,13 @@ def describe(status):
     ) or "none"
 
 
+def sanitized(program):
+    """Whether program was built with AddressSanitizer (make test's second
+    pass): its memory figures then include the sanitizer's own."""
+    with open(program, "rb") as f:
+        return b"__asan_init" in f.read()
+
+
 def undisturbed(names):
     """An invariant for wait_status: every device of names is running, and
     none of its misses is the host's own (misses_host: a request the host

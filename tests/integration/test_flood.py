@@ -8,7 +8,7 @@ import random
 import socket
 
 from frames import ANNOUNCE, DISCOVER, SYS, announce, parse, reply
-from harness import KITCHEN_NAMES, undisturbed
+from harness import KITCHEN_NAMES, sanitized, undisturbed
 
 TOTAL = 10000
 PER_DISCOVER = 300
@@ -72,8 +72,11 @@ def test_a_flood_of_fake_boards_is_bounded(t):
     assert len(floods) <= 3, "%d flood warnings in one flood: they are said at most every 10 s" % len(floods)
     # The driver states of the few let in are freed when they fail to
     # register; what is left is the device table, allocated at start.
+    # (Under AddressSanitizer freed memory sits in its quarantine, 256 MiB
+    # by default: RSS says nothing there.)
     grown = rss_kib(host.pid) - rss_before
-    assert grown < 48 * 1024, "vmacd grew by %d KiB under a flood of %d fake boards (seed %d)" % (grown, TOTAL, seed)
+    assert sanitized(t.path("vmacd")) or grown < 48 * 1024, (
+        "vmacd grew by %d KiB under a flood of %d fake boards (seed %d)" % (grown, TOTAL, seed))
     # The real boards were served throughout, and still are.
     served = {n: host.device(n, after)["served"] for n in KITCHEN_NAMES}
     host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 5 for n in KITCHEN_NAMES), 30,
