@@ -31,11 +31,12 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # TLS test's certificate; the Arm cross compiler, picolibc and QEMU for the firmware on a
 # microcontroller and its tests (make firmware, tests/integration/test_qemu.py); libmosquitto for
 # vmacd's MQTT client, and the mosquitto broker and python3-paho-mqtt for its tests (test_mqtt.py,
-# test_sparkplug.py); protoc-c and libprotobuf-c for its Sparkplug B payloads (core/mqtt/sparkplug_b.proto).
+# test_sparkplug.py); protoc-c and libprotobuf-c for its Sparkplug B payloads (core/mqtt/sparkplug_b.proto);
+# python3-nacl (libsodium's SipHash) for the integration tests' own sealed frames (test_trust.py).
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
         openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm \
-        libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev
+        libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev python3-nacl
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests

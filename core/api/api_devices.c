@@ -73,6 +73,7 @@ static json_t *device_json(const struct vmac_device_status *d)
 	json_object_set_new(o, "protocol", json_integer(d->protocol));
 	json_object_set_new(o, "service", json_string(d->cyclic ? "cyclic" : "unicast"));
 	json_object_set_new(o, "offset", d->cyclic ? json_integer(d->offset) : json_null());
+	json_object_set_new(o, "authenticated", json_boolean(d->authenticated));
 	return o;
 }
 
@@ -121,6 +122,13 @@ static json_t *status_json(struct vmac_http *h)
 		                    json_integer((json_int_t)s->counters.misses_host));
 		json_object_set_new(json_object_get(root, "counters"), "attach_refused",
 		                    json_integer((json_int_t)s->counters.attach_refused));
+		json_object_set_new(json_object_get(root, "counters"), "auth_failed",
+		                    json_integer((json_int_t)s->counters.auth_failed));
+		json_object_set_new(json_object_get(root, "counters"), "takeover_refused",
+		                    json_integer((json_int_t)s->counters.takeover_refused));
+		json_object_set_new(json_object_get(root, "counters"), "waiting",
+		                    json_integer((json_int_t)s->counters.waiting));
+		json_object_set_new(root, "bus_trust", json_string(h->cfg.bus_trust));
 		json_object_set_new(
 		    root, "schedule",
 		    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",

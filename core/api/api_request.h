@@ -53,7 +53,10 @@
 	X(HTTP_MANIFEST, "GET", "/api/drivers/NAME/manifest", VMAC_SCOPE_READ, http_driver_manifest)                   \
 	X(HTTP_UPLOAD, "POST", "/api/drivers/NAME", VMAC_SCOPE_DEPLOY, http_driver_upload)                             \
 	X(HTTP_ACTIVATE, "POST", "/api/drivers/NAME/activate", VMAC_SCOPE_DEPLOY, http_driver_activate)                \
-	X(HTTP_ROLLBACK, "POST", "/api/drivers/NAME/rollback", VMAC_SCOPE_DEPLOY, http_driver_rollback)
+	X(HTTP_ROLLBACK, "POST", "/api/drivers/NAME/rollback", VMAC_SCOPE_DEPLOY, http_driver_rollback)                \
+	X(HTTP_BOARDS, "GET", "/api/boards", VMAC_SCOPE_READ, http_boards)                                             \
+	X(HTTP_BOARD_ENROLL, "POST", "/api/boards/NAME", VMAC_SCOPE_DEPLOY, http_board_enroll)                         \
+	X(HTTP_BOARD_REMOVE, "POST", "/api/boards/NAME/remove", VMAC_SCOPE_DEPLOY, http_board_remove)
 
 #define HTTP_ROUTE_ENUM(endpoint, method, pattern, scope, handler) endpoint,
 

@@ -171,5 +171,7 @@ http_handler http_recordings, http_recording, http_record;
 http_handler http_site;
 /* api_drivers.c */
 http_handler http_driver_versions, http_driver_manifest, http_driver_upload, http_driver_activate, http_driver_rollback;
+/* api_boards.c */
+http_handler http_boards, http_board_enroll, http_board_remove;
 
 #endif

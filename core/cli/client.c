@@ -181,8 +181,10 @@ int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *da
 	return 0;
 }
 
-int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const char *path, const char *body, size_t len,
-                    void (*show)(json_t *answer))
+/* vmac_client_run and vmac_client_run_json: body (len bytes) as a driver
+ * upload (upload set) or as JSON. */
+static int run(const struct vmac_cmd_args *a, const char *method, const char *path, const char *body, size_t len,
+               int upload, void (*show)(json_t *answer))
 {
 	char url[512], err[600];
 	struct vmac_buffer b = {NULL, 0};
@@ -192,8 +194,8 @@ int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const cha
 	int rc;
 	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
 	curl_global_init(CURL_GLOBAL_DEFAULT);
-	rc = body ? vmac_client_upload(url, body, len, &b, &code, err, sizeof(err))
-	          : vmac_client_call(method, url, NULL, &b, &code, err, sizeof(err));
+	rc = upload ? vmac_client_upload(url, body, len, &b, &code, err, sizeof(err))
+	            : vmac_client_call(method, url, body, &b, &code, err, sizeof(err));
 	curl_global_cleanup();
 	if (rc != 0) {
 		fprintf(stderr, "vmac: %s\n", err);
@@ -221,4 +223,16 @@ int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const cha
 	show(answer);
 	json_decref(answer);
 	return code == 200 ? 0 : 1;
+}
+
+int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const char *path, const char *body, size_t len,
+                    void (*show)(json_t *answer))
+{
+	return run(a, method, path, body, len, body != NULL, show);
+}
+
+int vmac_client_run_json(const struct vmac_cmd_args *a, const char *method, const char *path, const char *json,
+                         void (*show)(json_t *answer))
+{
+	return run(a, method, path, json, json ? strlen(json) : 0, 0, show);
 }

@@ -48,6 +48,10 @@ int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *da
 int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const char *path, const char *body, size_t len,
                     void (*show)(json_t *answer));
 
+/* The same with a JSON body (NULL: none). */
+int vmac_client_run_json(const struct vmac_cmd_args *a, const char *method, const char *path, const char *json,
+                         void (*show)(json_t *answer));
+
 /* What to tell a person about a 401 or 403. */
 const char *vmac_client_auth_hint(void);
 

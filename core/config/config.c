@@ -68,6 +68,7 @@ static const struct key keys[] = {
     {B(realtime)},
     {B(cpu_awake)},
     {B(cyclic)},
+    {S(bus_trust)},
     {S(mqtt_url)},
     {S(mqtt_client_id)},
     {S(mqtt_host_id)},
@@ -117,6 +118,7 @@ void vmac_config_defaults(struct vmac_config *c)
 	c->recordings_max = 50;
 	c->realtime = 1;
 	c->cyclic = 1;
+	snprintf(c->bus_trust, sizeof(c->bus_trust), "enrolled");
 	snprintf(c->mqtt_prefix, sizeof(c->mqtt_prefix), "vmac");
 	snprintf(c->mqtt_discovery_prefix, sizeof(c->mqtt_discovery_prefix), "homeassistant");
 	snprintf(c->mqtt_sparkplug_group, sizeof(c->mqtt_sparkplug_group), "vmac");
@@ -403,10 +405,22 @@ static int listen_ok(const char *text)
 	return vmac_addr_parse(text, &a, &port) == 0;
 }
 
+int vmac_config_trust_open(const struct vmac_config *c)
+{
+	return strcmp(c->bus_trust, "open") == 0;
+}
+
 int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 {
 	struct vmac_bus_spec spec;
 	struct in_addr a;
+	if (strcmp(c->bus_trust, "enrolled") != 0 && strcmp(c->bus_trust, "open") != 0) {
+		snprintf(err, errlen,
+		         "bus_trust '%s': expected enrolled (only boards whose key this host holds) or open (any "
+		         "board; docs/SECURITY.md)",
+		         c->bus_trust);
+		return -EINVAL;
+	}
 	if (vmac_bus_spec_parse(c->bus, &spec) != 0) {
 		snprintf(err, errlen,
 		         "bus '%s': expected MULTICAST_GROUP:PORT (UDP, e.g. 239.255.86.77:5870) or eth:IFACE (raw "

@@ -55,6 +55,7 @@ struct vmac_config {
 	int realtime;                /* try SCHED_FIFO and mlockall */
 	int cpu_awake;               /* hold /dev/cpu_dma_latency at 0 while the bus runs */
 	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */
+	char bus_trust[16];          /* "enrolled": only boards whose key the store holds; "open": any board too */
 	/* MQTT (docs/MQTT.md; checked by core/mqtt/mqtt_settings.c): off while mqtt_url is "". */
 	char mqtt_url[256];                     /* mqtt://HOST:PORT or mqtts://HOST:PORT */
 	char mqtt_client_id[128];               /* "" = vmac-HOSTNAME */
@@ -95,6 +96,9 @@ int vmac_config_set(struct vmac_config *c, const char *key, const char *value, c
  * returns how many. */
 int vmac_config_driver_settings(const struct vmac_config *c, const char *driver, struct vmac_driver_setting *out,
                                 int max);
+/* Whether bus_trust lets a board without a key attach ("open"). */
+int vmac_config_trust_open(const struct vmac_config *c);
+
 /* Cross-field checks (deadline <= period, ...). Returns 0 or -1 with err. */
 int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen);
 

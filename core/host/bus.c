@@ -26,6 +26,7 @@
 #include <unistd.h>
 
 #include "../common/errors.h"
+#include "../proto/auth.h"
 #include "../sched/sched.h"
 
 const char *const vmac_malformed_reason_names[VMAC_BAD_REASONS] = {
@@ -44,10 +45,10 @@ double bus_time(const struct vmac_bus *bus)
 }
 
 /* Per flush at most: one request per device, a WATCHDOG beside it, a
- * DISCOVER, and a CYCLIC frame per chunk of offsets. */
+ * DISCOVER, and a CYCLIC frame per chunk of offsets, sealed and not. */
 static int tx_max(const struct vmac_bus *bus)
 {
-	return 2 * (int)bus->ndev + 2 + (int)bus->nchunks;
+	return 2 * (int)bus->ndev + 2 + (int)bus->nchunks + (int)bus->nauth_chunks;
 }
 
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
@@ -69,6 +70,8 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 	m->device_id = d->id;
 	m->channel = VMAC_CH_DEVICE;
 	n = vmac_proto_encode(m, p->data, sizeof(p->data));
+	if (n > 0 && d->keyed) /* its session's: the board obeys nothing else */
+		n = vmac_proto_seal(p->data, (size_t)n, sizeof(p->data), ++d->tx_counter, d->to_board, NULL, 0);
 	if (n <= 0) {
 		bus->ntx--;
 		return;
@@ -264,6 +267,22 @@ static void handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 		malformed(bus, p, VMAC_BAD_UNKNOWN_SENDER);
 		return;
 	}
+	if (d->keyed) {
+		/* Its session's, newer than the last accepted, or not the board's:
+		 * ignored as if never received (a forger cannot answer for it). */
+		if (!(m.flags & VMAC_FLAG_AUTH) || m.counter <= d->rx_counter ||
+		    vmac_proto_open(p->data, p->len, d->to_host, NULL, 0) != 0) {
+			bus_auth_failed(bus, p, d->ann.board,
+			                !(m.flags & VMAC_FLAG_AUTH)  ? "not sealed"
+			                : m.counter <= d->rx_counter ? "a replay (its counter is not new)"
+			                                             : "its MAC does not verify");
+			return;
+		}
+		d->rx_counter = m.counter;
+	} else if (m.flags & VMAC_FLAG_AUTH) {
+		malformed(bus, p, VMAC_BAD_UNKNOWN_SENDER); /* sealed, but we gave it no session key */
+		return;
+	}
 	d->last_seen_ns = p->rx_ns;
 	if (!d->pending || m.seq != d->seq) {
 		/* Expected and harmless: the late answer to a request already
@@ -325,6 +344,11 @@ static void send_discover(struct vmac_bus *bus)
 	m.channel = VMAC_CH_SYSTEM;
 	m.op = VMAC_SYS_DISCOVER;
 	m.seq = ++bus->discover_seq;
+	/* A fresh nonce each time: an announcement proves its key over it, so
+	 * an old one replayed proves nothing (keys.c). */
+	bus_nonce_next(bus);
+	m.u.discover.has_nonce = 1;
+	memcpy(m.u.discover.nonce, bus->nonce, sizeof(m.u.discover.nonce));
 	n = vmac_proto_encode(&m, p->data, sizeof(p->data));
 	if (n <= 0) {
 		bus->ntx--;
@@ -365,20 +389,27 @@ static void service_registration(struct vmac_bus *bus)
 }
 
 /* Put d's outputs, due, at its offset in this slot's CYCLIC frame of its
- * chunk (started on first use). The frame's seq is the slot's. */
+ * chunk (started on first use): a sealed one for an authenticated board,
+ * its record carrying a MAC under its session's key, else a plain one.
+ * The frame's seq is the slot's. */
 static void cyclic_put(struct vmac_bus *bus, struct device *d)
 {
-	uint32_t offset = bus_slot_of(bus, d), c = offset / VMAC_CYCLIC_RECORDS_MAX;
+	uint32_t offset = bus_slot_of(bus, d), per = d->keyed ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX;
+	uint32_t c = offset / per;
+	int *tx = d->keyed ? &bus->auth_chunk_tx[c] : &bus->chunk_tx[c];
 	struct vmac_packet *p;
-	if (bus->chunk_tx[c] < 0) {
-		uint32_t first = c * VMAC_CYCLIC_RECORDS_MAX, count = bus->nused - first;
+	if (*tx < 0) {
+		uint32_t first = c * per, count = bus->nused - first;
 		int n;
 		p = tx_slot(bus);
 		if (!p)
 			return;
-		if (count > VMAC_CYCLIC_RECORDS_MAX)
-			count = VMAC_CYCLIC_RECORDS_MAX;
-		n = vmac_proto_cyclic_begin(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count);
+		if (count > per)
+			count = per;
+		n = d->keyed
+		        ? vmac_proto_cyclic_begin_auth(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first,
+		                                       count, bus->cyclic_counter)
+		        : vmac_proto_cyclic_begin(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count);
 		if (n <= 0) {
 			bus->ntx--;
 			return;
@@ -386,14 +417,15 @@ static void cyclic_put(struct vmac_bus *bus, struct device *d)
 		p->len = (size_t)n;
 		p->addr = bus->tr.group;
 		memset(p->mac, 0, sizeof(p->mac));
-		bus->chunk_tx[c] = (int)(p - bus->tx);
+		*tx = (int)(p - bus->tx);
 	}
-	p = &bus->tx[bus->chunk_tx[c]];
-	vmac_proto_cyclic_put(p->data, offset % VMAC_CYCLIC_RECORDS_MAX, (uint16_t)(d->id >> 16), VMAC_CYCLIC_DUE,
-	                      &d->outputs);
+	p = &bus->tx[*tx];
+	vmac_proto_cyclic_put(p->data, offset % per, (uint16_t)(d->id >> 16), VMAC_CYCLIC_DUE, &d->outputs);
+	if (d->keyed)
+		vmac_proto_cyclic_seal_record(p->data, offset % per, d->to_board);
 	d->seq = bus->cyclic_seq;
 	d->pending = 1;
-	d->tx_index = bus->chunk_tx[c];
+	d->tx_index = *tx;
 	d->pending_op = VMAC_OP_UPDATE;
 	d->sent_ns = 0; /* stamped when the batch has left */
 }
@@ -410,7 +442,10 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 		bus_flush(bus);
 	for (c = 0; c < bus->nchunks; c++)
 		bus->chunk_tx[c] = -1;
+	for (c = 0; c < bus->nauth_chunks; c++)
+		bus->auth_chunk_tx[c] = -1;
 	bus->cyclic_seq++;
+	bus->cyclic_counter++; /* a sealed frame's freshness: one a slot, never repeated in a run */
 	for (i = 0; i < n; i++) {
 		const struct vmac_sched_entry *e = &bus->slot_entries[i];
 		struct device *d = &bus->dev[e->device];
@@ -552,6 +587,7 @@ static void *bus_main(void *arg)
 	struct timespec start;
 
 	vmac_driver_forbid_thread(); /* no driver runs here (docs/HOST.md, "Threads") */
+	bus_commands(bus);           /* what the main thread sent before the start (the keys) */
 	bus_try_realtime(bus);
 	bus_try_cpu_awake(bus);
 	clock_gettime(CLOCK_MONOTONIC, &start);
@@ -604,13 +640,15 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->mach = calloc(bus->ndev, sizeof(*bus->mach));
 	bus->nchunks = (bus->ndev + VMAC_CYCLIC_RECORDS_MAX - 1) / VMAC_CYCLIC_RECORDS_MAX;
 	bus->chunk_tx = calloc(bus->nchunks, sizeof(*bus->chunk_tx));
+	bus->nauth_chunks = (bus->ndev + VMAC_CYCLIC_AUTH_RECORDS_MAX - 1) / VMAC_CYCLIC_AUTH_RECORDS_MAX;
+	bus->auth_chunk_tx = calloc(bus->nauth_chunks, sizeof(*bus->auth_chunk_tx));
 	bus->tx = calloc((size_t)tx_max(bus), sizeof(*bus->tx));
 	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
 	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
-	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->status.devices || !bus->status.slot_load ||
-	    !bus->slot_entries || !bus->sched ||
+	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->auth_chunk_tx || !bus->status.devices ||
+	    !bus->status.slot_load || !bus->slot_entries || !bus->sched ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus) ||
 	    bus_jobs_init(bus)) {
@@ -646,6 +684,7 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 	bus = bus_alloc(cfg, err, errlen);
 	if (!bus)
 		return NULL;
+	bus_nonce_init(bus);
 	if (vmac_transport_open_host(&bus->tr, &spec, err, errlen) < 0)
 		goto fail;
 	vmac_addr_format(&bus->tr.local, bus->host_addr, sizeof(bus->host_addr));
@@ -669,6 +708,7 @@ struct vmac_bus *vmac_bus_new_virtual(const struct vmac_config *cfg, const struc
 	if (!bus)
 		return NULL;
 	bus->virt = 1;
+	bus_nonce_init(bus); /* the same nonces every run */
 	bus->link = *link;
 	bus->tr.group = *group;
 	snprintf(bus->host_addr, sizeof(bus->host_addr), "virtual");
@@ -748,6 +788,8 @@ void vmac_bus_free(struct vmac_bus *bus)
 	free(bus->mach);
 	free(bus->tx);
 	free(bus->chunk_tx);
+	free(bus->auth_chunk_tx);
+	vmac_bus_keys_free(bus->keys);
 	free(bus->status.devices);
 	free(bus->status.slot_load);
 	free(bus->slot_entries);

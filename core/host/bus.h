@@ -71,15 +71,17 @@ enum vmac_host_cmd_kind {
 	VMAC_CMD_LOADED,   /* drv loaded (or NULL with text saying why not) */
 	VMAC_CMD_STOP,     /* put every board in its safe state and end */
 	VMAC_CMD_RECORDER, /* rec for the machine whose primary is slot/generation, after a capture */
+	VMAC_CMD_KEYS,     /* keys: the enrolled boards' keys from now on (vmac_bus_set_keys) */
 };
 
 struct vmac_host_cmd {
 	enum vmac_host_cmd_kind kind;
 	uint32_t slot, generation;
 	struct vmac_driver *drv;
-	struct vmac_recorder *rec; /* its machine's flight recorder (NULL: none) */
-	uint8_t *ckpt;             /* its machine's checkpoint buffer, checkpoint_kib KiB (NULL: none) */
-	int missing;               /* no driver file at all (vs. a driver that failed to load) */
+	struct vmac_recorder *rec;  /* its machine's flight recorder (NULL: none) */
+	uint8_t *ckpt;              /* its machine's checkpoint buffer, checkpoint_kib KiB (NULL: none) */
+	int missing;                /* no driver file at all (vs. a driver that failed to load) */
+	struct vmac_bus_keys *keys; /* KEYS */
 	char text[VMAC_EVENT_TEXT];
 };
 
@@ -99,6 +101,7 @@ struct vmac_device_status {
 	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
 	char address[48];
 	uint32_t id, major, minor;
+	int authenticated; /* its session is sealed: it proved its enrolled key */
 	uint32_t period_us;
 	uint64_t misses, served;
 	uint64_t misses_host; /* of misses: the host's own fault */
@@ -120,9 +123,12 @@ struct vmac_bus_counters {
 	uint64_t ticks, ticks_skipped;
 	uint64_t events_lost; /* event ring full */
 	uint64_t table_full;
-	uint64_t attach_refused;       /* announcements not let attach: attach_max or attach_rate reached */
-	uint64_t schedule_full;        /* devices refused by admission control */
-	uint64_t checkpoints;          /* machine checkpoints handed to the main thread */
+	uint64_t attach_refused;   /* announcements not let attach: attach_max or attach_rate reached */
+	uint64_t auth_failed;      /* frames of an enrolled board (or claiming to be one) that did not prove its key */
+	uint64_t takeover_refused; /* announcements of a running board's identity that did not prove its key */
+	uint64_t waiting;          /* announcements of boards with no key held back (bus_trust enrolled) */
+	uint64_t schedule_full;    /* devices refused by admission control */
+	uint64_t checkpoints;      /* machine checkpoints handed to the main thread */
 	uint64_t checkpoints_deferred; /* ... put off a tick: the ring was full */
 };
 
@@ -160,6 +166,22 @@ struct vmac_status {
 };
 
 struct vmac_bus; /* opaque */
+
+/* The enrolled boards' keys as the bus thread holds them (keys.c): a hash
+ * table by board name, one allocation, built by the main thread from the
+ * store and handed over whole. */
+struct vmac_bus_keys;
+/* Room for n keys; NULL when out of memory. */
+struct vmac_bus_keys *vmac_bus_keys_new(uint32_t n);
+/* 0, or -ENOSPC when n keys are in already (a name added twice: the last key). */
+int vmac_bus_keys_add(struct vmac_bus_keys *k, const char *board, const uint8_t key[16]);
+void vmac_bus_keys_free(struct vmac_bus_keys *k);
+/* keys become the bus's (0; the old table comes back to the main thread to
+ * free), or -EAGAIN when the command ring is full (keys still the
+ * caller's). A running board whose key went away is dropped; one whose key
+ * changed keeps its session until it announces again. Sent before
+ * vmac_bus_start, they are in place before the first discovery. */
+int vmac_bus_set_keys(struct vmac_bus *bus, struct vmac_bus_keys *keys);
 
 /* Create the bus (opens the transport, allocates every table it will ever
  * use). Returns NULL with err set. */

@@ -32,7 +32,8 @@ enum dev_state {
 	DEV_RUNNING,
 	DEV_TO_SLEEP, /* registered only to be told to SLEEP (no driver) */
 	DEV_SLEEPING,
-	DEV_ERRANT, /* dropped; waits for the board to announce again */
+	DEV_ERRANT,  /* dropped; waits for the board to announce again */
+	DEV_WAITING, /* announced without proving a key (bus_trust enrolled): no driver until enrolled */
 };
 
 /* The steps of registering a board (DEV_REGISTERING): REGISTER, then for a
@@ -209,6 +210,12 @@ struct device {
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs; /* sent with the next UPDATE */
 	int64_t last_seen_ns;
+	/* Authenticated (keys.c): its announcement proved its enrolled key,
+	 * and every frame of its session is sealed with these. */
+	uint8_t keyed;
+	uint8_t to_board[16], to_host[16];
+	uint32_t tx_counter, rx_counter; /* the last sealed by us, the last of its accepted */
+	uint64_t proved_nonce;           /* the discovery (bus->nonce_count) its announcement proved its key for */
 };
 
 /* A request slot (vmac_bus_request_input): FREE -> FILLING (the caller
@@ -278,6 +285,16 @@ struct vmac_bus {
 	int attach_credit_set;
 	uint64_t refused_unsaid, table_full_unsaid;
 	int64_t flood_said_ns;
+	/* Trust on the wire (keys.c). */
+	struct vmac_bus_keys *keys; /* the enrolled boards' keys (NULL: none yet) */
+	uint8_t nonce_key[16];      /* makes each discovery's nonce */
+	uint8_t nonce[8];           /* the latest DISCOVER's */
+	uint64_t nonce_count;
+	uint32_t cyclic_counter; /* authenticated CYCLIC frames' counter */
+	int *auth_chunk_tx;      /* per VMAC_CYCLIC_AUTH_RECORDS_MAX offsets: its sealed CYCLIC frame in tx, or -1 */
+	uint32_t nauth_chunks;
+	int64_t auth_said_ns;
+	uint64_t auth_unsaid;
 	int realtime;
 	int stopping;
 	int64_t stop_deadline_ns;
@@ -442,6 +459,19 @@ void bus_checkpoint_taken(struct vmac_bus *bus, struct machine *m, struct job *j
  * offered, as m's job; a failure of either fails the driver. */
 void bus_attached(struct vmac_bus *bus, struct machine *m, int64_t now);
 void bus_attach_done(struct vmac_bus *bus, struct machine *m, struct job *j);
+
+/* keys.c */
+/* board's key, or NULL when it is not enrolled. */
+const uint8_t *bus_key_of(const struct vmac_bus *bus, const char *board);
+/* VMAC_CMD_KEYS: keys in, the old table out; boards whose key went, dropped. */
+void bus_keys_install(struct vmac_bus *bus, struct vmac_bus_keys *keys);
+void bus_nonce_init(struct vmac_bus *bus);
+/* A new bus->nonce, for the next DISCOVER. */
+void bus_nonce_next(struct vmac_bus *bus);
+/* d (its id set) proved key answering bus->nonce: its session's keys. */
+void bus_session_keys(struct vmac_bus *bus, struct device *d, const uint8_t key[16]);
+/* A frame that did not prove a key: counted, said at most every 10 s. */
+void bus_auth_failed(struct vmac_bus *bus, const struct vmac_packet *p, const char *board, const char *why);
 
 /* status.c */
 const char *bus_state_name(enum dev_state s);

@@ -19,6 +19,7 @@
 #include <unistd.h>
 
 #include "../common/errors.h"
+#include "../proto/auth.h"
 #include "../sched/sched.h"
 
 /* Hand a driver (or a machine's checkpoint buffer) to the main thread to
@@ -184,6 +185,11 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
 		char why[200];
+		if (d->state == DEV_WAITING &&
+		    now - d->last_seen_ns > 3 * (int64_t)bus->cfg.discovery_period_ms * 1000000) {
+			d->state = DEV_FREE; /* gone (or enrolled under another entry): no longer listed */
+			continue;
+		}
 		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->reply_window_ns)
 			continue;
 		d->pending = 0;
@@ -198,32 +204,59 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 	}
 }
 
+/* The device of this identity (driver, major, minor), a board waiting
+ * for approval aside. */
 static struct device *find_by_identity(struct vmac_bus *bus, const struct vmac_announce *a)
 {
 	uint32_t i;
 	for (i = 0; i < bus->nused; i++) {
 		struct device *d = &bus->dev[i];
-		if (d->state != DEV_FREE && d->ann.major == a->major && d->ann.minor == a->minor &&
-		    strcmp(d->ann.driver, a->driver) == 0)
+		if (d->state != DEV_FREE && d->state != DEV_WAITING && d->ann.major == a->major &&
+		    d->ann.minor == a->minor && strcmp(d->ann.driver, a->driver) == 0)
 			return d;
 	}
 	return NULL;
 }
 
+static struct device *find_waiting(struct vmac_bus *bus, const char *board)
+{
+	uint32_t i;
+	for (i = 0; i < bus->nused; i++)
+		if (bus->dev[i].state == DEV_WAITING && strcmp(bus->dev[i].ann.board, board) == 0)
+			return &bus->dev[i];
+	return NULL;
+}
+
+/* The device of state st not heard of for the longest (NULL: none); with
+ * count, how many are in st. */
+static struct device *oldest_in(struct vmac_bus *bus, enum dev_state st, uint32_t *count)
+{
+	struct device *oldest = NULL;
+	uint32_t i, n = 0;
+	for (i = 0; i < bus->nused; i++) {
+		struct device *d = &bus->dev[i];
+		if (d->state != st)
+			continue;
+		n++;
+		if (!oldest || d->last_seen_ns < oldest->last_seen_ns)
+			oldest = d;
+	}
+	if (count)
+		*count = n;
+	return oldest;
+}
+
 static struct device *new_slot(struct vmac_bus *bus)
 {
 	uint32_t i;
-	struct device *oldest = NULL;
+	struct device *d;
 	for (i = 0; i < bus->ndev; i++)
 		if (bus->dev[i].state == DEV_FREE)
 			return &bus->dev[i];
-	/* Full: reuse the errant device not heard of for the longest. */
-	for (i = 0; i < bus->nused; i++) {
-		struct device *d = &bus->dev[i];
-		if (d->state == DEV_ERRANT && (!oldest || d->last_seen_ns < oldest->last_seen_ns))
-			oldest = d;
-	}
-	return oldest;
+	/* Full: reuse the board waiting for approval, else the errant device,
+	 * not heard of for the longest. */
+	d = oldest_in(bus, DEV_WAITING, NULL);
+	return d ? d : oldest_in(bus, DEV_ERRANT, NULL);
 }
 
 /* The comm-loss period a board at this level is given: the configured one,
@@ -400,20 +433,137 @@ static void say_flood(struct vmac_bus *bus, int64_t now)
 	bus->refused_unsaid = bus->table_full_unsaid = 0;
 }
 
+static void refuse_attach(struct vmac_bus *bus, int64_t now)
+{
+	bus->counters.attach_refused++;
+	bus->refused_unsaid++;
+	say_flood(bus, now);
+}
+
+static void table_full(struct vmac_bus *bus, int64_t now)
+{
+	bus->counters.table_full++;
+	bus->table_full_unsaid++;
+	say_flood(bus, now);
+}
+
+/* Whether the announcement proves its board's enrolled key over this
+ * discovery's nonce: 1 (*key set), 0 (no key enrolled for that name), -1
+ * (an enrolled name, not proven: counted and said). */
+static int proven(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p, const uint8_t **key)
+{
+	*key = bus_key_of(bus, m->u.announce.board);
+	if (!*key)
+		return 0;
+	if (!(m->flags & VMAC_FLAG_AUTH)) {
+		bus_auth_failed(bus, p, m->u.announce.board,
+		                "an enrolled board's announcement, not sealed (was the board given its key?)");
+		return -1;
+	}
+	if (vmac_proto_open(p->data, p->len, *key, bus->nonce, VMAC_NONCE_LEN) != 0) {
+		bus_auth_failed(bus, p, m->u.announce.board,
+		                "its announcement does not prove the board's enrolled key (a forgery, an old "
+		                "announcement replayed, or a board given another key)");
+		return -1;
+	}
+	return 1;
+}
+
+/* bus_trust enrolled, and a board that proved no key: listed as waiting
+ * for approval (an event says so once), given nothing. A flood of them
+ * takes attach credit like any new board and holds at most attach_max
+ * entries, the oldest replaced. */
+static void hold_back(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p)
+{
+	const struct vmac_announce *a = &m->u.announce;
+	struct device *w = find_waiting(bus, a->board);
+	char addr[48];
+	int fresh = !w;
+	bus->counters.waiting++;
+	if (fresh) {
+		uint32_t nwaiting;
+		struct device *oldest;
+		if (!attach_allowed(bus, p->rx_ns)) {
+			refuse_attach(bus, p->rx_ns);
+			return;
+		}
+		oldest = oldest_in(bus, DEV_WAITING, &nwaiting);
+		w = nwaiting >= bus->cfg.attach_max ? oldest : new_slot(bus);
+		if (!w) {
+			table_full(bus, p->rx_ns);
+			return;
+		}
+	}
+	if (bus_slot_of(bus, w) >= bus->nused)
+		bus->nused = bus_slot_of(bus, w) + 1;
+	w->ann = *a;
+	w->version = m->version;
+	w->addr = p->addr;
+	w->last_seen_ns = p->rx_ns;
+	w->state = DEV_WAITING;
+	w->mach = -1;
+	w->keyed = 0;
+	w->pending = 0;
+	w->id = 0;
+	snprintf(w->note, sizeof(w->note),
+	         (m->flags & VMAC_FLAG_AUTH) ? "waiting for approval: it announces with a key this host does not hold "
+	                                       "(vmac board enroll %s --key-file ITS_KEY)"
+	                                     : "waiting for approval: no key (vmac board enroll %s --out %s.key, then "
+	                                       "give the board that key)",
+	         a->board, a->board);
+	if (fresh)
+		bus_event(bus, w, "waiting", "%s (driver %s, major %u minor %u) at %s waits for approval: %s", a->board,
+		          a->driver, (unsigned)a->major, (unsigned)a->minor,
+		          vmac_addr_format(&p->addr, addr, sizeof(addr)), w->note + strlen("waiting for approval: "));
+}
+
 void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struct vmac_packet *p)
 {
-	struct device *d = find_by_identity(bus, &m->u.announce);
+	const struct vmac_announce *a = &m->u.announce;
+	const uint8_t *key;
+	struct device *d;
+	int pr;
 
 	bus->counters.announces++;
+	pr = proven(bus, m, p, &key);
+	if (pr < 0)
+		return;
+	d = find_by_identity(bus, a);
+	/* An enrolled board's identity is taken only by a board that proves
+	 * its key under its name, whatever state it is in. */
+	if (d && d->keyed && bus_key_of(bus, d->ann.board) && (!pr || strcmp(d->ann.board, a->board) != 0)) {
+		bus->counters.takeover_refused++;
+		bus_auth_failed(bus, p, a->board,
+		                "announced the identity of an enrolled board without proving its key");
+		return;
+	}
+	if (!pr && !vmac_config_trust_open(&bus->cfg)) {
+		hold_back(bus, m, p);
+		return;
+	}
+	/* This discovery's proof seen again: the board's own duplicate, or a
+	 * copy of it replayed from elsewhere. */
+	if (d && pr && d->proved_nonce == bus->nonce_count && d->state != DEV_ERRANT && d->state != DEV_SLEEPING) {
+		if (!vmac_addr_equal(&d->addr, &p->addr))
+			bus_auth_failed(bus, p, a->board,
+			                "a replayed announcement (this discovery was answered already)");
+		return;
+	}
 	if ((!d || d->state != DEV_LOADING) && !attach_allowed(bus, p->rx_ns)) {
-		bus->counters.attach_refused++;
-		bus->refused_unsaid++;
-		say_flood(bus, p->rx_ns);
+		refuse_attach(bus, p->rx_ns);
 		return;
 	}
 	if (d) {
 		switch (d->state) {
-		case DEV_LOADING: d->addr = p->addr; return;
+		case DEV_LOADING:
+			/* It answered a later discovery while its driver loads: its
+			 * session is made from that one's nonce. */
+			d->addr = p->addr;
+			if (pr) {
+				bus_session_keys(bus, d, key);
+				d->proved_nonce = bus->nonce_count;
+			}
+			return;
 		case DEV_REGISTERING:
 		case DEV_RUNNING:
 		case DEV_TO_SLEEP:
@@ -424,11 +574,11 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 		default: break;
 		}
 	} else {
-		d = new_slot(bus);
+		d = find_waiting(bus, a->board); /* approved since: its entry is the board's */
+		if (!d)
+			d = new_slot(bus);
 		if (!d) {
-			bus->counters.table_full++;
-			bus->table_full_unsaid++;
-			say_flood(bus, p->rx_ns);
+			table_full(bus, p->rx_ns);
 			return;
 		}
 	}
@@ -441,6 +591,11 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 	/* Never 0: a CYCLIC record's tag is the generation, and tag 0 is empty. */
 	d->generation = (uint16_t)(d->generation + 1) ? (uint16_t)(d->generation + 1) : 1;
 	d->id = (uint32_t)d->generation << 16 | bus_slot_of(bus, d);
+	d->keyed = 0;
+	if (pr) { /* every frame of the session is sealed, REGISTER first */
+		bus_session_keys(bus, d, key);
+		d->proved_nonce = bus->nonce_count;
+	}
 	d->state = DEV_LOADING;
 	d->pending = 0;
 	d->register_sent = 0;

@@ -317,6 +317,10 @@ void bus_commands(struct vmac_bus *bus)
 			bus_rec_install(bus, &c);
 			continue;
 		}
+		if (c.kind == VMAC_CMD_KEYS) {
+			bus_keys_install(bus, c.keys);
+			continue;
+		}
 		d = c.slot < bus->ndev ? &bus->dev[c.slot] : NULL;
 		if (!d || d->state != DEV_LOADING || d->generation != c.generation || bus->stopping || d->mach < 0 ||
 		    bus->mach[d->mach].primary != c.slot || bus->mach[d->mach].drv) {

@@ -29,6 +29,7 @@ const char *bus_state_name(enum dev_state s)
 	case DEV_TO_SLEEP:
 	case DEV_SLEEPING: return "sleeping";
 	case DEV_ERRANT: return "errant";
+	case DEV_WAITING: return "waiting";
 	default: return "free";
 	}
 }
@@ -50,6 +51,7 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->id = d->id;
 	o->major = d->ann.major;
 	o->minor = d->ann.minor;
+	o->authenticated = d->keyed && d->state != DEV_WAITING;
 	o->scheduled = d->scheduled && vmac_sched_device(bus->sched, i, &sd) == 0 && sd.state == VMAC_SCHED_RUNNING;
 	o->level = o->scheduled ? sd.level : (m ? m->level : 0);
 	o->slot = o->scheduled ? sd.offset : 0;

@@ -2,6 +2,7 @@
 #include "mainloop.h"
 
 #include <errno.h>
+#include <sodium.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -12,6 +13,7 @@
 #include "../reload/deploy.h"
 
 #define STALLED_KEPT 32
+#define KEYS_EVERY_NS 200000000LL /* the store's board keys looked at this often */
 
 struct vmac_mainloop {
 	const struct vmac_config *cfg;
@@ -31,6 +33,10 @@ struct vmac_mainloop {
 		int64_t id;
 	} stalled[STALLED_KEPT];
 	unsigned nstalled;
+	/* The board keys the bus has: the store's at keys_version. */
+	uint64_t keys_version;
+	int keys_sent;
+	int64_t keys_checked_ns;
 };
 
 static double wall_s(const struct vmac_mainloop *l)
@@ -327,6 +333,67 @@ static void on_event(struct vmac_mainloop *l, const struct vmac_bus_msg *m)
 	}
 }
 
+struct key_list {
+	struct vmac_board_key *k;
+	int n, cap, failed;
+};
+
+static void collect_key(void *ctx, const struct vmac_board_key *k)
+{
+	struct key_list *x = ctx;
+	if (x->n == x->cap) {
+		int cap = x->cap ? 2 * x->cap : 64;
+		struct vmac_board_key *more = malloc((size_t)cap * sizeof(*more));
+		if (!more) {
+			x->failed = 1;
+			return;
+		}
+		if (x->k) {
+			memcpy(more, x->k, (size_t)x->n * sizeof(*more));
+			sodium_memzero(x->k, (size_t)x->n * sizeof(*more));
+		}
+		free(x->k);
+		x->k = more;
+		x->cap = cap;
+	}
+	x->k[x->n++] = *k;
+}
+
+/* The bus gets the store's board keys whenever they changed (enrolled or
+ * removed here through the API, or by `vmac board --state` in another
+ * process): within KEYS_EVERY_NS. */
+static void sync_keys(struct vmac_mainloop *l, int now)
+{
+	struct key_list x = {0};
+	struct vmac_bus_keys *keys = NULL;
+	uint64_t version;
+	char err[512];
+	int64_t t = l->hooks.wall_ns(l->hooks.ctx);
+	int i, rc;
+	if (!now && t - l->keys_checked_ns < KEYS_EVERY_NS)
+		return;
+	l->keys_checked_ns = t;
+	version = vmac_board_keys_version(l->store);
+	if (l->keys_sent && version == l->keys_version)
+		return;
+	rc = vmac_board_key_list(l->store, collect_key, &x, err, sizeof(err));
+	if (rc >= 0 && !x.failed && (keys = vmac_bus_keys_new((uint32_t)x.n)) != NULL) {
+		for (i = 0; i < x.n; i++)
+			vmac_bus_keys_add(keys, x.k[i].board, x.k[i].key);
+		if (vmac_bus_set_keys(l->bus, keys) == 0) {
+			l->keys_version = version;
+			l->keys_sent = 1;
+		} else {
+			vmac_bus_keys_free(keys); /* the ring is full: the next look sends them */
+		}
+	} else if (rc < 0) {
+		say(l, "warning", "", err);
+	}
+	if (x.k)
+		sodium_memzero(x.k, (size_t)x.cap * sizeof(*x.k));
+	free(x.k);
+}
+
 void vmac_mainloop_service(struct vmac_mainloop *l)
 {
 	struct vmac_bus_msg m;
@@ -351,6 +418,7 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 			store_events(l);
 	}
 	vmac_bus_workers_service(l->bus);
+	sync_keys(l, 0);
 	store_checkpoints(l);
 	store_events(l);
 }
@@ -375,7 +443,18 @@ struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vm
 	}
 	vmac_event_log_start_at(log, l->stored_seq + 1); /* seq goes on across restarts */
 	l->started_ns = hooks->wall_ns(hooks->ctx);
+	sync_keys(l, 1); /* before the bus starts: in place for the first discovery */
+	if (!vmac_config_trust_open(cfg))
+		return l;
+	say(l, "warning", "",
+	    "bus_trust is open: a board without an enrolled key attaches too, and anyone on the bus segment can "
+	    "speak for such a board (docs/SECURITY.md)");
 	return l;
+}
+
+void vmac_mainloop_sync_keys(struct vmac_mainloop *l)
+{
+	sync_keys(l, 1);
 }
 
 void vmac_mainloop_free(struct vmac_mainloop *l)

@@ -63,6 +63,11 @@ static const char *const migrations[] = {
     " reason TEXT NOT NULL,"
     " time REAL NOT NULL,"
     " data BLOB NOT NULL)",
+    "CREATE TABLE board_keys ("
+    " board TEXT PRIMARY KEY,"
+    " key BLOB NOT NULL,"
+    " created REAL NOT NULL,"
+    " note TEXT NOT NULL DEFAULT '')",
 };
 
 double store_now_s(void)

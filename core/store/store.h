@@ -198,4 +198,46 @@ int vmac_store_recording_list(struct vmac_store *s, const char *machine,
 /* Recording id: 1 with *data (malloc'd) and *len, 0 no such one, < 0 err. */
 int vmac_store_recording_get(struct vmac_store *s, int64_t id, char **data, size_t *len, char *err, size_t errlen);
 
+/* ---- board keys (docs/SECURITY.md, "Enrolling boards") ----
+ * The secret key of each enrolled board, by board name: the host proves
+ * a board's announcement with it and seals the board's session with keys
+ * made from it (docs/PROTOCOL.md, "Authenticated frames"). */
+#define VMAC_BOARD_KEY_LEN 16
+#define VMAC_BOARD_NAME_MAX 31
+#define VMAC_BOARD_NOTE_MAX 120
+#define VMAC_BOARD_FINGERPRINT_LEN 16 /* hex digits */
+
+struct vmac_board_key {
+	char board[VMAC_BOARD_NAME_MAX + 1];
+	uint8_t key[VMAC_BOARD_KEY_LEN];
+	char fingerprint[VMAC_BOARD_FINGERPRINT_LEN + 1];
+	double created; /* Unix time */
+	char note[VMAC_BOARD_NOTE_MAX + 1];
+};
+
+/* Whether name can be a board's (what an ANNOUNCE may carry: 1..31 of
+ * [A-Za-z0-9_-]). */
+int vmac_board_name_valid(const char *name);
+/* A key's fingerprint, what lists show instead of the key: the first 16
+ * hex digits of its BLAKE2b hash. */
+void vmac_board_key_fingerprint(const uint8_t key[VMAC_BOARD_KEY_LEN], char out[VMAC_BOARD_FINGERPRINT_LEN + 1]);
+/* Enroll board with key: 0 stored, 1 the board has a key already and
+ * replace is 0 (nothing changed), < 0 with err. */
+int vmac_board_key_set(struct vmac_store *s, const char *board, const uint8_t key[VMAC_BOARD_KEY_LEN], int replace,
+                       const char *note, char *err, size_t errlen);
+/* Enroll n boards (k[i].board, .key, .note) in one transaction: 0 (*kept:
+ * how many had a key already and kept it, replace being 0), < 0 with err
+ * (none enrolled). */
+int vmac_board_keys_set(struct vmac_store *s, const struct vmac_board_key *k, int n, int replace, int *kept, char *err,
+                        size_t errlen);
+/* Remove a board's key: 0 done, 1 no such board, < 0 with err. */
+int vmac_board_key_remove(struct vmac_store *s, const char *board, char *err, size_t errlen);
+/* Every board key, by name. Returns how many, or < 0 with err. */
+int vmac_board_key_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_board_key *k), void *ctx,
+                        char *err, size_t errlen);
+/* A number that changes whenever the board keys may have changed, by this
+ * process or another one (`vmac board enroll --state`): the host reads
+ * the keys again when it does. */
+uint64_t vmac_board_keys_version(struct vmac_store *s);
+
 #endif

@@ -1,6 +1,7 @@
 /* The store's insides, shared by its files (store.c: params, driver
  * versions, events, opening; store_token.c: access tokens; store_checkpoint.c: checkpoints of
- * machine state; store_recording.c: flight recordings). The rest of the
+ * machine state; store_recording.c: flight recordings; store_board.c:
+ * board keys). The rest of the
  * host sees only store.h. */
 #ifndef VMAC_STORE_INTERNAL_H
 #define VMAC_STORE_INTERNAL_H
@@ -9,6 +10,8 @@
 
 #include <pthread.h>
 #include <sqlite3.h>
+#include <stdatomic.h>
+#include <stdint.h>
 #include <sys/types.h>
 
 struct vmac_store {
@@ -27,7 +30,8 @@ struct vmac_store {
 	char path[4096];
 	dev_t dev;
 	ino_t ino;
-	int gone; /* it was removed or replaced: nothing more is written */
+	int gone;                    /* it was removed or replaced: nothing more is written */
+	_Atomic uint64_t key_writes; /* board keys written through this connection (store_board.c) */
 };
 
 /* n bytes as 2n lower-case hex digits and a NUL into out. */

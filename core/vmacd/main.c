@@ -37,6 +37,7 @@ struct host {
 	struct vmac_mainloop *main; /* the bus's messages answered, the store kept (core/mainloop/) */
 	struct ev_loop *loop;
 	ev_async wake_w;
+	ev_timer every_w; /* the main loop's own looks (the store's board keys) when nothing wakes it */
 	ev_signal int_w, term_w;
 	int stopping;
 };
@@ -90,6 +91,14 @@ static void stopped(void *ctx)
 }
 
 static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
+{
+	struct host *h = w->data;
+	(void)loop;
+	(void)revents;
+	vmac_mainloop_service(h->main);
+}
+
+static void on_timer(struct ev_loop *loop, ev_timer *w, int revents)
 {
 	struct host *h = w->data;
 	(void)loop;
@@ -242,6 +251,9 @@ int main(int argc, char **argv)
 	ev_async_init(&h->wake_w, on_wake);
 	h->wake_w.data = h;
 	ev_async_start(h->loop, &h->wake_w);
+	ev_timer_init(&h->every_w, on_timer, 0.2, 0.2);
+	h->every_w.data = h;
+	ev_timer_start(h->loop, &h->every_w);
 	ev_signal_init(&h->int_w, on_signal, SIGINT);
 	h->int_w.data = h;
 	ev_signal_start(h->loop, &h->int_w);

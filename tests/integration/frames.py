@@ -8,16 +8,26 @@ then corrupts it, with patch() or a slice, so the corruption is what the
 reader sees. parse() reads a header back, ethernet() wraps a frame for raw
 Ethernet.
 
-Used by test_malformed.py, test_eth.py and eth_peer.py here, and by
-tests/soak/soak.py (which puts this folder on sys.path, as for harness)."""
+Authenticated frames (docs/PROTOCOL.md, "Authenticated frames"): seal()
+and opens() with the MAC of libsodium's SipHash-2-4 through PyNaCl
+(python3-nacl), the other side's reading of the specification, not ours;
+session_keys() the keys of a session.
+
+Used by test_malformed.py, test_eth.py, test_trust.py and eth_peer.py here,
+and by tests/soak/soak.py (which puts this folder on sys.path, as for
+harness)."""
 
 import collections
 import struct
+import sys
 
 MAGIC = b"VM"
 HEADER = struct.Struct(">2sBBHIBBB")  # magic, version, flags, seq, device_id, channel, op, len
 HDR_LEN = HEADER.size  # 13
 REPLY = 0x01  # flags bit 0: set on every frame a board sends
+AUTH = 0x02  # flags bit 1: an authenticated frame (a counter and a MAC follow its data)
+TRAILER = struct.Struct(">I8s")  # counter, MAC
+NONCE_LEN = 8
 
 SYS, DEV = 0xFF, 0x00  # the system channel and the device channel
 DISCOVER, CYCLIC, ANNOUNCE = 0x01, 0x04, 0x10  # ops of the system channel
@@ -103,3 +113,59 @@ def ethernet(dst, src, payload, pad=False):
     if pad:
         payload += bytes(max(0, ETH_MIN_PAYLOAD - len(payload)))
     return dst + src + struct.pack(">H", ETH_P_VMAC) + payload
+
+
+def _nacl_hash():
+    """nacl.hash of the python3 running the tests, else Debian's
+    (python3-nacl: its extension is built for the stable ABI, so it loads
+    in a python3 of another origin too). None without either."""
+    try:
+        import nacl.hash
+        return nacl.hash
+    except ImportError:
+        pass
+    if "/usr/lib/python3/dist-packages" not in sys.path:
+        sys.path.append("/usr/lib/python3/dist-packages")
+    try:
+        import nacl.hash
+        return nacl.hash
+    except ImportError:
+        return None
+
+
+NACL = _nacl_hash()
+
+
+def siphash(key, message, wide=False):
+    """libsodium's SipHash-2-4 of message under the 16-byte key: 8 bytes, or
+    16 (SipHash-2-4-128) when wide."""
+    import nacl.encoding
+    f = NACL.siphashx24 if wide else NACL.siphash24
+    return f(message, key=key, encoder=nacl.encoding.RawEncoder)
+
+
+def seal(whole, counter, key, extra=b""):
+    """whole (a frame) authenticated: the AUTH flag set, counter and the MAC
+    of every byte so far and extra (an ANNOUNCE's: the DISCOVER's nonce)
+    appended."""
+    flagged = whole[:3] + bytes([whole[3] | AUTH]) + whole[4:] + struct.pack(">I", counter)
+    return flagged + siphash(key, flagged + extra)
+
+
+def opens(whole, key, extra=b""):
+    """Whether the authenticated frame whole verifies under key."""
+    return (len(whole) >= HDR_LEN + TRAILER.size and whole[3] & AUTH and
+            siphash(key, whole[:-8] + extra) == whole[-8:])
+
+
+def counter_of(whole):
+    """The counter of an authenticated frame (not CYCLIC)."""
+    return TRAILER.unpack(whole[-TRAILER.size:])[0]
+
+
+def session_keys(key, nonce, device_id):
+    """(to_board, to_host): the keys of the session of device_id that began
+    with the DISCOVER carrying nonce."""
+    tail = nonce + struct.pack(">I", device_id)
+    return siphash(key, b"vmac-to-board" + tail, True), siphash(key, b"vmac-to-host" + tail, True)
+
