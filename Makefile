@@ -101,7 +101,7 @@ BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 
 .PHONY: format format-check test-build asan-build
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz fuzz test-integration test-ui test-asan bench clean
-.PHONY: firmware run-qemu soak test-soak tahu-deps
+.PHONY: firmware run-qemu soak test-soak tahu-deps mcu-auth-bench
 all: $(BINS)
 
 $(portable_obj): $(OBJ)/%.o: %.c

@@ -112,3 +112,18 @@ void vmac_report_watchdog(const struct vmac_board *b, char *line, size_t len)
 	add_unsigned(&t, b->watchdog_ms);
 	add(&t, " ms, outputs off");
 }
+
+void vmac_report_counters(const struct vmac_board *b, char *line, size_t len)
+{
+	struct text t = start(b, line, len);
+	add(&t, "frames ok ");
+	add_unsigned(&t, b->counters.frames_ok);
+	add(&t, ", malformed ");
+	add_unsigned(&t, b->counters.frames_malformed);
+	add(&t, ", ignored ");
+	add_unsigned(&t, b->counters.frames_ignored);
+	add(&t, ", watchdog trips ");
+	add_unsigned(&t, b->counters.watchdog_trips);
+	add(&t, ", auth_failed ");
+	add_unsigned(&t, b->counters.auth_failed);
+}

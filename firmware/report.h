@@ -1,9 +1,9 @@
 /* The board's log lines (docs/BOARD.md, "What it prints"), made in one
  * place for vmac-board (firmware/posix/) and the firmware on a
  * microcontroller (firmware/mcu/): what changed since the last report (its
- * state, its outputs, the plant's unsafe episodes) and a watchdog trip,
- * each one line of text that people and the tests read. Portable C99,
- * no printf, no heap. */
+ * state, its outputs, the plant's unsafe episodes), a watchdog trip and
+ * the frame counters, each one line of text that people and the tests
+ * read. Portable C99, no printf, no heap. */
 #ifndef VMAC_REPORT_H
 #define VMAC_REPORT_H
 
@@ -35,5 +35,10 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 /* The line of a watchdog trip ("NAME: watchdog: no frame for N ms, outputs
  * off"); the caller may add the times its clock gives. */
 void vmac_report_watchdog(const struct vmac_board *b, char *line, size_t len);
+
+/* The board's frame counters, one line: "NAME: frames ok N, malformed N,
+ * ignored N, watchdog trips N, auth_failed N" (auth_failed: frames of a
+ * keyed board's session that did not open under its key, or replays). */
+void vmac_report_counters(const struct vmac_board *b, char *line, size_t len);
 
 #endif

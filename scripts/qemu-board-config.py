@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Set the identity of a copy of the LM3S6965 board firmware: board name,
-driver, plant, MAC and ids, in the identity block the firmware reads at
+driver, plant, MAC, ids and key, in the identity block the firmware reads at
 start (flash address 0x100, 128 bytes, magic "VMCF"; docs/BOARD.md,
 "Firmware on a microcontroller", and firmware/mcu/lm3s6965/config.h). So
 several boards run side by side in QEMU from one build, each its own name
@@ -8,7 +8,7 @@ and MAC.
 
     qemu-board-config.py IMAGE -o OUT [--name N] [--plant KIND] [--driver D]
                          [--mac MAC] [--major N] [--minor N] [--protocol V]
-                         [--quiet | --verbose]
+                         [--quiet | --verbose] [--key-file FILE | --no-key]
     qemu-board-config.py IMAGE --show
 
 IMAGE is the .elf (the block is its section .vmac_config) or the .bin (the
@@ -18,19 +18,28 @@ without --mac sets the MAC back to the one derived from the name
 --plant without --driver announces the plant's own driver. Every field is
 checked as the firmware checks it; a refused value changes nothing (exit 2).
 Prints the identity written (or shown), one 'key=value' per line with
---show."""
+--show; of the key only whether there is one (keyed yes or no).
+
+--key-file FILE makes the board keyed (docs/PROTOCOL.md, "Authenticated
+frames"): FILE holds its 16-byte key as `vmac board enroll --out FILE`
+writes it, 32 hex digits and at most one newline. The copy then holds the
+key: it is written readable by its owner only. --no-key removes a key."""
 
 import argparse
+import os
 import re
 import struct
 import sys
 
 MAGIC = b"VMCF"
-VERSION = 1
+# Version 2 holds the key in bytes version 1 reserved: a version-1 block
+# (firmware built before keys) is read and written as version 1, unkeyed.
+VERSIONS = (1, 2)
 SIZE = 128
 ADDR = 0x100
-LAYOUT = struct.Struct("<4sHH32s32s16s6sBBII24s")  # config.h, struct vmac_mcu_config
-MAJOR_SET, QUIET = 0x01, 0x02
+LAYOUT = struct.Struct("<4sHH32s32s16s6sBBII16s8s")  # config.h, struct vmac_mcu_config
+MAJOR_SET, QUIET, KEYED = 0x01, 0x02, 0x04
+KEY_FILE = re.compile(rb"\A[0-9A-Fa-f]{32}\n?\Z")
 PLANTS = ("washer", "dishwasher", "lights", "generic")
 NAME = re.compile(r"^[A-Za-z0-9_-]{1,31}$")
 assert LAYOUT.size == SIZE
@@ -89,13 +98,31 @@ def read_block(image, offset, path):
     if len(image) < offset + SIZE:
         fail("%s: too short to hold the identity block at 0x%x" % (path, offset))
     f = list(LAYOUT.unpack_from(image, offset))
-    if f[0] != MAGIC or f[1] != VERSION or f[2] != SIZE:
-        fail("%s: no identity block of version %d at 0x%x (magic %r, version %d, size %d)" % (
-            path, VERSION, offset, f[0], f[1], f[2]))
+    if f[0] != MAGIC or f[1] not in VERSIONS or f[2] != SIZE:
+        fail("%s: no identity block of version 1 or 2 at 0x%x (magic %r, version %d, size %d)" % (
+            path, offset, f[0], f[1], f[2]))
+    flags = f[8] if f[1] >= 2 else f[8] & ~KEYED
     return {
-        "board": text_field(f[3]), "driver": text_field(f[4]), "plant": text_field(f[5]), "mac": f[6],
-        "protocol": f[7] or 2, "flags": f[8], "major": f[9], "minor": f[10],
+        "version": f[1], "board": text_field(f[3]), "driver": text_field(f[4]), "plant": text_field(f[5]),
+        "mac": f[6], "protocol": f[7] or 2, "flags": flags, "major": f[9], "minor": f[10],
+        "key": f[11] if flags & KEYED else bytes(16),
     }
+
+
+def read_key(path):
+    """The 16-byte key of a key file (vmac board enroll --out FILE)."""
+    try:
+        with open(path, "rb") as f:
+            text = f.read(64)
+            mode = os.fstat(f.fileno()).st_mode
+    except OSError as e:
+        fail("key file %s: %s" % (path, e.strerror))
+    if not KEY_FILE.match(text):
+        fail("key file %s: not a key (want 32 hex digits, the 16-byte key, then at most one newline)" % path)
+    if mode & 0o077:
+        print("qemu-board-config: warning: key file %s has mode %04o: group or others may read or change "
+              "the board's key (chmod 600 %s)" % (path, mode & 0o7777, path), file=sys.stderr)
+    return bytes.fromhex(text.decode().strip())
 
 
 def check(b):
@@ -119,7 +146,7 @@ def describe(b):
     major = b["major"] if b["flags"] & MAJOR_SET else fnv1a(b["board"])
     return [("board", b["board"]), ("driver", b["driver"]), ("plant", b["plant"]), ("mac", mac_text(mac)),
             ("major", "%d" % major), ("minor", "%d" % b["minor"]), ("protocol", "%d" % b["protocol"]),
-            ("quiet", "yes" if b["flags"] & QUIET else "no")]
+            ("quiet", "yes" if b["flags"] & QUIET else "no"), ("keyed", "yes" if b["flags"] & KEYED else "no")]
 
 
 def parse_mac(text):
@@ -147,6 +174,9 @@ def main():
     quiet = ap.add_mutually_exclusive_group()
     quiet.add_argument("--quiet", action="store_true", help="log only state changes and safety events")
     quiet.add_argument("--verbose", action="store_true", help="log every output change too (as built)")
+    keyed = ap.add_mutually_exclusive_group()
+    keyed.add_argument("--key-file", help="keyed: the board's key, 32 hex digits (vmac board enroll --out FILE)")
+    keyed.add_argument("--no-key", action="store_true", help="unkeyed: remove the key (as built)")
     args = ap.parse_args()
     if not args.show and not args.out:
         fail("say where the patched copy goes (-o OUT), or --show")
@@ -184,11 +214,24 @@ def main():
         b["flags"] |= QUIET
     if args.verbose:
         b["flags"] &= ~QUIET
+    if args.key_file is not None:
+        if b["version"] < 2:
+            fail("%s: identity block of version 1: its firmware predates keys (build it again)" % args.image)
+        b["key"] = read_key(args.key_file)
+        b["flags"] |= KEYED
+    if args.no_key:
+        b["key"] = bytes(16)
+        b["flags"] &= ~KEYED
     check(b)
-    LAYOUT.pack_into(image, offset, MAGIC, VERSION, SIZE, b["board"].encode(), b["driver"].encode(),
-                     b["plant"].encode(), b["mac"], b["protocol"], b["flags"], b["major"], b["minor"], bytes(24))
+    LAYOUT.pack_into(image, offset, MAGIC, b["version"], SIZE, b["board"].encode(), b["driver"].encode(),
+                     b["plant"].encode(), b["mac"], b["protocol"], b["flags"], b["major"], b["minor"], b["key"],
+                     bytes(8))
     try:
-        with open(args.out, "wb") as f:
+        # A copy that holds a key is as secret as the key file.
+        fd = os.open(args.out, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if b["flags"] & KEYED else 0o666)
+        with os.fdopen(fd, "wb") as f:
+            if b["flags"] & KEYED:
+                os.fchmod(f.fileno(), 0o600)
             f.write(image)
     except OSError as e:
         fail("%s: %s" % (args.out, e.strerror))

@@ -8,6 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "keyfile.h"
+
 #define PLANT_STEP_MAX_S 0.01 /* physics sub-step */
 #define SESSIONS 65536        /* device_id & 0xFFFF: the host's slot of the device */
 
@@ -50,6 +52,23 @@ char *boards_mac_format(const uint8_t mac[6], char *buf, size_t len)
 {
 	snprintf(buf, len, "%02x:%02x:%02x:%02x:%02x:%02x", mac[0], mac[1], mac[2], mac[3], mac[4], mac[5]);
 	return buf;
+}
+
+/* --key-file or DIR/NAME.key of --key-dir into id, which is then keyed;
+ * neither: id stays unkeyed. 0, or -1 with the reason in err. */
+static int board_key(const struct boards_config *cfg, struct vmac_board_identity *id, char *err, size_t errlen)
+{
+	char path[4096];
+	if (cfg->key_file)
+		snprintf(path, sizeof(path), "%s", cfg->key_file);
+	else if (cfg->key_dir)
+		snprintf(path, sizeof(path), "%s/%s.key", cfg->key_dir, id->board);
+	else
+		return 0;
+	if (keyfile_read(path, id->key, err, errlen) != 0)
+		return -1;
+	id->keyed = 1;
+	return 0;
 }
 
 static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
@@ -118,8 +137,13 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 			boards_fini(s);
 			return -2;
 		}
+		if (board_key(cfg, &id, err, errlen) != 0) {
+			boards_fini(s);
+			return -2;
+		}
 		vmac_plant_init(&pb->plant, cfg->kind);
 		vmac_board_init(&pb->board, &id, &plant_io, &pb->plant, now_ms);
+		explicit_bzero(id.key, sizeof(id.key)); /* the board holds its copy */
 		vmac_report_init(&pb->report, &pb->board, &pb->plant, 0);
 		pb->routed_offset = VMAC_OFFSET_NONE;
 		memcpy(pb->mac, s->mac_prefix, sizeof(s->mac_prefix));
@@ -196,6 +220,13 @@ void boards_report(struct board_set *s, int32_t i)
 		printf("%s\n", line);
 }
 
+void boards_print_counters(const struct board_set *s, int32_t i)
+{
+	char line[VMAC_REPORT_LINE];
+	vmac_report_counters(&s->boards[i].board, line, sizeof(line));
+	printf("%s\n", line);
+}
+
 void boards_housekeep(struct board_set *s, uint64_t now_ms)
 {
 	double dt_s = now_ms > s->last_step_ms ? (double)(now_ms - s->last_step_ms) / 1000.0 : 0.0;
@@ -222,6 +253,11 @@ void boards_command(struct board_set *s, const char *line)
 	double value = 0;
 	int32_t i;
 	int fields = sscanf(line, "%63s %63s %lf", name, action, &value);
+	if (fields == 1 && strcmp(name, "status") == 0) {
+		for (i = 0; i < s->count; i++)
+			boards_print_counters(s, i);
+		return;
+	}
 	if (fields < 2) {
 		fprintf(stderr, "vmac-board: expected 'NAME ACTION VALUE', got: %s\n", line);
 		return;
@@ -229,6 +265,10 @@ void boards_command(struct board_set *s, const char *line)
 	for (i = 0; i < s->count; i++) {
 		struct posix_board *pb = &s->boards[i];
 		if (strcmp(pb->board.id.board, name) == 0) {
+			if (fields == 2 && strcmp(action, "status") == 0) {
+				boards_print_counters(s, i);
+				return;
+			}
 			if (vmac_plant_set(&pb->plant, action, value) != 0)
 				printf("%s: refused %s %g\n", name, action, value);
 			else

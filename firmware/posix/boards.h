@@ -38,6 +38,10 @@ struct boards_config {
 	long minor;
 	uint8_t protocol; /* 1 or 2 */
 	int eth;          /* raw Ethernet: each board has a MAC of its own */
+	/* Keyed boards (keyfile.h): one board's key file, or a folder of
+	 * NAME.key files, one per board; both NULL: unkeyed. */
+	const char *key_file;
+	const char *key_dir;
 };
 
 struct board_set {
@@ -64,9 +68,10 @@ struct board_set {
 	uint64_t last_step_ms; /* plant time */
 };
 
-/* Make cfg->count boards (names, identities, MACs, plants) and the routing
- * tables. Returns 0, or -1 with a readable reason in err (a name the
- * protocol refuses, or out of memory). */
+/* Make cfg->count boards (names, identities, keys, MACs, plants) and the
+ * routing tables. Returns 0, or with a readable reason in err -2 (a name
+ * the protocol refuses, a key file missing or not one) or -1 (out of
+ * memory). */
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen);
 void boards_fini(struct board_set *s);
 
@@ -95,7 +100,11 @@ void boards_housekeep(struct board_set *s, uint64_t now_ms);
  * a line for each unsafe episode its plant entered (even with --quiet). */
 void boards_report(struct board_set *s, int32_t i);
 
-/* An operator line 'NAME ACTION VALUE' (--commands). */
+/* The frame counters of board i, one line (firmware/report.c). */
+void boards_print_counters(const struct board_set *s, int32_t i);
+
+/* An operator line 'NAME ACTION VALUE' (--commands); 'status' or 'NAME
+ * status' prints the counters of every board, or of NAME. */
 void boards_command(struct board_set *s, const char *line);
 
 /* Route one batch of received frames to their boards (dispatch.c). The

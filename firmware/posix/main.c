@@ -54,6 +54,9 @@ static void usage(FILE *f)
 	           "                    (1..65535, default 1)\n"
 	           "  --major N         major id (default: hash of the name); --minor N (default 0)\n"
 	           "  --protocol V      highest protocol version the boards speak: 1 or 2 (default 2)\n"
+	           "  --key-file FILE   keyed: the board's 16-byte key, 32 hex digits (vmac board enroll\n"
+	           "                    --out FILE writes it); it answers only a host that authenticates\n"
+	           "  --key-dir DIR     keyed: each board NAME reads its key from DIR/NAME.key\n"
 	           "  --cpu K           run on CPU K only\n"
 	           "  --late-us N       print each reply that left more than N us after its request\n"
 	           "                    came in (default 1000; 0: never)\n"
@@ -65,7 +68,8 @@ static void usage(FILE *f)
 	           "                    default; refused, one line on stderr and normal scheduling)\n"
 	           "  --help            this text\n\n"
 	           "Prints one line per state change and output change on stdout. On SIGINT or\n"
-	           "SIGTERM every board turns its outputs off before the process exits.\n");
+	           "SIGTERM every board turns its outputs off before the process exits, and prints\n"
+	           "its frame counters (with --commands, 'status' prints them at any time).\n");
 }
 
 /* A whole number in min..max from text, or -1 with an error printed. */
@@ -104,6 +108,18 @@ static int pin_to_cpu(long cpu)
 	return 0;
 }
 
+/* Keyed boards: a second start-up line, after the one tests wait for,
+ * naming where the keys came from (never a key). */
+static void print_keyed(const struct boards_config *cfg)
+{
+	if (cfg->key_file)
+		printf("vmac-board: keyed: the board answers only a host that authenticates (key file %s)\n",
+		       cfg->key_file);
+	else if (cfg->key_dir)
+		printf("vmac-board: keyed: %s answer only a host that authenticates (keys %s/NAME.key)\n",
+		       cfg->count == 1 ? "the board" : "the boards", cfg->key_dir);
+}
+
 /* The start-up line: what runs, where, and on Ethernet each board's MAC
  * (a long run of boards: the first and the last, the rest follow from the
  * rule: the last two bytes are the board's number). */
@@ -118,6 +134,7 @@ static void print_start(const struct board_set *s, const struct boards_config *c
 	       cfg->count == 1 ? "" : "s", bus);
 	if (!s->eth) {
 		printf(" (UDP), interface %s, protocol %u%s\n", iface, (unsigned)cfg->protocol, cpu_text);
+		print_keyed(cfg);
 		return;
 	}
 	printf(" (raw Ethernet, interface MAC %s), protocol %u%s, MAC", boards_mac_format(t->mac, mac, sizeof(mac)),
@@ -127,11 +144,13 @@ static void print_start(const struct board_set *s, const struct boards_config *c
 			printf("%s %s %s", i ? "," : "", s->boards[i].board.id.board,
 			       boards_mac_format(s->boards[i].mac, mac, sizeof(mac)));
 		printf("\n");
+		print_keyed(cfg);
 		return;
 	}
 	printf(" %s %s", s->boards[0].board.id.board, boards_mac_format(s->boards[0].mac, mac, sizeof(mac)));
 	printf(" .. %s %s (NAME-N has the last two bytes N)\n", s->boards[s->count - 1].board.id.board,
 	       boards_mac_format(s->boards[s->count - 1].mac, mac, sizeof(mac)));
+	print_keyed(cfg);
 }
 
 /* --commands: stdin read without stdio's buffer, so that a line waiting in
@@ -220,6 +239,8 @@ static int take_option(struct options *o, int opt, const char *arg)
 	case 'C': o->commands = 1; return -1;
 	case 'q': o->quiet = 1; return -1;
 	case 'R': o->realtime = 0; return -1;
+	case 'K': o->cfg.key_file = arg; return -1;
+	case 'D': o->cfg.key_dir = arg; return -1;
 	case 'h': usage(stdout); return 0;
 	default: usage(stderr); return 2;
 	}
@@ -262,8 +283,9 @@ static int parse_options(int argc, char **argv, struct options *o)
 	    {"protocol", required_argument, 0, 'P'}, {"cpu", required_argument, 0, 'u'},
 	    {"late-us", required_argument, 0, 'l'},  {"commands", no_argument, 0, 'C'},
 	    {"quiet", no_argument, 0, 'q'},          {"no-realtime", no_argument, 0, 'R'},
+	    {"key-file", required_argument, 0, 'K'}, {"key-dir", required_argument, 0, 'D'},
 	    {"help", no_argument, 0, 'h'},           {0, 0, 0, 0}};
-	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0};
+	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0, NULL, NULL};
 	int opt, rc;
 
 	memset(o, 0, sizeof(*o));
@@ -283,6 +305,18 @@ static int parse_options(int argc, char **argv, struct options *o)
 		o->cfg.name = vmac_plant_name(o->cfg.kind);
 	if (!o->cfg.driver)
 		o->cfg.driver = vmac_plant_default_driver(o->cfg.kind);
+	if (o->cfg.key_file && o->cfg.key_dir) {
+		fprintf(stderr, "vmac-board: --key-file and --key-dir both given: one board's key, or a folder "
+		                "of NAME.key files, not both\n");
+		return 2;
+	}
+	if (o->cfg.key_file && o->cfg.count > 1) {
+		fprintf(stderr,
+		        "vmac-board: --key-file is one board's key; each of --count %ld boards has its own "
+		        "(--key-dir DIR: DIR/NAME-1.key..)\n",
+		        o->cfg.count);
+		return 2;
+	}
 	return take_bus(o);
 }
 
@@ -385,15 +419,32 @@ static int serve(struct runner *r)
 	return 0;
 }
 
-/* The exit: every board safe and reported, then the process's counts. */
+/* The exit: every board safe and reported, its counters (up to
+ * BOARDS_LIST_MACS_MAX boards; beyond, their sums), then the process's
+ * counts. */
 static void finish(struct runner *r, long late_us)
 {
 	struct board_set *s = &r->set;
+	struct vmac_board_counters sum;
 	int32_t k;
+	memset(&sum, 0, sizeof(sum));
 	for (k = 0; k < s->count; k++) {
+		const struct vmac_board_counters *c = &s->boards[k].board.counters;
 		vmac_board_safe(&s->boards[k].board);
 		boards_report(s, k);
+		if (s->count <= BOARDS_LIST_MACS_MAX)
+			boards_print_counters(s, k);
+		sum.frames_ok += c->frames_ok;
+		sum.frames_malformed += c->frames_malformed;
+		sum.frames_ignored += c->frames_ignored;
+		sum.watchdog_trips += c->watchdog_trips;
+		sum.auth_failed += c->auth_failed;
 	}
+	if (s->count > BOARDS_LIST_MACS_MAX)
+		printf("vmac-board: all %" PRId32 " boards: frames ok %" PRIu32 ", malformed %" PRIu32
+		       ", ignored %" PRIu32 ", watchdog trips %" PRIu32 ", auth_failed %" PRIu32 "\n",
+		       s->count, sum.frames_ok, sum.frames_malformed, sum.frames_ignored, sum.watchdog_trips,
+		       sum.auth_failed);
 	if (s->late_ns > 0)
 		printf("vmac-board: %" PRIu64 " late replies (board-side delay over %ld us)\n", s->late_replies,
 		       late_us);

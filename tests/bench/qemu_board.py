@@ -55,7 +55,8 @@ SO_TIMESTAMPNS, SO_RCVBUFFORCE = 35, 33
 SOL_PACKET, PACKET_STATISTICS = 263, 6
 PACKET_HOST, PACKET_OUTGOING = 0, 4
 OP_UPDATE, OP_CYCLIC, CH_DEVICE, CH_SYSTEM, FLAG_REPLY = 0x02, 0x04, 0x00, 0xFF, 0x01
-STATUS_RE = re.compile(r"^(\S+): frames ok (\d+), malformed (\d+), ignored (\d+), watchdog trips (\d+); "
+STATUS_RE = re.compile(r"^(\S+): frames ok (\d+), malformed (\d+), ignored (\d+), watchdog trips (\d+)"
+                       r"(?:, auth_failed \d+)?; "
                        r"Ethernet received (\d+), sent (\d+), not ours (\d+), oversize (\d+), overruns (\d+)")
 STATUS_FIELDS = ("frames_ok", "malformed", "ignored", "watchdog_trips", "eth_received", "eth_sent", "not_ours",
                  "oversize", "overruns")

@@ -16,6 +16,7 @@ each test is SKIPPED, which CI=true makes a failure."""
 
 import os
 import random
+import re
 import shutil
 import signal
 import subprocess
@@ -38,19 +39,24 @@ BANNER = r"^vmac-board: 1 \S+ board on bus eth:lm3s6965"
 RELAXED = {"reply_deadline_us": 250000, "miss_limit": 5}
 
 
-def firmware_image(t):
-    """The firmware's ELF image, or Skip saying what is missing."""
+def image_path(t):
+    """The firmware's ELF image, or Skip when it was not built."""
     path = os.environ.get("VMAC_FIRMWARE") or os.path.join(t.bindir, "..", "firmware",
                                                            "vmac-board-lm3s6965.elf")
     path = os.path.abspath(path)
-    if os.geteuid() != 0:
-        raise Skip("the QEMU boards need root (tap devices, a bridge, CAP_NET_RAW)")
-    if not shutil.which("qemu-system-arm"):
-        raise Skip("no qemu-system-arm (make deps installs it)")
     if not os.path.exists(path):
         raise Skip("no firmware image %s (make firmware; needs gcc-arm-none-eabi and picolibc-arm-none-eabi)"
                    % path)
     return path
+
+
+def firmware_image(t):
+    """The firmware's ELF image, or Skip saying what is missing."""
+    if os.geteuid() != 0:
+        raise Skip("the QEMU boards need root (tap devices, a bridge, CAP_NET_RAW)")
+    if not shutil.which("qemu-system-arm"):
+        raise Skip("no qemu-system-arm (make deps installs it)")
+    return image_path(t)
 
 
 class Link:
@@ -116,12 +122,13 @@ class Link:
         return ns, far
 
 
-def qemu_board(t, image, link, plant, name):
-    """A QEMU LM3S6965 running a copy of image patched to (plant, name), on
-    a tap of link; returns its Proc once the firmware's banner is out."""
+def qemu_board(t, image, link, plant, name, config=()):
+    """A QEMU LM3S6965 running a copy of image patched to (plant, name) and
+    the config script's further options, on a tap of link; returns its
+    Proc once the firmware's banner is out."""
     copy = os.path.join(t.logdir, "%s.elf" % name)
-    p = subprocess.run([sys.executable, CONFIG_SCRIPT, image, "-o", copy, "--plant", plant, "--name", name],
-                       capture_output=True, text=True, timeout=30)
+    p = subprocess.run([sys.executable, CONFIG_SCRIPT, image, "-o", copy, "--plant", plant, "--name", name]
+                       + list(config), capture_output=True, text=True, timeout=30)
     assert p.returncode == 0, "qemu-board-config.py refused %s: %s" % (name, p.stderr.strip())
     mac = [kv.split()[1] for kv in p.stdout.strip().split(", ") if kv.startswith("mac ")][0]
     argv = ["qemu-system-arm", "-M", "lm3s6965evb", "-display", "none", "-monitor", "none", "-serial", "stdio",
@@ -256,3 +263,105 @@ def test_the_host_killed_turns_a_qemu_boards_outputs_off(t):
         trip.time_s - killed, TIMING["watchdog_ms"])
     assert off.time_s - killed < limit_s, "the light still on %.2f s after the host died" % (off.time_s - killed)
     board.wait_line(r"^lights-1: state unknown device 0x00000000 ", 30, since=mark, what="back to discovery")
+
+
+KEY_HEX = "00112233445566778899AABBCCDDeeff"
+KEYED_LINE = r"^vmac-board: keyed: the board answers only a host that authenticates"
+
+
+def config(*argv):
+    """scripts/qemu-board-config.py argv: (exit code, stdout, stderr)."""
+    p = subprocess.run([sys.executable, CONFIG_SCRIPT] + list(argv), capture_output=True, text=True, timeout=30)
+    return p.returncode, p.stdout, p.stderr
+
+
+def key_file(t):
+    path = os.path.join(t.logdir, "board.key")
+    with open(path, "w") as f:
+        f.write(KEY_HEX + "\n")
+    os.chmod(path, 0o600)
+    return path
+
+
+def booted(t, image, name):
+    """QEMU running image with no network (no root needed) until its
+    second start-up line, and a moment for a third; returns its Proc."""
+    if not shutil.which("qemu-system-arm"):
+        raise Skip("no qemu-system-arm (make deps installs it)")
+    board = harness.Proc(t._name(name), ["qemu-system-arm", "-M", "lm3s6965evb", "-display", "none", "-monitor",
+                                         "none", "-serial", "stdio", "-nic", "none", "-kernel", image], t.logdir,
+                         stdin=True)
+    t.procs.append(board)
+    board.wait_line(r"^vmac-board: firmware ", 30, what="the firmware's start-up lines on UART0")
+    mark = board.mark()
+    board.send("status")  # answered after every start-up line
+    board.wait_line(r"^\S+: frames ok ", 30, since=mark, what="the counters")
+    return board
+
+
+def test_the_identity_block_carries_a_key_and_never_shows_it(t):
+    image = image_path(t)
+    key = key_file(t)
+    keyed = os.path.join(t.logdir, "keyed.elf")
+    rc, out, err = config(image, "-o", keyed, "--name", "k-1", "--key-file", key)
+    assert rc == 0 and out.rstrip().endswith(", keyed yes"), "writing a key: exit %d, %r %r" % (rc, out, err)
+    assert os.stat(keyed).st_mode & 0o077 == 0, "the copy holding the key is mode %o, expected 0600" % (
+        os.stat(keyed).st_mode & 0o777)
+    with open(keyed, "rb") as f:
+        assert bytes.fromhex(KEY_HEX) in f.read(), "the key is not in the copy's identity block"
+    rc, out, _ = config(keyed, "--show")
+    assert rc == 0 and "keyed=yes" in out.splitlines(), "--show of a keyed copy: %r" % out
+    assert KEY_HEX[:8].lower() not in out.lower(), "--show printed the key"
+    # Other changes keep the key; --no-key takes it out of the image.
+    again = os.path.join(t.logdir, "again.elf")
+    rc, out, _ = config(keyed, "-o", again, "--plant", "lights")
+    assert rc == 0 and out.rstrip().endswith(", keyed yes"), "a new plant dropped the key: %r" % out
+    plain = os.path.join(t.logdir, "plain.elf")
+    rc, out, _ = config(keyed, "-o", plain, "--no-key")
+    assert rc == 0 and out.rstrip().endswith(", keyed no"), "--no-key: %r" % out
+    with open(plain, "rb") as f:
+        assert bytes.fromhex(KEY_HEX) not in f.read(), "--no-key left the key in the image"
+    # A block of version 1 (firmware from before keys): the flag and key
+    # bytes were reserved. The script shows it unkeyed and refuses a key.
+    with open(keyed, "rb") as f:
+        data = bytearray(f.read())
+    at = data.index(b"VMCF\x02\x00\x80\x00")
+    data[at + 4] = 1
+    old = os.path.join(t.logdir, "version1.elf")
+    with open(old, "wb") as f:
+        f.write(data)
+    rc, out, _ = config(old, "--show")
+    assert rc == 0 and "keyed=no" in out.splitlines(), "--show of a version-1 block: %r" % out
+    rc, _, err = config(old, "-o", os.path.join(t.logdir, "refused.elf"), "--key-file", key)
+    assert rc == 2 and "version 1" in err, "a key for a version-1 block: exit %d, %r" % (rc, err)
+    # The firmware: keyed says so; version 1 with the same bytes runs unkeyed.
+    board = booted(t, keyed, "qemu-keyed")
+    assert board.find_lines(KEYED_LINE), "the keyed firmware did not say it is keyed: %r" % board.text("stdout")
+    assert KEY_HEX[:8].lower() not in board.text("stdout").lower(), "the firmware printed its key"
+    board = booted(t, old, "qemu-version1")
+    assert not board.find_lines(KEYED_LINE), "a version-1 block ran keyed: %r" % board.text("stdout")
+    assert not board.find_lines(r"identity block refused"), "a version-1 block was refused"
+
+
+def test_a_keyed_qemu_board_never_attaches_to_a_host_without_its_key(t):
+    # Today's host sends DISCOVER without a nonce: the keyed board answers
+    # none. It receives them (its MAC counts them) and stays off the host.
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "klights-1", config=["--key-file", key_file(t)])
+    board.wait_line(KEYED_LINE, 30, what="the keyed line")
+    host = t.host(bus="eth:" + link.bridge)
+    host.wait_status(lambda s: s is not None, 30, "the host's status")
+    received, line, deadline = 0, None, time.monotonic() + 30
+    while received < 3 and time.monotonic() < deadline:
+        time.sleep(1)
+        mark = board.mark()
+        board.send("status")
+        line = board.wait_line(r"^klights-1: frames ok ", 10, since=mark, what="the counters")
+        counts = re.search(r"Ethernet received (\d+), sent \d+, not ours (\d+)", line.text)
+        received = int(counts.group(1)) - int(counts.group(2))  # vmac frames to it or broadcast
+    assert received >= 3, "the board received %d vmac frames in 30 s: %r" % (received, line.text)
+    assert line.text.startswith("klights-1: frames ok 0,"), "the keyed board took frames: %r" % line.text
+    d = host.device("klights-1", host.status())
+    assert d is None or d.get("state") != "running", "a keyed board runs on a host without its key"
+    assert not board.find_lines(r"^klights-1: state known"), "the keyed board took a session"

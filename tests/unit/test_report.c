@@ -87,6 +87,23 @@ START_TEST(a_short_buffer_is_cut_not_overrun)
 }
 END_TEST
 
+START_TEST(the_counters_line_names_auth_failed)
+{
+	struct vmac_board b;
+	struct vmac_plant p;
+	char line[VMAC_REPORT_LINE];
+	make(&b, &p);
+	b.counters.frames_ok = 4294967295u;
+	b.counters.frames_malformed = 2;
+	b.counters.frames_ignored = 3;
+	b.counters.watchdog_trips = 4;
+	b.counters.auth_failed = 17;
+	vmac_report_counters(&b, line, sizeof(line));
+	ck_assert_str_eq(line, "washer-1: frames ok 4294967295, malformed 2, ignored 3, watchdog trips 4, "
+	                       "auth_failed 17");
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("report");
@@ -94,6 +111,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_change_is_said_once_in_the_words_the_tests_read);
 	tcase_add_test(tc, quiet_says_only_leaving_a_session);
 	tcase_add_test(tc, a_short_buffer_is_cut_not_overrun);
+	tcase_add_test(tc, the_counters_line_names_auth_failed);
 	suite_add_tcase(s, tc);
 	return s;
 }

@@ -21,6 +21,7 @@ __attribute__((section(".vmac_config"), used)) const struct vmac_mcu_config vmac
 typedef char config_size_check[sizeof(struct vmac_mcu_config) == VMAC_MCU_CONFIG_SIZE ? 1 : -1];
 typedef char config_mac_check[offsetof(struct vmac_mcu_config, mac) == 88 ? 1 : -1];
 typedef char config_major_check[offsetof(struct vmac_mcu_config, major) == 96 ? 1 : -1];
+typedef char config_key_check[offsetof(struct vmac_mcu_config, key) == 104 ? 1 : -1];
 
 /* The block as the flash holds it now: hidden from the optimiser, which
  * would otherwise read the values built in and never the patched ones. */
@@ -52,9 +53,9 @@ int vmac_mcu_config_load(struct vmac_mcu_settings *s, const char **why)
 	uint32_t hash;
 
 	memset(s, 0, sizeof(*s));
-	if (memcmp(c->magic, "VMCF", 4) != 0 || c->version != VMAC_MCU_CONFIG_VERSION ||
-	    c->size != VMAC_MCU_CONFIG_SIZE) {
-		*why = "no identity block of version 1 at 0x00000100 (magic VMCF)";
+	if (memcmp(c->magic, "VMCF", 4) != 0 || c->version < VMAC_MCU_CONFIG_VERSION_MIN ||
+	    c->version > VMAC_MCU_CONFIG_VERSION || c->size != VMAC_MCU_CONFIG_SIZE) {
+		*why = "no identity block of version 1 or 2 at 0x00000100 (magic VMCF)";
 		return -1;
 	}
 	if (copy_text(s->id.board, c->board, sizeof(c->board)) != 0 ||
@@ -94,5 +95,10 @@ int vmac_mcu_config_load(struct vmac_mcu_settings *s, const char **why)
 		memcpy(s->mac, c->mac, sizeof(s->mac));
 	}
 	s->quiet = (c->flags & VMAC_MCU_CONFIG_QUIET) != 0;
+	/* Version 1 had no key: its flag bit and bytes are reserved, unkeyed. */
+	if (c->version >= 2 && (c->flags & VMAC_MCU_CONFIG_KEYED)) {
+		s->id.keyed = 1;
+		memcpy(s->id.key, c->key, sizeof(s->id.key));
+	}
 	return 0;
 }

@@ -129,18 +129,14 @@ static int split_words(char *line, char **words, int max)
 	return n;
 }
 
+/* The board's counters as vmac-board prints them (firmware/report.c),
+ * then the MAC's and the stack's. */
 static void print_counters(void)
 {
 	const struct vmac_mcu_enet_counters *e = vmac_mcu_enet_counters();
-	put_name();
-	vmac_mcu_uart_puts("frames ok ");
-	vmac_mcu_uart_putu(board.counters.frames_ok);
-	vmac_mcu_uart_puts(", malformed ");
-	vmac_mcu_uart_putu(board.counters.frames_malformed);
-	vmac_mcu_uart_puts(", ignored ");
-	vmac_mcu_uart_putu(board.counters.frames_ignored);
-	vmac_mcu_uart_puts(", watchdog trips ");
-	vmac_mcu_uart_putu(board.counters.watchdog_trips);
+	char line[VMAC_REPORT_LINE];
+	vmac_report_counters(&board, line, sizeof(line));
+	vmac_mcu_uart_puts(line);
 	vmac_mcu_uart_puts("; Ethernet received ");
 	vmac_mcu_uart_putu(e->received);
 	vmac_mcu_uart_puts(", sent ");
@@ -216,6 +212,9 @@ static void print_start(void)
 	vmac_mcu_uart_puts(", identity block at 0x");
 	vmac_mcu_uart_puthex(VMAC_MCU_CONFIG_ADDR, 8);
 	vmac_mcu_uart_puts("\n");
+	if (board.id.keyed)
+		vmac_mcu_uart_puts("vmac-board: keyed: the board answers only a host that authenticates (key in "
+		                   "the identity block)\n");
 }
 
 /* A block that cannot be used keeps the board off the bus, its outputs off

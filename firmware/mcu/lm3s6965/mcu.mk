@@ -40,3 +40,21 @@ run-qemu: deps
 	@$(MAKE) --no-print-directory all firmware
 	@exec ./scripts/run-qemu-kitchen.sh $(BUILD)/bin $(FIRMWARE).elf
 
+
+# The cost of authenticated frames (tests/bench/mcu_auth.c, run by
+# tests/bench/mcu_auth.py): the firmware's objects with a bench in main's
+# place, so the code measured is the code that ships.
+MCU_BENCH_SRC := $(filter-out $(MCU_DIR)/main.c,$(MCU_SRC)) tests/bench/mcu_auth.c
+MCU_BENCH     := $(BUILD)/firmware/mcu-auth-bench.elf
+
+$(OBJ)/mcu/tests/bench/mcu_auth.o: tests/bench/mcu_auth.c
+	@mkdir -p $(dir $@)
+	$(MCU_CC) $(MCU_CFLAGS) -MMD -MP -c $< -o $@
+
+$(MCU_BENCH): $(MCU_BENCH_SRC:%.c=$(OBJ)/mcu/%.o) $(MCU_DIR)/lm3s6965.ld
+	@mkdir -p $(dir $@)
+	$(MCU_CC) $(MCU_ARCH) -nostartfiles -T $(MCU_DIR)/lm3s6965.ld -Wl,--gc-sections \
+		$(MCU_BENCH_SRC:%.c=$(OBJ)/mcu/%.o) -lm -o $@
+
+mcu-auth-bench: $(MCU_BENCH)
+	@python3 tests/bench/mcu_auth.py $(MCU_BENCH)
