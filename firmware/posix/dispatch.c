@@ -45,14 +45,15 @@ static void route_cyclic(struct board_set *s, const struct vmac_packet *p, uint6
 {
 	struct vmac_msg m;
 	const uint8_t *record;
-	unsigned k;
+	unsigned k, stride;
 
 	if (vmac_proto_decode(p->data, p->len, &m) != 0) {
 		s->unroutable++;
 		return;
 	}
 	record = m.u.cyclic.records;
-	for (k = 0; k < m.u.cyclic.count; k++, record += VMAC_CYCLIC_RECORD_LEN) {
+	stride = (m.flags & VMAC_FLAG_AUTH) ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN;
+	for (k = 0; k < m.u.cyclic.count; k++, record += stride) {
 		int32_t i;
 		if (record[0] == 0 && record[1] == 0)
 			continue; /* tag 0: an empty record */
