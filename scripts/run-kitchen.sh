@@ -9,7 +9,7 @@
 # vmacd settings, KEY=VALUE items separated by spaces, each passed as --set
 # after the demo's own, so they win: `make run VMAC_SET="miss_limit=3"`).
 # Each run makes a fresh operate token in STATE/token (the previous one is
-# revoked).
+# revoked), and enrolls the three boards (their keys in STATE/keys).
 #
 # The demo's reply deadline is 10 ms, not vmacd's 4 ms: the boards here are
 # processes on a PC that also runs builds and browsers, not microcontrollers,
@@ -51,6 +51,14 @@ fi
 	echo "run-kitchen: cannot make an access token in $state" >&2
 	exit 1
 }
+# The demo's boards are enrolled (docs/SECURITY.md, "Enrolling boards"):
+# each has its key in STATE/keys/NAME.key, made the first time, and the
+# host trusts only boards whose announcement proves theirs.
+"$bin/vmac" board enroll --local --state "$state" --key-dir "$state/keys" --replace --quiet \
+	washer-1 dishwasher-1 lights-1 || {
+	echo "run-kitchen: cannot enroll the demo's boards in $state" >&2
+	exit 1
+}
 pids=()
 fifos=$(mktemp -d)
 
@@ -80,11 +88,11 @@ pids+=($!)
 # Each board reads operator actions from a FIFO; the loop at the end hands
 # each line typed here to the board it names.
 for b in washer-1 dishwasher-1 lights-1; do mkfifo "$fifos/$b"; done
-"$bin/vmac-board" --plant washer --name washer-1 --bus "$bus" --quiet --commands <"$fifos/washer-1" &
+"$bin/vmac-board" --plant washer --name washer-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/washer-1" &
 pids+=($!)
-"$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --quiet --commands <"$fifos/dishwasher-1" &
+"$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/dishwasher-1" &
 pids+=($!)
-"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --quiet --commands <"$fifos/lights-1" &
+"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/lights-1" &
 pids+=($!)
 exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1"
 

@@ -136,6 +136,7 @@ enum MHD_Result http_board_enroll(struct vmac_http *h, struct MHD_Connection *c,
 	snprintf(text, sizeof(text), "%s enrolled%s, key %s (through the API)", board,
 	         replace ? " or its key replaced" : "", fp);
 	vmac_event_log_add(h->log, "enrolled", board, text);
+	vmac_bus_wake_main(h->bus); /* the main thread hands the bus the keys now */
 	body = json_pack("{s:s, s:s}", "board", board, "fingerprint", fp);
 	if (made) { /* said once, here: the store keeps it for the bus, no listing shows it */
 		sodium_bin2hex(keyhex, sizeof(keyhex), key, sizeof(key));
@@ -161,5 +162,6 @@ enum MHD_Result http_board_remove(struct vmac_http *h, struct MHD_Connection *c,
 	}
 	snprintf(text, sizeof(text), "%s's key removed (through the API): it is dropped if it runs", board);
 	vmac_event_log_add(h->log, "removed", board, text);
+	vmac_bus_wake_main(h->bus);
 	return http_reply(c, MHD_HTTP_OK, json_pack("{s:s, s:b}", "board", board, "removed", 1));
 }

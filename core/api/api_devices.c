@@ -129,6 +129,7 @@ static json_t *status_json(struct vmac_http *h)
 		json_object_set_new(json_object_get(root, "counters"), "waiting",
 		                    json_integer((json_int_t)s->counters.waiting));
 		json_object_set_new(root, "bus_trust", json_string(h->cfg.bus_trust));
+		json_object_set_new(root, "board_keys", json_integer((json_int_t)s->board_keys));
 		json_object_set_new(
 		    root, "schedule",
 		    json_pack("{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:o}", "slices_per_slot",

@@ -2,7 +2,7 @@
  * (docs/CLI.md, docs/SECURITY.md "Enrolling boards"). Through a running
  * host's API (a deploy token to change, read to list), or with --local on
  * the store of --state directly, host running or not: a running host reads
- * the keys again within a fraction of a second either way. A key is made
+ * the keys again at once (API) or within 50 ms (--local). A key is made
  * here (libsodium's randombytes) unless --key-file gives one; it is written
  * to --out (mode 0600) or printed once, and never shown again. */
 #include "board.h"

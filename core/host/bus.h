@@ -154,7 +154,8 @@ struct vmac_status {
 	int64_t time_ns;
 	int64_t started_ns;
 	char host_addr[48];
-	int realtime; /* SCHED_FIFO obtained */
+	int realtime;        /* SCHED_FIFO obtained */
+	uint32_t board_keys; /* enrolled boards' keys the bus holds */
 	int ndevices;
 	struct vmac_device_status *devices; /* max_devices entries */
 	struct vmac_hist lateness;
@@ -196,6 +197,9 @@ void vmac_bus_join(struct vmac_bus *bus);
  * thread) after pushing to the main ring; set it before start. */
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx);
 int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
+/* Wake the main thread (its wakeup callback), from any thread: something
+ * it looks after changed (the store's board keys, through the API). */
+void vmac_bus_wake_main(struct vmac_bus *bus);
 /* The main thread's care of the driver workers, on every wake-up: an
  * ended one joined, a spare kept ready for the next stall (the bus thread
  * lowers a stalled worker's priority itself). */

@@ -463,6 +463,8 @@ void bus_attach_done(struct vmac_bus *bus, struct machine *m, struct job *j);
 /* keys.c */
 /* board's key, or NULL when it is not enrolled. */
 const uint8_t *bus_key_of(const struct vmac_bus *bus, const char *board);
+/* How many keys the bus holds. */
+uint32_t bus_keys_count(const struct vmac_bus *bus);
 /* VMAC_CMD_KEYS: keys in, the old table out; boards whose key went, dropped. */
 void bus_keys_install(struct vmac_bus *bus, struct vmac_bus_keys *keys);
 void bus_nonce_init(struct vmac_bus *bus);

@@ -98,6 +98,11 @@ const uint8_t *bus_key_of(const struct vmac_bus *bus, const char *board)
 	return s->board[0] ? s->key : NULL;
 }
 
+uint32_t bus_keys_count(const struct vmac_bus *bus)
+{
+	return bus->keys ? bus->keys->n : 0;
+}
+
 void bus_keys_install(struct vmac_bus *bus, struct vmac_bus_keys *keys)
 {
 	struct vmac_bus_keys *old = bus->keys;

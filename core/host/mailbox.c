@@ -381,6 +381,12 @@ void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx
 	bus->wakeup_ctx = ctx;
 }
 
+void vmac_bus_wake_main(struct vmac_bus *bus)
+{
+	if (bus->wakeup)
+		bus->wakeup(bus->wakeup_ctx);
+}
+
 int vmac_bus_send_cmd(struct vmac_bus *bus, const struct vmac_host_cmd *cmd)
 {
 	if (vmac_ring_push(&bus->to_bus, cmd) != 0)

@@ -87,6 +87,7 @@ void bus_publish(struct vmac_bus *bus, int64_t now)
 	s->time_ns = now;
 	s->started_ns = bus->start_ns;
 	s->realtime = bus->realtime;
+	s->board_keys = bus_keys_count(bus);
 	s->lateness = bus->lateness;
 	s->counters = bus->counters;
 	s->slices_per_slot = bus->cfg.slices_per_slot;

@@ -13,7 +13,6 @@
 #include "../reload/deploy.h"
 
 #define STALLED_KEPT 32
-#define KEYS_EVERY_NS 200000000LL /* the store's board keys looked at this often */
 
 struct vmac_mainloop {
 	const struct vmac_config *cfg;
@@ -36,7 +35,6 @@ struct vmac_mainloop {
 	/* The board keys the bus has: the store's at keys_version. */
 	uint64_t keys_version;
 	int keys_sent;
-	int64_t keys_checked_ns;
 };
 
 static double wall_s(const struct vmac_mainloop *l)
@@ -360,19 +358,16 @@ static void collect_key(void *ctx, const struct vmac_board_key *k)
 }
 
 /* The bus gets the store's board keys whenever they changed (enrolled or
- * removed here through the API, or by `vmac board --state` in another
- * process): within KEYS_EVERY_NS. */
-static void sync_keys(struct vmac_mainloop *l, int now)
+ * removed here through the API, or by `vmac board --local` in another
+ * process), looked at on every service: vmacd services at least every
+ * 50 ms, and at once when the API changed them. */
+static void sync_keys(struct vmac_mainloop *l)
 {
 	struct key_list x = {0};
 	struct vmac_bus_keys *keys = NULL;
 	uint64_t version;
 	char err[512];
-	int64_t t = l->hooks.wall_ns(l->hooks.ctx);
 	int i, rc;
-	if (!now && t - l->keys_checked_ns < KEYS_EVERY_NS)
-		return;
-	l->keys_checked_ns = t;
 	version = vmac_board_keys_version(l->store);
 	if (l->keys_sent && version == l->keys_version)
 		return;
@@ -418,7 +413,7 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 			store_events(l);
 	}
 	vmac_bus_workers_service(l->bus);
-	sync_keys(l, 0);
+	sync_keys(l);
 	store_checkpoints(l);
 	store_events(l);
 }
@@ -443,7 +438,7 @@ struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vm
 	}
 	vmac_event_log_start_at(log, l->stored_seq + 1); /* seq goes on across restarts */
 	l->started_ns = hooks->wall_ns(hooks->ctx);
-	sync_keys(l, 1); /* before the bus starts: in place for the first discovery */
+	sync_keys(l); /* before the bus starts: in place for the first discovery */
 	if (!vmac_config_trust_open(cfg))
 		return l;
 	say(l, "warning", "",
@@ -454,7 +449,7 @@ struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vm
 
 void vmac_mainloop_sync_keys(struct vmac_mainloop *l)
 {
-	sync_keys(l, 1);
+	sync_keys(l);
 }
 
 void vmac_mainloop_free(struct vmac_mainloop *l)

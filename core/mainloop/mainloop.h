@@ -41,8 +41,8 @@ struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vm
  * and events into the store. On every wake-up, and once more after the bus
  * thread has ended. */
 void vmac_mainloop_service(struct vmac_mainloop *l);
-/* The store's board keys to the bus now, if they changed (the loop looks
- * every 200 ms by itself). */
+/* The store's board keys to the bus now, if they changed (every
+ * vmac_mainloop_service looks too). */
 void vmac_mainloop_sync_keys(struct vmac_mainloop *l);
 void vmac_mainloop_free(struct vmac_mainloop *l);
 

@@ -251,7 +251,7 @@ int main(int argc, char **argv)
 	ev_async_init(&h->wake_w, on_wake);
 	h->wake_w.data = h;
 	ev_async_start(h->loop, &h->wake_w);
-	ev_timer_init(&h->every_w, on_timer, 0.2, 0.2);
+	ev_timer_init(&h->every_w, on_timer, 0.05, 0.05);
 	h->every_w.data = h;
 	ev_timer_start(h->loop, &h->every_w);
 	ev_signal_init(&h->int_w, on_signal, SIGINT);

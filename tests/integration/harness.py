@@ -437,16 +437,24 @@ class Context:
             argv += ["--set", "%s=%s" % (k, v)]
         argv += list(extra)
         h = Host(self, self._name("vmacd"), argv, self.logdir)
+        extra = list(extra)
+        h.state = extra[extra.index("--state") + 1] if "--state" in extra else self.logdir
         self.procs.append(h)
         h.ready()
         return h
 
     def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None, wrapper=(), bus=None,
-              extra=()):
+              extra=(), keyed=True):
+        """Start vmac-board: count boards NAME-1..NAME-count, else one named
+        NAME. keyed: each has its own key, enrolled in this test's state
+        folder first (enroll), as a host with bus_trust enrolled wants."""
         # Late-reply lines only for replies that took a quarter of the tests'
         # reply deadline (TIMING): the ones that matter here.
         argv = list(wrapper) + [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", bus or self.bus,
                                 "--late-us", str(TIMING["reply_deadline_us"] // 4)]
+        if keyed:
+            self.enroll([name] if not count else ["%s-%d" % (name, i) for i in range(1, count + 1)])
+            argv += ["--key-dir", self.keys]
         argv += list(extra)
         if driver:
             argv += ["--driver", driver]
@@ -479,6 +487,34 @@ class Context:
             with open(os.path.join(path, name + ".lua"), "w") as f:
                 f.write(source)
         return path
+
+    @property
+    def keys(self):
+        """This test's board keys: KEYS/NAME.key, made by enroll."""
+        return os.path.join(self.logdir, "keys")
+
+    def enroll(self, names):
+        """Enroll boards names in this test's state folder and in that of
+        every host of this test started with its own (vmac board enroll
+        --local: host running or not), each key in self.keys/NAME.key, made
+        the first time; returns once every running host of the test's state
+        folder holds them (its status's board_keys)."""
+        states = [self.logdir]
+        for h in self.procs:
+            if isinstance(h, Host) and h.state not in states:
+                states.append(h.state)
+        for state in states:
+            p = subprocess.run([self.path("vmac"), "board", "enroll", "--local", "--state", state, "--key-dir",
+                                self.keys, "--replace", "--quiet"] + list(names), capture_output=True, text=True,
+                               timeout=60)
+            assert p.returncode == 0, "vmac board enroll failed (exit %d): %s" % (p.returncode, p.stderr)
+        # A running host has them before the boards announce (one of another
+        # state folder takes them within 50 ms: its status needs a token of
+        # its own store).
+        held = len([f for f in os.listdir(self.keys) if f.endswith(".key")])
+        for h in self.procs:
+            if isinstance(h, Host) and h.http and h.alive() and h.state == self.logdir:
+                h.wait_status(lambda st: st.get("board_keys", 0) >= held, 10, "the host holding %d board keys" % held)
 
     def make_token(self, scope):
         """A new token of scope in this test's state folder (vmac token create)."""

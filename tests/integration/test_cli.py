@@ -152,16 +152,20 @@ COMMANDS = {
     "token create": ["--state", "--scope", "--note"],
     "token list": ["--state"],
     "token revoke": ["--state"],
+    "board enroll": API + ["--state", "--local", "--key-file", "--out", "--key-dir", "--replace", "--note", "--quiet"],
+    "board list": API + ["--state", "--local"],
+    "board remove": API + ["--state", "--local"],
     "site": ["--mqtt", "--prefix", "--json", "--wait", "--user", "--password-file", "--cafile"],
     "lint": [],
     "bench": ["--seconds", "--only", "--max-boards", "--cpu-awake", "--out"],
     "test": ["--drivers", "--replay", "--filter", "--seed", "--list", "--tap", "--junit", "--trace", "--time-limit",
              "--timeout", "--history"],
 }
-PARENTS = {"": ["status", "lint", "test", "token", "console", "get", "set", "events", "site", "reload", "rollback",
-                "drivers", "activate", "recordings", "recording", "record", "bench"],
-           "token": ["create", "list", "revoke"], "recording": ["get", "to-test"]}
-FLAGS = {"--json", "--quiet", "--list", "--tap"}  # the options that take no value
+PARENTS = {"": ["status", "lint", "test", "token", "board", "console", "get", "set", "events", "site", "reload",
+                "rollback", "drivers", "activate", "recordings", "recording", "record", "bench"],
+           "token": ["create", "list", "revoke"], "board": ["enroll", "list", "remove"],
+           "recording": ["get", "to-test"]}
+FLAGS = {"--json", "--quiet", "--list", "--tap", "--local", "--replace"}  # the options that take no value
 
 
 def names_option(text, option):
@@ -250,7 +254,8 @@ def test_cli_every_api_command_reaches_the_host_it_is_given(t):
         f.write("return {}\n")
     arguments = {"status": [], "events": [], "reload": [driver], "rollback": ["counter"],
                  "activate": ["counter", "2"], "drivers": [], "recordings": [], "recording get": ["1"],
-                 "record": ["washer-1"], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": []}
+                 "record": ["washer-1"], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": [],
+                 "board enroll": ["lamp"], "board list": [], "board remove": ["lamp"]}
     assert sorted(arguments) == sorted(c for c, o in COMMANDS.items() if "--http" in o), (
         "a command that takes --http has no arguments here")
     closed = socket.socket(socket.AF_INET, socket.SOCK_STREAM)

@@ -17,10 +17,10 @@ PEER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "eth_peer.py")
 MAC = re.compile(r"^([0-9a-f]{2}:){5}[0-9a-f]{2}$")
 
 
-def eth_kitchen(t, commands=False):
+def eth_kitchen(t, commands=False, settings=None):
     """vmacd on eth:HOST_IF, the kitchen's three boards in the namespace."""
     host_if, ns, board_if = t.eth_link()
-    host = t.host(bus="eth:" + host_if)
+    host = t.host(bus="eth:" + host_if, settings=settings)
     wrap = ("ip", "netns", "exec", ns)
     boards = {name: t.board(plant, name, bus="eth:" + board_if, wrapper=wrap, commands=commands)
               for plant, name in KITCHEN}
@@ -147,7 +147,10 @@ def peer(t, ns, board_if, *argv):
 
 
 def test_a_board_confirming_the_wrong_offset_is_refused(t):
-    host, _, (host_if, ns, board_if) = eth_kitchen(t)
+    # The peers are boards of ours without a key: bus_trust open lets them
+    # attach, beside the kitchen's keyed boards (sealed and plain CYCLIC
+    # frames side by side).
+    host, _, (host_if, ns, board_if) = eth_kitchen(t, settings={"bus_trust": "open"})
     since = host.last_event_seq()
     before = counters(host)["malformed_by_reason"]["offset"]
     p = peer(t, ns, board_if, "offset", "--name", "liar-1", "--mac", "02:00:00:00:ee:01")

@@ -64,8 +64,9 @@ def test_a_full_disk_is_an_error_not_a_crash(t):
     wrapper = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
                'mount -t tmpfs -o size=1m tmpfs "$0" && cp "$1"/vmac.db* "$0"/ && shift && exec "$@"',
                state, t.logdir]
+    t.enroll(["washer-1"])  # into the store the host's copies
     host = t.host(wrapper=wrapper, extra=("--state", state))
-    t.board("washer", "washer-1")
+    t.board("washer", "washer-1", keyed=False, extra=("--key-dir", t.keys))
     version = host.device("washer-1", host.wait_running(["washer-1"]))["driver_version"]
     # Fill the tmpfs from inside the host's mount namespace.
     pid = host.popen.pid
@@ -98,10 +99,11 @@ def test_a_store_removed_under_the_host_is_said_not_lost_silently(t):
     t.kitchen(host)
     db = os.path.join(t.logdir, "vmac.db")
     assert os.path.exists(db), "no store at %s" % db
+    t.enroll(["lights-2"])  # while the store is there: the host has the key
     for f in glob.glob(db + "*"):
         os.unlink(f)
     # Something to store: a board attaching is an event.
-    t.board("lights", "lights-2")
+    t.board("lights", "lights-2", keyed=False, extra=("--key-dir", t.keys))
     # Events and checkpoints each say it, in whichever order they next write.
     warning = host.wait_event("warning", text="events are not being stored", timeout_s=30,
                               invariant=undisturbed(KITCHEN_NAMES))

@@ -1,0 +1,388 @@
+"""Trust on the wire (issue #30; docs/SECURITY.md; docs/PROTOCOL.md,
+"Authenticated frames"): the host attaches only boards whose announcement
+proves their enrolled key, seals every frame of their sessions, and ignores
+what does not prove the session's key; a board ignores a host frame that
+does not. A board without a key waits for approval. The Python side here
+seals and checks frames with libsodium's SipHash (PyNaCl): the other side's
+reading of the specification, not the host's code.
+
+Every test's real boards are keyed and enrolled by the harness (vmac board
+enroll --local, vmac-board --key-dir), as on any host with bus_trust
+enrolled, the default."""
+
+import os
+import re
+import socket
+import struct
+import threading
+import time
+
+import frames
+from frames import (ANNOUNCE, DEV, DISCOVER, IDLE, REGISTER, SHUTDOWN, SYS, UPDATE, WATCHDOG, announce, inputs,
+                    opens, parse, reply, seal, session_keys)
+from harness import Skip, post, undisturbed
+
+FORGED = 20  # forged or replayed frames sent in each attempt
+
+
+def need_nacl():
+    if frames.NACL is None:
+        raise Skip("PyNaCl (Debian python3-nacl) is missing: the tests' own sealed frames need libsodium's SipHash")
+
+
+def group_socket(bus):
+    """A socket on the bus's multicast group: DISCOVERs and CYCLIC frames."""
+    group, port = bus.rsplit(":", 1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    s.bind(("", int(port)))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+    s.settimeout(0.2)
+    return s
+
+
+def address(text):
+    host, port = text.rsplit(":", 1)
+    return host, int(port)
+
+
+class Peer:
+    """A board of the test's own on the UDP bus, speaking protocol version 1
+    (unicast UPDATEs), keyed with key (or not, key None; or announcing
+    sealed with key while claiming to be someone else). It answers as a
+    keyed board must, and counts what it received that did not open under
+    its session's key, and every REGISTER (a spoofer must never get one)."""
+
+    def __init__(self, bus, name, driver, major, key=None, minor=0):
+        self.name, self.driver, self.major, self.minor, self.key = name, driver, major, minor, key
+        self.group = group_socket(bus)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.2)
+        self.nonce = None
+        self.device_id = 0
+        self.to_board = self.to_host = None
+        self.tx = 0
+        self.rx = 0
+        self.registers = 0
+        self.updates = 0
+        self.bad = 0
+        self.sent_replies = []  # (frame, host address) of every reply sent: for replays
+        self.stop = False
+        self.threads = [threading.Thread(target=self._discover, daemon=True),
+                        threading.Thread(target=self._serve, daemon=True)]
+        for th in self.threads:
+            th.start()
+
+    def close(self):
+        self.stop = True
+        for th in self.threads:
+            th.join(5)
+        self.group.close()
+        self.sock.close()
+
+    def _send(self, frame, to):
+        if self.key is not None and self.to_host is not None:
+            self.tx += 1
+            frame = seal(frame, self.tx, self.to_host)
+        self.sent_replies.append((frame, to))
+        self.sock.sendto(frame, to)
+
+    def _discover(self):
+        while not self.stop:
+            try:
+                data, src = self.group.recvfrom(2048)
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            got = parse(data)
+            if not got or got[0].channel != SYS or got[0].op != DISCOVER or self.device_id:
+                continue
+            h, nonce = got
+            frame = reply(ANNOUNCE, announce(self.driver.encode(), self.name.encode(), major=self.major,
+                                             minor=self.minor), channel=SYS, seq=h.seq)
+            if self.key is not None and len(nonce) == frames.NONCE_LEN:
+                self.nonce = nonce
+                frame = seal(frame, 0, self.key, nonce)
+            self.sock.sendto(frame, src)
+
+    def _serve(self):
+        while not self.stop:
+            try:
+                data, src = self.sock.recvfrom(2048)
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            got = parse(data)
+            if not got or got[0].channel != DEV:
+                continue
+            h, body = got
+            if h.op == REGISTER:
+                self.registers += 1
+                if self.key is None:
+                    self.device_id = h.device_id
+                else:
+                    to_board, to_host = session_keys(self.key, self.nonce or bytes(8), h.device_id)
+                    if not opens(data, to_board):
+                        self.bad += 1
+                        continue
+                    self.to_board, self.to_host, self.tx = to_board, to_host, 0
+                    self.rx = frames.counter_of(data)
+                    self.device_id = h.device_id
+                self._send(reply(REGISTER, device_id=h.device_id, seq=h.seq), src)
+                continue
+            if h.device_id != self.device_id:
+                continue
+            if self.key is not None:
+                if not opens(data, self.to_board) or frames.counter_of(data) <= self.rx:
+                    self.bad += 1
+                    continue
+                self.rx = frames.counter_of(data)
+            if h.op in (UPDATE, IDLE):
+                self.updates += 1
+                self._send(reply(h.op, inputs(), device_id=h.device_id, seq=h.seq), src)
+            elif h.op == WATCHDOG:
+                self._send(reply(h.op, device_id=h.device_id, seq=h.seq), src)
+            elif h.op == SHUTDOWN:
+                self._send(reply(h.op, device_id=h.device_id, seq=h.seq), src)
+                self.device_id = 0
+                self.to_board = self.to_host = None
+
+
+def enroll_api(host, token, board, key=None):
+    """POST /api/boards/BOARD: (status, answer)."""
+    body = {} if key is None else {"key": key.hex()}
+    code, text = post(host, "/api/boards/" + board, token, json_bytes(body))
+    return code, text
+
+
+def json_bytes(o):
+    import json
+    return json.dumps(o).encode()
+
+
+def test_a_keyed_board_of_our_own_attaches_with_every_frame_sealed(t):
+    """The host's sealing read by libsodium: a board we wrote, given a key
+    through the API, attaches; the REGISTER and every UPDATE the host sends
+    open under the session's keys as PROTOCOL.md derives them."""
+    need_nacl()
+    host = t.host()
+    code, text = enroll_api(host, t.token, "peer-1")
+    assert code == 200, "enrolling peer-1 over the API answered %d: %s" % (code, text)
+    import json
+    key = bytes.fromhex(json.loads(text)["key"])
+    peer = Peer(t.bus, "peer-1", "lights", 4242, key)
+    try:
+        s = host.wait_running(["peer-1"])
+        assert host.device("peer-1", s)["authenticated"] is True, "peer-1 runs but is not marked authenticated"
+        deadline = time.monotonic() + 10
+        while peer.updates < 20 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert peer.updates >= 20, "only %d UPDATEs opened under the session's key in 10 s" % peer.updates
+        assert peer.bad == 0, "%d frames from the host did not open under the session's keys" % peer.bad
+        # The board's replies, replayed: refused by their counters.
+        before = host.status()["counters"]["auth_failed"]
+        old = list(peer.sent_replies[-5:])
+        for frame, to in old * (FORGED // 5):
+            peer.sock.sendto(frame, to)
+        s = host.wait_status(lambda st: st["counters"]["auth_failed"] >= before + FORGED, 10,
+                             "the replayed replies counted", invariant=undisturbed(["peer-1"]))
+        host.wait_event("auth", text="replay")
+        assert host.device("peer-1", s)["state"] == "running"
+    finally:
+        peer.close()
+
+
+def test_a_spoofing_board_takes_over_nothing(t):
+    """A process on the bus answers discovery with the running washer's
+    identity: unsealed, sealed with a key of its own, and under another
+    name. The washer is never dropped, the spoofer never gets a REGISTER,
+    and every attempt is counted."""
+    need_nacl()
+    host = t.host()
+    t.board("washer", "washer-1")
+    s = host.wait_running(["washer-1"])
+    washer = host.device("washer-1", s)
+    before = s["counters"]
+    spoofers = [Peer(t.bus, "washer-1", "washer", washer["major"]),
+                Peer(t.bus, "washer-1", "washer", washer["major"], key=os.urandom(16)),
+                Peer(t.bus, "evil", "washer", washer["major"], key=os.urandom(16))]
+    try:
+        host.wait_status(lambda st: st["counters"]["discoveries"] >= before["discoveries"] + 5, 30,
+                         "five discoveries", invariant=undisturbed(["washer-1"]))
+    finally:
+        for p in spoofers:
+            p.close()
+    after = host.status()
+    assert [p.registers for p in spoofers] == [0, 0, 0], \
+        "a spoofer got a REGISTER (unsealed, wrong key, other name): %r" % [p.registers for p in spoofers]
+    assert after["counters"]["auth_failed"] - before["auth_failed"] >= 10, \
+        "the spoofed announcements were not counted: auth_failed %d -> %d" % (before["auth_failed"],
+                                                                               after["counters"]["auth_failed"])
+    assert after["counters"]["takeover_refused"] > before["takeover_refused"], \
+        "the announcement under another name was not refused as a take-over"
+    assert not host.find_events("dropped", "washer-1"), "the washer was dropped: %r" % host.find_events("dropped")
+    assert host.device("evil", after) is None or host.device("evil", after)["state"] == "waiting", \
+        "the spoofer 'evil' got further than waiting: %r" % host.device("evil", after)
+    assert host.find_events("auth"), "no auth event said what was refused"
+
+
+def lights_record(t, host):
+    """The lights board's address and device id, as the host has them."""
+    d = host.device("lights-1", host.status())
+    return address(d["address"]), d["id"]
+
+
+def counter_line(board, name):
+    """The value of counter name in vmac-board's last report ("NAME: frames
+    ok N, ..., auth_failed N")."""
+    found = re.findall(r"\b%s (\d+)" % re.escape(name), board.text("stdout") + board.text("stderr"))
+    return int(found[-1]) if found else None
+
+
+def test_a_forged_or_replayed_host_frame_moves_no_output(t):
+    """Frames sent to a keyed board as if from the host: UPDATEs turning
+    every output on, unsealed or sealed with a wrong key, and the host's own
+    CYCLIC frames replayed after the lights went off. The board obeys none:
+    its outputs stay as the driver set them, and it counts each."""
+    need_nacl()
+    host = t.host()
+    board = t.board("lights", "lights-1")
+    host.wait_running(["lights-1"])
+    token = t.token
+    code, text = post(host, "/api/devices/lights-1/input", token, json_bytes({"name": "kitchen", "value": True}))
+    assert code == 200, "turning the kitchen lights on answered %d: %s" % (code, text)
+    host.wait_status(lambda s: any(host.device("lights-1", s)["outputs"]["digital"]), 10, "a light on")
+    # The host's CYCLIC frames now carry the light on: keep some that hold
+    # the board's record (a sealed frame: header, first, counter, then
+    # records of 14 bytes; an empty record's tag is 0).
+    offset = host.device("lights-1")["offset"]
+    grp = group_socket(t.bus)
+    captured = []
+    try:
+        deadline = time.monotonic() + 30
+        while len(captured) < FORGED and time.monotonic() < deadline:
+            try:
+                data, _ = grp.recvfrom(2048)
+            except socket.timeout:
+                continue
+            got = parse(data)
+            if not got or got[0].channel != SYS or got[0].op != frames.CYCLIC or not got[0].flags & frames.AUTH:
+                continue
+            first = struct.unpack_from(">H", data, frames.HDR_LEN)[0]
+            at = frames.HDR_LEN + 6 + 14 * (offset - first)
+            if first <= offset < first + got[0].len and data[at:at + 2] != b"\0\0":
+                captured.append(data)
+    finally:
+        grp.close()
+    assert len(captured) >= FORGED, "only %d sealed CYCLIC frames with the board's record in 30 s" % len(captured)
+    code, text = post(host, "/api/devices/lights-1/input", token, json_bytes({"name": "all_off"}))
+    assert code == 200, "all_off answered %d: %s" % (code, text)
+    host.wait_status(lambda s: not any(host.device("lights-1", s)["outputs"]["digital"]), 10, "every light off")
+    to, device_id = lights_record(t, host)
+    group, port = t.bus.rsplit(":", 1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    try:
+        on = struct.pack(">Bh", 0x7F, 1000)  # every output the lights board has, valid: only the MAC is wrong
+        for i in range(FORGED):
+            update = frames.frame(UPDATE, on, device_id=device_id, seq=1000 + i)
+            s.sendto(update, to)  # unsealed
+            s.sendto(seal(update, 1 << 30, os.urandom(16)), to)  # sealed with a key not the session's
+            s.sendto(captured[i], (group, int(port)))  # an old CYCLIC frame of the host's, light on
+        # The board's replies carry what it drives: judged over the next services.
+        for _ in range(20):
+            st = host.status()
+            d = host.device("lights-1", st)
+            assert not any(d["outputs"]["digital"]) and d["outputs"]["pwm"] == 0, \
+                "a forged or replayed frame moved the board's outputs: %r" % d["outputs"]
+            undisturbed(["lights-1"])(st)
+            time.sleep(0.05)
+    finally:
+        s.close()
+    board.signal(15)
+    assert board.wait_exit(10) == 0, "vmac-board did not stop cleanly"
+    failed = counter_line(board, "auth_failed")
+    assert failed is not None, "vmac-board's exit report has no auth_failed counter"
+    assert failed >= 3 * FORGED, "the board counted %d frames that failed authentication, %d were sent" % (
+        failed, 3 * FORGED)
+
+
+def test_a_board_without_a_key_waits_for_approval_then_runs_once_enrolled(t):
+    """The enrollment flow from the command line: an unknown board is
+    listed as waiting (status, event, vmac board list) and gets no driver;
+    vmac board enroll --out makes its key; given it, the board runs,
+    authenticated. Rotation: a new key (--replace) keeps the running session
+    until the board restarts, and then only the new key works. Removal
+    drops it at once."""
+    host = t.host()
+    first = t.board("lights", "lamp", keyed=False)
+    host.wait_event("waiting", "lamp")
+    s = host.wait_status(lambda st: host.device("lamp", st) is not None, 10, "lamp in the status")
+    d = host.device("lamp", s)
+    assert d["state"] == "waiting" and "vmac board enroll lamp" in d["note"], "lamp: %r" % d
+    assert d["driver_version"] == "", "a waiting board has a driver loaded: %r" % d
+    code, out, err = t.run([t.path("vmac"), "board", "list", "--http", host.http], "list")
+    assert code == 0 and "waiting for approval" in out and "lamp" in out, "vmac board list: %s %s" % (out, err)
+    key1 = os.path.join(t.logdir, "lamp.key")
+    code, out, err = t.run([t.path("vmac"), "board", "enroll", "lamp", "--out", key1, "--http", host.http], "enroll")
+    assert code == 0, "vmac board enroll lamp failed (%d): %s" % (code, err)
+    assert oct(os.stat(key1).st_mode & 0o777) == "0o600", "the key file is not private: %o" % os.stat(key1).st_mode
+    host.wait_event("enrolled", "lamp")
+    first.signal(15)
+    first.wait_exit(10)
+    lamp = t.board("lights", "lamp", keyed=False, extra=("--key-file", key1))
+    s = host.wait_running(["lamp"])
+    assert host.device("lamp", s)["authenticated"] is True, "lamp runs unauthenticated"
+    # Rotation.
+    key2 = os.path.join(t.logdir, "lamp2.key")
+    code, out, err = t.run([t.path("vmac"), "board", "enroll", "lamp", "--replace", "--out", key2, "--http",
+                            host.http], "rotate")
+    assert code == 0, "vmac board enroll --replace failed (%d): %s" % (code, err)
+    seq = host.last_event_seq()
+    time.sleep(1.0)  # the running session goes on: no drop in a second (several discoveries)
+    assert not host.find_events("dropped", "lamp", after_seq=seq), "a key rotation dropped the running board"
+    seq = host.last_event_seq()
+    lamp.signal(15)
+    lamp.wait_exit(10)
+    host.wait_event("dropped", "lamp", after_seq=seq)  # it said nothing: its replies stopped
+    seq = host.last_event_seq()
+    old = t.board("lights", "lamp", keyed=False, extra=("--key-file", key1))
+    host.wait_event("auth", text="lamp", after_seq=seq)
+    assert host.device("lamp", host.status())["state"] != "running", "the board with the old key runs again"
+    old.signal(15)
+    old.wait_exit(10)
+    t.board("lights", "lamp", keyed=False, extra=("--key-file", key2))
+    host.wait_running(["lamp"])
+    # Removal.
+    seq = host.last_event_seq()
+    code, out, err = t.run([t.path("vmac"), "board", "remove", "lamp", "--http", host.http], "remove")
+    assert code == 0, "vmac board remove failed (%d): %s" % (code, err)
+    host.wait_event("dropped", "lamp", text="key was removed", after_seq=seq)
+
+
+def test_bad_enrollments_are_refused_with_a_reason(t):
+    host = t.host()
+    read = t.make_token("read")
+    for path, body, want in (("/api/boards/bad.name", {}, 400), ("/api/boards/x", {"key": "00"}, 400),
+                             ("/api/boards/x", {"key": "zz" * 16}, 400), ("/api/boards/x", [], 400),
+                             ("/api/boards/..", {}, 404)):
+        code, text = post(host, path, t.token, json_bytes(body))
+        assert code == want, "POST %s %r answered %d, not %d: %s" % (path, body, code, want, text)
+    code, text = post(host, "/api/boards/x", read, json_bytes({}))
+    assert code == 403, "a read token enrolled a board (%d): %s" % (code, text)
+    assert post(host, "/api/boards/x", t.token, json_bytes({}))[0] == 200
+    code, text = post(host, "/api/boards/x", t.token, json_bytes({}))
+    assert code == 409 and "replace" in text, "enrolling twice answered %d: %s" % (code, text)
+    code, text = post(host, "/api/boards/nobody/remove", t.token, b"")
+    assert code == 404, "removing a board never enrolled answered %d: %s" % (code, text)
+    code, out, err = t.run([t.path("vmac"), "board", "enroll", "a", "b", "--http", host.http], "two")
+    assert code == 2 and "--key-dir" in err, "two boards without --key-dir: %d %s" % (code, err)
+    bad = os.path.join(t.logdir, "bad.key")
+    with open(bad, "w") as f:
+        f.write("not a key\n")
+    code, out, err = t.run([t.path("vmac"), "board", "enroll", "a", "--key-file", bad, "--http", host.http], "bad")
+    assert code == 1 and "32 hex digits" in err, "a bad key file: %d %s" % (code, err)
