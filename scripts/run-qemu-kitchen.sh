@@ -130,8 +130,14 @@ for spec in $boards; do
 	sysctl -qw "net.ipv6.conf.$tap.disable_ipv6=1" 2>/dev/null
 	ip link set "$tap" master "$bridge"
 	ip link set "$tap" up
+	# Enrolled, its key in STATE/keys/NAME.key (made the first time) and in
+	# its copy's identity block (docs/SECURITY.md, "Enrolling boards").
+	"$bin/vmac" board enroll --local --state "$state" --key-dir "$state/keys" --replace --quiet "$name" || {
+		remove_devices
+		die "cannot enroll board $name in $state"
+	}
 	out=$(python3 "$here/qemu-board-config.py" "$image" -o "$work/$name.elf" --plant "$plant" --name "$name" \
-		--quiet) || {
+		--key-file "$state/keys/$name.key" --quiet) || {
 		remove_devices
 		die "cannot configure board $name"
 	}

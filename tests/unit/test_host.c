@@ -1,6 +1,6 @@
 /* Unit tests of the host's own modules: configuration, the lateness
- * histogram, the SPSC ring, and the error codes the bus answers other
- * threads with. The driver module has its own tests (test_driver.c). */
+ * histogram, the SPSC ring, the error codes the bus answers other
+ * threads with, and the bus's table of board keys (white-box: bus_internal.h). The driver module has its own tests (test_driver.c). */
 #include <arpa/inet.h>
 #include <check.h>
 #include <errno.h>
@@ -18,6 +18,7 @@
 #include "../../core/config/config.h"
 #include "../../core/driver/driver.h"
 #include "../../core/host/bus.h"
+#include "../../core/host/bus_internal.h"
 #include "check_main.h"
 
 /* ---- config ---- */
@@ -403,6 +404,47 @@ START_TEST(error_codes_have_ranges_of_their_own)
 }
 END_TEST
 
+/* ---- the bus's table of board keys (keys.c) ---- */
+
+START_TEST(board_key_table_finds_every_name_and_only_those)
+{
+	struct vmac_bus_keys *k = vmac_bus_keys_new(1000);
+	struct vmac_bus *bus = calloc(1, sizeof(*bus));
+	uint8_t key[16];
+	char name[32];
+	int i;
+	ck_assert_ptr_nonnull(k);
+	ck_assert_ptr_nonnull(bus);
+	for (i = 0; i < 1000; i++) {
+		snprintf(name, sizeof(name), "board-%d", i);
+		memset(key, i & 0xff, sizeof(key));
+		ck_assert_int_eq(vmac_bus_keys_add(k, name, key), 0);
+	}
+	/* A name added again takes its last key, and takes no room. */
+	memset(key, 0xee, sizeof(key));
+	ck_assert_int_eq(vmac_bus_keys_add(k, "board-7", key), 0);
+	ck_assert_int_eq(vmac_bus_keys_add(k, "", key), -EINVAL);
+	bus->keys = k;
+	ck_assert_uint_eq(bus_keys_count(bus), 1000);
+	for (i = 0; i < 1000; i++) {
+		const uint8_t *got;
+		snprintf(name, sizeof(name), "board-%d", i);
+		got = bus_key_of(bus, name);
+		ck_assert_msg(got != NULL, "%s not found", name);
+		ck_assert_int_eq(got[0], i == 7 ? 0xee : (i & 0xff));
+	}
+	ck_assert_ptr_null(bus_key_of(bus, "board-1000"));
+	ck_assert_ptr_null(bus_key_of(bus, "board"));
+	/* Full: at most half the slots, so every probe ends. */
+	for (i = 1000; vmac_bus_keys_add(k, (snprintf(name, sizeof(name), "more-%d", i), name), key) == 0; i++)
+		ck_assert_int_lt(i, 100000);
+	ck_assert_ptr_null(bus_key_of(bus, "nobody"));
+	bus->keys = NULL;
+	vmac_bus_keys_free(k);
+	free(bus);
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("host");
@@ -419,6 +461,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, ring_fifo_and_full);
 	tcase_add_test(tc, input_requests_time_out_and_run_out_without_a_bus_thread);
 	tcase_add_test(tc, the_bus_answers_with_codes);
+	tcase_add_test(tc, board_key_table_finds_every_name_and_only_those);
 	suite_add_tcase(s, tc);
 	return s;
 }

@@ -429,6 +429,85 @@ START_TEST(a_full_disk_is_told_by_its_own_code)
 }
 END_TEST
 
+/* ---- board keys ---- */
+
+struct seen_keys {
+	int n;
+	char names[4][VMAC_BOARD_NAME_MAX + 1];
+	uint8_t keys[4][VMAC_BOARD_KEY_LEN];
+	char fingerprints[4][VMAC_BOARD_FINGERPRINT_LEN + 1];
+};
+
+static void see_key(void *ctx, const struct vmac_board_key *k)
+{
+	struct seen_keys *x = ctx;
+	ck_assert_int_lt(x->n, 4);
+	memcpy(x->names[x->n], k->board, sizeof(x->names[0]));
+	memcpy(x->keys[x->n], k->key, VMAC_BOARD_KEY_LEN);
+	memcpy(x->fingerprints[x->n], k->fingerprint, sizeof(x->fingerprints[0]));
+	x->n++;
+}
+
+START_TEST(board_keys_enroll_replace_and_remove)
+{
+	uint8_t k1[VMAC_BOARD_KEY_LEN], k2[VMAC_BOARD_KEY_LEN];
+	struct seen_keys seen;
+	char err[512] = "", fp[VMAC_BOARD_FINGERPRINT_LEN + 1];
+	uint64_t v0 = vmac_board_keys_version(store), v1;
+	memset(k1, 1, sizeof(k1));
+	memset(k2, 2, sizeof(k2));
+	ck_assert_msg(vmac_board_key_set(store, "lamp", k1, 0, "hall", err, sizeof(err)) == 0, "%s", err);
+	v1 = vmac_board_keys_version(store);
+	ck_assert_msg(v1 != v0, "enrolling did not change the keys' version");
+	/* Enrolled already: kept unless replaced. */
+	ck_assert_int_eq(vmac_board_key_set(store, "lamp", k2, 0, "", err, sizeof(err)), 1);
+	memset(&seen, 0, sizeof(seen));
+	ck_assert_int_eq(vmac_board_key_list(store, see_key, &seen, err, sizeof(err)), 1);
+	ck_assert_msg(memcmp(seen.keys[0], k1, sizeof(k1)) == 0, "a key was replaced without replace");
+	vmac_board_key_fingerprint(k1, fp);
+	ck_assert_str_eq(seen.fingerprints[0], fp);
+	ck_assert_int_eq((int)strlen(fp), VMAC_BOARD_FINGERPRINT_LEN);
+	ck_assert_int_eq(vmac_board_key_set(store, "lamp", k2, 1, "", err, sizeof(err)), 0);
+	memset(&seen, 0, sizeof(seen));
+	vmac_board_key_list(store, see_key, &seen, err, sizeof(err));
+	ck_assert_msg(memcmp(seen.keys[0], k2, sizeof(k2)) == 0, "replace did not replace the key");
+	/* Names a board cannot announce are refused; nothing is stored. */
+	ck_assert_int_lt(vmac_board_key_set(store, "..", k1, 0, "", err, sizeof(err)), 0);
+	ck_assert_int_lt(vmac_board_key_set(store, "a.b", k1, 0, "", err, sizeof(err)), 0);
+	ck_assert_int_lt(vmac_board_key_set(store, "", k1, 0, "", err, sizeof(err)), 0);
+	ck_assert_int_lt(vmac_board_key_set(store, "abcdefghijklmnopqrstuvwxyz0123456", k1, 0, "", err, sizeof(err)),
+	                 0);
+	ck_assert_int_eq(vmac_board_key_remove(store, "lamp", err, sizeof(err)), 0);
+	ck_assert_int_eq(vmac_board_key_remove(store, "lamp", err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_board_key_list(store, see_key, &seen, err, sizeof(err)), 0);
+}
+END_TEST
+
+START_TEST(board_keys_many_in_one_transaction)
+{
+	struct vmac_board_key k[3];
+	struct seen_keys seen;
+	char err[512] = "";
+	int kept = -1, i;
+	memset(k, 0, sizeof(k));
+	for (i = 0; i < 3; i++) {
+		snprintf(k[i].board, sizeof(k[i].board), "g-%d", i + 1);
+		memset(k[i].key, i + 1, sizeof(k[i].key));
+	}
+	ck_assert_msg(vmac_board_keys_set(store, k, 3, 0, &kept, err, sizeof(err)) == 0, "%s", err);
+	ck_assert_int_eq(kept, 0);
+	ck_assert_int_eq(vmac_board_keys_set(store, k, 3, 0, &kept, err, sizeof(err)), 0);
+	ck_assert_int_eq(kept, 3);
+	/* One bad name: none of them is enrolled. */
+	snprintf(k[1].board, sizeof(k[1].board), "bad name");
+	snprintf(k[0].board, sizeof(k[0].board), "h-1");
+	ck_assert_int_lt(vmac_board_keys_set(store, k, 3, 1, &kept, err, sizeof(err)), 0);
+	memset(&seen, 0, sizeof(seen));
+	ck_assert_int_eq(vmac_board_key_list(store, see_key, &seen, err, sizeof(err)), 3);
+	ck_assert_str_eq(seen.names[0], "g-1");
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("store");
@@ -440,6 +519,8 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_missing_folder_is_an_error);
 	tcase_add_test(tc, two_threads_at_once_get_their_own_answers);
 	tcase_add_test(tc, a_full_disk_is_told_by_its_own_code);
+	tcase_add_test(tc, board_keys_enroll_replace_and_remove);
+	tcase_add_test(tc, board_keys_many_in_one_transaction);
 	tcase_set_timeout(tc, 60);
 	suite_add_tcase(s, tc);
 	return s;
