@@ -119,13 +119,11 @@ void bus_keys_install(struct vmac_bus *bus, struct vmac_bus_keys *keys)
 		struct device *d = &bus->dev[i];
 		if (!d->keyed || bus_key_of(bus, d->ann.board))
 			continue;
-		/* d stays keyed: its SHUTDOWN is sealed, or the board would not obey it. */
-		if (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP) {
+		/* d stays keyed: its SHUTDOWN is sealed, or the board would not obey
+		 * it. Its machine goes with it (a driver being loaded included). */
+		if (d->state == DEV_LOADING || d->state == DEV_REGISTERING || d->state == DEV_RUNNING ||
+		    d->state == DEV_TO_SLEEP)
 			bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", "its key was removed (vmac board remove)");
-		} else if (d->state == DEV_LOADING) {
-			d->state = DEV_ERRANT;
-			snprintf(d->note, sizeof(d->note), "its key was removed (vmac board remove)");
-		}
 	}
 }
 
