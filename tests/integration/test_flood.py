@@ -2,7 +2,9 @@
 process on the segment answers every DISCOVER with hundreds of ANNOUNCEs of
 made-up identities of the lights driver. The host lets at most attach_max
 of them attach at once and attach_rate a second, says so in a `flood`
-warning, and its memory, its real boards and its event log are unaffected."""
+warning, and its memory, its real boards and its event log are unaffected.
+Having no key (bus_trust enrolled, the default), none attaches: each is
+held as waiting for approval, at most attach_max of them listed."""
 
 import random
 import socket
@@ -33,7 +35,17 @@ def listen(bus):
 
 
 def test_a_flood_of_fake_boards_is_bounded(t):
-    host = t.host()
+    flood(t, trust_open=False)
+
+
+def test_a_flood_of_fake_boards_is_bounded_on_an_open_bus(t):
+    flood(t, trust_open=True)
+
+
+def flood(t, trust_open):
+    """trust_open: bus_trust open, where boards without a key attach: the
+    fakes load drivers, at most attach_max at once."""
+    host = t.host(settings={"bus_trust": "open"} if trust_open else None)
     t.kitchen(host)
     before = host.status()
     rss_before = rss_kib(host.pid)
@@ -42,7 +54,7 @@ def test_a_flood_of_fake_boards_is_bounded(t):
     seed = random.SystemRandom().randrange(1 << 32)
     rnd = random.Random(seed)
     sock = listen(t.bus)
-    most_attaching = 0
+    most_attaching = most_waiting = 0
     sent = 0
     try:
         while sent < TOTAL:
@@ -56,8 +68,10 @@ def test_a_flood_of_fake_boards_is_bounded(t):
                 sent += 1
             s = host.status()
             undisturbed(KITCHEN_NAMES)(s)
-            attaching = sum(1 for d in s["devices"] if d["state"] in ("loading", "registering"))
+            attaching = sum(1 for d in s["devices"] if d["state"] == "attaching")
             most_attaching = max(most_attaching, attaching)
+            waiting = sum(1 for d in s["devices"] if d["state"] == "waiting")
+            most_waiting = max(most_waiting, waiting)
     finally:
         sock.close()
 
@@ -68,6 +82,12 @@ def test_a_flood_of_fake_boards_is_bounded(t):
     refused = after["counters"]["attach_refused"] - before["counters"]["attach_refused"]
     assert refused > TOTAL // 2, "only %d of %d fake announcements were refused (seed %d)" % (refused, TOTAL, seed)
     assert most_attaching <= 32, "%d devices attaching at once, attach_max is 32" % most_attaching
+    # Without keys (bus_trust enrolled) the fakes are held as waiting for
+    # approval, never attaching: no driver state at all, and at most
+    # attach_max listed.
+    if not trust_open:
+        assert most_attaching == 0, "%d fake boards without a key attached" % most_attaching
+        assert most_waiting <= 32, "%d boards listed as waiting at once, attach_max is 32" % most_waiting
     floods = host.find_events("flood")
     assert len(floods) <= 3, "%d flood warnings in one flood: they are said at most every 10 s" % len(floods)
     # The driver states of the few let in are freed when they fail to
