@@ -83,8 +83,13 @@ async function main() {
   const busA = bus(), busB = bus();
   const addrA = await vmacd("site-a", STATE_A, busA, brokerPort);
   await vmacd("site-b", STATE_B, busB, brokerPort);
-  start("lights-a", [path.join(BIN, "vmac-board"), "--plant", "lights", "--name", "lights-a", "--bus", busA]);
-  start("lights-b", [path.join(BIN, "vmac-board"), "--plant", "lights", "--name", "lights-b", "--bus", busB]);
+  // Each host holds its board's key (bus_trust enrolled, the default).
+  for (const [name, state, busAddr] of [["lights-a", STATE_A, busA], ["lights-b", STATE_B, busB]]) {
+    const keyFile = path.join(state, name + ".key");
+    execFileSync(path.join(BIN, "vmac"), ["board", "enroll", name, "--local", "--state", state, "--out", keyFile]);
+    start(name, [path.join(BIN, "vmac-board"), "--plant", "lights", "--name", name, "--bus", busAddr,
+      "--key-file", keyFile]);
+  }
   const hostB = procs.find((p) => p.spawnargs.includes("mqtt_host_id=site-b"));
 
   const browser = await chromium.launch({

@@ -1,6 +1,9 @@
 // The web UI in a real browser (docs/UI.md): Debian's chromium, headless,
 // driven by playwright-core, against vmacd and the three mock boards of the
-// demo kitchen, all started here on a bus of their own.
+// demo kitchen, all started here on a bus of their own. The kitchen's
+// boards are enrolled and keyed (bus_trust enrolled, the default); a fourth
+// board, started without a key, waits for approval and is enrolled and
+// removed through the Boards page.
 //
 //   node tests/ui/ui_test.mjs --bin build/bin --out build/ui
 //
@@ -19,6 +22,7 @@ const OUT = path.resolve(args.out || "build/ui");
 const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
 fs.mkdirSync(OUT, { recursive: true });
 const STATE = fs.mkdtempSync(path.join(os.tmpdir(), "vmac-ui-"));
+const KEYS = path.join(STATE, "keys"); // the boards' key files
 const rnd = (lo, hi) => lo + Math.floor(Math.random() * (hi - lo + 1));
 const BUS = `239.255.${rnd(1, 254)}.${rnd(1, 254)}:${rnd(20000, 60000)}`;
 const procs = [];
@@ -61,12 +65,22 @@ async function status(host, tok) {
   return r.json();
 }
 
+async function boardsOf(host, tok) {
+  const r = await fetch(`http://${host}/api/boards`, { headers: { Authorization: "Bearer " + tok } });
+  if (!r.ok) throw new Error(`GET /api/boards: HTTP ${r.status}`);
+  return r.json();
+}
+
 
 const deviceOut = (s, name, bit) => ((s.devices.find((d) => d.name === name) || {}).outputs || { digital: [] }).digital[bit];
 
 async function main() {
   const operate = token("operate");
   const read = token("read");
+  const deploy = token("deploy");
+  fs.mkdirSync(KEYS, { mode: 0o700 });
+  execFileSync(path.join(BIN, "vmac"), ["board", "enroll", "--local", "--state", STATE, "--key-dir", KEYS,
+    "washer-1", "dish-1", "lights-1"]);
   const host = start("vmacd", [path.join(BIN, "vmacd"), "--bus", BUS, "--http", "127.0.0.1:0", "--state", STATE,
     "--set", "realtime=false", "--set", "slice_us=1250", "--set", "slices_per_slot=5", "--set", "watchdog_ms=1500",
     "--set", "reply_deadline_us=80000", "--set", "discovery_period_ms=300",
@@ -76,7 +90,7 @@ async function main() {
   const boards = {};
   for (const [plant, name] of [["washer", "washer-1"], ["dishwasher", "dish-1"], ["lights", "lights-1"]]) {
     boards[name] = start(name, [path.join(BIN, "vmac-board"), "--plant", plant, "--name", name, "--bus", BUS,
-      "--commands"], true);
+      "--key-file", path.join(KEYS, name + ".key"), "--commands"], true);
   }
 
   const browser = await chromium.launch({
@@ -101,6 +115,12 @@ async function main() {
       if (cards !== 3) throw new Error(`${cards} cards`);
       if (page.url().includes("token")) throw new Error("the token is still in the address bar: " + page.url());
       await page.screenshot({ path: path.join(OUT, "1-kitchen.png"), fullPage: true });
+    });
+
+    await check("the kitchen's boards proved their keys: their cards say sealed", async () => {
+      for (const name of ["washer-1", "dish-1", "lights-1"]) {
+        await page.waitForSelector(`[data-device="${name}"] [data-sealed]:not([hidden])`, { timeout: 5000 });
+      }
     });
 
     await check("switching the kitchen light on in the page turns the board's output on", async () => {
@@ -180,9 +200,92 @@ async function main() {
       await bad.waitForSelector("#signin:not([hidden]) #signin-error:text('not valid')", { timeout: 10000 });
       await bad.close();
     });
+
+    await enrollment(browser, page, addr, { operate, deploy });
   } finally {
     await browser.close();
   }
+}
+
+// A board without a key (shed-light) waits for approval: the operate page
+// marks it and cannot enroll it; a deploy page enrolls it, shows the key
+// once, the board given that key attaches sealed, and Remove takes it away.
+async function enrollment(browser, page, addr, tokens) {
+  const SHED = "shed-light";
+  let shed = start(SHED, [path.join(BIN, "vmac-board"), "--plant", "lights", "--name", SHED, "--bus", BUS]);
+  const dp = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+  dp.on("pageerror", (e) => { tally.failures++; console.log("FAIL the deploy page raised: " + e.message); });
+  let key = null, fingerprint = null;
+
+  await check("a board without a key shows as waiting, and the Boards page lists it", async () => {
+    await page.click('nav a[data-page="devices"]');
+    await page.waitForSelector(`.card.waiting[data-device="${SHED}"] .badge.waiting`, { timeout: 10000 });
+    const vars = await page.locator(`[data-device="${SHED}"] [data-var]`).count();
+    if (vars !== 0) throw new Error(`a waiting board's card shows ${vars} variables: it has no driver`);
+    await page.waitForSelector("#boards-count:not([hidden]):text('1')", { timeout: 5000 });
+    await page.screenshot({ path: path.join(OUT, "11-waiting-card.png"), fullPage: true });
+    await page.click('nav a[data-page="boards"]');
+    await page.waitForSelector(`#boards-waiting tr[data-board="${SHED}"] [data-enroll="${SHED}"]`, { timeout: 5000 });
+    for (const name of ["dish-1", "lights-1"]) {
+      await page.waitForSelector(`#boards-enrolled tr[data-board="${name}"] .badge.sealed`, { timeout: 5000 });
+    }
+  });
+
+  await check("Enroll with an operate token says plainly that it needs a deploy token", async () => {
+    await page.click(`[data-enroll="${SHED}"]`);
+    await page.waitForSelector("#boards-error:has-text('needs a deploy token')", { timeout: 5000 });
+    if (await page.locator("#board-key [data-key]").count() !== 0) throw new Error("a key shown after a 403");
+    const b = await boardsOf(addr, tokens.deploy);
+    if (b.enrolled.some((k) => k.board === SHED)) throw new Error(`${SHED} enrolled by an operate token`);
+    await page.screenshot({ path: path.join(OUT, "12-enroll-needs-deploy.png"), fullPage: true });
+  });
+
+  await check("Enroll with a deploy token shows the key once, with the fingerprint the host lists", async () => {
+    await dp.goto(`http://${addr}/#token=${tokens.deploy}`);
+    await dp.click('nav a[data-page="boards"]');
+    await dp.click(`#boards-waiting [data-enroll="${SHED}"]`, { timeout: 10000 });
+    key = (await (await dp.waitForSelector("#board-key [data-key]", { timeout: 5000 })).textContent()).trim();
+    if (!/^[0-9a-f]{32}$/.test(key)) throw new Error(`the key shown is not 32 hex digits: ${JSON.stringify(key)}`);
+    fingerprint = await dp.getAttribute("#board-key [data-fingerprint]", "data-fingerprint");
+    const listed = (await boardsOf(addr, tokens.deploy)).enrolled.find((k) => k.board === SHED);
+    if (!listed) throw new Error(`GET /api/boards does not list ${SHED} enrolled`);
+    if (listed.fingerprint !== fingerprint) {
+      throw new Error(`the page shows fingerprint ${fingerprint}, the host lists ${listed.fingerprint}`);
+    }
+    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"] [data-fingerprint="${fingerprint}"]`,
+      { timeout: 5000 });
+    const kept = await dp.evaluate(() => JSON.stringify(Object.assign({}, localStorage, sessionStorage)));
+    if (kept.includes(key)) throw new Error("the page stored the key");
+    await dp.screenshot({ path: path.join(OUT, "13-enrolled-key.png"), fullPage: true });
+  });
+
+  await check("the board given the key shown attaches, sealed", async () => {
+    if (!key) throw new Error("no key was shown");
+    const file = path.join(KEYS, SHED + ".key");
+    fs.writeFileSync(file, key + "\n", { mode: 0o600 });
+    shed.kill("SIGKILL");
+    shed = start(SHED + "-keyed", [path.join(BIN, "vmac-board"), "--plant", "lights", "--name", SHED, "--bus", BUS,
+      "--key-file", file]);
+    await page.click('nav a[data-page="devices"]');
+    await page.waitForSelector(`.card:not(.waiting)[data-device="${SHED}"] [data-sealed]:not([hidden])`,
+      { timeout: 15000 });
+    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"] .badge.running`, { timeout: 10000 });
+    await dp.click("#board-key [data-key-done]");
+    await dp.waitForSelector("#board-key", { state: "hidden", timeout: 2000 });
+    if (await dp.locator("#board-key *").count() !== 0) throw new Error("the key is still in the page after Done");
+  });
+
+  await check("Remove (confirmed) takes the key away: gone from the list, the board waits again", async () => {
+    dp.once("dialog", (d) => d.accept());
+    await dp.click(`#boards-enrolled [data-remove="${SHED}"]`);
+    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"]`, { state: "detached", timeout: 5000 });
+    const b = await boardsOf(addr, tokens.deploy);
+    if (b.enrolled.some((k) => k.board === SHED)) throw new Error(`GET /api/boards still lists ${SHED} enrolled`);
+    await dp.waitForSelector(`#boards-waiting tr[data-board="${SHED}"]`, { timeout: 10000 });
+    await page.waitForSelector(`.card.waiting[data-device="${SHED}"]`, { timeout: 10000 });
+    await dp.screenshot({ path: path.join(OUT, "14-removed.png"), fullPage: true });
+  });
+  await dp.close();
 }
 
 try {

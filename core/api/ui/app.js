@@ -2,15 +2,16 @@
 // declarations. Plain JavaScript, no build step, served by vmacd itself.
 // The token stays in this browser (localStorage) and goes in the
 // Authorization header of every call; the status arrives pushed by
-// GET /api/live, the latest of it every quarter second.
+// GET /api/live, the latest of it every quarter second. A board's key the
+// host makes (Boards) is shown once in the page and kept nowhere.
 "use strict";
 
 const PLOT_SECONDS = 300;      // plots show the last five minutes
 const COLOURS = ["#2563eb", "#f59e0b", "#059669", "#dc2626", "#7c3aed", "#0891b2"];
 const CYCLE_VARS = ["state", "cycle", "step", "paused_by", "error", "time_left_s"];
 const BAD_KINDS = ["dropped", "driver_error", "driver_missing", "schedule_full", "machine_full", "rolled_back",
-  "reload_refused", "warning", "sleeping"];
-const GOOD_KINDS = ["attached", "reloaded", "probation_passed"];
+  "reload_refused", "warning", "sleeping", "auth", "removed"];
+const GOOD_KINDS = ["attached", "reloaded", "probation_passed", "enrolled"];
 
 const state = {
   token: null,
@@ -22,6 +23,9 @@ const state = {
   status: null,
   stream: null,
   siteTimer: null,    // the Site page's poll while it is shown
+  boardsSeen: "",     // what of the status GET /api/boards answers from, when the Boards page last read it
+  boardsLoading: null, // the GET /api/boards under way, and whether another is wanted after it
+  boardsAgain: false,
 };
 
 const $ = (sel, root) => (root || document).querySelector(sel);
@@ -58,7 +62,11 @@ async function api(method, path, body) {
   let data = {};
   try { data = await r.json(); } catch (e) { /* an empty answer */ }
   if (r.status === 401) signedOut("the token is not valid (unknown, revoked or malformed)");
-  if (!r.ok) throw new Error(data.error || ("HTTP " + r.status));
+  if (!r.ok) {
+    const err = new Error(data.error || ("HTTP " + r.status));
+    err.status = r.status;
+    throw err;
+  }
   return data;
 }
 
@@ -90,6 +98,7 @@ function signedOut(why) {
   localStorage.removeItem("vmacToken");
   if (state.stream) state.stream.abort();
   siteTimer(false);
+  hideKey();
   $("#signin").hidden = false;
   $("#signin-error").textContent = why || "";
   document.querySelectorAll(".page").forEach((p) => { p.hidden = true; });
@@ -168,10 +177,11 @@ function onStatus(s) {
     if (d.machine && d.machine !== d.name) continue; // another board of a machine: the primary's card shows it
     if (d.state === "errant") continue;               // dropped: its card goes
     seen.add(d.name);
+    const waiting = d.state === "waiting";
     let card = state.cards[d.name];
-    if (!card || card.version !== d.driver_version) {
+    if (!card || card.version !== d.driver_version || card.waiting !== waiting) {
       if (card) card.root.remove();
-      card = state.cards[d.name] = makeCard(d);
+      card = state.cards[d.name] = waiting ? makeWaitingCard(d) : makeCard(d);
     }
     card.update(d, now);
   }
@@ -181,6 +191,7 @@ function onStatus(s) {
   $("#empty").hidden = Object.keys(state.cards).length > 0;
   onEvents(s.events || []);
   if (!$("#page-system").hidden) drawSystem(s);
+  onBoardsStatus(s);
 }
 
 function removeCard(name) {
@@ -188,6 +199,7 @@ function removeCard(name) {
   delete state.cards[name];
   card.root.classList.add("leaving");
   setTimeout(() => card.root.remove(), 500);
+  if (card.waiting) return; // it stopped announcing, or was enrolled: no machine went
   const why = (state.status.events || []).filter((e) => e.device === name && e.kind === "dropped").pop();
   toast(why ? why.text : name + " is gone", true);
 }
@@ -211,13 +223,29 @@ function clock(seconds) {
 
 function makeCard(d) {
   const root = el("article", { class: "card", "data-device": d.name },
-    el("h2", {}, el("span", { class: "title" }, d.driver), el("span", { class: "badge" }, d.state)),
+    el("h2", {}, el("span", { class: "title" }, d.driver), el("span", { class: "badge" }, d.state),
+      el("span", { class: "badge sealed", "data-sealed": "", hidden: true,
+        title: "its board proved its enrolled key, and every frame with it is sealed" }, "sealed")),
     el("div", { class: "sub" }, d.name + " · " + d.driver + " " + d.driver_version));
   $("#cards").append(root);
-  const card = { root, version: d.driver_version, parts: null, history: {}, name: d.name };
+  const card = { root, version: d.driver_version, parts: null, history: {}, name: d.name, waiting: false };
   card.update = (dev, now) => updateCard(card, dev, now);
   manifest(d.driver, d.driver_version).then((m) => buildCard(card, m));
   return card;
+}
+
+// A board waiting for approval (no key this host holds): no driver, no
+// values; what to do, and the way to the Boards page.
+function makeWaitingCard(d) {
+  const note = el("div", { class: "note" });
+  const root = el("article", { class: "card waiting", "data-device": d.name, "data-waiting": "" },
+    el("h2", {}, el("span", { class: "title" }, d.name), el("span", { class: "badge waiting" }, "waiting")),
+    el("div", { class: "sub" }, "driver " + d.driver + " · at " + d.address + " · no driver runs it"),
+    note,
+    el("a", { class: "button secondary", href: "#boards" }, "Approve it on the Boards page"));
+  $("#cards").append(root);
+  return { root, version: d.driver_version, name: d.name, waiting: true,
+    update: (dev) => { note.textContent = dev.note || "waiting for approval"; } };
 }
 
 function buildCard(card, m) {
@@ -326,6 +354,7 @@ function updateCard(card, d, now) {
   const badge = $(".badge", card.root);
   badge.textContent = d.state;
   badge.className = "badge " + d.state;
+  $("[data-sealed]", card.root).hidden = !d.authenticated;
   const p = card.parts;
   if (!p) return;
   const v = card.values;
@@ -589,15 +618,182 @@ function siteTimer(on) {
   if (on) loadSite();
 }
 
+// ---- boards: who may speak on the bus (GET /api/boards, docs/UI.md "Boards") ----
+
+// What of the status the Boards page depends on: each device's state and
+// proof, and the enrolling and removing events.
+function boardsKey(s) {
+  const devices = s.devices.map((d) => d.name + ":" + d.state + ":" + (d.authenticated ? 1 : 0)).join(",");
+  const events = (s.events || []).filter((e) => ["enrolled", "removed", "waiting"].includes(e.kind))
+    .map((e) => e.seq).join(",");
+  return devices + "|" + events;
+}
+
+function onBoardsStatus(s) {
+  const waiting = s.devices.filter((d) => d.state === "waiting").length;
+  $("#boards-count").textContent = waiting;
+  $("#boards-count").hidden = waiting === 0;
+  const key = boardsKey(s);
+  if (!$("#page-boards").hidden && key !== state.boardsSeen) loadBoards();
+}
+
+// GET /api/boards and draw it; one at a time, and once more when asked
+// again while one is under way.
+async function loadBoards() {
+  if (state.boardsLoading) { state.boardsAgain = true; return; }
+  state.boardsSeen = state.status ? boardsKey(state.status) : "";
+  state.boardsLoading = api("GET", "/api/boards");
+  try {
+    drawBoards(await state.boardsLoading);
+  } catch (e) {
+    $("#boards-error").textContent = "The boards cannot be read: " + e.message;
+  } finally {
+    state.boardsLoading = null;
+    if (state.boardsAgain) { state.boardsAgain = false; loadBoards(); }
+  }
+}
+
+function drawBoards(b) {
+  const operate = mayOperate();
+  $("#boards-note").textContent = (b.bus_trust === "open"
+    ? "bus_trust is open: a board without a key attaches too, and anyone on the bus segment can speak as a board. "
+    : "Only the boards enrolled here (their key held by this host) get a driver; another board waits for approval. ") +
+    (operate ? "Enrolling and removing need a token of scope deploy." : "This token is read only: it lists the boards.");
+  // A board enrolled a moment ago goes on being listed as waiting until its
+  // unkeyed announcements stop: it waits for its key, in the Enrolled list.
+  const enrolledNames = new Set(b.enrolled.map((k) => k.board));
+  const held = b.waiting.filter((w) => !enrolledNames.has(w.board));
+  const waiting = $("#boards-waiting tbody");
+  waiting.replaceChildren(...held.map((w) => el("tr", { "data-board": w.board },
+    el("td", {}, w.board), el("td", {}, w.driver), el("td", {}, w.address), el("td", { class: "sub" }, w.note),
+    el("td", {}, operate ? el("button", { "data-enroll": w.board, onclick: (ev) => enroll(w.board, ev.target) },
+      "Enroll") : null))));
+  $("#boards-waiting").hidden = held.length === 0;
+  $("#boards-waiting-empty").hidden = held.length > 0;
+  const enrolled = $("#boards-enrolled tbody");
+  enrolled.replaceChildren(...b.enrolled.map((k) => el("tr", { "data-board": k.board },
+    el("td", {}, k.board),
+    el("td", {}, el("code", { "data-fingerprint": k.fingerprint }, k.fingerprint)),
+    el("td", {}, el("span", { class: "badge " + (k.state || "absent") },
+      !k.state ? "not on the bus" : k.state === "waiting" ? "waiting for its key" : k.state),
+      k.authenticated ? el("span", { class: "badge sealed", title: "it proved its key" }, "sealed") : null),
+    el("td", {}, new Date(k.created * 1000).toLocaleString()),
+    el("td", {}, k.note),
+    el("td", {}, operate ? el("button", { class: "danger", "data-remove": k.board,
+      onclick: (ev) => removeBoard(k.board, ev.target) }, "Remove") : null))));
+  $("#boards-enrolled").hidden = b.enrolled.length === 0;
+  $("#boards-enrolled-empty").hidden = b.enrolled.length > 0;
+}
+
+// What a refused enroll or remove says: a 403 is the token's scope.
+function boardsRefused(what, e) {
+  $("#boards-error").textContent = e.status === 403
+    ? what + " needs a deploy token: this page is signed in with a token of scope " + state.scope +
+      ". Make one on the host (vmac token create --scope deploy), sign out and sign in with it."
+    : what + ": " + e.message;
+}
+
+async function enroll(board, button) {
+  button.disabled = true;
+  $("#boards-error").textContent = "";
+  try {
+    showKey(await api("POST", "/api/boards/" + encodeURIComponent(board)));
+  } catch (e) {
+    boardsRefused("Enrolling " + board, e);
+  } finally {
+    button.disabled = false;
+    loadBoards();
+  }
+}
+
+async function removeBoard(board, button) {
+  if (!confirm("Remove " + board + "'s key? If it runs it is dropped at once (its outputs go safe), " +
+    "and from then on it waits for approval.")) return;
+  button.disabled = true;
+  $("#boards-error").textContent = "";
+  try {
+    await api("POST", "/api/boards/" + encodeURIComponent(board) + "/remove");
+    toast(board + "'s key removed");
+  } catch (e) {
+    boardsRefused("Removing " + board, e);
+  } finally {
+    button.disabled = false;
+    loadBoards();
+  }
+}
+
+// The key the host made, shown in the page this once: not in localStorage,
+// not in state; "Done" (or signing out) takes it out of the page.
+function showKey(r) {
+  hideKey();
+  const box = $("#board-key");
+  if (!r.key) { // a key given by the caller: nothing to hand over
+    toast(r.board + " enrolled, key " + r.fingerprint);
+    return;
+  }
+  const file = r.board + ".key";
+  const code = el("code", { class: "key", "data-key": "" }, r.key);
+  const saved = URL.createObjectURL(new Blob([r.key + "\n"], { type: "text/plain" }));
+  box.dataset.url = saved;
+  box.dataset.board = r.board;
+  box.append(
+    el("h3", {}, r.board + " is enrolled: give it this key now"),
+    el("p", {}, "It is shown only now: the host keeps it for the bus and never shows it again, and this page keeps " +
+      "no copy. Lost, it is replaced by enrolling the board again with a new key (vmac board enroll " + r.board +
+      " --replace)."),
+    el("div", { class: "key-line" }, code,
+      el("button", { class: "secondary", "data-copy": "", onclick: () => copyKey(code) }, "Copy"),
+      el("a", { class: "button secondary", href: saved, download: file }, "Save as " + file)),
+    el("p", {}, "Key fingerprint ", el("code", { "data-fingerprint": r.fingerprint }, r.fingerprint),
+      " (what the Enrolled list shows)."),
+    el("p", {}, "Give this key to the board: put this text in a file FILE (", el("code", {}, file),
+      ", chmod 600), then"),
+    el("ul", {},
+      el("li", {}, "a board run by vmac-board: ", el("code", {}, "vmac-board --name " + r.board + " --key-file " + file +
+        " ...")),
+      el("li", {}, "a Cortex-M3 board's firmware image: ",
+        el("code", {}, "scripts/qemu-board-config.py IMAGE -o OUT --key-file " + file))),
+    el("p", {}, "and restart it: it attaches when it proves the key."),
+    el("button", { "data-key-done": "", onclick: hideKey }, "Done: the board has its key"));
+  box.hidden = false;
+}
+
+function hideKey() {
+  const box = $("#board-key");
+  if (box.dataset.url) URL.revokeObjectURL(box.dataset.url);
+  delete box.dataset.url;
+  delete box.dataset.board;
+  box.replaceChildren();
+  box.hidden = true;
+}
+
+// To the clipboard where the page may write it (https, or localhost), else
+// selected for Ctrl+C.
+async function copyKey(code) {
+  try {
+    await navigator.clipboard.writeText(code.textContent);
+    toast("the key is copied");
+    return;
+  } catch (e) { /* no clipboard here: select it instead */ }
+  const range = document.createRange();
+  range.selectNodeContents(code);
+  getSelection().removeAllRanges();
+  getSelection().addRange(range);
+  let copied = false;
+  try { copied = document.execCommand("copy"); } catch (e) { /* not allowed */ }
+  toast(copied ? "the key is copied" : "the key is selected: copy it with Ctrl+C (or a long press)");
+}
+
 // ---- pages ----
 
 function showPage() {
   const page = (location.hash || "#devices").slice(1);
-  const name = ["devices", "events", "system", "site"].includes(page) ? page : "devices";
+  const name = ["devices", "events", "system", "site", "boards"].includes(page) ? page : "devices";
   document.querySelectorAll(".page").forEach((p) => { p.hidden = p.id !== "page-" + name; });
   document.querySelectorAll("nav a").forEach((a) => a.classList.toggle("active", a.dataset.page === name));
   if (name === "events") loadEvents();
   if (name === "system" && state.status) drawSystem(state.status);
+  if (name === "boards") loadBoards();
   siteTimer(name === "site");
 }
 
