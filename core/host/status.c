@@ -51,7 +51,8 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->id = d->id;
 	o->major = d->ann.major;
 	o->minor = d->ann.minor;
-	o->authenticated = d->keyed && d->state != DEV_WAITING;
+	o->authenticated = d->keyed && (d->state == DEV_LOADING || d->state == DEV_REGISTERING ||
+	                                d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP);
 	o->scheduled = d->scheduled && vmac_sched_device(bus->sched, i, &sd) == 0 && sd.state == VMAC_SCHED_RUNNING;
 	o->level = o->scheduled ? sd.level : (m ? m->level : 0);
 	o->slot = o->scheduled ? sd.offset : 0;

@@ -1,6 +1,7 @@
 /* Unit tests of the host's own modules: configuration, the lateness
  * histogram, the SPSC ring, the error codes the bus answers other
- * threads with, and the bus's table of board keys (white-box: bus_internal.h). The driver module has its own tests (test_driver.c). */
+ * threads with, and the bus's table of board keys (white-box: bus_internal.h). The driver module has its own tests
+ * (test_driver.c). */
 #include <arpa/inet.h>
 #include <check.h>
 #include <errno.h>
