@@ -12,6 +12,7 @@ import os
 import random
 import re
 import signal
+import socket
 import subprocess
 import threading
 import time
@@ -321,6 +322,19 @@ def sanitized(program):
     pass): its memory figures then include the sanitizer's own."""
     with open(program, "rb") as f:
         return b"__asan_init" in f.read()
+
+
+def bus_socket(bus, timeout_s):
+    """A UDP socket on the test's bus (GROUP:PORT), a member of its group
+    on loopback, as a board's is: it receives DISCOVERs and CYCLIC frames.
+    Its sends go out unicast unless told otherwise."""
+    group, port = bus.rsplit(":", 1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    s.bind(("", int(port)))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+    s.settimeout(timeout_s)
+    return s
 
 
 def undisturbed(names):

@@ -10,7 +10,7 @@ import random
 import socket
 
 from frames import ANNOUNCE, DISCOVER, SYS, announce, parse, reply
-from harness import KITCHEN_NAMES, sanitized, undisturbed
+from harness import KITCHEN_NAMES, bus_socket, sanitized, undisturbed
 
 TOTAL = 10000
 PER_DISCOVER = 300
@@ -22,16 +22,6 @@ def rss_kib(pid):
             if line.startswith("VmRSS:"):
                 return int(line.split()[1])
     raise AssertionError("no VmRSS for pid %d" % pid)
-
-
-def listen(bus):
-    group, port = bus.rsplit(":", 1)
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    s.bind(("", int(port)))
-    s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
-    s.settimeout(5)
-    return s
 
 
 def test_a_flood_of_fake_boards_is_bounded(t):
@@ -53,7 +43,7 @@ def flood(t, trust_open):
     target = (target[0], int(target[1]))
     seed = random.SystemRandom().randrange(1 << 32)
     rnd = random.Random(seed)
-    sock = listen(t.bus)
+    sock = bus_socket(t.bus, 5)
     most_attaching = most_waiting = 0
     sent = 0
     try:

@@ -20,7 +20,7 @@ import time
 import frames
 from frames import (ANNOUNCE, DEV, DISCOVER, IDLE, REGISTER, SHUTDOWN, SYS, UPDATE, WATCHDOG, announce, inputs,
                     opens, parse, reply, seal, session_keys)
-from harness import Skip, post, undisturbed
+from harness import Skip, bus_socket, post, undisturbed
 
 FORGED = 20  # forged or replayed frames sent in each attempt
 
@@ -28,17 +28,6 @@ FORGED = 20  # forged or replayed frames sent in each attempt
 def need_nacl():
     if frames.NACL is None:
         raise Skip("PyNaCl (Debian python3-nacl) is missing: the tests' own sealed frames need libsodium's SipHash")
-
-
-def group_socket(bus):
-    """A socket on the bus's multicast group: DISCOVERs and CYCLIC frames."""
-    group, port = bus.rsplit(":", 1)
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    s.bind(("", int(port)))
-    s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
-    s.settimeout(0.2)
-    return s
 
 
 def address(text):
@@ -55,7 +44,7 @@ class Peer:
 
     def __init__(self, bus, name, driver, major, key=None, minor=0):
         self.name, self.driver, self.major, self.minor, self.key = name, driver, major, minor, key
-        self.group = group_socket(bus)
+        self.group = bus_socket(bus, 0.2)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.2)
@@ -259,7 +248,7 @@ def test_a_forged_or_replayed_host_frame_moves_no_output(t):
     # the board's record (a sealed frame: header, first, counter, then
     # records of 14 bytes; an empty record's tag is 0).
     offset = host.device("lights-1")["offset"]
-    grp = group_socket(t.bus)
+    grp = bus_socket(t.bus, 0.2)
     captured = []
     try:
         deadline = time.monotonic() + 30
