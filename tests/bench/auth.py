@@ -109,7 +109,7 @@ def auth(args):
     if others:
         print("    note: already running here, sharing the CPUs: %s" % ", ".join(others[:8]), flush=True)
     out = {"others_at_start": others, "loadavg_at_start": open("/proc/loadavg").read().split()[:3]}
-    print("auth frames: tests/bench/auth_frames, ns per operation", flush=True)
+    print("auth frames: build/bench/auth_frames, ns per operation", flush=True)
     out["frames"] = frames(args)
     print("auth cpu: eth-cyclic, %d boards at %d Hz, keyed next to open, %d s windows" % (
         BOARDS, 1000000 // PERIOD_US, args.seconds), flush=True)
