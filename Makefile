@@ -278,10 +278,15 @@ $(BUILD)/bench/wakeup: $(OBJ)/tests/bench/wakeup.o
 $(BUILD)/bench/driver_tick: $(OBJ)/tests/bench/driver_tick.o $(call archives,$(call down_from,driver))
 	$(call link,$<,$(call down_from,driver))
 
+# What sealing and opening frames costs per frame and per CYCLIC record, in
+# ns, next to encoding the same request (tests/bench/auth_frames.c).
+$(BUILD)/bench/auth_frames: $(OBJ)/tests/bench/auth_frames.o $(call archives,proto common)
+	$(call link,$<,proto common)
+
 BENCH_SECONDS ?= 60
 bench:
 	@$(MAKE) --no-print-directory deps EXTRA_DEBS="$(BENCH_DEBS)"
-	@$(MAKE) --no-print-directory all $(BUILD)/bench/bare_loop
+	@$(MAKE) --no-print-directory all $(BUILD)/bench/bare_loop $(BUILD)/bench/auth_frames
 	python3 tests/bench/bench.py --bin $(BUILD)/bin --bare $(BUILD)/bench/bare_loop --seconds $(BENCH_SECONDS) \
 		--out $(BUILD)/bench/results.json
 

@@ -47,9 +47,14 @@ same run on the same machine, reported as ratios.
             device per tick at 100 boards and 1 kHz, how the tick lateness
             grows with drivers that burn CPU, the washer's driver on one
             worker next to two (else SKIPPED)
+  auth      authenticated frames (tests/bench/auth.py): ns per frame and per
+            record of sealing and opening next to encoding the same request
+            (tests/bench/auth_frames.c), and host CPU per device per tick, 100
+            boards at 1 kHz on eth-cyclic, keyed next to bus_trust open with
+            boards without keys, alternating rounds (root, else SKIPPED)
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth]
                 [--base-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
@@ -410,7 +415,7 @@ def main():
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only",
-                   default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers")
+                   default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth")
     p.add_argument("--base-bin", default=None,
                    help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
     p.add_argument("--cpu-awake", choices=("true", "false"), default="true",
@@ -484,6 +489,12 @@ def main():
         from ethring import ethring
         print("ethring: raw Ethernet's receive ring next to recvmmsg, %d s windows" % args.seconds, flush=True)
         results["ethring"] = ethring(args)
+
+    if "auth" in only:
+        from auth import auth
+        print("auth: authenticated frames, the codec alone and host CPU keyed next to open, %d s windows" %
+              args.seconds, flush=True)
+        results["auth"] = auth(args)
 
     if "workers" in only:
         from workers import workers
@@ -577,6 +588,9 @@ def report(r):
     if r.get("ethring"):
         from ethring import report_ethring
         report_ethring(r["ethring"])
+    if r.get("auth"):
+        from auth import report_auth
+        report_auth(r["auth"])
     if r.get("mqtt"):
         from mqtt_bench import report_mqtt
         report_mqtt(r["mqtt"])

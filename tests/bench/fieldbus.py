@@ -61,11 +61,13 @@ def run_seconds(pid):
     return total / 1e9
 
 
-def fieldbus_kitchen(ctx, mode, boards, period_us, driver=None):
+def fieldbus_kitchen(ctx, mode, boards, period_us, driver=None, keyed=True, board_extra=()):
     """vmacd and one vmac-board --count `boards` (running benchprobe, or
     driver: (name, source, {its host settings})) on the bus of `mode`, every
-    board running; returns (host, board process). Raises Skip when
-    eth-cyclic cannot make its namespace."""
+    board running; returns (host, board process). keyed: the boards enrolled
+    and given their keys (harness.Context.board), else none (the host then
+    needs bus_trust open). board_extra: more vmac-board arguments. Raises
+    Skip when eth-cyclic cannot make its namespace."""
     name, source, extra = driver or ("benchprobe", BENCH_LUA, {})
     source = source or BENCH_LUA
     settings = {"reply_deadline_us": period_us, "realtime": "true", "cpu_awake": cpu_awake(),
@@ -85,7 +87,7 @@ def fieldbus_kitchen(ctx, mode, boards, period_us, driver=None):
     # --late-us = the reply deadline: every line it prints is a reply the
     # board itself sent too late to be in time, whatever the host did.
     board = ctx.board("generic", "b", count=boards, driver=name, wrapper=wrapper, bus=board_bus,
-                      extra=("--late-us", str(period_us)))
+                      extra=("--late-us", str(period_us)) + tuple(board_extra), keyed=keyed)
     wait_attached(host, boards, timeout_s=30 + boards / 50)
     return host, board
 
@@ -126,10 +128,10 @@ def fresh_status(host):
         time.sleep(0.005)  # until the next publication, at most 100 ms away
 
 
-def fieldbus_run(ctx, mode, boards, period_us, seconds, driver=None):
+def fieldbus_run(ctx, mode, boards, period_us, seconds, driver=None, keyed=True, board_extra=()):
     """`boards` boards served in `mode` for `seconds` of steady state: the
-    figures of that window (driver: as fieldbus_kitchen's)."""
-    host, board = fieldbus_kitchen(ctx, mode, boards, period_us, driver)
+    figures of that window (driver, keyed, board_extra: as fieldbus_kitchen's)."""
+    host, board = fieldbus_kitchen(ctx, mode, boards, period_us, driver, keyed, board_extra)
     before = fresh_status(host)
     late_mark = board.mark()
     cpu0, run0, bcpu0, t0 = cpu_seconds(host.pid), run_seconds(host.pid), proc_cpu(board.pid), time.monotonic()
@@ -167,6 +169,7 @@ def fieldbus_run(ctx, mode, boards, period_us, seconds, driver=None):
         "late_replies_host": c1["late_replies"] - c0["late_replies"],
         "late_replies_board": len(late), "late_reply_example": late[0].text if late else None,
         "running_at_end": sum(1 for d in after["devices"] if d["state"] == "running"),
+        "authenticated_at_end": sum(1 for d in after["devices"] if d["state"] == "running" and d.get("authenticated")),
         "services": services,
         "served": served,
         "served_ratio": served / max(1.0, boards * per_device),
