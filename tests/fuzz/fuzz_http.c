@@ -117,7 +117,8 @@ static void make_path(const char *pattern, const char *part, char *path, size_t 
 /* The scope docs/API.md gives a request that found its route, said from
  * the method and the path alone (not read from the table, which this
  * checks): the web UI and the health check none, operator input under
- * /api/devices/ operate, drivers deploy, everything else read. */
+ * /api/devices/ operate, drivers and board keys deploy, everything else
+ * read. */
 static enum vmac_scope documented_scope(const char *method, const char *path)
 {
 	int post = strcmp(method, "POST") == 0;
@@ -125,7 +126,7 @@ static enum vmac_scope documented_scope(const char *method, const char *path)
 		return VMAC_SCOPE_NONE;
 	if (post && strncmp(path, "/api/devices/", 13) == 0)
 		return VMAC_SCOPE_OPERATE;
-	if (post && strncmp(path, "/api/drivers/", 13) == 0)
+	if (post && (strncmp(path, "/api/drivers/", 13) == 0 || strncmp(path, "/api/boards/", 12) == 0))
 		return VMAC_SCOPE_DEPLOY;
 	return VMAC_SCOPE_READ;
 }

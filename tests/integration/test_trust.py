@@ -375,3 +375,18 @@ def test_bad_enrollments_are_refused_with_a_reason(t):
         f.write("not a key\n")
     code, out, err = t.run([t.path("vmac"), "board", "enroll", "a", "--key-file", bad, "--http", host.http], "bad")
     assert code == 1 and "32 hex digits" in err, "a bad key file: %d %s" % (code, err)
+
+
+def test_an_open_bus_says_so_and_still_authenticates_enrolled_boards(t):
+    """bus_trust open: a warning at start says anyone on the segment can
+    speak for a board without a key; such a board attaches unauthenticated
+    beside an enrolled one, which is still sealed."""
+    host = t.host(settings={"bus_trust": "open"})
+    warning = host.wait_event("warning", text="bus_trust is open")
+    assert "anyone on the bus segment" in warning["text"], "the warning does not say why: %r" % warning["text"]
+    assert host.status()["bus_trust"] == "open"
+    t.board("lights", "plain-1", keyed=False)
+    t.board("lights", "sealed-1")
+    s = host.wait_running(["plain-1", "sealed-1"])
+    assert host.device("plain-1", s)["authenticated"] is False, "an unkeyed board runs as authenticated"
+    assert host.device("sealed-1", s)["authenticated"] is True, "an enrolled board runs unauthenticated on an open bus"
