@@ -288,6 +288,11 @@ class Soak:
                            revoked, "not-a-token", "vmac_" + revoked.split("_")[1] + "_" + "0" * 64]
         self.state = os.path.join(a.out, "state")
         os.makedirs(self.state)
+        # Every board enrolled before the host starts: its store is the copy
+        # the wrapper makes into its own mount namespace, so enrolling later
+        # from here would not reach it.
+        ctx.enroll(["washer-1", "lights-1", "steady-1", "steady-2"] +
+                   ["victim-%d" % i for i in range(1, VICTIMS + 1)])
         wrapper = self.store_wrapper()
         settings = {"miss_limit": 3, "driver.washer.param.time_scale": "0.002",
                     "driver.washer.param.program": "quick"}
@@ -299,9 +304,10 @@ class Soak:
         if comm != "vmacd":
             raise RuntimeError("process %d is %s, not vmacd" % (self.pid, comm))
         self.api = Api(self.host.http)
-        self.boards = {"washer-1": ctx.board("washer", "washer-1", commands=True),
-                       "lights-1": ctx.board("lights", "lights-1"),
-                       "steady": ctx.board("generic", "steady", count=2)}
+        keys = ("--key-dir", ctx.keys)
+        self.boards = {"washer-1": ctx.board("washer", "washer-1", commands=True, keyed=False, extra=keys),
+                       "lights-1": ctx.board("lights", "lights-1", keyed=False, extra=keys),
+                       "steady": ctx.board("generic", "steady", count=2, keyed=False, extra=keys)}
         self.boards["washer-1"].send("washer-1 fill_rate_lps 5")
         self.host.wait_running(HEALTHY, timeout_s=60)
         self.start_victims()
@@ -359,7 +365,7 @@ class Soak:
             self.victim_log = open(os.path.join(self.args.out, "victims.log"), "a")
         self.victim_proc = subprocess.Popen(
             [self.ctx.path("vmac-board"), "--plant", "generic", "--name", "victim", "--driver", "victim",
-             "--count", str(VICTIMS), "--bus", self.ctx.bus, "--quiet", "--late-us", "0"],
+             "--count", str(VICTIMS), "--bus", self.ctx.bus, "--key-dir", self.ctx.keys, "--quiet", "--late-us", "0"],
             stdin=subprocess.DEVNULL, stdout=self.victim_log, stderr=subprocess.STDOUT, start_new_session=True)
 
     def kill_victims(self):
