@@ -116,18 +116,17 @@ static json_t *status_json(struct vmac_http *h)
 		json_t *load = json_array();
 		for (i = 0; i < (int)s->slots_per_block; i++)
 			json_array_append_new(load, json_integer(s->slot_load[i]));
-		json_object_set_new(json_object_get(root, "counters"), "schedule_full",
-		                    json_integer((json_int_t)s->counters.schedule_full));
-		json_object_set_new(json_object_get(root, "counters"), "misses_host",
-		                    json_integer((json_int_t)s->counters.misses_host));
-		json_object_set_new(json_object_get(root, "counters"), "attach_refused",
-		                    json_integer((json_int_t)s->counters.attach_refused));
-		json_object_set_new(json_object_get(root, "counters"), "auth_failed",
-		                    json_integer((json_int_t)s->counters.auth_failed));
-		json_object_set_new(json_object_get(root, "counters"), "takeover_refused",
-		                    json_integer((json_int_t)s->counters.takeover_refused));
-		json_object_set_new(json_object_get(root, "counters"), "waiting",
-		                    json_integer((json_int_t)s->counters.waiting));
+		/* The rest of the counters, one row each. */
+		const struct {
+			const char *name;
+			uint64_t value;
+		} more[] = {
+		    {"schedule_full", s->counters.schedule_full},       {"misses_host", s->counters.misses_host},
+		    {"attach_refused", s->counters.attach_refused},     {"auth_failed", s->counters.auth_failed},
+		    {"takeover_refused", s->counters.takeover_refused}, {"waiting", s->counters.waiting}};
+		for (i = 0; i < (int)(sizeof(more) / sizeof(more[0])); i++)
+			json_object_set_new(json_object_get(root, "counters"), more[i].name,
+			                    json_integer((json_int_t)more[i].value));
 		json_object_set_new(root, "bus_trust", json_string(h->cfg.bus_trust));
 		json_object_set_new(root, "board_keys", json_integer((json_int_t)s->board_keys));
 		json_object_set_new(
