@@ -773,6 +773,15 @@ void vmac_bus_free(struct vmac_bus *bus)
 	if (stuck)
 		return; /* the process ends: what a stuck worker reads (the bus, its jobs) stays */
 	bus_wait_fini(bus);
+	{ /* commands never taken (a host that failed before its bus started) */
+		struct vmac_host_cmd c;
+		while (bus->to_bus.buf && vmac_ring_pop(&bus->to_bus, &c)) {
+			vmac_bus_keys_free(c.keys);
+			vmac_driver_free(c.drv);
+			vmac_recorder_free(c.rec);
+			free(c.ckpt);
+		}
+	}
 	vmac_transport_close(&bus->tr);
 	if (bus->tfd >= 0)
 		close(bus->tfd);
