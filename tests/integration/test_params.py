@@ -31,8 +31,11 @@ def test_a_persisted_param_survives_a_restart(t):
                    "washer-1.door_level_l:7\n"), "console answers: %r (stderr %r)" % (out, err)
     assert "does not persist" in err and "not one of the allowed values" in err, \
         "the console does not say why: %r" % err
-    s = host.wait_status(lambda s: params(host, "washer-1", s).get("program") == "quick", 5,
-                         "program quick in the status")
+    # The status carries what each machine's last job left: both values,
+    # set by two jobs, before they are read back.
+    s = host.wait_status(lambda s: params(host, "washer-1", s).get("program") == "quick" and
+                         params(host, "washer-1", s).get("door_level_l") == 7, 5,
+                         "program quick and door_level_l 7 in the status")
     rc, out, err = console("washer-1.program? washer-1.door_level_l?")
     assert out == "washer-1.program:quick washer-1.door_level_l:7\n", "reading params back: %r %r" % (out, err)
 
