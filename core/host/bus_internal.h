@@ -345,8 +345,10 @@ void bus_post_code(struct vmac_bus *bus, enum vmac_event_code code, const struct
                    int64_t version_id, const char *kind, const char *text);
 void bus_requests(struct vmac_bus *bus);
 void bus_commands(struct vmac_bus *bus);
+/* receive.c: one frame from the bus, judged and acted on. */
+void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p);
 /* wait.c: the bus thread's wait and loop. bus_wake: what to_bus and the
- * requests hold is there (any thread). bus_drain (bus.c): every reply
+ * requests hold is there (any thread). bus_drain (receive.c): every reply
  * waiting on the socket. */
 int bus_wait_init(struct vmac_bus *bus, char *err, size_t errlen);
 void bus_wait_fini(struct vmac_bus *bus);
