@@ -83,6 +83,7 @@ static const struct key keys[] = {
     {B(mqtt_commands)},
     {B(mqtt_sparkplug)},
     {S(mqtt_sparkplug_group)},
+    {S(mqtt_sparkplug_primary_host)},
     {U(mqtt_keepalive_s, 5, 3600)},
 };
 

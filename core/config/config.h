@@ -66,11 +66,12 @@ struct vmac_config {
 	char mqtt_cafile[VMAC_PATH_MAX];        /* mqtts: the CA (PEM); "" = the system's */
 	char mqtt_certfile[VMAC_PATH_MAX];      /* mqtts: a client certificate (PEM), with mqtt_keyfile */
 	char mqtt_keyfile[VMAC_PATH_MAX];
-	char mqtt_prefix[128];           /* topics: PREFIX/HOST/DEVICE/... */
-	char mqtt_discovery_prefix[128]; /* Home Assistant's discovery prefix */
-	int mqtt_commands;               /* accept operator input from the command topics */
-	int mqtt_sparkplug;              /* also speak Sparkplug B (an Edge Node; docs/MQTT.md) */
-	char mqtt_sparkplug_group[128];  /* its group id: spBv1.0/GROUP/... */
+	char mqtt_prefix[128];                /* topics: PREFIX/HOST/DEVICE/... */
+	char mqtt_discovery_prefix[128];      /* Home Assistant's discovery prefix */
+	int mqtt_commands;                    /* accept operator input from the command topics */
+	int mqtt_sparkplug;                   /* also speak Sparkplug B (an Edge Node; docs/MQTT.md) */
+	char mqtt_sparkplug_group[128];       /* its group id: spBv1.0/GROUP/... */
+	char mqtt_sparkplug_primary_host[64]; /* a Primary Host Application's id: births wait for its STATE */
 	uint32_t mqtt_keepalive_s;
 	struct vmac_config_driver_setting driver[VMAC_CONFIG_DRIVER_SETTINGS];
 	int ndriver;

@@ -93,23 +93,29 @@ static const char *conn_what(const struct mqtt_conn *c)
 	return c->index == MQTT_CONN_SPARKPLUG ? " (Sparkplug)" : "";
 }
 
-/* Sparkplug: this connection carries the will registered with it
- * (bdseq_next); the next one gets the following bdSeq, persisted, so a
- * restart goes on counting. The will is changed here, on the network
- * thread, the one that reconnects with it: never while it is being sent. */
-static void spb_next_will(struct mqtt_conn *c)
+/* Sparkplug, before every CONNECT (network thread, the one that sends
+ * it): the will is the NDEATH with the next bdSeq, one more than the last
+ * CONNECT's whether or not that one was accepted (the specification counts
+ * CONNECT packets), persisted, so a restart goes on counting. A CONNACK
+ * makes it this connection's bdSeq (on_connect). 0, or -1 (out of memory:
+ * this attempt is not made). */
+static int spb_arm_will(struct mqtt_conn *c)
 {
 	struct vmac_mqtt *m = c->m;
 	char topic[300];
 	void *ndeath;
-	int len;
-	atomic_store(&m->spb.bdseq, m->spb.bdseq_next);
+	int len, rc;
+	snprintf(topic, sizeof(topic), "spBv1.0/%s/NDEATH/%s", m->s.sparkplug_group, m->s.host_id);
+	if (!(ndeath = mqtt_spb_ndeath((unsigned)m->spb.bdseq_next, &len)))
+		return -1;
+	rc = mosquitto_will_set(c->mosq, topic, len, ndeath, 1, false); /* QoS 1, not retained */
+	free(ndeath);
+	if (rc != MOSQ_ERR_SUCCESS)
+		return -1;
+	m->spb.bdseq_connect = m->spb.bdseq_next;
 	m->spb.bdseq_next = (m->spb.bdseq_next + 1) % 256;
 	mqtt_spb_bdseq_store(m->spb.path, m->spb.bdseq_next);
-	snprintf(topic, sizeof(topic), "spBv1.0/%s/NDEATH/%s", m->s.sparkplug_group, m->s.host_id);
-	if ((ndeath = mqtt_spb_ndeath((unsigned)m->spb.bdseq_next, &len)) != NULL)
-		mosquitto_will_set(c->mosq, topic, len, ndeath, 1, false);
-	free(ndeath);
+	return 0;
 }
 
 /* A failure to connect or a lost connection, in an event: once per reason
@@ -141,7 +147,7 @@ static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 		return;
 	}
 	if (c->index == MQTT_CONN_SPARKPLUG)
-		spb_next_will(c);
+		atomic_store(&m->spb.bdseq, m->spb.bdseq_connect);
 	c->reported[0] = 0; /* the next failure is news again */
 	c->last_error[0] = 0;
 	atomic_fetch_add(&c->connacks, 1);
@@ -194,8 +200,10 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 	(void)mosq;
 	if (c->index == MQTT_CONN_MAIN && mqtt_site_message(m, msg))
 		return; /* the site view's, applied here (mqtt_site.c) */
-	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic) || msg->retain)
-		return; /* a retained command is an old one: never acted on */
+	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic))
+		return;
+	if (msg->retain && !(c->index == MQTT_CONN_SPARKPLUG && strncmp(msg->topic, "spBv1.0/STATE/", 14) == 0))
+		return; /* a retained command is an old one: never acted on (a host application's STATE is news) */
 	pthread_mutex_lock(&m->lock);
 	if (m->nqueue == MQTT_QUEUE) {
 		m->dropped++;
@@ -240,7 +248,7 @@ void mqtt_profiles_device_up(struct vmac_mqtt *m, struct mqtt_device *d, const s
 {
 	int p;
 	for (p = 0; p < NPROFILES; p++)
-		if (profiles[p]->device_up)
+		if (profiles[p]->conn == d->conn && profiles[p]->device_up)
 			profiles[p]->device_up(m, d, st);
 }
 
@@ -248,7 +256,7 @@ void mqtt_profiles_device_down(struct vmac_mqtt *m, struct mqtt_device *d)
 {
 	int p;
 	for (p = 0; p < NPROFILES; p++)
-		if (profiles[p]->device_down)
+		if (profiles[p]->conn == d->conn && profiles[p]->device_down)
 			profiles[p]->device_down(m, d);
 }
 
@@ -257,7 +265,7 @@ void mqtt_profiles_values(struct vmac_mqtt *m, struct mqtt_device *d, const stru
 {
 	int p;
 	for (p = 0; p < NPROFILES; p++)
-		if (profiles[p]->values)
+		if (profiles[p]->conn == d->conn && profiles[p]->values)
 			profiles[p]->values(m, d, st, changed, n);
 }
 
@@ -287,8 +295,7 @@ static void *publisher(void *arg)
 			for (p = 0; p < NPROFILES; p++)
 				if (profiles[p]->conn == k && profiles[p]->connected)
 					profiles[p]->connected(m);
-			if (k == MQTT_CONN_MAIN)
-				mqtt_devices_republish(m);
+			mqtt_devices_republish(m, c);
 		}
 		handle_messages(m);
 		if (now >= next_poll) {
@@ -334,28 +341,19 @@ static int tls_setup(struct vmac_mqtt *m, struct mosquitto *mosq, char *err, siz
 	return 0;
 }
 
-/* The will of connection c: PREFIX/HOST/status "offline" (retained) on the
- * main one, the NDEATH with the next bdSeq on Sparkplug's. */
+/* The will of the main connection: PREFIX/HOST/status "offline"
+ * (retained). Sparkplug's (the NDEATH) is made before each CONNECT, with
+ * that CONNECT's bdSeq (spb_arm_will). */
 static int set_will(struct mqtt_conn *c, char *err, size_t errlen)
 {
 	struct vmac_mqtt *m = c->m;
 	char topic[512];
-	void *ndeath;
-	int len, rc;
-	if (c->index == MQTT_CONN_MAIN) {
-		/* A host that dies (SIGKILL, power) is said offline by the broker. */
-		mqtt_topic(m, topic, sizeof(topic), "status");
-		rc = mosquitto_will_set(c->mosq, topic, 7, "offline", 1, true);
-	} else {
-		snprintf(topic, sizeof(topic), "spBv1.0/%s/NDEATH/%s", m->s.sparkplug_group, m->s.host_id);
-		if (!(ndeath = mqtt_spb_ndeath((unsigned)m->spb.bdseq_next, &len))) {
-			snprintf(err, errlen, "out of memory");
-			return -1;
-		}
-		rc = mosquitto_will_set(c->mosq, topic, len, ndeath, 1,
-		                        false); /* the specification: QoS 1, not retained */
-		free(ndeath);
-	}
+	int rc;
+	if (c->index != MQTT_CONN_MAIN)
+		return 0;
+	/* A host that dies (SIGKILL, power) is said offline by the broker. */
+	mqtt_topic(m, topic, sizeof(topic), "status");
+	rc = mosquitto_will_set(c->mosq, topic, 7, "offline", 1, true);
 	if (rc != MOSQ_ERR_SUCCESS) {
 		snprintf(err, errlen, "mqtt: cannot set the last will on %s", topic);
 		return -1;
@@ -392,6 +390,11 @@ static void *net_thread(void *arg)
 		if (atomic_load(&m->stopping))
 			break;
 		c->last_error[0] = 0;
+		if (c->index == MQTT_CONN_SPARKPLUG && spb_arm_will(c) != 0) {
+			atomic_store(&c->in_connect, 0);
+			net_pause(m, backoff_s);
+			continue;
+		}
 		rc = first ? mosquitto_connect(c->mosq, m->s.host, m->s.port, (int)m->s.keepalive_s)
 		           : mosquitto_reconnect(c->mosq);
 		first = 0;
@@ -409,7 +412,12 @@ static void *net_thread(void *arg)
 			break;
 		if (atomic_load(&c->connacks) != connacks)
 			backoff_s = 1;
-		say_failure(c, rc);
+		if (atomic_exchange(&c->redial, 0)) { /* asked for, and said by who asked */
+			atomic_store(&c->was_connected, 0);
+			backoff_s = 1;
+		} else {
+			say_failure(c, rc);
+		}
 		net_pause(m, backoff_s);
 		backoff_s = backoff_s >= 16 ? 30 : backoff_s * 2;
 	}
@@ -453,6 +461,15 @@ static int conn_start(struct vmac_mqtt *m, int index, char *err, size_t errlen)
 	pthread_setname_np(c->net, index == MQTT_CONN_SPARKPLUG ? "vmac-mqtt-spb" : "vmac-mqtt-net");
 	c->net_started = 1;
 	return 0;
+}
+
+void mqtt_conn_redial(struct mqtt_conn *c)
+{
+	if (!c->mosq)
+		return;
+	atomic_store(&c->redial, 1);
+	atomic_store(&c->connected, 0);
+	mosquitto_disconnect(c->mosq); /* queued after what was published; the network thread writes it */
 }
 
 static void conn_stop(struct mqtt_conn *c)

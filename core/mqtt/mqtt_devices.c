@@ -1,7 +1,9 @@
 /* The machines as the MQTT client sees them: every MQTT_POLL_MS the bus's
  * status copy (vmac_bus_status: what the bus thread published at most
  * 100 ms ago, with a trylock, so reading it never holds the bus back) is
- * compared with what was published. A machine that starts running, or runs
+ * compared with what was published, on each connection separately (each
+ * has its own table: Sparkplug's births and deaths go on while the main
+ * connection is away, and a main-only reconnect says nothing on Sparkplug's). A machine that starts running, or runs
  * a new driver version, is "up"; one that stops running is "down"; values
  * that changed go out, the newest only (a value that changed five times
  * while the broker was away is published once, as it is now). A variable
@@ -14,29 +16,35 @@
 
 #include "../loader/loader.h"
 
-struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name)
+struct mqtt_device *mqtt_conn_device_find(struct mqtt_conn *c, const char *name)
 {
 	int i;
-	for (i = 0; i < m->ndevices; i++)
-		if (strcmp(m->devices[i].name, name) == 0)
-			return &m->devices[i];
+	for (i = 0; i < c->ndevices; i++)
+		if (strcmp(c->devices[i].name, name) == 0)
+			return &c->devices[i];
 	return NULL;
 }
 
-static struct mqtt_device *device_add(struct vmac_mqtt *m, const char *name)
+struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name)
+{
+	return mqtt_conn_device_find(&m->conns[MQTT_CONN_MAIN], name);
+}
+
+static struct mqtt_device *device_add(struct mqtt_conn *c, const char *name)
 {
 	struct mqtt_device *d;
-	if (m->ndevices == m->cap) {
-		int cap = m->cap ? 2 * m->cap : 16;
-		struct mqtt_device *more = realloc(m->devices, (size_t)cap * sizeof(*more));
+	if (c->ndevices == c->cap) {
+		int cap = c->cap ? 2 * c->cap : 16;
+		struct mqtt_device *more = realloc(c->devices, (size_t)cap * sizeof(*more));
 		if (!more)
 			return NULL;
-		m->devices = more;
-		m->cap = cap;
+		c->devices = more;
+		c->cap = cap;
 	}
-	d = &m->devices[m->ndevices++];
+	d = &c->devices[c->ndevices++];
 	memset(d, 0, sizeof(*d));
 	snprintf(d->name, sizeof(d->name), "%s", name);
+	d->conn = c->index;
 	return d;
 }
 
@@ -74,7 +82,7 @@ static void publish_values(struct vmac_mqtt *m, struct mqtt_device *d, const str
 	struct mqtt_value *changed[MQTT_VALUES];
 	double now = mqtt_now_s();
 	int n = 0, i;
-	if (!mqtt_can_publish_values(m)) {
+	if (!mqtt_conn_can_publish(&m->conns[d->conn])) {
 		m->skipped_rounds++; /* they stay unsent: the newest goes out when there is room */
 		return;
 	}
@@ -119,7 +127,7 @@ static void go_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_
 	if ((!d->manifest || strcmp(d->driver, st->driver) != 0 || strcmp(d->version, st->driver_version) != 0) &&
 	    load_manifest(d, st) != 0)
 		return; /* not known yet: next round */
-	if (!mqtt_conn_is_up(&m->conns[MQTT_CONN_MAIN]))
+	if (!mqtt_conn_is_up(&m->conns[d->conn]))
 		return; /* said when the connection is back (mqtt_devices_republish) */
 	d->online = 1;
 	mqtt_profiles_device_up(m, d, st);
@@ -133,19 +141,19 @@ static int is_machine(const struct vmac_device_status *st)
 	       (!st->machine[0] || strcmp(st->machine, st->name) == 0);
 }
 
-void mqtt_devices_poll(struct vmac_mqtt *m)
+/* The status copy m->status against connection c's table. */
+static void poll_conn(struct vmac_mqtt *m, struct mqtt_conn *c)
 {
 	int i;
-	vmac_bus_status(m->bus, &m->status);
-	for (i = 0; i < m->ndevices; i++)
-		m->devices[i].seen = 0;
+	for (i = 0; i < c->ndevices; i++)
+		c->devices[i].seen = 0;
 	for (i = 0; i < m->status.ndevices; i++) {
 		const struct vmac_device_status *st = &m->status.devices[i];
 		struct mqtt_device *d;
 		if (!is_machine(st))
 			continue;
-		d = mqtt_device_find(m, st->name);
-		if (!d && !(d = device_add(m, st->name)))
+		d = mqtt_conn_device_find(c, st->name);
+		if (!d && !(d = device_add(c, st->name)))
 			continue;
 		d->seen = 1;
 		if (!d->online || strcmp(d->driver, st->driver) != 0 || strcmp(d->version, st->driver_version) != 0)
@@ -153,40 +161,53 @@ void mqtt_devices_poll(struct vmac_mqtt *m)
 		else
 			publish_values(m, d, st, 0);
 	}
-	for (i = 0; i < m->ndevices; i++) {
-		struct mqtt_device *d = &m->devices[i];
-		if (!d->seen && d->online && mqtt_conn_is_up(&m->conns[MQTT_CONN_MAIN])) {
+	for (i = 0; i < c->ndevices; i++) {
+		struct mqtt_device *d = &c->devices[i];
+		if (!d->seen && d->online && mqtt_conn_is_up(c)) {
 			d->online = 0;
 			mqtt_profiles_device_down(m, d);
 		}
 	}
 }
 
-void mqtt_devices_republish(struct vmac_mqtt *m)
+void mqtt_devices_poll(struct vmac_mqtt *m)
+{
+	int k;
+	vmac_bus_status(m->bus, &m->status);
+	for (k = 0; k < MQTT_CONNS; k++)
+		if (m->conns[k].mosq)
+			poll_conn(m, &m->conns[k]);
+}
+
+void mqtt_devices_republish(struct vmac_mqtt *m, struct mqtt_conn *c)
 {
 	int i;
-	for (i = 0; i < m->ndevices; i++) {
-		struct mqtt_device *d = &m->devices[i];
+	for (i = 0; i < c->ndevices; i++) {
+		struct mqtt_device *d = &c->devices[i];
 		int k;
 		for (k = 0; k < d->nvalues; k++)
 			d->values[k].sent = 0;
 		d->online = 0; /* up again, with every value, at this poll */
 	}
-	mqtt_devices_poll(m);
+	vmac_bus_status(m->bus, &m->status);
+	poll_conn(m, c);
 	/* The others are said offline again: dropped while the broker was away,
 	 * or a broker that lost its retained messages. */
-	for (i = 0; i < m->ndevices; i++)
-		if (!m->devices[i].online && mqtt_conn_is_up(&m->conns[MQTT_CONN_MAIN]))
-			mqtt_profiles_device_down(m, &m->devices[i]);
+	for (i = 0; i < c->ndevices; i++)
+		if (!c->devices[i].online && mqtt_conn_is_up(c))
+			mqtt_profiles_device_down(m, &c->devices[i]);
 }
 
 void mqtt_devices_stopping(struct vmac_mqtt *m)
 {
-	int i;
-	for (i = 0; i < m->ndevices; i++)
-		if (m->devices[i].online) {
-			m->devices[i].online = 0;
-			mqtt_profiles_device_down(m, &m->devices[i]);
+	int i, k;
+	for (k = 0; k < MQTT_CONNS; k++)
+		for (i = 0; i < m->conns[k].ndevices; i++) {
+			struct mqtt_device *d = &m->conns[k].devices[i];
+			if (d->online) {
+				d->online = 0;
+				mqtt_profiles_device_down(m, d);
+			}
 		}
 	mqtt_profiles_stopping(m);
 }
@@ -205,15 +226,19 @@ const struct vmac_value *mqtt_status_value(const struct vmac_device_status *st, 
 
 void mqtt_devices_free(struct vmac_mqtt *m)
 {
-	int i, k;
-	for (i = 0; i < m->ndevices; i++) {
-		json_decref(m->devices[i].manifest);
-		for (k = 0; k < m->devices[i].nconfigs; k++)
-			free(m->devices[i].configs[k]);
-		free(m->devices[i].configs);
-		free(m->devices[i].spb_metrics);
+	int i, k, c;
+	for (c = 0; c < MQTT_CONNS; c++) {
+		struct mqtt_conn *conn = &m->conns[c];
+		for (i = 0; i < conn->ndevices; i++) {
+			struct mqtt_device *d = &conn->devices[i];
+			json_decref(d->manifest);
+			for (k = 0; k < d->nconfigs; k++)
+				free(d->configs[k]);
+			free(d->configs);
+			free(d->spb_metrics);
+		}
+		free(conn->devices);
+		conn->devices = NULL;
+		conn->ndevices = conn->cap = 0;
 	}
-	free(m->devices);
-	m->devices = NULL;
-	m->ndevices = m->cap = 0;
 }

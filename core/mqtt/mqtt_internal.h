@@ -19,6 +19,7 @@
 #include <jansson.h>
 #include <pthread.h>
 #include <stdatomic.h>
+#include <stdint.h>
 
 #include "mqtt.h"
 
@@ -47,12 +48,15 @@ struct mqtt_spb_metric {
 	unsigned datatype;
 };
 
-/* A machine as the client knows it (by its primary board's name). */
+/* A machine as one connection's profiles know it (by its primary board's
+ * name): each connection has a table of its own, so what one connection
+ * said (up, down, which values) is independent of the other's outages. */
 struct mqtt_device {
 	char name[VMAC_NAME_MAX + 1];
+	int conn; /* the connection whose table holds it (MQTT_CONN_*) */
 	char driver[VMAC_NAME_MAX + 1];
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
-	int online;       /* running, and said so */
+	int online;       /* running, and said so on its connection */
 	int seen;         /* in the status this round */
 	json_t *manifest; /* the running version's declarations (vmac_loaded_manifest), NULL until known */
 	char **configs;   /* ha: the discovery config topics published for this version */
@@ -96,6 +100,11 @@ struct mqtt_conn {
 	int net_started;
 	atomic_int in_connect; /* in mosquitto_connect: a stop cancels it rather than wait minutes */
 	atomic_int closing;    /* conn_stop: write what is queued (the DISCONNECT), then end */
+	atomic_int redial;     /* a disconnect asked for (Sparkplug's primary host offline): connect again */
+	/* The publisher thread's: the machines as this connection's profiles
+	 * were told of them (mqtt_devices.c). */
+	struct mqtt_device *devices;
+	int ndevices, cap;
 	/* Network thread only: libmosquitto's last error line (its log callback:
 	 * the OpenSSL reason of a refused handshake, or the broker's CONNACK) and
 	 * the failure last reported, so that a broker that stays unreachable is
@@ -131,15 +140,22 @@ struct mqtt_profile {
 
 extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile, mqtt_site_profile;
 
-/* Sparkplug's session (mqtt_sparkplug.c). bdseq_next is the bdSeq of the
- * NDEATH registered as the will of the next connection; the network thread
- * moves it to bdseq on every CONNACK (and persists the one after). */
+/* Sparkplug's session (mqtt_sparkplug.c). Before every CONNECT the
+ * network thread registers the NDEATH with bdseq_next as the will, makes it
+ * bdseq_connect and counts bdseq_next on (persisted); a CONNACK makes
+ * bdseq_connect this connection's bdseq. */
 struct mqtt_spb {
-	char path[VMAC_PATH_MAX + 32]; /* STATE_DIR/sparkplug-bdseq: the next connection's bdSeq */
+	char path[VMAC_PATH_MAX + 32]; /* STATE_DIR/sparkplug-bdseq: the next CONNECT's bdSeq */
 	atomic_int bdseq;              /* this connection's bdSeq (its NBIRTH's and its will's) */
-	int bdseq_next;                /* network thread */
+	int bdseq_next;                /* network thread: the next CONNECT's */
+	int bdseq_connect;             /* network thread: the CONNECT in flight's */
 	unsigned seq;                  /* the next message's seq, 0..255 */
 	int born;                      /* bdseq + 1 of the connection the NBIRTH went out on; 0: none yet */
+	/* mqtt_sparkplug_primary_host: its last STATE on this connection (the
+	 * retained one comes right after the SUBSCRIBE) and that STATE's
+	 * timestamp; an older one than what was seen is ignored. */
+	int host_online;
+	int64_t host_ts;
 };
 
 struct vmac_mqtt {
@@ -158,8 +174,6 @@ struct vmac_mqtt {
 	unsigned long dropped;
 	/* The publisher thread's own. */
 	struct vmac_status status;
-	struct mqtt_device *devices;
-	int ndevices, cap;
 	unsigned long skipped_rounds; /* values held back: too much waiting to be written */
 	struct mqtt_spb spb;
 	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
@@ -180,7 +194,7 @@ int mqtt_conn_can_publish(struct mqtt_conn *c);
 void mqtt_event(struct vmac_mqtt *m, const char *device, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 double mqtt_now_s(void);
 
-/* mqtt_client.c: every profile's hook, in order. */
+/* mqtt_client.c: the hook of every profile on d's connection, in order. */
 void mqtt_profiles_device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st);
 void mqtt_profiles_device_down(struct vmac_mqtt *m, struct mqtt_device *d);
 void mqtt_profiles_values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
@@ -188,12 +202,15 @@ void mqtt_profiles_values(struct vmac_mqtt *m, struct mqtt_device *d, const stru
 void mqtt_profiles_stopping(struct vmac_mqtt *m);
 
 /* mqtt_devices.c */
-void mqtt_devices_poll(struct vmac_mqtt *m);      /* read the status copy, tell the profiles */
-void mqtt_devices_republish(struct vmac_mqtt *m); /* after a reconnect: every device again */
-void mqtt_devices_stopping(struct vmac_mqtt *m);  /* every device down, then the profiles' last words */
+void mqtt_devices_poll(struct vmac_mqtt *m); /* read the status copy, tell every connection's profiles */
+/* After a CONNACK on c: every device again to c's profiles. */
+void mqtt_devices_republish(struct vmac_mqtt *m, struct mqtt_conn *c);
+void mqtt_devices_stopping(struct vmac_mqtt *m); /* every device down, then the profiles' last words */
 void mqtt_devices_free(struct vmac_mqtt *m);
 /* The value of a variable or param named name in a machine's status (NULL: none). */
 const struct vmac_value *mqtt_status_value(const struct vmac_device_status *st, const char *name);
+/* A machine in connection c's table (mqtt_device_find: the main one's). */
+struct mqtt_device *mqtt_conn_device_find(struct mqtt_conn *c, const char *name);
 struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
 
 /* mqtt_site.c: a message on the main connection, on libmosquitto's network
@@ -218,6 +235,10 @@ void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char 
  * {config topic: config payload object} from its manifest and status. */
 json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
                         json_t *manifest, const struct vmac_device_status *st);
+
+/* Disconnect c (after what is queued) and connect again, with the
+ * reconnect's backoff from 1 s; said by the caller. Publisher thread. */
+void mqtt_conn_redial(struct mqtt_conn *c);
 
 /* mqtt_sparkplug.c: the NDEATH payload with bdSeq (malloc'd, *len its size;
  * NULL when out of memory), for the will of a connection. Any thread. */

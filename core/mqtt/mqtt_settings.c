@@ -211,6 +211,20 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 		return -EINVAL;
 	}
 	snprintf(s->sparkplug_group, sizeof(s->sparkplug_group), "%s", cfg->mqtt_sparkplug_group);
+	/* The Primary Host Application's id: one topic level of spBv1.0/STATE/ID. */
+	for (i = 0; cfg->mqtt_sparkplug_primary_host[i]; i++)
+		if (!isalnum((unsigned char)cfg->mqtt_sparkplug_primary_host[i]) &&
+		    !strchr("_-.", cfg->mqtt_sparkplug_primary_host[i]))
+			break;
+	if (cfg->mqtt_sparkplug_primary_host[i] ||
+	    strlen(cfg->mqtt_sparkplug_primary_host) >= sizeof(s->sparkplug_primary_host)) {
+		snprintf(err, errlen,
+		         "mqtt_sparkplug_primary_host '%s': expected a host application id of letters, digits, '_', "
+		         "'-' and '.' (at most 63)",
+		         cfg->mqtt_sparkplug_primary_host);
+		return -EINVAL;
+	}
+	snprintf(s->sparkplug_primary_host, sizeof(s->sparkplug_primary_host), "%s", cfg->mqtt_sparkplug_primary_host);
 	s->sparkplug = cfg->mqtt_sparkplug;
 	s->commands = cfg->mqtt_commands;
 	s->keepalive_s = cfg->mqtt_keepalive_s;

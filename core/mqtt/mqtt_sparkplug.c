@@ -24,7 +24,6 @@ typedef SparkplugB__Payload Payload;
 typedef SparkplugB__Payload__Metric Metric;
 
 #define DT_INT64 SPARKPLUG_B__DATA_TYPE__Int64
-#define DT_UINT64 SPARKPLUG_B__DATA_TYPE__UInt64
 #define DT_DOUBLE SPARKPLUG_B__DATA_TYPE__Double
 #define DT_BOOLEAN SPARKPLUG_B__DATA_TYPE__Boolean
 #define DT_STRING SPARKPLUG_B__DATA_TYPE__String
@@ -56,6 +55,7 @@ struct spb_out {
 	Metric metrics[SPB_METRICS];
 	char names[SPB_METRICS][SPB_NAME_MAX];
 	uint64_t ts;
+	int no_datatypes; /* DDATA: a host knows them from the birth (the specification: SHOULD NOT) */
 };
 
 static void out_init(struct spb_out *o)
@@ -77,7 +77,7 @@ static Metric *out_metric(struct spb_out *o, const char *name, unsigned datatype
 	*mt = init;
 	snprintf(o->names[i], sizeof(o->names[i]), "%s", name);
 	mt->name = o->names[i];
-	mt->has_datatype = 1;
+	mt->has_datatype = !o->no_datatypes;
 	mt->datatype = datatype;
 	mt->has_timestamp = 1;
 	mt->timestamp = o->ts;
@@ -151,7 +151,7 @@ void *mqtt_spb_ndeath(unsigned bdseq, int *len)
 	p.metrics = list;
 	mt.name = (char *)(uintptr_t) "bdSeq";
 	mt.has_datatype = 1;
-	mt.datatype = DT_UINT64;
+	mt.datatype = DT_INT64; /* the normative text (its own NDEATH example says UInt64) */
 	mt.has_timestamp = 1;
 	mt.timestamp = p.timestamp;
 	mt.value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE;
@@ -310,59 +310,9 @@ done:
 	free(o);
 }
 
-/* NBIRTH (seq 0, this connection's bdSeq, Node Control/Rebirth false), then
- * a DBIRTH for every machine running: after a CONNACK and for a Rebirth. */
-static void births(struct vmac_mqtt *m)
-{
-	struct spb_out *o = calloc(1, sizeof(*o));
-	char topic[300];
-	int bdseq = atomic_load(&m->spb.bdseq), i;
-	Metric *mt;
-	if (!o)
-		return;
-	out_init(o);
-	mt = out_metric(o, "bdSeq", DT_UINT64);
-	mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE;
-	mt->long_value = (uint64_t)bdseq;
-	mt = out_metric(o, REBIRTH, DT_BOOLEAN);
-	mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE;
-	mt->boolean_value = 0;
-	m->spb.seq = 0;
-	spb_topic(m, topic, sizeof(topic), "NBIRTH", NULL);
-	if (out_send(m, topic, o, 1) == 0)
-		m->spb.born = bdseq + 1;
-	free(o);
-	for (i = 0; i < m->ndevices; i++) {
-		struct mqtt_device *d = &m->devices[i];
-		d->spb_born = 0;
-		if (d->online && d->manifest && live(m))
-			dbirth(m, d, status_of(m, d->name));
-	}
-}
-
-static void connected(struct vmac_mqtt *m)
-{
-	char topic[300];
-	spb_topic(m, topic, sizeof(topic), "NCMD", NULL);
-	mqtt_conn_subscribe(&m->conns[MQTT_CONN_SPARKPLUG], topic, 1);
-	if (m->s.commands) {
-		spb_topic(m, topic, sizeof(topic), "DCMD", "+");
-		mqtt_conn_subscribe(&m->conns[MQTT_CONN_SPARKPLUG], topic, 1);
-	}
-	births(m);
-}
-
-/* Its DBIRTH goes out with its values (the values hook right after). A
- * driver without variables or params gets it now. */
-static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
-{
-	d->spb_born = 0;
-	if (live(m) && json_object_size(json_object_get(d->manifest, "variables")) == 0 &&
-	    json_object_size(json_object_get(d->manifest, "params")) == 0)
-		dbirth(m, d, st);
-}
-
-static void device_down(struct vmac_mqtt *m, struct mqtt_device *d)
+/* A DDEATH of d (born in this session), before it is born again or when
+ * it stops running. */
+static void ddeath(struct vmac_mqtt *m, struct mqtt_device *d)
 {
 	struct spb_out *o;
 	char topic[300];
@@ -375,6 +325,87 @@ static void device_down(struct vmac_mqtt *m, struct mqtt_device *d)
 	spb_topic(m, topic, sizeof(topic), "DDEATH", d->name);
 	out_send(m, topic, o, 1);
 	free(o);
+}
+
+/* d born again in this session (a new driver version, a value whose
+ * datatype its DBIRTH did not say): its DDEATH first, so that a host
+ * application never sees a second birth of a device it holds as alive. */
+static void reborn(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	ddeath(m, d);
+	dbirth(m, d, st);
+}
+
+/* NBIRTH (seq 0, this connection's bdSeq, Node Control/Rebirth false), then
+ * a DBIRTH for every machine running on this connection: when the primary
+ * host application is online (at once without one), and for a Rebirth. */
+static void births(struct vmac_mqtt *m)
+{
+	struct mqtt_conn *c = &m->conns[MQTT_CONN_SPARKPLUG];
+	struct spb_out *o = calloc(1, sizeof(*o));
+	char topic[300];
+	int bdseq = atomic_load(&m->spb.bdseq), i;
+	Metric *mt;
+	if (!o)
+		return;
+	out_init(o);
+	mt = out_metric(o, "bdSeq", DT_INT64);
+	mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE;
+	mt->long_value = (uint64_t)bdseq;
+	mt = out_metric(o, REBIRTH, DT_BOOLEAN);
+	mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_BOOLEAN_VALUE;
+	mt->boolean_value = 0;
+	m->spb.seq = 0;
+	spb_topic(m, topic, sizeof(topic), "NBIRTH", NULL);
+	if (out_send(m, topic, o, 1) == 0)
+		m->spb.born = bdseq + 1;
+	free(o);
+	for (i = 0; i < c->ndevices; i++) {
+		struct mqtt_device *d = &c->devices[i];
+		d->spb_born = 0;
+		if (d->online && d->manifest && live(m))
+			dbirth(m, d, status_of(m, d->name));
+	}
+}
+
+/* Subscriptions before the NBIRTH (NCMD, DCMD, the primary host's STATE);
+ * the machines follow from mqtt_devices_republish, whose DBIRTHs wait for
+ * the NBIRTH. */
+static void connected(struct vmac_mqtt *m)
+{
+	struct mqtt_conn *c = &m->conns[MQTT_CONN_SPARKPLUG];
+	char topic[300];
+	m->spb.born = 0;
+	m->spb.host_online = 0;
+	m->spb.host_ts = 0;
+	spb_topic(m, topic, sizeof(topic), "NCMD", NULL);
+	mqtt_conn_subscribe(c, topic, 1);
+	if (m->s.commands) {
+		spb_topic(m, topic, sizeof(topic), "DCMD", "+");
+		mqtt_conn_subscribe(c, topic, 1);
+	}
+	if (m->s.sparkplug_primary_host[0]) {
+		snprintf(topic, sizeof(topic), "spBv1.0/STATE/%s", m->s.sparkplug_primary_host);
+		mqtt_conn_subscribe(c, topic, 1);
+		return; /* births when it says online */
+	}
+	births(m);
+}
+
+/* Its DBIRTH goes out with its values (the values hook right after); born
+ * before in this session (a new driver version): its DDEATH first. A driver
+ * without variables or params is born now. */
+static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	ddeath(m, d);
+	if (live(m) && json_object_size(json_object_get(d->manifest, "variables")) == 0 &&
+	    json_object_size(json_object_get(d->manifest, "params")) == 0)
+		dbirth(m, d, st);
+}
+
+static void device_down(struct vmac_mqtt *m, struct mqtt_device *d)
+{
+	ddeath(m, d);
 }
 
 static const struct mqtt_spb_metric *born_metric(const struct mqtt_device *d, const char *name)
@@ -406,6 +437,7 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 	if (!(o = calloc(1, sizeof(*o))))
 		return;
 	out_init(o);
+	o->no_datatypes = 1;
 	for (i = 0; i < n; i++) {
 		const struct vmac_value *v = mqtt_status_value(st, changed[i]->name);
 		const struct mqtt_spb_metric *born = born_metric(d, changed[i]->name);
@@ -417,7 +449,7 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 			continue;
 		if (!born) {
 			free(o);
-			dbirth(m, d, st);
+			reborn(m, d, st);
 			return;
 		}
 		decl = decl_of(d->manifest, born->name, &is_param);
@@ -426,7 +458,7 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 			dt = DT_DOUBLE; /* a whole number now, a fraction before */
 		if (dt != born->datatype) {
 			free(o);
-			dbirth(m, d, st);
+			reborn(m, d, st);
 			return;
 		}
 		if ((mt = out_metric(o, born->name, dt)) != NULL)
@@ -619,9 +651,68 @@ static void ncmd(struct vmac_mqtt *m, const struct mqtt_message *msg)
 			mqtt_event(m, "", "Sparkplug: an NCMD metric refused: %s", mt->name ? mt->name : "(no name)");
 	}
 	sparkplug_b__payload__free_unpacked(p, NULL);
-	if (rebirth && mqtt_conn_is_up(&m->conns[MQTT_CONN_SPARKPLUG])) {
+	if (rebirth && m->s.sparkplug_primary_host[0] && !m->spb.host_online)
+		mqtt_event(m, "", "Sparkplug: Rebirth asked for while the primary host %s is not online: not yet",
+		           m->s.sparkplug_primary_host);
+	else if (rebirth && mqtt_conn_is_up(&m->conns[MQTT_CONN_SPARKPLUG])) {
 		mqtt_event(m, "", "Sparkplug: Rebirth asked for: NBIRTH and every DBIRTH again");
 		births(m);
+	}
+}
+
+/* The NDEATH of this connection's bdSeq, published (QoS 1, not retained)
+ * as the will would say it. */
+static void publish_ndeath(struct vmac_mqtt *m)
+{
+	char topic[300];
+	void *ndeath;
+	int len;
+	if (!(ndeath = mqtt_spb_ndeath((unsigned)atomic_load(&m->spb.bdseq), &len)))
+		return;
+	spb_topic(m, topic, sizeof(topic), "NDEATH", NULL);
+	mqtt_conn_publish(&m->conns[MQTT_CONN_SPARKPLUG], topic, ndeath, len, 1, 0);
+	free(ndeath);
+}
+
+/* spBv1.0/STATE/ID of mqtt_sparkplug_primary_host: {"online": bool,
+ * "timestamp": ms}. Online: the births, if not yet. Offline (not older than
+ * the online it follows): the session ends, NDEATH and a disconnect, and a
+ * new connection waits for online again. A malformed one is said and
+ * ignored. */
+static void host_state(struct vmac_mqtt *m, const struct mqtt_message *msg)
+{
+	json_t *j = msg->len > 0 ? json_loadb(msg->payload, (size_t)msg->len, 0, NULL) : NULL;
+	json_t *online = json_object_get(j, "online"), *ts = json_object_get(j, "timestamp");
+	int64_t t = json_is_integer(ts) ? (int64_t)json_integer_value(ts) : -1;
+	int is_online = json_is_true(online);
+	if (!json_is_boolean(online) || t < 0) {
+		mqtt_event(m, "",
+		           "Sparkplug: a STATE of the primary host %s ignored: expected {\"online\": true|false, "
+		           "\"timestamp\": ms}",
+		           m->s.sparkplug_primary_host);
+		json_decref(j);
+		return;
+	}
+	json_decref(j);
+	if (t < m->spb.host_ts)
+		return; /* older than the last one: a stale retained message */
+	m->spb.host_ts = t;
+	m->spb.host_online = is_online;
+	if (is_online && !live(m)) {
+		mqtt_event(m, "", "Sparkplug: the primary host %s is online: NBIRTH and every DBIRTH",
+		           m->s.sparkplug_primary_host);
+		births(m);
+	} else if (!is_online && live(m)) {
+		mqtt_event(m, "",
+		           "Sparkplug: the primary host %s is offline: NDEATH, and connecting again to wait "
+		           "for it",
+		           m->s.sparkplug_primary_host);
+		publish_ndeath(m);
+		m->spb.born = 0;
+		mqtt_conn_redial(&m->conns[MQTT_CONN_SPARKPLUG]);
+	} else if (!is_online) {
+		mqtt_event(m, "", "Sparkplug: waiting for the primary host %s to be online before the NBIRTH",
+		           m->s.sparkplug_primary_host);
 	}
 }
 
@@ -631,6 +722,13 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 	size_t n;
 	if (msg->conn != MQTT_CONN_SPARKPLUG)
 		return 0;
+	if (m->s.sparkplug_primary_host[0]) {
+		snprintf(mine, sizeof(mine), "spBv1.0/STATE/%s", m->s.sparkplug_primary_host);
+		if (strcmp(msg->topic, mine) == 0) {
+			host_state(m, msg);
+			return 1;
+		}
+	}
 	spb_topic(m, mine, sizeof(mine), "NCMD", NULL);
 	if (strcmp(msg->topic, mine) == 0) {
 		ncmd(m, msg);
@@ -647,14 +745,8 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
  * the will would say it (QoS 1, not retained). */
 static void stopping(struct vmac_mqtt *m)
 {
-	char topic[300];
-	void *ndeath;
-	int len;
-	if (!m->s.sparkplug || !(ndeath = mqtt_spb_ndeath((unsigned)atomic_load(&m->spb.bdseq), &len)))
-		return;
-	spb_topic(m, topic, sizeof(topic), "NDEATH", NULL);
-	mqtt_conn_publish(&m->conns[MQTT_CONN_SPARKPLUG], topic, ndeath, len, 1, 0);
-	free(ndeath);
+	if (m->s.sparkplug)
+		publish_ndeath(m);
 }
 
 const struct mqtt_profile mqtt_sparkplug_profile = {

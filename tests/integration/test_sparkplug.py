@@ -160,7 +160,7 @@ def tahu(requests):
     if not node or not os.path.isdir(os.path.join(TAHU, "node_modules", "sparkplug-payload")):
         raise Skip("Eclipse Tahu's codec is not installed (node and npm ci in tests/mqtt/tahu: "
                    "tests/npm_ci.sh tests/mqtt/tahu 12, which make test-integration runs)")
-    lines = "".join(json.dumps({"decode": base64.b64encode(r["decode"]).decode()} if "decode" in r else r) + "\n"
+    lines = "".join(json.dumps(dict(r, decode=base64.b64encode(r["decode"]).decode()) if "decode" in r else r) + "\n"
                     for r in requests)
     p = subprocess.run([node, os.path.join(TAHU, "codec.mjs")], input=lines, capture_output=True, text=True,
                        timeout=60)
@@ -174,9 +174,16 @@ def tahu_agrees(raw_messages):
     """Every (topic, payload) decoded by Tahu, field by field as the test's
     reader decoded it: seq, timestamp, and each metric's name, datatype and
     value. Returns how many payloads and metrics were compared."""
-    answers = tahu([{"decode": data} for _, data in raw_messages])
+    births, requests = {}, []
+    for topic, data in raw_messages:  # a host's view: DDATA's datatypes are its device's DBIRTH's
+        parts = topic.split("/")
+        if parts[2] == "DBIRTH":
+            births[parts[4]] = {m["name"]: m["datatype"] for m in decode(data)["metrics"]}
+        requests.append({"decode": data, "births": births.get(parts[4], {})} if parts[2] == "DDATA" else
+                        {"decode": data})
+    answers = tahu(requests)
     metrics = 0
-    for (topic, data), a in zip(raw_messages, answers):
+    for (topic, data), a, r in zip(raw_messages, answers, requests):
         assert a["ok"], "Tahu cannot decode the %s payload %s: %s" % (topic, data.hex(), a["error"])
         ours, theirs = decode(data), a["payload"]
         assert ("seq" in ours) == ("seq" in theirs) and int(theirs.get("seq", -1)) == ours.get("seq", -1), \
@@ -185,6 +192,8 @@ def tahu_agrees(raw_messages):
         assert len(theirs.get("metrics", [])) == len(ours["metrics"]), "%s: metric counts differ" % topic
         for m, t in zip(ours["metrics"], theirs.get("metrics", [])):
             what = "%s metric %s" % (topic, m.get("name"))
+            if "datatype" not in m:  # DDATA: the type its birth gave
+                m = dict(m, datatype=r.get("births", {}).get(m["name"]))
             assert t["name"] == m["name"] and TAHU_TYPES.get(t["type"]) == m["datatype"], \
                 "%s: Tahu reads name %r type %s, the test's reader %r datatype %s" % (
                     what, t["name"], t["type"], m["name"], m["datatype"])
@@ -207,11 +216,13 @@ def tahu_agrees(raw_messages):
 class SpHost:
     """Subscribed to spBv1.0/# and PREFIX/#: every message in order, raw."""
 
-    def __init__(self, broker):
+    def __init__(self, broker, user=None, password=None):
         mqtt = paho()
         self.cond = threading.Condition()
         self.log = []
         self.c = mqtt.Client(client_id="sphost-%d" % os.getpid())
+        if user:
+            self.c.username_pw_set(user, password)
         self.c.on_message = self._on_message
         self.c.on_connect = lambda c, u, f, rc: (c.subscribe("spBv1.0/#", qos=1), c.subscribe(PREFIX + "/#", qos=1))
         self.c.connect("127.0.0.1", broker.port, keepalive=30)
@@ -222,8 +233,8 @@ class SpHost:
             self.log.append((m.topic, bytes(m.payload), m.retain, m.qos))
             self.cond.notify_all()
 
-    def publish(self, topic, payload):
-        self.c.publish(topic, payload, qos=0).wait_for_publish()
+    def publish(self, topic, payload, qos=0, retain=False):
+        self.c.publish(topic, payload, qos=qos, retain=retain).wait_for_publish()
 
     def mark(self):
         with self.cond:
@@ -312,7 +323,7 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         nbirth, _ = sp.wait(NODE % "NBIRTH", what="NBIRTH")
         assert nbirth["seq"] == 0, nbirth
         bdseq = nbirth["by_name"]["bdSeq"]
-        assert bdseq["datatype"] == UINT64 and isinstance(bdseq["value"], int), bdseq
+        assert bdseq["datatype"] == INT64 and isinstance(bdseq["value"], int), bdseq
         rebirth = nbirth["by_name"]["Node Control/Rebirth"]
         assert rebirth["datatype"] == BOOLEAN and rebirth["value"] is False, rebirth
         # A DBIRTH per machine with every variable and param; the lights'
@@ -339,7 +350,9 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         host.wait_status(lambda s: host.device("lights-1", s)["outputs"]["digital"][0] is True, 30,
                          "the kitchen light's output on after a DCMD", undisturbed(KITCHEN_NAMES))
         ddata, _ = sp.wait(NODE % "DDATA" + "/lights-1", has_value("kitchen", True), since=mark, what="DDATA kitchen")
-        assert ddata["by_name"]["kitchen"]["datatype"] == BOOLEAN and "dining" not in ddata["by_name"], ddata
+        assert "dining" not in ddata["by_name"], "report by exception: %s" % ddata
+        for m in ddata["metrics"]:  # the birth said it (tck-id-payloads-metric-datatype-not-req)
+            assert "datatype" not in m and "timestamp" in m, "a DDATA metric with a datatype: %s" % m
 
         # Refused (out of range, read-only) and malformed DCMDs: published back, nothing changes, no crash.
         def refused(payload, code, what):
@@ -405,7 +418,8 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         host.signal(signal.SIGKILL)
         host.wait_exit(10)
         ndeath, _ = sp.wait(NODE % "NDEATH", since=mark, what="the NDEATH will")
-        assert ndeath["by_name"]["bdSeq"]["value"] == bdseq["value"], (ndeath, bdseq)
+        assert ndeath["by_name"]["bdSeq"] == dict(bdseq, timestamp=ndeath["by_name"]["bdSeq"]["timestamp"]), \
+            "the NDEATH's bdSeq (name, Int64, value) is not the NBIRTH's: %s, %s" % (ndeath, bdseq)
         assert "seq" not in ndeath, ndeath
         assert [q for k, d, p, r, q in sp.node_messages() if k == "NDEATH"] == [1], "the NDEATH QoS"
         # Every payload again through Eclipse Tahu's decoder: it reads what the test's reader read.

@@ -7,6 +7,11 @@
 // One JSON object per line on standard input, one answer per line out:
 //   {"decode": BASE64}  -> {"ok": true, "payload": {timestamp, seq, metrics:
 //                           [{name, type, value, timestamp, isNull}]}}
+//   {"decode": BASE64, "births": {NAME: DATATYPE}}: a DDATA, whose metrics
+//                           carry no datatype (the specification: the birth
+//                           gave it), decoded as a host application does,
+//                           with each metric's datatype from its device's
+//                           DBIRTH (Tahu's decodePayload reads a value by it)
 //   {"encode": PAYLOAD} -> {"ok": true, "b64": BASE64}; PAYLOAD as Tahu takes
 //                           it ({timestamp, metrics: [{name, type, value}]})
 //   anything that fails -> {"ok": false, "error": TEXT}
@@ -16,6 +21,7 @@ import { createRequire } from "node:module";
 
 const require = createRequire(import.meta.url);
 const { decodePayload, encodePayload } = require("sparkplug-payload").get("spBv1.0");
+const { Payload } = require("sparkplug-payload/lib/sparkplugPayloadProto").org.eclipse.tahu.protobuf;
 const Long = require("long");
 
 function plain(v) {
@@ -30,7 +36,15 @@ function plain(v) {
 function answer(line) {
 	const req = JSON.parse(line);
 	if ("decode" in req) {
-		return { ok: true, payload: plain(decodePayload(Buffer.from(req.decode, "base64"))) };
+		let bytes = Buffer.from(req.decode, "base64");
+		if (req.births) {
+			const raw = Payload.decode(bytes);
+			for (const m of raw.metrics) {
+				if (!m.datatype && m.name in req.births) m.datatype = req.births[m.name];
+			}
+			bytes = Payload.encode(raw).finish();
+		}
+		return { ok: true, payload: plain(decodePayload(bytes)) };
 	}
 	if ("encode" in req) {
 		const p = req.encode;

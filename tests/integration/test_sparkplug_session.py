@@ -1,0 +1,231 @@
+"""Sparkplug B's session rules (docs/MQTT.md, "Sparkplug B" and its
+conformance table) against a real Mosquitto, with a paho client as the
+host application (test_sparkplug.py's SpHost and payload reader) and, where
+a test must see what the broker saw, tests/integration/mqtt_proxy.py
+between vmacd and the broker reading every CONNECT packet as the
+Sparkplug TCK's monitor does:
+- bdSeq counts every CONNECT, those the broker refused (a wrong password)
+  too, and the NBIRTH and the will of the accepted one carry the same;
+- the Sparkplug session lives on while the main connection is down, and the
+  main one's return re-births nothing;
+- a Primary Host Application (mqtt_sparkplug_primary_host): no NBIRTH before
+  its STATE says online, NDEATH and a new connection when it says offline, a
+  stale or malformed STATE ignored;
+- a hot reload: the device's DDEATH before its new DBIRTH.
+SKIPPED without mosquitto, paho or Tahu, as test_sparkplug.py."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import time
+
+from harness import KITCHEN_NAMES, Skip
+from mqtt_proxy import MqttProxy, client_ids
+from test_mqtt import PREFIX, Broker
+from test_sparkplug import BOOLEAN, GROUP, INT64, NODE, SpHost, check_seq, command, decode, has_value, spb_host, \
+    tahu_agrees
+
+MAIN_ID = "vmac-spbtest"
+
+
+def will_bdseq(payload):
+    """The bdSeq metric of an NDEATH will: (datatype, value)."""
+    m = decode(payload)["by_name"]["bdSeq"]
+    return m["datatype"], m["value"]
+
+
+def passwd(path, user, password):
+    tool = shutil.which("mosquitto_passwd")
+    if not tool:
+        raise Skip("mosquitto_passwd (Debian package mosquitto) is not installed")
+    subprocess.run([tool, "-b", path, user, password], check=True, capture_output=True)
+    os.chmod(path, 0o644)  # mosquitto reads it as its own user
+
+
+def test_sparkplug_bdseq_counts_every_connect_refused_ones_too(t):
+    """tck-id-topics-nbirth-bdseq-increment: each CONNECT's will has a
+    bdSeq one more than the CONNECT before it, whether or not the broker
+    accepted that one; the NBIRTH says the accepted CONNECT's."""
+    pw = os.path.join(t.logdir, "passwd")
+    open(pw, "w").close()
+    os.chmod(t.logdir, 0o755)
+    passwd(pw, "hub", "hub-pw")  # vmacd's user is not there yet: refused
+    broker = Broker(t, config=lambda port: "listener %d 127.0.0.1\nallow_anonymous false\npassword_file %s\n"
+                                           "persistence false\n" % (port, pw))
+    proxy = MqttProxy(broker.port)
+    secret = os.path.join(t.logdir, "vmac-pw")
+    with open(secret, "w") as f:
+        f.write("vmac-pw\n")
+    sp = SpHost(broker, user="hub", password="hub-pw")
+    host = spb_host(t, broker, extra={"mqtt_url": proxy.url, "mqtt_client_id": MAIN_ID, "mqtt_user": "vmac",
+                                      "mqtt_password_file": secret})
+    t.kitchen(host)
+    try:
+        proxy.wait_connects(lambda c: len(client_ids(c, "-spb")) >= 2, 30, "two Sparkplug CONNECTs refused")
+        host.wait_event("mqtt", text="not authorised", timeout_s=10)
+        assert not any(tp == NODE % "NBIRTH" for tp, _, _, _ in sp.log), "an NBIRTH while the broker refused vmacd"
+        passwd(pw, "vmac", "vmac-pw")
+        broker.proc.signal(signal.SIGHUP)  # mosquitto reads its password file again
+        nbirth, _ = sp.wait(NODE % "NBIRTH", timeout_s=60, what="NBIRTH once the password is right")
+        wills = [will_bdseq(p) for cid, topic, p in client_ids(proxy.connects, "-spb")]
+        topics = {topic for cid, topic, p in client_ids(proxy.connects, "-spb")}
+        assert topics == {NODE % "NDEATH"}, "the Sparkplug CONNECTs' will topics: %s" % topics
+        assert len(wills) >= 3, "CONNECTs seen: %s" % wills
+        for (dt, value), (_, nxt) in zip(wills, wills[1:]):
+            assert dt == INT64, "a will's bdSeq is not Int64: %s" % wills
+            assert nxt == (value + 1) % 256, "bdSeq did not count every CONNECT: %s" % wills
+        born = nbirth["by_name"]["bdSeq"]
+        assert (born["datatype"], born["value"]) == wills[-1], \
+            "the NBIRTH's bdSeq %s is not the accepted CONNECT's will %s" % (born, wills[-1])
+        mark = sp.mark()
+        host.signal(signal.SIGKILL)
+        host.wait_exit(10)
+        ndeath, _ = sp.wait(NODE % "NDEATH", since=mark, what="the will after SIGKILL")
+        assert ndeath["by_name"]["bdSeq"]["value"] == born["value"], (ndeath, born)
+    finally:
+        proxy.close()
+        sp.close()
+
+
+def test_sparkplug_lives_on_while_the_main_connection_is_down(t):
+    """The main connection (native topics, Home Assistant) cut and kept out;
+    the Sparkplug session goes on: a DCMD is obeyed and its DDATA comes, a
+    dropped machine's DDEATH and its DBIRTH when it is back. The main
+    connection's return re-births nothing on Sparkplug."""
+    broker = Broker(t)
+    proxy = MqttProxy(broker.port)
+    sp = SpHost(broker)
+    host = spb_host(t, broker, extra={"mqtt_url": proxy.url, "mqtt_client_id": MAIN_ID})
+    boards = t.kitchen(host)
+    try:
+        sp.wait(NODE % "DBIRTH" + "/lights-1", lambda p: p["by_name"].get("kitchen", {}).get("datatype") == BOOLEAN,
+                what="lights DBIRTH")
+        for name in KITCHEN_NAMES:
+            sp.wait(NODE % "DBIRTH" + "/" + name, what="DBIRTH of " + name)
+        mark = sp.mark()
+        proxy.block(MAIN_ID)
+        sp.wait(PREFIX + "/status", lambda p: p == "offline", since=mark, raw=True,
+                what="the main connection's will (it was cut)")
+        host.wait_event("mqtt", text="lost the broker", timeout_s=20)
+
+        sp.publish(NODE % "DCMD" + "/lights-1", command([("kitchen", BOOLEAN, True)]))
+        sp.wait(NODE % "DDATA" + "/lights-1", has_value("kitchen", True), since=mark,
+                what="DDATA of a DCMD while the main connection is down")
+        boards["washer-1"].signal(signal.SIGSTOP)
+        try:
+            host.wait_status(lambda s: host.device("washer-1", s)["state"] != "running", 30, "washer-1 dropped")
+            sp.wait(NODE % "DDEATH" + "/washer-1", since=mark, what="DDEATH while the main connection is down")
+        finally:
+            boards["washer-1"].signal(signal.SIGCONT)
+        _, back = sp.wait(NODE % "DBIRTH" + "/washer-1", since=mark, timeout_s=60,
+                          what="DBIRTH of washer-1 back, the main connection still down")
+        assert not any(tp == PREFIX + "/status" and p == b"online" for tp, p, _, _ in sp.log[mark:]), \
+            "the main connection was not kept out"
+
+        proxy.unblock(MAIN_ID)
+        sp.wait(PREFIX + "/status", lambda p: p == "online", since=back, raw=True, timeout_s=60,
+                what="the main connection back")
+        sp.wait(PREFIX + "/washer-1/availability", lambda p: p == "online", since=back, raw=True,
+                what="the main connection's devices said again")
+        # A DCMD after that: on the Sparkplug connection, anything the main
+        # connection's return made it say comes before its DDATA.
+        sp.publish(NODE % "DCMD" + "/lights-1", command([("tv", BOOLEAN, True)]))
+        _, end = sp.wait(NODE % "DDATA" + "/lights-1", has_value("tv", True), since=back, what="DDATA tv")
+        said = [(k, d) for k, d, p, r, q in sp.node_messages()]
+        kinds = [tp.split("/")[2] for tp, _, _, _ in sp.log[back:end] if tp.startswith("spBv1.0/" + GROUP + "/")]
+        assert not {"NBIRTH", "DBIRTH", "DDEATH", "NDEATH"} & set(kinds), \
+            "the main connection's return re-birthed on Sparkplug: %s" % kinds
+        assert said.count(("NBIRTH", None)) == 1, "one NBIRTH in the whole test: %s" % said
+        check_seq(sp.node_messages())
+        tahu_agrees(sp.node_raw())
+    finally:
+        proxy.close()
+        sp.close()
+
+
+def state(online, ts):
+    return json.dumps({"online": online, "timestamp": ts})
+
+
+def test_sparkplug_primary_host_state(t):
+    """mqtt_sparkplug_primary_host: births only once the host application's
+    STATE says online; its offline ends the session (NDEATH with the
+    session's bdSeq, a new CONNECT) and the next online brings an NBIRTH
+    with the next bdSeq. An older STATE and a malformed one change nothing."""
+    broker = Broker(t)
+    sp = SpHost(broker)
+    topic = "spBv1.0/STATE/scada"
+    t0 = int(time.time() * 1000)
+    sp.publish(topic, state(False, t0), qos=1, retain=True)
+    host = spb_host(t, broker, extra={"mqtt_sparkplug_primary_host": "scada"})
+    t.kitchen(host)
+    try:
+        host.wait_event("mqtt", text="waiting for the primary host scada", timeout_s=30)
+        host.wait_running(KITCHEN_NAMES)
+        seq = host.last_event_seq()
+        sp.publish(topic, "not json", qos=1)
+        host.wait_event("mqtt", text="STATE of the primary host scada ignored", after_seq=seq)
+        assert not [k for k, d, p, r, q in sp.node_messages() if k in ("NBIRTH", "DBIRTH")], \
+            "births before the primary host was online: %s" % sp.node_messages()
+
+        mark = sp.mark()
+        sp.publish(topic, state(True, t0 + 1), qos=1, retain=True)
+        nbirth, i = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH once the primary host is online")
+        for name in KITCHEN_NAMES:
+            sp.wait(NODE % "DBIRTH" + "/" + name, since=i, what="DBIRTH of %s after the NBIRTH" % name)
+        bdseq = nbirth["by_name"]["bdSeq"]["value"]
+
+        # An offline older than the online it follows: ignored (a Rebirth
+        # after it is answered, with no NDEATH between).
+        mark = sp.mark()
+        sp.publish(topic, state(False, t0), qos=1)
+        sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
+        sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH for a Rebirth after a stale offline")
+        assert NODE % "NDEATH" not in [tp for tp, _, _, _ in sp.log[mark:]], "a stale offline ended the session"
+
+        mark = sp.mark()
+        sp.publish(topic, state(False, t0 + 2), qos=1, retain=True)
+        ndeath, _ = sp.wait(NODE % "NDEATH", since=mark, what="NDEATH when the primary host went offline")
+        assert ndeath["by_name"]["bdSeq"]["value"] == bdseq, (ndeath, bdseq)
+        host.wait_event("mqtt", text="primary host scada is offline")
+        host.wait_event("mqtt", text="waiting for the primary host scada", after_seq=seq)
+        mark = sp.mark()
+        sp.publish(topic, state(True, t0 + 3), qos=1, retain=True)
+        again, _ = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH when the primary host is back")
+        assert again["by_name"]["bdSeq"]["value"] == (bdseq + 1) % 256, \
+            "the new session's bdSeq: %s after %s" % (again["by_name"]["bdSeq"], bdseq)
+        check_seq(sp.node_messages())
+    finally:
+        sp.close()
+
+
+def test_sparkplug_hot_reload_ddeath_before_the_new_dbirth(t):
+    broker = Broker(t)
+    sp = SpHost(broker)
+    host = spb_host(t, broker)
+    t.kitchen(host)
+    try:
+        sp.wait(NODE % "DBIRTH" + "/lights-1", lambda p: p["by_name"].get("kitchen", {}).get("datatype") == BOOLEAN,
+                what="lights DBIRTH")
+        here = os.path.dirname(os.path.abspath(__file__))
+        with open(os.path.join(here, "..", "..", "scripts", "drivers", "lights.lua")) as f:
+            src = f.read()
+        version = src.split('version = "', 1)[1].split('"', 1)[0]
+        new = src.replace('version = "%s"' % version, 'version = "%s-spb"' % version, 1)
+        path = os.path.join(t.logdir, "lights.lua")
+        with open(path, "w") as f:
+            f.write(new)
+        mark = sp.mark()
+        rc, out, err = t.run([t.path("vmac"), "reload", "--http", host.http, "--probation", "0", path], "reload")
+        assert rc == 0, "vmac reload failed (exit %d): %s %s" % (rc, out, err)
+        born, i = sp.wait(NODE % "DBIRTH" + "/lights-1",
+                          lambda p: p["by_name"]["Properties/Driver"]["value"] == "lights %s-spb" % version,
+                          since=mark, what="the new version's DBIRTH")
+        kinds = [tp.split("/")[2] for tp, _, _, _ in sp.log[mark:i] if tp.endswith("/lights-1")]
+        assert kinds and kinds[-1] == "DBIRTH" and "DDEATH" in kinds and kinds.index("DDEATH") < len(kinds) - 1, \
+            "no DDEATH of lights-1 before its new DBIRTH: %s" % kinds
+        check_seq(sp.node_messages())
+    finally:
+        sp.close()
