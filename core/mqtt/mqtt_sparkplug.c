@@ -196,17 +196,38 @@ static int whole(json_t *v)
 	return !v || (json_is_number(v) && floor(x) == x);
 }
 
-/* The Sparkplug datatype of a declared value: String (values, a string
- * default), Boolean (a boolean default), Int64 (a number declared with
- * whole min/max/default/step, a param or a variable without a unit, and
- * whole now), Double (another number: a measurement); else from its value
- * now; String when neither says (no value yet: null, and a DBIRTH again
- * once its value says otherwise). */
+/* Whether values (a declaration's list) are all numbers; *whole: all whole. */
+static int numeric_values(json_t *values, int *whole_out)
+{
+	size_t i;
+	json_t *v;
+	*whole_out = 1;
+	if (!json_is_array(values) || json_array_size(values) == 0)
+		return 0;
+	json_array_foreach(values, i, v)
+	{
+		if (!json_is_number(v))
+			return 0;
+		if (!whole(v))
+			*whole_out = 0;
+	}
+	return 1;
+}
+
+/* The Sparkplug datatype of a declared value: String (values of strings, a
+ * string default), Int64 or Double (values that are all numbers, whole or
+ * not), Boolean (a boolean default), Int64 (a number declared with whole
+ * min/max/default/step, a param or a variable without a unit, and whole
+ * now), Double (another number: a measurement); else from its value now;
+ * String when neither says (no value yet: null, and a DBIRTH again once
+ * its value says otherwise). */
 static unsigned datatype_of(json_t *decl, int is_param, const struct vmac_value *now)
 {
 	json_t *def = json_object_get(decl, "default"), *min = json_object_get(decl, "min"),
 	       *max = json_object_get(decl, "max");
-	int now_whole = !now || now->type != VMAC_VALUE_NUMBER || floor(now->number) == now->number;
+	int now_whole = !now || now->type != VMAC_VALUE_NUMBER || floor(now->number) == now->number, all_whole;
+	if (numeric_values(json_object_get(decl, "values"), &all_whole))
+		return all_whole && now_whole ? DT_INT64 : DT_DOUBLE;
 	if (json_object_get(decl, "values") || json_is_string(def))
 		return DT_STRING;
 	if (json_is_boolean(def))

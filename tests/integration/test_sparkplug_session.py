@@ -23,8 +23,8 @@ import time
 
 from harness import KITCHEN_NAMES, Skip
 from mqtt_proxy import MqttProxy, client_ids
-from test_mqtt import PREFIX, Broker
-from test_sparkplug import BOOLEAN, GROUP, INT64, NODE, SpHost, check_seq, command, decode, has_value, spb_host, \
+from test_mqtt import HOST_ID, PREFIX, Broker
+from test_sparkplug import BOOLEAN, DOUBLE, GROUP, INT64, NODE, STRING, SpHost, check_seq, command, decode, has_value, spb_host, \
     tahu_agrees
 
 MAIN_ID = "vmac-spbtest"
@@ -227,5 +227,43 @@ def test_sparkplug_hot_reload_ddeath_before_the_new_dbirth(t):
         assert kinds and kinds[-1] == "DBIRTH" and "DDEATH" in kinds and kinds.index("DDEATH") < len(kinds) - 1, \
             "no DDEATH of lights-1 before its new DBIRTH: %s" % kinds
         check_seq(sp.node_messages())
+    finally:
+        sp.close()
+
+
+CHOICES_LUA = """
+local driver = { name = "choices", version = "1.0.0", io = { do0 = "do0" },
+                 params = { speed = { default = 2, values = { 1, 2, 3 } },
+                            ratio = { default = 0.5, values = { 0.5, 1.5 } },
+                            mode = { default = "eco", values = { "eco", "1", "on" } } } }
+function driver.tick(dev, inputs) end
+return driver
+"""
+
+
+def test_sparkplug_datatypes_of_value_lists(t):
+    """A list of whole numbers is an Int64, of other numbers a Double, of
+    strings a String (one that looks like a number or a boolean stays a
+    string); a DCMD of each is taken as declared."""
+    broker = Broker(t)
+    sp = SpHost(broker)
+    host = t.host(drivers=t.drivers(choices=CHOICES_LUA), settings={
+        "mqtt_url": broker.url, "mqtt_host_id": HOST_ID, "mqtt_commands": "true", "mqtt_sparkplug": "true",
+        "mqtt_sparkplug_group": GROUP})
+    t.board("generic", "ch", driver="choices")
+    try:
+        born, _ = sp.wait(NODE % "DBIRTH" + "/ch", what="the DBIRTH of a driver with value lists")
+        b = born["by_name"]
+        assert (b["speed"]["datatype"], b["speed"]["value"]) == (INT64, 2), b["speed"]
+        assert (b["ratio"]["datatype"], b["ratio"]["value"]) == (DOUBLE, 0.5), b["ratio"]
+        assert (b["mode"]["datatype"], b["mode"]["value"]) == (STRING, "eco"), b["mode"]
+        mark = sp.mark()
+        sp.publish(NODE % "DCMD" + "/ch", command([("speed", INT64, 3), ("mode", STRING, "1"), ("ratio", DOUBLE, 1.5)]))
+        sp.wait(NODE % "DDATA" + "/ch", lambda p: has_value("speed", 3)(p) or "speed" not in p["by_name"],
+                since=mark, what="DDATA after the DCMD")
+        host.wait_status(lambda s: host.device("ch", s)["params"] == {"speed": 3, "mode": "1", "ratio": 1.5}, 30,
+                         "the params set by the DCMD as declared")
+        payloads, _ = tahu_agrees(sp.node_raw())
+        assert payloads >= 3, payloads
     finally:
         sp.close()
