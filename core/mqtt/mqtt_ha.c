@@ -54,7 +54,7 @@ static json_t *entity(struct ha *h, const char *name, json_t *decl)
 	char uid[240], topic[400], host_status[300];
 	const char *label = json_string_value(json_object_get(decl, "label"));
 	snprintf(uid, sizeof(uid), "%s_%s", h->dev_id, name);
-	snprintf(topic, sizeof(topic), "%s/availability", h->topic_base);
+	snprintf(topic, sizeof(topic), "%s/_availability", h->topic_base);
 	snprintf(host_status, sizeof(host_status), "%s/%s/status", h->s->prefix, h->s->host_id);
 	/* Available only while both the host and the machine say online. */
 	return json_pack("{s:s, s:s, s:[{s:s}, {s:s}], s:s, s:O}", "name", label ? label : name, "unique_id", uid,

@@ -3,7 +3,10 @@
  * values (retained), and the command topics PREFIX/HOST/DEVICE/set/NAME
  * and .../cmd/NAME handed to the bus exactly as POST
  * /api/devices/NAME/input hands them (the driver validates; a refusal is
- * published back on PREFIX/HOST/DEVICE/error, never more than that). */
+ * published back on PREFIX/HOST/DEVICE/_error, never more than that).
+ * The host's own per-device topics begin with '_', which no name of a
+ * driver's can ([a-z][a-z0-9_]*): a variable named error or availability
+ * has its state topic like any other. */
 #include "mqtt_internal.h"
 
 #include <ctype.h>
@@ -153,7 +156,7 @@ void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *top
 	    json_pack("{s:s, s:s, s:s, s:s}", "topic", topic, "name", name ? name : "", "code", code, "error", text);
 	char *body = o ? json_dumps(o, JSON_COMPACT) : NULL;
 	if (device)
-		mqtt_topic(m, where, sizeof(where), "%s/error", device);
+		mqtt_topic(m, where, sizeof(where), "%s/_error", device);
 	else
 		mqtt_topic(m, where, sizeof(where), "error");
 	if (body)
@@ -231,7 +234,7 @@ static void connected(struct vmac_mqtt *m)
 static void availability(struct vmac_mqtt *m, struct mqtt_device *d, const char *what)
 {
 	char topic[512];
-	mqtt_topic(m, topic, sizeof(topic), "%s/availability", d->name);
+	mqtt_topic(m, topic, sizeof(topic), "%s/_availability", d->name);
 	mqtt_publish(m, topic, what, -1, 1, 1);
 }
 
