@@ -29,7 +29,8 @@
 #define MQTT_PAYLOAD_MAX 1024      /* a received payload; longer is kept as len -1 and refused */
 #define MQTT_TEXT_PAYLOAD_MAX 256  /* a command's text payload (mqtt_native.c); longer is refused */
 #define MQTT_VALUES (VMAC_DRIVER_MAX_VARS + VMAC_DRIVER_MAX_PARAMS)
-#define MQTT_TEXT_MAX 96 /* a value as text */
+#define MQTT_TEXT_MAX 96         /* a value as text */
+#define MQTT_PAYLOAD_NONE "None" /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
 
 /* A value as published: its text, and when a variable with update =
  * "timer:N" may be published next. */

@@ -30,6 +30,10 @@ void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char 
 	va_end(ap);
 }
 
+/* "None" is Home Assistant's PAYLOAD_NONE: every MQTT entity reads it as
+ * unknown, where an empty payload is ignored (the stale value stays) and
+ * "null" is refused by a sensor with a unit. A number that is not finite
+ * (NaN, inf) is no measurement: unknown too. */
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen)
 {
 	switch (v->type) {
@@ -37,11 +41,11 @@ void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen)
 		if (isfinite(v->number))
 			snprintf(out, outlen, "%.15g", v->number);
 		else
-			snprintf(out, outlen, "null");
+			snprintf(out, outlen, "%s", MQTT_PAYLOAD_NONE);
 		break;
 	case VMAC_VALUE_BOOL: snprintf(out, outlen, "%s", v->number != 0 ? "true" : "false"); break;
 	case VMAC_VALUE_STRING: snprintf(out, outlen, "%s", v->str); break;
-	default: out[0] = 0; break; /* no value: the retained one is cleared */
+	default: snprintf(out, outlen, "%s", MQTT_PAYLOAD_NONE); break;
 	}
 }
 
