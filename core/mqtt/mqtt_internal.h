@@ -207,7 +207,13 @@ int mqtt_site_message(struct vmac_mqtt *m, const struct mosquitto_message *msg);
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
 /* A command's payload (len bytes, -1: too long) into v: 0, or -1 with why. */
 int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const char **why);
-/* {"topic", "name", "code", "error"} on PREFIX/HOST/DEVICE/error (device
+/* The same, typed by decl (a variable's or param's declaration from the
+ * manifest; NULL: as mqtt_payload_value): a string (values of strings, a
+ * string default) as it came, a number, a boolean (true/false/ON/OFF), or
+ * for numeric values a number when it reads as one; a payload that is not
+ * what the declaration says is refused with why. */
+int mqtt_payload_typed(const char *payload, int len, json_t *decl, struct vmac_value *v, const char **why);
+/* {"topic", "name", "code", "error"} on PREFIX/HOST/DEVICE/_error (device
  * NULL: PREFIX/HOST/error); docs/MQTT.md "Payloads". */
 void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,
                         const char *text);

@@ -128,6 +128,74 @@ int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const
 	return 0;
 }
 
+/* What a declaration says a value is: 's' a string (a select of strings,
+ * or a string default), 'v' one of numeric values, 'n' a number, 'b' a
+ * boolean, 0 nothing (the value's own text decides). */
+static char declared_kind(json_t *decl)
+{
+	json_t *values = json_object_get(decl, "values"), *def = json_object_get(decl, "default"), *x;
+	size_t i, strings = 0, numbers = 0;
+	json_array_foreach(values, i, x)
+	{
+		strings += json_is_string(x);
+		numbers += json_is_number(x);
+	}
+	if (strings > 0 && strings == json_array_size(values))
+		return 's';
+	if (numbers > 0 && numbers == json_array_size(values))
+		return 'v';
+	if (json_is_array(values))
+		return 0; /* mixed: as the value's text says */
+	if (json_is_string(def))
+		return 's';
+	if (json_is_boolean(def))
+		return 'b';
+	if (json_is_number(def) || json_object_get(decl, "min") || json_object_get(decl, "max") ||
+	    json_object_get(decl, "unit"))
+		return 'n';
+	return 0;
+}
+
+int mqtt_payload_typed(const char *payload, int len, json_t *decl, struct vmac_value *v, const char **why)
+{
+	char kind = declared_kind(decl);
+	size_t i, n;
+	if (kind == 's' && len >= 0) { /* the text as it came: "1", "on", "null" are options like any other */
+		memset(v, 0, sizeof(*v));
+		for (i = 0, n = 0; i < (size_t)len; i++) {
+			if (payload[i] == 0 || (unsigned char)payload[i] < 0x20 || payload[i] == 0x7f) {
+				*why = payload[i] == 0 ? "the payload holds a NUL byte"
+				                       : "the payload holds control characters";
+				return -1;
+			}
+			n += payload[i] != ' ';
+		}
+		if (n == 0)
+			return 0; /* nothing: no value */
+		if (len > VMAC_DRIVER_STR_MAX) {
+			*why = "a string value is at most 63 bytes";
+			return -1;
+		}
+		v->type = VMAC_VALUE_STRING;
+		memcpy(v->str, payload, (size_t)len);
+		v->str[len] = 0;
+		return 0;
+	}
+	if (mqtt_payload_value(payload, len, v, why) != 0)
+		return -1;
+	if (v->type == VMAC_VALUE_NONE || !kind || kind == 'v')
+		return 0; /* 'v': a number when it reads as one, else the driver says it is not among the values */
+	if (kind == 'n' && v->type != VMAC_VALUE_NUMBER) {
+		*why = "expected a number";
+		return -1;
+	}
+	if (kind == 'b' && v->type != VMAC_VALUE_BOOL) {
+		*why = "expected true/false/ON/OFF";
+		return -1;
+	}
+	return 0;
+}
+
 /* [A-Za-z0-9._-]{1,max} (a device), or [a-z][a-z0-9_]{0,max-1} (a name). */
 static int device_ok(const char *s)
 {
@@ -169,6 +237,38 @@ void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *top
 	json_decref(o);
 }
 
+/* Empty, blanks or PRESS: a button's payload. */
+static int is_press(const char *payload, int len)
+{
+	int start, end;
+	if (len < 0)
+		return 0;
+	for (start = 0; start < len && isspace((unsigned char)payload[start]); start++)
+		;
+	for (end = len; end > start && isspace((unsigned char)payload[end - 1]); end--)
+		;
+	return end == start || (end - start == 5 && memcmp(payload + start, "PRESS", 5) == 0);
+}
+
+/* The declaration that types the payload of .../set/NAME (the variable or
+ * param NAME) or .../cmd/NAME (the param its arg names), from the manifest
+ * of the version that runs; NULL when there is none (the value's own text
+ * decides). */
+static json_t *declaration(struct vmac_mqtt *m, const char *device, const char *kind, const char *name)
+{
+	struct mqtt_device *d = mqtt_device_find(m, device);
+	json_t *decl;
+	if (!d || !d->manifest)
+		return NULL;
+	if (strcmp(kind, "cmd") == 0) {
+		const char *arg = json_string_value(
+		    json_object_get(json_object_get(json_object_get(d->manifest, "commands"), name), "arg"));
+		return arg ? json_object_get(json_object_get(d->manifest, "params"), arg) : NULL;
+	}
+	decl = json_object_get(json_object_get(d->manifest, "variables"), name);
+	return decl ? decl : json_object_get(json_object_get(d->manifest, "params"), name);
+}
+
 /* PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME: operator input, as POST
  * /api/devices/DEVICE/input {"name": NAME, "value": payload} does it. */
 static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *rest)
@@ -201,7 +301,10 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", name);
-	if (mqtt_payload_value(msg->payload, msg->len > MQTT_TEXT_PAYLOAD_MAX ? -1 : msg->len, &req.value, &why) != 0) {
+	if (strcmp(kind, "cmd") == 0 && is_press(msg->payload, msg->len)) {
+		req.value.type = VMAC_VALUE_NONE; /* a button: the command without an argument */
+	} else if (mqtt_payload_typed(msg->payload, msg->len > MQTT_TEXT_PAYLOAD_MAX ? -1 : msg->len,
+	                              declaration(m, device, kind, name), &req.value, &why) != 0) {
 		mqtt_publish_error(m, device, msg->topic, name, "malformed", why);
 		return;
 	}
