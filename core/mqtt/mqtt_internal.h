@@ -38,6 +38,7 @@ struct mqtt_value {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
 	char text[MQTT_TEXT_MAX];
 	int sent;        /* text went out on this connection */
+	int precision;   /* a number's decimals as published (the declaration's precision), -1: all */
 	double period_s; /* timer:N (0: on every change) */
 	double next_s;   /* monotonic seconds: not before this */
 };
@@ -205,6 +206,12 @@ int mqtt_site_message(struct vmac_mqtt *m, const struct mosquitto_message *msg);
 
 /* mqtt_native.c: values as text and back (pure; docs/MQTT.md "Payloads"). */
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
+/* The same with a number rounded to precision decimals (0..6; -1: as it is),
+ * -0 written 0: a value is published when this text changes. */
+void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, size_t outlen);
+/* The precision a declaration gives its numbers: "precision" 0..6, not for
+ * a choice of values (its state is the option's text); else -1. */
+int mqtt_declared_precision(json_t *decl);
 /* A command's payload (len bytes, -1: too long) into v: 0, or -1 with why. */
 int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const char **why);
 /* The same, typed by decl (a variable's or param's declaration from the

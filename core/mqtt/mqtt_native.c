@@ -49,6 +49,28 @@ void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen)
 	}
 }
 
+void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, size_t outlen)
+{
+	double rounded;
+	if (precision < 0 || precision > 6 || v->type != VMAC_VALUE_NUMBER || !isfinite(v->number)) {
+		mqtt_value_text(v, out, outlen);
+		return;
+	}
+	snprintf(out, outlen, "%.*f", precision, v->number);
+	rounded = strtod(out, NULL);
+	if (rounded == 0) /* -0.04 at one decimal is 0.0, not -0.0 */
+		snprintf(out, outlen, "%.*f", precision, 0.0);
+}
+
+int mqtt_declared_precision(json_t *decl)
+{
+	json_t *p = json_object_get(decl, "precision");
+	double x = json_number_value(p);
+	if (!json_is_number(p) || json_object_get(decl, "values") || x != floor(x) || x < 0 || x > 6)
+		return -1;
+	return (int)x;
+}
+
 static int equals_ci(const char *a, const char *b)
 {
 	return strcasecmp(a, b) == 0;

@@ -29,11 +29,17 @@ local driver = {
 		reading = { label = "Reading" },
 		ratio = { unit = "%", label = "Ratio" },
 		seen = { label = "Seen" },
+		temp_c = { unit = "degC", precision = 1, label = "Temperature" },
+		raw_c = { unit = "degC", label = "Temperature, every digit" },
 	},
 }
+local ticks = 0
 
 function driver.tick(dev, inputs)
 	local p = dev.params
+	ticks = ticks + 1
+	dev.vars.temp_c = 20 + p.speed + (ticks % 4) * 0.01 -- noise below the declared precision
+	dev.vars.raw_c = dev.vars.temp_c
 	dev.vars.error = "E42"
 	dev.vars.reading = p.speed ~= 3 and p.speed or nil
 	dev.vars.ratio = p.speed == 0 and 0 / 0 or p.speed == 10 and math.huge or p.speed * 10
@@ -104,6 +110,16 @@ def test_mqtt_payloads_names_nothing_and_typed_commands(t):
                     "a late subscriber gets %s %r retained, got %r" % (name, want, late.latest[DEV + "/" + name])
         finally:
             late.close()
+        # A declared precision: the noise below it is not published.
+        hub.wait(DEV + "/temp_c", lambda p: p == "30.0", what="temp_c 30.0 at speed 10 (one decimal)")
+        hub.wait(DEV + "/raw_c", lambda p: p != "30", what="raw_c with its noise")
+        mark = hub.mark()
+        time.sleep(2)  # 20 ticks, and 8 reads of the status copy
+        with hub.cond:
+            temps = [p for tp, p in hub.log[mark:] if tp == DEV + "/temp_c"]
+            raws = [p for tp, p in hub.log[mark:] if tp == DEV + "/raw_c"]
+        assert temps == [] and len(raws) >= 3, "in 2 s: temp_c %r (precision 1), raw_c %r (no precision)" % (
+            temps, raws)
         # The host's own site view: error a value, None no value.
         deadline = time.monotonic() + 30
         while True:

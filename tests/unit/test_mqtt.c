@@ -49,6 +49,39 @@ START_TEST(value_text_says_unknown_as_home_assistant_reads_it)
 }
 END_TEST
 
+static const char *text_at(double x, int precision)
+{
+	static char out[MQTT_TEXT_MAX];
+	struct vmac_value v = number(x);
+	mqtt_value_text_at(&v, precision, out, sizeof(out));
+	return out;
+}
+
+static int precision_of(const char *decl)
+{
+	json_t *d = json_loads(decl, 0, NULL);
+	int p = mqtt_declared_precision(d);
+	json_decref(d);
+	return p;
+}
+
+START_TEST(a_declared_precision_rounds_what_is_published)
+{
+	ck_assert_str_eq(text_at(21.449, 1), "21.4");
+	ck_assert_str_eq(text_at(21.45001, 1), "21.5");
+	ck_assert_str_eq(text_at(-0.04, 1), "0.0"); /* never -0.0: it would read as a change */
+	ck_assert_str_eq(text_at(3.7, 0), "4");
+	ck_assert_str_eq(text_at(12.3456789, -1), "12.3456789");
+	ck_assert_str_eq(text_at(NAN, 2), "None");
+	ck_assert_int_eq(precision_of("{\"unit\": \"degC\", \"precision\": 1}"), 1);
+	ck_assert_int_eq(precision_of("{\"precision\": 1.0}"), 1); /* Lua numbers come as reals */
+	ck_assert_int_eq(precision_of("{\"unit\": \"degC\"}"), -1);
+	ck_assert_int_eq(precision_of("{\"precision\": 7}"), -1);
+	ck_assert_int_eq(precision_of("{\"precision\": 1.5}"), -1);
+	ck_assert_int_eq(precision_of("{\"precision\": 1, \"values\": [1.5, 2.5]}"), -1); /* options stay as written */
+}
+END_TEST
+
 /* payload (NUL-terminated) read against decl (JSON text, or NULL). */
 static int typed(const char *payload, const char *decl, struct vmac_value *v, const char **why)
 {
@@ -85,8 +118,8 @@ END_TEST
 
 START_TEST(a_select_or_text_gets_the_payload_as_a_string)
 {
-	static const char *const looks_like_other_things[] = {"1", "on", "true", "OFF", "null", "PRESS", "2.50",
-	                                                      "\"q\"", "[x]"};
+	static const char *const looks_like_other_things[] = {"1",     "on",   "true",  "OFF", "null",
+	                                                      "PRESS", "2.50", "\"q\"", "[x]"};
 	const char *select = "{\"default\": \"1\", \"values\": [\"1\", \"on\", \"true\"]}";
 	const char *text = "{\"default\": \"\"}";
 	struct vmac_value v;
@@ -141,10 +174,10 @@ static json_t *device_of(json_t *view, const char *host, const char *device)
 {
 	size_t i, k;
 	json_t *h, *d;
-	json_array_foreach(json_object_get(view, "hosts"), i, h) if (strcmp(json_string_value(json_object_get(h, "host")),
-	                                                                    host) == 0)
-	    json_array_foreach(json_object_get(h, "devices"), k, d) if (strcmp(
-	        json_string_value(json_object_get(d, "device")), device) == 0) return d;
+	json_array_foreach(json_object_get(view, "hosts"), i,
+	                   h) if (strcmp(json_string_value(json_object_get(h, "host")), host) == 0)
+	    json_array_foreach(json_object_get(h, "devices"), k,
+	                       d) if (strcmp(json_string_value(json_object_get(d, "device")), device) == 0) return d;
 	return NULL;
 }
 
@@ -160,10 +193,10 @@ START_TEST(site_view_reads_host_topics_and_none)
 	json_t *view, *dev, *values;
 	feed(s, "vmac/b/status", "online");
 	feed(s, "vmac/b/washer-1/_availability", "online");
-	feed(s, "vmac/b/washer-1/error", "E42");          /* a variable named error is a value */
-	feed(s, "vmac/b/washer-1/availability", "no");     /* and so is one named availability */
+	feed(s, "vmac/b/washer-1/error", "E42");            /* a variable named error is a value */
+	feed(s, "vmac/b/washer-1/availability", "no");      /* and so is one named availability */
 	feed(s, "vmac/b/washer-1/_error", "{\"code\": 1}"); /* a refusal: not a value */
-	feed(s, "vmac/b/washer-1/_health", "{}");          /* any other host topic: not a value either */
+	feed(s, "vmac/b/washer-1/_health", "{}");           /* any other host topic: not a value either */
 	feed(s, "vmac/b/washer-1/temp_c", "21.5");
 	feed(s, "vmac/b/washer-1/gone", "here");
 	feed(s, "vmac/b/washer-1/gone", "None"); /* no value any more */
@@ -178,7 +211,8 @@ START_TEST(site_view_reads_host_topics_and_none)
 	ck_assert_msg(json_real_value(json_object_get(values, "temp_c")) == 21.5, "temp_c 21.5");
 	ck_assert_msg(!json_object_get(values, "gone") && !json_object_get(values, "never"), "None is no value: %s",
 	              json_dumps(values, 0));
-	ck_assert_msg(!json_object_get(values, "_error") && !json_object_get(values, "_health"), "host topics as values");
+	ck_assert_msg(!json_object_get(values, "_error") && !json_object_get(values, "_health"),
+	              "host topics as values");
 	ck_assert_int_eq(json_object_size(values), 3);
 	ck_assert_int_eq(json_integer_value(json_object_get(view, "malformed")), 0);
 	json_decref(view);
@@ -198,6 +232,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, untyped_payloads_read_as_their_text_says);
 	tcase_add_test(tc, a_select_or_text_gets_the_payload_as_a_string);
 	tcase_add_test(tc, a_number_boolean_or_numeric_choice_gets_its_type);
+	tcase_add_test(tc, a_declared_precision_rounds_what_is_published);
 	suite_add_tcase(s, tc);
 	tc = tcase_create("site");
 	tcase_add_test(tc, site_view_reads_host_topics_and_none);
