@@ -7,7 +7,8 @@
  * a new driver version, is "up"; one that stops running is "down"; values
  * that changed go out, the newest only (a value that changed five times
  * while the broker was away is published once, as it is now). A variable
- * declared with update = "timer:N" goes out at most every N s. */
+ * declared with update = "timer:N" goes out at most every N s; a number
+ * declared with a precision goes out when it changes at that precision. */
 #include "mqtt_internal.h"
 
 #include <stdio.h>
@@ -48,6 +49,13 @@ static struct mqtt_device *device_add(struct mqtt_conn *c, const char *name)
 	return d;
 }
 
+/* The declaration of variable or param name in the manifest (NULL: none). */
+static json_t *declaration(json_t *manifest, const char *name)
+{
+	json_t *decl = json_object_get(json_object_get(manifest, "variables"), name);
+	return decl ? decl : json_object_get(json_object_get(manifest, "params"), name);
+}
+
 /* timer:N of variable name in the manifest: N, else 0. */
 static double timer_period(json_t *manifest, const char *name)
 {
@@ -72,6 +80,7 @@ static struct mqtt_value *value_slot(struct mqtt_device *d, const char *name)
 	memset(v, 0, sizeof(*v));
 	snprintf(v->name, sizeof(v->name), "%s", name);
 	v->period_s = timer_period(d->manifest, name);
+	v->precision = mqtt_declared_precision(declaration(d->manifest, name));
 	return v;
 }
 
@@ -92,7 +101,7 @@ static void publish_values(struct vmac_mqtt *m, struct mqtt_device *d, const str
 		char text[MQTT_TEXT_MAX];
 		if (!v)
 			continue;
-		mqtt_value_text(&var->value, text, sizeof(text));
+		mqtt_value_text_at(&var->value, v->precision, text, sizeof(text)); /* a change that shows */
 		if (!force && v->sent && strcmp(v->text, text) == 0)
 			continue;
 		if (!force && v->sent && now < v->next_s)

@@ -54,7 +54,7 @@ static json_t *entity(struct ha *h, const char *name, json_t *decl)
 	char uid[240], topic[400], host_status[300];
 	const char *label = json_string_value(json_object_get(decl, "label"));
 	snprintf(uid, sizeof(uid), "%s_%s", h->dev_id, name);
-	snprintf(topic, sizeof(topic), "%s/availability", h->topic_base);
+	snprintf(topic, sizeof(topic), "%s/_availability", h->topic_base);
 	snprintf(host_status, sizeof(host_status), "%s/%s/status", h->s->prefix, h->s->host_id);
 	/* Available only while both the host and the machine say online. */
 	return json_pack("{s:s, s:s, s:[{s:s}, {s:s}], s:s, s:O}", "name", label ? label : name, "unique_id", uid,
@@ -121,6 +121,30 @@ static void add_reader(struct ha *h, const char *name, json_t *decl, char kind)
 	add(h, "sensor", name, e);
 }
 
+/* A select's options as the texts its state topic carries (HA compares the
+ * state with them as strings): a number as mqtt_value_text writes it (2, not
+ * 2.0), a boolean true/false. */
+static json_t *option_texts(json_t *values)
+{
+	json_t *out = json_array(), *x;
+	size_t i;
+	json_array_foreach(values, i, x)
+	{
+		struct vmac_value v;
+		char text[MQTT_TEXT_MAX];
+		if (json_is_string(x)) {
+			json_array_append(out, x);
+			continue;
+		}
+		memset(&v, 0, sizeof(v));
+		v.type = json_is_boolean(x) ? VMAC_VALUE_BOOL : VMAC_VALUE_NUMBER;
+		v.number = json_is_boolean(x) ? json_is_true(x) : json_number_value(x);
+		mqtt_value_text(&v, text, sizeof(text));
+		json_array_append_new(out, json_string(text));
+	}
+	return out;
+}
+
 /* A settable value: switch, number, select or text. */
 static void add_writer(struct ha *h, const char *name, json_t *decl, char kind, int config)
 {
@@ -156,7 +180,7 @@ static void add_writer(struct ha *h, const char *name, json_t *decl, char kind, 
 			json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
 	} else if (json_is_array(values)) {
 		component = "select";
-		json_object_set(e, "options", values);
+		json_object_set_new(e, "options", option_texts(values));
 	} else {
 		component = "text";
 		json_object_set_new(e, "max", json_integer(VMAC_DRIVER_STR_MAX));

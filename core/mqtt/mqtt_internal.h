@@ -30,7 +30,8 @@
 #define MQTT_PAYLOAD_MAX 1024      /* a received payload; longer is kept as len -1 and refused */
 #define MQTT_TEXT_PAYLOAD_MAX 256  /* a command's text payload (mqtt_native.c); longer is refused */
 #define MQTT_VALUES (VMAC_DRIVER_MAX_VARS + VMAC_DRIVER_MAX_PARAMS)
-#define MQTT_TEXT_MAX 96 /* a value as text */
+#define MQTT_TEXT_MAX 96         /* a value as text */
+#define MQTT_PAYLOAD_NONE "None" /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
 
 /* A value as published: its text, and when a variable with update =
  * "timer:N" may be published next. */
@@ -38,6 +39,7 @@ struct mqtt_value {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
 	char text[MQTT_TEXT_MAX];
 	int sent;        /* text went out on this connection */
+	int precision;   /* a number's decimals as published (the declaration's precision), -1: all */
 	double period_s; /* timer:N (0: on every change) */
 	double next_s;   /* monotonic seconds: not before this */
 };
@@ -221,9 +223,21 @@ int mqtt_site_message(struct vmac_mqtt *m, const struct mosquitto_message *msg);
 
 /* mqtt_native.c: values as text and back (pure; docs/MQTT.md "Payloads"). */
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
+/* The same with a number rounded to precision decimals (0..6; -1: as it is),
+ * -0 written 0: a value is published when this text changes. */
+void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, size_t outlen);
+/* The precision a declaration gives its numbers: "precision" 0..6, not for
+ * a choice of values (its state is the option's text); else -1. */
+int mqtt_declared_precision(json_t *decl);
 /* A command's payload (len bytes, -1: too long) into v: 0, or -1 with why. */
 int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const char **why);
-/* {"topic", "name", "code", "error"} on PREFIX/HOST/DEVICE/error (device
+/* The same, typed by decl (a variable's or param's declaration from the
+ * manifest; NULL: as mqtt_payload_value): a string (values of strings, a
+ * string default) as it came, a number, a boolean (true/false/ON/OFF), or
+ * for numeric values a number when it reads as one; a payload that is not
+ * what the declaration says is refused with why. */
+int mqtt_payload_typed(const char *payload, int len, json_t *decl, struct vmac_value *v, const char **why);
+/* {"topic", "name", "code", "error"} on PREFIX/HOST/DEVICE/_error (device
  * NULL: PREFIX/HOST/error); docs/MQTT.md "Payloads". */
 void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,
                         const char *text);

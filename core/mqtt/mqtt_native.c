@@ -3,7 +3,10 @@
  * values (retained), and the command topics PREFIX/HOST/DEVICE/set/NAME
  * and .../cmd/NAME handed to the bus exactly as POST
  * /api/devices/NAME/input hands them (the driver validates; a refusal is
- * published back on PREFIX/HOST/DEVICE/error, never more than that). */
+ * published back on PREFIX/HOST/DEVICE/_error, never more than that).
+ * The host's own per-device topics begin with '_', which no name of a
+ * driver's can ([a-z][a-z0-9_]*): a variable named error or availability
+ * has its state topic like any other. */
 #include "mqtt_internal.h"
 
 #include <ctype.h>
@@ -27,6 +30,10 @@ void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char 
 	va_end(ap);
 }
 
+/* "None" is Home Assistant's PAYLOAD_NONE: every MQTT entity reads it as
+ * unknown, where an empty payload is ignored (the stale value stays) and
+ * "null" is refused by a sensor with a unit. A number that is not finite
+ * (NaN, inf) is no measurement: unknown too. */
 void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen)
 {
 	switch (v->type) {
@@ -34,12 +41,34 @@ void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen)
 		if (isfinite(v->number))
 			snprintf(out, outlen, "%.15g", v->number);
 		else
-			snprintf(out, outlen, "null");
+			snprintf(out, outlen, "%s", MQTT_PAYLOAD_NONE);
 		break;
 	case VMAC_VALUE_BOOL: snprintf(out, outlen, "%s", v->number != 0 ? "true" : "false"); break;
 	case VMAC_VALUE_STRING: snprintf(out, outlen, "%s", v->str); break;
-	default: out[0] = 0; break; /* no value: the retained one is cleared */
+	default: snprintf(out, outlen, "%s", MQTT_PAYLOAD_NONE); break;
 	}
+}
+
+void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, size_t outlen)
+{
+	double rounded;
+	if (precision < 0 || precision > 6 || v->type != VMAC_VALUE_NUMBER || !isfinite(v->number)) {
+		mqtt_value_text(v, out, outlen);
+		return;
+	}
+	snprintf(out, outlen, "%.*f", precision, v->number);
+	rounded = strtod(out, NULL);
+	if (rounded == 0) /* -0.04 at one decimal is 0.0, not -0.0 */
+		snprintf(out, outlen, "%.*f", precision, 0.0);
+}
+
+int mqtt_declared_precision(json_t *decl)
+{
+	json_t *p = json_object_get(decl, "precision");
+	double x = json_number_value(p);
+	if (!json_is_number(p) || json_object_get(decl, "values") || x != floor(x) || x < 0 || x > 6)
+		return -1;
+	return (int)x;
 }
 
 static int equals_ci(const char *a, const char *b)
@@ -121,6 +150,74 @@ int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const
 	return 0;
 }
 
+/* What a declaration says a value is: 's' a string (a select of strings,
+ * or a string default), 'v' one of numeric values, 'n' a number, 'b' a
+ * boolean, 0 nothing (the value's own text decides). */
+static char declared_kind(json_t *decl)
+{
+	json_t *values = json_object_get(decl, "values"), *def = json_object_get(decl, "default"), *x;
+	size_t i, strings = 0, numbers = 0;
+	json_array_foreach(values, i, x)
+	{
+		strings += json_is_string(x);
+		numbers += json_is_number(x);
+	}
+	if (strings > 0 && strings == json_array_size(values))
+		return 's';
+	if (numbers > 0 && numbers == json_array_size(values))
+		return 'v';
+	if (json_is_array(values))
+		return 0; /* mixed: as the value's text says */
+	if (json_is_string(def))
+		return 's';
+	if (json_is_boolean(def))
+		return 'b';
+	if (json_is_number(def) || json_object_get(decl, "min") || json_object_get(decl, "max") ||
+	    json_object_get(decl, "unit"))
+		return 'n';
+	return 0;
+}
+
+int mqtt_payload_typed(const char *payload, int len, json_t *decl, struct vmac_value *v, const char **why)
+{
+	char kind = declared_kind(decl);
+	size_t i, n;
+	if (kind == 's' && len >= 0) { /* the text as it came: "1", "on", "null" are options like any other */
+		memset(v, 0, sizeof(*v));
+		for (i = 0, n = 0; i < (size_t)len; i++) {
+			if (payload[i] == 0 || (unsigned char)payload[i] < 0x20 || payload[i] == 0x7f) {
+				*why = payload[i] == 0 ? "the payload holds a NUL byte"
+				                       : "the payload holds control characters";
+				return -1;
+			}
+			n += payload[i] != ' ';
+		}
+		if (n == 0)
+			return 0; /* nothing: no value */
+		if (len > VMAC_DRIVER_STR_MAX) {
+			*why = "a string value is at most 63 bytes";
+			return -1;
+		}
+		v->type = VMAC_VALUE_STRING;
+		memcpy(v->str, payload, (size_t)len);
+		v->str[len] = 0;
+		return 0;
+	}
+	if (mqtt_payload_value(payload, len, v, why) != 0)
+		return -1;
+	if (v->type == VMAC_VALUE_NONE || !kind || kind == 'v')
+		return 0; /* 'v': a number when it reads as one, else the driver says it is not among the values */
+	if (kind == 'n' && v->type != VMAC_VALUE_NUMBER) {
+		*why = "expected a number";
+		return -1;
+	}
+	if (kind == 'b' && v->type != VMAC_VALUE_BOOL) {
+		*why = "expected true/false/ON/OFF";
+		return -1;
+	}
+	return 0;
+}
+
 /* [A-Za-z0-9._-]{1,max} (a device), or [a-z][a-z0-9_]{0,max-1} (a name). */
 static int device_ok(const char *s)
 {
@@ -153,13 +250,45 @@ void mqtt_publish_error(struct vmac_mqtt *m, const char *device, const char *top
 	    json_pack("{s:s, s:s, s:s, s:s}", "topic", topic, "name", name ? name : "", "code", code, "error", text);
 	char *body = o ? json_dumps(o, JSON_COMPACT) : NULL;
 	if (device)
-		mqtt_topic(m, where, sizeof(where), "%s/error", device);
+		mqtt_topic(m, where, sizeof(where), "%s/_error", device);
 	else
 		mqtt_topic(m, where, sizeof(where), "error");
 	if (body)
 		mqtt_publish(m, where, body, -1, 0, 0);
 	free(body);
 	json_decref(o);
+}
+
+/* Empty, blanks or PRESS: a button's payload. */
+static int is_press(const char *payload, int len)
+{
+	int start, end;
+	if (len < 0)
+		return 0;
+	for (start = 0; start < len && isspace((unsigned char)payload[start]); start++)
+		;
+	for (end = len; end > start && isspace((unsigned char)payload[end - 1]); end--)
+		;
+	return end == start || (end - start == 5 && memcmp(payload + start, "PRESS", 5) == 0);
+}
+
+/* The declaration that types the payload of .../set/NAME (the variable or
+ * param NAME) or .../cmd/NAME (the param its arg names), from the manifest
+ * of the version that runs; NULL when there is none (the value's own text
+ * decides). */
+static json_t *declaration(struct vmac_mqtt *m, const char *device, const char *kind, const char *name)
+{
+	struct mqtt_device *d = mqtt_device_find(m, device);
+	json_t *decl;
+	if (!d || !d->manifest)
+		return NULL;
+	if (strcmp(kind, "cmd") == 0) {
+		const char *arg = json_string_value(
+		    json_object_get(json_object_get(json_object_get(d->manifest, "commands"), name), "arg"));
+		return arg ? json_object_get(json_object_get(d->manifest, "params"), arg) : NULL;
+	}
+	decl = json_object_get(json_object_get(d->manifest, "variables"), name);
+	return decl ? decl : json_object_get(json_object_get(d->manifest, "params"), name);
 }
 
 /* PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME: operator input, as POST
@@ -194,7 +323,10 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 	memset(&req, 0, sizeof(req));
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", name);
-	if (mqtt_payload_value(msg->payload, msg->len > MQTT_TEXT_PAYLOAD_MAX ? -1 : msg->len, &req.value, &why) != 0) {
+	if (strcmp(kind, "cmd") == 0 && is_press(msg->payload, msg->len)) {
+		req.value.type = VMAC_VALUE_NONE; /* a button: the command without an argument */
+	} else if (mqtt_payload_typed(msg->payload, msg->len > MQTT_TEXT_PAYLOAD_MAX ? -1 : msg->len,
+	                              declaration(m, device, kind, name), &req.value, &why) != 0) {
 		mqtt_publish_error(m, device, msg->topic, name, "malformed", why);
 		return;
 	}
@@ -231,7 +363,7 @@ static void connected(struct vmac_mqtt *m)
 static void availability(struct vmac_mqtt *m, struct mqtt_device *d, const char *what)
 {
 	char topic[512];
-	mqtt_topic(m, topic, sizeof(topic), "%s/availability", d->name);
+	mqtt_topic(m, topic, sizeof(topic), "%s/_availability", d->name);
 	mqtt_publish(m, topic, what, -1, 1, 1);
 }
 

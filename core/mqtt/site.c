@@ -1,6 +1,7 @@
 /* See site.h: the site view. Topics are vmac's native ones (docs/MQTT.md,
- * "Topics"): PREFIX/HOST/status, PREFIX/HOST/DEVICE/availability and
- * PREFIX/HOST/DEVICE/NAME (a value). Hosts, devices and values are kept in
+ * "Topics"): PREFIX/HOST/status, PREFIX/HOST/DEVICE/_availability and
+ * PREFIX/HOST/DEVICE/NAME (a value); the host's other per-device topics
+ * (PREFIX/HOST/DEVICE/_NAME: _error ...) are no values and are ignored. Hosts, devices and values are kept in
  * arrays sorted by name, grown on demand up to the bounds of site.h. */
 #include "site.h"
 
@@ -187,6 +188,15 @@ static int state_of(const char *payload, int len)
 	return -2;
 }
 
+/* "None": no value (the driver's nil, or a number that was not finite), as
+ * vmacd publishes it and Home Assistant reads it (docs/MQTT.md, "Payloads");
+ * the view holds no value for it, as for an empty payload (a retained value
+ * cleared). */
+static int is_none(const char *payload, int len)
+{
+	return len == 4 && memcmp(payload, "None", 4) == 0;
+}
+
 /* ---- the tables (lock held) ---- */
 
 /* The host of that id, made when new (NULL: no room, counted). */
@@ -276,7 +286,7 @@ static struct site_device *device_get(struct vmac_site *s, struct site_host *h, 
 }
 
 /* The value name of d set to text (len bytes), or removed when len is 0
- * (the retained value cleared: the driver's nil). */
+ * (no value: None, or the retained value cleared). */
 static void value_set(struct vmac_site *s, struct site_device *d, const char *name, const char *text, int len)
 {
 	int lo = 0, hi = d->nvalues;
@@ -360,10 +370,10 @@ int vmac_site_feed(struct vmac_site *s, const char *topic, const void *payload, 
 	n = split(topic + np + 1, level, levlen);
 	if (n == 2 && levlen[1] == 6 && memcmp(level[1], "status", 6) == 0)
 		kind = 0;
-	else if (n == 3 && levlen[2] == 12 && memcmp(level[2], "availability", 12) == 0)
+	else if (n == 3 && levlen[2] == 13 && memcmp(level[2], "_availability", 13) == 0)
 		kind = 1;
-	else if (n == 3 && levlen[2] == 5 && memcmp(level[2], "error", 5) == 0)
-		return 1; /* a refused command's answer: not part of the view */
+	else if (n == 3 && levlen[2] > 0 && level[2][0] == '_')
+		return 1; /* the host's own (_error, _health ...): not a value, not part of the view */
 	else if (n == 3)
 		kind = 2;
 	else
@@ -391,7 +401,7 @@ int vmac_site_feed(struct vmac_site *s, const char *topic, const void *payload, 
 				} else {
 					memcpy(name, level[2], levlen[2]);
 					name[levlen[2]] = 0;
-					value_set(s, d, name, text, len);
+					value_set(s, d, name, text, is_none(text, len) ? 0 : len);
 				}
 			}
 		}
@@ -408,7 +418,8 @@ static const char *state_name(int state)
 }
 
 /* A value's text as JSON: true/false, a number, "null" (a number that was
- * not finite), else a string (docs/MQTT.md, "Payloads"). */
+ * not finite, as vmacd published it before "None"), else a string
+ * (docs/MQTT.md, "Payloads"). */
 static json_t *value_json(const char *text)
 {
 	char *end;

@@ -194,12 +194,12 @@ def test_mqtt_discovery_configs_for_the_kitchen(t):
             assert dev["via_device"] == "vmac_" + HOST_ID, "via_device is %r" % dev.get("via_device")
             assert dev["manufacturer"] == "vmac" and dev["model"].startswith(dev["name"].split("-")[0]), dev
             assert [a["topic"] for a in cfg["availability"]] == [
-                PREFIX + "/status", "%s/%s/availability" % (PREFIX, dev["name"])], cfg["availability"]
+                PREFIX + "/status", "%s/%s/_availability" % (PREFIX, dev["name"])], cfg["availability"]
             assert cfg["availability_mode"] == "all", cfg
         host_cfg = json.loads(hub.wait("%s/binary_sensor/%s/status/config" % (DISCOVERY, HOST_ID)))
         assert host_cfg["device"]["identifiers"] == ["vmac_" + HOST_ID], host_cfg
         for name in KITCHEN_NAMES:
-            hub.wait("%s/%s/availability" % (PREFIX, name), lambda p: p == "online", what="online")
+            hub.wait("%s/%s/_availability" % (PREFIX, name), lambda p: p == "online", what="online")
         assert hub.wait(PREFIX + "/status") == "online"
         assert hub.wait(PREFIX + "/washer-1/program") == "normal"
         late = Hub(broker, "late")
@@ -235,7 +235,7 @@ def test_mqtt_commands_refusals_and_malformed_messages(t):
             device = topic.split("/")[2]
             mark = hub.mark()
             hub.publish(topic, payload)
-            body = json.loads(hub.wait("%s/%s/error" % (PREFIX, device), since=mark, what="an error for %s" % topic))
+            body = json.loads(hub.wait("%s/%s/_error" % (PREFIX, device), since=mark, what="an error for %s" % topic))
             assert body["code"] == code and body["topic"] == topic, "%s %r: %s" % (topic, payload, body)
             if text:
                 assert text in body["error"], "%s %r: %s" % (topic, payload, body)
@@ -293,7 +293,7 @@ def test_mqtt_broker_killed_and_restarted(t):
         hub.config("sensor", "washer-1", "level_l", timeout_s=30)
         assert hub.wait(PREFIX + "/status", timeout_s=30) == "online"
         for name in KITCHEN_NAMES:
-            hub.wait("%s/%s/availability" % (PREFIX, name), lambda p: p == "online", what="online again")
+            hub.wait("%s/%s/_availability" % (PREFIX, name), lambda p: p == "online", what="online again")
         hub.wait(PREFIX + "/lights-1/kitchen", what="the values again")
         hub.publish(PREFIX + "/lights-1/set/kitchen", "true")
         host.wait_status(lambda s: host.device("lights-1", s)["outputs"]["digital"][0] is True, 30,
@@ -310,7 +310,7 @@ def test_mqtt_dropped_machine_and_killed_host_go_offline(t):
     boards = t.kitchen(host)
     hub = Hub(broker)
     try:
-        topic = PREFIX + "/washer-1/availability"
+        topic = PREFIX + "/washer-1/_availability"
         hub.wait(topic, lambda p: p == "online", what="washer-1 online")
         boards["washer-1"].signal(signal.SIGSTOP)
         try:

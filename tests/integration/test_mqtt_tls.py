@@ -133,7 +133,7 @@ def test_mqtt_tls_with_the_documented_acl(t):
     try:
         # vmacd publishes under the ACL; the hub reads it all.
         hub.wait("vmac/%s/status" % HOST, lambda p: p == "online", what="the host online (TLS, ACL)")
-        hub.wait("vmac/%s/lights-1/availability" % HOST, lambda p: p == "online", what="lights-1 online")
+        hub.wait("vmac/%s/lights-1/_availability" % HOST, lambda p: p == "online", what="lights-1 online")
         hub.wait("homeassistant/switch/%s_lights-1/kitchen/config" % HOST, lambda p: p != "",
                  what="the kitchen light's discovery config")
         hub.wait("spBv1.0/%s/DBIRTH/%s/lights-1" % (GROUP, HOST), what="the lights' Sparkplug DBIRTH")

@@ -163,8 +163,8 @@ def test_site_malformed_foreign_and_too_many_messages_change_only_counters(t):
             ("vmac/bad host!/status", "online"),            # not a host id
             ("vmac/x/status", "maybe"),                     # neither online nor offline
             ("vmac/x/status", b"\xff\xfe"),
-            ("vmac/x/dev 1/availability", "online"),        # not a device name
-            ("vmac/x/dev-1/availability", "up"),
+            ("vmac/x/dev 1/_availability", "online"),       # not a device name
+            ("vmac/x/dev-1/_availability", "up"),
             ("vmac/x/dev-1/Kitchen", "1"),                  # not a variable's name
             ("vmac/x/dev-1/kitchen", "y" * 100),            # longer than any value vmacd publishes
             ("vmac/x/dev-1/kitchen", b"\xc3\x28"),          # not UTF-8
@@ -172,7 +172,9 @@ def test_site_malformed_foreign_and_too_many_messages_change_only_counters(t):
             ("vmac/x/dev-1/kitchen", "line\nbreak"),        # control characters
             ("vmac/" + "h" * 200 + "/status", "online"),    # a host id too long
         ]
-        foreign = [("vmac/x/dev-1/error", '{"not": "a value"}'), ("vmac/x/dev-1/set/kitchen", "true"),
+        # The host's own topics (a refusal, and any other _NAME) are no values.
+        foreign = [("vmac/x/dev-1/_error", '{"not": "a value"}'), ("vmac/x/dev-1/_health", "{}"),
+                   ("vmac/x/dev-1/set/kitchen", "true"),
                    ("vmac/x/error", "?"), ("other/x/status", "online"), ("vmac/x/y/z/w", "?"), ("vmac", "?")]
         for topic, payload in bad + foreign:
             hub.publish(topic, payload, retain=True)
@@ -181,26 +183,30 @@ def test_site_malformed_foreign_and_too_many_messages_change_only_counters(t):
         for i in range(70):
             hub.publish("vmac/ghost-%02d/status" % i, "offline", retain=True)
         for i in range(300):
-            hub.publish("vmac/many/dev-%03d/availability" % i, "online", retain=True)
+            hub.publish("vmac/many/dev-%03d/_availability" % i, "online", retain=True)
         for i in range(80):
             hub.publish("vmac/many/dev-000/v%02d" % i, str(i), retain=True)
         hub.publish("vmac/many/status", "online", retain=True)
         hub.publish("vmac/fine/dev-1/note", "café 12", retain=True)  # UTF-8 strings are values too
         hub.publish("vmac/fine/dev-1/ratio", "0.25", retain=True)
         hub.publish("vmac/fine/dev-1/gone", "1", retain=True)
-        hub.publish("vmac/fine/dev-1/gone", "", retain=True)  # the retained value cleared: the driver's nil
+        hub.publish("vmac/fine/dev-1/gone", "", retain=True)  # the retained value cleared
+        hub.publish("vmac/fine/dev-1/unset", "7", retain=True)
+        hub.publish("vmac/fine/dev-1/unset", "None", retain=True)  # the driver's nil: no value
+        hub.publish("vmac/fine/dev-1/error", "E42", retain=True)  # a variable named error is a value
 
         def settled(s):
             many = host_of(s, "many")
             return (s["malformed"] >= len(bad) and s["dropped"]["hosts"] > 0 and
                     many["devices_dropped"] > 0 and device_of(s, "many", "dev-000")["values_dropped"] > 0 and
-                    "ratio" in device_of(s, "fine", "dev-1")["values"])
+                    "error" in device_of(s, "fine", "dev-1")["values"])
 
         view = wait_site(lambda: a.get("/api/site"), settled, 30, "every bad message counted, the bounds kept")
         assert len(view["hosts"]) <= 64, len(view["hosts"])
         assert len(host_of(view, "many")["devices"]) == 256, len(host_of(view, "many")["devices"])
         assert len(device_of(view, "many", "dev-000")["values"]) == 64
-        assert device_of(view, "fine", "dev-1")["values"] == {"note": "café 12", "ratio": 0.25}, view
+        fine = {"note": "café 12", "ratio": 0.25, "error": "E42"}
+        assert device_of(view, "fine", "dev-1")["values"] == fine, view
         assert device_of(view, "fine", "dev-1")["state"] == "unknown", "no status, no availability: unknown"
         assert device_of(view, "site-a", "lights-a")["state"] == "online" and host_of(view, "site-a")["self"]
         for h in view["hosts"]:
@@ -210,7 +216,7 @@ def test_site_malformed_foreign_and_too_many_messages_change_only_counters(t):
         retained_bad = len(set(topic for topic, _ in bad))
         assert cli["malformed"] == retained_bad and len(cli["hosts"]) <= 64, (cli["malformed"], retained_bad)
         assert cli["dropped"]["hosts"] > 0 and host_of(cli, "many")["devices_dropped"] > 0, cli["dropped"]
-        assert device_of(cli, "fine", "dev-1")["values"] == {"note": "café 12", "ratio": 0.25}, cli
+        assert device_of(cli, "fine", "dev-1")["values"] == fine, cli
         text = vmac_site(t, broker)
         assert "malformed messages" in text, text
     finally:

@@ -358,7 +358,7 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         def refused(payload, code, what):
             m = sp.mark()
             sp.publish(NODE % "DCMD" + "/washer-1", payload)
-            body, _ = sp.wait(PREFIX + "/washer-1/error", since=m, raw=True, what="an error for " + what)
+            body, _ = sp.wait(PREFIX + "/washer-1/_error", since=m, raw=True, what="an error for " + what)
             body = json.loads(body)
             assert body["code"] == code and body["topic"] == NODE % "DCMD" + "/washer-1", "%s: %s" % (what, body)
             # And on record in the host's events, as an NCMD's refusal is.

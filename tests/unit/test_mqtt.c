@@ -1,0 +1,241 @@
+/* Unit tests of what vmacd says on MQTT and reads back (core/mqtt; docs/MQTT.md,
+ * "Payloads" and "Conformance: payloads and topics"): values as text, command
+ * payloads untyped and typed by their declaration, and the site view's reading
+ * of the native topics. White-box: core/mqtt/mqtt_internal.h. */
+#include <check.h>
+#include <jansson.h>
+#include <math.h>
+#include <string.h>
+
+#include "../../core/mqtt/mqtt_internal.h"
+#include "../../core/mqtt/site.h"
+#include "check_main.h"
+
+static const char *text_of(struct vmac_value v)
+{
+	static char out[MQTT_TEXT_MAX];
+	mqtt_value_text(&v, out, sizeof(out));
+	return out;
+}
+
+static struct vmac_value number(double x)
+{
+	struct vmac_value v;
+	memset(&v, 0, sizeof(v));
+	v.type = VMAC_VALUE_NUMBER;
+	v.number = x;
+	return v;
+}
+
+START_TEST(value_text_says_unknown_as_home_assistant_reads_it)
+{
+	struct vmac_value none, yes, word;
+	memset(&none, 0, sizeof(none));
+	none.type = VMAC_VALUE_NONE;
+	ck_assert_str_eq(text_of(none), "None"); /* HA's PAYLOAD_NONE, not an empty (ignored) payload */
+	ck_assert_str_eq(text_of(number(NAN)), "None");
+	ck_assert_str_eq(text_of(number(INFINITY)), "None");
+	ck_assert_str_eq(text_of(number(-INFINITY)), "None");
+	ck_assert_str_eq(text_of(number(2)), "2"); /* a numeric select's option, not 2.0 */
+	ck_assert_str_eq(text_of(number(12.5)), "12.5");
+	ck_assert_str_eq(text_of(number(-0.001)), "-0.001");
+	yes = number(1);
+	yes.type = VMAC_VALUE_BOOL;
+	ck_assert_str_eq(text_of(yes), "true");
+	word = number(0);
+	word.type = VMAC_VALUE_STRING;
+	strcpy(word.str, "quick");
+	ck_assert_str_eq(text_of(word), "quick");
+}
+END_TEST
+
+static const char *text_at(double x, int precision)
+{
+	static char out[MQTT_TEXT_MAX];
+	struct vmac_value v = number(x);
+	mqtt_value_text_at(&v, precision, out, sizeof(out));
+	return out;
+}
+
+static int precision_of(const char *decl)
+{
+	json_t *d = json_loads(decl, 0, NULL);
+	int p = mqtt_declared_precision(d);
+	json_decref(d);
+	return p;
+}
+
+START_TEST(a_declared_precision_rounds_what_is_published)
+{
+	ck_assert_str_eq(text_at(21.449, 1), "21.4");
+	ck_assert_str_eq(text_at(21.45001, 1), "21.5");
+	ck_assert_str_eq(text_at(-0.04, 1), "0.0"); /* never -0.0: it would read as a change */
+	ck_assert_str_eq(text_at(3.7, 0), "4");
+	ck_assert_str_eq(text_at(12.3456789, -1), "12.3456789");
+	ck_assert_str_eq(text_at(NAN, 2), "None");
+	ck_assert_int_eq(precision_of("{\"unit\": \"degC\", \"precision\": 1}"), 1);
+	ck_assert_int_eq(precision_of("{\"precision\": 1.0}"), 1); /* Lua numbers come as reals */
+	ck_assert_int_eq(precision_of("{\"unit\": \"degC\"}"), -1);
+	ck_assert_int_eq(precision_of("{\"precision\": 7}"), -1);
+	ck_assert_int_eq(precision_of("{\"precision\": 1.5}"), -1);
+	ck_assert_int_eq(precision_of("{\"precision\": 1, \"values\": [1.5, 2.5]}"), -1); /* options stay as written */
+}
+END_TEST
+
+/* payload (NUL-terminated) read against decl (JSON text, or NULL). */
+static int typed(const char *payload, const char *decl, struct vmac_value *v, const char **why)
+{
+	json_t *d = decl ? json_loads(decl, 0, NULL) : NULL;
+	int rc;
+	*why = "";
+	if (decl)
+		ck_assert_msg(d != NULL, "bad test declaration %s", decl);
+	rc = mqtt_payload_typed(payload, (int)strlen(payload), d, v, why);
+	json_decref(d);
+	return rc;
+}
+
+START_TEST(untyped_payloads_read_as_their_text_says)
+{
+	struct vmac_value v;
+	const char *why;
+	ck_assert_int_eq(typed("ON", NULL, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_BOOL && v.number == 1, "ON is true for an undeclared name");
+	ck_assert_int_eq(typed(" 12.5 ", NULL, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_NUMBER && v.number == 12.5, "a number with blanks around it");
+	ck_assert_int_eq(typed("\"12\"", NULL, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_STRING && strcmp(v.str, "12") == 0, "a JSON string stays a string");
+	ck_assert_int_eq(typed("PRESS", NULL, &v, &why), 0);
+	ck_assert_int_eq(v.type, VMAC_VALUE_NONE);
+	ck_assert_int_eq(typed("{\"a\": 1}", NULL, &v, &why), -1);
+	ck_assert_msg(strstr(why, "JSON") != NULL, "why: %s", why);
+	ck_assert_int_eq(mqtt_payload_value("x", -1, &v, &why), -1);
+	ck_assert_msg(strstr(why, "256 bytes") != NULL, "why: %s", why);
+	ck_assert_int_eq(mqtt_payload_value("a\0b", 3, &v, &why), -1);
+	ck_assert_msg(strstr(why, "NUL") != NULL, "why: %s", why);
+}
+END_TEST
+
+START_TEST(a_select_or_text_gets_the_payload_as_a_string)
+{
+	static const char *const looks_like_other_things[] = {"1",     "on",   "true",  "OFF", "null",
+	                                                      "PRESS", "2.50", "\"q\"", "[x]"};
+	const char *select = "{\"default\": \"1\", \"values\": [\"1\", \"on\", \"true\"]}";
+	const char *text = "{\"default\": \"\"}";
+	struct vmac_value v;
+	const char *why;
+	size_t i;
+	for (i = 0; i < sizeof(looks_like_other_things) / sizeof(looks_like_other_things[0]); i++) {
+		const char *p = looks_like_other_things[i];
+		ck_assert_msg(typed(p, select, &v, &why) == 0 && v.type == VMAC_VALUE_STRING && strcmp(v.str, p) == 0,
+		              "select payload %s: type %d str %s (%s)", p, v.type, v.str, why);
+		ck_assert_msg(typed(p, text, &v, &why) == 0 && v.type == VMAC_VALUE_STRING && strcmp(v.str, p) == 0,
+		              "text payload %s: type %d str %s (%s)", p, v.type, v.str, why);
+	}
+	ck_assert_int_eq(typed("", text, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_NONE, "an empty payload is no value (set refuses it)");
+	ck_assert_int_eq(typed("a\tb", text, &v, &why), -1);
+	ck_assert_msg(strstr(why, "control") != NULL, "why: %s", why);
+	ck_assert_int_eq(typed("0123456789012345678901234567890123456789012345678901234567890123", text, &v, &why), -1);
+	ck_assert_msg(strstr(why, "63 bytes") != NULL, "why: %s", why);
+}
+END_TEST
+
+START_TEST(a_number_boolean_or_numeric_choice_gets_its_type)
+{
+	const char *num = "{\"default\": 5, \"min\": 0, \"max\": 10}";
+	const char *unit = "{\"unit\": \"degC\"}";
+	const char *flag = "{\"default\": false}";
+	const char *gear = "{\"default\": 1, \"values\": [1, 2, 3]}";
+	struct vmac_value v;
+	const char *why;
+	ck_assert_int_eq(typed("7", num, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_NUMBER && v.number == 7, "a number for a number");
+	ck_assert_int_eq(typed("on", num, &v, &why), -1);
+	ck_assert_msg(strcmp(why, "expected a number") == 0, "why: %s", why);
+	ck_assert_int_eq(typed("warm", unit, &v, &why), -1);
+	ck_assert_int_eq(typed("1e400", num, &v, &why), -1); /* not finite: never a number */
+	ck_assert_int_eq(typed("OFF", flag, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_BOOL && v.number == 0, "OFF for a boolean");
+	ck_assert_int_eq(typed("1", flag, &v, &why), -1);
+	ck_assert_msg(strcmp(why, "expected true/false/ON/OFF") == 0, "why: %s", why);
+	ck_assert_int_eq(typed("2", gear, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_NUMBER && v.number == 2, "the option \"2\" is the number 2");
+	ck_assert_int_eq(typed("fast", gear, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_STRING, "not a number: the driver refuses it as none of its values");
+	ck_assert_int_eq(typed("", num, &v, &why), 0);
+	ck_assert_msg(v.type == VMAC_VALUE_NONE, "empty: no value");
+}
+END_TEST
+
+/* ---- the site view ---- */
+
+static json_t *device_of(json_t *view, const char *host, const char *device)
+{
+	size_t i, k;
+	json_t *h, *d;
+	json_array_foreach(json_object_get(view, "hosts"), i,
+	                   h) if (strcmp(json_string_value(json_object_get(h, "host")), host) == 0)
+	    json_array_foreach(json_object_get(h, "devices"), k,
+	                       d) if (strcmp(json_string_value(json_object_get(d, "device")), device) == 0) return d;
+	return NULL;
+}
+
+static void feed(struct vmac_site *s, const char *topic, const char *payload)
+{
+	ck_assert_msg(vmac_site_feed(s, topic, payload, (int)strlen(payload)) == 1, "%s not taken as a site topic",
+	              topic);
+}
+
+START_TEST(site_view_reads_host_topics_and_none)
+{
+	struct vmac_site *s = vmac_site_new("vmac", "a");
+	json_t *view, *dev, *values;
+	feed(s, "vmac/b/status", "online");
+	feed(s, "vmac/b/washer-1/_availability", "online");
+	feed(s, "vmac/b/washer-1/error", "E42");            /* a variable named error is a value */
+	feed(s, "vmac/b/washer-1/availability", "no");      /* and so is one named availability */
+	feed(s, "vmac/b/washer-1/_error", "{\"code\": 1}"); /* a refusal: not a value */
+	feed(s, "vmac/b/washer-1/_health", "{}");           /* any other host topic: not a value either */
+	feed(s, "vmac/b/washer-1/temp_c", "21.5");
+	feed(s, "vmac/b/washer-1/gone", "here");
+	feed(s, "vmac/b/washer-1/gone", "None"); /* no value any more */
+	feed(s, "vmac/b/washer-1/never", "None");
+	view = vmac_site_json(s);
+	dev = device_of(view, "b", "washer-1");
+	ck_assert_msg(dev != NULL, "washer-1 of b in the view");
+	ck_assert_str_eq(json_string_value(json_object_get(dev, "state")), "online");
+	values = json_object_get(dev, "values");
+	ck_assert_str_eq(json_string_value(json_object_get(values, "error")), "E42");
+	ck_assert_str_eq(json_string_value(json_object_get(values, "availability")), "no");
+	ck_assert_msg(json_real_value(json_object_get(values, "temp_c")) == 21.5, "temp_c 21.5");
+	ck_assert_msg(!json_object_get(values, "gone") && !json_object_get(values, "never"), "None is no value: %s",
+	              json_dumps(values, 0));
+	ck_assert_msg(!json_object_get(values, "_error") && !json_object_get(values, "_health"),
+	              "host topics as values");
+	ck_assert_int_eq(json_object_size(values), 3);
+	ck_assert_int_eq(json_integer_value(json_object_get(view, "malformed")), 0);
+	json_decref(view);
+	feed(s, "vmac/b/washer-1/_availability", "maybe"); /* vmacd never says that */
+	view = vmac_site_json(s);
+	ck_assert_int_eq(json_integer_value(json_object_get(view, "malformed")), 1);
+	json_decref(view);
+	vmac_site_free(s);
+}
+END_TEST
+
+Suite *vmac_test_suite(void)
+{
+	Suite *s = suite_create("mqtt");
+	TCase *tc = tcase_create("payloads");
+	tcase_add_test(tc, value_text_says_unknown_as_home_assistant_reads_it);
+	tcase_add_test(tc, untyped_payloads_read_as_their_text_says);
+	tcase_add_test(tc, a_select_or_text_gets_the_payload_as_a_string);
+	tcase_add_test(tc, a_number_boolean_or_numeric_choice_gets_its_type);
+	tcase_add_test(tc, a_declared_precision_rounds_what_is_published);
+	suite_add_tcase(s, tc);
+	tc = tcase_create("site");
+	tcase_add_test(tc, site_view_reads_host_topics_and_none);
+	suite_add_tcase(s, tc);
+	return s;
+}
