@@ -5,7 +5,7 @@
  * and kept in STATE_DIR/sparkplug-bdseq). Payloads are sparkplug_b.proto
  * through protobuf-c. A DCMD is operator input through the bus's request
  * slots, with the checks and the refusals of the native profile
- * (mqtt_native.c: refusals on PREFIX/HOST/DEVICE/error); an NCMD "Node
+ * (mqtt_native.c: refusals on PREFIX/HOST/DEVICE/_error); an NCMD "Node
  * Control/Rebirth" brings the NBIRTH and every DBIRTH again. Publisher
  * thread, except where a function says otherwise. */
 #include "mqtt_internal.h"
@@ -549,7 +549,7 @@ static int metric_input(const Metric *mt, struct vmac_value *v, const char **why
 	}
 }
 
-/* A DCMD not carried out: the error answered on PREFIX/HOST/DEVICE/error
+/* A DCMD not carried out: the error answered on PREFIX/HOST/DEVICE/_error
  * (the native profile's), and an event in the host's log, as for an NCMD,
  * so that what the broker's clients asked and were refused is on record. */
 static void dcmd_refused(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,

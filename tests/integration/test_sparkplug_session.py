@@ -127,7 +127,7 @@ def test_sparkplug_lives_on_while_the_main_connection_is_down(t):
         proxy.unblock(MAIN_ID)
         sp.wait(PREFIX + "/status", lambda p: p == "online", since=back, raw=True, timeout_s=60,
                 what="the main connection back")
-        sp.wait(PREFIX + "/washer-1/availability", lambda p: p == "online", since=back, raw=True,
+        sp.wait(PREFIX + "/washer-1/_availability", lambda p: p == "online", since=back, raw=True,
                 what="the main connection's devices said again")
         # A DCMD after that: on the Sparkplug connection, anything the main
         # connection's return made it say comes before its DDATA.
