@@ -257,8 +257,7 @@ test: deps
 	@$(call timed,test-drivers)
 	@$(call timed,test-fuzz)
 	@$(call timed,test-integration asan-build test-soak,-j3)
-	@$(call timed,test-ui)
-	@$(call timed,test-asan,VMAC_SCHED_PROPERTY_RUNS=10000)
+	@$(call timed,test-ui test-asan,-j2 VMAC_SCHED_PROPERTY_RUNS=10000)
 	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \
