@@ -1,6 +1,7 @@
 /* The manifest (docs/DRIVERS.md "The manifest"): every field read and
  * checked, errors naming the field; its declarations as JSON for user
  * interfaces. Runs in the driver's protection at load. */
+#include "hints.h"
 #include "internal.h"
 
 #include <jansson.h>
@@ -625,6 +626,11 @@ int drv_describe(struct vmac_driver *d, char *err, size_t errlen)
 			json_object_set_new(o, fields[i], v);
 	}
 	lua_settop(L, first - 2);
+	/* Home Assistant's view: the hints checked, the unit's defaults added. */
+	if (o && !left.over && vmac_hints_apply(o, d->file, err, errlen) != 0) {
+		json_decref(o);
+		return -1;
+	}
 	d->describe = o && !left.over ? json_dumps(o, JSON_COMPACT) : NULL;
 	json_decref(o);
 	if (left.over) {
