@@ -102,12 +102,35 @@ static const struct sensor_class SENSOR_CLASSES[] = {
 static const char *const SENSOR_TEXT_CLASSES[] = {"date", "enum", "timestamp", NULL};
 
 /* homeassistant/components/binary_sensor/__init__.py, BinarySensorDeviceClass. */
-static const char *const BINARY_CLASSES[] = {
-    "battery", "battery_charging", "carbon_monoxide", "cold",     "connectivity", "door",    "garage_door",
-    "gas",     "heat",             "light",           "lock",     "moisture",     "motion",  "moving",
-    "occupancy", "opening",        "plug",            "power",    "presence",     "problem", "running",
-    "safety",  "smoke",            "sound",           "tamper",   "update",       "vibration", "window",
-    NULL};
+static const char *const BINARY_CLASSES[] = {"battery",
+                                             "battery_charging",
+                                             "carbon_monoxide",
+                                             "cold",
+                                             "connectivity",
+                                             "door",
+                                             "garage_door",
+                                             "gas",
+                                             "heat",
+                                             "light",
+                                             "lock",
+                                             "moisture",
+                                             "motion",
+                                             "moving",
+                                             "occupancy",
+                                             "opening",
+                                             "plug",
+                                             "power",
+                                             "presence",
+                                             "problem",
+                                             "running",
+                                             "safety",
+                                             "smoke",
+                                             "sound",
+                                             "tamper",
+                                             "update",
+                                             "vibration",
+                                             "window",
+                                             NULL};
 /* switch/__init__.py SwitchDeviceClass; button/__init__.py ButtonDeviceClass; event/__init__.py
  * EventDeviceClass. */
 static const char *const SWITCH_CLASSES[] = {"outlet", "switch", NULL};
@@ -120,13 +143,11 @@ static const struct unit_default {
 	const char *device_class; /* NULL: none (no HA class takes it) */
 	int precision;
 } UNIT_DEFAULTS[] = {
-    {"degC", "temperature", 1}, {"degF", "temperature", 1}, {"K", "temperature", 1},
-    {"l", "volume_storage", 1}, {"mL", "volume_storage", 0}, {"s", "duration", 0},
-    {"ms", "duration", 0},      {"min", "duration", 0},      {"h", "duration", 1},
-    {"W", "power", 0},          {"kW", "power", 2},          {"kWh", "energy", 2},
-    {"Wh", "energy", 0},        {"V", "voltage", 1},         {"A", "current", 2},
-    {"Hz", "frequency", 1},     {"bar", "pressure", 2},      {"kPa", "pressure", 1},
-    {"rpm", NULL, 0},
+    {"degC", "temperature", 1},  {"degF", "temperature", 1}, {"K", "temperature", 1}, {"l", "volume_storage", 1},
+    {"mL", "volume_storage", 0}, {"s", "duration", 0},       {"ms", "duration", 0},   {"min", "duration", 0},
+    {"h", "duration", 1},        {"W", "power", 0},          {"kW", "power", 2},      {"kWh", "energy", 2},
+    {"Wh", "energy", 0},         {"V", "voltage", 1},        {"A", "current", 2},     {"Hz", "frequency", 1},
+    {"bar", "pressure", 2},      {"kPa", "pressure", 1},     {"rpm", NULL, 0},
 };
 
 const char *vmac_hints_ha_unit(const char *unit)
@@ -259,7 +280,7 @@ static unsigned state_bit(const char *s)
 		int n_ = snprintf(err, errlen, "%s: manifest: %s.%s.", file, table, name);                             \
 		if (n_ > 0 && (size_t)n_ < errlen)                                                                     \
 			snprintf(err + n_, errlen - (size_t)n_, __VA_ARGS__);                                          \
-		return -1;                                                                                     \
+		return -1;                                                                                             \
 	} while (0)
 
 /* device_class of a declaration of kind kind, settable or not. */
@@ -302,8 +323,8 @@ static int check_device_class(json_t *decl, const char *dc, char kind, int setta
 }
 
 /* The hints of one declaration; defaults from its unit filled in. */
-static int check_decl(json_t *decl, int settable, const char *file, const char *table, const char *name,
-                      char *err, size_t errlen)
+static int check_decl(json_t *decl, int settable, const char *file, const char *table, const char *name, char *err,
+                      size_t errlen)
 {
 	json_t *v, *min = json_object_get(decl, "min"), *max = json_object_get(decl, "max");
 	const char *unit = json_string_value(json_object_get(decl, "unit"));

@@ -19,8 +19,8 @@
 
 #include "site.h"
 
-static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile, &mqtt_sparkplug_profile,
-                                                      &mqtt_site_profile};
+static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile, &mqtt_health_profile,
+                                                      &mqtt_sparkplug_profile, &mqtt_site_profile};
 #define NPROFILES (int)(sizeof(profiles) / sizeof(profiles[0]))
 
 double mqtt_now_s(void)

@@ -9,7 +9,13 @@
  * whose kind only its value tells (no default, no unit) and that had no
  * value yet is configured as a string, and configured again when a value
  * says it is a boolean or a number (device_up comes with the first status
- * copy that shows the machine running: before its driver's first tick). */
+ * copy that shows the machine running: before its driver's first tick).
+ * What HA accepts of each config (device classes, units, state classes,
+ * categories) is docs/MQTT.md's "Conformance: Home Assistant"; the
+ * driver's hints (core/driver/hints.c) are checked against it at load, and
+ * a class is put only on the platform that takes it. Beside the values,
+ * every machine has diagnostic sensors of its health and an event entity
+ * (mqtt_health.c publishes both), and so does the host. */
 #include "mqtt_internal.h"
 
 #include <ctype.h>
@@ -17,6 +23,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "../driver/hints.h"
 
 /* s with every character outside [A-Za-z0-9_-] made '_' (HA's ids). */
 static void ha_id(char *out, size_t outlen, const char *s)
@@ -27,16 +35,18 @@ static void ha_id(char *out, size_t outlen, const char *s)
 	out[i] = 0;
 }
 
-/* vmac's units in HA's spelling (HA compares units of a device class). */
+/* vmacd's version (the API's VMAC_VERSION_STRING, core/api/http_internal.h). */
+#define VMAC_HA_SW_VERSION "0.1.0"
+
 static const char *ha_unit(const char *unit)
 {
-	if (strcmp(unit, "degC") == 0)
-		return "°C";
-	if (strcmp(unit, "degF") == 0)
-		return "°F";
-	if (strcmp(unit, "l") == 0)
-		return "L";
-	return unit;
+	return vmac_hints_ha_unit(unit);
+}
+
+/* Who made the configs, for HA's logs (discovery.py, MQTT_ORIGIN_INFO_SCHEMA). */
+static json_t *origin(void)
+{
+	return json_pack("{s:s, s:s}", "name", "vmac", "sw_version", VMAC_HA_SW_VERSION);
 }
 
 struct ha {
@@ -53,13 +63,39 @@ static json_t *entity(struct ha *h, const char *name, json_t *decl)
 {
 	char uid[240], topic[400], host_status[300];
 	const char *label = json_string_value(json_object_get(decl, "label"));
+	const char *category = json_string_value(json_object_get(decl, "entity_category"));
+	json_t *e;
 	snprintf(uid, sizeof(uid), "%s_%s", h->dev_id, name);
 	snprintf(topic, sizeof(topic), "%s/_availability", h->topic_base);
 	snprintf(host_status, sizeof(host_status), "%s/%s/status", h->s->prefix, h->s->host_id);
 	/* Available only while both the host and the machine say online. */
-	return json_pack("{s:s, s:s, s:[{s:s}, {s:s}], s:s, s:O}", "name", label ? label : name, "unique_id", uid,
-	                 "availability", "topic", host_status, "topic", topic, "availability_mode", "all", "device",
-	                 h->device_obj);
+	e = json_pack("{s:s, s:s, s:[{s:s}, {s:s}], s:s, s:O, s:o}", "name", label ? label : name, "unique_id", uid,
+	              "availability", "topic", host_status, "topic", topic, "availability_mode", "all", "device",
+	              h->device_obj, "origin", origin());
+	if (e && category && strcmp(category, "diagnostic") == 0)
+		json_object_set_new(e, "entity_category", json_string("diagnostic"));
+	if (e && json_is_false(json_object_get(decl, "enabled_by_default")))
+		json_object_set_new(e, "enabled_by_default", json_false());
+	return e;
+}
+
+/* The declaration's device_class, where component takes it with its unit. */
+static void device_class(json_t *e, json_t *decl, const char *component)
+{
+	const char *dc = json_string_value(json_object_get(decl, "device_class"));
+	if (dc && vmac_hints_fits(component, dc, json_string_value(json_object_get(decl, "unit"))))
+		json_object_set_new(e, "device_class", json_string(dc));
+}
+
+/* Whether values is a non-empty array of strings (HA's options). */
+static int string_options(json_t *values)
+{
+	size_t i;
+	json_t *v;
+	if (!json_is_array(values) || json_array_size(values) == 0)
+		return 0;
+	json_array_foreach(values, i, v) if (!json_is_string(v)) return 0;
+	return 1;
 }
 
 static void add(struct ha *h, const char *component, const char *name, json_t *config)
@@ -77,14 +113,9 @@ static void add(struct ha *h, const char *component, const char *name, json_t *c
  * yet), configured as a string. */
 static char kind_of(json_t *decl, const struct vmac_value *now)
 {
-	json_t *def = json_object_get(decl, "default");
-	if (json_object_get(decl, "values") || json_is_string(def))
-		return 's';
-	if (json_is_boolean(def))
-		return 'b';
-	if (json_is_number(def) || json_object_get(decl, "min") || json_object_get(decl, "max") ||
-	    json_object_get(decl, "unit"))
-		return 'n';
+	char kind = vmac_hints_kind(decl);
+	if (kind != '?')
+		return kind;
 	if (now && now->type == VMAC_VALUE_BOOL)
 		return 'b';
 	if (now && now->type == VMAC_VALUE_STRING)
@@ -98,10 +129,13 @@ static int whole(json_t *v)
 	return !v || (json_is_number(v) && floor(x) == x);
 }
 
-/* A read-only view: sensor (with its unit) or binary_sensor. */
+/* A read-only view: sensor (with its unit, class and precision; an enum
+ * when its values are strings) or binary_sensor. A "config" category is
+ * left out: HA refuses it on a sensor (SensorEntity's
+ * async_internal_added_to_hass). */
 static void add_reader(struct ha *h, const char *name, json_t *decl, char kind)
 {
-	json_t *e = entity(h, name, decl);
+	json_t *e = entity(h, name, decl), *values = json_object_get(decl, "values"), *v;
 	const char *unit = json_string_value(json_object_get(decl, "unit"));
 	char state[400];
 	snprintf(state, sizeof(state), "%s/%s", h->topic_base, name);
@@ -109,14 +143,25 @@ static void add_reader(struct ha *h, const char *name, json_t *decl, char kind)
 	if (kind == 'b') {
 		json_object_set_new(e, "payload_on", json_string("true"));
 		json_object_set_new(e, "payload_off", json_string("false"));
+		device_class(e, decl, "binary_sensor");
 		add(h, "binary_sensor", name, e);
 		return;
 	}
-	if (unit) {
-		json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
-		json_object_set_new(e, "state_class", json_string("measurement"));
-		if (strcmp(unit, "degC") == 0 || strcmp(unit, "degF") == 0)
-			json_object_set_new(e, "device_class", json_string("temperature"));
+	if (kind == 's' && string_options(values)) {
+		json_object_set_new(e, "device_class", json_string("enum"));
+		json_object_set(e, "options", values);
+	} else if (kind == 'n') {
+		const char *dc = json_string_value(json_object_get(decl, "device_class"));
+		if (unit)
+			json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
+		device_class(e, decl, "sensor");
+		if ((v = json_object_get(decl, "state_class")) != NULL && (!dc || json_object_get(e, "device_class")))
+			json_object_set(e, "state_class", v);
+		if (json_is_number(v = json_object_get(decl, "precision")))
+			json_object_set_new(e, "suggested_display_precision",
+			                    json_integer((json_int_t)json_number_value(v)));
+	} else if (kind == 's') {
+		device_class(e, decl, "sensor"); /* timestamp, date */
 	}
 	add(h, "sensor", name, e);
 }
@@ -156,10 +201,14 @@ static void add_writer(struct ha *h, const char *name, json_t *decl, char kind, 
 	json_object_set_new(e, "state_topic", json_string(t));
 	snprintf(t, sizeof(t), "%s/set/%s", h->topic_base, name);
 	json_object_set_new(e, "command_topic", json_string(t));
-	if (config)
+	/* The declaration's category wins; else a param is a setting. */
+	if (json_is_string(json_object_get(decl, "entity_category")))
+		json_object_set(e, "entity_category", json_object_get(decl, "entity_category"));
+	else if (config)
 		json_object_set_new(e, "entity_category", json_string("config"));
 	if (kind == 'b') {
 		component = "switch";
+		device_class(e, decl, component);
 		json_object_set_new(e, "payload_on", json_string("true"));
 		json_object_set_new(e, "payload_off", json_string("false"));
 		json_object_set_new(e, "state_on", json_string("true"));
@@ -178,7 +227,8 @@ static void add_writer(struct ha *h, const char *name, json_t *decl, char kind, 
 		json_object_set_new(e, "mode", json_string("box"));
 		if (unit)
 			json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
-	} else if (json_is_array(values)) {
+		device_class(e, decl, component);
+	} else if (string_options(values)) {
 		component = "select";
 		json_object_set_new(e, "options", option_texts(values));
 	} else {
@@ -228,6 +278,63 @@ static int same_components(const char *a, const char *b)
 	return *a == *b;
 }
 
+/* A diagnostic sensor reading one field of a JSON health topic. */
+static json_t *health_sensor(json_t *common, const char *uid, const char *label, const char *state_topic,
+                             const char *field, const char *unit, const char *dc, const char *state_class, int enabled)
+{
+	char tpl[120];
+	json_t *e = json_deep_copy(common);
+	snprintf(tpl, sizeof(tpl), "{{ value_json.%s }}", field);
+	json_object_set_new(e, "name", json_string(label));
+	json_object_set_new(e, "unique_id", json_string(uid));
+	json_object_set_new(e, "state_topic", json_string(state_topic));
+	json_object_set_new(e, "value_template", json_string(tpl));
+	json_object_set_new(e, "entity_category", json_string("diagnostic"));
+	json_object_set_new(e, "state_class", json_string(state_class));
+	if (unit)
+		json_object_set_new(e, "unit_of_measurement", json_string(unit));
+	if (dc)
+		json_object_set_new(e, "device_class", json_string(dc));
+	if (!enabled)
+		json_object_set_new(e, "enabled_by_default", json_false());
+	return e;
+}
+
+/* The machine's health (PREFIX/HOST/DEVICE/_health, mqtt_health.c) as
+ * diagnostic sensors, and its events (_event) as an event entity that
+ * only the host's status makes unavailable, so that a drop is seen. */
+static void add_health(struct ha *h, json_t *manifest)
+{
+	static const struct {
+		const char *field, *label, *unit, *dc, *state_class;
+		int enabled;
+	} fields[] = {
+	    {"misses", "Misses", NULL, NULL, "total_increasing", 1},
+	    {"driver_late", "Late ticks", NULL, NULL, "total_increasing", 0},
+	    {"driver_memory_kb", "Driver memory", "kB", "data_size", "measurement", 0},
+	};
+	char state[400], uid[300], host_status[300], object[64];
+	json_t *common = entity(h, "_health", json_object()), *e, *types;
+	size_t i;
+	snprintf(state, sizeof(state), "%s/_health", h->topic_base);
+	for (i = 0; common && i < sizeof(fields) / sizeof(fields[0]); i++) {
+		snprintf(uid, sizeof(uid), "%s__health_%s", h->dev_id, fields[i].field);
+		snprintf(object, sizeof(object), "_health_%s", fields[i].field);
+		add(h, "sensor", object,
+		    health_sensor(common, uid, fields[i].label, state, fields[i].field, fields[i].unit, fields[i].dc,
+		                  fields[i].state_class, fields[i].enabled));
+	}
+	json_decref(common);
+	snprintf(uid, sizeof(uid), "%s__event", h->dev_id);
+	snprintf(state, sizeof(state), "%s/_event", h->topic_base);
+	snprintf(host_status, sizeof(host_status), "%s/%s/status", h->s->prefix, h->s->host_id);
+	types = mqtt_health_event_types(manifest);
+	e = json_pack("{s:s, s:s, s:s, s:o, s:[{s:s}], s:O, s:o}", "name", "Events", "unique_id", uid, "state_topic",
+	              state, "event_types", types, "availability", "topic", host_status, "device", h->device_obj,
+	              "origin", origin());
+	add(h, "event", "_event", e);
+}
+
 json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
                         json_t *manifest, const struct vmac_device_status *st)
 {
@@ -274,31 +381,64 @@ json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, 
 			json_object_set_new(e, "payload_press", json_string("PRESS"));
 			add(&h, "button", name, e);
 		}
+	add_health(&h, manifest);
 	json_decref(h.device_obj);
 	return h.out;
 }
 
-/* The host itself: a device with one entity, its connection. */
-static void publish_host(struct vmac_mqtt *m)
+/* A config out, retained (o is taken). */
+static void publish_config(struct vmac_mqtt *m, const char *topic, json_t *o)
 {
-	char host_id[80], topic[512], uid[120], state[300], name[100], via[100];
-	json_t *o;
-	char *body;
-	ha_id(host_id, sizeof(host_id), m->s.host_id);
-	snprintf(topic, sizeof(topic), "%s/binary_sensor/%s/status/config", m->s.discovery_prefix, host_id);
-	snprintf(uid, sizeof(uid), "vmac_%s_status", host_id);
-	snprintf(state, sizeof(state), "%s/%s/status", m->s.prefix, m->s.host_id);
-	snprintf(name, sizeof(name), "vmac %s", m->s.host_id);
-	snprintf(via, sizeof(via), "vmac_%s", host_id);
-	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:s, s:{s:[s], s:s, s:s, s:s}}", "name", "Connected", "unique_id", uid,
-	              "state_topic", state, "payload_on", "online", "payload_off", "offline", "device_class",
-	              "connectivity", "device", "identifiers", via, "name", name, "model", "vmacd", "manufacturer",
-	              "vmac");
-	body = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	char *body = o ? json_dumps(o, JSON_COMPACT) : NULL;
 	if (body)
 		mqtt_publish(m, topic, body, -1, 1, 1);
 	free(body);
 	json_decref(o);
+}
+
+/* The host itself: a device with its connection and its health
+ * (PREFIX/HOST/_health, mqtt_health.c), all diagnostic. */
+static void publish_host(struct vmac_mqtt *m)
+{
+	static const struct {
+		const char *field, *label, *unit, *dc, *state_class;
+		int enabled;
+	} fields[] = {
+	    {"misses", "Misses", NULL, NULL, "total_increasing", 1},
+	    {"drops", "Drops", NULL, NULL, "total_increasing", 1},
+	    {"malformed_frames", "Malformed frames", NULL, NULL, "total_increasing", 0},
+	    {"lateness_p99_ms", "Lateness (99th percentile)", "ms", "duration", "measurement", 1},
+	    {"lateness_max_ms", "Lateness (most)", "ms", "duration", "measurement", 0},
+	};
+	char host_id[80], topic[512], uid[160], state[300], name[100], via[100], host_status[300];
+	json_t *o, *device;
+	size_t i;
+	ha_id(host_id, sizeof(host_id), m->s.host_id);
+	snprintf(uid, sizeof(uid), "vmac_%s_status", host_id);
+	snprintf(state, sizeof(state), "%s/%s/status", m->s.prefix, m->s.host_id);
+	snprintf(name, sizeof(name), "vmac %s", m->s.host_id);
+	snprintf(via, sizeof(via), "vmac_%s", host_id);
+	device = json_pack("{s:[s], s:s, s:s, s:s, s:s}", "identifiers", via, "name", name, "model", "vmacd",
+	                   "manufacturer", "vmac", "sw_version", VMAC_HA_SW_VERSION);
+	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:s, s:s, s:O, s:o}", "name", "Connected", "unique_id", uid,
+	              "state_topic", state, "payload_on", "online", "payload_off", "offline", "device_class",
+	              "connectivity", "entity_category", "diagnostic", "device", device, "origin", origin());
+	snprintf(topic, sizeof(topic), "%s/binary_sensor/%s/status/config", m->s.discovery_prefix, host_id);
+	publish_config(m, topic, o);
+	snprintf(state, sizeof(state), "%s/%s/_health", m->s.prefix, m->s.host_id);
+	snprintf(host_status, sizeof(host_status), "%s/%s/status", m->s.prefix, m->s.host_id);
+	o = json_pack("{s:[{s:s}], s:O, s:o}", "availability", "topic", host_status, "device", device, "origin",
+	              origin());
+	for (i = 0; o && i < sizeof(fields) / sizeof(fields[0]); i++) {
+		snprintf(uid, sizeof(uid), "vmac_%s__health_%s", host_id, fields[i].field);
+		snprintf(topic, sizeof(topic), "%s/sensor/%s/_health_%s/config", m->s.discovery_prefix, host_id,
+		         fields[i].field);
+		publish_config(m, topic,
+		               health_sensor(o, uid, fields[i].label, state, fields[i].field, fields[i].unit,
+		                             fields[i].dc, fields[i].state_class, fields[i].enabled));
+	}
+	json_decref(o);
+	json_decref(device);
 }
 
 static void free_configs(struct mqtt_device *d)

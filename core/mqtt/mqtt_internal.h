@@ -7,6 +7,7 @@
  *   mqtt_native.c    profile "vmac": the host's and devices' availability, state topics, the command
  *                    topics into the bus's request slots, errors published back
  *   mqtt_ha.c        profile "ha": Home Assistant discovery configs from each driver's manifest
+ *   mqtt_health.c    profile "health": each machine's and the host's health (_health) and events (_event)
  *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
  *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
  *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
@@ -140,7 +141,8 @@ struct mqtt_profile {
 	void (*stopping)(struct vmac_mqtt *m);
 };
 
-extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile, mqtt_site_profile;
+extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile, mqtt_site_profile,
+    mqtt_health_profile;
 
 /* Sparkplug's session (mqtt_sparkplug.c). Before every CONNECT the
  * network thread registers the NDEATH with bdseq_next as the will, makes it
@@ -253,6 +255,10 @@ json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, 
 /* Disconnect c (after what is queued) and connect again, with the
  * reconnect's backoff from 1 s; said by the caller. Publisher thread. */
 void mqtt_conn_redial(struct mqtt_conn *c);
+
+/* mqtt_health.c: the event types a machine of this manifest publishes on
+ * PREFIX/HOST/DEVICE/_event (a new JSON array of strings). */
+json_t *mqtt_health_event_types(json_t *manifest);
 
 /* mqtt_sparkplug.c: the NDEATH payload with bdSeq (malloc'd, *len its size;
  * NULL when out of memory), for the will of a connection. Any thread. */

@@ -30,8 +30,8 @@ static int apply(const char *table, const char *decl_json, json_t **out, char *e
 static void refused(const char *table, const char *decl, const char *want)
 {
 	char err[400] = "";
-	ck_assert_msg(apply(table, decl, NULL, err, sizeof(err)) == -1, "%s %s was accepted (wanted '%s')", table,
-	              decl, want);
+	ck_assert_msg(apply(table, decl, NULL, err, sizeof(err)) == -1, "%s %s was accepted (wanted '%s')", table, decl,
+	              want);
 	ck_assert_msg(strstr(err, want) != NULL, "error '%s' does not say '%s'", err, want);
 }
 
@@ -48,8 +48,9 @@ START_TEST(what_home_assistant_refuses_names_the_field)
 	refused("params", "{\"default\": 5, \"unit\": \"l\", \"device_class\": \"temperature\"}",
 	        "t.lua: manifest: params.x.device_class: \"temperature\" does not take unit \"l\" (HA accepts °C, °F, "
 	        "K)");
-	refused("variables", "{\"unit\": \"s\", \"device_class\": \"duration\", \"state_class\": \"total\", "
-	                     "\"precision\": 7}",
+	refused("variables",
+	        "{\"unit\": \"s\", \"device_class\": \"duration\", \"state_class\": \"total\", "
+	        "\"precision\": 7}",
 	        "variables.x.precision must be a whole number 0..6");
 	refused("variables", "{\"unit\": \"kWh\", \"device_class\": \"energy\", \"state_class\": \"measurement\"}",
 	        "variables.x.state_class: device class \"energy\" does not take \"measurement\" (HA accepts total, "
@@ -138,7 +139,8 @@ START_TEST(a_load_checks_hints_and_describes_defaults)
 	f = fopen(path, "w");
 	ck_assert(f != NULL);
 	fputs("return { name = 't', version = '1', io = {}, tick = function() end,\n"
-	      "  params = { door_level_l = { default = 5, min = 0, max = 40, unit = 'l', device_class = 'temperature' } } }\n",
+	      "  params = { door_level_l = { default = 5, min = 0, max = 40, unit = 'l', device_class = 'temperature' "
+	      "} } }\n",
 	      f);
 	fclose(f);
 	ck_assert_int_ne(vmac_driver_load(path, &limits, &d, err, sizeof(err)), 0);
@@ -153,9 +155,8 @@ START_TEST(a_load_checks_hints_and_describes_defaults)
 	fclose(f);
 	ck_assert_msg(vmac_driver_load(path, &limits, &d, err, sizeof(err)) == 0, "load failed: %s", err);
 	desc = json_loads(vmac_driver_describe(d), 0, NULL);
-	ck_assert_str_eq(json_string_value(json_object_get(json_object_get(json_object_get(desc, "variables"),
-	                                                                    "temp_c"),
-	                                                    "device_class")),
+	ck_assert_str_eq(json_string_value(json_object_get(
+	                     json_object_get(json_object_get(desc, "variables"), "temp_c"), "device_class")),
 	                 "temperature");
 	json_decref(desc);
 	vmac_driver_free(d);

@@ -1,0 +1,289 @@
+"""Home Assistant's MQTT discovery as HA reads it (docs/MQTT.md,
+"Conformance: Home Assistant"): every config the demo kitchen publishes,
+and every retained value its sensors read, judged by a checker written from
+HA's schemas and entity checks, one function per platform, each rule named
+as the matrix names it (C1.., S1.., N1..) with the HA source it comes from.
+A config that breaks a rule fails with the config's topic and the rule.
+Beside them: the health topics the diagnostic sensors read, and the
+washer's event entity saying a programme started and that it was dropped.
+Real Mosquitto as in test_mqtt.py; SKIPPED without it or paho-mqtt."""
+
+import json
+import re
+import signal
+
+import test_mqtt as base
+from harness import KITCHEN_NAMES, undisturbed
+
+DISCOVERY, PREFIX, HOST_ID = base.DISCOVERY, base.PREFIX, base.HOST_ID
+
+# homeassistant/components/sensor/const.py: DEVICE_CLASS_UNITS (None = no
+# unit; "any" = no entry, any unit) and DEVICE_CLASS_STATE_CLASSES.
+M, T, I = "measurement", "total", "total_increasing"
+ALL = {M, T, I}
+ENERGY = "J kJ MJ GJ mWh Wh kWh MWh GWh TWh cal kcal Mcal Gcal".split()
+PRESSURE = "Pa kPa hPa mPa bar cbar mbar mmHg inHg inH₂O psi".split()
+SPEED = "Beaufort ft/s in/s km/h kn m/s mph mm/s".split()
+FLUX = "in/d in/h mm/d mm/h".split()
+VOLUME = ["L", "mL", "m³", "ft³", "CCF", "MCF", "gal", "fl. oz."]
+UG = ["µg/m³"]
+SENSOR = {
+    "apparent_power": (["VA", "mVA", "kVA"], {M}), "aqi": ([None], {M}),
+    "area": ("m² cm² km² mm² in² ft² yd² mi² ac ha".split(), ALL), "atmospheric_pressure": (PRESSURE, {M}),
+    "battery": (["%"], {M}), "blood_glucose_concentration": (["mg/dL", "mmol/L"], {M}),
+    "carbon_monoxide": (["ppm"], {M}), "carbon_dioxide": (["ppm"], {M}),
+    "conductivity": (["S/cm", "mS/cm", "µS/cm"], {M}), "current": (["A", "mA"], {M}),
+    "data_rate": ("bit/s kbit/s Mbit/s Gbit/s B/s kB/s MB/s GB/s KiB/s MiB/s GiB/s".split(), {M}),
+    "data_size": ("bit kbit Mbit Gbit B kB MB GB TB PB EB ZB YB KiB MiB GiB TiB PiB EiB ZiB YiB".split(), ALL),
+    "distance": ("mm cm m km in ft yd mi nmi".split(), ALL), "duration": (["d", "h", "min", "s", "ms"], ALL),
+    "energy": (ENERGY, {T, I}), "energy_distance": (["kWh/100km", "mi/kWh", "km/kWh"], {M}),
+    "energy_storage": (ENERGY, {M}), "frequency": (["Hz", "kHz", "MHz", "GHz"], {M}),
+    "gas": (["m³", "ft³", "CCF"], {T, I}), "humidity": (["%"], {M}), "illuminance": (["lx"], {M}),
+    "irradiance": (["W/m²", "BTU/(h⋅ft²)"], {M}), "moisture": (["%"], {M}), "monetary": ("any", {T}),
+    "nitrogen_dioxide": (UG, {M}), "nitrogen_monoxide": (UG, {M}), "nitrous_oxide": (UG, {M}), "ozone": (UG, {M}),
+    "ph": ([None], {M}), "pm1": (UG, {M}), "pm10": (UG, {M}), "pm25": (UG, {M}), "power_factor": (["%", None], {M}),
+    "power": (["W", "kW", "MW", "GW", "TW"], {M}), "precipitation": (["cm", "in", "mm"], ALL),
+    "precipitation_intensity": (FLUX, {M}), "pressure": (PRESSURE, {M}), "reactive_power": (["var"], {M}),
+    "signal_strength": (["dB", "dBm"], {M}), "sound_pressure": (["dB", "dBA"], {M}), "speed": (SPEED + FLUX, {M}),
+    "sulphur_dioxide": (UG, {M}), "temperature": (["°C", "°F", "K"], {M}),
+    "temperature_delta": (["°C", "°F", "K"], {M}), "volatile_organic_compounds": (UG, {M}),
+    "volatile_organic_compounds_parts": (["ppm", "ppb"], {M}), "voltage": (["V", "mV", "µV", "kV", "MV"], {M}),
+    "volume": (VOLUME, {T, I}), "volume_flow_rate": ("m³/h ft³/min L/min gal/min mL/s L/h L/s m³/s".split(), {M}),
+    "volume_storage": (VOLUME, {M}), "water": (["m³", "ft³", "CCF", "gal", "L"], {T, I}),
+    "weight": ("kg g mg µg oz lb st".split(), ALL), "wind_direction": (["°"], set()), "wind_speed": (SPEED, {M}),
+}
+SENSOR_TEXT = {"date", "enum", "timestamp"}  # NON_NUMERIC_DEVICE_CLASSES
+BINARY = set("battery battery_charging carbon_monoxide cold connectivity door garage_door gas heat light lock "
+             "moisture motion moving occupancy opening plug power presence problem running safety smoke sound "
+             "tamper update vibration window".split())
+SWITCH, BUTTON, EVENT = {"outlet", "switch"}, {"identify", "restart", "update"}, {"doorbell", "button", "motion"}
+
+# Keys each platform's DISCOVERY_SCHEMA knows (others are dropped silently:
+# extra=vol.REMOVE_EXTRA), the common ones from schemas.py.
+COMMON = {"name", "unique_id", "availability", "availability_mode", "availability_topic", "device", "origin",
+          "entity_category", "enabled_by_default", "icon", "json_attributes_topic", "json_attributes_template",
+          "object_id", "default_entity_id", "qos", "encoding", "payload_available", "payload_not_available"}
+KEYS = {
+    "sensor": {"state_topic", "value_template", "device_class", "state_class", "unit_of_measurement",
+               "suggested_display_precision", "expire_after", "force_update", "options",
+               "last_reset_value_template"},
+    "binary_sensor": {"state_topic", "value_template", "device_class", "payload_on", "payload_off",
+                      "expire_after", "force_update", "off_delay"},
+    "switch": {"state_topic", "command_topic", "value_template", "device_class", "payload_on", "payload_off",
+               "state_on", "state_off", "optimistic", "retain", "command_template"},
+    "number": {"state_topic", "command_topic", "value_template", "command_template", "device_class", "min", "max",
+               "step", "mode", "unit_of_measurement", "payload_reset", "optimistic", "retain"},
+    "select": {"state_topic", "command_topic", "value_template", "command_template", "options", "optimistic",
+               "retain"},
+    "text": {"state_topic", "command_topic", "value_template", "command_template", "min", "max", "mode",
+             "pattern", "optimistic", "retain"},
+    "button": {"command_topic", "command_template", "payload_press", "device_class", "retain"},
+    "event": {"state_topic", "value_template", "device_class", "event_types"},
+}
+
+TOPIC_MATCHER = re.compile(r"^%s/(\w+)/(?:([a-zA-Z0-9_-]+)/)?([a-zA-Z0-9_-]+)/config$" % DISCOVERY)
+
+
+def rule(ok, topic, code, text):
+    if not ok:
+        raise AssertionError("%s: rule %s: %s" % (topic, code, text))
+
+
+def check_common(topic, component, cfg):
+    rule(TOPIC_MATCHER.match(topic) is not None, topic, "C1", "discovery.py TOPIC_MATCHER: bad config topic")
+    unknown = set(cfg) - COMMON - KEYS[component]
+    rule(not unknown, topic, "C2", "keys %s are not in %s's DISCOVERY_SCHEMA (dropped)" % (sorted(unknown), component))
+    rule(isinstance(cfg.get("unique_id"), str), topic, "C3", "unique_id a string")
+    dev = cfg.get("device", {})
+    rule(isinstance(dev.get("identifiers"), list) and dev["identifiers"] and
+         all(isinstance(i, str) for i in dev["identifiers"]), topic, "C4",
+         "schemas.py validate_device_has_at_least_one_identifier")
+    origin = cfg.get("origin")
+    rule(isinstance(origin, dict) and isinstance(origin.get("name"), str), topic, "C5",
+         "schemas.py MQTT_ORIGIN_INFO_SCHEMA: origin with a name (discovery.py logs it)")
+    rule(cfg.get("entity_category") in (None, "config", "diagnostic"), topic, "C6", "ENTITY_CATEGORIES_SCHEMA")
+    rule(isinstance(cfg.get("enabled_by_default", True), bool), topic, "C7", "enabled_by_default a boolean")
+    for a in cfg.get("availability", []):
+        rule(isinstance(a.get("topic"), str) and "#" not in a["topic"] and "+" not in a["topic"], topic, "C8",
+             "MQTT_AVAILABILITY_SCHEMA: availability topics valid publish topics")
+    rule(cfg.get("availability_mode", "latest") in ("all", "any", "latest"), topic, "C8", "availability_mode")
+
+
+def check_sensor(topic, cfg, value):
+    dc, sc, unit = cfg.get("device_class"), cfg.get("state_class"), cfg.get("unit_of_measurement")
+    rule(dc is None or dc in SENSOR or dc in SENSOR_TEXT, topic, "S1", "device_class %r not a SensorDeviceClass" % dc)
+    rule(sc in (None, M, T, I), topic, "S2", "state_class %r not a SensorStateClass" % sc)
+    if dc in SENSOR and SENSOR[dc][0] != "any":
+        rule(unit in SENSOR[dc][0], topic, "S3", "sensor/__init__.py state: unit %r not valid for %s (%s)"
+             % (unit, dc, SENSOR[dc][0]))
+    if dc in SENSOR and sc:
+        rule(sc in SENSOR[dc][1], topic, "S4", "state_class %r impossible for device class %s" % (sc, dc))
+    if dc in SENSOR_TEXT:
+        rule(not unit and not sc, topic, "S5", "a non-numeric device class takes no unit nor state class")
+    if "options" in cfg:
+        rule(dc == "enum" and cfg["options"] and not sc and not unit and
+             all(isinstance(o, str) for o in cfg["options"]), topic, "S6",
+             "sensor.py validate_sensor_state_and_device_class_config: options only on enum, non-empty")
+    rule(cfg.get("entity_category") != "config", topic, "S7",
+         "SensorEntity.async_internal_added_to_hass: category config refused")
+    p = cfg.get("suggested_display_precision")
+    rule(p is None or (isinstance(p, int) and p >= 0), topic, "S8", "suggested_display_precision cv.positive_int")
+    if value not in (None, "", "None") and "value_template" not in cfg:
+        numeric = dc not in SENSOR_TEXT and (sc or unit or p is not None or dc is not None)
+        if numeric:
+            try:
+                float(value)
+            except ValueError:
+                rule(False, topic, "S9", "a numeric sensor got the non-numeric value %r" % value)
+        if dc == "enum":
+            rule(value in cfg["options"], topic, "S9", "value %r not among the options" % value)
+
+
+def check_binary_sensor(topic, cfg, value):
+    dc = cfg.get("device_class")
+    rule(dc is None or dc in BINARY, topic, "B1", "device_class %r not a BinarySensorDeviceClass" % dc)
+    rule(isinstance(cfg.get("state_topic"), str), topic, "B2", "state_topic required (MQTT_RO_SCHEMA)")
+    if value not in (None, "", "None"):
+        rule(value in (cfg.get("payload_on", "ON"), cfg.get("payload_off", "OFF")), topic, "B3",
+             "binary_sensor.py: payload %r is neither payload_on nor payload_off" % value)
+
+
+def check_switch(topic, cfg, value):
+    rule(cfg.get("device_class") in (None,) + tuple(SWITCH), topic, "W1", "device_class not a SwitchDeviceClass")
+    rule(isinstance(cfg.get("command_topic"), str), topic, "W2", "command_topic required (MQTT_RW_SCHEMA)")
+
+
+def check_number(topic, cfg, value):
+    lo, hi, step = cfg.get("min", 1), cfg.get("max", 100), cfg.get("step", 1)
+    rule(lo < hi, topic, "N1", "number.py validate_config: max must be > min")
+    rule(step >= 1e-3, topic, "N2", "number.py: step vol.Range(min=1e-3)")
+    dc = cfg.get("device_class")
+    rule(dc is None or dc in SENSOR, topic, "N3", "device_class %r not a NumberDeviceClass" % dc)
+    if dc in SENSOR and SENSOR[dc][0] != "any":
+        rule(cfg.get("unit_of_measurement") in SENSOR[dc][0], topic, "N3", "unit not valid for %s" % dc)
+    rule(cfg.get("mode", "auto") in ("auto", "box", "slider"), topic, "N4", "NumberMode")
+    rule(isinstance(cfg.get("command_topic"), str), topic, "N5", "command_topic required")
+    if value not in (None, "", "None"):
+        rule(lo <= float(value) <= hi, topic, "N6", "value %r out of min..max" % value)
+
+
+def check_select(topic, cfg, value):
+    opts = cfg.get("options")
+    rule(isinstance(opts, list) and opts and all(isinstance(o, str) for o in opts), topic, "L1",
+         "select.py: options a non-empty list of strings")
+    rule(isinstance(cfg.get("command_topic"), str), topic, "L2", "command_topic required")
+    if value not in (None, "", "None"):
+        rule(value in opts, topic, "L3", "select.py: value %r not among the options" % value)
+
+
+def check_text(topic, cfg, value):
+    rule(0 <= cfg.get("min", 0) < cfg.get("max", 255) <= 255, topic, "X1",
+         "text.py valid_text_size_configuration: 0 <= min < max <= 255")
+    rule(isinstance(cfg.get("command_topic"), str), topic, "X2", "command_topic required")
+
+
+def check_button(topic, cfg, value):
+    rule(cfg.get("device_class") in (None,) + tuple(BUTTON), topic, "U1", "device_class not a ButtonDeviceClass")
+    rule(isinstance(cfg.get("command_topic"), str), topic, "U2", "command_topic required")
+
+
+def check_event(topic, cfg, value):
+    types = cfg.get("event_types")
+    rule(isinstance(types, list) and types and all(isinstance(x, str) for x in types), topic, "E1",
+         "event.py: event_types required, a list of strings")
+    rule(isinstance(cfg.get("state_topic"), str), topic, "E2", "state_topic required (MQTT_RO_SCHEMA)")
+    rule(cfg.get("device_class") in (None,) + tuple(EVENT), topic, "E3", "device_class not an EventDeviceClass")
+
+
+CHECKERS = {"sensor": check_sensor, "binary_sensor": check_binary_sensor, "switch": check_switch,
+            "number": check_number, "select": check_select, "text": check_text, "button": check_button,
+            "event": check_event}
+
+
+def check_config(topic, cfg, value=None):
+    """Every rule of the matrix for one config (and the retained value its
+    state topic holds, if any): AssertionError naming topic and rule."""
+    m = TOPIC_MATCHER.match(topic)
+    component = m.group(1) if m else "?"
+    rule(component in CHECKERS, topic, "C0", "vmac publishes no %s" % component)
+    check_common(topic, component, cfg)
+    CHECKERS[component](topic, cfg, value)
+
+
+def check_all(hub):
+    with hub.cond:
+        latest = dict(hub.latest)
+    configs = {tp: json.loads(p) for tp, (p, _) in latest.items() if tp.startswith(DISCOVERY + "/") and p}
+    uids = [c.get("unique_id") for c in configs.values()]
+    dup = {u for u in uids if uids.count(u) > 1}
+    rule(not dup, "(all configs)", "C3", "unique_id used twice: %s" % sorted(dup))
+    for tp, cfg in sorted(configs.items()):
+        value = latest.get(cfg.get("state_topic"), (None,))[0]
+        check_config(tp, cfg, value)
+    return configs
+
+
+def test_mqtt_ha_checker_names_the_config_and_the_rule(t):
+    """The checker itself: a config HA would warn about fails by rule."""
+    good = {"name": "T", "unique_id": "u", "state_topic": "s", "device": {"identifiers": ["d"]},
+            "origin": {"name": "vmac"}, "unit_of_measurement": "L", "device_class": "temperature"}
+    topic = DISCOVERY + "/sensor/n/o/config"
+    for cfg, code in ((good, "S3"), (dict(good, device_class="volume_storage", state_class="total"), "S4"),
+                      (dict(good, device_class="enum", options=[1]), "S5"),
+                      (dict(good, device_class=None, entity_category="config"), "S7"),
+                      (dict(good, device_class=None, origin=None), "C5")):
+        try:
+            check_config(topic, cfg)
+        except AssertionError as e:
+            assert topic in str(e) and ("rule %s" % code) in str(e), "wanted rule %s: %s" % (code, e)
+        else:
+            raise AssertionError("the checker passed a config breaking rule %s: %s" % (code, cfg))
+    check_config(topic, dict(good, device_class="volume_storage", state_class="measurement"), "12.5")
+
+
+def test_mqtt_ha_kitchen_configs_follow_home_assistant(t):
+    broker = base.Broker(t)
+    host = base.mqtt_host(t, broker)
+    t.kitchen(host)
+    hub = base.Hub(broker)
+    try:
+        for name in KITCHEN_NAMES:
+            hub.wait("%s/%s/_health" % (PREFIX, name), what="%s's health" % name)
+        hub.config("event", "washer-1", "_event")
+        temp = hub.config("sensor", "washer-1", "temp_c")
+        assert (temp["device_class"], temp["state_class"], temp["suggested_display_precision"]) == (
+            "temperature", "measurement", 1), temp
+        hub.wait(PREFIX + "/washer-1/temp_c", what="a temperature")
+        health = json.loads(hub.wait(PREFIX + "/_health", what="the host's health"))
+        assert {"misses", "drops", "lateness_p99_ms"} <= set(health), health
+        host_cfg = json.loads(hub.wait("%s/binary_sensor/%s/status/config" % (DISCOVERY, HOST_ID)))
+        assert host_cfg["entity_category"] == "diagnostic" and host_cfg["origin"]["name"] == "vmac", host_cfg
+        configs = check_all(hub)
+        assert len(configs) > 40, "only %d configs: %s" % (len(configs), sorted(configs))
+        undisturbed(KITCHEN_NAMES)(host.last)
+    finally:
+        hub.close()
+
+
+def test_mqtt_ha_events_say_a_start_and_a_drop(t):
+    broker = base.Broker(t)
+    host = base.mqtt_host(t, broker, extra={"miss_limit": 1})
+    boards = t.kitchen(host)
+    hub = base.Hub(broker)
+    try:
+        events = PREFIX + "/washer-1/_event"
+        cfg = hub.config("event", "washer-1", "_event")
+        assert "programme_started" in cfg["event_types"] and "dropped" in cfg["event_types"], cfg
+        hub.wait(PREFIX + "/washer-1/state", what="the washer's state")
+        since = hub.mark()
+        hub.publish(PREFIX + "/washer-1/cmd/start", "quick")
+        got = json.loads(hub.wait(events, lambda p: "programme_started" in p, since=since, what="a start event"))
+        assert got == {"event_type": "programme_started"}, got
+        since = hub.mark()
+        boards["washer-1"].signal(signal.SIGSTOP)
+        try:
+            hub.wait(events, lambda p: "dropped" in p, since=since, what="a drop event")
+        finally:
+            boards["washer-1"].signal(signal.SIGCONT)
+    finally:
+        hub.close()
