@@ -24,11 +24,13 @@
  * A programme's start, end, cancel and error are read from the stdlib
  * appliance's published variables (stdlib/appliance.lua publish():
  * "state", the cycle's state, and "error"), the only place a driver says
- * them; a driver declaring both variables is taken to be an appliance:
+ * them (the cycle's states, stdlib/cycle.lua: idle, running, paused,
+ * cancelling, done, failed, cancelled); a driver declaring both variables
+ * is taken to be an appliance:
  *   state becomes "running" from anything but "paused" -> programme_started
  *   state becomes "done"                                -> programme_finished
- *   state becomes "cancelling"                          -> programme_cancelled
- *   error becomes a non-empty text                      -> programme_error
+ *   state becomes "cancelled"                           -> programme_cancelled
+ *   state becomes "failed" (the error variable says why) -> programme_error
  * The first value after a machine comes up says no event (it is where the
  * programme was, not a change). Every machine has "dropped": it stopped
  * running while the host did not stop (its availability says offline). */
@@ -45,8 +47,8 @@
 /* What was said of one machine (by name) on this publisher thread. */
 struct seen {
 	char name[VMAC_NAME_MAX + 1];
-	int up;               /* device_up seen, device_down not since */
-	int have_state;       /* state holds the value before this one */
+	int up;         /* device_up seen, device_down not since */
+	int have_state; /* state holds the value before this one */
 	char state[MQTT_TEXT_MAX];
 	char health[200];     /* the _health text published last */
 	double next_health_s; /* monotonic: not before this */
@@ -129,10 +131,11 @@ static void device_health_out(struct vmac_mqtt *m, struct seen *s, const struct 
 	double now = mqtt_now_s();
 	if (!force && now < s->next_health_s)
 		return;
-	snprintf(text, sizeof(text),
-	         "{\"misses\":%llu,\"misses_host\":%llu,\"served\":%llu,\"driver_late\":%llu,\"driver_memory_kb\":%.1f}",
-	         (unsigned long long)st->misses, (unsigned long long)st->misses_host, (unsigned long long)st->served,
-	         (unsigned long long)st->driver_late, (double)st->driver_memory / 1024.0);
+	snprintf(
+	    text, sizeof(text),
+	    "{\"misses\":%llu,\"misses_host\":%llu,\"served\":%llu,\"driver_late\":%llu,\"driver_memory_kb\":%.1f}",
+	    (unsigned long long)st->misses, (unsigned long long)st->misses_host, (unsigned long long)st->served,
+	    (unsigned long long)st->driver_late, (double)st->driver_memory / 1024.0);
 	if (!force && strcmp(text, s->health) == 0)
 		return;
 	mqtt_topic(m, topic, sizeof(topic), "%s/_health", s->name);
@@ -176,8 +179,10 @@ static const char *state_event(const char *before, const char *now)
 		return "programme_started";
 	if (strcmp(now, "done") == 0 && strcmp(before, "done") != 0)
 		return "programme_finished";
-	if (strcmp(now, "cancelling") == 0 && strcmp(before, "cancelling") != 0)
+	if (strcmp(now, "cancelled") == 0 && strcmp(before, "cancelled") != 0)
 		return "programme_cancelled";
+	if (strcmp(now, "failed") == 0 && strcmp(before, "failed") != 0)
+		return "programme_error";
 	return NULL;
 }
 
@@ -190,15 +195,12 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 		return;
 	for (i = 0; appliance && i < n; i++) {
 		const char *event = NULL;
-		if (strcmp(changed[i]->name, "state") == 0) {
-			if (s->have_state)
-				event = state_event(s->state, changed[i]->text);
-			snprintf(s->state, sizeof(s->state), "%s", changed[i]->text);
-			s->have_state = 1;
-		} else if (strcmp(changed[i]->name, "error") == 0 && s->have_state && changed[i]->text[0] &&
-		           strcmp(changed[i]->text, "None") != 0) {
-			event = "programme_error";
-		}
+		if (strcmp(changed[i]->name, "state") != 0)
+			continue;
+		if (s->have_state)
+			event = state_event(s->state, changed[i]->text);
+		snprintf(s->state, sizeof(s->state), "%s", changed[i]->text);
+		s->have_state = 1;
 		if (event)
 			publish_event(m, d->name, event);
 	}
