@@ -87,14 +87,15 @@ static void device_class(json_t *e, json_t *decl, const char *component)
 		json_object_set_new(e, "device_class", json_string(dc));
 }
 
-/* Whether values is a non-empty array of strings (HA's options). */
+/* Whether values can be HA's options: a non-empty array of strings,
+ * numbers or booleans (option_texts makes them the texts published). */
 static int string_options(json_t *values)
 {
 	size_t i;
 	json_t *v;
 	if (!json_is_array(values) || json_array_size(values) == 0)
 		return 0;
-	json_array_foreach(values, i, v) if (!json_is_string(v)) return 0;
+	json_array_foreach(values, i, v) if (!json_is_string(v) && !json_is_number(v) && !json_is_boolean(v)) return 0;
 	return 1;
 }
 
@@ -129,43 +130,6 @@ static int whole(json_t *v)
 	return !v || (json_is_number(v) && floor(x) == x);
 }
 
-/* A read-only view: sensor (with its unit, class and precision; an enum
- * when its values are strings) or binary_sensor. A "config" category is
- * left out: HA refuses it on a sensor (SensorEntity's
- * async_internal_added_to_hass). */
-static void add_reader(struct ha *h, const char *name, json_t *decl, char kind)
-{
-	json_t *e = entity(h, name, decl), *values = json_object_get(decl, "values"), *v;
-	const char *unit = json_string_value(json_object_get(decl, "unit"));
-	char state[400];
-	snprintf(state, sizeof(state), "%s/%s", h->topic_base, name);
-	json_object_set_new(e, "state_topic", json_string(state));
-	if (kind == 'b') {
-		json_object_set_new(e, "payload_on", json_string("true"));
-		json_object_set_new(e, "payload_off", json_string("false"));
-		device_class(e, decl, "binary_sensor");
-		add(h, "binary_sensor", name, e);
-		return;
-	}
-	if (kind == 's' && string_options(values)) {
-		json_object_set_new(e, "device_class", json_string("enum"));
-		json_object_set(e, "options", values);
-	} else if (kind == 'n') {
-		const char *dc = json_string_value(json_object_get(decl, "device_class"));
-		if (unit)
-			json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
-		device_class(e, decl, "sensor");
-		if ((v = json_object_get(decl, "state_class")) != NULL && (!dc || json_object_get(e, "device_class")))
-			json_object_set(e, "state_class", v);
-		if (json_is_number(v = json_object_get(decl, "precision")))
-			json_object_set_new(e, "suggested_display_precision",
-			                    json_integer((json_int_t)json_number_value(v)));
-	} else if (kind == 's') {
-		device_class(e, decl, "sensor"); /* timestamp, date */
-	}
-	add(h, "sensor", name, e);
-}
-
 /* A select's options as the texts its state topic carries (HA compares the
  * state with them as strings): a number as mqtt_value_text writes it (2, not
  * 2.0), a boolean true/false. */
@@ -188,6 +152,43 @@ static json_t *option_texts(json_t *values)
 		json_array_append_new(out, json_string(text));
 	}
 	return out;
+}
+
+/* A read-only view: sensor (with its unit, class and precision; an enum
+ * when its values are strings) or binary_sensor. A "config" category is
+ * left out: HA refuses it on a sensor (SensorEntity's
+ * async_internal_added_to_hass). */
+static void add_reader(struct ha *h, const char *name, json_t *decl, char kind)
+{
+	json_t *e = entity(h, name, decl), *values = json_object_get(decl, "values"), *v;
+	const char *unit = json_string_value(json_object_get(decl, "unit"));
+	char state[400];
+	snprintf(state, sizeof(state), "%s/%s", h->topic_base, name);
+	json_object_set_new(e, "state_topic", json_string(state));
+	if (kind == 'b') {
+		json_object_set_new(e, "payload_on", json_string("true"));
+		json_object_set_new(e, "payload_off", json_string("false"));
+		device_class(e, decl, "binary_sensor");
+		add(h, "binary_sensor", name, e);
+		return;
+	}
+	if (kind == 's' && string_options(values)) {
+		json_object_set_new(e, "device_class", json_string("enum"));
+		json_object_set_new(e, "options", option_texts(values));
+	} else if (kind == 'n') {
+		const char *dc = json_string_value(json_object_get(decl, "device_class"));
+		if (unit)
+			json_object_set_new(e, "unit_of_measurement", json_string(ha_unit(unit)));
+		device_class(e, decl, "sensor");
+		if ((v = json_object_get(decl, "state_class")) != NULL && (!dc || json_object_get(e, "device_class")))
+			json_object_set(e, "state_class", v);
+		if (json_is_number(v = json_object_get(decl, "precision")))
+			json_object_set_new(e, "suggested_display_precision",
+			                    json_integer((json_int_t)json_number_value(v)));
+	} else if (kind == 's') {
+		device_class(e, decl, "sensor"); /* timestamp, date */
+	}
+	add(h, "sensor", name, e);
 }
 
 /* A settable value: switch, number, select or text. */

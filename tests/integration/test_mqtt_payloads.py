@@ -30,7 +30,7 @@ local driver = {
 		ratio = { unit = "%", label = "Ratio" },
 		seen = { label = "Seen" },
 		temp_c = { unit = "degC", precision = 1, label = "Temperature" },
-		raw_c = { unit = "degC", label = "Temperature, every digit" },
+		raw_c = { label = "Temperature, every digit" }, -- no unit: a unit brings a default precision (DRIVERS.md)
 	},
 }
 local ticks = 0
