@@ -11,7 +11,7 @@
 #include <microhttpd.h>
 #include <stdatomic.h>
 
-#define VMAC_VERSION_STRING "0.1.0"
+#include "../common/version.h"
 
 #define STATUS_EVENTS 20
 

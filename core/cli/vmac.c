@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "../common/paths.h"
+#include "../common/version.h"
 #include "../vtest/vtest.h"
 #include "board.h"
 #include "client.h"
@@ -356,7 +357,7 @@ static const struct vmac_cmd vmac = {
 int main(int argc, char **argv)
 {
 	if (argc >= 2 && strcmp(argv[1], "--version") == 0) {
-		printf("vmac 0.1.0\n");
+		printf("vmac %s\n", VMAC_VERSION_STRING);
 		return 0;
 	}
 	if (argc >= 2 && strcmp(argv[1], "help") == 0) {

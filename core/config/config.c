@@ -70,6 +70,7 @@ static const struct key keys[] = {
     {B(cyclic)},
     {S(bus_trust)},
     {S(mqtt_url)},
+    {S(ui_url)},
     {S(mqtt_client_id)},
     {S(mqtt_host_id)},
     {S(mqtt_user)},

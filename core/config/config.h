@@ -57,11 +57,12 @@ struct vmac_config {
 	int cyclic;                  /* serve version-2 boards with the cyclic frame (else unicast UPDATEs) */
 	char bus_trust[16];          /* "enrolled": only boards whose key the store holds; "open": any board too */
 	/* MQTT (docs/MQTT.md; checked by core/mqtt/mqtt_settings.c): off while mqtt_url is "". */
-	char mqtt_url[256];                     /* mqtt://HOST:PORT or mqtts://HOST:PORT */
-	char mqtt_client_id[128];               /* "" = vmac-HOSTNAME */
-	char mqtt_host_id[64];                  /* this host in topics; "" = the host name */
-	char mqtt_user[128];                    /* "" = no user name */
-	char mqtt_password[256];                /* never printed */
+	char mqtt_url[256];       /* mqtt://HOST:PORT or mqtts://HOST:PORT */
+	char ui_url[200];         /* the web UI as a browser elsewhere reaches it ("": from http and the host name) */
+	char mqtt_client_id[128]; /* "" = vmac-HOSTNAME */
+	char mqtt_host_id[64];    /* this host in topics; "" = the host name */
+	char mqtt_user[128];      /* "" = no user name */
+	char mqtt_password[256];  /* never printed */
 	char mqtt_password_file[VMAC_PATH_MAX]; /* the password, its first line */
 	char mqtt_cafile[VMAC_PATH_MAX];        /* mqtts: the CA (PEM); "" = the system's */
 	char mqtt_certfile[VMAC_PATH_MAX];      /* mqtts: a client certificate (PEM), with mqtt_keyfile */

@@ -33,6 +33,7 @@ struct vmac_mqtt_settings {
 	int commands;  /* subscribe to the command topics */
 	int sparkplug; /* also a Sparkplug B Edge Node, on a connection of its own */
 	char sparkplug_group[VMAC_MQTT_TOPIC_MAX];
+	char ui_url[256];                /* the web UI's address for Home Assistant's configuration_url */
 	char sparkplug_primary_host[64]; /* "": none; else births wait for spBv1.0/STATE/ID online */
 	unsigned keepalive_s;
 };

@@ -269,6 +269,22 @@ void mqtt_profiles_values(struct vmac_mqtt *m, struct mqtt_device *d, const stru
 			profiles[p]->values(m, d, st, changed, n);
 }
 
+void mqtt_profiles_tick(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	int p;
+	for (p = 0; p < NPROFILES; p++)
+		if (profiles[p]->conn == d->conn && profiles[p]->tick)
+			profiles[p]->tick(m, d, st);
+}
+
+void mqtt_profiles_poll(struct vmac_mqtt *m)
+{
+	int p;
+	for (p = 0; p < NPROFILES; p++)
+		if (profiles[p]->poll && mqtt_conn_is_up(&m->conns[profiles[p]->conn]))
+			profiles[p]->poll(m);
+}
+
 void mqtt_profiles_stopping(struct vmac_mqtt *m)
 {
 	int p;
@@ -300,6 +316,7 @@ static void *publisher(void *arg)
 		handle_messages(m);
 		if (now >= next_poll) {
 			mqtt_devices_poll(m);
+			mqtt_profiles_poll(m);
 			next_poll += MQTT_POLL_MS / 1000.0;
 			if (next_poll < now)
 				next_poll = now + MQTT_POLL_MS / 1000.0;

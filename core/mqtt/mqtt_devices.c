@@ -169,6 +169,8 @@ static void poll_conn(struct vmac_mqtt *m, struct mqtt_conn *c)
 			go_up(m, d, st); /* new, back, or a hot reload */
 		else
 			publish_values(m, d, st, 0);
+		if (d->online)
+			mqtt_profiles_tick(m, d, st);
 	}
 	for (i = 0; i < c->ndevices; i++) {
 		struct mqtt_device *d = &c->devices[i];

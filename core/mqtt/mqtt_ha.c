@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../common/version.h"
 #include "../driver/hints.h"
 
 /* s with every character outside [A-Za-z0-9_-] made '_' (HA's ids). */
@@ -35,9 +36,6 @@ static void ha_id(char *out, size_t outlen, const char *s)
 	out[i] = 0;
 }
 
-/* vmacd's version (the API's VMAC_VERSION_STRING, core/api/http_internal.h). */
-#define VMAC_HA_SW_VERSION "0.1.0"
-
 static const char *ha_unit(const char *unit)
 {
 	return vmac_hints_ha_unit(unit);
@@ -46,7 +44,7 @@ static const char *ha_unit(const char *unit)
 /* Who made the configs, for HA's logs (discovery.py, MQTT_ORIGIN_INFO_SCHEMA). */
 static json_t *origin(void)
 {
-	return json_pack("{s:s, s:s}", "name", "vmac", "sw_version", VMAC_HA_SW_VERSION);
+	return json_pack("{s:s, s:s}", "name", "vmac", "sw_version", VMAC_VERSION_STRING);
 }
 
 struct ha {
@@ -292,6 +290,9 @@ static json_t *health_sensor(json_t *common, const char *uid, const char *label,
 	json_object_set_new(e, "value_template", json_string(tpl));
 	json_object_set_new(e, "entity_category", json_string("diagnostic"));
 	json_object_set_new(e, "state_class", json_string(state_class));
+	/* A heartbeat comes every MQTT_HEALTH_HEARTBEAT_S: none for this long
+	 * (the publisher stopped, the connection lives on) shows unknown. */
+	json_object_set_new(e, "expire_after", json_integer(MQTT_HEALTH_EXPIRE_S));
 	if (unit)
 		json_object_set_new(e, "unit_of_measurement", json_string(unit));
 	if (dc)
@@ -356,6 +357,11 @@ json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, 
 	snprintf(via, sizeof(via), "vmac_%s", host_id);
 	h.device_obj = json_pack("{s:[s], s:s, s:s, s:s, s:s, s:s}", "identifiers", h.dev_id, "name", device, "model",
 	                         model, "manufacturer", "vmac", "sw_version", version, "via_device", via);
+	if (h.device_obj && s->ui_url[0]) { /* HA's "Visit": the web UI's machines */
+		char url[sizeof(s->ui_url) + 16];
+		snprintf(url, sizeof(url), "%s#devices", s->ui_url);
+		json_object_set_new(h.device_obj, "configuration_url", json_string(url));
+	}
 	json_object_foreach(json_object_get(manifest, "variables"), name, decl)
 	{
 		char kind = kind_of(decl, mqtt_status_value(st, name));
@@ -420,7 +426,9 @@ static void publish_host(struct vmac_mqtt *m)
 	snprintf(name, sizeof(name), "vmac %s", m->s.host_id);
 	snprintf(via, sizeof(via), "vmac_%s", host_id);
 	device = json_pack("{s:[s], s:s, s:s, s:s, s:s}", "identifiers", via, "name", name, "model", "vmacd",
-	                   "manufacturer", "vmac", "sw_version", VMAC_HA_SW_VERSION);
+	                   "manufacturer", "vmac", "sw_version", VMAC_VERSION_STRING);
+	if (device && m->s.ui_url[0])
+		json_object_set_new(device, "configuration_url", json_string(m->s.ui_url));
 	o = json_pack("{s:s, s:s, s:s, s:s, s:s, s:s, s:s, s:O, s:o}", "name", "Connected", "unique_id", uid,
 	              "state_topic", state, "payload_on", "online", "payload_off", "offline", "device_class",
 	              "connectivity", "entity_category", "diagnostic", "device", device, "origin", origin());

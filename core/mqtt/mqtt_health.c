@@ -12,12 +12,12 @@
  *       event platform reads it (event.py), T one of
  *       mqtt_health_event_types
  *
- * Health goes out when it changed, at most every HEALTH_PERIOD_S per topic,
- * and at once when a machine comes up; it is looked at whenever the
- * publisher hands a profile a machine's changed values (every status copy
- * that changed one) or a machine going up or down. A machine whose values
- * never change does not bring its health out again: a profile has no hook
- * that runs on every status copy (docs/MQTT.md says so).
+ * Health is looked at on every status copy (the tick and poll hooks). It
+ * goes out when it changed, at most every HEALTH_PERIOD_S per topic, at
+ * once when a machine comes up, and every HEALTH_HEARTBEAT_S when it did
+ * not change: a heartbeat, so that Home Assistant's expire_after
+ * (HEALTH_EXPIRE_S, mqtt_ha.c) shows a host whose publisher stopped while
+ * its connection lives on as unknown.
  *
  * EVENTS
  *
@@ -43,41 +43,7 @@
 #include "../common/hist.h"
 
 #define HEALTH_PERIOD_S 10.0
-
-/* What was said of one machine (by name) on this publisher thread. */
-struct seen {
-	char name[VMAC_NAME_MAX + 1];
-	int up;         /* device_up seen, device_down not since */
-	int have_state; /* state holds the value before this one */
-	char state[MQTT_TEXT_MAX];
-	char health[200];     /* the _health text published last */
-	double next_health_s; /* monotonic: not before this */
-};
-
-/* The publisher thread's own: one MQTT client per process (vmacd's). */
-static struct seen *seen;
-static int nseen, seen_cap;
-static char host_health[300];
-static double next_host_health_s;
-
-static struct seen *seen_of(const char *name)
-{
-	int i;
-	for (i = 0; i < nseen; i++)
-		if (strcmp(seen[i].name, name) == 0)
-			return &seen[i];
-	if (nseen == seen_cap) {
-		int cap = seen_cap ? seen_cap * 2 : 16;
-		struct seen *more = realloc(seen, (size_t)cap * sizeof(*seen));
-		if (!more)
-			return NULL;
-		seen = more;
-		seen_cap = cap;
-	}
-	memset(&seen[nseen], 0, sizeof(seen[0]));
-	snprintf(seen[nseen].name, sizeof(seen[0].name), "%s", name);
-	return &seen[nseen++];
-}
+#define HEALTH_HEARTBEAT_S ((double)MQTT_HEALTH_HEARTBEAT_S)
 
 static int is_appliance(json_t *manifest)
 {
@@ -101,13 +67,14 @@ static void publish_event(struct vmac_mqtt *m, const char *device, const char *t
 	mqtt_publish(m, topic, body, -1, 1, 0);
 }
 
-/* The bus's health, if it changed and its period is over (force: now). */
+/* The bus's health, if it changed (or its heartbeat is due) and its
+ * period is over (force: now). */
 static void host_health_out(struct vmac_mqtt *m, int force)
 {
 	const struct vmac_status *st = &m->status;
-	char text[sizeof(host_health)], topic[300];
+	char text[sizeof(m->host_health)], topic[300];
 	double now = mqtt_now_s();
-	if (!force && now < next_host_health_s)
+	if (!force && now < m->host_health_next_s)
 		return;
 	snprintf(text, sizeof(text),
 	         "{\"misses\":%llu,\"drops\":%llu,\"malformed_frames\":%llu,\"lateness_p99_ms\":%.3f,"
@@ -116,32 +83,35 @@ static void host_health_out(struct vmac_mqtt *m, int force)
 	         (unsigned long long)st->counters.malformed_frames,
 	         (double)vmac_hist_quantile(&st->lateness, 0.99) / 1000.0, (double)st->lateness.max_us / 1000.0,
 	         st->ndevices);
-	if (!force && strcmp(text, host_health) == 0)
+	if (!force && strcmp(text, m->host_health) == 0 && now < m->host_health_sent_s + HEALTH_HEARTBEAT_S)
 		return;
 	mqtt_topic(m, topic, sizeof(topic), "_health");
 	if (mqtt_publish(m, topic, text, -1, 1, 1) == 0) {
-		memcpy(host_health, text, sizeof(text));
-		next_host_health_s = now + HEALTH_PERIOD_S;
+		memcpy(m->host_health, text, sizeof(text));
+		m->host_health_sent_s = now;
+		m->host_health_next_s = now + HEALTH_PERIOD_S;
 	}
 }
 
-static void device_health_out(struct vmac_mqtt *m, struct seen *s, const struct vmac_device_status *st, int force)
+static void device_health_out(struct vmac_mqtt *m, struct mqtt_device *s, const struct vmac_device_status *st,
+                              int force)
 {
 	char text[sizeof(s->health)], topic[300];
 	double now = mqtt_now_s();
-	if (!force && now < s->next_health_s)
+	if (!force && now < s->health_next_s)
 		return;
 	snprintf(
 	    text, sizeof(text),
 	    "{\"misses\":%llu,\"misses_host\":%llu,\"served\":%llu,\"driver_late\":%llu,\"driver_memory_kb\":%.1f}",
 	    (unsigned long long)st->misses, (unsigned long long)st->misses_host, (unsigned long long)st->served,
 	    (unsigned long long)st->driver_late, (double)st->driver_memory / 1024.0);
-	if (!force && strcmp(text, s->health) == 0)
+	if (!force && strcmp(text, s->health) == 0 && now < s->health_sent_s + HEALTH_HEARTBEAT_S)
 		return;
 	mqtt_topic(m, topic, sizeof(topic), "%s/_health", s->name);
 	if (mqtt_publish(m, topic, text, -1, 1, 1) == 0) {
 		memcpy(s->health, text, sizeof(text));
-		s->next_health_s = now + HEALTH_PERIOD_S;
+		s->health_sent_s = now;
+		s->health_next_s = now + HEALTH_PERIOD_S;
 	}
 }
 
@@ -152,24 +122,18 @@ static void connected(struct vmac_mqtt *m)
 
 static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
 {
-	struct seen *s = seen_of(d->name);
-	if (!s)
-		return;
-	s->up = 1;
-	s->have_state = 0; /* the first state is where it is, not a change */
-	device_health_out(m, s, st, 1);
-	host_health_out(m, 0);
+	d->have_state = 0; /* the first state is where it is, not a change */
+	d->told_up = 1;
+	device_health_out(m, d, st, 1);
 }
 
+/* A machine that stops running: "dropped", once (after a reconnect the
+ * machines that are not up are said down again). */
 static void device_down(struct vmac_mqtt *m, struct mqtt_device *d)
 {
-	struct seen *s = seen_of(d->name);
-	if (!s || !s->up)
-		return;
-	s->up = 0;
-	if (!atomic_load(&m->stopping))
+	if (d->told_up && !atomic_load(&m->stopping))
 		publish_event(m, d->name, "dropped");
-	host_health_out(m, 0);
+	d->told_up = 0;
 }
 
 /* The event a change of the appliance's state says, or NULL. */
@@ -189,32 +153,29 @@ static const char *state_event(const char *before, const char *now)
 static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
                    struct mqtt_value *const *changed, int n)
 {
-	struct seen *s = seen_of(d->name);
 	int i, appliance = is_appliance(d->manifest);
-	if (!s)
-		return;
+	(void)st;
 	for (i = 0; appliance && i < n; i++) {
 		const char *event = NULL;
 		if (strcmp(changed[i]->name, "state") != 0)
 			continue;
-		if (s->have_state)
-			event = state_event(s->state, changed[i]->text);
-		snprintf(s->state, sizeof(s->state), "%s", changed[i]->text);
-		s->have_state = 1;
+		if (d->have_state)
+			event = state_event(d->state, changed[i]->text);
+		snprintf(d->state, sizeof(d->state), "%s", changed[i]->text);
+		d->have_state = 1;
 		if (event)
 			publish_event(m, d->name, event);
 	}
-	device_health_out(m, s, st, 0);
-	host_health_out(m, 0);
 }
 
-static void stopping(struct vmac_mqtt *m)
+static void tick(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
 {
-	(void)m;
-	free(seen);
-	seen = NULL;
-	nseen = seen_cap = 0;
-	host_health[0] = 0;
+	device_health_out(m, d, st, 0);
+}
+
+static void poll(struct vmac_mqtt *m)
+{
+	host_health_out(m, 0);
 }
 
 const struct mqtt_profile mqtt_health_profile = {
@@ -224,5 +185,6 @@ const struct mqtt_profile mqtt_health_profile = {
     .device_up = device_up,
     .device_down = device_down,
     .values = values,
-    .stopping = stopping,
+    .tick = tick,
+    .poll = poll,
 };

@@ -31,8 +31,10 @@
 #define MQTT_PAYLOAD_MAX 1024      /* a received payload; longer is kept as len -1 and refused */
 #define MQTT_TEXT_PAYLOAD_MAX 256  /* a command's text payload (mqtt_native.c); longer is refused */
 #define MQTT_VALUES (VMAC_DRIVER_MAX_VARS + VMAC_DRIVER_MAX_PARAMS)
-#define MQTT_TEXT_MAX 96         /* a value as text */
-#define MQTT_PAYLOAD_NONE "None" /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
+#define MQTT_TEXT_MAX 96           /* a value as text */
+#define MQTT_HEALTH_HEARTBEAT_S 60 /* _health goes out at least this often (mqtt_health.c) */
+#define MQTT_HEALTH_EXPIRE_S 150   /* HA's expire_after of the health sensors (mqtt_ha.c) */
+#define MQTT_PAYLOAD_NONE "None"   /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
 
 /* A value as published: its text, and when a variable with update =
  * "timer:N" may be published next. */
@@ -72,6 +74,13 @@ struct mqtt_device {
 	int spb_born;
 	struct mqtt_spb_metric *spb_metrics;
 	int nspb_metrics;
+	/* health: the appliance's state before this one (its events), the
+	 * _health text published last, when, and when it may go out again. */
+	int told_up; /* device_up said, device_down not since: a drop is an event once */
+	int have_state;
+	char state[MQTT_TEXT_MAX];
+	char health[200];
+	double health_sent_s, health_next_s;
 	struct mqtt_value values[MQTT_VALUES];
 	int nvalues;
 };
@@ -135,6 +144,11 @@ struct mqtt_profile {
 	 * status copy (st): a group's variables come together. */
 	void (*values)(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
 	               struct mqtt_value *const *changed, int n);
+	/* After every read of the status copy, for every machine up on its
+	 * connection (st its status now): what is due by time, not by change. */
+	void (*tick)(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st);
+	/* After every read of the status copy while its connection is up. */
+	void (*poll)(struct vmac_mqtt *m);
 	/* A message on a subscribed topic: 1 handled, 0 not this profile's. */
 	int (*message)(struct vmac_mqtt *m, const struct mqtt_message *msg);
 	/* The host stopping in order: last words (the will covers a crash). */
@@ -179,6 +193,8 @@ struct vmac_mqtt {
 	/* The publisher thread's own. */
 	struct vmac_status status;
 	unsigned long skipped_rounds; /* values held back: too much waiting to be written */
+	char host_health[300];        /* health (mqtt_health.c): the host's _health published last, when */
+	double host_health_sent_s, host_health_next_s;
 	struct mqtt_spb spb;
 	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
 };
@@ -204,6 +220,8 @@ void mqtt_profiles_device_down(struct vmac_mqtt *m, struct mqtt_device *d);
 void mqtt_profiles_values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st,
                           struct mqtt_value *const *changed, int n);
 void mqtt_profiles_stopping(struct vmac_mqtt *m);
+void mqtt_profiles_tick(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st);
+void mqtt_profiles_poll(struct vmac_mqtt *m);
 
 /* mqtt_devices.c */
 void mqtt_devices_poll(struct vmac_mqtt *m); /* read the status copy, tell every connection's profiles */

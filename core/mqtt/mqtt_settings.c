@@ -121,6 +121,40 @@ static int read_password(const char *path, struct vmac_mqtt_settings *s, char *e
 	return 0;
 }
 
+/* The web UI's address as a browser on another machine reaches it:
+ * ui_url, else http(s)://ADDR:PORT/ from the http setting (the machine's
+ * host name when it listens on every address); none for port 0. 0, or -1
+ * with err. */
+static int ui_url(const struct vmac_config *cfg, const char *hostname, struct vmac_mqtt_settings *s, char *err,
+                  size_t errlen)
+{
+	const char *colon = strrchr(cfg->http, ':');
+	size_t i;
+	if (cfg->ui_url[0]) {
+		if (strncmp(cfg->ui_url, "http://", 7) != 0 && strncmp(cfg->ui_url, "https://", 8) != 0) {
+			snprintf(err, errlen, "ui_url '%s': expected http://HOST[:PORT]/... or https://...",
+			         cfg->ui_url);
+			return -EINVAL;
+		}
+		for (i = 0; cfg->ui_url[i]; i++)
+			if ((unsigned char)cfg->ui_url[i] <= 0x20 || cfg->ui_url[i] == 0x7f || cfg->ui_url[i] == '"') {
+				snprintf(err, errlen, "ui_url '%s': no spaces, quotes or control characters",
+				         cfg->ui_url);
+				return -EINVAL;
+			}
+		snprintf(s->ui_url, sizeof(s->ui_url), "%s", cfg->ui_url);
+		return 0;
+	}
+	if (!colon || strcmp(colon, ":0") == 0)
+		return 0; /* a port the kernel chooses: not known here, so none */
+	if (strncmp(cfg->http, "0.0.0.0:", 8) == 0)
+		snprintf(s->ui_url, sizeof(s->ui_url), "%s://%s%s/", cfg->tls_cert[0] ? "https" : "http", hostname,
+		         colon);
+	else
+		snprintf(s->ui_url, sizeof(s->ui_url), "%s://%s/", cfg->tls_cert[0] ? "https" : "http", cfg->http);
+	return 0;
+}
+
 int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_settings *out, char *err, size_t errlen)
 {
 	struct vmac_mqtt_settings *s = out;
@@ -136,6 +170,8 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 	if (gethostname(hostname, sizeof(hostname)) != 0)
 		snprintf(hostname, sizeof(hostname), "vmac");
 	hostname[sizeof(hostname) - 1] = 0;
+	if ((rc = ui_url(cfg, hostname, s, err, errlen)) != 0)
+		return rc;
 	for (i = 0; hostname[i]; i++) /* a topic level and an HA id: [A-Za-z0-9_-] */
 		if (!isalnum((unsigned char)hostname[i]) && hostname[i] != '-')
 			hostname[i] = '_';

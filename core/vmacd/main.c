@@ -17,6 +17,7 @@
 
 #include "../api/http.h"
 #include "../common/paths.h"
+#include "../common/version.h"
 #include "../config/config.h"
 #include "../host/bus.h"
 #include "../host/events.h"
@@ -181,7 +182,7 @@ static int parse_args(struct host *h, int argc, char **argv)
 			}
 			continue;
 		case 'h': usage(stdout); return 1;
-		case 'V': printf("vmacd 0.1.0\n"); return 1;
+		case 'V': printf("vmacd %s\n", VMAC_VERSION_STRING); return 1;
 		default: usage(stderr); return 2;
 		}
 		if (vmac_config_set(&h->cfg, key, optarg, err, sizeof(err)) != 0) {

@@ -448,6 +448,10 @@ def test_mqtt_bad_settings_stop_the_host(t):
         ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_host_id": "a/b"}, "mqtt_host_id"),
         ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_password": "secret-pw"}, "mqtt_user"),
         ({"mqtt_url": "mqtts://127.0.0.1:8883", "mqtt_certfile": __file__}, "mqtt_keyfile"),
+        ({"mqtt_url": "mqtt://127.0.0.1:1883", "ui_url": "ftp://x/"}, "ui_url"),
+        ({"mqtt_url": "mqtt://127.0.0.1:1883", "ui_url": "http://a b/"}, "ui_url"),
+        ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_sparkplug_primary_host": "a/b"},
+         "mqtt_sparkplug_primary_host"),
     ]
     for settings, want in cases:
         argv = [vmacd, "--http", "127.0.0.1:0", "--state", t.logdir, "--set", "realtime=false"]
@@ -457,3 +461,45 @@ def test_mqtt_bad_settings_stop_the_host(t):
         assert rc == 2, "vmacd with %s exited %d, expected 2: %s" % (settings, rc, err)
         assert want in err, "vmacd with %s did not name %r: %r" % (settings, want, err)
         assert "secret-pw" not in err, "the password was printed: %r" % err
+
+
+def test_mqtt_configuration_url_and_health_on_every_status_copy(t):
+    """The web UI's address in every HA device (ui_url, else from http); the
+    health sensors expire; a machine's _health comes out again with no
+    value of its changing (the lights, left alone), looked at on every
+    status copy, not only when a value changed."""
+    broker = Broker(t)
+    host = mqtt_host(t, broker, extra={"ui_url": "https://kitchen.example:8443/vmac/"})
+    t.kitchen(host)
+    hub = Hub(broker)
+    try:
+        kitchen = hub.config("switch", "lights-1", "kitchen")
+        assert kitchen["device"]["configuration_url"] == "https://kitchen.example:8443/vmac/#devices", kitchen
+        conn = json.loads(hub.wait("%s/binary_sensor/%s/status/config" % (DISCOVERY, HOST_ID), lambda p: p != "",
+                                   what="the host's connectivity config"))
+        assert conn["device"]["configuration_url"] == "https://kitchen.example:8443/vmac/", conn
+        misses = hub.config("sensor", "lights-1", "_health_misses")
+        assert misses["expire_after"] == 150 and misses["entity_category"] == "diagnostic", misses
+        topic = PREFIX + "/lights-1/_health"
+        first = json.loads(hub.wait(topic, what="the lights' health"))
+        mark = hub.mark()
+        second = json.loads(hub.wait(topic, lambda p: json.loads(p)["served"] > first["served"], since=mark,
+                                     timeout_s=40, what="the lights' health again, their values unchanged"))
+        assert second["served"] > first["served"], (first, second)
+        with hub.cond:
+            lights = [tp for tp, _ in hub.log[mark:] if tp.startswith(PREFIX + "/lights-1/") and
+                      not tp.split("/")[-1].startswith("_")]
+        assert not lights, "a lights value changed, so this proves nothing: %s" % lights
+    finally:
+        hub.close()
+    # Without ui_url, from the http setting: none for port 0 (the kernel's
+    # choice, which the harness uses), else that address.
+    broker2 = Broker(t)
+    host2 = mqtt_host(t, broker2)
+    t.kitchen(host2)
+    hub2 = Hub(broker2)
+    try:
+        kitchen = hub2.config("switch", "lights-1", "kitchen")
+        assert "configuration_url" not in kitchen["device"], kitchen["device"]
+    finally:
+        hub2.close()

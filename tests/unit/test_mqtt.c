@@ -6,6 +6,7 @@
 #include <jansson.h>
 #include <math.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../../core/mqtt/mqtt_internal.h"
 #include "../../core/mqtt/site.h"
@@ -224,6 +225,41 @@ START_TEST(site_view_reads_host_topics_and_none)
 }
 END_TEST
 
+/* The web UI's address for HA's configuration_url: ui_url, else from the
+ * http setting (the host name for 0.0.0.0, https with tls_cert), none for
+ * port 0; a ui_url that is no http(s) URL stops the host. */
+START_TEST(ui_url_from_the_setting_or_the_http_address)
+{
+	struct vmac_config cfg;
+	struct vmac_mqtt_settings s;
+	char err[256], host[64], want[128];
+	vmac_config_defaults(&cfg);
+	snprintf(cfg.mqtt_url, sizeof(cfg.mqtt_url), "mqtt://127.0.0.1:1883");
+	snprintf(cfg.http, sizeof(cfg.http), "127.0.0.1:8080");
+	ck_assert_int_eq(vmac_mqtt_settings_parse(&cfg, &s, err, sizeof(err)), 0);
+	ck_assert_str_eq(s.ui_url, "http://127.0.0.1:8080/");
+	snprintf(cfg.tls_cert, sizeof(cfg.tls_cert), "/etc/vmac/cert.pem");
+	ck_assert_int_eq(vmac_mqtt_settings_parse(&cfg, &s, err, sizeof(err)), 0);
+	ck_assert_str_eq(s.ui_url, "https://127.0.0.1:8080/");
+	cfg.tls_cert[0] = 0;
+	snprintf(cfg.http, sizeof(cfg.http), "0.0.0.0:9000");
+	ck_assert_int_eq(gethostname(host, sizeof(host)), 0);
+	host[sizeof(host) - 1] = 0;
+	ck_assert_int_eq(vmac_mqtt_settings_parse(&cfg, &s, err, sizeof(err)), 0);
+	snprintf(want, sizeof(want), "http://%s:9000/", host);
+	ck_assert_str_eq(s.ui_url, want);
+	snprintf(cfg.http, sizeof(cfg.http), "127.0.0.1:0");
+	ck_assert_int_eq(vmac_mqtt_settings_parse(&cfg, &s, err, sizeof(err)), 0);
+	ck_assert_str_eq(s.ui_url, "");
+	snprintf(cfg.ui_url, sizeof(cfg.ui_url), "https://plant.example/vmac/");
+	ck_assert_int_eq(vmac_mqtt_settings_parse(&cfg, &s, err, sizeof(err)), 0);
+	ck_assert_str_eq(s.ui_url, "https://plant.example/vmac/");
+	snprintf(cfg.ui_url, sizeof(cfg.ui_url), "plant.example");
+	ck_assert_int_ne(vmac_mqtt_settings_parse(&cfg, &s, err, sizeof(err)), 0);
+	ck_assert_ptr_nonnull(strstr(err, "ui_url"));
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("mqtt");
@@ -234,6 +270,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_number_boolean_or_numeric_choice_gets_its_type);
 	tcase_add_test(tc, a_declared_precision_rounds_what_is_published);
 	suite_add_tcase(s, tc);
+	tcase_add_test(tc, ui_url_from_the_setting_or_the_http_address);
 	tc = tcase_create("site");
 	tcase_add_test(tc, site_view_reads_host_topics_and_none);
 	suite_add_tcase(s, tc);
