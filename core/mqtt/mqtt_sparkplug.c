@@ -18,6 +18,7 @@
 #include <time.h>
 
 #include "../common/errors.h"
+#include "../driver/hints.h"
 #include "sparkplug_b.pb-c.h"
 
 typedef SparkplugB__Payload Payload;
@@ -214,29 +215,31 @@ static int numeric_values(json_t *values, int *whole_out)
 	return 1;
 }
 
-/* The Sparkplug datatype of a declared value: String (values of strings, a
- * string default), Int64 or Double (values that are all numbers, whole or
- * not), Boolean (a boolean default), Int64 (a number declared with whole
- * min/max/default/step, a param or a variable without a unit, and whole
- * now), Double (another number: a measurement); else from its value now;
- * String when neither says (no value yet: null, and a DBIRTH again once
- * its value says otherwise). */
+/* The Sparkplug datatype of a declared value: Int64 or Double for values
+ * that are all numbers (whole or not); else by its kind as Home Assistant's
+ * configs take it (vmac_hints_kind: default, values, min, max, unit, a
+ * device class): String, Boolean, or for a number Int64 when it is a param
+ * or a variable without a unit, declared with whole min/max/default/step,
+ * no decimals (precision) and whole now, else Double (a measurement);
+ * where the declaration says no kind, from its value now, and String with
+ * none yet (null, and a DBIRTH again once its value says otherwise). */
 static unsigned datatype_of(json_t *decl, int is_param, const struct vmac_value *now)
 {
-	json_t *def = json_object_get(decl, "default"), *min = json_object_get(decl, "min"),
-	       *max = json_object_get(decl, "max");
+	json_t *min = json_object_get(decl, "min"), *max = json_object_get(decl, "max");
 	int now_whole = !now || now->type != VMAC_VALUE_NUMBER || floor(now->number) == now->number, all_whole;
 	if (numeric_values(json_object_get(decl, "values"), &all_whole))
 		return all_whole && now_whole ? DT_INT64 : DT_DOUBLE;
-	if (json_object_get(decl, "values") || json_is_string(def))
-		return DT_STRING;
-	if (json_is_boolean(def))
-		return DT_BOOLEAN;
-	if (json_is_number(def) || min || max || json_object_get(decl, "unit"))
-		return (is_param || !json_object_get(decl, "unit")) && whole(def) && whole(min) && whole(max) &&
-		               whole(json_object_get(decl, "step")) && now_whole
+	switch (vmac_hints_kind(decl)) {
+	case 's': return DT_STRING;
+	case 'b': return DT_BOOLEAN;
+	case 'n':
+		return (is_param || !json_object_get(decl, "unit")) && whole(json_object_get(decl, "default")) &&
+		               whole(min) && whole(max) && whole(json_object_get(decl, "step")) &&
+		               json_integer_value(json_object_get(decl, "precision")) == 0 && now_whole
 		           ? DT_INT64
 		           : DT_DOUBLE;
+	default: break;
+	}
 	if (now && now->type == VMAC_VALUE_BOOL)
 		return DT_BOOLEAN;
 	if (now && now->type == VMAC_VALUE_NUMBER)

@@ -20,10 +20,10 @@ local driver = {
 		disposal = "do3",
 	},
 	variables = {
-		kitchen = { set = true, label = "Kitchen light" },
-		dining = { set = true, label = "Dining light" },
-		tv = { set = true, label = "TV" },
-		disposal = { set = true, label = "Garbage disposal" },
+		kitchen = { set = true, device_class = "switch", label = "Kitchen light" },
+		dining = { set = true, device_class = "switch", label = "Dining light" },
+		tv = { set = true, device_class = "switch", label = "TV" },
+		disposal = { set = true, device_class = "switch", label = "Garbage disposal" },
 	},
 	commands = {
 		all_off = { label = "All off" },

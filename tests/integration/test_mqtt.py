@@ -359,7 +359,7 @@ def test_mqtt_hot_reload_removes_entities_the_new_version_lacks(t):
         with open(os.path.join(here, "..", "..", "scripts", "drivers", "lights.lua")) as f:
             src = f.read()
         new = src.replace('version = "1.2.0"', 'version = "1.2.1-mqtt"').replace(
-            '\t\ttv = { set = true, label = "TV" },\n', "")
+            '\t\ttv = { set = true, device_class = "switch", label = "TV" },\n', "")
         assert new != src and "1.2.1-mqtt" in new, "the lights driver changed: this test needs updating"
         path = os.path.join(t.logdir, "lights.lua")
         with open(path, "w") as f:
@@ -388,7 +388,7 @@ def test_mqtt_entity_configured_again_when_its_value_tells_its_kind(t):
         here = os.path.dirname(os.path.abspath(__file__))
         with open(os.path.join(here, "..", "..", "scripts", "drivers", "lights.lua")) as f:
             src = f.read()
-        disposal = '\t\tdisposal = { set = true, label = "Garbage disposal" },\n'
+        disposal = '\t\tdisposal = { set = true, device_class = "switch", label = "Garbage disposal" },\n'
         new = src
         for old, by in (('version = "1.2.0"', 'version = "1.2.2-mqtt"'),
                         (disposal, disposal + '\t\tspare = { set = true, label = "Spare" },\n'),

@@ -327,9 +327,9 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
         rebirth = nbirth["by_name"]["Node Control/Rebirth"]
         assert rebirth["datatype"] == BOOLEAN and rebirth["value"] is False, rebirth
         # A DBIRTH per machine with every variable and param; the lights'
-        # switches are Booleans once their first value said so.
-        lights, _ = sp.wait(NODE % "DBIRTH" + "/lights-1",
-                            lambda p: p["by_name"].get("kitchen", {}).get("datatype") == BOOLEAN, what="lights DBIRTH")
+        # switches are Booleans from their first birth (device_class
+        # "switch" says their kind before any value does).
+        lights, _ = sp.wait(NODE % "DBIRTH" + "/lights-1", what="lights DBIRTH")
         for name in ("kitchen", "dining", "tv", "disposal", "Commands/all_off"):
             assert lights["by_name"][name]["datatype"] == BOOLEAN, (name, lights["by_name"].get(name))
         assert lights["by_name"]["kitchen"]["value"] is False
