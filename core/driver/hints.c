@@ -2,7 +2,7 @@
  * units and state classes HA accepts per platform, checked at load against
  * what a driver declares, and the defaults a unit gives (docs/DRIVERS.md,
  * "Home Assistant"; docs/MQTT.md, "Conformance: Home Assistant", cites
- * the HA source of every table here).
+ * the HA source of every table here and the commit it was read at).
  *
  * TABLES
  *
@@ -10,9 +10,14 @@
  * DEVICE_CLASS_UNITS (units, '|'-separated, "-" for no unit; NULL: any,
  * as monetary, which has no entry) and DEVICE_CLASS_STATE_CLASSES (a mask
  * of SC_*). Its numeric classes are also the number platform's
- * (NumberDeviceClass, aligned with them by HA's own comment). date, enum
- * and timestamp take no unit and no state class. A value that becomes a
- * number or a sensor must satisfy both, so one table serves both.
+ * (number/const.py: NumberDeviceClass and a DEVICE_CLASS_UNITS of its
+ * own), except where `number` is 0: temperature_delta is no
+ * NumberDeviceClass, and HA's MQTT number refuses a config naming it. A
+ * value that becomes a number or a sensor must satisfy both tables, so the
+ * units here are those both accept, in the HA releases read (an HA that
+ * warns about a unit counts): mVA and kVA, inH₂O and MCF, which only newer
+ * releases know, and mPa, which none has, are left out. date, enum and
+ * timestamp take no unit and no state class.
  *
  * DEFAULTS
  *
@@ -25,6 +30,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <strings.h>
 
 enum { SC_M = 1, SC_T = 2, SC_I = 4, SC_ALL = 7 };
 
@@ -32,70 +38,71 @@ struct sensor_class {
 	const char *name;
 	const char *units; /* '|'-separated, "-" = no unit; NULL: any */
 	unsigned states;
+	int number; /* 1: a NumberDeviceClass too */
 };
 
 #define ENERGY_UNITS "J|kJ|MJ|GJ|mWh|Wh|kWh|MWh|GWh|TWh|cal|kcal|Mcal|Gcal"
-#define PRESSURE_UNITS "Pa|kPa|hPa|mPa|bar|cbar|mbar|mmHg|inHg|inH₂O|psi"
+#define PRESSURE_UNITS "Pa|kPa|hPa|bar|cbar|mbar|mmHg|inHg|psi"
 #define SPEED_UNITS "Beaufort|ft/s|in/s|km/h|kn|m/s|mph|mm/s"
 #define FLUX_UNITS "in/d|in/h|mm/d|mm/h"
-#define VOLUME_UNITS "L|mL|m³|ft³|CCF|MCF|gal|fl. oz."
+#define VOLUME_UNITS "L|mL|m³|ft³|CCF|gal|fl. oz."
 #define UGM3 "µg/m³"
 
 static const struct sensor_class SENSOR_CLASSES[] = {
-    {"apparent_power", "VA|mVA|kVA", SC_M},
-    {"aqi", "-", SC_M},
-    {"area", "m²|cm²|km²|mm²|in²|ft²|yd²|mi²|ac|ha", SC_ALL},
-    {"atmospheric_pressure", PRESSURE_UNITS, SC_M},
-    {"battery", "%", SC_M},
-    {"blood_glucose_concentration", "mg/dL|mmol/L", SC_M},
-    {"carbon_monoxide", "ppm", SC_M},
-    {"carbon_dioxide", "ppm", SC_M},
-    {"conductivity", "S/cm|mS/cm|µS/cm", SC_M},
-    {"current", "A|mA", SC_M},
-    {"data_rate", "bit/s|kbit/s|Mbit/s|Gbit/s|B/s|kB/s|MB/s|GB/s|KiB/s|MiB/s|GiB/s", SC_M},
-    {"data_size", "bit|kbit|Mbit|Gbit|B|kB|MB|GB|TB|PB|EB|ZB|YB|KiB|MiB|GiB|TiB|PiB|EiB|ZiB|YiB", SC_ALL},
-    {"distance", "mm|cm|m|km|in|ft|yd|mi|nmi", SC_ALL},
-    {"duration", "d|h|min|s|ms", SC_ALL},
-    {"energy", ENERGY_UNITS, SC_T | SC_I},
-    {"energy_distance", "kWh/100km|mi/kWh|km/kWh", SC_M},
-    {"energy_storage", ENERGY_UNITS, SC_M},
-    {"frequency", "Hz|kHz|MHz|GHz", SC_M},
-    {"gas", "m³|ft³|CCF", SC_T | SC_I},
-    {"humidity", "%", SC_M},
-    {"illuminance", "lx", SC_M},
-    {"irradiance", "W/m²|BTU/(h⋅ft²)", SC_M},
-    {"moisture", "%", SC_M},
-    {"monetary", NULL, SC_T},
-    {"nitrogen_dioxide", UGM3, SC_M},
-    {"nitrogen_monoxide", UGM3, SC_M},
-    {"nitrous_oxide", UGM3, SC_M},
-    {"ozone", UGM3, SC_M},
-    {"ph", "-", SC_M},
-    {"pm1", UGM3, SC_M},
-    {"pm10", UGM3, SC_M},
-    {"pm25", UGM3, SC_M},
-    {"power_factor", "%|-", SC_M},
-    {"power", "W|kW|MW|GW|TW", SC_M},
-    {"precipitation", "cm|in|mm", SC_ALL},
-    {"precipitation_intensity", FLUX_UNITS, SC_M},
-    {"pressure", PRESSURE_UNITS, SC_M},
-    {"reactive_power", "var", SC_M},
-    {"signal_strength", "dB|dBm", SC_M},
-    {"sound_pressure", "dB|dBA", SC_M},
-    {"speed", SPEED_UNITS "|" FLUX_UNITS, SC_M},
-    {"sulphur_dioxide", UGM3, SC_M},
-    {"temperature", "°C|°F|K", SC_M},
-    {"temperature_delta", "°C|°F|K", SC_M},
-    {"volatile_organic_compounds", UGM3, SC_M},
-    {"volatile_organic_compounds_parts", "ppm|ppb", SC_M},
-    {"voltage", "V|mV|µV|kV|MV", SC_M},
-    {"volume", VOLUME_UNITS, SC_T | SC_I},
-    {"volume_flow_rate", "m³/h|ft³/min|L/min|gal/min|mL/s|L/h|L/s|m³/s", SC_M},
-    {"volume_storage", VOLUME_UNITS, SC_M},
-    {"water", "m³|ft³|CCF|gal|L", SC_T | SC_I},
-    {"weight", "kg|g|mg|µg|oz|lb|st", SC_ALL},
-    {"wind_direction", "°", 0},
-    {"wind_speed", SPEED_UNITS, SC_M},
+    {"apparent_power", "VA", SC_M, 1},
+    {"aqi", "-", SC_M, 1},
+    {"area", "m²|cm²|km²|mm²|in²|ft²|yd²|mi²|ac|ha", SC_ALL, 1},
+    {"atmospheric_pressure", PRESSURE_UNITS, SC_M, 1},
+    {"battery", "%", SC_M, 1},
+    {"blood_glucose_concentration", "mg/dL|mmol/L", SC_M, 1},
+    {"carbon_monoxide", "ppm", SC_M, 1},
+    {"carbon_dioxide", "ppm", SC_M, 1},
+    {"conductivity", "S/cm|mS/cm|µS/cm", SC_M, 1},
+    {"current", "A|mA", SC_M, 1},
+    {"data_rate", "bit/s|kbit/s|Mbit/s|Gbit/s|B/s|kB/s|MB/s|GB/s|KiB/s|MiB/s|GiB/s", SC_M, 1},
+    {"data_size", "bit|kbit|Mbit|Gbit|B|kB|MB|GB|TB|PB|EB|ZB|YB|KiB|MiB|GiB|TiB|PiB|EiB|ZiB|YiB", SC_ALL, 1},
+    {"distance", "mm|cm|m|km|in|ft|yd|mi|nmi", SC_ALL, 1},
+    {"duration", "d|h|min|s|ms", SC_ALL, 1},
+    {"energy", ENERGY_UNITS, SC_T | SC_I, 1},
+    {"energy_distance", "kWh/100km|mi/kWh|km/kWh", SC_M, 1},
+    {"energy_storage", ENERGY_UNITS, SC_M, 1},
+    {"frequency", "Hz|kHz|MHz|GHz", SC_M, 1},
+    {"gas", "m³|ft³|CCF", SC_T | SC_I, 1},
+    {"humidity", "%", SC_M, 1},
+    {"illuminance", "lx", SC_M, 1},
+    {"irradiance", "W/m²|BTU/(h⋅ft²)", SC_M, 1},
+    {"moisture", "%", SC_M, 1},
+    {"monetary", NULL, SC_T, 1},
+    {"nitrogen_dioxide", UGM3, SC_M, 1},
+    {"nitrogen_monoxide", UGM3, SC_M, 1},
+    {"nitrous_oxide", UGM3, SC_M, 1},
+    {"ozone", UGM3, SC_M, 1},
+    {"ph", "-", SC_M, 1},
+    {"pm1", UGM3, SC_M, 1},
+    {"pm10", UGM3, SC_M, 1},
+    {"pm25", UGM3, SC_M, 1},
+    {"power_factor", "%|-", SC_M, 1},
+    {"power", "W|kW|MW|GW|TW", SC_M, 1},
+    {"precipitation", "cm|in|mm", SC_ALL, 1},
+    {"precipitation_intensity", FLUX_UNITS, SC_M, 1},
+    {"pressure", PRESSURE_UNITS, SC_M, 1},
+    {"reactive_power", "var", SC_M, 1},
+    {"signal_strength", "dB|dBm", SC_M, 1},
+    {"sound_pressure", "dB|dBA", SC_M, 1},
+    {"speed", SPEED_UNITS "|" FLUX_UNITS, SC_M, 1},
+    {"sulphur_dioxide", UGM3, SC_M, 1},
+    {"temperature", "°C|°F|K", SC_M, 1},
+    {"temperature_delta", "°C|°F|K", SC_M, 0},
+    {"volatile_organic_compounds", UGM3, SC_M, 1},
+    {"volatile_organic_compounds_parts", "ppm|ppb", SC_M, 1},
+    {"voltage", "V|mV|µV|kV|MV", SC_M, 1},
+    {"volume", VOLUME_UNITS, SC_T | SC_I, 1},
+    {"volume_flow_rate", "m³/h|ft³/min|L/min|gal/min|mL/s|L/h|L/s|m³/s", SC_M, 1},
+    {"volume_storage", VOLUME_UNITS, SC_M, 1},
+    {"water", "m³|ft³|CCF|gal|L", SC_T | SC_I, 1},
+    {"weight", "kg|g|mg|µg|oz|lb|st", SC_ALL, 1},
+    {"wind_direction", "°", 0, 1},
+    {"wind_speed", SPEED_UNITS, SC_M, 1},
 };
 
 /* Non-numeric sensor classes: strings, no unit, no state class. */
@@ -216,7 +223,7 @@ int vmac_hints_fits(const char *component, const char *dc, const char *unit)
 	if (strcmp(component, "sensor") != 0 && strcmp(component, "number") != 0)
 		return 0; /* select, text: no device class */
 	c = sensor_class(dc);
-	return c && unit_ok(c, unit);
+	return c && unit_ok(c, unit) && (c->number || strcmp(component, "number") != 0);
 }
 
 char vmac_hints_kind(const json_t *decl)
@@ -313,6 +320,10 @@ static int check_device_class(json_t *decl, const char *dc, char kind, int setta
 		    dc);
 	if (!(c = sensor_class(dc)))
 		BAD("device_class: \"%s\" is not a device class of a numeric sensor or number", dc);
+	if (settable && !c->number)
+		BAD("device_class: \"%s\" is a sensor's class only; a settable value is HA's number, which refuses "
+		    "it (number/const.py NumberDeviceClass)",
+		    dc);
 	if (!unit_ok(c, unit)) {
 		units_text(accepted, sizeof(accepted), c->units);
 		if (unit)
@@ -371,8 +382,19 @@ static int check_decl(json_t *decl, int settable, const char *file, const char *
 		if (!ec || (strcmp(ec, "config") && strcmp(ec, "diagnostic")))
 			BAD("entity_category must be \"config\" or \"diagnostic\"");
 		if (!settable && strcmp(ec, "config") == 0)
-			BAD("entity_category: \"config\" is for settings; a read-only value is a sensor, which HA "
-			    "refuses in that category (use \"diagnostic\")");
+			BAD("entity_category: \"config\" is for settings; a read-only value is a sensor or "
+			    "binary_sensor, which HA refuses in that category (use \"diagnostic\")");
+	}
+	if (json_is_array(v = json_object_get(decl, "values"))) {
+		json_t *x;
+		json_array_foreach(v, i, x)
+		{
+			const char *text = json_string_value(x);
+			if (text && (!*text || strcasecmp(text, "none") == 0))
+				BAD("values: \"%s\" can never be HA's state: its select reads \"none\" in any case as "
+				    "unknown and ignores \"\", its sensor reads \"None\" as unknown",
+				    text);
+		}
 	}
 	if ((v = json_object_get(decl, "enabled_by_default")) != NULL && !json_is_boolean(v))
 		BAD("enabled_by_default must be true or false");

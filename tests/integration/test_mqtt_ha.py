@@ -9,6 +9,7 @@ washer's event entity saying a programme started and that it was dropped.
 Real Mosquitto as in test_mqtt.py; SKIPPED without it or paho-mqtt."""
 
 import json
+import math
 import re
 import signal
 
@@ -18,17 +19,18 @@ from harness import KITCHEN_NAMES, undisturbed
 DISCOVERY, PREFIX, HOST_ID = base.DISCOVERY, base.PREFIX, base.HOST_ID
 
 # homeassistant/components/sensor/const.py: DEVICE_CLASS_UNITS (None = no
-# unit; "any" = no entry, any unit) and DEVICE_CLASS_STATE_CLASSES.
+# unit; "any" = no entry, any unit) and DEVICE_CLASS_STATE_CLASSES, the
+# units those a number (number/const.py) accepts too (hints.c says why).
 M, T, I = "measurement", "total", "total_increasing"
 ALL = {M, T, I}
 ENERGY = "J kJ MJ GJ mWh Wh kWh MWh GWh TWh cal kcal Mcal Gcal".split()
-PRESSURE = "Pa kPa hPa mPa bar cbar mbar mmHg inHg inH₂O psi".split()
+PRESSURE = "Pa kPa hPa bar cbar mbar mmHg inHg psi".split()
 SPEED = "Beaufort ft/s in/s km/h kn m/s mph mm/s".split()
 FLUX = "in/d in/h mm/d mm/h".split()
-VOLUME = ["L", "mL", "m³", "ft³", "CCF", "MCF", "gal", "fl. oz."]
+VOLUME = ["L", "mL", "m³", "ft³", "CCF", "gal", "fl. oz."]
 UG = ["µg/m³"]
 SENSOR = {
-    "apparent_power": (["VA", "mVA", "kVA"], {M}), "aqi": ([None], {M}),
+    "apparent_power": (["VA"], {M}), "aqi": ([None], {M}),
     "area": ("m² cm² km² mm² in² ft² yd² mi² ac ha".split(), ALL), "atmospheric_pressure": (PRESSURE, {M}),
     "battery": (["%"], {M}), "blood_glucose_concentration": (["mg/dL", "mmol/L"], {M}),
     "carbon_monoxide": (["ppm"], {M}), "carbon_dioxide": (["ppm"], {M}),
@@ -57,6 +59,11 @@ BINARY = set("battery battery_charging carbon_monoxide cold connectivity door ga
              "moisture motion moving occupancy opening plug power presence problem running safety smoke sound "
              "tamper update vibration window".split())
 SWITCH, BUTTON, EVENT = {"outlet", "switch"}, {"identify", "restart", "update"}, {"doorbell", "button", "motion"}
+NUMBER = set(SENSOR) - {"temperature_delta"}  # number/const.py NumberDeviceClass (of the classes above)
+DEVICE_KEYS = {"identifiers", "connections", "manufacturer", "model", "model_id", "name", "hw_version",
+               "serial_number", "sw_version", "via_device", "suggested_area", "configuration_url"}
+ORIGIN_KEYS = {"name", "sw_version", "support_url"}
+URL = re.compile(r"^[a-z][a-z0-9+.-]*://\S+$")  # cv.configuration_url: a URL with a scheme (or homeassistant://)
 
 # Keys each platform's DISCOVERY_SCHEMA knows (others are dropped silently:
 # extra=vol.REMOVE_EXTRA), the common ones from schemas.py.
@@ -95,17 +102,26 @@ def check_common(topic, component, cfg):
     rule(not unknown, topic, "C2", "keys %s are not in %s's DISCOVERY_SCHEMA (dropped)" % (sorted(unknown), component))
     rule(isinstance(cfg.get("unique_id"), str), topic, "C3", "unique_id a string")
     dev = cfg.get("device", {})
+    # HA takes identifiers and/or connections; vmac always sends identifiers.
     rule(isinstance(dev.get("identifiers"), list) and dev["identifiers"] and
          all(isinstance(i, str) for i in dev["identifiers"]), topic, "C4",
          "schemas.py validate_device_has_at_least_one_identifier")
+    rule(set(dev) <= DEVICE_KEYS and all(isinstance(dev[k], str) for k in dev if k not in ("identifiers", "connections")),
+         topic, "C4", "schemas.py MQTT_ENTITY_DEVICE_INFO_SCHEMA: device keys %s" % sorted(set(dev) - DEVICE_KEYS))
+    rule("configuration_url" not in dev or URL.match(dev["configuration_url"]), topic, "C4",
+         "device configuration_url not a URL with a scheme (cv.configuration_url)")
     origin = cfg.get("origin")
-    rule(isinstance(origin, dict) and isinstance(origin.get("name"), str), topic, "C5",
-         "schemas.py MQTT_ORIGIN_INFO_SCHEMA: origin with a name (discovery.py logs it)")
+    rule(isinstance(origin, dict) and isinstance(origin.get("name"), str) and set(origin) <= ORIGIN_KEYS and
+         isinstance(origin.get("sw_version", ""), str) and URL.match(origin.get("support_url", "a://b")), topic, "C5",
+         "schemas.py MQTT_ORIGIN_INFO_SCHEMA: origin with a name, sw_version a string, support_url a URL")
     rule(cfg.get("entity_category") in (None, "config", "diagnostic"), topic, "C6", "ENTITY_CATEGORIES_SCHEMA")
     rule(isinstance(cfg.get("enabled_by_default", True), bool), topic, "C7", "enabled_by_default a boolean")
+    rule(not ("availability" in cfg and "availability_topic" in cfg), topic, "C8",
+         "MQTT_AVAILABILITY_SCHEMA: availability and availability_topic are exclusive")
     for a in cfg.get("availability", []):
-        rule(isinstance(a.get("topic"), str) and "#" not in a["topic"] and "+" not in a["topic"], topic, "C8",
-             "MQTT_AVAILABILITY_SCHEMA: availability topics valid publish topics")
+        # valid_subscribe_topic allows whole-level wildcards; vmac's topics have none.
+        rule(isinstance(a.get("topic"), str) and a["topic"] and "#" not in a["topic"] and "+" not in a["topic"],
+             topic, "C8", "MQTT_AVAILABILITY_LIST_SCHEMA: availability topics valid (valid_subscribe_topic)")
     rule(cfg.get("availability_mode", "latest") in ("all", "any", "latest"), topic, "C8", "availability_mode")
 
 
@@ -128,15 +144,20 @@ def check_sensor(topic, cfg, value):
          "SensorEntity.async_internal_added_to_hass: category config refused")
     p = cfg.get("suggested_display_precision")
     rule(p is None or (isinstance(p, int) and p >= 0), topic, "S8", "suggested_display_precision cv.positive_int")
+    # mqtt/sensor.py _update_state: "None" is unknown, "" ignored on a numeric sensor.
     if value not in (None, "", "None") and "value_template" not in cfg:
         numeric = dc not in SENSOR_TEXT and (sc or unit or p is not None or dc is not None)
         if numeric:
             try:
-                float(value)
+                number = float(value)
             except ValueError:
-                rule(False, topic, "S9", "a numeric sensor got the non-numeric value %r" % value)
+                number = None
+            rule(number is not None and math.isfinite(number), topic, "S9",
+                 "a numeric sensor got the non-numeric or non-finite value %r" % value)
         if dc == "enum":
             rule(value in cfg["options"], topic, "S9", "value %r not among the options" % value)
+    if dc == "enum":
+        rule(all(o != "None" for o in cfg.get("options", [])), topic, "S6", "option \"None\" reads as unknown")
 
 
 def check_binary_sensor(topic, cfg, value):
@@ -146,6 +167,10 @@ def check_binary_sensor(topic, cfg, value):
     if value not in (None, "", "None"):
         rule(value in (cfg.get("payload_on", "ON"), cfg.get("payload_off", "OFF")), topic, "B3",
              "binary_sensor.py: payload %r is neither payload_on nor payload_off" % value)
+    rule(cfg.get("entity_category") != "config", topic, "B4",
+         "BinarySensorEntity.async_internal_added_to_hass: category config refused")
+    e = cfg.get("expire_after")
+    rule(e is None or (isinstance(e, int) and e >= 0), topic, "B5", "expire_after cv.positive_int")
 
 
 def check_switch(topic, cfg, value):
@@ -154,32 +179,43 @@ def check_switch(topic, cfg, value):
 
 
 def check_number(topic, cfg, value):
-    lo, hi, step = cfg.get("min", 1), cfg.get("max", 100), cfg.get("step", 1)
+    lo, hi, step = cfg.get("min", 0), cfg.get("max", 100), cfg.get("step", 1)  # number/const.py defaults
     rule(lo < hi, topic, "N1", "number.py validate_config: max must be > min")
     rule(step >= 1e-3, topic, "N2", "number.py: step vol.Range(min=1e-3)")
     dc = cfg.get("device_class")
-    rule(dc is None or dc in SENSOR, topic, "N3", "device_class %r not a NumberDeviceClass" % dc)
-    if dc in SENSOR and SENSOR[dc][0] != "any":
+    rule(dc is None or dc in NUMBER, topic, "N3", "device_class %r not a NumberDeviceClass" % dc)
+    if dc in NUMBER and SENSOR[dc][0] != "any":
         rule(cfg.get("unit_of_measurement") in SENSOR[dc][0], topic, "N3", "unit not valid for %s" % dc)
     rule(cfg.get("mode", "auto") in ("auto", "box", "slider"), topic, "N4", "NumberMode")
     rule(isinstance(cfg.get("command_topic"), str), topic, "N5", "command_topic required")
-    if value not in (None, "", "None"):
+    if value not in (None, "", cfg.get("payload_reset", "None")):
         rule(lo <= float(value) <= hi, topic, "N6", "value %r out of min..max" % value)
 
 
 def check_select(topic, cfg, value):
     opts = cfg.get("options")
-    rule(isinstance(opts, list) and opts and all(isinstance(o, str) for o in opts), topic, "L1",
-         "select.py: options a non-empty list of strings")
+    # HA asks only for a list (cv.ensure_list); vmac's are non-empty, strings, and none of
+    # them one HA could never show ("" is ignored, "none" in any case is unknown).
+    rule(isinstance(opts, list) and opts and all(isinstance(o, str) and o.strip() and o.lower() != "none"
+                                                  for o in opts), topic, "L1",
+         "select.py: options a non-empty list of strings HA can show")
     rule(isinstance(cfg.get("command_topic"), str), topic, "L2", "command_topic required")
-    if value not in (None, "", "None"):
+    if value not in (None, "") and value.lower() != "none":
         rule(value in opts, topic, "L3", "select.py: value %r not among the options" % value)
 
 
 def check_text(topic, cfg, value):
-    rule(0 <= cfg.get("min", 0) < cfg.get("max", 255) <= 255, topic, "X1",
-         "text.py valid_text_size_configuration: 0 <= min < max <= 255")
+    lo, hi = cfg.get("min", 0), cfg.get("max", 255)
+    rule(isinstance(lo, int) and isinstance(hi, int) and 0 <= lo <= hi <= 255, topic, "X1",
+         "text.py valid_text_size_configuration: 0 <= min <= max <= 255 (MAX_LENGTH_STATE_STATE)")
     rule(isinstance(cfg.get("command_topic"), str), topic, "X2", "command_topic required")
+    if "pattern" in cfg:
+        try:
+            re.compile(cfg["pattern"])
+        except re.error:
+            rule(False, topic, "X3", "pattern not a regular expression (cv.is_regex)")
+    if value is not None:
+        rule(len(value) <= 255, topic, "X4", "util.py check_state_too_long: state over 255 characters")
 
 
 def check_button(topic, cfg, value):
@@ -193,6 +229,8 @@ def check_event(topic, cfg, value):
          "event.py: event_types required, a list of strings")
     rule(isinstance(cfg.get("state_topic"), str), topic, "E2", "state_topic required (MQTT_RO_SCHEMA)")
     rule(cfg.get("device_class") in (None,) + tuple(EVENT), topic, "E3", "device_class not an EventDeviceClass")
+    rule(cfg.get("device_class") != "doorbell" or "ring" in types, topic, "E4",
+         "event/__init__.py: a doorbell without the ring event type is warned about")
 
 
 CHECKERS = {"sensor": check_sensor, "binary_sensor": check_binary_sensor, "switch": check_switch,
@@ -218,7 +256,10 @@ def check_all(hub):
     dup = {u for u in uids if uids.count(u) > 1}
     rule(not dup, "(all configs)", "C3", "unique_id used twice: %s" % sorted(dup))
     for tp, cfg in sorted(configs.items()):
-        value = latest.get(cfg.get("state_topic"), (None,))[0]
+        value, retained = latest.get(cfg.get("state_topic"), (None, False))
+        if tp.startswith(DISCOVERY + "/event/"):
+            rule(not retained, tp, "E2", "event.py _event_received: a retained event is ignored")
+            value = None
         check_config(tp, cfg, value)
     return configs
 
@@ -239,6 +280,26 @@ def test_mqtt_ha_checker_names_the_config_and_the_rule(t):
         else:
             raise AssertionError("the checker passed a config breaking rule %s: %s" % (code, cfg))
     check_config(topic, dict(good, device_class="volume_storage", state_class="measurement"), "12.5")
+    rw = {"name": "T", "unique_id": "u", "state_topic": "s", "command_topic": "c", "device": {"identifiers": ["d"]},
+          "origin": {"name": "vmac"}}
+    for component, cfg, value, code in (
+            ("number", dict(rw, device_class="temperature_delta", unit_of_measurement="K"), None, "N3"),
+            ("number", dict(rw, min=5), "3", "N6"),
+            ("select", dict(rw, options=["off", "None"]), None, "L1"),
+            ("text", dict(rw, min=10, max=5), None, "X1"),
+            ("binary_sensor", dict({k: good[k] for k in good if k not in ("unit_of_measurement", "device_class")},
+                                   entity_category="config"), None, "B4"),
+            ("sensor", dict(good, device_class=None, origin={"name": "vmac", "support_url": "vmac.example"}), None,
+             "C5"),
+            ("sensor", dict(good, device_class=None, unit_of_measurement="W"), "nan", "S9")):
+        topic = "%s/%s/n/o/config" % (DISCOVERY, component)
+        try:
+            check_config(topic, cfg, value)
+        except AssertionError as e:
+            assert ("rule %s" % code) in str(e), "wanted rule %s: %s" % (code, e)
+        else:
+            raise AssertionError("the checker passed a %s config breaking rule %s: %s" % (component, code, cfg))
+    check_config(DISCOVERY + "/number/n/o/config", dict(rw, device_class="temperature", unit_of_measurement="K"), "0")
 
 
 def test_mqtt_ha_kitchen_configs_follow_home_assistant(t):
@@ -279,6 +340,9 @@ def test_mqtt_ha_events_say_a_start_and_a_drop(t):
         hub.publish(PREFIX + "/washer-1/cmd/start", "quick")
         got = json.loads(hub.wait(events, lambda p: "programme_started" in p, since=since, what="a start event"))
         assert got == {"event_type": "programme_started"}, got
+        with hub.cond:
+            retained = hub.latest[events][1]
+        assert not retained, "rule E2: HA ignores a retained event (event.py _event_received)"
         since = hub.mark()
         boards["washer-1"].signal(signal.SIGSTOP)
         try:

@@ -57,6 +57,16 @@ START_TEST(what_home_assistant_refuses_names_the_field)
 	        "total_increasing)");
 	refused("variables", "{\"device_class\": \"enum\"}", "variables.x.device_class: \"enum\" needs values");
 	refused("variables", "{\"device_class\": \"doorbell\"}", "does not say whether the value is a number");
+	/* Tables checked against HA's source (docs/MQTT.md, "Conformance: Home Assistant"). */
+	refused("params", "{\"default\": 1, \"unit\": \"K\", \"device_class\": \"temperature_delta\"}",
+	        "params.x.device_class: \"temperature_delta\" is a sensor's class only");
+	refused("variables", "{\"unit\": \"kVA\", \"device_class\": \"apparent_power\"}",
+	        "does not take unit \"kVA\" (HA accepts VA)");
+	refused("variables", "{\"unit\": \"MCF\", \"device_class\": \"volume\", \"state_class\": \"total\"}",
+	        "does not take unit \"MCF\"");
+	refused("params", "{\"values\": [\"off\", \"None\"]}", "params.x.values: \"None\" can never be HA's state");
+	refused("variables", "{\"values\": [\"\", \"on\"]}", "variables.x.values: \"\" can never be HA's state");
+	refused("variables", "{\"default\": true, \"entity_category\": \"config\"}", "sensor or binary_sensor");
 	refused("variables", "{\"default\": false, \"device_class\": \"outlet\"}",
 	        "\"outlet\" is not a device class of a binary_sensor");
 	refused("variables", "{\"unit\": \"l\", \"entity_category\": \"config\"}",
@@ -116,6 +126,11 @@ START_TEST(fits_follows_each_platform)
 	ck_assert(!vmac_hints_fits("switch", "door", NULL));
 	ck_assert(vmac_hints_fits("switch", "outlet", NULL));
 	ck_assert(!vmac_hints_fits("select", "enum", NULL));
+	ck_assert(vmac_hints_fits("sensor", "temperature_delta", "K"));
+	ck_assert(!vmac_hints_fits("number", "temperature_delta", "K"));
+	ck_assert(vmac_hints_fits("button", "restart", NULL));
+	ck_assert(!vmac_hints_fits("event", "ring", NULL));
+	ck_assert(vmac_hints_fits("event", "doorbell", NULL));
 	ck_assert_str_eq(vmac_hints_ha_unit("degF"), "°F");
 }
 END_TEST
