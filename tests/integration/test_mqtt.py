@@ -481,6 +481,8 @@ def test_mqtt_configuration_url_and_health_on_every_status_copy(t):
         misses = hub.config("sensor", "lights-1", "_health_misses")
         assert misses["expire_after"] == 150 and misses["entity_category"] == "diagnostic", misses
         topic = PREFIX + "/lights-1/_health"
+        for relay in ("kitchen", "dining", "tv", "disposal"):  # their first values (the first tick)
+            hub.wait(PREFIX + "/lights-1/" + relay, lambda p: p == "false", what="the lights' first values")
         first = json.loads(hub.wait(topic, what="the lights' health"))
         mark = hub.mark()
         second = json.loads(hub.wait(topic, lambda p: json.loads(p)["served"] > first["served"], since=mark,
