@@ -416,6 +416,12 @@ static void *net_thread(void *arg)
 		           : mosquitto_reconnect(c->mosq);
 		first = 0;
 		atomic_store(&c->in_connect, 0);
+		if (rc != MOSQ_ERR_SUCCESS && c->index == MQTT_CONN_SPARKPLUG) {
+			/* No CONNECT packet went out (the TCP connection or the TLS
+			 * handshake failed): its bdSeq is the next one's. */
+			m->spb.bdseq_next = m->spb.bdseq_connect;
+			mqtt_spb_bdseq_store(m->spb.path, m->spb.bdseq_next);
+		}
 		connacks = atomic_load(&c->connacks);
 		/* Until the connection fails; at a stop, until the DISCONNECT is out
 		 * (at most a second). */

@@ -55,6 +55,7 @@ struct spb_out {
 	Metric *list[SPB_METRICS];
 	Metric metrics[SPB_METRICS];
 	char names[SPB_METRICS][SPB_NAME_MAX];
+	char texts[SPB_METRICS][MQTT_TEXT_MAX]; /* a value written as a String metric's text */
 	uint64_t ts;
 	int no_datatypes; /* DDATA: a host knows them from the birth (the specification: SHOULD NOT) */
 };
@@ -87,11 +88,14 @@ static Metric *out_metric(struct spb_out *o, const char *name, unsigned datatype
 	return mt;
 }
 
-/* v as a metric of datatype t (v's type fits t: datatype_of made t from it).
- * The string stays v's: v must outlive the packing. */
-static void metric_value(Metric *mt, unsigned t, const struct vmac_value *v)
+/* v as metric mt (of o) of datatype t. A value of another type than t
+ * (a driver's declaration said one kind, its value is another): a String
+ * metric takes its text, a Boolean or number metric is null rather than a
+ * value it does not say. The string stays v's or o's until the packing. */
+static void out_value(struct spb_out *o, Metric *mt, unsigned t, const struct vmac_value *v)
 {
-	if (v->type == VMAC_VALUE_NONE || (v->type == VMAC_VALUE_NUMBER && !isfinite(v->number))) {
+	int fits = t == DT_STRING || (t == DT_BOOLEAN ? v->type == VMAC_VALUE_BOOL : v->type == VMAC_VALUE_NUMBER);
+	if (v->type == VMAC_VALUE_NONE || (v->type == VMAC_VALUE_NUMBER && !isfinite(v->number)) || !fits) {
 		mt->has_is_null = 1;
 		mt->is_null = 1;
 		return;
@@ -111,7 +115,13 @@ static void metric_value(Metric *mt, unsigned t, const struct vmac_value *v)
 		break;
 	default:
 		mt->value_case = SPARKPLUG_B__PAYLOAD__METRIC__VALUE_STRING_VALUE;
-		mt->string_value = (char *)(uintptr_t)v->str; /* read only: packing copies it */
+		if (v->type == VMAC_VALUE_STRING) {
+			mt->string_value = (char *)(uintptr_t)v->str; /* read only: packing copies it */
+		} else {
+			char *text = o->texts[mt - o->metrics];
+			mqtt_value_text(v, text, sizeof(o->texts[0]));
+			mt->string_value = text;
+		}
 		break;
 	}
 }
@@ -299,7 +309,7 @@ static void dbirth(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 			Metric *mt;
 			if (ntypes == MQTT_VALUES || !(mt = out_metric(o, name, dt)))
 				break;
-			metric_value(mt, dt, v ? v : &none);
+			out_value(o, mt, dt, v ? v : &none);
 			snprintf(types[ntypes].name, sizeof(types[ntypes].name), "%s", name);
 			types[ntypes++].datatype = dt;
 		}
@@ -320,7 +330,7 @@ static void dbirth(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 	driver.type = VMAC_VALUE_STRING;
 	snprintf(model, sizeof(model), "%s %s", d->driver, d->version);
 	snprintf(driver.str, sizeof(driver.str), "%s", model);
-	metric_value(out_metric(o, "Properties/Driver", DT_STRING), DT_STRING, &driver);
+	out_value(o, out_metric(o, "Properties/Driver", DT_STRING), DT_STRING, &driver);
 	spb_topic(m, topic, sizeof(topic), "DBIRTH", d->name);
 	if (out_send(m, topic, o, 1) != 0)
 		goto done;
@@ -360,16 +370,15 @@ static void reborn(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 	dbirth(m, d, st);
 }
 
-/* NBIRTH (seq 0, this connection's bdSeq, Node Control/Rebirth false), then
- * a DBIRTH for every machine running on this connection: when the primary
- * host application is online (at once without one), and for a Rebirth. */
-static void births(struct vmac_mqtt *m)
+/* NBIRTH: seq 0, this connection's bdSeq, Node Control/Rebirth false. The
+ * node is live once it is out (not before: a failed one leaves it not). */
+static void nbirth(struct vmac_mqtt *m)
 {
-	struct mqtt_conn *c = &m->conns[MQTT_CONN_SPARKPLUG];
 	struct spb_out *o = calloc(1, sizeof(*o));
 	char topic[300];
-	int bdseq = atomic_load(&m->spb.bdseq), i;
+	int bdseq = atomic_load(&m->spb.bdseq);
 	Metric *mt;
+	m->spb.born = 0;
 	if (!o)
 		return;
 	out_init(o);
@@ -384,6 +393,17 @@ static void births(struct vmac_mqtt *m)
 	if (out_send(m, topic, o, 1) == 0)
 		m->spb.born = bdseq + 1;
 	free(o);
+}
+
+/* The NBIRTH, then a DBIRTH for every machine up on this connection: when
+ * the primary host application comes online, and for a Rebirth. (After a
+ * CONNACK only the NBIRTH: mqtt_devices_republish brings each machine up,
+ * and its DBIRTH, right after.) */
+static void births(struct vmac_mqtt *m)
+{
+	struct mqtt_conn *c = &m->conns[MQTT_CONN_SPARKPLUG];
+	int i;
+	nbirth(m);
 	for (i = 0; i < c->ndevices; i++) {
 		struct mqtt_device *d = &c->devices[i];
 		d->spb_born = 0;
@@ -399,9 +419,11 @@ static void connected(struct vmac_mqtt *m)
 {
 	struct mqtt_conn *c = &m->conns[MQTT_CONN_SPARKPLUG];
 	char topic[300];
+	int i;
 	m->spb.born = 0;
-	m->spb.host_online = 0;
-	m->spb.host_ts = 0;
+	m->spb.host_online = 0; /* host_ts stays: an older STATE is still older */
+	for (i = 0; i < c->ndevices; i++)
+		c->devices[i].spb_born = 0; /* a new session */
 	spb_topic(m, topic, sizeof(topic), "NCMD", NULL);
 	mqtt_conn_subscribe(c, topic, 1);
 	if (m->s.commands) {
@@ -413,7 +435,7 @@ static void connected(struct vmac_mqtt *m)
 		mqtt_conn_subscribe(c, topic, 1);
 		return; /* births when it says online */
 	}
-	births(m);
+	nbirth(m);
 }
 
 /* Its DBIRTH goes out with its values (the values hook right after); born
@@ -486,7 +508,7 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 			return;
 		}
 		if ((mt = out_metric(o, born->name, dt)) != NULL)
-			metric_value(mt, dt, v);
+			out_value(o, mt, dt, v);
 	}
 	if (o->payload.n_metrics) {
 		spb_topic(m, topic, sizeof(topic), "DDATA", d->name);
@@ -707,7 +729,10 @@ static void host_state(struct vmac_mqtt *m, const struct mqtt_message *msg)
 {
 	json_t *j = msg->len > 0 ? json_loadb(msg->payload, (size_t)msg->len, 0, NULL) : NULL;
 	json_t *online = json_object_get(j, "online"), *ts = json_object_get(j, "timestamp");
-	int64_t t = json_is_integer(ts) ? (int64_t)json_integer_value(ts) : -1;
+	double x = json_number_value(ts); /* an integer, or a real that is whole (1.7e12) */
+	int64_t t = json_is_integer(ts)                                         ? (int64_t)json_integer_value(ts)
+	            : json_is_real(ts) && x >= 0 && x < 9.2e18 && floor(x) == x ? (int64_t)x
+	                                                                        : -1;
 	int is_online = json_is_true(online);
 	if (!json_is_boolean(online) || t < 0) {
 		mqtt_event(m, "",

@@ -60,22 +60,26 @@ class MqttProxy:
         self.connects = []
         self.blocked = set()
         self.live = []  # (client id, client socket, broker socket)
+        self.port = 0
+        self.closed = False
+        self._listen()
+
+    def _listen(self):
         self.srv = socket.socket()
         self.srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.srv.bind(("127.0.0.1", 0))
+        self.srv.bind(("127.0.0.1", self.port))
         self.srv.listen(16)
         self.port = self.srv.getsockname()[1]
-        self.closed = False
-        threading.Thread(target=self._accept, daemon=True).start()
+        threading.Thread(target=self._accept, args=(self.srv,), daemon=True).start()
 
     @property
     def url(self):
         return "mqtt://127.0.0.1:%d" % self.port
 
-    def _accept(self):
+    def _accept(self, srv):
         while not self.closed:
             try:
-                client, _ = self.srv.accept()
+                client, _ = srv.accept()
             except OSError:
                 return
             threading.Thread(target=self._session, args=(client,), daemon=True).start()
@@ -142,18 +146,32 @@ class MqttProxy:
                     what, timeout_s, [(c, t) for c, t, _ in self.connects]))
             return list(self.connects)
 
-    def block(self, client_id):
-        """Cut client_id's connections (no DISCONNECT: the broker sees the
-        socket close) and close its new ones at once."""
+    def _cut(self, which):
         with self.cond:
-            self.blocked.add(client_id)
-            cut = [(c, u) for cid, c, u in self.live if cid == client_id]
+            cut = [(c, u) for cid, c, u in self.live if which(cid)]
         for pair in cut:
             for s in pair:
                 try:
                     s.shutdown(socket.SHUT_RDWR)
                 except OSError:
                     pass
+
+    def block(self, client_id):
+        """Cut client_id's connections (no DISCONNECT: the broker sees the
+        socket close) and close its new ones at once."""
+        with self.cond:
+            self.blocked.add(client_id)
+        self._cut(lambda cid: cid == client_id)
+
+    def pause(self):
+        """The server gone: every connection cut and no listener, so a
+        client's TCP connect is refused (no CONNECT packet is sent)."""
+        self.srv.close()
+        self._cut(lambda cid: True)
+
+    def resume(self):
+        """Listening again on the same port."""
+        self._listen()
 
     def unblock(self, client_id):
         with self.cond:

@@ -145,6 +145,45 @@ def test_sparkplug_lives_on_while_the_main_connection_is_down(t):
         sp.close()
 
 
+def test_sparkplug_connection_lost_and_back_counts_bdseq_and_births_once(t):
+    """The broker gone (every connection cut, TCP connects refused) and
+    back: the CONNECT after it carries the bdSeq after the last CONNECT's
+    (the refused TCP connects sent none), then one NBIRTH and exactly one
+    DBIRTH per machine, no DDEATH between them."""
+    broker = Broker(t)
+    proxy = MqttProxy(broker.port)
+    sp = SpHost(broker)
+    host = spb_host(t, broker, extra={"mqtt_url": proxy.url, "mqtt_client_id": MAIN_ID})
+    t.kitchen(host)
+    try:
+        for name in KITCHEN_NAMES:
+            sp.wait(NODE % "DBIRTH" + "/" + name, what="DBIRTH of " + name)
+        seq = host.last_event_seq()
+        before = len(client_ids(proxy.connects, "-spb"))
+        mark = sp.mark()
+        proxy.pause()
+        host.wait_event("mqtt", text="(Sparkplug) (Connection refused", after_seq=seq, timeout_s=30)
+        proxy.resume()
+        nbirth, i = sp.wait(NODE % "NBIRTH", since=mark, timeout_s=60, what="NBIRTH after the outage")
+        wills = [will_bdseq(p)[1] for _, _, p in client_ids(proxy.connects, "-spb")]
+        assert len(wills) == before + 1, "one CONNECT after the outage, none while TCP was refused: %s" % wills
+        assert wills[-1] == (wills[-2] + 1) % 256 == nbirth["by_name"]["bdSeq"]["value"], \
+            "bdSeq after an outage whose connects sent no CONNECT: %s, NBIRTH %s" % (wills, nbirth["by_name"])
+        for name in KITCHEN_NAMES:
+            sp.wait(NODE % "DBIRTH" + "/" + name, since=i, what="DBIRTH of %s after the outage" % name)
+        sp.publish(NODE % "DCMD" + "/lights-1", command([("tv", BOOLEAN, True)]))
+        _, end = sp.wait(NODE % "DDATA" + "/lights-1", has_value("tv", True), since=i, what="DDATA tv")
+        said = [tp.split("/")[2] + "/" + tp.split("/")[-1] for tp, _, _, _ in sp.log[i:end]
+                if tp.startswith("spBv1.0/" + GROUP + "/") and "/DCMD/" not in tp]
+        for name in KITCHEN_NAMES:
+            assert said.count("DBIRTH/" + name) == 1, "DBIRTHs of %s after the NBIRTH: %s" % (name, said)
+        assert not [k for k in said if k.startswith(("DDEATH", "NBIRTH"))], "a death or second NBIRTH: %s" % said
+        check_seq(sp.node_messages())
+    finally:
+        proxy.close()
+        sp.close()
+
+
 def state(online, ts):
     return json.dumps({"online": online, "timestamp": ts})
 
@@ -191,9 +230,17 @@ def test_sparkplug_primary_host_state(t):
         assert ndeath["by_name"]["bdSeq"]["value"] == bdseq, (ndeath, bdseq)
         host.wait_event("mqtt", text="primary host scada is offline")
         host.wait_event("mqtt", text="waiting for the primary host scada", after_seq=seq)
+        # An online older than that offline (after the reconnect: the node
+        # remembers the last STATE's timestamp) is ignored.
         mark = sp.mark()
-        sp.publish(topic, state(True, t0 + 3), qos=1, retain=True)
-        again, _ = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH when the primary host is back")
+        sp.publish(topic, state(True, t0 + 1), qos=1)
+        seq2 = host.last_event_seq()
+        sp.publish(topic, "[]", qos=1)
+        host.wait_event("mqtt", text="STATE of the primary host scada ignored", after_seq=seq2)
+        assert NODE % "NBIRTH" not in [tp for tp, _, _, _ in sp.log[mark:]], "an older online brought an NBIRTH"
+        mark = sp.mark()
+        sp.publish(topic, json.dumps({"online": True, "timestamp": float(t0 + 3)}), qos=1, retain=True)
+        again, _ = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH when the primary host is back (a real timestamp)")
         assert again["by_name"]["bdSeq"]["value"] == (bdseq + 1) % 256, \
             "the new session's bdSeq: %s after %s" % (again["by_name"]["bdSeq"], bdseq)
         check_seq(sp.node_messages())
@@ -235,8 +282,12 @@ CHOICES_LUA = """
 local driver = { name = "choices", version = "1.0.0", io = { do0 = "do0" },
                  params = { speed = { default = 2, values = { 1, 2, 3 } },
                             ratio = { default = 0.5, values = { 0.5, 1.5 } },
-                            mode = { default = "eco", values = { "eco", "1", "on" } } } }
-function driver.tick(dev, inputs) end
+                            mode = { default = "eco", values = { "eco", "1", "on" } } },
+                 variables = { word = { default = "none yet" }, level = { unit = "l" } } }
+function driver.tick(dev, inputs)
+    dev.vars.word = 5        -- declared a string, its value a number
+    dev.vars.level = "full"  -- declared a number, its value a string
+end
 return driver
 """
 
@@ -257,6 +308,13 @@ def test_sparkplug_datatypes_of_value_lists(t):
         assert (b["speed"]["datatype"], b["speed"]["value"]) == (INT64, 2), b["speed"]
         assert (b["ratio"]["datatype"], b["ratio"]["value"]) == (DOUBLE, 0.5), b["ratio"]
         assert (b["mode"]["datatype"], b["mode"]["value"]) == (STRING, "eco"), b["mode"]
+        # A value of another kind than declared: the String takes its text,
+        # the Double (a unit) is null rather than a value it cannot say.
+        assert b["word"]["datatype"] == STRING and b["level"]["datatype"] == DOUBLE, (b["word"], b["level"])
+        assert "value" not in b["level"] and b["level"].get("is_null"), b["level"]
+        word_said = lambda p: p["by_name"].get("word", {}).get("value") == "5"  # noqa: E731
+        if not word_said(born):  # born before the first tick: its value comes in a DDATA
+            sp.wait(NODE % "DDATA" + "/ch", word_said, what="the word's value as text")
         mark = sp.mark()
         sp.publish(NODE % "DCMD" + "/ch", command([("speed", INT64, 3), ("mode", STRING, "1"), ("ratio", DOUBLE, 1.5)]))
         sp.wait(NODE % "DDATA" + "/ch", lambda p: has_value("speed", 3)(p) or "speed" not in p["by_name"],
