@@ -133,8 +133,8 @@ $(OBJ)/gen/sparkplug_b.pb-c.o: $(SPB_GEN).c $(SPB_GEN).h
 	@mkdir -p $(dir $@)
 	$(CC) $(HOST_CFLAGS) -I$(BUILD)/gen -c $< -o $@
 
-$(OBJ)/core/mqtt/mqtt_sparkplug.o: $(SPB_GEN).h
-$(OBJ)/core/mqtt/mqtt_sparkplug.o: HOST_CFLAGS += -I$(BUILD)/gen
+$(OBJ)/core/mqtt/mqtt_sparkplug.o $(OBJ)/core/mqtt/mqtt_spb_dcmd.o: $(SPB_GEN).h
+$(OBJ)/core/mqtt/mqtt_sparkplug.o $(OBJ)/core/mqtt/mqtt_spb_dcmd.o: HOST_CFLAGS += -I$(BUILD)/gen
 
 # link(OBJECTS, MODULES, LIBS): a program or test from its own objects and
 # the archives of MODULES, in layer order; --as-needed keeps a library out

@@ -10,6 +10,7 @@
  *   mqtt_health.c    profile "health": each machine's and the host's health (_health) and events (_event)
  *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
  *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
+ *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what the two share)
  *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
  *                    /api/site serves, on the network thread
  * A profile is one way of speaking MQTT over a connection and the same device table (docs/MQTT.md,
