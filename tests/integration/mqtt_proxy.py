@@ -166,6 +166,10 @@ class MqttProxy:
     def pause(self):
         """The server gone: every connection cut and no listener, so a
         client's TCP connect is refused (no CONNECT packet is sent)."""
+        try:  # wakes the accepting thread and stops listening at once (close alone waits for it)
+            self.srv.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
         self.srv.close()
         self._cut(lambda cid: True)
 
