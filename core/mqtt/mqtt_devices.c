@@ -56,17 +56,6 @@ static json_t *declaration(json_t *manifest, const char *name)
 	return decl ? decl : json_object_get(json_object_get(manifest, "params"), name);
 }
 
-/* timer:N of variable name in the manifest: N, else 0. */
-static double timer_period(json_t *manifest, const char *name)
-{
-	json_t *var = json_object_get(json_object_get(manifest, "variables"), name);
-	const char *update = json_string_value(json_object_get(var, "update"));
-	double n;
-	if (update && sscanf(update, "timer:%lf", &n) == 1 && n > 0)
-		return n;
-	return 0;
-}
-
 static struct mqtt_value *value_slot(struct mqtt_device *d, const char *name)
 {
 	struct mqtt_value *v;
@@ -79,17 +68,18 @@ static struct mqtt_value *value_slot(struct mqtt_device *d, const char *name)
 	v = &d->values[d->nvalues++];
 	memset(v, 0, sizeof(*v));
 	snprintf(v->name, sizeof(v->name), "%s", name);
-	v->period_s = timer_period(d->manifest, name);
 	v->precision = mqtt_declared_precision(declaration(d->manifest, name));
 	return v;
 }
 
 /* The values of st that changed since they were published (all with
- * force), published: variables then params. */
+ * force), published: variables then params. A variable declared
+ * update = "timer:N" changes in the status copy at most every N s (the
+ * driver's instance publishes it so, core/driver/instance.c): no second
+ * clock here, which drifting against that one would lose its steps. */
 static void publish_values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st, int force)
 {
 	struct mqtt_value *changed[MQTT_VALUES];
-	double now = mqtt_now_s();
 	int n = 0, i;
 	if (!mqtt_conn_can_publish(&m->conns[d->conn])) {
 		m->skipped_rounds++; /* they stay unsent: the newest goes out when there is room */
@@ -104,11 +94,8 @@ static void publish_values(struct vmac_mqtt *m, struct mqtt_device *d, const str
 		mqtt_value_text_at(&var->value, v->precision, text, sizeof(text)); /* a change that shows */
 		if (!force && v->sent && strcmp(v->text, text) == 0)
 			continue;
-		if (!force && v->sent && now < v->next_s)
-			continue; /* timer:N: not yet; the newest goes out when due */
 		snprintf(v->text, sizeof(v->text), "%s", text);
 		v->sent = 1;
-		v->next_s = now + v->period_s;
 		changed[n++] = v;
 	}
 	if (n)

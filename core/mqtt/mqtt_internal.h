@@ -37,15 +37,12 @@
 #define MQTT_HEALTH_EXPIRE_S 150   /* HA's expire_after of the health sensors (mqtt_ha.c) */
 #define MQTT_PAYLOAD_NONE "None"   /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
 
-/* A value as published: its text, and when a variable with update =
- * "timer:N" may be published next. */
+/* A value as published: its text at its precision. */
 struct mqtt_value {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
 	char text[MQTT_TEXT_MAX];
-	int sent;        /* text went out on this connection */
-	int precision;   /* a number's decimals as published (the declaration's precision), -1: all */
-	double period_s; /* timer:N (0: on every change) */
-	double next_s;   /* monotonic seconds: not before this */
+	int sent;      /* text went out on this connection */
+	int precision; /* a number's decimals as published (the declaration's precision), -1: all */
 };
 
 /* sparkplug: a metric of a DBIRTH and its Sparkplug datatype. */
