@@ -40,8 +40,12 @@ same run on the same machine, reported as ratios.
   mqtt      MQTT through Mosquitto (tests/bench/mqtt_bench.py): 1,000
             boards at 10 Hz, a variable changing at every tick, MQTT on
             next to off in alternating rounds: value messages per second
-            to a subscriber, tick lateness p99 on/off, host CPU, misses
-            (mosquitto and python3-paho-mqtt, else SKIPPED)
+            to a subscriber, tick lateness p99 on/off, host CPU, misses;
+            then the precision throttle: the kitchen with a wash running,
+            the washer's temperature at precision 6 next to 1, its messages
+            per second and the changes that reached the subscriber
+            (mosquitto and python3-paho-mqtt, else SKIPPED); mqtt-kitchen:
+            that second part alone
   workers   drivers on driver workers next to a vmacd that ran them on its
             bus thread (--base-bin; tests/bench/workers.py): host CPU per
             device per tick at 100 boards and 1 kHz, how the tick lateness
@@ -54,7 +58,8 @@ same run on the same machine, reported as ratios.
             boards without keys, alternating rounds (root, else SKIPPED)
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
-                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth]
+                [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,
+                        mqtt-kitchen]
                 [--base-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
@@ -504,9 +509,13 @@ def main():
 
     if "mqtt" in only:
         from mqtt_bench import mqtt
-        print("mqtt: 1000 boards at 10 Hz through Mosquitto, MQTT on next to off, %d s windows" % args.seconds,
-              flush=True)
+        print("mqtt: 1000 boards at 10 Hz through Mosquitto, MQTT on next to off, then the kitchen's precision "
+              "throttle off next to on, %d s windows" % args.seconds, flush=True)
         results["mqtt"] = mqtt(args)
+    elif "mqtt-kitchen" in only:
+        from mqtt_bench import mqtt_kitchen
+        print("mqtt-kitchen: the kitchen's precision throttle off next to on, %d s windows" % args.seconds, flush=True)
+        results["mqtt"] = mqtt_kitchen(args)
 
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)

@@ -17,14 +17,28 @@ Per window (--seconds of steady state, a fresh vmacd each):
             start: attach (under a second), SETTLE_S and the window
   cpu       vmacd's on-CPU time (schedstat, all threads) and utime+stime as
             a share of a CPU, the MQTT threads' part (publisher and network), Mosquitto's
-  misses    counters.misses and misses_host over the window"""
+  misses    counters.misses and misses_host over the window
 
+Then the precision throttle (issue 31): the demo kitchen (washer, dishwasher,
+lights on their simulated plants) with a normal wash running, the washer's
+temp_c declared precision = 6 (exact for its 0.025 C steps: every change goes
+out, as before the throttle) next to precision = 1 (the shipped washer's: out
+only when the text at 0.1 C changes), alternating rounds, a fresh vmacd each.
+Per window, from the wash step on (the fill done): temp_c messages and all the
+kitchen's value messages per second to the subscriber, tick lateness, misses,
+and a check that nothing that matters was lost: the host's own temp_c (GET
+/api/status every 100 ms, the copy the publisher reads; it changes at most
+once a second, update = "timer:1") rounded to the declared precision, each
+change in order, against the subscriber's series."""
+
+import json
 import os
+import re
 import statistics
 import threading
 import time
 
-from bench import board_wrapper, cpu_seconds, schedule_for, with_ctx
+from bench import ROOT, board_wrapper, cpu_seconds, schedule_for, with_ctx
 from fieldbus import MAX_DEVICES_DEFAULT, fresh_status, others_running, run_seconds, wait_attached
 from harness import Skip
 
@@ -57,11 +71,13 @@ class Subscriber:
     topics such as _availability and _error, set/ or cmd/) and the machines
     they came from."""
 
-    def __init__(self, port):
+    def __init__(self, port, record=()):
         import test_mqtt  # the tests' way of finding paho (Debian's python3-paho-mqtt)
         mqtt = test_mqtt.paho()
         self.values, self.other = 0, 0
         self.devices, self.window_devices = set(), set()
+        self.record = set(record)  # (device, name) whose messages go to log
+        self.log = []  # (monotonic time of arrival, device, name, payload text)
         self.c = mqtt.Client(client_id="bench-sub-%d" % os.getpid())
         self.c.on_message = self._on_message
         self.c.on_connect = lambda c, u, f, rc: c.subscribe(PREFIX + "/#", qos=0)
@@ -74,6 +90,8 @@ class Subscriber:
             self.values += 1
             self.devices.add(levels[2])
             self.window_devices.add(levels[2])
+            if (levels[2], levels[3]) in self.record:
+                self.log.append((time.monotonic(), levels[2], levels[3], m.payload.decode()))
         else:
             self.other += 1
 
@@ -164,6 +182,197 @@ def window(ctx, mqtt_on, seconds):
     }
 
 
+# The precision throttle's kitchen (issue 31). The washer plant has no noise:
+# its temperature is exact physics read through a 12-bit input of 0.025 C a
+# count (docs/BOARD.md, "Washer"), and it moves only with a programme
+# running: the fill sets it (the normal programme's warm fill: 37.5 C), then
+# it cools toward 20 C with a time constant of 600 s. So the window is the
+# wash step of a normal programme, after its fill.
+KITCHEN_BOARDS = (("washer", "washer-1"), ("dishwasher", "dish-1"), ("lights", "lights-1"))
+KITCHEN_PROGRAM = "normal"
+WASHER, TEMP = "washer-1", "temp_c"
+PRECISION_OFF, PRECISION_ON = 6, 1  # 6: every 0.025 C step shows, as undeclared; 1: the shipped washer's
+TEMP_DECLARATION = re.compile(r'^\s*temp_c = \{ unit = "degC"[^}]*\}', re.M)  # in variables, not io
+STATUS_POLL_S = 0.1  # the host's own temp_c: the status copy is published every 100 ms
+WASH_STEP_TIMEOUT_S = 120  # from the start command to the wash step (lock, then a 12 l fill at 1 l/s)
+LATE_MESSAGES_S = 1.5  # after the window, for the values of its last status to reach the subscriber
+
+
+def washer_source(precision):
+    """scripts/drivers/washer.lua with its temp_c variable declared
+    precision = `precision` (a precision it declares itself replaced)."""
+    with open(os.path.join(ROOT, "scripts", "drivers", "washer.lua")) as f:
+        text = f.read()
+    found = TEMP_DECLARATION.search(text)
+    if not found:
+        raise AssertionError("scripts/drivers/washer.lua: no variable temp_c = { unit = \"degC\" ... }: the bench "
+                             "needs its declaration to set a precision")
+    table, said = re.subn(r"precision = \d+", "precision = %d" % precision, found.group(0))
+    if not said:
+        table = table.replace("{ ", "{ precision = %d, " % precision, 1)
+    return text[:found.start()] + table + text[found.end():]
+
+
+def text_at(number, precision):
+    """A number as core/mqtt/mqtt_native.c mqtt_value_text_at publishes it
+    (C's and Python's %.Nf round the same binary value the same way); no
+    value (nil in the driver, null in the status) is None."""
+    if number is None:
+        return "None"
+    text = "%.*f" % (precision, number)
+    return "%.*f" % (precision, 0.0) if float(text) == 0 else text
+
+
+def changes(texts):
+    """texts without repeats in a row: the changes, in order."""
+    out = []
+    for t in texts:
+        if not out or out[-1] != t:
+            out.append(t)
+    return out
+
+
+def kitchen_window(ctx, precision, seconds):
+    """A fresh vmacd, Mosquitto and subscriber, the kitchen on its plants,
+    the washer's temp_c declared with `precision`; a normal wash started,
+    and `seconds` of its wash step measured."""
+    import test_mqtt
+    from harness import post
+    test_mqtt.paho()  # Skip before anything starts
+    broker = test_mqtt.Broker(ctx)
+    sub = Subscriber(broker.port, record=[(WASHER, TEMP)])
+    ctx.cleanups.append(sub.close)
+    names = [name for _, name in KITCHEN_BOARDS]
+    host = ctx.host(drivers=ctx.drivers(washer=washer_source(precision)), settings={
+        "realtime": "true", "mqtt_url": broker.url, "mqtt_host_id": HOST_ID, "mqtt_client_id": "vmac-" + HOST_ID,
+        "mqtt_prefix": PREFIX})
+    for plant, name in KITCHEN_BOARDS:
+        ctx.board(plant, name, wrapper=board_wrapper())
+    host.wait_running(names, timeout_s=60)
+    t_attached = time.monotonic()
+
+    def washer_vars():
+        for d in host.get("/api/status")["devices"]:
+            if d["name"] == WASHER:
+                return d["variables"]
+        raise AssertionError("%s is no longer in the status" % WASHER)
+
+    # Every machine's values through the broker, and the subscriber's temp_c
+    # that of the host (the first, None, is followed by 20 C a second later:
+    # update = "timer:1").
+    while len(sub.devices) < len(names) or not sub.log or sub.log[-1][3] != text_at(washer_vars()[TEMP], precision):
+        if time.monotonic() - t_attached > FIRST_VALUES_TIMEOUT_S:
+            raise AssertionError("values of %d of %d machines, the washer's %s %s, reached the subscriber within "
+                                 "%d s" % (len(sub.devices), len(names), TEMP, sub.log[-1][3] if sub.log else "none",
+                                           FIRST_VALUES_TIMEOUT_S))
+        time.sleep(0.1)  # between two looks at the subscriber's count
+    published_before = len(sub.log)  # the last of these is what the broker holds when the wash starts
+    host_temps = []  # (monotonic time, temp_c) of every status read from the start command on
+    code, answer = post(host, "/api/devices/%s/cycle" % WASHER, ctx.token,
+                        json.dumps({"action": "start", "program": KITCHEN_PROGRAM}).encode())
+    if code != 200:
+        raise AssertionError("starting the %s programme: %d %s" % (KITCHEN_PROGRAM, code, answer[:200]))
+    t_started = time.monotonic()
+    while True:
+        v = washer_vars()
+        host_temps.append((time.monotonic(), v[TEMP]))
+        if v.get("step") == "wash":
+            break
+        if time.monotonic() - t_started > WASH_STEP_TIMEOUT_S:
+            raise AssertionError("no wash step within %d s of the start (step %s)" % (WASH_STEP_TIMEOUT_S,
+                                                                                      v.get("step")))
+        time.sleep(STATUS_POLL_S)
+    before = fresh_status(host)
+    values0, t0 = sub.values, time.monotonic()
+    while time.monotonic() < t0 + seconds:  # the window, the host's temp_c read all along
+        host_temps.append((time.monotonic(), washer_vars()[TEMP]))
+        time.sleep(STATUS_POLL_S)
+    after = fresh_status(host)
+    values1, t1 = sub.values, time.monotonic()
+    time.sleep(LATE_MESSAGES_S)  # not a measurement: the last status's values on their way
+    washer = host.device(WASHER, after)
+    log = list(sub.log)
+    in_window = [m for m in log if t0 <= m[0] <= t1]
+    # Nothing that matters lost: every change of the host's temp_c at the
+    # declared precision, in order, from what the broker held at the start
+    # to the window's end, and what the subscriber got over the same span.
+    want = changes([log[published_before - 1][3]] + [text_at(x, precision) for _, x in host_temps])
+    got = changes([m[3] for m in log[published_before - 1:] if m[0] <= t1 + LATE_MESSAGES_S])
+    lost = [x for x in want if x not in got]
+    elapsed = t1 - t0
+    return {
+        "precision": precision, "seconds": seconds, "step_at_end": washer["variables"].get("step"),
+        "fill_s": t0 - t_started, "uptime_s_at_end": after["uptime_s"],
+        "temp_c_start_end_window": [next(x for t, x in host_temps if t >= t0), host_temps[-1][1]],
+        "temp_messages_per_s": len(in_window) / elapsed,
+        "temp_messages": len(in_window),
+        "kitchen_messages_per_s": (values1 - values0) / elapsed,
+        "lateness_us": after["tick"]["lateness_us"],
+        "misses": after["counters"]["misses"] - before["counters"]["misses"],
+        "misses_host": after["counters"].get("misses_host", 0) - before["counters"].get("misses_host", 0),
+        "realtime": after["bus"]["realtime"],
+        "changes_host": len(want), "changes_subscriber": len(got), "lost": lost,
+        "in_order": got[:len(want)] == want, "repeats": len(log) - published_before + 1 - len(got),
+        "series_host": want, "series_subscriber": got,
+    }
+
+
+def kitchen_rounds(args, rounds):
+    """The precision throttle off (PRECISION_OFF) and on (PRECISION_ON) in
+    alternating rounds; the figures of every window and pooled."""
+    out = {"program": KITCHEN_PROGRAM, "precision_off": PRECISION_OFF, "precision_on": PRECISION_ON,
+           "seconds": args.seconds, "rounds": []}
+    for rnd in range(1, rounds + 1):
+        row = {}
+        order = (True, False) if rnd % 2 == 0 else (False, True)  # neither always first
+        for on in order:
+            name, precision = ("on", PRECISION_ON) if on else ("off", PRECISION_OFF)
+            print("mqtt, kitchen round %d/%d: precision throttle %s (the washer's temp_c precision = %d), "
+                  "%s wash, %d s of its wash step" % (rnd, rounds, name, precision, KITCHEN_PROGRAM, args.seconds),
+                  flush=True)
+            try:
+                r = with_ctx(args, "mqtt-kitchen-%s-%d" % (name, rnd), lambda c: kitchen_window(c, precision,
+                                                                                                  args.seconds))
+            except Skip:
+                raise
+            except AssertionError as e:
+                r = {"error": str(e)[:300]}
+            except Exception as e:  # noqa: BLE001 (a program that died, a refused setting)
+                r = {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
+            if "error" in r:
+                print("    FAILED: %s" % r["error"], flush=True)
+            else:
+                lat = r["lateness_us"]
+                print("    temp_c %.3f -> %.3f C: %.2f temp_c messages/s (%d), all the kitchen's values %.2f/s; "
+                      "%d changes at precision %d from the start, %s; tick lateness p99 %d, max %d us; "
+                      "%d misses (%d the host's)" % (
+                          r["temp_c_start_end_window"][0], r["temp_c_start_end_window"][1],
+                          r["temp_messages_per_s"], r["temp_messages"], r["kitchen_messages_per_s"],
+                          r["changes_host"], precision,
+                          "all reached the subscriber in order" if r["in_order"] and not r["lost"] else
+                          "LOST %s" % ", ".join(r["lost"][:10]) if r["lost"] else "OUT OF ORDER",
+                          lat["p99"], lat["max"], r["misses"], r["misses_host"]), flush=True)
+            row[name] = r
+        if "error" not in row["on"] and "error" not in row["off"]:
+            row["ratio_p99"] = row["on"]["lateness_us"]["p99"] / max(1, row["off"]["lateness_us"]["p99"])
+        out["rounds"].append(row)
+    for name in ("off", "on"):
+        ok = [rw[name] for rw in out["rounds"] if "error" not in rw[name]]
+        secs = sum(x["seconds"] for x in ok)
+        out[name] = {"windows": len(ok), "temp_messages": sum(x["temp_messages"] for x in ok),
+                     "temp_messages_per_s": sum(x["temp_messages"] for x in ok) / secs if secs else None,
+                     "kitchen_messages_per_s": statistics.mean(x["kitchen_messages_per_s"] for x in ok) if ok
+                     else None,
+                     "lost": sum(len(x["lost"]) for x in ok), "in_order": all(x["in_order"] for x in ok)}
+    p99 = [rw["ratio_p99"] for rw in out["rounds"] if "ratio_p99" in rw]
+    out["ratio_p99_median"] = statistics.median(p99) if p99 else None
+    if out["on"]["windows"] and out["off"]["windows"]:  # None: none with the throttle on (a window too short)
+        out["temp_ratio"] = (out["off"]["temp_messages_per_s"] / out["on"]["temp_messages_per_s"]
+                             if out["on"]["temp_messages_per_s"] else None)
+        out["kitchen_ratio"] = out["off"]["kitchen_messages_per_s"] / max(1e-9, out["on"]["kitchen_messages_per_s"])
+    return out
+
+
 def mqtt(args):
     """MQTT on and off in alternating rounds; {"skipped": why} without a broker or paho."""
     t_start = time.monotonic()
@@ -216,6 +425,22 @@ def mqtt(args):
     out["ratio_p99_median"] = statistics.median(p99) if p99 else None
     out["ratio_cpu_median"] = statistics.median(cpu) if cpu else None
     out["messages_per_s_median"] = statistics.median(rates) if rates else None
+    out["kitchen"] = kitchen_rounds(args, rounds)
+    out["elapsed_s"] = time.monotonic() - t_start
+    out["loadavg_at_end"] = open("/proc/loadavg").read().split()[:3]
+    return out
+
+
+def mqtt_kitchen(args):
+    """The precision throttle's rounds alone (--only mqtt-kitchen)."""
+    rounds = max(ROUNDS_MIN, min(ROUNDS_MAX, 40 // max(1, args.seconds)))
+    t_start = time.monotonic()
+    out = {"others_at_start": others_running(), "loadavg_at_start": open("/proc/loadavg").read().split()[:3]}
+    try:
+        out["kitchen"] = kitchen_rounds(args, rounds)
+    except Skip as e:
+        print("    mqtt-kitchen: SKIPPED: %s" % e, flush=True)
+        out["skipped"] = str(e)
     out["elapsed_s"] = time.monotonic() - t_start
     out["loadavg_at_end"] = open("/proc/loadavg").read().split()[:3]
     return out
@@ -224,6 +449,11 @@ def mqtt(args):
 def report_mqtt(r):
     if r.get("skipped"):
         print("mqtt: SKIPPED: %s" % r["skipped"])
+        return
+    if "rounds" not in r:  # --only mqtt-kitchen
+        report_kitchen(r["kitchen"])
+        print("mqtt-kitchen: %.0f s in all; load average %s at the start, %s at the end" % (
+            r["elapsed_s"], "/".join(r["loadavg_at_start"]), "/".join(r["loadavg_at_end"])))
         return
     print("\nMQTT through Mosquitto, %d boards at %d Hz, each machine's variable changing at every tick "
           "(tick lateness over each fresh host's life: attach, %d s settling and the window):" % (
@@ -260,7 +490,45 @@ def report_mqtt(r):
     print("  misses (the host's): on %s, off %s" % (
         ", ".join("%d (%d)" % (x["misses"], x["misses_host"]) for x in ons),
         ", ".join("%d (%d)" % (x["misses"], x["misses_host"]) for x in offs)))
+    if r.get("kitchen"):
+        report_kitchen(r["kitchen"])
     print("mqtt: %.0f s in all; load average %s at the start, %s at the end%s" % (
         r["elapsed_s"], "/".join(r["loadavg_at_start"]), "/".join(r["loadavg_at_end"]),
         "; %d programs of ours already running (%s)" % (len(r["others_at_start"]), ", ".join(r["others_at_start"][:4]))
         if r["others_at_start"] else ""))
+
+
+def report_kitchen(k):
+    print("\nThe precision throttle: the kitchen, a %s wash, %d s of its wash step per window; the washer's temp_c "
+          "(update = \"timer:1\") declared precision = %d (off: every 0.025 C step) or %d (on):" % (
+              k["program"], k["seconds"], k["precision_off"], k["precision_on"]))
+    print("  %-6s %-62s %-62s %s" % ("round", "throttle off", "throttle on", "p99 on/off"))
+    for i, rw in enumerate(k["rounds"], 1):
+        cells = []
+        for name in ("off", "on"):
+            x = rw[name]
+            if "error" in x:
+                cells.append("FAILED")
+                continue
+            first, last = x["temp_c_start_end_window"]
+            cells.append("temp_c %.2f/s (%.3f -> %.3f C), all %.2f/s, p99 %d us, %d lost" % (
+                x["temp_messages_per_s"], first, last, x["kitchen_messages_per_s"], x["lateness_us"]["p99"],
+                len(x["lost"])))
+        print("  %-6d %-62s %-62s %s" % (i, cells[0], cells[1], "%.2f" % rw["ratio_p99"] if "ratio_p99" in rw else "-"))
+    if "kitchen_ratio" not in k:
+        print("  no ratio (every window of one side failed)")
+        return
+    off, on = k["off"], k["on"]
+    print("  temp_c messages to the subscriber: off %.2f/s, on %.2f/s (all windows pooled: %d and %d messages): "
+          "%s (goal, issue 31: at least 5x)" % (
+              off["temp_messages_per_s"], on["temp_messages_per_s"], off["temp_messages"], on["temp_messages"],
+              "%.1fx fewer" % k["temp_ratio"] if k["temp_ratio"] else "no ratio: none with the throttle on, the "
+              "windows too short for a change of its precision"))
+    print("  all the kitchen's value messages: off %.2f/s, on %.2f/s: %.2fx fewer" % (
+        off["kitchen_messages_per_s"], on["kitchen_messages_per_s"], k["kitchen_ratio"]))
+    print("  changes of the host's temp_c at the declared precision the subscriber never got: off %d, on %d "
+          "(its series the host's, in order: off %s, on %s)" % (off["lost"], on["lost"],
+                                                                  "yes" if off["in_order"] else "no",
+                                                                  "yes" if on["in_order"] else "no"))
+    print("  tick lateness p99 on/off: %.2f, median of the rounds' %s (goal: at most 1.1)" % (
+        k["ratio_p99_median"], ", ".join("%.2f" % rw["ratio_p99"] for rw in k["rounds"] if "ratio_p99" in rw)))
