@@ -13,7 +13,6 @@
 
 #include "../common/errors.h"
 
-
 /* A DCMD metric's value as operator input; 0, or -1 with why. */
 static int metric_input(const Metric *mt, struct vmac_value *v, const char **why)
 {
@@ -170,4 +169,3 @@ void mqtt_spb_dcmd(struct vmac_mqtt *m, const struct mqtt_message *msg, const ch
 		dcmd_metric(m, device, msg->topic, p->metrics[i]);
 	sparkplug_b__payload__free_unpacked(p, NULL);
 }
-
