@@ -31,6 +31,15 @@ def _string(data, i):
     return data[i + 2:i + 2 + n], i + 2 + n
 
 
+def connect_flags(packet):
+    """A CONNECT's flags (MQTT 3.1.1, 3.1.2.3): clean session, will QoS and
+    will retain."""
+    _, i = _varint_len(packet, 1)
+    _, i = _string(packet, i)
+    flags = packet[i + 1]
+    return {"clean": bool(flags & 0x02), "will_qos": (flags >> 3) & 3, "will_retain": bool(flags & 0x20)}
+
+
 def parse_connect(packet):
     """(client id, will topic or None, will payload or None) of a CONNECT
     (MQTT 3.1.1, section 3.1)."""
@@ -58,6 +67,8 @@ class MqttProxy:
         self.broker_port = broker_port
         self.cond = threading.Condition()
         self.connects = []
+        self.flags = []  # connect_flags() of each CONNECT, as connects
+        self.publishes = []  # (client id, topic, QoS, retain) of every PUBLISH a client sent
         self.blocked = set()
         self.live = []  # (client id, client socket, broker socket)
         self.port = 0
@@ -110,6 +121,7 @@ class MqttProxy:
             return
         with self.cond:
             self.connects.append((cid, will_topic, will_payload))
+            self.flags.append(connect_flags(packet))
             self.cond.notify_all()
             blocked = cid in self.blocked
         if blocked:
@@ -119,17 +131,35 @@ class MqttProxy:
         upstream.sendall(packet)
         with self.cond:
             self.live.append((cid, client, upstream))
-        for a, b in ((client, upstream), (upstream, client)):
-            threading.Thread(target=self._pipe, args=(a, b), daemon=True).start()
+        threading.Thread(target=self._pipe, args=(client, upstream, cid), daemon=True).start()
+        threading.Thread(target=self._pipe, args=(upstream, client), daemon=True).start()
 
-    @staticmethod
-    def _pipe(src, dst):
+    def _pipe(self, src, dst, cid=None):
+        """src to dst as it comes; from a client (cid), its PUBLISH packets
+        are read on the way (3.3.1: QoS and retain in the fixed header)."""
+        pending = b""
         try:
             while True:
                 data = src.recv(65536)
                 if not data:
                     break
                 dst.sendall(data)
+                if cid is None:
+                    continue
+                pending += data
+                while pending:
+                    try:
+                        length, i = _varint_len(pending, 1)
+                    except ValueError:
+                        break
+                    if len(pending) < i + length:
+                        break
+                    packet, pending = pending[:i + length], pending[i + length:]
+                    if packet[0] >> 4 == 3:
+                        topic, _ = _string(packet, i)
+                        with self.cond:
+                            self.publishes.append((cid, topic.decode("utf-8", "replace"), (packet[0] >> 1) & 3,
+                                                   bool(packet[0] & 1)))
         except OSError:
             pass
         for s in (src, dst):

@@ -299,10 +299,16 @@ def has_value(metric_name, value):
 
 def check_seq(messages):
     """seq: NBIRTH 0, then one more per message of the node (mod 256);
-    NDEATH without one."""
+    NDEATH without one. Every timestamp, the payload's and each metric's,
+    ms since the epoch in UTC: within 5 minutes of this machine's clock (the
+    TCK's window for an NBIRTH)."""
     prev = None
+    now_ms = time.time() * 1000
     for kind, device, p, retain, qos in messages:
         assert not retain, "%s %s published retained" % (kind, device)
+        for ts in [p.get("timestamp")] + [m.get("timestamp") for m in p["metrics"]]:
+            assert ts is not None and abs(ts - now_ms) < 300000, \
+                "%s %s: a timestamp %s is not UTC ms now (%d)" % (kind, device, ts, now_ms)
         if kind == "NDEATH":
             assert "seq" not in p, "an NDEATH with a seq: %s" % p
             continue

@@ -140,6 +140,9 @@ def test_sparkplug_lives_on_while_the_main_connection_is_down(t):
         assert said.count(("NBIRTH", None)) == 1, "one NBIRTH in the whole test: %s" % said
         check_seq(sp.node_messages())
         tahu_agrees(sp.node_raw())
+        host.signal(signal.SIGTERM)  # an orderly stop: DDEATHs and the NDEATH, through the relay
+        assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
+        wire_ok(proxy, {"NBIRTH", "DBIRTH", "DDATA", "DDEATH", "NDEATH"})
     finally:
         proxy.close()
         sp.close()
@@ -179,9 +182,26 @@ def test_sparkplug_connection_lost_and_back_counts_bdseq_and_births_once(t):
             assert said.count("DBIRTH/" + name) == 1, "DBIRTHs of %s after the NBIRTH: %s" % (name, said)
         assert not [k for k in said if k.startswith(("DDEATH", "NBIRTH"))], "a death or second NBIRTH: %s" % said
         check_seq(sp.node_messages())
+        wire_ok(proxy, {"NBIRTH", "DBIRTH", "DDATA"})
     finally:
         proxy.close()
         sp.close()
+
+
+def wire_ok(proxy, kinds):
+    """As the TCK's monitor reads the packets: every Sparkplug CONNECT a
+    clean session with a QoS 1, not retained, will; every message of the
+    node QoS 0 and not retained but the NDEATH (QoS 1); kinds all seen. (A
+    broker clears the retain flag for a subscriber already there, so only
+    the wire shows it.)"""
+    for (cid, _, _), f in zip(proxy.connects, proxy.flags):
+        if cid.endswith("-spb"):
+            assert f == {"clean": True, "will_qos": 1, "will_retain": False}, "CONNECT of %s: %s" % (cid, f)
+    sent = [(tp, q, r) for cid, tp, q, r in proxy.publishes if cid.endswith("-spb")]
+    seen = {tp.split("/")[2] for tp, q, r in sent}
+    assert kinds <= seen, "the relay saw %s of the node, not all of %s" % (seen, kinds)
+    wrong = [(tp, q, r) for tp, q, r in sent if r or q != (1 if "/NDEATH/" in tp else 0)]
+    assert not wrong, "node messages with another QoS, or retained: %s" % wrong[:5]
 
 
 def state(online, ts):
