@@ -18,6 +18,7 @@
 #include <string.h>
 
 #include "../common/errors.h"
+#include "../driver/hints.h"
 
 void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char *fmt, ...)
 {
@@ -152,30 +153,25 @@ int mqtt_payload_value(const char *payload, int len, struct vmac_value *v, const
 
 /* What a declaration says a value is: 's' a string (a select of strings,
  * or a string default), 'v' one of numeric values, 'n' a number, 'b' a
- * boolean, 0 nothing (the value's own text decides). */
+ * boolean, 0 nothing or a mixed list (the value's own text decides). The
+ * kind is Home Assistant's and Sparkplug's too (vmac_hints_kind). */
 static char declared_kind(json_t *decl)
 {
-	json_t *values = json_object_get(decl, "values"), *def = json_object_get(decl, "default"), *x;
+	json_t *values = json_object_get(decl, "values"), *x;
 	size_t i, strings = 0, numbers = 0;
-	json_array_foreach(values, i, x)
-	{
-		strings += json_is_string(x);
-		numbers += json_is_number(x);
+	char kind;
+	if (json_is_array(values)) {
+		json_array_foreach(values, i, x)
+		{
+			strings += json_is_string(x);
+			numbers += json_is_number(x);
+		}
+		return strings > 0 && strings == json_array_size(values)   ? 's'
+		       : numbers > 0 && numbers == json_array_size(values) ? 'v'
+		                                                           : 0;
 	}
-	if (strings > 0 && strings == json_array_size(values))
-		return 's';
-	if (numbers > 0 && numbers == json_array_size(values))
-		return 'v';
-	if (json_is_array(values))
-		return 0; /* mixed: as the value's text says */
-	if (json_is_string(def))
-		return 's';
-	if (json_is_boolean(def))
-		return 'b';
-	if (json_is_number(def) || json_object_get(decl, "min") || json_object_get(decl, "max") ||
-	    json_object_get(decl, "unit"))
-		return 'n';
-	return 0;
+	kind = vmac_hints_kind(decl);
+	return kind == '?' ? 0 : kind;
 }
 
 int mqtt_payload_typed(const char *payload, int len, json_t *decl, struct vmac_value *v, const char **why)
