@@ -385,17 +385,6 @@ static int check_decl(json_t *decl, int settable, const char *file, const char *
 			BAD("entity_category: \"config\" is for settings; a read-only value is a sensor or "
 			    "binary_sensor, which HA refuses in that category (use \"diagnostic\")");
 	}
-	if (json_is_array(v = json_object_get(decl, "values"))) {
-		json_t *x;
-		json_array_foreach(v, i, x)
-		{
-			const char *text = json_string_value(x);
-			if (text && (!*text || strcasecmp(text, "none") == 0))
-				BAD("values: \"%s\" can never be HA's state: its select reads \"none\" in any case as "
-				    "unknown and ignores \"\", its sensor reads \"None\" as unknown",
-				    text);
-		}
-	}
 	if ((v = json_object_get(decl, "enabled_by_default")) != NULL && !json_is_boolean(v))
 		BAD("enabled_by_default must be true or false");
 	if ((v = json_object_get(decl, "step")) != NULL && (!json_is_number(v) || !(json_number_value(v) >= 0.001)))

@@ -64,8 +64,6 @@ START_TEST(what_home_assistant_refuses_names_the_field)
 	        "does not take unit \"kVA\" (HA accepts VA)");
 	refused("variables", "{\"unit\": \"MCF\", \"device_class\": \"volume\", \"state_class\": \"total\"}",
 	        "does not take unit \"MCF\"");
-	refused("params", "{\"values\": [\"off\", \"None\"]}", "params.x.values: \"None\" can never be HA's state");
-	refused("variables", "{\"values\": [\"\", \"on\"]}", "variables.x.values: \"\" can never be HA's state");
 	refused("variables", "{\"default\": true, \"entity_category\": \"config\"}", "sensor or binary_sensor");
 	refused("variables", "{\"default\": false, \"device_class\": \"outlet\"}",
 	        "\"outlet\" is not a device class of a binary_sensor");
