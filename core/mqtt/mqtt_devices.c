@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../driver/hints.h"
 #include "../loader/loader.h"
 
 struct mqtt_device *mqtt_conn_device_find(struct mqtt_conn *c, const char *name)
@@ -69,6 +70,7 @@ static struct mqtt_value *value_slot(struct mqtt_device *d, const char *name)
 	memset(v, 0, sizeof(*v));
 	snprintf(v->name, sizeof(v->name), "%s", name);
 	v->precision = mqtt_declared_precision(declaration(d->manifest, name));
+	v->kind = vmac_hints_kind(declaration(d->manifest, name));
 	return v;
 }
 
@@ -88,10 +90,15 @@ static void publish_values(struct vmac_mqtt *m, struct mqtt_device *d, const str
 	for (i = 0; i < st->nvars + st->nparams; i++) {
 		const struct vmac_variable *var = i < st->nvars ? &st->vars[i] : &st->params[i - st->nvars];
 		struct mqtt_value *v = value_slot(d, var->name);
+		struct vmac_value shown;
 		char text[MQTT_TEXT_MAX];
 		if (!v)
 			continue;
-		mqtt_value_text_at(&var->value, v->precision, text, sizeof(text)); /* a change that shows */
+		shown = var->value;
+		if (shown.type != VMAC_VALUE_NONE && ((v->kind == 'n' && shown.type != VMAC_VALUE_NUMBER) ||
+		                                      (v->kind == 'b' && shown.type != VMAC_VALUE_BOOL)))
+			shown.type = VMAC_VALUE_NONE; /* not what its entity reads: unknown, not an error in HA's log */
+		mqtt_value_text_at(&shown, v->precision, text, sizeof(text)); /* a change that shows */
 		if (!force && v->sent && strcmp(v->text, text) == 0)
 			continue;
 		snprintf(v->text, sizeof(v->text), "%s", text);

@@ -43,6 +43,7 @@ struct mqtt_value {
 	char text[MQTT_TEXT_MAX];
 	int sent;      /* text went out on this connection */
 	int precision; /* a number's decimals as published (the declaration's precision), -1: all */
+	char kind;     /* vmac_hints_kind of its declaration: a value of another kind goes out as None */
 };
 
 /* sparkplug: a metric of a DBIRTH and its Sparkplug datatype. */

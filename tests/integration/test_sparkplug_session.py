@@ -335,6 +335,10 @@ def test_sparkplug_datatypes_of_value_lists(t):
         word_said = lambda p: p["by_name"].get("word", {}).get("value") == "5"  # noqa: E731
         if not word_said(born):  # born before the first tick: its value comes in a DDATA
             sp.wait(NODE % "DDATA" + "/ch", word_said, what="the word's value as text")
+        # The native topics say the same: the text, and None (HA's unknown)
+        # where an entity of the declared kind could not read the value.
+        sp.wait(PREFIX + "/ch/word", lambda p: p == "5", raw=True, what="the word's native value")
+        sp.wait(PREFIX + "/ch/level", lambda p: p == "None", raw=True, what="a string in a number as None")
         mark = sp.mark()
         sp.publish(NODE % "DCMD" + "/ch", command([("speed", INT64, 3), ("mode", STRING, "1"), ("ratio", DOUBLE, 1.5)]))
         sp.wait(NODE % "DDATA" + "/ch", lambda p: has_value("speed", 3)(p) or "speed" not in p["by_name"],
