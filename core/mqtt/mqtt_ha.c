@@ -316,7 +316,7 @@ static void add_health(struct ha *h, json_t *manifest)
 	    {"driver_memory_kb", "Driver memory", "kB", "data_size", "measurement", 0},
 	};
 	char state[400], uid[300], host_status[300], object[64];
-	json_t *common = entity(h, "_health", json_object()), *e, *types;
+	json_t *none = json_object(), *common = entity(h, "_health", none), *e, *types;
 	size_t i;
 	snprintf(state, sizeof(state), "%s/_health", h->topic_base);
 	for (i = 0; common && i < sizeof(fields) / sizeof(fields[0]); i++) {
@@ -327,6 +327,7 @@ static void add_health(struct ha *h, json_t *manifest)
 		                  fields[i].state_class, fields[i].enabled));
 	}
 	json_decref(common);
+	json_decref(none);
 	snprintf(uid, sizeof(uid), "%s__event", h->dev_id);
 	snprintf(state, sizeof(state), "%s/_event", h->topic_base);
 	snprintf(host_status, sizeof(host_status), "%s/%s/status", h->s->prefix, h->s->host_id);
