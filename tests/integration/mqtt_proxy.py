@@ -68,7 +68,7 @@ class MqttProxy:
         self.cond = threading.Condition()
         self.connects = []
         self.flags = []  # connect_flags() of each CONNECT, as connects
-        self.publishes = []  # (client id, topic, QoS, retain) of every PUBLISH a client sent
+        self.publishes = []  # (client id, topic, QoS, retain, connection) of every PUBLISH a client sent
         self.blocked = set()
         self.live = []  # (client id, client socket, broker socket)
         self.port = 0
@@ -122,6 +122,7 @@ class MqttProxy:
         with self.cond:
             self.connects.append((cid, will_topic, will_payload))
             self.flags.append(connect_flags(packet))
+            conn = len(self.connects) - 1  # this connection: the index of its CONNECT
             self.cond.notify_all()
             blocked = cid in self.blocked
         if blocked:
@@ -131,10 +132,10 @@ class MqttProxy:
         upstream.sendall(packet)
         with self.cond:
             self.live.append((cid, client, upstream))
-        threading.Thread(target=self._pipe, args=(client, upstream, cid), daemon=True).start()
+        threading.Thread(target=self._pipe, args=(client, upstream, cid, conn), daemon=True).start()
         threading.Thread(target=self._pipe, args=(upstream, client), daemon=True).start()
 
-    def _pipe(self, src, dst, cid=None):
+    def _pipe(self, src, dst, cid=None, conn=None):
         """src to dst as it comes; from a client (cid), its PUBLISH packets
         are read on the way (3.3.1: QoS and retain in the fixed header)."""
         pending = b""
@@ -159,7 +160,7 @@ class MqttProxy:
                         topic, _ = _string(packet, i)
                         with self.cond:
                             self.publishes.append((cid, topic.decode("utf-8", "replace"), (packet[0] >> 1) & 3,
-                                                   bool(packet[0] & 1)))
+                                                   bool(packet[0] & 1), conn))
         except OSError:
             pass
         for s in (src, dst):

@@ -191,17 +191,33 @@ def test_sparkplug_connection_lost_and_back_counts_bdseq_and_births_once(t):
 def wire_ok(proxy, kinds):
     """As the TCK's monitor reads the packets: every Sparkplug CONNECT a
     clean session with a QoS 1, not retained, will; every message of the
-    node QoS 0 and not retained but the NDEATH (QoS 1); kinds all seen. (A
-    broker clears the retain flag for a subscriber already there, so only
-    the wire shows it.)"""
+    node QoS 0 and not retained but the NDEATH (QoS 1); on each connection
+    the NBIRTH first, and no DDATA or DDEATH of a device before its DBIRTH
+    in that session; kinds all seen. (A broker clears the retain flag for a
+    subscriber already there, so only the wire shows it.)"""
     for (cid, _, _), f in zip(proxy.connects, proxy.flags):
         if cid.endswith("-spb"):
             assert f == {"clean": True, "will_qos": 1, "will_retain": False}, "CONNECT of %s: %s" % (cid, f)
-    sent = [(tp, q, r) for cid, tp, q, r in proxy.publishes if cid.endswith("-spb")]
-    seen = {tp.split("/")[2] for tp, q, r in sent}
+    sent = [(tp, q, r, conn) for cid, tp, q, r, conn in proxy.publishes if cid.endswith("-spb")]
+    seen = {tp.split("/")[2] for tp, q, r, conn in sent}
     assert kinds <= seen, "the relay saw %s of the node, not all of %s" % (seen, kinds)
-    wrong = [(tp, q, r) for tp, q, r in sent if r or q != (1 if "/NDEATH/" in tp else 0)]
+    wrong = [(tp, q, r) for tp, q, r, conn in sent if r or q != (1 if "/NDEATH/" in tp else 0)]
     assert not wrong, "node messages with another QoS, or retained: %s" % wrong[:5]
+    born, first = set(), {}
+    for tp, q, r, conn in sent:
+        kind, device = tp.split("/")[2], "/".join(tp.split("/")[4:])
+        if conn not in first:
+            first[conn] = kind
+            assert kind in ("NBIRTH", "NDEATH"), "connection %d's first message is a %s" % (conn, tp)
+        if kind == "NBIRTH":
+            born = {(conn, "")}
+        elif kind == "DBIRTH":
+            born.add((conn, device))
+        elif kind == "DDEATH":
+            assert (conn, device) in born, "a DDEATH of %s not born in this session" % device
+            born.discard((conn, device))
+        elif kind == "DDATA":
+            assert (conn, "") in born and (conn, device) in born, "a DDATA of %s before its DBIRTH" % device
 
 
 def state(online, ts):
