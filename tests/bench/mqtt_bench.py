@@ -317,6 +317,20 @@ def kitchen_window(ctx, precision, seconds):
     }
 
 
+def attempt(run):
+    """run()'s result, or {"error": why} when it failed (boards that did not
+    attach, values that never came, a program that died, a refused
+    setting); Skip goes to the caller."""
+    try:
+        return run()
+    except Skip:
+        raise
+    except AssertionError as e:
+        return {"error": str(e)[:300]}
+    except Exception as e:  # noqa: BLE001
+        return {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
+
+
 def kitchen_rounds(args, rounds):
     """The precision throttle off (PRECISION_OFF) and on (PRECISION_ON) in
     alternating rounds; the figures of every window and pooled."""
@@ -330,15 +344,8 @@ def kitchen_rounds(args, rounds):
             print("mqtt, kitchen round %d/%d: precision throttle %s (the washer's temp_c precision = %d), "
                   "%s wash, %d s of its wash step" % (rnd, rounds, name, precision, KITCHEN_PROGRAM, args.seconds),
                   flush=True)
-            try:
-                r = with_ctx(args, "mqtt-kitchen-%s-%d" % (name, rnd), lambda c: kitchen_window(c, precision,
-                                                                                                  args.seconds))
-            except Skip:
-                raise
-            except AssertionError as e:
-                r = {"error": str(e)[:300]}
-            except Exception as e:  # noqa: BLE001 (a program that died, a refused setting)
-                r = {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
+            r = attempt(lambda: with_ctx(args, "mqtt-kitchen-%s-%d" % (name, rnd),
+                                         lambda c: kitchen_window(c, precision, args.seconds)))
             if "error" in r:
                 print("    FAILED: %s" % r["error"], flush=True)
             else:
@@ -392,15 +399,11 @@ def mqtt(args):
             print("mqtt, round %d/%d: MQTT %s, %d boards at %d Hz, %d s" % (
                 rnd, rounds, name, BOARDS, 1000000 // PERIOD_US, args.seconds), flush=True)
             try:
-                r = with_ctx(args, "mqtt-%s-%d" % (name, rnd), lambda c: window(c, on, args.seconds))
+                r = attempt(lambda: with_ctx(args, "mqtt-%s-%d" % (name, rnd), lambda c: window(c, on, args.seconds)))
             except Skip as e:
                 print("    mqtt: SKIPPED: %s" % e, flush=True)
                 out["skipped"] = str(e)
                 return out
-            except AssertionError as e:  # boards that did not attach, values that never came
-                r = {"error": str(e)[:300]}
-            except Exception as e:  # noqa: BLE001 (a program that died, a refused setting)
-                r = {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
             if "error" in r:
                 print("    FAILED: %s" % r["error"], flush=True)
             else:
