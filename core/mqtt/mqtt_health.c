@@ -37,7 +37,6 @@
 #include "mqtt_internal.h"
 
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "../common/hist.h"
