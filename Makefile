@@ -18,6 +18,7 @@
 #                   sampled every 10 s; make test-soak: the same for 2 minutes
 #   make clean
 
+.DEFAULT_GOAL := all # plain make builds the programs, not the first archive a fragment defines
 BUILD   ?= build
 CC      ?= cc
 CFLAGS  ?= -O2 -g
@@ -32,11 +33,14 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # microcontroller and its tests (make firmware, tests/integration/test_qemu.py); libmosquitto for
 # vmacd's MQTT client, and the mosquitto broker and python3-paho-mqtt for its tests (test_mqtt.py,
 # test_sparkplug.py); protoc-c and libprotobuf-c for its Sparkplug B payloads (core/mqtt/sparkplug_b.proto);
-# python3-nacl (libsodium's SipHash) for the integration tests' own sealed frames (test_trust.py).
+# python3-nacl (libsodium's SipHash) for the integration tests' own sealed frames (test_trust.py);
+# libsystemd for vmacd's sd_notify and journal fields (core/vmacd/service.c), and systemd's
+# journald and journalctl for the journal test (test_service.py).
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
         openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm \
-        libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev python3-nacl
+        libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev python3-nacl \
+        libsystemd-dev systemd
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
@@ -151,11 +155,12 @@ endef
 VMACD_MODULES      := $(MODULES)
 VMAC_MODULES       := $(call down_from,mqtt)
 VMAC_BOARD_MODULES := transport board proto common
+VMACD_OBJ          := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/vmacd/*.c))
 VMAC_OBJ           := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/cli/*.c))
 VMAC_BOARD_OBJ     := $(patsubst %.c,$(OBJ)/%.o,$(wildcard firmware/posix/*.c))
 
-$(BUILD)/bin/vmacd: $(OBJ)/core/vmacd/main.o $(call archives,$(VMACD_MODULES)) $(BUILD)/layers.ok
-	$(call link,$(OBJ)/core/vmacd/main.o,$(VMACD_MODULES),-lev)
+$(BUILD)/bin/vmacd: $(VMACD_OBJ) $(call archives,$(VMACD_MODULES)) $(BUILD)/layers.ok
+	$(call link,$(VMACD_OBJ),$(VMACD_MODULES),-lev $(call pkg_libs,libsystemd))
 
 $(BUILD)/bin/vmac: $(VMAC_OBJ) $(call archives,$(VMAC_MODULES)) $(BUILD)/layers.ok
 	$(call link,$(VMAC_OBJ),$(VMAC_MODULES),$(call pkg_libs,libcurl libmosquitto jansson))

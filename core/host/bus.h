@@ -196,6 +196,9 @@ void vmac_bus_join(struct vmac_bus *bus);
 /* Main thread side of the rings. to_main_wakeup is called (from the bus
  * thread) after pushing to the main ring; set it before start. */
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx);
+/* How many ticks the bus thread has run, readable from any thread at any
+ * time: it grows while the bus thread lives (vmacd's systemd watchdog). */
+uint64_t vmac_bus_heartbeat(struct vmac_bus *bus);
 int vmac_bus_poll_msg(struct vmac_bus *bus, struct vmac_bus_msg *msg);
 /* Wake the main thread (its wakeup callback), from any thread: something
  * it looks after changed (the store's board keys, through the API). */

@@ -278,6 +278,7 @@ struct vmac_bus {
 	struct vmac_packet rx[RX_BATCH];
 	struct vmac_hist lateness;
 	struct vmac_bus_counters counters;
+	_Atomic uint64_t heartbeat; /* counters.ticks for other threads (vmac_bus_heartbeat) */
 	/* The attach limiter (devices.c, attach_allowed): credit in ns of
 	 * attach_rate, at most attach_max attaches' worth; what it refused
 	 * since the last warning, said at most every FLOOD_WARN_NS. */

@@ -34,7 +34,7 @@ void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char
 void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const char *kind, const char *device,
                            const char *text)
 {
-	struct vmac_event *e;
+	struct vmac_event *e, copy;
 	pthread_mutex_lock(&log->lock);
 	e = &log->ring[log->next_seq % VMAC_EVENT_LOG_SIZE];
 	e->seq = log->next_seq++;
@@ -42,10 +42,12 @@ void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const ch
 	snprintf(e->kind, sizeof(e->kind), "%s", kind);
 	snprintf(e->device, sizeof(e->device), "%s", device ? device : "");
 	snprintf(e->text, sizeof(e->text), "%s", text);
+	if (log->echo)
+		copy = *e;
 	pthread_cond_broadcast(&log->grew);
 	pthread_mutex_unlock(&log->lock);
 	if (log->echo)
-		fprintf(stderr, "%s: [%s] %s\n", log->echo, kind, text);
+		log->echo(log->echo_ctx, &copy);
 }
 
 uint64_t vmac_event_log_next_seq(struct vmac_event_log *log)

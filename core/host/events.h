@@ -1,6 +1,6 @@
 /* The host's event log: the last events (attached, dropped, driver errors,
  * missing drivers, malformed frames) kept in memory for the status API and
- * the event stream, echoed to stderr, and copied into the store by the main
+ * the event stream, echoed (vmacd: to stderr or the journal), and copied into the store by the main
  * thread (vmac_store_events_add). Written by the main thread, read by the HTTP threads. */
 #ifndef VMAC_EVENTS_H
 #define VMAC_EVENTS_H
@@ -24,7 +24,10 @@ struct vmac_event_log {
 	pthread_mutex_t lock;
 	pthread_cond_t grew; /* broadcast on every add (CLOCK_MONOTONIC) */
 	uint64_t next_seq;
-	const char *echo; /* each event also goes to stderr after this name ("vmacd"); NULL: not */
+	/* Each event, once recorded, is also handed to echo (outside the lock:
+	 * vmacd writes it to stderr or the journal); NULL: not. */
+	void (*echo)(void *ctx, const struct vmac_event *e);
+	void *echo_ctx;
 	struct vmac_event ring[VMAC_EVENT_LOG_SIZE];
 };
 

@@ -249,8 +249,12 @@ static int start_worker(struct worker *w, int state)
 	pthread_sigmask(SIG_BLOCK, &all, &old);
 	rc = pthread_create(&w->thread, NULL, worker_main, w);
 	pthread_sigmask(SIG_SETMASK, &old, NULL);
-	if (rc == 0)
+	if (rc == 0) {
+		char name[16];
+		snprintf(name, sizeof(name), "vmac-worker-%d", w->index % 1000);
+		pthread_setname_np(w->thread, name);
 		atomic_store(&w->state, state); /* visible to the bus thread only once it runs */
+	}
 	return rc;
 }
 

@@ -1,8 +1,9 @@
 /* vmacd: the vmac host. The main thread parses the configuration, starts
  * the bus thread, the HTTP server and MQTT, runs the main loop
  * (core/mainloop/: drivers loaded and unloaded when the bus thread asks,
- * events and checkpoints stored) on each wake-up, and on SIGINT/SIGTERM has
- * every board put in its safe state before exiting 0. */
+ * events and checkpoints stored) on each wake-up, tells systemd it is ready
+ * and alive (service.c), and on SIGINT/SIGTERM has every board put in its
+ * safe state before exiting 0. */
 #include <errno.h>
 #include <ev.h>
 #include <getopt.h>
@@ -25,6 +26,7 @@
 #include "../mqtt/mqtt.h"
 #include "../mqtt/site.h"
 #include "../store/store.h"
+#include "service.h"
 
 struct host {
 	struct vmac_config cfg;
@@ -40,6 +42,7 @@ struct host {
 	ev_async wake_w;
 	ev_timer every_w; /* the main loop's own looks (the store's board keys) when nothing wakes it */
 	ev_signal int_w, term_w;
+	struct vmacd_notify notify; /* systemd: READY=1, WATCHDOG=1 (service.h) */
 	int stopping;
 };
 
@@ -62,7 +65,7 @@ static void usage(FILE *f)
 	        "  --set KEY=VALUE    any config key, e.g. --set slice_us=200 (repeatable);\n"
 	        "                     driver.NAME.KEY for one driver, e.g. --set driver.washer.param.time_scale=0.01\n"
 	        "  --help, --version\n\n"
-	        "SIGINT or SIGTERM: every board is commanded to its safe state, then exit 0.\n");
+	        "SIGINT or SIGTERM: every board is commanded to its safe state, then exit 0.");
 }
 
 static void wakeup(void *ctx)
@@ -114,11 +117,12 @@ static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
 	(void)loop;
 	(void)revents;
 	if (h->stopping) {
-		fprintf(stderr, "vmacd: second signal, exiting now (boards go safe on their watchdog)\n");
+		vmacd_log(LOG_ERR, "second signal, exiting now (boards go safe on their watchdog)");
 		_exit(1);
 	}
 	h->stopping = 1;
-	fprintf(stderr, "vmacd: signal %d: putting every board in its safe state\n", w->signum);
+	vmacd_notify_stopping();
+	vmacd_log(LOG_NOTICE, "signal %d: putting every board in its safe state", w->signum);
 	memset(&c, 0, sizeof(c));
 	c.kind = VMAC_CMD_STOP;
 	while (vmac_bus_send_cmd(h->bus, &c) != 0)
@@ -153,7 +157,7 @@ static int parse_args(struct host *h, int argc, char **argv)
 		else if (strncmp(argv[i], "--config=", 9) == 0)
 			file = argv[i] + 9;
 		if (file && vmac_config_load(&h->cfg, file, err, sizeof(err)) != 0) {
-			fprintf(stderr, "vmacd: config: %s\n", err);
+			vmacd_log(LOG_ERR, "config: %s", err);
 			return 2;
 		}
 	}
@@ -172,34 +176,34 @@ static int parse_args(struct host *h, int argc, char **argv)
 			snprintf(kv, sizeof(kv), "%s", optarg);
 			eq = strchr(kv, '=');
 			if (!eq) {
-				fprintf(stderr, "vmacd: --set wants KEY=VALUE, got '%s'\n", optarg);
+				vmacd_log(LOG_ERR, "--set wants KEY=VALUE, got '%s'", optarg);
 				return 2;
 			}
 			*eq = '\0';
 			if (vmac_config_set(&h->cfg, kv, eq + 1, err, sizeof(err)) != 0) {
-				fprintf(stderr, "vmacd: --set: %s\n", err);
+				vmacd_log(LOG_ERR, "--set: %s", err);
 				return 2;
 			}
 			continue;
 		case 'h': usage(stdout); return 1;
-		case 'V': printf("vmacd %s\n", VMAC_VERSION_STRING); return 1;
+		case 'V': printf("vmacd %s", VMAC_VERSION_STRING); return 1;
 		default: usage(stderr); return 2;
 		}
 		if (vmac_config_set(&h->cfg, key, optarg, err, sizeof(err)) != 0) {
-			fprintf(stderr, "vmacd: %s\n", err);
+			vmacd_log(LOG_ERR, "%s", err);
 			return 2;
 		}
 	}
 	if (optind < argc) {
-		fprintf(stderr, "vmacd: unexpected argument '%s' (see --help)\n", argv[optind]);
+		vmacd_log(LOG_ERR, "unexpected argument '%s' (see --help)", argv[optind]);
 		return 2;
 	}
 	if (vmac_config_check(&h->cfg, err, sizeof(err)) != 0) {
-		fprintf(stderr, "vmacd: %s\n", err);
+		vmacd_log(LOG_ERR, "%s", err);
 		return 2;
 	}
 	if (vmac_mqtt_settings_parse(&h->cfg, &h->mqtt_settings, err, sizeof(err)) != 0) {
-		fprintf(stderr, "vmacd: %s\n", err);
+		vmacd_log(LOG_ERR, "%s", err);
 		return 2;
 	}
 	return 0;
@@ -210,7 +214,10 @@ int main(int argc, char **argv)
 	static struct host host;
 	struct host *h = &host;
 	char err[512];
-	int rc = parse_args(h, argc, argv);
+	int rc;
+
+	vmacd_log_init();
+	rc = parse_args(h, argc, argv);
 
 	if (rc)
 		return rc == 1 ? 0 : rc;
@@ -224,11 +231,11 @@ int main(int argc, char **argv)
 	mallopt(M_ARENA_MAX, 4);
 	setvbuf(stderr, NULL, _IOLBF, 0);
 	vmac_event_log_init(&h->log);
-	h->log.echo = "vmacd";
+	h->log.echo = vmacd_echo_event;
 	h->loop = EV_DEFAULT;
 	h->bus = vmac_bus_new(&h->cfg, err, sizeof(err));
 	if (!h->bus) {
-		fprintf(stderr, "vmacd: bus: %s\n", err);
+		vmacd_log(LOG_ERR, "bus: %s", err);
 		return 1;
 	}
 	{
@@ -236,7 +243,7 @@ int main(int argc, char **argv)
 		    .ctx = h, .wall_ns = wall_ns, .bus_ns = bus_ns, .stopped = stopped};
 		if (vmac_store_open(h->cfg.state_dir, &h->store, err, sizeof(err)) != 0 ||
 		    !(h->main = vmac_mainloop_new(&h->cfg, h->bus, h->store, &h->log, &hooks, err, sizeof(err)))) {
-			fprintf(stderr, "vmacd: %s\n", err);
+			vmacd_log(LOG_ERR, "%s", err);
 			vmac_store_close(h->store);
 			vmac_bus_free(h->bus);
 			return 1;
@@ -244,7 +251,7 @@ int main(int argc, char **argv)
 	}
 	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, h->store, &h->cfg, err, sizeof(err));
 	if (!h->http) {
-		fprintf(stderr, "vmacd: http: %s\n", err);
+		vmacd_log(LOG_ERR, "http: %s", err);
 		vmac_store_close(h->store);
 		vmac_bus_free(h->bus);
 		return 1;
@@ -274,7 +281,7 @@ int main(int argc, char **argv)
 		pthread_sigmask(SIG_SETMASK, &old, NULL);
 	}
 	if (rc != 0) {
-		fprintf(stderr, "vmacd: cannot start the bus thread: %s\n", vmac_strerror(rc));
+		vmacd_log(LOG_ERR, "cannot start the bus thread: %s", vmac_strerror(rc));
 		return 1;
 	}
 	if (h->mqtt_settings.enabled) { /* its threads too leave the stop signals to the main thread */
@@ -291,23 +298,31 @@ int main(int argc, char **argv)
 		if (!h->site)
 			snprintf(err, sizeof(err), "out of memory");
 		if (!h->mqtt) {
-			fprintf(stderr, "vmacd: mqtt: %s\n", err);
+			vmacd_log(LOG_ERR, "mqtt: %s", err);
 			return 1;
 		}
-		fprintf(stderr, "vmacd: mqtt to %s://%s:%d as %s, topics %s/%s/...%s\n",
-		        h->mqtt_settings.tls ? "mqtts" : "mqtt", h->mqtt_settings.host, h->mqtt_settings.port,
-		        h->mqtt_settings.client_id, h->mqtt_settings.prefix, h->mqtt_settings.host_id,
-		        h->mqtt_settings.commands ? ", commands accepted" : ", commands off");
+		vmacd_log(LOG_NOTICE, "mqtt to %s://%s:%d as %s, topics %s/%s/...%s",
+		          h->mqtt_settings.tls ? "mqtts" : "mqtt", h->mqtt_settings.host, h->mqtt_settings.port,
+		          h->mqtt_settings.client_id, h->mqtt_settings.prefix, h->mqtt_settings.host_id,
+		          h->mqtt_settings.commands ? ", commands accepted" : ", commands off");
 		vmac_http_set_site(h->http, h->site);
 	}
-	fprintf(stderr,
-	        "vmacd: bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us\n"
-	        "vmacd: drivers from %s%s%s/drivers\n"
-	        "vmacd: status at %s://%.*s:%u/api/status\n",
-	        h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
-	        h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us, h->cfg.drivers_dir,
-	        h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir, vmac_http_tls(h->http) ? "https" : "http",
-	        (int)(strrchr(h->cfg.http, ':') - h->cfg.http), h->cfg.http, vmac_http_port(h->http));
+	{
+		char status[256];
+		int hostlen = (int)(strrchr(h->cfg.http, ':') - h->cfg.http);
+		const char *scheme = vmac_http_tls(h->http) ? "https" : "http";
+		vmacd_log(LOG_NOTICE,
+		          "bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us",
+		          h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
+		          h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us);
+		vmacd_log(LOG_NOTICE, "drivers from %s%s%s/drivers", h->cfg.drivers_dir,
+		          h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir);
+		vmacd_log(LOG_NOTICE, "status at %s://%.*s:%u/api/status", scheme, hostlen, h->cfg.http,
+		          vmac_http_port(h->http));
+		snprintf(status, sizeof(status), "bus %s, API at %s://%.*s:%u", h->cfg.bus, scheme, hostlen,
+		         h->cfg.http, vmac_http_port(h->http));
+		vmacd_notify_start(&h->notify, h->loop, h->bus, status);
+	}
 	ev_run(h->loop, 0);
 	vmac_mqtt_stop(h->mqtt); /* devices and host offline, while the broker can still be told */
 	vmac_bus_join(h->bus);
@@ -317,6 +332,6 @@ int main(int argc, char **argv)
 	vmac_mainloop_free(h->main);
 	vmac_store_close(h->store);
 	vmac_bus_free(h->bus);
-	fprintf(stderr, "vmacd: stopped; every board was told to go safe\n");
+	vmacd_log(LOG_NOTICE, "stopped; every board was told to go safe");
 	return 0;
 }

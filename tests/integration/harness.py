@@ -187,8 +187,8 @@ class Host(Proc):
     the last poll (a busy host, a slow poll), the ones between are fetched
     from the event log (GET /api/events/log?after=SEQ), so none is missed."""
 
-    def __init__(self, ctx, name, argv, logdir):
-        super().__init__(name, argv, logdir)
+    def __init__(self, ctx, name, argv, logdir, env=None):
+        super().__init__(name, argv, logdir, env=env)
         self.ctx = ctx
         self.events = {}
         self.complete_to = None  # every event up to this seq is in self.events
@@ -435,10 +435,11 @@ class Context:
         ip("netns", "exec", ns, "ip", "link", "set", "lo", "up")
         return host_if, ns, board_if
 
-    def host(self, drivers=None, settings=None, extra=(), wrapper=(), bus=None):
+    def host(self, drivers=None, settings=None, extra=(), wrapper=(), bus=None, env=None):
         """Start vmacd on this test's bus with relaxed timing; returns once its
         status server is up. The HTTP port is chosen by the kernel. wrapper:
-        a command vmacd runs under (e.g. setpriv to drop privileges)."""
+        a command vmacd runs under (e.g. setpriv to drop privileges); env:
+        its whole environment (default: the test's)."""
         if self.token is None:
             self.token = self.make_token("deploy")
         values = dict(TIMING, realtime="false")
@@ -450,7 +451,7 @@ class Context:
         for k, v in values.items():
             argv += ["--set", "%s=%s" % (k, v)]
         argv += list(extra)
-        h = Host(self, self._name("vmacd"), argv, self.logdir)
+        h = Host(self, self._name("vmacd"), argv, self.logdir, env=env)
         extra = list(extra)
         h.state = extra[extra.index("--state") + 1] if "--state" in extra else self.logdir
         self.procs.append(h)
