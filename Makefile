@@ -16,6 +16,8 @@
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
 #   make soak       one host under every fault at once for SOAK_MINUTES (default 60), its resources
 #                   sampled every 10 s; make test-soak: the same for 2 minutes
+#   make install    the programs and their files under PREFIX (default /usr/local), DESTDIR; make deb: the
+#                   Debian package (packaging/package.mk)
 #   make clean
 
 BUILD   ?= build
@@ -164,6 +166,7 @@ $(BUILD)/bin/vmac-board: $(VMAC_BOARD_OBJ) $(call archives,$(VMAC_BOARD_MODULES)
 	$(call link,$(VMAC_BOARD_OBJ),$(VMAC_BOARD_MODULES))
 
 include firmware/mcu/lm3s6965/mcu.mk tests/unit/unit.mk tests/fuzz/fuzz.mk
+include packaging/package.mk
 
 deps:
 	@if ! command -v dpkg-query >/dev/null; then \

@@ -5,7 +5,7 @@
  *   installed    PREFIX/bin/vmacd        -> PREFIX/share/vmac (make install, the .deb)
  *   source tree  ROOT/build/bin/vmacd,   -> ROOT (the first folder above the
  *                ROOT/build/asan/bin/vmac    binary that holds scripts/drivers/)
- * Used by vmacd and vmac. */
+ * Used by vmacd and vmac; docs/SERVICE.md, "Install layout". */
 #ifndef VMAC_PATHS_H
 #define VMAC_PATHS_H
 
