@@ -17,7 +17,7 @@
 #   make soak       one host under every fault at once for SOAK_MINUTES (default 60), its resources
 #                   sampled every 10 s; make test-soak: the same for 2 minutes
 #   make install    the programs and their files under PREFIX (default /usr/local), DESTDIR; make deb: the
-#                   Debian package (packaging/package.mk)
+#                   Debian package; make test-package: it installed and purged (packaging/package.mk)
 #   make clean
 
 BUILD   ?= build
@@ -257,7 +257,7 @@ test: deps
 	@$(call timed,test-build,-j2)
 	@$(call timed,test-unit test-lua test-drivers test-fuzz,-j2)
 	@$(call timed,test-integration asan-build test-soak,-j3)
-	@$(call timed,test-ui test-asan,-j2 VMAC_SCHED_PROPERTY_RUNS=10000)
+	@$(call timed,test-ui test-asan test-package,-j2 VMAC_SCHED_PROPERTY_RUNS=10000)
 	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \

@@ -1,11 +1,14 @@
-# packaging/package.mk: vmac installed (make install, make uninstall) and as
-# a Debian package (make deb); docs/SERVICE.md. The files beside this one
+# packaging/package.mk: vmac installed (make install, make uninstall), as a
+# Debian package (make deb) and that package's test (make test-package);
+# docs/SERVICE.md. The files beside this one
 # are the service's: the unit (vmacd.service), the settings file
 # (vmacd.conf), the user (vmac.sysusers) and the state folder
 # (vmac.tmpfiles); debian/ holds the package's own.
 #
 #   make install [PREFIX=/usr/local] [DESTDIR=]   the programs, their files, man pages, docs, the unit
 #   make deb                                      build/deb/vmac_VERSION_ARCH.deb, checked by lintian
+#   make test-package                             make deb, dpkg -i, the service's command as its user,
+#                                                 the kitchen, dpkg --purge; make install into a folder
 
 PREFIX      ?= /usr/local
 DESTDIR     ?=
@@ -22,8 +25,9 @@ SYSUSERSDIR ?= $(PREFIX)/lib/sysusers.d
 TMPFILESDIR ?= $(PREFIX)/lib/tmpfiles.d
 
 # make deps: help2man makes the man pages from the programs' --help;
-# debhelper and dpkg-dev build the package, lintian checks it.
-PACKAGE_DEBS := help2man debhelper dpkg-dev lintian
+# debhelper and dpkg-dev build the package, lintian checks it; the package
+# test reads man pages (man-db) and the unit (systemd-analyze, from systemd).
+PACKAGE_DEBS := help2man debhelper dpkg-dev lintian man-db systemd
 DEBS += $(PACKAGE_DEBS)
 
 # What the programs read at run time, by path from the root they find
@@ -43,7 +47,7 @@ SERVICE_PATHS = -e 's|/usr/bin/vmacd|$(BINDIR)/vmacd|g' -e 's|/etc/vmac/|$(SYSCO
                 -e 's|/usr/share/doc/vmac|$(DOCDIR)|g' -e 's|/usr/share/vmac|$(DATADIR)|g' \
                 -e 's|/lib/systemd/system|$(UNITDIR)|g'
 
-.PHONY: install uninstall deb
+.PHONY: install uninstall deb test-package
 
 $(BUILD)/man/%.1: $(BUILD)/bin/% packaging/see-also.h2m packaging/help2man-wrap.sh
 	@mkdir -p $(dir $@)
@@ -98,3 +102,8 @@ deb:
 	cd $(DEB_OUT)/src && env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL dpkg-buildpackage --build=binary --no-sign -jauto
 	lintian --fail-on error,warning $(DEB_OUT)/vmac_$(DEB_VERSION)_*.deb
 	@ls $(DEB_OUT)/*.deb
+
+# Installs and purges the vmac package on this machine (root): a vmac
+# installed before is purged first (docs/SERVICE.md, "Testing the package").
+test-package:
+	@VMAC_SKIP_FILE=$(SKIPPED) python3 tests/package/test_package.py --build $(BUILD)
