@@ -10,7 +10,8 @@ AddressSanitizer, and a package is built once.
   vmacd started as the unit's ExecStart says, as its User with its
   capabilities (setpriv), on a bus and port of the test's own; the kitchen's
   boards (the installed vmac-board) running in /api/status; SIGTERM, exit 0;
-  dpkg --purge: every file the package had gone, /etc/vmac and /var/lib/vmac
+  dpkg -i over itself and dpkg -r keeping a changed settings file and the
+  store; dpkg --purge: every file the package had gone, /etc/vmac and /var/lib/vmac
   too, the user kept.
 - make install DESTDIR=... PREFIX=/usr: exactly the files expected; from
   another folder, the installed vmac test, vmac lint and vmacd finding their
@@ -54,7 +55,7 @@ WANTS_LINK = "/etc/systemd/system/multi-user.target.wants/vmacd.service"
 def sh(argv, what, timeout_s=300, **kw):
     """Run argv to its end; its stdout. AssertionError with what and the
     tail of its output when it fails."""
-    p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s, **kw)
+    p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s, stdin=subprocess.DEVNULL, **kw)
     if p.returncode != 0:
         tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-15:])
         raise AssertionError("%s failed (%s exited %d):\n%s" % (what, " ".join(argv[:3]), p.returncode, tail))
@@ -155,6 +156,7 @@ def test_the_debian_package(t, build):
         files = sh(["dpkg", "-L", "vmac"], "dpkg -L vmac").split()
         check_installed(files)
         run_as_the_unit_does(t)
+        check_upgrade_and_remove(debs[0])
         purge("the end of the test")
     except BaseException:
         subprocess.run(["dpkg", "--purge", "vmac"], capture_output=True, timeout=120)  # leave the machine clean
@@ -305,6 +307,25 @@ def run_as_the_unit_does(t):
     host.signal(signal.SIGTERM)
     rc = host.wait_exit(30)
     assert rc == 0, "vmacd exited %d after SIGTERM, not 0: %s" % (rc, host.text()[-500:])
+
+
+def check_upgrade_and_remove(deb):
+    """Installing over it (the upgrade path) keeps a settings file changed
+    by hand and the state; dpkg -r keeps both too."""
+    conf = "/etc/vmac/vmacd.conf"
+    with open(conf, "a") as f:
+        f.write("-- changed by test_package.py\n")
+    store = os.path.join(STATE_DIR, "vmac.db")
+    assert os.path.exists(store), "vmacd left no store in %s" % STATE_DIR
+    sh(["dpkg", "-i", deb], "dpkg -i over the installed package")
+    with open(conf) as f:
+        assert "changed by test_package.py" in f.read(), "installing over the package lost the changed %s" % conf
+    assert os.path.exists(store), "installing over the package lost the store %s" % store
+    sh(["dpkg", "-r", "vmac"], "dpkg -r vmac")
+    assert not os.path.exists("/usr/bin/vmacd"), "dpkg -r left /usr/bin/vmacd"
+    assert os.path.exists(conf) and os.path.exists(store), "dpkg -r removed %s" % (
+        conf if not os.path.exists(conf) else store)
+    print("test_package: over itself and removed: the changed settings and the store kept", flush=True)
 
 
 def check_purged(files):
