@@ -16,6 +16,8 @@
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
 #   make soak       one host under every fault at once for SOAK_MINUTES (default 60), its resources
 #                   sampled every 10 s; make test-soak: the same for 2 minutes
+#   make install    the programs and their files under PREFIX (default /usr/local), DESTDIR; make deb: the
+#                   Debian package; make test-package: it installed and purged (packaging/package.mk)
 #   make clean
 
 .DEFAULT_GOAL := all # plain make builds the programs, not the first archive a fragment defines
@@ -169,6 +171,7 @@ $(BUILD)/bin/vmac-board: $(VMAC_BOARD_OBJ) $(call archives,$(VMAC_BOARD_MODULES)
 	$(call link,$(VMAC_BOARD_OBJ),$(VMAC_BOARD_MODULES))
 
 include firmware/mcu/lm3s6965/mcu.mk tests/unit/unit.mk tests/fuzz/fuzz.mk
+include packaging/package.mk
 
 deps:
 	@if ! command -v dpkg-query >/dev/null; then \
@@ -259,7 +262,7 @@ test: deps
 	@$(call timed,test-build,-j2)
 	@$(call timed,test-unit test-lua test-drivers test-fuzz,-j2)
 	@$(call timed,test-integration asan-build test-soak,-j3)
-	@$(call timed,test-ui test-asan,-j2 VMAC_SCHED_PROPERTY_RUNS=10000)
+	@$(call timed,test-ui test-asan test-package,-j3 VMAC_SCHED_PROPERTY_RUNS=10000)
 	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \

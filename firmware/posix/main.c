@@ -15,6 +15,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../../core/common/version.h"
 #include "boards.h"
 #include "realtime.h"
 
@@ -66,7 +67,7 @@ static void usage(FILE *f)
 	           "                    and late replies\n"
 	           "  --no-realtime     do not ask for SCHED_FIFO and locked memory (asked for by\n"
 	           "                    default; refused, one line on stderr and normal scheduling)\n"
-	           "  --help            this text\n\n"
+	           "  --help, --version this text; the version\n\n"
 	           "Prints one line per state change and output change on stdout. On SIGINT or\n"
 	           "SIGTERM every board turns its outputs off before the process exits, and prints\n"
 	           "its frame counters (with --commands, 'status' prints them at any time).\n");
@@ -211,7 +212,7 @@ struct runner {
 };
 
 /* One option (getopt_long's opt and optarg) into o. Returns -1 to go on,
- * or the exit code: 0 after --help, 2 for a wrong value. */
+ * or the exit code: 0 after --help or --version, 2 for a wrong value. */
 static int take_option(struct options *o, int opt, const char *arg)
 {
 	long number;
@@ -242,6 +243,7 @@ static int take_option(struct options *o, int opt, const char *arg)
 	case 'K': o->cfg.key_file = arg; return -1;
 	case 'D': o->cfg.key_dir = arg; return -1;
 	case 'h': usage(stdout); return 0;
+	case 'V': printf("vmac-board %s\n", VMAC_VERSION_STRING); return 0;
 	default: usage(stderr); return 2;
 	}
 }
@@ -275,16 +277,25 @@ static int take_bus(struct options *o)
 /* The command line into o. Returns -1 to go on, or the exit code. */
 static int parse_options(int argc, char **argv, struct options *o)
 {
-	static const struct option opts[] = {
-	    {"plant", required_argument, 0, 'p'},    {"name", required_argument, 0, 'n'},
-	    {"driver", required_argument, 0, 'd'},   {"bus", required_argument, 0, 'b'},
-	    {"iface", required_argument, 0, 'i'},    {"count", required_argument, 0, 'c'},
-	    {"major", required_argument, 0, 'M'},    {"minor", required_argument, 0, 'm'},
-	    {"protocol", required_argument, 0, 'P'}, {"cpu", required_argument, 0, 'u'},
-	    {"late-us", required_argument, 0, 'l'},  {"commands", no_argument, 0, 'C'},
-	    {"quiet", no_argument, 0, 'q'},          {"no-realtime", no_argument, 0, 'R'},
-	    {"key-file", required_argument, 0, 'K'}, {"key-dir", required_argument, 0, 'D'},
-	    {"help", no_argument, 0, 'h'},           {0, 0, 0, 0}};
+	static const struct option opts[] = {{"plant", required_argument, 0, 'p'},
+	                                     {"name", required_argument, 0, 'n'},
+	                                     {"driver", required_argument, 0, 'd'},
+	                                     {"bus", required_argument, 0, 'b'},
+	                                     {"iface", required_argument, 0, 'i'},
+	                                     {"count", required_argument, 0, 'c'},
+	                                     {"major", required_argument, 0, 'M'},
+	                                     {"minor", required_argument, 0, 'm'},
+	                                     {"protocol", required_argument, 0, 'P'},
+	                                     {"cpu", required_argument, 0, 'u'},
+	                                     {"late-us", required_argument, 0, 'l'},
+	                                     {"commands", no_argument, 0, 'C'},
+	                                     {"quiet", no_argument, 0, 'q'},
+	                                     {"no-realtime", no_argument, 0, 'R'},
+	                                     {"key-file", required_argument, 0, 'K'},
+	                                     {"key-dir", required_argument, 0, 'D'},
+	                                     {"help", no_argument, 0, 'h'},
+	                                     {"version", no_argument, 0, 'V'},
+	                                     {0, 0, 0, 0}};
 	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0, NULL, NULL};
 	int opt, rc;
 

@@ -104,7 +104,7 @@ def test_help_and_version(t):
         rc, out, err = t.run([t.path(argv[0])] + argv[1:], argv[0] + "-help", EXIT_S)
         assert rc == 0, "'%s' exited %d: %s" % (" ".join(argv), rc, err)
         assert out.startswith("usage: "), "'%s' printed no usage on stdout: %r" % (" ".join(argv), out[:200])
-    for program in ("vmacd", "vmac"):
+    for program in ("vmacd", "vmac", "vmac-board"):
         rc, out, err = t.run([t.path(program), "--version"], program + "-version", EXIT_S)
         assert rc == 0 and out.startswith(program + " "), "'%s --version' exited %d, printed %r" % (
             program, rc, out)
