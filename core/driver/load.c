@@ -142,8 +142,14 @@ static int open_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 {
 	lua_State *L = d->L;
 	(void)args;
-	/* Interpreter only: the count hook that enforces the budget is not
-	 * honoured inside JIT-compiled traces. */
+	/* The jit library sets the compiler's parameters (without it jit = true
+	 * compiles nothing), then the interpreter only: the count hook that
+	 * enforces the budget is not honoured inside JIT-compiled traces. The
+	 * sandbox gives drivers no `jit` (drv_make_env). */
+	if (drv_open_lib(L, luaopen_jit, LUA_JITLIBNAME)) {
+		snprintf(err, errlen, "cannot open the jit library: not enough memory");
+		return -1;
+	}
 	luaJIT_setmode(L, 0, LUAJIT_MODE_ENGINE | LUAJIT_MODE_OFF);
 	if (drv_open_lib(L, luaopen_base, "") || drv_open_lib(L, luaopen_string, LUA_STRLIBNAME) ||
 	    drv_open_lib(L, luaopen_table, LUA_TABLIBNAME) || drv_open_lib(L, luaopen_math, LUA_MATHLIBNAME) ||

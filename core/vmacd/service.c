@@ -43,13 +43,13 @@ int vmacd_event_priority(const char *kind)
 		const char *kind;
 		int priority;
 	} kinds[] = {
-	    {"driver_error", LOG_ERR},   {"dropped", LOG_WARNING},        {"driver_missing", LOG_WARNING},
+	    {"driver_error", LOG_ERR},      {"dropped", LOG_WARNING},      {"driver_missing", LOG_WARNING},
 	    {"schedule_full", LOG_WARNING}, {"machine_full", LOG_WARNING}, {"malformed", LOG_WARNING},
-	    {"flood", LOG_WARNING},      {"table_full", LOG_WARNING},     {"auth", LOG_WARNING},
-	    {"http", LOG_WARNING},       {"warning", LOG_WARNING},        {"reload_refused", LOG_WARNING},
-	    {"rolled_back", LOG_WARNING}, {"attached", LOG_NOTICE},       {"enrolled", LOG_NOTICE},
-	    {"removed", LOG_NOTICE},     {"reloaded", LOG_NOTICE},        {"probation_passed", LOG_NOTICE},
-	    {"waiting", LOG_NOTICE},     {"mqtt", LOG_NOTICE},
+	    {"flood", LOG_WARNING},         {"table_full", LOG_WARNING},   {"auth", LOG_WARNING},
+	    {"http", LOG_WARNING},          {"warning", LOG_WARNING},      {"reload_refused", LOG_WARNING},
+	    {"rolled_back", LOG_WARNING},   {"attached", LOG_NOTICE},      {"enrolled", LOG_NOTICE},
+	    {"removed", LOG_NOTICE},        {"reloaded", LOG_NOTICE},      {"probation_passed", LOG_NOTICE},
+	    {"waiting", LOG_NOTICE},        {"mqtt", LOG_NOTICE},
 	};
 	size_t i;
 	for (i = 0; i < sizeof(kinds) / sizeof(kinds[0]); i++)
@@ -63,8 +63,8 @@ void vmacd_echo_event(void *ctx, const struct vmac_event *e)
 	int priority = vmacd_event_priority(e->kind);
 	(void)ctx;
 	if (journal && sd_journal_send("MESSAGE=[%s] %s", e->kind, e->text, "PRIORITY=%d", priority,
-	                               "SYSLOG_IDENTIFIER=vmacd", "VMAC_EVENT=%s", e->kind, "VMAC_DEVICE=%s",
-	                               e->device, "VMAC_SEQ=%llu", (unsigned long long)e->seq, NULL) >= 0)
+	                               "SYSLOG_IDENTIFIER=vmacd", "VMAC_EVENT=%s", e->kind, "VMAC_DEVICE=%s", e->device,
+	                               "VMAC_SEQ=%llu", (unsigned long long)e->seq, NULL) >= 0)
 		return;
 	vmacd_log(priority, "[%s] %s", e->kind, e->text); /* not under the journal, or its socket refused */
 }

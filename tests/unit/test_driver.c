@@ -748,6 +748,35 @@ START_TEST(two_step_load_on_a_given_heap)
 }
 END_TEST
 
+/* jit = true: a hot loop is compiled (the count hook, and so the budget,
+ * stops there) where the host allows it, and interpreted (the budget
+ * stops it) where it does not. */
+START_TEST(jit_compiles_a_driver_only_where_allowed)
+{
+	static const char src[] = "return { name = 't', version = '1', io = {}, jit = true, tick = function()\n"
+	                          "  local n = 0 for i = 1, 5000000 do n = n + i % 7 end end }\n";
+	struct vmac_driver *d;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	int allow;
+	memset(&in, 0, sizeof(in));
+	for (allow = 0; allow <= 1; allow++) {
+		limits.allow_jit = allow;
+		d = load_ok(src);
+		vmac_driver_add_board(d, 0, "b0");
+		if (allow)
+			ck_assert_msg(tick1(d, 0, &in, &out, err, sizeof(err)) == 0,
+			              "allow_jit: the loop was not compiled (%s)", err);
+		else
+			ck_assert_msg(tick1(d, 0, &in, &out, err, sizeof(err)) != 0 &&
+			                  strstr(err, "time budget exceeded") != NULL,
+			              "without allow_jit the budget did not stop the loop (%s)", err);
+		vmac_driver_free(d);
+	}
+}
+END_TEST
+
 START_TEST(load_gets_a_larger_budget_and_stdlib)
 {
 	struct vmac_driver *d;
@@ -896,6 +925,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, sandbox_bounds);
 	tcase_add_test(tc, sandbox_is_exactly_the_allow_list);
 	tcase_add_test(tc, load_gets_a_larger_budget_and_stdlib);
+	tcase_add_test(tc, jit_compiles_a_driver_only_where_allowed);
 	tcase_add_test(tc, no_programmes_name_the_folder);
 	tcase_add_test(tc, two_step_load_on_a_given_heap);
 	tcase_add_test(tc, a_description_past_its_bounds_is_refused);
