@@ -14,6 +14,7 @@ void vmac_hist_add(struct vmac_hist *h, int64_t us)
 		i = VMAC_HIST_BUCKETS - 1;
 	h->bucket[i]++;
 	h->count++;
+	h->sum_us += (uint64_t)us;
 	if (us > h->max_us)
 		h->max_us = us;
 }
@@ -41,4 +42,19 @@ int64_t vmac_hist_quantile(const struct vmac_hist *h, double q)
 		}
 	}
 	return h->max_us;
+}
+
+uint64_t vmac_hist_below(const struct vmac_hist *h, int64_t le_us)
+{
+	uint64_t n = 0;
+	int i, end; /* the buckets wholly below le_us: [0, end) */
+	if (le_us <= VMAC_HIST_FINE)
+		end = le_us > 0 ? (int)le_us : 0;
+	else if (le_us < VMAC_HIST_FINE + 100 * VMAC_HIST_COARSE)
+		end = VMAC_HIST_FINE + (int)((le_us - VMAC_HIST_FINE) / 100);
+	else
+		end = VMAC_HIST_BUCKETS - 1;
+	for (i = 0; i < end; i++)
+		n += h->bucket[i];
+	return n;
 }

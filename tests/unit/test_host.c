@@ -250,6 +250,31 @@ START_TEST(hist_quantiles)
 }
 END_TEST
 
+/* GET /metrics's buckets: exact counts below each bucket bound, and the sum. */
+START_TEST(hist_counts_below_bounds)
+{
+	static struct vmac_hist h;
+	const int64_t samples[] = {0, 4, 5, 999, 1000, 1099, 1100, 2500, 99999, 100000, 5000000};
+	size_t i;
+	uint64_t sum = 0;
+	memset(&h, 0, sizeof(h));
+	for (i = 0; i < sizeof(samples) / sizeof(samples[0]); i++) {
+		vmac_hist_add(&h, samples[i]);
+		sum += (uint64_t)samples[i];
+	}
+	ck_assert_uint_eq(h.sum_us, sum);
+	ck_assert_uint_eq(vmac_hist_below(&h, 0), 0);
+	ck_assert_uint_eq(vmac_hist_below(&h, 5), 2);       /* 0 and 4: a sample of 5 us is not below 5 */
+	ck_assert_uint_eq(vmac_hist_below(&h, 1000), 4);    /* ... and 5, 999 */
+	ck_assert_uint_eq(vmac_hist_below(&h, 1100), 6);    /* + 1000, 1099 (the coarse bucket [1000, 1100)) */
+	ck_assert_uint_eq(vmac_hist_below(&h, 2500), 7);    /* + 1100 */
+	ck_assert_uint_eq(vmac_hist_below(&h, 2600), 8);    /* + 2500 */
+	ck_assert_uint_eq(vmac_hist_below(&h, 100000), 9);  /* + 99999; not 100000 itself */
+	ck_assert_uint_eq(vmac_hist_below(&h, 1 << 30), 9); /* the overflow bucket has no bound below +Inf */
+	ck_assert_uint_eq(h.count, 11);
+}
+END_TEST
+
 /* ---- ring ---- */
 
 /* A bus whose thread never runs: every request times out and is left for
@@ -459,6 +484,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, config_driver_settings);
 	tcase_add_test(tc, config_file_refuses_bytecode);
 	tcase_add_test(tc, hist_quantiles);
+	tcase_add_test(tc, hist_counts_below_bounds);
 	tcase_add_test(tc, ring_fifo_and_full);
 	tcase_add_test(tc, input_requests_time_out_and_run_out_without_a_bus_thread);
 	tcase_add_test(tc, the_bus_answers_with_codes);
