@@ -69,11 +69,14 @@ static json_t *device_json(const struct vmac_device_status *d)
 	json_object_set_new(o, "note", d->note[0] ? json_string(d->note) : json_null());
 	json_object_set_new(o, "params", params);
 	json_object_set_new(o, "misses_host", json_integer((json_int_t)d->misses_host));
+	json_object_set_new(o, "drops", json_integer((json_int_t)d->drops));
 	json_object_set_new(o, "driver_late", json_integer((json_int_t)d->driver_late));
 	json_object_set_new(o, "protocol", json_integer(d->protocol));
 	json_object_set_new(o, "service", json_string(d->cyclic ? "cyclic" : "unicast"));
 	json_object_set_new(o, "offset", d->cyclic ? json_integer(d->offset) : json_null());
 	json_object_set_new(o, "authenticated", json_boolean(d->authenticated));
+	json_object_set_new(o, "driver_instructions", json_integer((json_int_t)d->driver_instructions));
+	json_object_set_new(o, "driver_call_s", json_real((double)d->driver_call_ns / 1e9));
 	return o;
 }
 

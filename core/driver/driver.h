@@ -275,8 +275,21 @@ int vmac_driver_params(const struct vmac_driver *d, struct vmac_variable *out);
 int vmac_driver_restore_param(struct vmac_driver *d, const char *name, const struct vmac_value *v, char *why,
                               size_t whylen);
 
-/* Bytes the driver's heap holds now. */
+/* Bytes the driver's heap holds now, and the most it may (memory_kib, its
+ * driver.NAME override; fixed at load, so any thread may read it). */
 size_t vmac_driver_memory(const struct vmac_driver *d);
+size_t vmac_driver_memory_cap(const struct vmac_driver *d);
+
+/* VM instructions the driver's code has run in all its calls so far, as
+ * the budget counts them: in steps of 1,000 (the count hook's period: a
+ * call of fewer counts 0), a priced library call as its price. Read it on
+ * the thread that runs the driver. And the budget of one call
+ * (instructions, its driver.NAME override; fixed at load, so any thread). */
+uint64_t vmac_driver_instructions(const struct vmac_driver *d);
+/* Wall-clock ns the driver's code has run in all its calls so far (what
+ * budget_us judges each call by); read as vmac_driver_instructions. */
+uint64_t vmac_driver_call_ns(const struct vmac_driver *d);
+uint64_t vmac_driver_instruction_budget(const struct vmac_driver *d);
 
 /* The wall-clock budget of one call (budget_us, its driver.NAME override),
  * in ns; 0: none. */

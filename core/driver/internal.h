@@ -73,6 +73,9 @@ struct vmac_driver {
 	void *heap_ctx;
 	uint64_t budget_hooks;          /* hook calls allowed per guarded call */
 	uint64_t hooks;                 /* hook calls so far in this call */
+	uint64_t instructions;          /* counted over every guarded call so far, as the budget counts them */
+	uint64_t call_ns;               /* wall-clock time in every guarded call so far */
+	uint64_t instruction_budget;    /* per call, as configured (budget_hooks is set from it); fixed at load */
 	int64_t budget_ns, deadline_ns; /* wall-clock budget per call; 0 = none */
 	int overrun;                    /* budget exceeded: keep raising until the call unwinds */
 	char overrun_msg[96];

@@ -220,6 +220,7 @@ int vmac_driver_new(const char *file, const struct vmac_driver_limits *limits, s
 		return -ENOMEM;
 	}
 	d->cap = limits->memory_bytes;
+	d->instruction_budget = limits->instructions;
 	d->budget_hooks = limits->instructions / HOOK_EVERY + 1;
 	d->budget_ns = (int64_t)limits->budget_us * 1000;
 	d->clock = limits->clock;
@@ -275,7 +276,7 @@ int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, co
 		if (strcmp(k, "memory_kib") == 0 && *end == 0 && x >= 64 && x <= 1048576)
 			d->cap = (size_t)x * 1024;
 		else if (strcmp(k, "instructions") == 0 && *end == 0 && x >= 1000 && x <= 1e9)
-			d->budget_hooks = (uint64_t)x / HOOK_EVERY + 1;
+			d->instruction_budget = (uint64_t)x, d->budget_hooks = (uint64_t)x / HOOK_EVERY + 1;
 		else if (strcmp(k, "budget_us") == 0 && *end == 0 && x >= 0 && x <= 1e7)
 			d->budget_ns = (int64_t)x * 1000;
 		else if (strncmp(k, "param.", 6) != 0) {
@@ -376,6 +377,26 @@ int64_t vmac_driver_tag(const struct vmac_driver *d)
 size_t vmac_driver_memory(const struct vmac_driver *d)
 {
 	return d->used;
+}
+
+size_t vmac_driver_memory_cap(const struct vmac_driver *d)
+{
+	return d->cap;
+}
+
+uint64_t vmac_driver_instructions(const struct vmac_driver *d)
+{
+	return d->instructions;
+}
+
+uint64_t vmac_driver_call_ns(const struct vmac_driver *d)
+{
+	return d->call_ns;
+}
+
+uint64_t vmac_driver_instruction_budget(const struct vmac_driver *d)
+{
+	return d->instruction_budget;
 }
 
 int64_t vmac_driver_budget_ns(const struct vmac_driver *d)

@@ -148,6 +148,7 @@ int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned fa
 	lua_State *L = d->L;
 	int base = lua_gettop(L) - nargs, rc;
 	uint64_t hooks = d->budget_hooks;
+	int64_t start_ns = drv_mono_ns();
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_traceback);
 	lua_insert(L, base);
 	d->hooks = 0;
@@ -155,11 +156,13 @@ int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned fa
 	d->mem_refused = 0;
 	d->lib_call = NULL; /* a library call an escaped error left named */
 	d->budget_hooks = hooks * factor;
-	d->deadline_ns = d->budget_ns ? drv_mono_ns() + d->budget_ns * factor : 0;
+	d->deadline_ns = d->budget_ns ? start_ns + d->budget_ns * factor : 0;
 	d->in_driver = 1;
 	rc = lua_pcall(L, nargs, nresults, base);
 	d->in_driver = 0;
 	d->budget_hooks = hooks;
+	d->instructions += d->hooks * HOOK_EVERY;
+	d->call_ns += (uint64_t)(drv_mono_ns() - start_ns);
 	if (rc != 0 || d->overrun || d->mem_refused) {
 		/* The traceback names the file and line; when the driver swallowed
 		 * the error (rc 0) there is none, only what happened. */

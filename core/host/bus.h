@@ -91,6 +91,7 @@ struct vmac_device_status {
 	char driver[VMAC_NAME_MAX + 1];
 	char driver_version[VMAC_DRIVER_VERSION_MAX + 1]; /* "" when no driver runs it */
 	char machine[VMAC_NAME_MAX + 1];                  /* the primary board's name ("" when none) */
+	char last_machine[VMAC_NAME_MAX + 1];             /* machine, or the one it was in last ("": never in one) */
 	char note[200];                                   /* why it is not running, e.g. "schedule full: ..." */
 	const char *state;                                /* attaching, running, sleeping, errant */
 	int scheduled;                                    /* level, slot, slice are valid */
@@ -105,13 +106,20 @@ struct vmac_device_status {
 	uint32_t period_us;
 	uint64_t misses, served;
 	uint64_t misses_host; /* of misses: the host's own fault */
+	uint64_t drops;       /* times the host dropped it */
 	uint64_t driver_late; /* ticks whose outputs came after the machine's next service (primary board only) */
 	unsigned protocol;    /* the version the board speaks (1 or 2) */
 	int cyclic;           /* served by the cyclic frame, at offset (else unicast UPDATEs) */
 	unsigned offset;
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs;
-	size_t driver_memory;
+	/* The machine's driver (primary board only; 0 when none runs): heap
+	 * bytes and its cap, VM instructions in all calls (counted in steps of
+	 * 1,000: vmac_driver_instructions) and the budget of one call, and the
+	 * wall-clock time of all its calls. */
+	size_t driver_memory, driver_memory_cap;
+	uint64_t driver_instructions, driver_instruction_budget;
+	uint64_t driver_call_ns;
 };
 
 struct vmac_bus_counters {

@@ -82,6 +82,8 @@ struct job {
 	int vars_fresh; /* vars hold the instance's published values now */
 	int params_fresh;
 	size_t memory;
+	uint64_t instructions;                           /* vmac_driver_instructions after the call */
+	uint64_t call_ns;                                /* vmac_driver_call_ns after the call */
 	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
 	/* The bus thread's own notes on it. */
 	int64_t queued_ns;      /* when it was asked for (a tick: its primary's reply) */
@@ -167,6 +169,7 @@ struct machine {
 	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
 	struct vmac_variable params[VMAC_DRIVER_MAX_PARAMS];
 	size_t memory;
+	uint64_t instructions, call_ns;
 	int64_t next_checkpoint_ns; /* checkpoint_s: the next periodic checkpoint */
 	int checkpoint_failing;     /* the last one was refused (said once) */
 	struct vmac_recorder *rec;  /* the flight recorder (NULL: none) */
@@ -207,6 +210,12 @@ struct device {
 	uint32_t consecutive_misses;
 	uint64_t misses, served;
 	uint64_t misses_host; /* of misses: caused by the host (its request never left) */
+	uint64_t drops;       /* times it was dropped (bus_drop: itself, or a board of its machine) */
+	/* The machine it is in, or was in last (its primary's name; "" before
+	 * it first joined one): what labels its series in GET /metrics, which
+	 * must not change when it is dropped, or its counters would start a
+	 * new series exactly when they count. */
+	char last_machine[VMAC_NAME_MAX + 1];
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs; /* sent with the next UPDATE */
 	int64_t last_seen_ns;

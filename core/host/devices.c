@@ -143,6 +143,7 @@ void bus_drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char
 	if (d->mach >= 0)
 		bus_rec_failure(bus, &bus->mach[d->mach], VMAC_REC_DROP, why);
 	bus->counters.drops++;
+	d->drops++;
 	if (d->mach >= 0) {
 		int mi = d->mach;
 		uint32_t i;
@@ -158,6 +159,7 @@ void bus_drop(struct vmac_bus *bus, struct device *d, uint8_t reason, const char
 			bus_event(bus, o, kind, "%s dropped: %s, a board of the same machine, was dropped",
 			          o->ann.board, d->ann.board);
 			bus->counters.drops++;
+			o->drops++;
 			set_aside(bus, o, reason);
 		}
 		bus_free_machine(bus, &bus->mach[mi]);
@@ -339,6 +341,8 @@ static void join_or_load(struct vmac_bus *bus, struct device *d)
 		if (m->drv && admit(bus, m, d) != 0) { /* else joins when the driver arrives */
 			d->mach = -1;
 			d->state = DEV_TO_SLEEP;
+		} else {
+			memcpy(d->last_machine, bus->dev[m->primary].ann.board, sizeof(d->last_machine));
 		}
 		return;
 	}
@@ -362,6 +366,7 @@ static void join_or_load(struct vmac_bus *bus, struct device *d)
 	m->major = d->ann.major;
 	m->primary = bus_slot_of(bus, d);
 	d->mach = mi;
+	memcpy(d->last_machine, d->ann.board, sizeof(d->last_machine));
 
 	memset(&load, 0, sizeof(load));
 	load.kind = VMAC_MSG_LOAD;
@@ -493,6 +498,7 @@ static void hold_back(struct vmac_bus *bus, const struct vmac_msg *m, const stru
 			table_full(bus, p->rx_ns);
 			return;
 		}
+		w->last_machine[0] = 0; /* an entry of another board's, maybe */
 	}
 	if (bus_slot_of(bus, w) >= bus->nused)
 		bus->nused = bus_slot_of(bus, w) + 1;
@@ -581,6 +587,7 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 			table_full(bus, p->rx_ns);
 			return;
 		}
+		d->last_machine[0] = 0;
 	}
 	if (bus_slot_of(bus, d) >= bus->nused)
 		bus->nused = bus_slot_of(bus, d) + 1;
@@ -695,6 +702,8 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 		m->vars[i] = *vmac_driver_variable(c->drv, (int)i);
 	m->nparams = 0;
 	m->memory = vmac_driver_memory(c->drv);
+	m->instructions = vmac_driver_instructions(c->drv); /* its loading's */
+	m->call_ns = vmac_driver_call_ns(c->drv);
 	bus_bind_driver(m, m->drv);
 	if (admit(bus, m, d) != 0) {
 		char note[sizeof(d->note)];

@@ -228,7 +228,7 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 	hand_over(bus, m, j);
 }
 
-/* What every job leaves for the status: variables, params, memory. */
+/* What every job leaves for the status: variables, params, memory, instructions, time. */
 static void copy_in(struct machine *m, const struct job *j)
 {
 	if (j->vars_fresh) {
@@ -240,6 +240,8 @@ static void copy_in(struct machine *m, const struct job *j)
 		memcpy(m->params, j->params, (size_t)m->nparams * sizeof(m->params[0]));
 	}
 	m->memory = j->memory;
+	m->instructions = j->instructions;
+	m->call_ns = j->call_ns;
 }
 
 static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)

@@ -45,6 +45,7 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	memcpy(o->driver, d->ann.driver, sizeof(o->driver));
 	snprintf(o->driver_version, sizeof(o->driver_version), "%s", m && m->drv ? vmac_driver_version(m->drv) : "");
 	snprintf(o->machine, sizeof(o->machine), "%s", m ? bus->dev[m->primary].ann.board : "");
+	memcpy(o->last_machine, d->last_machine, sizeof(o->last_machine));
 	snprintf(o->note, sizeof(o->note), "%s", d->note);
 	o->state = bus_state_name(d->state);
 	vmac_addr_format(&d->addr, o->address, sizeof(o->address));
@@ -61,6 +62,7 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->misses = d->misses;
 	o->served = d->served;
 	o->misses_host = d->misses_host;
+	o->drops = d->drops;
 	o->driver_late = m && m->primary == i ? m->late : 0;
 	o->protocol = d->version;
 	o->cyclic = d->cyclic;
@@ -68,6 +70,10 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->inputs = d->inputs;
 	o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
 	o->driver_memory = m && m->drv && m->primary == i ? m->memory : 0;
+	o->driver_memory_cap = m && m->drv && m->primary == i ? vmac_driver_memory_cap(m->drv) : 0;
+	o->driver_instructions = m && m->drv && m->primary == i ? m->instructions : 0;
+	o->driver_call_ns = m && m->drv && m->primary == i ? m->call_ns : 0;
+	o->driver_instruction_budget = m && m->drv && m->primary == i ? vmac_driver_instruction_budget(m->drv) : 0;
 	o->nvars = o->nparams = 0;
 	if (m && m->drv && m->primary == i) { /* as the machine's last job left them */
 		o->nvars = m->nvars;

@@ -59,7 +59,7 @@ static void take_checkpoint(struct job *j, struct vmac_driver *d)
 
 /* What the status shows of the instance that runs the machine now: its
  * variables when they moved, its params after anything but a tick and at
- * most every 100 ms after ticks, its memory. */
+ * most every 100 ms after ticks, its memory, instructions and time. */
 static void copy_out(struct job *j, struct vmac_driver *d)
 {
 	int64_t t_ns = (int64_t)(j->time_s * 1e9);
@@ -79,6 +79,8 @@ static void copy_out(struct job *j, struct vmac_driver *d)
 		j->params_fresh = 1;
 	}
 	j->memory = vmac_driver_memory(d);
+	j->instructions = vmac_driver_instructions(d);
+	j->call_ns = vmac_driver_call_ns(d);
 }
 
 void bus_run_job(struct job *j)
