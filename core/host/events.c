@@ -31,6 +31,35 @@ void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char
 	vmac_event_log_add_at(log, (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec, kind, device, text);
 }
 
+/* One more event of kind; under log->lock. */
+static void count_kind(struct vmac_event_log *log, const char *kind)
+{
+	int i;
+	for (i = 0; i < log->nkinds && strcmp(log->kinds[i].kind, kind) != 0; i++)
+		;
+	if (i == log->nkinds) {
+		if (log->nkinds >= VMAC_EVENT_KINDS - 1) /* the last entry is for the rest */
+			kind = "other";
+		for (i = 0; i < log->nkinds && strcmp(log->kinds[i].kind, kind) != 0; i++)
+			;
+		if (i == log->nkinds) {
+			snprintf(log->kinds[i].kind, sizeof(log->kinds[i].kind), "%s", kind);
+			log->nkinds++;
+		}
+	}
+	log->kinds[i].count++;
+}
+
+int vmac_event_log_counts(struct vmac_event_log *log, struct vmac_event_count *out)
+{
+	int n;
+	pthread_mutex_lock(&log->lock);
+	n = log->nkinds;
+	memcpy(out, log->kinds, (size_t)n * sizeof(*out));
+	pthread_mutex_unlock(&log->lock);
+	return n;
+}
+
 void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const char *kind, const char *device,
                            const char *text)
 {
@@ -42,6 +71,7 @@ void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const ch
 	snprintf(e->kind, sizeof(e->kind), "%s", kind);
 	snprintf(e->device, sizeof(e->device), "%s", device ? device : "");
 	snprintf(e->text, sizeof(e->text), "%s", text);
+	count_kind(log, e->kind);
 	if (log->echo)
 		copy = *e;
 	pthread_cond_broadcast(&log->grew);

@@ -11,6 +11,7 @@
 #include "bus.h"
 
 #define VMAC_EVENT_LOG_SIZE 100
+#define VMAC_EVENT_KINDS 48 /* kinds counted by name; the host has some 30 (docs/API.md, "events") */
 
 struct vmac_event {
 	uint64_t seq;    /* 1, 2, ... in order of recording */
@@ -18,6 +19,12 @@ struct vmac_event {
 	char kind[24];
 	char device[VMAC_NAME_MAX + 1];
 	char text[VMAC_EVENT_TEXT];
+};
+
+/* How many events of one kind the log has taken since the host started. */
+struct vmac_event_count {
+	char kind[24];
+	uint64_t count;
 };
 
 struct vmac_event_log {
@@ -29,6 +36,8 @@ struct vmac_event_log {
 	void (*echo)(void *ctx, const struct vmac_event *e);
 	void *echo_ctx;
 	struct vmac_event ring[VMAC_EVENT_LOG_SIZE];
+	struct vmac_event_count kinds[VMAC_EVENT_KINDS]; /* in order of first sight; the last counts the rest */
+	int nkinds;
 };
 
 void vmac_event_log_init(struct vmac_event_log *log);
@@ -39,6 +48,10 @@ void vmac_event_log_add(struct vmac_event_log *log, const char *kind, const char
 /* The same at time_ns (Unix time in ns: vmac test's events carry its virtual clock). */
 void vmac_event_log_add_at(struct vmac_event_log *log, int64_t time_ns, const char *kind, const char *device,
                            const char *text);
+/* The count of every kind of event taken so far (GET /metrics), in order of
+ * first sight, into out (room for VMAC_EVENT_KINDS). Returns how many; a
+ * kind past the first VMAC_EVENT_KINDS - 1 is counted as "other". */
+int vmac_event_log_counts(struct vmac_event_log *log, struct vmac_event_count *out);
 /* The seq the next event will have. */
 uint64_t vmac_event_log_next_seq(struct vmac_event_log *log);
 /* Copy the newest events, oldest first, into out (room for max). Returns how many. */
