@@ -81,15 +81,20 @@ double store_now_s(void)
  * is full (SQLITE_FULL), or any other failure. */
 int store_fail(struct vmac_store *s, const char *what, char *err, size_t errlen)
 {
+	int full;
 	if (s && s->gone) {
 		snprintf(err, errlen,
 		         "store: %s: the database %s was removed or replaced while the host ran; nothing more is "
 		         "written to it (restart the host to open the store again)",
 		         what, s->path);
+		atomic_fetch_add(&s->failures[VMAC_STORE_FAILED_REPLACED], 1);
 		return -VMAC_ESTORE;
 	}
 	snprintf(err, errlen, "store: %s: %s", what, s && s->db ? sqlite3_errmsg(s->db) : "cannot open");
-	return s && s->db && (sqlite3_extended_errcode(s->db) & 0xff) == SQLITE_FULL ? -VMAC_ESTOREFULL : -VMAC_ESTORE;
+	full = s && s->db && (sqlite3_extended_errcode(s->db) & 0xff) == SQLITE_FULL;
+	if (s)
+		atomic_fetch_add(&s->failures[full ? VMAC_STORE_FAILED_FULL : VMAC_STORE_FAILED_OTHER], 1);
+	return full ? -VMAC_ESTOREFULL : -VMAC_ESTORE;
 }
 
 /* store_fail(), then let the other threads in: the message is the one of this
@@ -226,6 +231,23 @@ void vmac_store_close(struct vmac_store *s)
 	sqlite3_close(s->db);
 	pthread_mutex_destroy(&s->lock);
 	free(s);
+}
+
+void vmac_store_stats(struct vmac_store *s, struct vmac_store_stats *out)
+{
+	char wal[sizeof(s->path) + 8];
+	struct stat st;
+	int i;
+	memset(out, 0, sizeof(*out));
+	for (i = 0; i < VMAC_STORE_FAILURE_KINDS; i++)
+		out->failures[i] = atomic_load(&s->failures[i]);
+	if (!s->path[0])
+		return; /* in memory */
+	if (stat(s->path, &st) == 0)
+		out->database_bytes = (uint64_t)st.st_size;
+	snprintf(wal, sizeof(wal), "%s-wal", s->path);
+	if (stat(wal, &st) == 0)
+		out->wal_bytes = (uint64_t)st.st_size;
 }
 
 void store_hex(const unsigned char *b, size_t n, char *out)

@@ -50,6 +50,18 @@ int vmac_store_open(const char *dir, struct vmac_store **out, char *err, size_t 
 int vmac_store_open_memory(struct vmac_store **out, char *err, size_t errlen);
 void vmac_store_close(struct vmac_store *s);
 
+/* What GET /metrics shows of the store: its files' sizes (0 in memory) and
+ * the calls that failed since it opened, by why: the disk was full
+ * (-VMAC_ESTOREFULL), the file was removed or replaced under the host, any
+ * other failure of the database. Any thread; it takes no lock. */
+enum vmac_store_failure { VMAC_STORE_FAILED_FULL, VMAC_STORE_FAILED_REPLACED, VMAC_STORE_FAILED_OTHER };
+#define VMAC_STORE_FAILURE_KINDS 3
+struct vmac_store_stats {
+	uint64_t database_bytes, wal_bytes; /* vmac.db and vmac.db-wal */
+	uint64_t failures[VMAC_STORE_FAILURE_KINDS];
+};
+void vmac_store_stats(struct vmac_store *s, struct vmac_store_stats *out);
+
 struct vmac_token_info {
 	char id[VMAC_TOKEN_ID_LEN + 1];
 	enum vmac_scope scope;

@@ -32,6 +32,7 @@ struct vmac_store {
 	ino_t ino;
 	int gone;                    /* it was removed or replaced: nothing more is written */
 	_Atomic uint64_t key_writes; /* board keys written through this connection (store_board.c) */
+	_Atomic uint64_t failures[VMAC_STORE_FAILURE_KINDS]; /* every store_fail, by kind (vmac_store_stats) */
 };
 
 /* n bytes as 2n lower-case hex digits and a NUL into out. */
