@@ -8,6 +8,7 @@
 #define VMAC_MQTT_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "../config/config.h"
 #include "../host/bus.h"
@@ -58,5 +59,22 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 /* Publish the host and its devices offline (waiting at most about a
  * second for the broker), disconnect, join the threads, free. NULL: nothing. */
 void vmac_mqtt_stop(struct vmac_mqtt *m);
+
+/* The client's figures for GET /metrics (mqtt_stats.c), since the process
+ * started: all 0 while no client runs. Connection 0 is the main one,
+ * 1 Sparkplug's (used only with mqtt_sparkplug). Any thread. */
+#define VMAC_MQTT_CONNECTIONS 2
+struct vmac_mqtt_stats {
+	int running;      /* a client runs (mqtt_url set) */
+	uint64_t dropped; /* messages received and dropped: they came faster than they were handled */
+	struct {
+		int used, connected;     /* the connection is made; its CONNACK came and it has not closed since */
+		uint64_t connects;       /* CONNACKs accepted */
+		uint64_t published;      /* messages handed to libmosquitto to send */
+		uint64_t publish_failed; /* ... refused by it (not connected meanwhile, out of memory) */
+		uint64_t received;       /* messages that came from the broker, every topic */
+	} conn[VMAC_MQTT_CONNECTIONS];
+};
+void vmac_mqtt_stats(struct vmac_mqtt_stats *out);
 
 #endif

@@ -51,8 +51,10 @@ int mqtt_conn_publish(struct mqtt_conn *c, const char *topic, const void *payloa
 	rc = mosquitto_publish(c->mosq, NULL, topic, len, payload, qos, retain != 0);
 	if (rc != MOSQ_ERR_SUCCESS) {
 		atomic_fetch_sub(&c->outstanding, 1);
+		atomic_fetch_add(&mqtt_stats.conn[c->index].publish_failed, 1);
 		return -1;
 	}
+	atomic_fetch_add(&mqtt_stats.conn[c->index].published, 1);
 	return 0;
 }
 
@@ -137,6 +139,13 @@ static void say_failure(struct mqtt_conn *c, int rc)
 	snprintf(c->reported, sizeof(c->reported), "%s", why);
 }
 
+/* c is connected (a CONNACK accepted) or no longer; GET /metrics sees it too. */
+static void conn_set_connected(struct mqtt_conn *c, int connected)
+{
+	atomic_store(&c->connected, connected);
+	atomic_store(&mqtt_stats.conn[c->index].connected, connected);
+}
+
 static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 {
 	struct mqtt_conn *c = obj;
@@ -152,7 +161,8 @@ static void on_connect(struct mosquitto *mosq, void *obj, int rc)
 	c->last_error[0] = 0;
 	atomic_fetch_add(&c->connacks, 1);
 	atomic_store(&c->outstanding, 0);
-	atomic_store(&c->connected, 1);
+	conn_set_connected(c, 1);
+	atomic_fetch_add(&mqtt_stats.conn[c->index].connects, 1);
 	if (c->index == MQTT_CONN_MAIN && m->site)
 		vmac_site_set_connected(m->site, 1);
 	atomic_store(&c->need_births, 1);
@@ -176,7 +186,7 @@ static void on_disconnect(struct mosquitto *mosq, void *obj, int rc)
 	struct mqtt_conn *c = obj;
 	struct vmac_mqtt *m = c->m;
 	(void)mosq;
-	atomic_store(&c->connected, 0);
+	conn_set_connected(c, 0);
 	if (c->index == MQTT_CONN_MAIN && m->site)
 		vmac_site_set_connected(m->site, 0);
 	if (rc != 0 && !atomic_load(&m->stopping))
@@ -198,6 +208,7 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 	struct vmac_mqtt *m = c->m;
 	struct mqtt_message *q;
 	(void)mosq;
+	atomic_fetch_add(&mqtt_stats.conn[c->index].received, 1);
 	if (c->index == MQTT_CONN_MAIN && mqtt_site_message(m, msg))
 		return; /* the site view's, applied here (mqtt_site.c) */
 	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic))
@@ -207,6 +218,7 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 	pthread_mutex_lock(&m->lock);
 	if (m->nqueue == MQTT_QUEUE) {
 		m->dropped++;
+		atomic_fetch_add(&mqtt_stats.dropped, 1);
 	} else {
 		q = &m->queue[m->nqueue++];
 		snprintf(q->topic, sizeof(q->topic), "%s", msg->topic);
@@ -483,6 +495,7 @@ static int conn_start(struct vmac_mqtt *m, int index, char *err, size_t errlen)
 	}
 	pthread_setname_np(c->net, index == MQTT_CONN_SPARKPLUG ? "vmac-mqtt-spb" : "vmac-mqtt-net");
 	c->net_started = 1;
+	atomic_store(&mqtt_stats.conn[index].used, 1);
 	return 0;
 }
 
@@ -491,7 +504,7 @@ void mqtt_conn_redial(struct mqtt_conn *c)
 	if (!c->mosq)
 		return;
 	atomic_store(&c->redial, 1);
-	atomic_store(&c->connected, 0);
+	conn_set_connected(c, 0);
 	mosquitto_disconnect(c->mosq); /* queued after what was published; the network thread writes it */
 }
 
@@ -516,6 +529,8 @@ static void conn_stop(struct mqtt_conn *c)
 	}
 	mosquitto_destroy(c->mosq);
 	c->mosq = NULL;
+	conn_set_connected(c, 0);
+	atomic_store(&mqtt_stats.conn[c->index].used, 0);
 }
 
 /* The connections closed and everything of m freed (a start that failed
@@ -523,6 +538,7 @@ static void conn_stop(struct mqtt_conn *c)
 static void mqtt_free(struct vmac_mqtt *m)
 {
 	int k;
+	atomic_store(&mqtt_stats.running, 0);
 	for (k = 0; k < MQTT_CONNS; k++)
 		conn_stop(&m->conns[k]);
 	mosquitto_lib_cleanup();
@@ -577,6 +593,7 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 		goto fail;
 	}
 	pthread_setname_np(m->thread, "vmac-mqtt");
+	atomic_store(&mqtt_stats.running, 1);
 	return m;
 fail:
 	atomic_store(&m->stopping, 1);

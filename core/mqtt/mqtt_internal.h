@@ -13,6 +13,7 @@
  *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what the two share)
  *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
  *                    /api/site serves, on the network thread
+ *   mqtt_stats.c     the client's connections and messages counted for GET /metrics (process-wide)
  * A profile is one way of speaking MQTT over a connection and the same device table (docs/MQTT.md,
  * "Adding a profile"). Everything here runs on the publisher thread unless it says otherwise. */
 #ifndef VMAC_MQTT_INTERNAL_H
@@ -197,6 +198,18 @@ struct vmac_mqtt {
 	struct mqtt_spb spb;
 	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
 };
+
+/* The process's client counted (mqtt_stats.c: vmac_mqtt_stats reads it);
+ * written by mqtt_client.c on whichever thread sees the thing counted. */
+struct mqtt_stats {
+	atomic_int running;
+	_Atomic uint64_t dropped;
+	struct {
+		atomic_int used, connected;
+		_Atomic uint64_t connects, published, publish_failed, received;
+	} conn[MQTT_CONNS];
+};
+extern struct mqtt_stats mqtt_stats;
 
 /* Publish (retained or not) at QoS 0 or 1 on the main connection; len -1:
  * strlen(payload). 0, or -1 when not connected (nothing queued). Any thread. */
