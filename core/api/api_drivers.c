@@ -98,7 +98,7 @@ static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned
 }
 
 /* What a deploy request asks: an upload (src), a version to activate (id)
- * or a rollback, with its probation. */
+ * or a rollback, with its probation. kind indexes h->deploys (GET /metrics). */
 struct deploy_ask {
 	enum { ASK_UPLOAD, ASK_ACTIVATE, ASK_ROLLBACK } kind;
 	const char *src;
@@ -125,6 +125,7 @@ static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connecti
 	case ASK_ACTIVATE: vmac_deploy_activate(&x, driver, a->id, by, a->probation_ms, r); break;
 	case ASK_ROLLBACK: vmac_deploy_rollback(&x, driver, by, r); break;
 	}
+	atomic_fetch_add(&h->deploys[a->kind][r->status == 200 ? 0 : r->status < 500 ? 1 : 2], 1);
 	ret = deploy_reply(c, driver, r, a->probation_s);
 	free(r);
 	return ret;

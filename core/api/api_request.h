@@ -56,7 +56,8 @@
 	X(HTTP_ROLLBACK, "POST", "/api/drivers/NAME/rollback", VMAC_SCOPE_DEPLOY, http_driver_rollback)                \
 	X(HTTP_BOARDS, "GET", "/api/boards", VMAC_SCOPE_READ, http_boards)                                             \
 	X(HTTP_BOARD_ENROLL, "POST", "/api/boards/NAME", VMAC_SCOPE_DEPLOY, http_board_enroll)                         \
-	X(HTTP_BOARD_REMOVE, "POST", "/api/boards/NAME/remove", VMAC_SCOPE_DEPLOY, http_board_remove)
+	X(HTTP_BOARD_REMOVE, "POST", "/api/boards/NAME/remove", VMAC_SCOPE_DEPLOY, http_board_remove)                  \
+	X(HTTP_METRICS, "GET", "/metrics", VMAC_SCOPE_READ, http_metrics)
 
 #define HTTP_ROUTE_ENUM(endpoint, method, pattern, scope, handler) endpoint,
 

@@ -4,7 +4,10 @@
  * handler its route names (docs/API.md; the routes are HTTP_ROUTES in
  * api_request.h): the web UI's files, the health check, GET /api and
  * whoami here, the others in api_devices.c, api_drivers.c, api_events.c,
- * api_recordings.c and api_site.c. http_internal.h holds what they share. */
+ * api_recordings.c, api_site.c and api_metrics.c (GET /metrics, and its
+ * listener without a token). Every answer is counted by its status code
+ * when it ends (GET /metrics shows them). http_internal.h holds what they
+ * share. */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -70,10 +73,18 @@ json_t *http_error_body(const char *msg)
 	return json_pack("{s:s}", "error", msg);
 }
 
+void http_count_answer(struct vmac_http *h, struct MHD_Connection *c)
+{
+	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_HTTP_STATUS);
+	if (ci && ci->http_status >= HTTP_CODE_FIRST && ci->http_status < HTTP_CODE_FIRST + HTTP_CODES)
+		atomic_fetch_add(&h->answered[ci->http_status - HTTP_CODE_FIRST], 1);
+}
+
 static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, enum MHD_RequestTerminationCode why)
 {
 	struct conn *k = *con_cls;
 	(void)why;
+	http_count_answer(cls, c);
 	http_guard_phase(c, cls, GUARD_HEADERS); /* a kept-alive connection's next request: its deadline */
 	if (k) {
 		free(k->body);
@@ -302,6 +313,10 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	}
 	info = MHD_get_daemon_info(h->daemon, MHD_DAEMON_INFO_BIND_PORT);
 	h->port = info ? info->port : (unsigned)port;
+	if (cfg->metrics_http[0] && http_metrics_listen(h, cfg->metrics_http, err, errlen) != 0) {
+		vmac_http_stop(h);
+		return NULL;
+	}
 	return h;
 }
 
@@ -325,6 +340,8 @@ void vmac_http_stop(struct vmac_http *h)
 	if (!h)
 		return;
 	atomic_store(&h->stopping, 1); /* event streams end within SSE_WAIT_MS */
+	if (h->metrics_daemon)
+		MHD_stop_daemon(h->metrics_daemon);
 	if (h->daemon)
 		MHD_stop_daemon(h->daemon);
 	pthread_mutex_destroy(&h->status_lock);

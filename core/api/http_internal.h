@@ -30,6 +30,22 @@
 
 #define GUARD_CONNS HTTP_CONNECTIONS_MAX
 
+/* Answers counted by status code (GET /metrics), 100..599. */
+#define HTTP_CODE_FIRST 100
+#define HTTP_CODES 500
+
+/* Deploys counted by action (upload, activate, rollback: the order of
+ * struct deploy_ask in api_drivers.c) and result (ok, refused, failed). */
+#define HTTP_DEPLOY_ACTIONS 3
+#define HTTP_DEPLOY_RESULTS 3
+
+/* metrics_http, the listener without a token (api_metrics.c): a
+ * connection idle this long is closed; at most this many connections, and
+ * this many from one address. */
+#define HTTP_METRICS_TIMEOUT_S 10
+#define HTTP_METRICS_CONNECTIONS 16
+#define HTTP_METRICS_PER_ADDRESS 4
+
 struct guard_fail {
 	char key[80]; /* "token ID" or "address A"; "" = unused */
 	double window_start;
@@ -70,13 +86,17 @@ struct vmac_http {
 	struct vmac_status status;
 	unsigned port;
 	struct vmac_store *store;
-	char *tls_cert, *tls_key;       /* PEM texts while the daemon runs (TLS) */
-	pthread_mutex_t live_lock;      /* the live streams' shared message: */
-	double live_at;                 /* when it was built */
-	char *live_json;                /* the newest status as JSON */
-	_Atomic int stopping;           /* event streams end */
-	struct http_guard guard;        /* lock-outs and deadlines (guard.c) */
-	struct vmac_site *_Atomic site; /* GET /api/site (api_site.c); NULL: MQTT off */
+	char *tls_cert, *tls_key;              /* PEM texts while the daemon runs (TLS) */
+	pthread_mutex_t live_lock;             /* the live streams' shared message: */
+	double live_at;                        /* when it was built */
+	char *live_json;                       /* the newest status as JSON */
+	_Atomic int stopping;                  /* event streams end */
+	struct http_guard guard;               /* lock-outs and deadlines (guard.c) */
+	struct vmac_site *_Atomic site;        /* GET /api/site (api_site.c); NULL: MQTT off */
+	_Atomic uint64_t answered[HTTP_CODES]; /* answers by status code - HTTP_CODE_FIRST */
+	_Atomic uint64_t deploys[HTTP_DEPLOY_ACTIONS][HTTP_DEPLOY_RESULTS];
+	struct MHD_Daemon *metrics_daemon; /* metrics_http (NULL: none) */
+	unsigned metrics_port;
 };
 
 /* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
@@ -141,6 +161,8 @@ enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body
 enum MHD_Result http_reply_header(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
                                   const char *value);
 json_t *http_error_body(const char *msg);
+/* The answer of the request on c has ended: counted by its status code (MHD_OPTION_NOTIFY_COMPLETED). */
+void http_count_answer(struct vmac_http *h, struct MHD_Connection *c);
 
 /* guard.c: the scope of the request's token when it has at least `need`;
  * else VMAC_SCOPE_NONE (0), with the answer (401, 403 or 429) queued into
@@ -173,5 +195,12 @@ http_handler http_site;
 http_handler http_driver_versions, http_driver_manifest, http_driver_upload, http_driver_activate, http_driver_rollback;
 /* api_boards.c */
 http_handler http_boards, http_board_enroll, http_board_remove;
+/* api_metrics.c */
+http_handler http_metrics;
+/* The text of GET /metrics (malloc'd, *len bytes), or NULL when out of memory. */
+char *http_metrics_text(struct vmac_http *h, size_t *len);
+/* Serve GET /metrics without a token on listen ("ADDR:PORT", metrics_http):
+ * 0, or -1 with err. vmac_http_stop stops it. */
+int http_metrics_listen(struct vmac_http *h, const char *listen, char *err, size_t errlen);
 
 #endif

@@ -34,6 +34,7 @@ static const struct key keys[] = {
     {S(bus)},
     {S(iface)},
     {S(http)},
+    {S(metrics_http)},
     {S(drivers_dir)},
     {S(scripts_dir)},
     {S(stdlib_dir)},
@@ -436,6 +437,12 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 	}
 	if (!listen_ok(c->http)) {
 		snprintf(err, errlen, "http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:8080", c->http);
+		return -EINVAL;
+	}
+	if (c->metrics_http[0] && !listen_ok(c->metrics_http)) {
+		snprintf(err, errlen,
+		         "metrics_http '%s': expected IPv4ADDR:PORT, e.g. 127.0.0.1:9108, or \"\" for none",
+		         c->metrics_http);
 		return -EINVAL;
 	}
 	if (c->default_level > c->max_level) {

@@ -20,6 +20,7 @@ struct vmac_config {
 	char bus[64];                    /* "GROUP:PORT" (UDP) or "eth:IFACE" (raw Ethernet) */
 	char iface[64];                  /* UDP: the local interface address */
 	char http[64];                   /* "ADDR:PORT" of the status/API server */
+	char metrics_http[64];           /* "ADDR:PORT": GET /metrics without a token there too ("" = off) */
 	char drivers_dir[VMAC_PATH_MAX]; /* searched first for NAME.lua and cycles/NAME/ ("" = none) */
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ and cycles/ below it) */
 	char stdlib_dir[VMAC_PATH_MAX];  /* the Lua standard library drivers require() from */
