@@ -37,12 +37,13 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # test_sparkplug.py); protoc-c and libprotobuf-c for its Sparkplug B payloads (core/mqtt/sparkplug_b.proto);
 # python3-nacl (libsodium's SipHash) for the integration tests' own sealed frames (test_trust.py);
 # libsystemd for vmacd's sd_notify and journal fields (core/vmacd/service.c), and systemd's
-# journald and journalctl for the journal test (test_service.py).
+# journald and journalctl for the journal test (test_service.py); prometheus (the server, and
+# promtool) to scrape GET /metrics in test_metrics.py.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
         openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm \
         libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev python3-nacl \
-        libsystemd-dev systemd
+        libsystemd-dev systemd prometheus
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
