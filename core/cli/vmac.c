@@ -197,7 +197,7 @@ static const struct vmac_cmd_option bench_options[] = {
     {"seconds", NULL, 0, "N", NULL, NULL, "length of each measurement (default 60)"},
     {"only", NULL, 0, "LIST", NULL, NULL,
      "the figures to take, of lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,"
-     "workers,auth (default all)"},
+     "workers,auth,metrics (default all)"},
     {"max-boards", NULL, 0, "N", NULL, NULL,
      "most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)"},
     {"cpu-awake", NULL, 0, "true|false", NULL, NULL,

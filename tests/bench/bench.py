@@ -51,6 +51,11 @@ same run on the same machine, reported as ratios.
             device per tick at 100 boards and 1 kHz, how the tick lateness
             grows with drivers that burn CPU, the washer's driver on one
             worker next to two (else SKIPPED)
+  metrics   GET /metrics (tests/bench/metrics_bench.py): 1,000 boards at
+            10 Hz, a scrape a second (a read token, one kept-alive
+            connection, as Prometheus scrapes) and 20 a second (a
+            magnifier) next to no scrape, in turn in each round: the time
+            of one scrape (ms), its size, and tick lateness p99 scraped/none
   auth      authenticated frames (tests/bench/auth.py): ns per frame and per
             record of sealing and opening next to encoding the same request
             (tests/bench/auth_frames.c), and host CPU per device per tick, 100
@@ -59,7 +64,7 @@ same run on the same machine, reported as ratios.
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
                 [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,
-                        mqtt-kitchen]
+                        metrics,mqtt-kitchen]
                 [--base-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
@@ -420,7 +425,8 @@ def main():
     p.add_argument("--bare", default="build/bench/bare_loop")
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only",
-                   default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth")
+                   default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,"
+                           "metrics")
     p.add_argument("--base-bin", default=None,
                    help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
     p.add_argument("--cpu-awake", choices=("true", "false"), default="true",
@@ -517,6 +523,12 @@ def main():
         print("mqtt-kitchen: the kitchen's precision throttle off next to on, %d s windows" % args.seconds, flush=True)
         results["mqtt"] = mqtt_kitchen(args)
 
+    if "metrics" in only:
+        from metrics_bench import metrics
+        print("metrics: 1000 boards at 10 Hz, GET /metrics 1 and 20 times a second next to none, %d s windows" %
+              args.seconds, flush=True)
+        results["metrics"] = metrics(args)
+
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
         results["reload"] = reload_bench(args)
@@ -606,6 +618,9 @@ def report(r):
     if r.get("workers"):
         from workers import report_workers
         report_workers(r["workers"])
+    if r.get("metrics"):
+        from metrics_bench import report_metrics
+        report_metrics(r["metrics"])
 
 
 if __name__ == "__main__":
