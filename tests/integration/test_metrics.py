@@ -280,6 +280,8 @@ def test_metrics_of_the_kitchen_through_prometheus(t):
 
 
 def test_metrics_need_a_read_token_as_the_status_does(t):
+    # Every scope includes read: a token without it is one the store does
+    # not hold (none, malformed) or no longer honours (revoked).
     host = t.host()
     read = t.make_token("read")
     code, ctype, body = scrape(host.http, read)
