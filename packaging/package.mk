@@ -64,6 +64,7 @@ install: $(BINS) $(MAN_PAGES)
 	install -m 0755 $(BINS) $(DESTDIR)$(BINDIR)/
 	@for f in $(INSTALL_DATA); do install -D -m 0644 $$f $(DESTDIR)$(DATADIR)/$$f || exit 1; done
 	install -m 0644 $(INSTALL_DOCS) $(DESTDIR)$(DOCDIR)/
+	install -D -m 0644 docs/grafana/vmac-dashboard.json $(DESTDIR)$(DOCDIR)/grafana/vmac-dashboard.json
 	install -m 0644 $(MAN_PAGES) $(DESTDIR)$(MAN1DIR)/
 	sed $(SERVICE_PATHS) packaging/vmacd.service > $(DESTDIR)$(UNITDIR)/vmacd.service
 	install -m 0644 packaging/vmac.sysusers $(DESTDIR)$(SYSUSERSDIR)/vmac.conf
