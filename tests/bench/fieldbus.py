@@ -319,6 +319,30 @@ def others_running():
     return found
 
 
+def note_others():
+    """others_running(), said when there are any: figures measured beside
+    them shared the CPUs."""
+    others = others_running()
+    if others:
+        print("    note: already running here, sharing the CPUs: %s%s" % (
+            ", ".join(others[:8]), " and %d more" % (len(others) - 8) if len(others) > 8 else ""), flush=True)
+    return others
+
+
+def attempt(run):
+    """run()'s result, or {"error": why} when it failed (boards that did not
+    attach, values that never came, a program that died, a refused
+    setting); harness.Skip goes to the caller."""
+    try:
+        return run()
+    except Skip:
+        raise
+    except AssertionError as e:
+        return {"error": str(e)[:300]}
+    except Exception as e:  # noqa: BLE001
+        return {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
+
+
 def fieldbus(args):
     """Protocol version 2 in three modes (FIELDBUS_MODES), one run."""
     t_start = time.monotonic()

@@ -23,7 +23,7 @@ import statistics
 import time
 
 from bench import BENCH_LUA, board_wrapper, cpu_seconds, schedule_for, with_ctx
-from fieldbus import MAX_DEVICES_DEFAULT, fresh_status, others_running, run_seconds, wait_attached
+from fieldbus import MAX_DEVICES_DEFAULT, attempt, fresh_status, note_others, run_seconds, wait_attached
 
 BOARDS, PERIOD_US = 1000, 100000
 # The configurations of a round: its name, and seconds between scrapes (None: no scrape).
@@ -108,22 +108,10 @@ def window(ctx, every_s, seconds):
     return out
 
 
-def attempt(run):
-    """run()'s result, or {"error": why} when it failed."""
-    try:
-        return run()
-    except AssertionError as e:
-        return {"error": str(e)[:300]}
-    except Exception as e:  # noqa: BLE001
-        return {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
-
 
 def metrics(args):
     t_start = time.monotonic()
-    others = others_running()
-    if others:
-        print("    note: already running here, sharing the CPUs: %s%s" % (
-            ", ".join(others[:8]), " and %d more" % (len(others) - 8) if len(others) > 8 else ""), flush=True)
+    others = note_others()
     out = {"boards": BOARDS, "period_us": PERIOD_US, "seconds": args.seconds, "settle_s": SETTLE_S,
            "configs": [name for name, _ in CONFIGS], "others_at_start": others,
            "loadavg_at_start": open("/proc/loadavg").read().split()[:3], "rounds": []}

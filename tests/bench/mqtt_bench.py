@@ -39,7 +39,7 @@ import threading
 import time
 
 from bench import ROOT, board_wrapper, cpu_seconds, schedule_for, with_ctx
-from fieldbus import MAX_DEVICES_DEFAULT, fresh_status, others_running, run_seconds, wait_attached
+from fieldbus import MAX_DEVICES_DEFAULT, attempt, fresh_status, note_others, others_running, run_seconds, wait_attached
 from harness import Skip
 
 # One variable that changes at every tick: a count, published with
@@ -317,19 +317,6 @@ def kitchen_window(ctx, precision, seconds):
     }
 
 
-def attempt(run):
-    """run()'s result, or {"error": why} when it failed (boards that did not
-    attach, values that never came, a program that died, a refused
-    setting); Skip goes to the caller."""
-    try:
-        return run()
-    except Skip:
-        raise
-    except AssertionError as e:
-        return {"error": str(e)[:300]}
-    except Exception as e:  # noqa: BLE001
-        return {"error": "%s: %s" % (type(e).__name__, str(e)[:300])}
-
 
 def kitchen_rounds(args, rounds):
     """The precision throttle off (PRECISION_OFF) and on (PRECISION_ON) in
@@ -383,10 +370,7 @@ def kitchen_rounds(args, rounds):
 def mqtt(args):
     """MQTT on and off in alternating rounds; {"skipped": why} without a broker or paho."""
     t_start = time.monotonic()
-    others = others_running()
-    if others:
-        print("    note: already running here, sharing the CPUs: %s%s" % (
-            ", ".join(others[:8]), " and %d more" % (len(others) - 8) if len(others) > 8 else ""), flush=True)
+    others = note_others()
     out = {"boards": BOARDS, "period_us": PERIOD_US, "seconds": args.seconds, "settle_s": SETTLE_S,
            "others_at_start": others,
            "loadavg_at_start": open("/proc/loadavg").read().split()[:3], "rounds": []}
