@@ -93,7 +93,14 @@ uninstall:
 DEB_OUT     := $(BUILD)/deb
 DEB_VERSION := $(shell sed -n 's/^\#define VMAC_VERSION_STRING "\(.*\)"$$/\1/p' core/common/version.h)
 
+# What make deb needs on a fresh machine, and only that: debian/control's
+# Build-Depends and the tools that read it (not the whole of make deps).
+DEB_BUILD_DEBS := build-essential dpkg-dev debhelper lintian help2man git pkg-config python3 libluajit-5.1-dev \
+                  libev-dev libmicrohttpd-dev libjansson-dev libcurl4-openssl-dev libsqlite3-dev libsodium-dev \
+                  libmosquitto-dev protobuf-c-compiler libprotobuf-c-dev libsystemd-dev
+
 deb:
+	@$(MAKE) --no-print-directory deps DEBS="$(DEB_BUILD_DEBS)"
 	@said=$$(dpkg-parsechangelog -S Version); if [ "$$said" != "$(DEB_VERSION)" ]; then \
 		echo "make deb: debian/changelog is at $$said, core/common/version.h at $(DEB_VERSION):" \
 			"add a changelog entry (dch -v $(DEB_VERSION))"; exit 1; fi
