@@ -317,6 +317,19 @@ def describe(status):
     ) or "none"
 
 
+def plain_pass_only(why):
+    """Marks a test that judges a whole programme in real time (minutes of
+    a plant's physics): make test runs it in the plain pass, and the
+    sanitizer pass leaves it out (run.py lists it as PLAIN), because the
+    code it runs is run under the sanitizers by the shorter tests and by
+    the drivers' tests in virtual time (make test-asan's test-drivers).
+    why says which of those cover it."""
+    def mark(fn):
+        fn.plain_pass_only = why
+        return fn
+    return mark
+
+
 def sanitized(program):
     """Whether program was built with AddressSanitizer (make test's second
     pass): its memory figures then include the sanitizer's own."""

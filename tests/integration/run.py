@@ -8,7 +8,9 @@ processes on its own bus, and kills whatever a test started however it ends.
 Tests run N at a time (default 4: they mostly wait on the programs they
 start, and each has its own bus, ports and state folder), each in a worker
 process of its own; a test file that must have the machine to itself says
-SERIAL = True and its tests run one at a time after the others. The longest
+SERIAL = True and its tests run one at a time after the others. Against a
+sanitized build (make test-asan's second pass) the tests marked
+harness.plain_pass_only are not run and are listed as PLAIN. The longest
 start first, by how long each passed in the last run that timed it
 (build/integration-times.json, which every run updates; tests it does not
 know keep their file order): a long test started last kept the others
@@ -235,6 +237,14 @@ def main():
     if not tests:
         print("run.py: no test matches %r" % args.filter, file=sys.stderr)
         return 2
+    # The sanitizer pass leaves the tests marked plain_pass_only to the
+    # plain pass that make test runs first (harness.plain_pass_only).
+    plain_only = []
+    if harness.sanitized(os.path.join(bindir, "vmacd")):
+        plain_only = [t for t in tests if getattr(t[1], "plain_pass_only", None)]
+        tests = [t for t in tests if t not in plain_only]
+        for name, fn, _ in plain_only:
+            print("PLAIN %s: run by the plain pass only (%s)" % (name, fn.plain_pass_only), flush=True)
 
     signal.signal(signal.SIGTERM, on_terminate)
     ci = os.environ.get("CI") == "true"
@@ -266,7 +276,8 @@ def main():
             with open(skip_file, "a") as f:
                 for name, reason in skips:
                     f.write("integration test %s (%s): %s\n" % (name, args.bin, reason))
-    print("%d passed, %d failed, %d skipped" % (passed, failed, len(skips)), flush=True)
+    print("%d passed, %d failed, %d skipped%s" % (passed, failed, len(skips), ", %d left to the plain pass" % len(
+        plain_only) if plain_only else ""), flush=True)
     return 1 if failed else 0
 
 

@@ -4,7 +4,7 @@ washer programme, the door opened mid-wash, cancel, the dishwasher with its
 door, and the lights. Cycles are shortened by the drivers' time_scale param
 (docs/DRIVERS.md, host setting driver.NAME.param.KEY) and faster valves."""
 
-from harness import undisturbed
+from harness import plain_pass_only, undisturbed
 
 STILL_RPM = 10       # the driver's own threshold is 2 RPM; published values lag up to 0.2 s at 50 RPM/s
 SETTLE_S = 0.5       # the status shows the outputs a board applied, a period or two behind the inputs
@@ -69,6 +69,7 @@ def start_washer(t, host, boards):
                      door_guard(host))
 
 
+@plain_pass_only("the wash programme under the sanitizers: test-drivers' washer tests run it to its end")
 def test_washer_runs_a_whole_programme(t):
     host = washer_host(t)
     boards = t.kitchen(host, commands=True)
@@ -100,6 +101,7 @@ def test_washer_runs_a_whole_programme(t):
     assert d["inputs"]["analog"][0] < 50, "water left in the tub: %d counts" % d["inputs"]["analog"][0]
 
 
+@plain_pass_only("the door interlock under the sanitizers: test-drivers' washer door tests")
 def test_washer_door_opened_mid_wash(t):
     host = washer_host(t, {"driver.washer.param.time_scale": "0.01"})
     boards = t.kitchen(host, commands=True)
@@ -122,6 +124,7 @@ def test_washer_door_opened_mid_wash(t):
                      door_guard(host))
 
 
+@plain_pass_only("cancel and drain under the sanitizers: test-drivers' washer cancel tests")
 def test_washer_cancel_stops_and_drains(t):
     host = washer_host(t, {"driver.washer.param.time_scale": "0.01"})
     boards = t.kitchen(host, commands=True)
@@ -142,6 +145,7 @@ def dish_var(host, s, name):
     return host.device("dish-1", s)["variables"].get(name)
 
 
+@plain_pass_only("the dishwasher under the sanitizers: test-drivers' dishwasher tests")
 def test_dishwasher_runs_and_honours_its_door(t):
     host = washer_host(t)
     boards = t.kitchen(host, commands=True)
