@@ -18,12 +18,20 @@
 #include "../driver/hints.h"
 #include "../loader/loader.h"
 
+/* From after the last find on, round the table: the poll, HA's configs and
+ * Sparkplug's births ask in the status's order, which is the table's (the
+ * table grows in that order and keeps a machine that left), so a lookup is
+ * one compare, not a walk over every machine before it. */
 struct mqtt_device *mqtt_conn_device_find(struct mqtt_conn *c, const char *name)
 {
-	int i;
-	for (i = 0; i < c->ndevices; i++)
-		if (strcmp(c->devices[i].name, name) == 0)
+	int k;
+	for (k = 0; k < c->ndevices; k++) {
+		int i = (c->find_next + k) % c->ndevices;
+		if (strcmp(c->devices[i].name, name) == 0) {
+			c->find_next = i + 1;
 			return &c->devices[i];
+		}
+	}
 	return NULL;
 }
 

@@ -117,6 +117,7 @@ struct mqtt_conn {
 	 * were told of them (mqtt_devices.c). */
 	struct mqtt_device *devices;
 	int ndevices, cap;
+	int find_next; /* where mqtt_conn_device_find looks first: after its last find */
 	/* Network thread only: libmosquitto's last error line (its log callback:
 	 * the OpenSSL reason of a refused handshake, or the broker's CONNACK) and
 	 * the failure last reported, so that a broker that stays unreachable is

@@ -228,6 +228,30 @@ END_TEST
 /* The web UI's address for HA's configuration_url: ui_url, else from the
  * http setting (the host name for 0.0.0.0, https with tls_cert), none for
  * port 0; a ui_url that is no http(s) URL stops the host. */
+/* A connection's machines are found whatever order they are asked in, the
+ * status's order (from after the last find) or any other. */
+START_TEST(a_machine_is_found_in_any_order)
+{
+	struct mqtt_device devices[4];
+	struct mqtt_conn c;
+	static const char *const names[] = {"washer-1", "dish-1", "lights-1", "lamp-9"};
+	static const int order[] = {0, 1, 2, 3, 0, 1, 2, 3, 3, 2, 1, 0, 2, 0, 3, 1};
+	int i;
+	memset(&c, 0, sizeof(c));
+	memset(devices, 0, sizeof(devices));
+	for (i = 0; i < 4; i++)
+		snprintf(devices[i].name, sizeof(devices[i].name), "%s", names[i]);
+	c.devices = devices;
+	c.ndevices = c.cap = 4;
+	for (i = 0; i < (int)(sizeof(order) / sizeof(order[0])); i++)
+		ck_assert_msg(mqtt_conn_device_find(&c, names[order[i]]) == &devices[order[i]],
+		              "lookup %d: %s not found where it is", i, names[order[i]]);
+	ck_assert_msg(mqtt_conn_device_find(&c, "oven-1") == NULL, "a machine not in the table was found");
+	c.ndevices = 0;
+	ck_assert_msg(mqtt_conn_device_find(&c, "washer-1") == NULL, "an empty table found a machine");
+}
+END_TEST
+
 START_TEST(ui_url_from_the_setting_or_the_http_address)
 {
 	struct vmac_config cfg;
@@ -271,6 +295,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_declared_precision_rounds_what_is_published);
 	suite_add_tcase(s, tc);
 	tcase_add_test(tc, ui_url_from_the_setting_or_the_http_address);
+	tcase_add_test(tc, a_machine_is_found_in_any_order);
 	tc = tcase_create("site");
 	tcase_add_test(tc, site_view_reads_host_topics_and_none);
 	suite_add_tcase(s, tc);
