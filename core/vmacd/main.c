@@ -209,16 +209,136 @@ static int parse_args(struct host *h, int argc, char **argv)
 	return 0;
 }
 
+/* The bus, the store, the main loop and the HTTP server: 0, or 1 said. */
+static int open_parts(struct host *h)
+{
+	const struct vmac_mainloop_hooks hooks = {.ctx = h, .wall_ns = wall_ns, .bus_ns = bus_ns, .stopped = stopped};
+	char err[512];
+	h->bus = vmac_bus_new(&h->cfg, err, sizeof(err));
+	if (!h->bus) {
+		vmacd_log(LOG_ERR, "bus: %s", err);
+		return 1;
+	}
+	if (vmac_store_open(h->cfg.state_dir, &h->store, err, sizeof(err)) != 0 ||
+	    !(h->main = vmac_mainloop_new(&h->cfg, h->bus, h->store, &h->log, &hooks, err, sizeof(err)))) {
+		vmacd_log(LOG_ERR, "%s", err);
+		vmac_store_close(h->store);
+		vmac_bus_free(h->bus);
+		return 1;
+	}
+	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, h->store, &h->cfg, err, sizeof(err));
+	if (!h->http) {
+		vmacd_log(LOG_ERR, "http: %s", err);
+		vmac_store_close(h->store);
+		vmac_bus_free(h->bus);
+		return 1;
+	}
+	return 0;
+}
+
+/* The main loop's watchers: the bus's wake-ups, its own timer, the stop signals. */
+static void watch(struct host *h)
+{
+	ev_async_init(&h->wake_w, on_wake);
+	h->wake_w.data = h;
+	ev_async_start(h->loop, &h->wake_w);
+	ev_timer_init(&h->every_w, on_timer, 0.05, 0.05);
+	h->every_w.data = h;
+	ev_timer_start(h->loop, &h->every_w);
+	ev_signal_init(&h->int_w, on_signal, SIGINT);
+	h->int_w.data = h;
+	ev_signal_start(h->loop, &h->int_w);
+	ev_signal_init(&h->term_w, on_signal, SIGTERM);
+	h->term_w.data = h;
+	ev_signal_start(h->loop, &h->term_w);
+	vmac_bus_set_wakeup(h->bus, wakeup, h);
+}
+
+/* Block (or, with old, restore) the stop signals around starting threads:
+ * libev delivers them to the main thread. */
+static void block_stop_signals(sigset_t *old)
+{
+	sigset_t set;
+	sigemptyset(&set);
+	sigaddset(&set, SIGINT);
+	sigaddset(&set, SIGTERM);
+	pthread_sigmask(SIG_BLOCK, &set, old);
+}
+
+/* The bus thread, then MQTT's when it is on: 0, or 1 said. */
+static int start_threads(struct host *h)
+{
+	char err[512];
+	sigset_t old;
+	int rc;
+	block_stop_signals(&old);
+	rc = vmac_bus_start(h->bus);
+	pthread_sigmask(SIG_SETMASK, &old, NULL);
+	if (rc != 0) {
+		vmacd_log(LOG_ERR, "cannot start the bus thread: %s", vmac_strerror(rc));
+		return 1;
+	}
+	if (!h->mqtt_settings.enabled)
+		return 0;
+	block_stop_signals(&old);
+	h->site = vmac_site_new(h->mqtt_settings.prefix, h->mqtt_settings.host_id);
+	h->mqtt =
+	    h->site ? vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, h->site, err, sizeof(err)) : NULL;
+	pthread_sigmask(SIG_SETMASK, &old, NULL);
+	if (!h->site)
+		snprintf(err, sizeof(err), "out of memory");
+	if (!h->mqtt) {
+		vmacd_log(LOG_ERR, "mqtt: %s", err);
+		return 1;
+	}
+	vmacd_log(LOG_NOTICE, "mqtt to %s://%s:%d as %s, topics %s/%s/...%s", h->mqtt_settings.tls ? "mqtts" : "mqtt",
+	          h->mqtt_settings.host, h->mqtt_settings.port, h->mqtt_settings.client_id, h->mqtt_settings.prefix,
+	          h->mqtt_settings.host_id, h->mqtt_settings.commands ? ", commands accepted" : ", commands off");
+	vmac_http_set_site(h->http, h->site);
+	return 0;
+}
+
+/* Where everything is, in the log; systemd is told once the bus ticks. */
+static void announce(struct host *h)
+{
+	char status[256];
+	int hostlen = (int)(strrchr(h->cfg.http, ':') - h->cfg.http);
+	const char *scheme = vmac_http_tls(h->http) ? "https" : "http";
+	vmacd_log(LOG_NOTICE,
+	          "bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us",
+	          h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
+	          h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us);
+	vmacd_log(LOG_NOTICE, "drivers from %s%s%s/drivers", h->cfg.drivers_dir, h->cfg.drivers_dir[0] ? " then " : "",
+	          h->cfg.scripts_dir);
+	vmacd_log(LOG_NOTICE, "status at %s://%.*s:%u/api/status", scheme, hostlen, h->cfg.http,
+	          vmac_http_port(h->http));
+	snprintf(status, sizeof(status), "bus %s, API at %s://%.*s:%u", h->cfg.bus, scheme, hostlen, h->cfg.http,
+	         vmac_http_port(h->http));
+	vmacd_notify_start(&h->notify, h->loop, h->bus, status);
+}
+
+/* After the loop: MQTT said offline, the bus's last events kept, all freed. */
+static void shut_down(struct host *h)
+{
+	vmac_mqtt_stop(h->mqtt); /* devices and host offline, while the broker can still be told */
+	vmac_bus_join(h->bus);
+	vmac_mainloop_service(h->main); /* the last events */
+	vmac_http_stop(h->http);
+	vmac_site_free(h->site); /* after the server: a request may have been reading it */
+	vmac_mainloop_free(h->main);
+	vmac_store_close(h->store);
+	vmac_bus_free(h->bus);
+	vmacd_log(LOG_NOTICE, "stopped; every board was told to go safe");
+}
+
 int main(int argc, char **argv)
 {
 	static struct host host;
 	struct host *h = &host;
-	char err[512];
 	int rc;
 
 	vmacd_log_init();
 	rc = parse_args(h, argc, argv);
-
 	if (rc)
 		return rc == 1 ? 0 : rc;
 	signal(SIGPIPE, SIG_IGN);
@@ -233,105 +353,13 @@ int main(int argc, char **argv)
 	vmac_event_log_init(&h->log);
 	h->log.echo = vmacd_echo_event;
 	h->loop = EV_DEFAULT;
-	h->bus = vmac_bus_new(&h->cfg, err, sizeof(err));
-	if (!h->bus) {
-		vmacd_log(LOG_ERR, "bus: %s", err);
+	if (open_parts(h) != 0)
 		return 1;
-	}
-	{
-		const struct vmac_mainloop_hooks hooks = {
-		    .ctx = h, .wall_ns = wall_ns, .bus_ns = bus_ns, .stopped = stopped};
-		if (vmac_store_open(h->cfg.state_dir, &h->store, err, sizeof(err)) != 0 ||
-		    !(h->main = vmac_mainloop_new(&h->cfg, h->bus, h->store, &h->log, &hooks, err, sizeof(err)))) {
-			vmacd_log(LOG_ERR, "%s", err);
-			vmac_store_close(h->store);
-			vmac_bus_free(h->bus);
-			return 1;
-		}
-	}
-	h->http = vmac_http_start(h->cfg.http, h->bus, &h->log, h->store, &h->cfg, err, sizeof(err));
-	if (!h->http) {
-		vmacd_log(LOG_ERR, "http: %s", err);
-		vmac_store_close(h->store);
-		vmac_bus_free(h->bus);
+	watch(h);
+	if (start_threads(h) != 0)
 		return 1;
-	}
-	ev_async_init(&h->wake_w, on_wake);
-	h->wake_w.data = h;
-	ev_async_start(h->loop, &h->wake_w);
-	ev_timer_init(&h->every_w, on_timer, 0.05, 0.05);
-	h->every_w.data = h;
-	ev_timer_start(h->loop, &h->every_w);
-	ev_signal_init(&h->int_w, on_signal, SIGINT);
-	h->int_w.data = h;
-	ev_signal_start(h->loop, &h->int_w);
-	ev_signal_init(&h->term_w, on_signal, SIGTERM);
-	h->term_w.data = h;
-	ev_signal_start(h->loop, &h->term_w);
-	vmac_bus_set_wakeup(h->bus, wakeup, h);
-
-	/* Block the stop signals in the bus thread: libev delivers them here. */
-	{
-		sigset_t set, old;
-		sigemptyset(&set);
-		sigaddset(&set, SIGINT);
-		sigaddset(&set, SIGTERM);
-		pthread_sigmask(SIG_BLOCK, &set, &old);
-		rc = vmac_bus_start(h->bus);
-		pthread_sigmask(SIG_SETMASK, &old, NULL);
-	}
-	if (rc != 0) {
-		vmacd_log(LOG_ERR, "cannot start the bus thread: %s", vmac_strerror(rc));
-		return 1;
-	}
-	if (h->mqtt_settings.enabled) { /* its threads too leave the stop signals to the main thread */
-		sigset_t set, old;
-		sigemptyset(&set);
-		sigaddset(&set, SIGINT);
-		sigaddset(&set, SIGTERM);
-		pthread_sigmask(SIG_BLOCK, &set, &old);
-		h->site = vmac_site_new(h->mqtt_settings.prefix, h->mqtt_settings.host_id);
-		h->mqtt = h->site
-		              ? vmac_mqtt_start(&h->mqtt_settings, &h->cfg, h->bus, &h->log, h->site, err, sizeof(err))
-		              : NULL;
-		pthread_sigmask(SIG_SETMASK, &old, NULL);
-		if (!h->site)
-			snprintf(err, sizeof(err), "out of memory");
-		if (!h->mqtt) {
-			vmacd_log(LOG_ERR, "mqtt: %s", err);
-			return 1;
-		}
-		vmacd_log(LOG_NOTICE, "mqtt to %s://%s:%d as %s, topics %s/%s/...%s",
-		          h->mqtt_settings.tls ? "mqtts" : "mqtt", h->mqtt_settings.host, h->mqtt_settings.port,
-		          h->mqtt_settings.client_id, h->mqtt_settings.prefix, h->mqtt_settings.host_id,
-		          h->mqtt_settings.commands ? ", commands accepted" : ", commands off");
-		vmac_http_set_site(h->http, h->site);
-	}
-	{
-		char status[256];
-		int hostlen = (int)(strrchr(h->cfg.http, ':') - h->cfg.http);
-		const char *scheme = vmac_http_tls(h->http) ? "https" : "http";
-		vmacd_log(LOG_NOTICE,
-		          "bus %s from %s, slot %u us (%u slices of %u us), %u slots per block, reply deadline %u us",
-		          h->cfg.bus, vmac_bus_host_addr(h->bus), vmac_config_slot_us(&h->cfg), h->cfg.slices_per_slot,
-		          h->cfg.slice_us, 1u << h->cfg.max_level, h->cfg.reply_deadline_us);
-		vmacd_log(LOG_NOTICE, "drivers from %s%s%s/drivers", h->cfg.drivers_dir,
-		          h->cfg.drivers_dir[0] ? " then " : "", h->cfg.scripts_dir);
-		vmacd_log(LOG_NOTICE, "status at %s://%.*s:%u/api/status", scheme, hostlen, h->cfg.http,
-		          vmac_http_port(h->http));
-		snprintf(status, sizeof(status), "bus %s, API at %s://%.*s:%u", h->cfg.bus, scheme, hostlen,
-		         h->cfg.http, vmac_http_port(h->http));
-		vmacd_notify_start(&h->notify, h->loop, h->bus, status);
-	}
+	announce(h);
 	ev_run(h->loop, 0);
-	vmac_mqtt_stop(h->mqtt); /* devices and host offline, while the broker can still be told */
-	vmac_bus_join(h->bus);
-	vmac_mainloop_service(h->main); /* the last events */
-	vmac_http_stop(h->http);
-	vmac_site_free(h->site); /* after the server: a request may have been reading it */
-	vmac_mainloop_free(h->main);
-	vmac_store_close(h->store);
-	vmac_bus_free(h->bus);
-	vmacd_log(LOG_NOTICE, "stopped; every board was told to go safe");
+	shut_down(h);
 	return 0;
 }
