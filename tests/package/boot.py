@@ -21,7 +21,6 @@ debootstrap or systemd-nspawn it says SKIPPED (appended to $VMAC_SKIP_FILE)
 and exits 0, or 1 with CI=true."""
 
 import argparse
-import ctypes
 import json
 import os
 import re
@@ -31,8 +30,10 @@ import subprocess
 import sys
 import time
 
-PTRACE_DETACH, PTRACE_SEIZE, PTRACE_INTERRUPT = 17, 0x4206, 0x4207
-WALL = 0x40000000
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "integration"))
+sys.dont_write_bytecode = True
+from park import Parked, thread_of  # noqa: E402
+
 BASE = ["systemd", "systemd-sysv", "dbus"]
 MIRROR = "http://deb.debian.org/debian"
 
@@ -168,25 +169,6 @@ def child_of(pid):
     return None
 
 
-def park(tid):
-    """Stop one thread (ptrace); returns a function that lets it go."""
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.ptrace.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p]
-    if libc.ptrace(PTRACE_SEIZE, tid, None, None) != 0 or libc.ptrace(PTRACE_INTERRUPT, tid, None, None) != 0:
-        raise Failed("cannot ptrace vmacd's bus thread: %s" % os.strerror(ctypes.get_errno()))
-    os.waitpid(tid, WALL)
-
-    def release():
-        # Let it go; once its process was killed, it is ours to reap
-        # before the process can end.
-        libc.ptrace(PTRACE_DETACH, tid, None, None)
-        try:
-            os.waitpid(tid, WALL | os.WNOHANG)
-        except ChildProcessError:
-            pass
-    return release
-
-
 def seconds(span):
     """systemd's time span ("10s", "1min 30s", "500ms") in seconds."""
     units = {"us": 1e-6, "ms": 1e-3, "s": 1, "min": 60, "h": 3600}
@@ -260,11 +242,10 @@ def run(args):
 
         restarts = int(show(m, "NRestarts"))
         watchdog_s = seconds(show(m, "WatchdogUSec"))
-        bus = [t for t in os.listdir("/proc/%d/task" % pid)
-               if open("/proc/%d/task/%s/comm" % (pid, t)).read().strip() == "vmac-bus"]
-        if not bus:
-            raise Failed("vmacd (pid %d) has no thread vmac-bus" % pid)
-        release = park(int(bus[0]))
+        try:
+            parked = Parked(thread_of(pid, "vmac-bus"))
+        except OSError as e:
+            raise Failed("cannot stop vmacd's bus thread: %s" % e)
         try:
             # systemd's judgement; a thread held by ptrace cannot die, so
             # it is let go once judged, and vmacd ends on systemd's signal.
@@ -272,7 +253,7 @@ def run(args):
                    lambda p: "Watchdog timeout" in p.stdout,
                    "systemd's watchdog judging vmacd after its bus thread stopped", 3 * watchdog_s + 10)
         finally:
-            release()
+            parked.release()  # let go, or reaped if vmacd was killed meanwhile
         m.wait(["systemctl", "show", "-p", "NRestarts", "--value", "vmacd"],
                lambda p: p.stdout.strip().isdigit() and int(p.stdout) > restarts, "systemd restarting vmacd", 60)
         journal = m.journal("vmacd")
