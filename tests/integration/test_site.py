@@ -84,9 +84,14 @@ def wait_site(fetch, predicate, timeout_s, what):
         time.sleep(0.2)
 
 
+LIGHTS = {"kitchen", "dining", "tv", "disposal"}
+
+
 def both_online(site, kitchen=False):
-    """Both hosts and their lights online, the kitchen light as said (None: any)."""
+    """Both hosts and their lights online with every light's value come (they
+    arrive one message each), the kitchen light as said (None: any)."""
     return all(host_of(site, h)["state"] == "online" and device_of(site, h, d)["state"] == "online" and
+               LIGHTS <= set(device_of(site, h, d)["values"]) and
                (kitchen is None or device_of(site, h, d)["values"].get("kitchen") is kitchen)
                for h, d in (("site-a", "lights-a"), ("site-b", "lights-b")))
 
