@@ -351,6 +351,9 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
             assert "name" in m and "datatype" in m and "timestamp" in m, "a DBIRTH metric lacks name/type/time: %s" % m
         sp.wait(NODE % "DBIRTH" + "/dish-1", what="dishwasher DBIRTH")
 
+        if "value" not in kitchen:  # born before the first tick: its values come first, in a DDATA of their own
+            sp.wait(NODE % "DDATA" + "/lights-1", has_value("kitchen", False), what="the lights' first values")
+
         # DCMD: the kitchen light on, through the bus; DDATA says so.
         mark = sp.mark()
         sp.publish(NODE % "DCMD" + "/lights-1", command([("kitchen", BOOLEAN, True)]))
