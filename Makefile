@@ -38,17 +38,18 @@ SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # python3-nacl (libsodium's SipHash) for the integration tests' own sealed frames (test_trust.py);
 # libsystemd for vmacd's sd_notify and journal fields (core/vmacd/service.c), and systemd's
 # journald and journalctl for the journal test (test_service.py); prometheus (the server, and
-# promtool) to scrape GET /metrics in test_metrics.py.
+# promtool) to scrape GET /metrics in test_metrics.py; libarchive-dev for bundles
+# (core/bundle) and minisign, the signing tool the bundle tests sign with.
 DEBS := build-essential pkg-config libluajit-5.1-dev libev-dev libmicrohttpd-dev libjansson-dev \
         libcurl4-openssl-dev libsqlite3-dev libsodium-dev check clang libclang-rt-dev python3 lua-check luajit \
         openssl clang-format iproute2 util-linux gcc-arm-none-eabi picolibc-arm-none-eabi qemu-system-arm \
         libmosquitto-dev mosquitto python3-paho-mqtt protobuf-c-compiler libprotobuf-c-dev python3-nacl \
-        libsystemd-dev systemd prometheus
+        libsystemd-dev systemd prometheus libarchive-dev minisign
 
 # make bench also needs cyclictest, its lateness baseline.
 BENCH_DEBS := rt-tests
 
-PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium
+PKGS := luajit libmicrohttpd jansson libcurl sqlite3 libsodium libarchive
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 # The fuzz harnesses and benchmarks link these; programs and unit tests link
 # what their modules' fragments (MODULE_LIBS) name.
@@ -71,7 +72,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 # this order, each once, and scripts/check-layers.py reads every archive's
 # symbols (nm) and every include before anything links: an arrow upward is
 # a build error.
-MODULES := api mqtt vtest mainloop reload host loader config driver transport store recorder board sched proto common
+MODULES := api mqtt vtest mainloop reload host loader bundle config driver transport store recorder board sched proto common
 MODULE_DIR = $(if $(filter board,$(1)),firmware,core/$(1))
 pkg_libs = $(shell pkg-config --libs $(1) 2>/dev/null)
 OBJ = $(BUILD)/obj

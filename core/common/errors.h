@@ -28,7 +28,14 @@
 	X(VMAC_EREFUSED, "refused")                    /* a new version a machine would not take over */               \
 	X(VMAC_EBUSY, "the host is busy")              /* the bus thread took no request, or not in time */            \
 	X(VMAC_ESTORE, "the store failed")             /* the store could not read or write (not a full disk) */       \
-	X(VMAC_ESTOREFULL, "the store's disk is full") /* the store could not write: its disk is full */
+	X(VMAC_ESTOREFULL, "the store's disk is full") /* the store could not write: its disk is full */               \
+	X(VMAC_EBUNDLE, "not a valid bundle")          /* an archive that is not a bundle, or a damaged one */         \
+	X(VMAC_ESIGMISSING, "no signature")            /* a signature is required and none came */                     \
+	X(VMAC_ESIGKEY, "signed by an unknown key")    /* its key id is none of deploy_keys */                         \
+	X(VMAC_ESIGBAD, "the signature does not match") /* the file is not what was signed (tampered) */               \
+	X(VMAC_ESIGCOMMENT, "trusted comment altered")  /* the trusted comment is not what was signed */               \
+	X(VMAC_ESIGMETA, "signed for another bundle")   /* the trusted comment disagrees with the metadata */          \
+	X(VMAC_ECOUNTER, "security counter too low")    /* lower than the highest accepted for that driver */
 
 #define VMAC_ERR_ENUM(name, text) name,
 enum vmac_err { VMAC_OK = 0, VMAC_ERR_FIRST_ = VMAC_ERR_BASE, VMAC_ERRORS(VMAC_ERR_ENUM) VMAC_ERR_END_ };
