@@ -6,13 +6,14 @@ CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
 # test NAME : the module it tests. test_isolation and test_checkpoint are
 # white-box (core/driver/internal.h); test_transport's raw-Ethernet round
 # trip runs over a veth pair in a network namespace of its own (root), else
-# it is SKIPPED into $(SKIPPED).
+# it is SKIPPED into $(SKIPPED); test_minisign signs and checks with the
+# real minisign command (SKIPPED without it).
 UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto test_cyclic:proto \
                     test_board:board test_plant:board test_board_v2:board test_board_cyclic:board \
                     test_sched:sched test_store:store test_recording:recorder test_transport:transport \
                     test_driver:driver test_hints:driver test_isolation:driver test_checkpoint:driver test_host:host \
                     test_auth:proto test_board_auth:board test_report:board \
-                    test_mqtt:mqtt test_paths:common test_prom:api
+                    test_mqtt:mqtt test_paths:common test_prom:api test_minisign:bundle
 UNIT_TESTS := $(foreach t,$(UNIT_TEST_MODULE),$(BUILD)/tests/$(firstword $(subst :, ,$(t))))
 
 # Libraries a test needs beyond its modules': libsodium is the reference
