@@ -61,10 +61,13 @@ same run on the same machine, reported as ratios.
             (tests/bench/auth_frames.c), and host CPU per device per tick, 100
             boards at 1 kHz on eth-cyclic, keyed next to bus_trust open with
             boards without keys, alternating rounds (root, else SKIPPED)
+  minisign  checking a bundle's minisign signature (tests/bench/minisign_bench.py):
+            us per MiB of a prehashed (ED) and a legacy (Ed) signature next to
+            BLAKE2b-512 alone over the same 4 MiB (tests/bench/minisign_verify.c)
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
                 [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,
-                        metrics,mqtt-kitchen]
+                        metrics,minisign,mqtt-kitchen]
                 [--base-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
@@ -426,7 +429,7 @@ def main():
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only",
                    default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,"
-                           "metrics")
+                           "metrics,minisign")
     p.add_argument("--base-bin", default=None,
                    help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
     p.add_argument("--cpu-awake", choices=("true", "false"), default="true",
@@ -529,6 +532,11 @@ def main():
               args.seconds, flush=True)
         results["metrics"] = metrics(args)
 
+    if "minisign" in only:
+        from minisign_bench import minisign
+        print("minisign: checking a signature, us per MiB next to BLAKE2b-512 alone", flush=True)
+        results["minisign"] = minisign(args)
+
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
         results["reload"] = reload_bench(args)
@@ -621,6 +629,9 @@ def report(r):
     if r.get("metrics"):
         from metrics_bench import report_metrics
         report_metrics(r["metrics"])
+    if r.get("minisign"):
+        from minisign_bench import report_minisign
+        report_minisign(r["minisign"])
 
 
 if __name__ == "__main__":
