@@ -21,9 +21,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define VMAC_BUNDLE_MAX (4u << 20)  /* bytes of a bundle file */
-#define VMAC_BUNDLE_FILES 160       /* members besides bundle.json */
-#define VMAC_BUNDLE_PATH_MAX 64     /* bytes of a member's path, NUL included */
+#define VMAC_BUNDLE_MAX (4u << 20)      /* bytes of a bundle file */
+#define VMAC_BUNDLE_FILES 160           /* members besides bundle.json */
+#define VMAC_BUNDLE_PATH_MAX 64         /* bytes of a member's path, NUL included */
 #define VMAC_BUNDLE_FILE_MAX (1u << 20) /* bytes of one member */
 #define VMAC_BUNDLE_NAME_MAX 47
 #define VMAC_BUNDLE_VERSION_MAX 31
@@ -60,12 +60,14 @@ const struct vmac_bundle_file *vmac_bundle_driver(const struct vmac_bundle *b);
 
 /* A bundle of what a drivers folder holds for one driver (DRIVERS.md
  * "Bundles"): path is a driver file D/NAME.lua, or a folder D that holds
- * exactly one driver file. It takes D/NAME.lua; the programmes
- * D/cycles/NAME/*.lua (else D/../cycles/NAME/*.lua, the source tree's
- * scripts/ layout); D/plants/NAME.lua as plant.lua; D/tests/NAME_test.lua
- * and D/tests/NAME_*_test.lua as tests/. Version, counter and api are left
- * for the caller. 0, or < 0 with err (-ENOENT: no such driver). */
-int vmac_bundle_from_folder(const char *path, struct vmac_bundle **out, char *err, size_t errlen);
+ * exactly one driver file. It takes D/NAME.lua; the programmes in
+ * cycles_dir, or when that is NULL in D/cycles/NAME/ (else
+ * D/../cycles/NAME/, the source tree's scripts/ layout); D/plants/NAME.lua
+ * as plant.lua; D/tests/NAME_test.lua and D/tests/NAME_*_test.lua as
+ * tests/. Version, counter and api are left for the caller. 0, or < 0
+ * with err (-ENOENT: no such driver). */
+int vmac_bundle_from_folder(const char *path, const char *cycles_dir, struct vmac_bundle **out, char *err,
+                            size_t errlen);
 
 /* The archive of b (malloc'd, *len bytes): the same b always gives the
  * same bytes. 0, or < 0 with err (a bundle without version or driver). */
@@ -73,6 +75,10 @@ int vmac_bundle_write(const struct vmac_bundle *b, char **data, size_t *len, cha
 
 /* Read an archive: 0 and *out, or -VMAC_EBUNDLE with err. */
 int vmac_bundle_read(const void *data, size_t len, struct vmac_bundle **out, char *err, size_t errlen);
+
+/* Whether data looks like an archive (ustar's magic at offset 257), not
+ * a driver's Lua text. */
+int vmac_bundle_is_archive(const void *data, size_t len);
 
 /* BLAKE2b-256 of data as lowercase hex (the hash of a member, and of a
  * whole bundle: what the store and recordings name it by). */
