@@ -29,6 +29,10 @@
 #define VMAC_DRIVER_NAME_MAX 31                /* names of io, params, variables, commands */
 #define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value */
 #define VMAC_DRIVER_VERSION_MAX 31
+/* The driver API this host offers (vmac.version; a bundle names the one it
+ * needs): MAJOR.MINOR, a bundle of the same major and a minor not above
+ * this one runs. */
+#define VMAC_DRIVER_API "0.2"
 #define VMAC_DRIVER_LOAD_FACTOR 50     /* loading the file gets this many budgets */
 #define VMAC_DRIVER_FILE_MAX (1 << 20) /* bytes of a driver's file (and of a stdlib module) */
 /* The most a manifest's description (vmac_driver_describe) may hold:
@@ -42,17 +46,39 @@ struct vmac_driver_setting {
 	char value[64];
 };
 
+/* A driver's programmes (docs/DRIVERS.md "Cycles as scripts"), the
+ * sources vmac.cycles() runs: from a bundle (core/loader), or read from a
+ * folder (vmac_driver_programmes_read). Each name is a module name. */
+#define VMAC_DRIVER_PROGRAMMES 64
+struct vmac_driver_programme {
+	char name[48];
+	const char *src;
+	size_t len;
+};
+struct vmac_driver_programmes {
+	int n; /* in name order */
+	struct vmac_driver_programme p[VMAC_DRIVER_PROGRAMMES];
+	char from[600]; /* where they came from, for messages ("/x/cycles/washer", "the bundle") */
+	int owned;      /* the sources are malloc'd: vmac_driver_programmes_free frees them */
+};
+
+/* Every NAME.lua of folder dir (NAME a module name: others are let be),
+ * at most VMAC_DRIVER_PROGRAMMES, read into out (from: dir). A missing
+ * folder holds none. 0, or < 0 with err (a file that cannot be read). */
+int vmac_driver_programmes_read(const char *dir, struct vmac_driver_programmes *out, char *err, size_t errlen);
+void vmac_driver_programmes_free(struct vmac_driver_programmes *p);
+
 struct vmac_driver_limits {
-	size_t memory_bytes;                        /* cap on the state's heap (default 4 MiB) */
-	uint64_t instructions;                      /* VM instructions per call (default 200,000) */
-	uint32_t budget_us;                         /* wall-clock microseconds per call; 0 = no wall-clock limit */
-	unsigned default_level;                     /* level when the manifest names none */
-	unsigned max_level;                         /* highest level the scheduler has */
-	int allow_jit;                              /* honour a manifest's jit = true */
-	const char *stdlib_dir;                     /* where the driver's require() looks; NULL: no require */
-	const char *cycles_dir;                     /* vmac.cycles() reads the .lua files here; NULL: it raises */
-	const char *expect_name;                    /* the driver name the board announced; NULL: any */
-	const struct vmac_driver_setting *settings; /* overrides for this driver */
+	size_t memory_bytes;                             /* cap on the state's heap (default 4 MiB) */
+	uint64_t instructions;                           /* VM instructions per call (default 200,000) */
+	uint32_t budget_us;                              /* wall-clock microseconds per call; 0 = no wall-clock limit */
+	unsigned default_level;                          /* level when the manifest names none */
+	unsigned max_level;                              /* highest level the scheduler has */
+	int allow_jit;                                   /* honour a manifest's jit = true */
+	const char *stdlib_dir;                          /* where the driver's require() looks; NULL: no require */
+	const struct vmac_driver_programmes *programmes; /* what vmac.cycles() runs; NULL: it raises */
+	const char *expect_name;                         /* the driver name the board announced; NULL: any */
+	const struct vmac_driver_setting *settings;      /* overrides for this driver */
 	int nsettings;
 	/* Bus time in seconds, for os.clock(); NULL: 0. */
 	double (*clock)(void *ctx);

@@ -66,9 +66,10 @@ struct var {
 
 struct vmac_driver {
 	lua_State *L;
-	char stdlib_dir[512], cycles_dir[600];
-	int loading;      /* require() and vmac.cycles() read files only while loading */
-	size_t used, cap; /* heap accounting of the counting allocator */
+	char stdlib_dir[512];
+	const struct vmac_driver_programmes *programmes; /* while loading only: the limits' */
+	int loading;                                     /* require() and vmac.cycles() read files only while loading */
+	size_t used, cap;                                /* heap accounting of the counting allocator */
 	void *(*heap)(void *ctx, void *ptr, size_t osize, size_t nsize); /* NULL: realloc/free */
 	void *heap_ctx;
 	uint64_t budget_hooks;          /* hook calls allowed per guarded call */
@@ -173,7 +174,11 @@ void drv_raw_setfield(lua_State *L, int i, const char *k);
 void drv_wrap_bounded(lua_State *L, const char *lib);
 
 /* sandbox.c */
+/* Run a file (or a text in memory) as text in the driver's environment,
+ * upvalue 1 of the calling C function, with arg: [-0, +1] what it
+ * returned, or raises. */
 void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg);
+void drv_run_sandboxed_text(lua_State *L, const char *src, size_t len, const char *chunk, const char *arg);
 int drv_valid_module_name(const char *name, size_t maxlen);
 void drv_make_env(lua_State *L);
 int drv_open_lib(lua_State *L, lua_CFunction f, const char *name);

@@ -186,9 +186,11 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	d->loading = 1;
 	if (drv_guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen) != 0) {
 		d->loading = 0;
+		d->programmes = NULL;
 		return -1;
 	}
 	d->loading = 0;
+	d->programmes = NULL; /* the limits' are the caller's: not kept past the load */
 	if (!lua_istable(L, -1)) {
 		snprintf(err, errlen, "%s: the file must return a table (the driver), got %s", d->file,
 		         luaL_typename(L, -1));
@@ -268,7 +270,7 @@ int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, co
 	}
 	snprintf(d->name, sizeof(d->name), "%s", limits->expect_name ? limits->expect_name : "?");
 	snprintf(d->stdlib_dir, sizeof(d->stdlib_dir), "%s", limits->stdlib_dir ? limits->stdlib_dir : "");
-	snprintf(d->cycles_dir, sizeof(d->cycles_dir), "%s", limits->cycles_dir ? limits->cycles_dir : "");
+	d->programmes = limits->programmes;
 	for (i = 0; i < limits->nsettings; i++) {
 		const char *k = limits->settings[i].key, *v = limits->settings[i].value;
 		char *end;

@@ -72,8 +72,17 @@ static int bus_clock(lua_State *L)
 	return 1;
 }
 
-/* Load a file as text into the driver's environment (upvalue 1 of the
- * calling C closure) and call it with arg: [-0, +1] the result, or raises. */
+/* See internal.h. */
+void drv_run_sandboxed_text(lua_State *L, const char *src, size_t len, const char *chunk, const char *arg)
+{
+	if (luaL_loadbufferx(L, src, len, chunk, "t") != 0)
+		lua_error(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_setfenv(L, -2);
+	lua_pushstring(L, arg);
+	lua_call(L, 1, 1);
+}
+
 void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const char *arg)
 {
 	char err[300];
@@ -82,10 +91,11 @@ void drv_run_sandboxed(lua_State *L, const char *path, const char *chunk, const 
 	char *src = vmac_read_file(path, VMAC_DRIVER_FILE_MAX, &len, err, sizeof(err), &code);
 	if (!src)
 		luaL_error(L, "%s", err);
-	code = luaL_loadbufferx(L, src, len, chunk, "t");
-	free(src);
-	if (code != 0)
+	if (luaL_loadbufferx(L, src, len, chunk, "t") != 0) {
+		free(src);
 		lua_error(L);
+	}
+	free(src);
 	lua_pushvalue(L, lua_upvalueindex(1));
 	lua_setfenv(L, -2);
 	lua_pushstring(L, arg);
@@ -153,61 +163,76 @@ static int sandbox_require(lua_State *L)
 	return 1;
 }
 
-/* The names of the programmes in folder `path` (NAME.lua, NAME a module
- * name), at most CYCLES_MAX of them, sorted: how many. A missing folder
- * holds none. */
-#define CYCLES_MAX 64
-static int cycle_names(const char *path, char names[CYCLES_MAX][48])
+int vmac_driver_programmes_read(const char *dir, struct vmac_driver_programmes *out, char *err, size_t errlen)
 {
-	int n = 0, i, j;
-	DIR *dir = opendir(path);
+	DIR *d = opendir(dir);
 	struct dirent *e;
-	if (!dir)
+	int i, j, code = 0;
+	memset(out, 0, sizeof(*out));
+	snprintf(out->from, sizeof(out->from), "%s", dir);
+	out->owned = 1;
+	if (!d)
 		return 0;
-	while ((e = readdir(dir)) && n < CYCLES_MAX) {
+	while ((e = readdir(d)) && out->n < VMAC_DRIVER_PROGRAMMES) {
+		struct vmac_driver_programme *p = &out->p[out->n];
 		size_t len = strlen(e->d_name);
-		if (len < 5 || len - 4 >= sizeof(names[0]) || strcmp(e->d_name + len - 4, ".lua") != 0)
+		char path[900];
+		if (len < 5 || len - 4 >= sizeof(p->name) || strcmp(e->d_name + len - 4, ".lua") != 0)
 			continue;
-		memcpy(names[n], e->d_name, len - 4);
-		names[n][len - 4] = 0;
-		if (drv_valid_module_name(names[n], 40))
-			n++;
-	}
-	closedir(dir);
-	for (i = 1; i < n; i++) /* insertion sort: a handful of names */
-		for (j = i; j > 0 && strcmp(names[j - 1], names[j]) > 0; j--) {
-			char t[48];
-			memcpy(t, names[j], sizeof(t));
-			memcpy(names[j], names[j - 1], sizeof(t));
-			memcpy(names[j - 1], t, sizeof(t));
+		memcpy(p->name, e->d_name, len - 4);
+		p->name[len - 4] = 0;
+		if (!drv_valid_module_name(p->name, 40))
+			continue;
+		snprintf(path, sizeof(path), "%s/%s", dir, e->d_name);
+		if (!(p->src = vmac_read_file(path, VMAC_DRIVER_FILE_MAX, &p->len, err, errlen, &code))) {
+			closedir(d);
+			vmac_driver_programmes_free(out);
+			return code ? code : -1;
 		}
-	return n;
+		out->n++;
+	}
+	closedir(d);
+	for (i = 1; i < out->n; i++) /* insertion sort: a handful of names */
+		for (j = i; j > 0 && strcmp(out->p[j - 1].name, out->p[j].name) > 0; j--) {
+			struct vmac_driver_programme t = out->p[j];
+			out->p[j] = out->p[j - 1];
+			out->p[j - 1] = t;
+		}
+	return 0;
 }
 
-/* vmac.cycles(): every CYCLES_DIR/NAME.lua, run in the driver's sandbox, as
- * a table NAME -> what the file returned, in name order. Load time only. A
- * driver that asks for its programmes needs one at least: with none (no
- * folder, or no NAME.lua in it) it raises an error that names the folder it
- * looked in, for the person who forgot to put them there. The names live on
- * the C stack, so a file that raises leaks nothing. */
+void vmac_driver_programmes_free(struct vmac_driver_programmes *p)
+{
+	int i;
+	if (p->owned)
+		for (i = 0; i < p->n; i++)
+			free((char *)p->p[i].src);
+	p->n = 0;
+}
+
+/* vmac.cycles(): every programme the host gave the driver, run in its
+ * sandbox, as a table NAME -> what the file returned, in name order. Load
+ * time only. A driver that asks for its programmes needs one at least:
+ * with none it raises an error that names where they were looked for, for
+ * the person who forgot to put them there. */
 static int sandbox_cycles(lua_State *L)
 {
 	struct vmac_driver *d = drv_of(L);
-	char names[CYCLES_MAX][48], path[900], chunk[120];
-	int n, i;
+	const struct vmac_driver_programmes *p = d->programmes;
+	char chunk[120];
+	int i;
 
 	if (!d->loading)
 		return luaL_error(L, "vmac.cycles: call it when the driver loads (top of the file)");
-	if (!d->cycles_dir[0])
-		return luaL_error(L, "vmac.cycles: no programmes for %s (the host gave no folder)", d->name);
-	if ((n = cycle_names(d->cycles_dir, names)) == 0)
-		return luaL_error(L, "vmac.cycles: no programmes for %s in %s/", d->name, d->cycles_dir);
+	if (!p)
+		return luaL_error(L, "vmac.cycles: no programmes for %s (the host gave none)", d->name);
+	if (p->n == 0)
+		return luaL_error(L, "vmac.cycles: no programmes for %s in %s/", d->name, p->from);
 	lua_newtable(L);
-	for (i = 0; i < n; i++) {
-		snprintf(path, sizeof(path), "%s/%s.lua", d->cycles_dir, names[i]);
-		snprintf(chunk, sizeof(chunk), "@cycles/%s/%s.lua", d->name, names[i]);
-		drv_run_sandboxed(L, path, chunk, names[i]);
-		lua_setfield(L, -2, names[i]);
+	for (i = 0; i < p->n; i++) {
+		snprintf(chunk, sizeof(chunk), "@cycles/%s/%s.lua", d->name, p->p[i].name);
+		drv_run_sandboxed_text(L, p->p[i].src, p->p[i].len, chunk, p->p[i].name);
+		lua_setfield(L, -2, p->p[i].name);
 	}
 	return 1;
 }
@@ -344,7 +369,7 @@ void drv_make_env(lua_State *L)
 	lua_pushvalue(L, env);
 	lua_pushcclosure(L, sandbox_cycles, 1);
 	lua_setfield(L, -2, "cycles");
-	lua_pushliteral(L, "0.2");
+	lua_pushliteral(L, VMAC_DRIVER_API);
 	lua_setfield(L, -2, "version");
 	make_read_only(L);
 	lua_setfield(L, env, "vmac");

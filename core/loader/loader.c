@@ -8,6 +8,8 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "../common/errors.h"
+
 int vmac_driver_path(const struct vmac_config *cfg, const char *driver, char *path, size_t len)
 {
 	struct stat st;
@@ -93,7 +95,7 @@ char *vmac_loaded_manifest(const char *driver, const char *version)
 
 /* The limits and settings the configuration gives driver `driver`. */
 static void limits_for(const struct vmac_config *cfg, const char *driver, struct vmac_driver_limits *limits,
-                       struct vmac_driver_setting *settings, char *cycles, size_t cycleslen)
+                       struct vmac_driver_setting *settings)
 {
 	memset(limits, 0, sizeof(*limits));
 	limits->memory_bytes = (size_t)cfg->driver_memory_kib * 1024;
@@ -103,53 +105,197 @@ static void limits_for(const struct vmac_config *cfg, const char *driver, struct
 	limits->max_level = cfg->max_level;
 	limits->allow_jit = cfg->allow_jit;
 	limits->stdlib_dir = cfg->stdlib_dir;
-	cycles_path(cfg, driver, cycles, cycleslen);
-	limits->cycles_dir = cycles;
 	limits->expect_name = driver;
 	limits->settings = settings;
 	limits->nsettings = vmac_config_driver_settings(cfg, driver, settings, VMAC_CONFIG_DRIVER_SETTINGS);
 }
 
-int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_driver **out,
-                     char *text, size_t textlen)
+/* Whether this host runs drivers of API api: the same major, a minor not
+ * above the host's (VMAC_DRIVER_API). */
+static int api_ok(const char *api)
+{
+	unsigned hmaj = 0, hmin = 0, maj = 0, min = 0;
+	char end;
+	if (sscanf(VMAC_DRIVER_API, "%u.%u", &hmaj, &hmin) != 2 || sscanf(api, "%u.%u%c", &maj, &min, &end) != 2)
+		return 0;
+	return maj == hmaj && min <= hmin;
+}
+
+/* The bundle's programmes as the driver takes them: pointers into b;
+ * from: where they were read (a folder), or NULL: the bundle. */
+static void programmes_of(const struct vmac_bundle *b, const char *from, struct vmac_driver_programmes *p)
+{
+	int i;
+	memset(p, 0, sizeof(*p));
+	snprintf(p->from, sizeof(p->from), "%s", from ? from : "the bundle's cycles");
+	for (i = 0; i < b->nfiles && p->n < VMAC_DRIVER_PROGRAMMES; i++) {
+		const struct vmac_bundle_file *f = &b->files[i];
+		size_t n = strlen(f->path);
+		if (strncmp(f->path, "cycles/", 7) != 0 || n - 11 >= sizeof(p->p[0].name))
+			continue;
+		snprintf(p->p[p->n].name, sizeof(p->p[0].name), "%.*s", (int)(n - 11), f->path + 7);
+		p->p[p->n].src = f->data;
+		p->p[p->n].len = f->len;
+		p->n++;
+	}
+}
+
+/* Load b's driver (version: the one it must declare, or NULL; from: the
+ * folder its programmes were read from, or NULL). */
+static int load_bundle(const struct vmac_config *cfg, const struct vmac_bundle *b, const char *device,
+                       const char *version, const char *from, struct vmac_driver **out, char *text, size_t textlen)
 {
 	struct vmac_driver_limits limits;
 	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];
-	char path[VMAC_PATH_MAX + 64], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+	struct vmac_driver_programmes programmes;
+	const struct vmac_bundle_file *f = vmac_bundle_driver(b);
+	char file[VMAC_NAME_MAX + 8], err[VMAC_DRIVER_ERR_MAX];
 	int rc;
 
 	*out = NULL;
-	limits_for(cfg, driver, &limits, settings, cycles, sizeof(cycles));
-	if (vmac_driver_path(cfg, driver, path, sizeof(path)) != 0) {
-		snprintf(text, textlen, "no driver '%s' for %s (looked in %s%s%s/drivers)", driver, device,
-		         cfg->drivers_dir, cfg->drivers_dir[0] ? " and " : "", cfg->scripts_dir);
-		return -ENOENT;
+	if (!f) {
+		snprintf(text, textlen, "the bundle of %s holds no %s.lua", b->name, b->name);
+		return -VMAC_EBUNDLE;
 	}
-	rc = vmac_driver_load(path, &limits, out, err, sizeof(err));
+	limits_for(cfg, b->name, &limits, settings);
+	programmes_of(b, from, &programmes);
+	limits.programmes = &programmes;
+	snprintf(file, sizeof(file), "%s.lua", b->name);
+	rc = vmac_driver_load_source(file, f->data, f->len, &limits, out, err, sizeof(err));
 	if (rc != 0) {
-		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
+		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", b->name, device, err);
 		return rc < 0 ? rc : -EINVAL;
+	}
+	if (version && version[0] && strcmp(version, vmac_driver_version(*out)) != 0) {
+		snprintf(text, textlen, "the bundle says %s %s, but %s.lua's manifest says version %s", b->name,
+		         version, b->name, vmac_driver_version(*out));
+		vmac_driver_free(*out);
+		*out = NULL;
+		return -VMAC_EBUNDLE;
 	}
 	remember(*out);
 	return 0;
 }
 
-int vmac_load_driver_source(const struct vmac_config *cfg, const char *driver, const char *device, const char *src,
-                            size_t len, struct vmac_driver **out, char *text, size_t textlen)
+int vmac_load_driver_bundle(const struct vmac_config *cfg, const struct vmac_bundle *b, const char *device,
+                            struct vmac_driver **out, char *text, size_t textlen)
 {
-	struct vmac_driver_limits limits;
-	struct vmac_driver_setting settings[VMAC_CONFIG_DRIVER_SETTINGS];
-	char file[VMAC_NAME_MAX + 8], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+	*out = NULL;
+	if (!api_ok(b->api)) {
+		snprintf(text, textlen, "the bundle of %s %s needs driver API %s; this host has %s", b->name,
+		         b->version, b->api, VMAC_DRIVER_API);
+		return -VMAC_EBUNDLE;
+	}
+	return load_bundle(cfg, b, device, b->version, NULL, out, text, textlen);
+}
+
+/* The folders' bundle of driver (vmac_folder_bundle), and its driver
+ * loaded for device into *drv when drv is not NULL (else freed). */
+static int folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device,
+                         struct vmac_bundle **out, struct vmac_driver **drv, char *text, size_t textlen)
+{
+	char path[VMAC_PATH_MAX + 64], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
+	struct vmac_driver *d;
 	int rc;
 
 	*out = NULL;
-	limits_for(cfg, driver, &limits, settings, cycles, sizeof(cycles));
-	snprintf(file, sizeof(file), "%s.lua", driver);
-	rc = vmac_driver_load_source(file, src, len, &limits, out, err, sizeof(err));
-	if (rc != 0) {
-		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
-		return rc < 0 ? rc : -EINVAL;
+	if (vmac_driver_path(cfg, driver, path, sizeof(path)) != 0) {
+		snprintf(text, textlen, "no driver '%s' for %s (looked in %s%s%s/drivers)", driver, device,
+		         cfg->drivers_dir, cfg->drivers_dir[0] ? " and " : "", cfg->scripts_dir);
+		return -ENOENT;
 	}
-	remember(*out);
+	cycles_path(cfg, driver, cycles, sizeof(cycles));
+	if ((rc = vmac_bundle_from_folder(path, cycles, out, err, sizeof(err))) != 0) {
+		snprintf(text, textlen, "driver '%s' for %s failed to load: %s", driver, device, err);
+		return rc;
+	}
+	snprintf((*out)->api, sizeof((*out)->api), "%s", VMAC_DRIVER_API);
+	if ((rc = load_bundle(cfg, *out, device, NULL, cycles, &d, text, textlen)) != 0) {
+		vmac_bundle_free(*out);
+		*out = NULL;
+		return rc;
+	}
+	snprintf((*out)->version, sizeof((*out)->version), "%s", vmac_driver_version(d));
+	if (drv)
+		*drv = d;
+	else
+		vmac_driver_free(d);
+	return 0;
+}
+
+int vmac_folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_bundle **out,
+                       char *text, size_t textlen)
+{
+	return folder_bundle(cfg, driver, device, out, NULL, text, textlen);
+}
+
+int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_driver **out,
+                     char *text, size_t textlen)
+{
+	struct vmac_bundle *b;
+	int rc = folder_bundle(cfg, driver, device, &b, out, text, textlen);
+	if (rc == 0)
+		vmac_bundle_free(b);
+	else
+		*out = NULL;
+	return rc;
+}
+
+int vmac_bundle_of_data(const struct vmac_config *cfg, const char *driver, const char *data, size_t len,
+                        struct vmac_bundle **out, char *err, size_t errlen)
+{
+	struct vmac_driver *check = NULL;
+	char file[VMAC_BUNDLE_NAME_MAX + 8];
+	int rc;
+	*out = NULL;
+	if (vmac_bundle_is_archive(data, len)) {
+		if ((rc = vmac_bundle_read(data, len, out, err, errlen)) != 0)
+			return rc;
+		if (strcmp((*out)->name, driver) != 0) {
+			snprintf(err, errlen, "the bundle is of driver %s, not %s", (*out)->name, driver);
+			vmac_bundle_free(*out);
+			*out = NULL;
+			return -VMAC_EBUNDLE;
+		}
+		rc = vmac_load_driver_bundle(cfg, *out, "(upload)", &check, err, errlen);
+	} else {
+		/* A driver's Lua text alone: a bundle of that one file, without
+		 * programmes (older versions in the store, `curl --data-binary`). */
+		snprintf(file, sizeof(file), "%s.lua", driver);
+		if ((rc = vmac_bundle_new(driver, out, err, errlen)) != 0 ||
+		    (rc = vmac_bundle_add(*out, file, data, len, err, errlen)) != 0) {
+			vmac_bundle_free(*out);
+			*out = NULL;
+			return rc;
+		}
+		snprintf((*out)->api, sizeof((*out)->api), "%s", VMAC_DRIVER_API);
+		if ((rc = vmac_load_driver_bundle(cfg, *out, "(upload)", &check, err, errlen)) == 0)
+			snprintf((*out)->version, sizeof((*out)->version), "%s", vmac_driver_version(check));
+	}
+	vmac_driver_free(check);
+	if (rc != 0) {
+		vmac_bundle_free(*out);
+		*out = NULL;
+		return rc == -VMAC_EBUNDLE ? rc : -VMAC_EFAIL;
+	}
+	return 0;
+}
+
+int vmac_bundle_make(const struct vmac_config *cfg, const char *path, uint64_t counter, struct vmac_bundle **out,
+                     char *err, size_t errlen)
+{
+	struct vmac_driver *d;
+	int rc = vmac_bundle_from_folder(path, NULL, out, err, errlen);
+	if (rc != 0)
+		return rc;
+	snprintf((*out)->api, sizeof((*out)->api), "%s", VMAC_DRIVER_API);
+	(*out)->counter = counter;
+	if ((rc = load_bundle(cfg, *out, "(bundle)", NULL, NULL, &d, err, errlen)) != 0) {
+		vmac_bundle_free(*out);
+		*out = NULL;
+		return rc;
+	}
+	snprintf((*out)->version, sizeof((*out)->version), "%s", vmac_driver_version(d));
+	vmac_driver_free(d);
 	return 0;
 }

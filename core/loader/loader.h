@@ -1,4 +1,5 @@
-/* Finding and loading a device's driver the way the host does: NAME.lua in
+/* Finding and loading a device's driver the way the host does: from a
+ * bundle (docs/DRIVERS.md "Bundles"), or from the folders: NAME.lua in
  * the --drivers folder DIR first, then the shipped scripts/drivers/; its
  * programmes in DIR/cycles/NAME/ when DIR holds that folder, else in the
  * shipped scripts/cycles/NAME/ (docs/DRIVERS.md, "Cycles as scripts"); the
@@ -10,20 +11,49 @@
 #define VMAC_LOADER_H
 
 #include <stddef.h>
+#include <stdint.h>
 
+#include "../bundle/bundle.h"
 #include "../config/config.h"
 #include "../driver/driver.h"
 
-/* Load driver `driver` for board `device`. Returns 0 and *out; or -ENOENT
- * (no such file) or another negative errno, with text saying why in words a
- * person can act on ("no driver 'washer' for washer-1 (looked in ...)"). */
+/* The bundle of driver `driver` as the folders hold it (DRIVERS.md
+ * "Bundles"): DIR/NAME.lua of the --drivers folder DIR, else the shipped
+ * scripts/drivers/NAME.lua; the programmes as above; its plant and tests
+ * when the folder has them; version and api from the driver's manifest
+ * (it is compiled), counter 0. 0 and *out; -ENOENT (no such file) or
+ * another negative errno, with text saying why in words a person can act
+ * on ("no driver 'washer' for washer-1 (looked in ...)"). */
+int vmac_folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_bundle **out,
+                       char *text, size_t textlen);
+
+/* Load the driver of bundle b for board device: its NAME.lua, with the
+ * bundle's programmes and nothing from the host's folders (but the
+ * stdlib). The manifest must name b's driver and version, and b's api
+ * must be one this host has. 0 and *out, or < 0 with text. */
+int vmac_load_driver_bundle(const struct vmac_config *cfg, const struct vmac_bundle *b, const char *device,
+                            struct vmac_driver **out, char *text, size_t textlen);
+
+/* The bundle of data, as an upload, a stored version or a recording holds
+ * it: an archive (it must be driver's), or a driver's Lua text alone (a
+ * bundle of that one file, without programmes: versions stored before
+ * bundles). It is compiled: the manifest must agree. 0, or -VMAC_EBUNDLE
+ * (not a bundle of driver) or -VMAC_EFAIL (it does not compile) with err. */
+int vmac_bundle_of_data(const struct vmac_config *cfg, const char *driver, const char *data, size_t len,
+                        struct vmac_bundle **out, char *err, size_t errlen);
+
+/* A bundle of what a folder holds for one driver (vmac_bundle_from_folder:
+ * path is D/NAME.lua or a folder D with one driver), its version and api
+ * from the driver's manifest (it is compiled, with its programmes, and
+ * must load), with security counter counter: `vmac bundle`, `vmac reload
+ * DIR`. 0, or < 0 with err. */
+int vmac_bundle_make(const struct vmac_config *cfg, const char *path, uint64_t counter, struct vmac_bundle **out,
+                     char *err, size_t errlen);
+
+/* Load driver `driver` for board `device` from the folders: the two
+ * above. Returns as vmac_folder_bundle. */
 int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_driver **out,
                      char *text, size_t textlen);
-
-/* The same from a text in memory (a version uploaded for hot reload); its
- * messages call it DRIVER.lua. */
-int vmac_load_driver_source(const struct vmac_config *cfg, const char *driver, const char *device, const char *src,
-                            size_t len, struct vmac_driver **out, char *text, size_t textlen);
 
 /* The declarations (vmac_driver_describe) of every driver version this
  * process has loaded, for user interfaces: a malloc'd copy of the JSON

@@ -251,6 +251,22 @@ __attribute__((no_sanitize("coverage"), noinline)) static uint32_t input_hash(co
 	return h;
 }
 
+/* The programmes of folder dir (vmac.cycles), as the host reads a drivers
+ * folder's: read again only when the folder is another than last time. */
+static struct vmac_driver_programmes programmes;
+static char programmes_dir[VMAC_NAME_MAX + 64];
+
+static void programmes_of(const char *dir)
+{
+	char err[300];
+	if (strcmp(dir, programmes_dir) == 0)
+		return;
+	vmac_driver_programmes_free(&programmes);
+	if (vmac_driver_programmes_read(dir, &programmes, err, sizeof(err)) != 0)
+		abort(); /* the shipped programmes must be readable */
+	snprintf(programmes_dir, sizeof(programmes_dir), "%s", dir);
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
 	struct vmac_driver_setting settings[SETTINGS_MAX];
@@ -299,7 +315,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	/* The folder of the announced driver's programmes (vmac.cycles), as the
 	 * host has it; a name that is not one has none. */
 	snprintf(cycles, sizeof(cycles), "%s/%s", FUZZ_CYCLES_DIR, manifest_name_ok(expect) ? expect : "-");
-	limits.cycles_dir = cycles;
+	programmes_of(cycles);
+	limits.programmes = &programmes;
 	limits.expect_name = expect[0] ? expect : NULL;
 	limits.settings = settings;
 	limits.nsettings = nsettings;

@@ -103,11 +103,17 @@ static void load_example(lua_State *L)
 /* "driver_NAME": a new instance of scripts/drivers/NAME.lua, its
  * programmes from scripts/cycles/NAME/: [-0, +1] what the file returned,
  * or raises. Not cached: every require is another instance. */
+static struct vmac_driver_programmes programmes; /* the last driver's: a case requires one at a time */
+
 static int require_driver(lua_State *L, const char *path, const char *driver)
 {
 	struct vmac_driver *d = drv_of(L);
-	char chunk[600];
-	snprintf(d->cycles_dir, sizeof(d->cycles_dir), CYCLES_DIR "/%s", driver);
+	char chunk[600], dir[300], err[300];
+	snprintf(dir, sizeof(dir), CYCLES_DIR "/%s", driver);
+	vmac_driver_programmes_free(&programmes);
+	if (vmac_driver_programmes_read(dir, &programmes, err, sizeof(err)) != 0)
+		luaL_error(L, "%s", err);
+	d->programmes = &programmes;
 	snprintf(chunk, sizeof(chunk), "@%s", path);
 	drv_run_sandboxed(L, path, chunk, driver);
 	return 1;

@@ -24,6 +24,16 @@
 #define CYCLES_DIR "/tmp/vmac-test-driver-cycles"
 
 static struct vmac_driver_limits limits;
+static struct vmac_driver_programmes programmes;
+
+/* The programmes of folder dir, as the host reads a drivers folder's. */
+static void use_folder(const char *dir)
+{
+	char err[300];
+	vmac_driver_programmes_free(&programmes);
+	ck_assert_msg(vmac_driver_programmes_read(dir, &programmes, err, sizeof(err)) == 0, "%s", err);
+	limits.programmes = &programmes;
+}
 
 static void setup(void)
 {
@@ -33,7 +43,7 @@ static void setup(void)
 	limits.max_level = 10;
 	limits.default_level = 4;
 	limits.stdlib_dir = STDLIB_DIR;
-	limits.cycles_dir = CYCLES_DIR;
+	use_folder(CYCLES_DIR);
 }
 
 static void write_file(const char *path, const char *text)
@@ -708,10 +718,10 @@ START_TEST(two_step_load_on_a_given_heap)
 	/* The stdlib and cycles folders come with the load, not with the
 	 * sandbox: one made without them loads a driver that requires. */
 	limits.stdlib_dir = NULL;
-	limits.cycles_dir = NULL;
+	limits.programmes = NULL;
 	ck_assert_int_eq(vmac_driver_new("t.lua", &limits, &d, err, sizeof(err)), 0);
 	limits.stdlib_dir = STDLIB_DIR;
-	limits.cycles_dir = CYCLES_DIR;
+	use_folder(CYCLES_DIR);
 	ck_assert_msg(vmac_driver_load_into(d, src, strlen(src), &limits, err, sizeof(err)) == 0,
 	              "a sandbox made without a stdlib folder, loaded with one: %s", err);
 	vmac_driver_free(d);
@@ -788,6 +798,7 @@ START_TEST(load_gets_a_larger_budget_and_stdlib)
 	write_file(STDLIB_DIR "/twice.lua", "return { f = function(x) return 2 * x end }\n");
 	write_file(CYCLES_DIR "/b.lua", "return 'second'\n");
 	write_file(CYCLES_DIR "/a.lua", "return 'first'\n");
+	use_folder(CYCLES_DIR);
 	/* About 3 budgets of work at load: allowed (50 budgets); in tick: refused. */
 	d = load_ok("local n = 0 for i = 1, 150000 do n = n + i end\n"
 	            "local t = require 'twice'\nlocal c = vmac.cycles()\n"
@@ -801,6 +812,7 @@ START_TEST(load_gets_a_larger_budget_and_stdlib)
 	ck_assert_msg(strstr(err, "time budget exceeded") != NULL, "tick-time overrun: %s", err);
 	vmac_driver_free(d);
 	write_file(CYCLES_DIR "/c.lua", "return (\n");
+	use_folder(CYCLES_DIR);
 	load_fails("vmac.cycles()\nreturn { name = 't', version = '1', io = {}, tick = function() end }\n",
 	           "cycles/t/c.lua:");
 	unlink(CYCLES_DIR "/c.lua");
@@ -817,15 +829,16 @@ START_TEST(no_programmes_name_the_folder)
 	const char *folder = "/tmp/vmac-test-driver-no-cycles";
 	unlink("/tmp/vmac-test-driver-no-cycles/notes.txt");
 	rmdir(folder);
-	limits.cycles_dir = folder; /* no such folder */
+	use_folder(folder); /* no such folder */
 	load_fails(src, "t.lua:1: vmac.cycles: no programmes for t in /tmp/vmac-test-driver-no-cycles/");
 	mkdir(folder, 0755); /* a folder with no NAME.lua in it */
 	write_file("/tmp/vmac-test-driver-no-cycles/notes.txt", "not a programme\n");
+	use_folder(folder);
 	load_fails(src, "vmac.cycles: no programmes for t in /tmp/vmac-test-driver-no-cycles/");
 	unlink("/tmp/vmac-test-driver-no-cycles/notes.txt");
 	rmdir(folder);
-	limits.cycles_dir = NULL; /* a host that gives no folder */
-	load_fails(src, "vmac.cycles: no programmes for t (the host gave no folder)");
+	limits.programmes = NULL; /* a host that gives none */
+	load_fails(src, "vmac.cycles: no programmes for t (the host gave none)");
 }
 END_TEST
 
