@@ -26,10 +26,11 @@
 
 static json_t *version_json(const struct vmac_driver_version *v)
 {
-	return json_pack("{s:I, s:s, s:s, s:s, s:f, s:s, s:s, s:I, s:s, s:I}", "id", (json_int_t)v->id, "driver",
-	                 v->driver, "version", v->version, "hash", v->hash, "deployed", v->deployed, "deployed_by",
-	                 v->deployed_by, "state", v->state, "previous", (json_int_t)v->previous, "note", v->note,
-	                 "size", (json_int_t)v->size);
+	return json_pack("{s:I, s:s, s:s, s:s, s:f, s:s, s:s, s:I, s:s, s:I, s:I, s:s, s:s}", "id", (json_int_t)v->id,
+	                 "driver", v->driver, "version", v->version, "hash", v->hash, "deployed", v->deployed,
+	                 "deployed_by", v->deployed_by, "state", v->state, "previous", (json_int_t)v->previous, "note",
+	                 v->note, "size", (json_int_t)v->size, "counter", (json_int_t)v->counter, "signer", v->signer,
+	                 "origin", v->origin);
 }
 
 static void append_version(void *ctx, const struct vmac_driver_version *v)
@@ -70,11 +71,14 @@ static enum MHD_Result deploy_reply(struct MHD_Connection *c, const char *driver
 		json_array_append_new(machines, json_pack("{s:s, s:b, s:s}", "device", r->machines[i].device, "ok",
 		                                          r->machines[i].ok, "text", r->machines[i].text));
 	if (r->status != 200) {
-		body = json_pack("{s:s, s:o}", "error", r->error, "machines", machines);
+		body = json_pack("{s:s, s:s, s:o}", "error", r->error, "code",
+		                 r->code ? vmac_err_name(r->code) : "failed", "machines", machines);
 		return http_reply(c, (unsigned)r->status, body);
 	}
-	body = json_pack("{s:b, s:s, s:I, s:s, s:s, s:f, s:o}", "ok", 1, "driver", driver, "id", (json_int_t)r->id,
-	                 "version", r->version, "hash", r->hash, "probation_s", probation_s, "machines", machines);
+	body = json_pack("{s:b, s:s, s:I, s:s, s:s, s:I, s:s, s:b, s:s, s:f, s:o}", "ok", 1, "driver", driver, "id",
+	                 (json_int_t)r->id, "version", r->version, "hash", r->hash, "counter", (json_int_t)r->counter,
+	                 "signer", r->signer, "unchanged", r->unchanged, "note", r->note, "probation_s", probation_s,
+	                 "machines", machines);
 	return http_reply(c, MHD_HTTP_OK, body);
 }
 
@@ -97,32 +101,32 @@ static int probation_arg(struct vmac_http *h, struct MHD_Connection *c, unsigned
 	return 0;
 }
 
-/* What a deploy request asks: an upload (src), a version to activate (id)
- * or a rollback, with its probation. kind indexes h->deploys (GET /metrics). */
+/* What a deploy request asks: an upload (its bundle, signature and
+ * --force), a version to activate (id) or a rollback, with its probation.
+ * kind indexes h->deploys (GET /metrics). */
 struct deploy_ask {
 	enum { ASK_UPLOAD, ASK_ACTIVATE, ASK_ROLLBACK } kind;
-	const char *src;
-	size_t len;
+	struct vmac_deploy_upload up;
 	long long id;
-	unsigned probation_ms;
 	double probation_s;
 };
 
 /* Run a deploy request for driver and answer it (the result is large: on
  * the heap, not the connection thread's stack). */
 static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
-                                        const struct deploy_ask *a)
+                                        struct deploy_ask *a)
 {
-	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg};
+	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg, &h->trust};
 	struct vmac_deploy_result *r = malloc(sizeof(*r));
 	char by[VMAC_TOKEN_ID_LEN + 1];
 	enum MHD_Result ret;
 	if (!r)
 		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
 	token_id(c, by, sizeof(by));
+	a->up.by = by;
 	switch (a->kind) {
-	case ASK_UPLOAD: vmac_deploy(&x, driver, a->src, a->len, by, a->probation_ms, r); break;
-	case ASK_ACTIVATE: vmac_deploy_activate(&x, driver, a->id, by, a->probation_ms, r); break;
+	case ASK_UPLOAD: vmac_deploy(&x, driver, &a->up, r); break;
+	case ASK_ACTIVATE: vmac_deploy_activate(&x, driver, a->id, by, a->up.probation_ms, r); break;
 	case ASK_ROLLBACK: vmac_deploy_rollback(&x, driver, by, r); break;
 	}
 	atomic_fetch_add(&h->deploys[a->kind][r->status == 200 ? 0 : r->status < 500 ? 1 : 2], 1);
@@ -131,31 +135,60 @@ static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connecti
 	return ret;
 }
 
-/* POST /api/drivers/NAME[?probation=S], the body a driver's source text. */
+/* The Vmac-Signature header: base64 of a .minisig file's text, decoded
+ * into sig. 0 (*len 0: none), or -1 (not base64, too long). */
+static int signature_header(struct MHD_Connection *c, char *sig, size_t max, size_t *len)
+{
+	const char *v = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Vmac-Signature");
+	*len = 0;
+	if (!v || !v[0])
+		return 0;
+	return sodium_base642bin((unsigned char *)sig, max, v, strlen(v), " ", len, NULL,
+	                         sodium_base64_VARIANT_ORIGINAL) == 0
+	           ? 0
+	           : -1;
+}
+
+/* POST /api/drivers/NAME[?probation=S][&force=1], the body a bundle (or a
+ * driver's Lua text), its signature in the Vmac-Signature header. */
 enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
-	struct deploy_ask a = {ASK_UPLOAD, k->body, k->len, 0, 0, 0};
+	struct deploy_ask a;
+	const char *force = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "force");
+	char sig[VMAC_MINISIGN_SIG_MAX];
 	enum MHD_Result ret;
+	memset(&a, 0, sizeof(a));
+	a.kind = ASK_UPLOAD;
 	if (k->too_big)
-		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("a driver file is at most 1 MiB"));
+		return http_reply(c, MHD_HTTP_CONTENT_TOO_LARGE, http_error_body("a bundle is at most 4 MiB"));
 	if (!k->len)
+		return http_reply(
+		    c, MHD_HTTP_BAD_REQUEST,
+		    http_error_body("the request body must be a bundle (vmac bundle) or a driver's Lua text"));
+	if (signature_header(c, sig, sizeof(sig), &a.up.siglen) != 0)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
-		                  http_error_body("the request body must be the driver's source (Lua text)"));
-	if (probation_arg(h, c, &a.probation_ms, &a.probation_s, &ret) != 0)
+		                  http_error_body("Vmac-Signature must be the .minisig file in base64, at most 4 KiB"));
+	if (probation_arg(h, c, &a.up.probation_ms, &a.probation_s, &ret) != 0)
 		return ret;
+	a.up.data = k->body;
+	a.up.len = k->len;
+	a.up.sig = a.up.siglen ? sig : NULL;
+	a.up.force = force && (strcmp(force, "1") == 0 || strcmp(force, "true") == 0);
 	return deploy_and_reply(h, c, k->route.name, &a);
 }
 
 /* POST /api/drivers/NAME/activate?id=N[&probation=S] */
 enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
-	struct deploy_ask a = {ASK_ACTIVATE, NULL, 0, 0, 0, 0};
+	struct deploy_ask a;
 	const char *id_s = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "id");
 	enum MHD_Result ret;
+	memset(&a, 0, sizeof(a));
+	a.kind = ASK_ACTIVATE;
 	if (http_parse_id(id_s, &a.id) != 0)
 		return http_reply(c, MHD_HTTP_BAD_REQUEST,
 		                  http_error_body("id must be a version's id (vmac drivers lists them)"));
-	if (probation_arg(h, c, &a.probation_ms, &a.probation_s, &ret) != 0)
+	if (probation_arg(h, c, &a.up.probation_ms, &a.probation_s, &ret) != 0)
 		return ret;
 	return deploy_and_reply(h, c, k->route.name, &a);
 }
@@ -163,7 +196,9 @@ enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection 
 /* POST /api/drivers/NAME/rollback */
 enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
 {
-	struct deploy_ask a = {ASK_ROLLBACK, NULL, 0, 0, 0, 0};
+	struct deploy_ask a;
+	memset(&a, 0, sizeof(a));
+	a.kind = ASK_ROLLBACK;
 	return deploy_and_reply(h, c, k->route.name, &a);
 }
 

@@ -261,6 +261,10 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	h->log = log;
 	h->store = store;
 	h->cfg = *cfg;
+	if (vmac_deploy_trust_load(cfg, &h->trust, err, errlen) != 0) {
+		free(h);
+		return NULL;
+	}
 	if (http_guard_start(h) != 0) {
 		snprintf(err, errlen, "cannot start the API's guard thread");
 		free(h);

@@ -12,6 +12,7 @@
 #include <stdatomic.h>
 
 #include "../common/version.h"
+#include "../reload/deploy.h"
 
 #define STATUS_EVENTS 20
 
@@ -97,11 +98,12 @@ struct vmac_http {
 	_Atomic uint64_t deploys[HTTP_DEPLOY_ACTIONS][HTTP_DEPLOY_RESULTS];
 	struct MHD_Daemon *metrics_daemon; /* metrics_http (NULL: none) */
 	unsigned metrics_port;
+	struct vmac_deploy_trust trust; /* deploy_keys (core/reload/deploy.h) */
 };
 
-/* A connection's request body (POST), kept up to BODY_MAX bytes (a driver
+/* A connection's request body (POST), kept up to BODY_MAX bytes (a bundle
  * upload); other requests take at most INPUT_MAX (api_request.h). */
-#define BODY_MAX (1 << 20)
+#define BODY_MAX VMAC_BUNDLE_MAX
 
 #define INPUT_TIMEOUT_MS 2000 /* the bus thread answers within a tick; this bounds a stuck host */
 

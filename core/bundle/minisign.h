@@ -45,7 +45,7 @@ struct vmac_minisign_result {
  *   -VMAC_ESIGKEY     its key id is none of keys (the id is in err)
  *   -VMAC_ESIGBAD     data is not what was signed
  *   -VMAC_ESIGCOMMENT the trusted comment is not what was signed */
-int vmac_minisign_verify(const struct vmac_minisign_key *keys, int nkeys, const void *data, size_t len,
-                         const char *sig, size_t siglen, struct vmac_minisign_result *r, char *err, size_t errlen);
+int vmac_minisign_verify(const struct vmac_minisign_key *keys, int nkeys, const void *data, size_t len, const char *sig,
+                         size_t siglen, struct vmac_minisign_result *r, char *err, size_t errlen);
 
 #endif

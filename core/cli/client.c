@@ -84,7 +84,14 @@ int vmac_client_call(const char *method, const char *url, const char *body, stru
 int vmac_client_upload(const char *url, const char *body, size_t len, struct vmac_buffer *out, long *code, char *err,
                        size_t errlen)
 {
-	return call("POST", url, body, len, "Content-Type: text/x-lua", out, code, err, errlen);
+	return call("POST", url, body, len, "Content-Type: application/octet-stream", out, code, err, errlen);
+}
+
+static char extra_header[8192]; /* vmac_client_header */
+
+void vmac_client_header(const char *header)
+{
+	snprintf(extra_header, sizeof(extra_header), "%s", header);
 }
 
 /* A libcurl handle for url with the bearer token's header in *headers and
@@ -102,6 +109,8 @@ static CURL *open_call(const char *url, struct curl_slist **headers, char *err, 
 		snprintf(auth, sizeof(auth), "Authorization: Bearer %s", bearer);
 		*headers = curl_slist_append(*headers, auth);
 	}
+	if (extra_header[0])
+		*headers = curl_slist_append(*headers, extra_header);
 	curl_easy_setopt(c, CURLOPT_URL, url);
 	trust(c);
 	curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, 3000L);
@@ -183,6 +192,13 @@ int vmac_client_stream(const char *url, int (*on_data)(void *ctx, const char *da
 
 /* vmac_client_run and vmac_client_run_json: body (len bytes) as a driver
  * upload (upload set) or as JSON. */
+/* A 403 about a bundle's signature (docs/API.md), not about the token. */
+static int is_signature_refusal(json_t *answer)
+{
+	const char *code = json_string_value(json_object_get(answer, "code"));
+	return code && strncmp(code, "ESIG", 4) == 0;
+}
+
 static int run(const struct vmac_cmd_args *a, const char *method, const char *path, const char *body, size_t len,
                int upload, void (*show)(json_t *answer))
 {
@@ -208,7 +224,7 @@ static int run(const struct vmac_cmd_args *a, const char *method, const char *pa
 	}
 	answer = json_loads(b.data ? b.data : "", 0, &jerr);
 	free(b.data);
-	if (code == 401 || code == 403) {
+	if (code == 401 || (code == 403 && !is_signature_refusal(answer))) {
 		fprintf(stderr, "vmac: HTTP %ld: %s\n%s\n", code, json_string_value(json_object_get(answer, "error")),
 		        vmac_client_auth_hint());
 		json_decref(answer);

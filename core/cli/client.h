@@ -52,6 +52,10 @@ int vmac_client_run(const struct vmac_cmd_args *a, const char *method, const cha
 int vmac_client_run_json(const struct vmac_cmd_args *a, const char *method, const char *path, const char *json,
                          void (*show)(json_t *answer));
 
+/* One more header for the next calls ("Name: value"; copied), e.g. a
+ * bundle's Vmac-Signature. */
+void vmac_client_header(const char *header);
+
 /* What to tell a person about a 401 or 403. */
 const char *vmac_client_auth_hint(void);
 

@@ -8,8 +8,10 @@
 #include <string.h>
 #include <time.h>
 
-#include "../common/file.h"
-#include "../driver/driver.h"
+#include <sodium.h>
+
+#include "../bundle/minisign.h"
+#include "bundle.h"
 #include "client.h"
 #include "command.h"
 
@@ -27,6 +29,13 @@ static void show_machines(json_t *a)
 
 static void show_deploy(json_t *a)
 {
+	const char *note = json_string_value(json_object_get(a, "note"));
+	if (json_is_true(json_object_get(a, "unchanged"))) {
+		printf("%s\n", note);
+		return;
+	}
+	if (note && note[0])
+		printf("%s\n", note);
 	if (json_is_true(json_object_get(a, "ok"))) {
 		const char *hash = json_string_value(json_object_get(a, "hash"));
 		printf("%s %s is active (version id %lld%s%.12s)", json_string_value(json_object_get(a, "driver")),
@@ -46,38 +55,25 @@ static void show_versions(json_t *a)
 	long long active = json_integer_value(json_object_get(a, "active"));
 	if (json_is_string(json_object_get(a, "driver")))
 		printf("%s: %s\n", json_string_value(json_object_get(a, "driver")),
-		       active ? "runs the active version below" : "runs its file (no version uploaded is active)");
-	printf("%5s %-14s %-10s %-12s %-19s %-16s %s\n", "ID", "DRIVER", "VERSION", "STATE", "DEPLOYED", "BY", "HASH");
+		       active ? "runs the active version below" : "no version has run yet");
+	printf("%5s %-14s %-10s %-12s %-19s %-16s %-12s %4s %-16s\n", "ID", "DRIVER", "VERSION", "STATE", "DEPLOYED",
+	       "BY", "HASH", "CTR", "SIGNER");
 	json_array_foreach(json_object_get(a, "versions"), i, v)
 	{
 		time_t t = (time_t)json_number_value(json_object_get(v, "deployed"));
 		char when[24];
 		const char *note = json_string_value(json_object_get(v, "note"));
 		strftime(when, sizeof(when), "%Y-%m-%d %H:%M:%S", localtime(&t));
-		printf("%5lld %-14s %-10s %-12s %-19s %-16s %.12s\n", json_integer_value(json_object_get(v, "id")),
-		       json_string_value(json_object_get(v, "driver")),
+		const char *signer = json_string_value(json_object_get(v, "signer"));
+		printf("%5lld %-14s %-10s %-12s %-19s %-16s %-12.12s %4lld %-16s\n",
+		       json_integer_value(json_object_get(v, "id")), json_string_value(json_object_get(v, "driver")),
 		       json_string_value(json_object_get(v, "version")), json_string_value(json_object_get(v, "state")),
 		       when, json_string_value(json_object_get(v, "deployed_by")),
-		       json_string_value(json_object_get(v, "hash")));
+		       json_string_value(json_object_get(v, "hash")), json_integer_value(json_object_get(v, "counter")),
+		       signer && signer[0] ? signer : "unsigned");
 		if (note && note[0])
 			printf("      %s\n", note);
 	}
-}
-
-/* The driver's name from a file name: "path/to/washer.lua" -> "washer". */
-static int name_of(const char *path, char *name, size_t len)
-{
-	const char *base = strrchr(path, '/');
-	size_t n;
-	base = base ? base + 1 : path;
-	n = strlen(base);
-	if (n > 4 && strcmp(base + n - 4, ".lua") == 0)
-		n -= 4;
-	if (n == 0 || n >= len)
-		return -1;
-	memcpy(name, base, n);
-	name[n] = 0;
-	return 0;
 }
 
 /* A driver's name as an argument: one path segment that fits. */
@@ -86,7 +82,7 @@ static int driver_name_ok(const char *name)
 	return strlen(name) <= 63 && !strchr(name, '/');
 }
 
-enum { RELOAD_DRIVER = VMAC_CMD_OWN, RELOAD_PROBATION };
+enum { RELOAD_DRIVER = VMAC_CMD_OWN, RELOAD_PROBATION, RELOAD_FORCE, RELOAD_SIG, RELOAD_COUNTER };
 
 #define PROBATION_OPTION                                                                                               \
 	{                                                                                                              \
@@ -96,33 +92,41 @@ enum { RELOAD_DRIVER = VMAC_CMD_OWN, RELOAD_PROBATION };
 
 static const struct vmac_cmd_option reload_options[] = {
     [RELOAD_DRIVER - VMAC_CMD_OWN] = {"driver", NULL, 0, "NAME", NULL, NULL,
-                                      "the driver's name (default: FILE's name without .lua)"},
+                                      "the driver it must be (default: the bundle's)"},
     [RELOAD_PROBATION - VMAC_CMD_OWN] = PROBATION_OPTION,
+    [RELOAD_FORCE - VMAC_CMD_OWN] = {"force", NULL, 0, NULL, NULL, NULL,
+                                     "replace a kept version of the same number and other content"},
+    [RELOAD_SIG - VMAC_CMD_OWN] = {"sig", NULL, 0, "FILE", NULL, NULL,
+                                   "the bundle's minisign signature (default: BUNDLE.minisig when there is one)"},
+    [RELOAD_COUNTER - VMAC_CMD_OWN] = {"counter", NULL, 0, "N", NULL, NULL,
+                                       "the security counter of a bundle made from a folder (default 0)"},
     {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
 
 static int reload_run(const struct vmac_cmd_args *a)
 {
-	const char *file = a->arg[0], *probation = a->opt[RELOAD_PROBATION], *driver = a->opt[RELOAD_DRIVER];
-	char name[64], path[256], why[600];
-	size_t len = 0;
-	char *src;
-	int rc, code = 0;
-	if (driver ? snprintf(name, sizeof(name), "%s", driver) >= (int)sizeof(name)
-	           : name_of(file, name, sizeof(name)) != 0) {
-		fprintf(stderr, "vmac reload: cannot take a driver name from '%s' (use --driver NAME)\n", file);
-		return 2;
+	const char *probation = a->opt[RELOAD_PROBATION], *driver = a->opt[RELOAD_DRIVER];
+	char name[64], path[300], *data, *sig, b64[2 * VMAC_MINISIGN_SIG_MAX], header[2 * VMAC_MINISIGN_SIG_MAX + 32];
+	size_t len, siglen;
+	int rc = vmac_cli_bundle_load(a->arg[0], a->opt[RELOAD_COUNTER], a->opt[RELOAD_SIG], &data, &len, &sig, &siglen,
+	                              name, sizeof(name));
+	if (rc != 0)
+		return rc;
+	if (driver && strcmp(driver, name) != 0) {
+		fprintf(stderr, "vmac reload: %s is a bundle of %s, not %s\n", a->arg[0], name, driver);
+		free(data);
+		free(sig);
+		return 1;
 	}
-	src = vmac_read_file(file, VMAC_DRIVER_FILE_MAX, &len, why, sizeof(why), &code);
-	if (!src) {
-		fprintf(stderr, "vmac reload: %s\n", why);
-		return 2;
+	snprintf(path, sizeof(path), "/api/drivers/%s?force=%d%s%s", name, a->opt[RELOAD_FORCE] ? 1 : 0,
+	         probation ? "&probation=" : "", probation ? probation : "");
+	if (sig) {
+		sodium_bin2base64(b64, sizeof(b64), (const unsigned char *)sig, siglen, sodium_base64_VARIANT_ORIGINAL);
+		snprintf(header, sizeof(header), "Vmac-Signature: %s", b64);
+		vmac_client_header(header);
 	}
-	if (probation)
-		snprintf(path, sizeof(path), "/api/drivers/%s?probation=%s", name, probation);
-	else
-		snprintf(path, sizeof(path), "/api/drivers/%s", name);
-	rc = vmac_client_run(a, "POST", path, src, len, show_deploy);
-	free(src);
+	rc = vmac_client_run(a, "POST", path, data, len, show_deploy);
+	free(data);
+	free(sig);
 	return rc;
 }
 
@@ -130,15 +134,19 @@ static int reload_run(const struct vmac_cmd_args *a)
 
 const struct vmac_cmd vmac_reload_cmd = {
     .name = "reload",
-    .args = "FILE.lua",
+    .args = "BUNDLE|DIR|FILE.lua",
     .min_args = 1,
     .max_args = 1,
-    .summary = "upload a new version of a driver; machines switch at a slot boundary",
-    .about = "Upload a new version of a driver to a running vmacd: the host compiles it in a fresh\n"
-             "sandbox, refuses it with the error and line if it does not compile or its manifest is\n"
-             "wrong, and otherwise switches every running machine of that driver at a slot boundary,\n"
-             "handing the old state to the new version's migrate(). A version that fails within its\n"
-             "probation is rolled back by the host. Needs a token of scope deploy.\n" EXIT_CODES,
+    .summary = "deploy a new version of a driver (a bundle); machines switch at a slot boundary",
+    .about = "Deploy a bundle (vmac bundle) to a running vmacd, with its signature BUNDLE.minisig when\n"
+             "there is one; a folder or a driver file is bundled on the fly (its programmes with it).\n"
+             "The host checks the signature (its deploy_keys), the security counter and the version,\n"
+             "compiles it in a fresh sandbox against the bundle's programmes only, refuses it with\n"
+             "the reason if any of that fails, and otherwise switches every running machine of that\n"
+             "driver at a slot boundary, handing the old state to the new version's migrate(). The\n"
+             "same content again changes nothing; a kept version number with other content needs\n"
+             "--force. A version that fails within its probation is rolled back by the host. Needs a\n"
+             "token of scope deploy.\n" EXIT_CODES,
     .common = VMAC_CMD_API,
     .own = reload_options,
     .run = reload_run};
@@ -158,9 +166,9 @@ const struct vmac_cmd vmac_rollback_cmd = {
     .min_args = 1,
     .max_args = 1,
     .summary = "go back to a driver's previous version",
-    .about = "Go back to the version of DRIVER that was active before the active one (or to the\n"
-             "driver's file), on every running machine, each at a slot boundary with migrate().\n"
-             "Needs a token of scope deploy.\n" EXIT_CODES,
+    .about = "Go back to the version of DRIVER that ran before the active one (whatever its security\n"
+             "counter: the one way back past it), on every running machine, each at a slot boundary\n"
+             "with migrate(). Needs a token of scope deploy.\n" EXIT_CODES,
     .common = VMAC_CMD_API,
     .run = rollback_run};
 
@@ -192,9 +200,10 @@ const struct vmac_cmd vmac_activate_cmd = {
     .min_args = 2,
     .max_args = 2,
     .summary = "make a kept driver version the active one again",
-    .about = "Make version ID of DRIVER (vmac drivers lists them) the active one again: its source is\n"
+    .about = "Make version ID of DRIVER (vmac drivers lists them) the active one again: its bundle is\n"
              "deployed as vmac reload would (a new entry in the list, the same hash), with migrate()\n"
-             "and probation. Needs a token of scope deploy.\n" EXIT_CODES,
+             "and probation; refused when its security counter is below one accepted since (vmac\n"
+             "rollback goes back past it). Needs a token of scope deploy.\n" EXIT_CODES,
     .common = VMAC_CMD_API,
     .own = activate_options,
     .run = activate_run};

@@ -55,4 +55,17 @@ static inline const char *vmac_strerror(int code)
 #undef VMAC_ERR_TEXT
 }
 
+/* A VMAC_E* code's name without "VMAC_" ("ESIGKEY"), what JSON answers
+ * carry for programs to branch on; "EFAIL" for any other code. */
+static inline const char *vmac_err_name(int code)
+{
+#define VMAC_ERR_NAME(name, text)                                                                                      \
+	case name: return #name + 5;
+	switch (code < 0 ? -code : code) {
+		VMAC_ERRORS(VMAC_ERR_NAME)
+	default: return "EFAIL";
+	}
+#undef VMAC_ERR_NAME
+}
+
 #endif

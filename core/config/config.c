@@ -41,6 +41,8 @@ static const struct key keys[] = {
     {S(state_dir)},
     {S(tls_cert)},
     {S(tls_key)},
+    {S(deploy_keys)},
+    {S(deploy_require_signature)},
     {U(slice_us, 1, 1000000)},
     {U(slices_per_slot, 1, 256)},
     {U(max_level, 0, 12)},
@@ -96,6 +98,7 @@ void vmac_config_defaults(struct vmac_config *c)
 	snprintf(c->iface, sizeof(c->iface), "127.0.0.1");
 	snprintf(c->http, sizeof(c->http), "127.0.0.1:8080");
 	snprintf(c->state_dir, sizeof(c->state_dir), "/var/lib/vmac");
+	snprintf(c->deploy_require_signature, sizeof(c->deploy_require_signature), "auto");
 	c->slice_us = 100;
 	c->slices_per_slot = 10;
 	c->max_level = 10;
@@ -453,6 +456,12 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 	if ((uint64_t)c->slice_us * c->slices_per_slot > 10000000) {
 		snprintf(err, errlen, "a slot (slice_us x slices_per_slot = %llu us) must not exceed 10 s",
 		         (unsigned long long)c->slice_us * c->slices_per_slot);
+		return -EINVAL;
+	}
+	if (strcmp(c->deploy_require_signature, "auto") != 0 && strcmp(c->deploy_require_signature, "yes") != 0 &&
+	    strcmp(c->deploy_require_signature, "no") != 0) {
+		snprintf(err, errlen, "deploy_require_signature '%s': expected auto, yes or no",
+		         c->deploy_require_signature);
 		return -EINVAL;
 	}
 	if ((uint64_t)c->watchdog_ms * 1000 < 2ull * vmac_config_slot_us(c)) {

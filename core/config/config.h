@@ -25,12 +25,14 @@ struct vmac_config {
 	char scripts_dir[VMAC_PATH_MAX]; /* the shipped scripts/ (drivers/ and cycles/ below it) */
 	char stdlib_dir[VMAC_PATH_MAX];  /* the Lua standard library drivers require() from */
 	char state_dir[VMAC_PATH_MAX];
-	char tls_cert[VMAC_PATH_MAX]; /* PEM certificate (chain): the API serves HTTPS ("" = plain HTTP) */
-	char tls_key[VMAC_PATH_MAX];  /* its PEM private key */
-	uint32_t slice_us;            /* one time slice; a slot is slices_per_slot of them */
-	uint32_t slices_per_slot;     /* S: devices one slot can serve */
-	uint32_t max_level;           /* K: a block is 2^K slots; levels are 0..K */
-	uint32_t default_level;       /* a driver's level when its manifest names none */
+	char tls_cert[VMAC_PATH_MAX];     /* PEM certificate (chain): the API serves HTTPS ("" = plain HTTP) */
+	char tls_key[VMAC_PATH_MAX];      /* its PEM private key */
+	char deploy_keys[VMAC_PATH_MAX];  /* minisign public keys trusted to sign bundles ("" = none) */
+	char deploy_require_signature[8]; /* "auto" (on when deploy_keys is set), "yes", "no" */
+	uint32_t slice_us;                /* one time slice; a slot is slices_per_slot of them */
+	uint32_t slices_per_slot;         /* S: devices one slot can serve */
+	uint32_t max_level;               /* K: a block is 2^K slots; levels are 0..K */
+	uint32_t default_level;           /* a driver's level when its manifest names none */
 	uint32_t
 	    reply_deadline_us; /* a reply later than this after the send is a miss (capped at the device's period) */
 	uint32_t discovery_period_ms;

@@ -152,20 +152,35 @@ static void offer_checkpoint(struct vmac_mainloop *l, struct vmac_driver *drv, c
 	free(data);
 }
 
-/* The source of the driver version a recording ran: the store's version,
- * or the driver's file as it is now (malloc'd; NULL when neither). */
-static char *recorded_source(struct vmac_mainloop *l, const struct vmac_recorder *r, size_t *len)
+/* The bundle of the driver version a recording ran (the store's version:
+ * every version that runs is one, the drivers folder's too) and its
+ * driver's source, each malloc'd; NULL when unknown (a version stored
+ * before bundles has its Lua text only). */
+static void recorded_bundle(struct vmac_mainloop *l, const struct vmac_recorder *r, char **bundle, size_t *blen,
+                            char **src, size_t *srclen)
 {
 	struct vmac_driver_version v;
-	char path[VMAC_PATH_MAX + 64], err[VMAC_PATH_MAX + 128], *src = NULL;
-	int code = 0;
-	*len = 0;
-	if (r->version_id > 0)
-		return vmac_store_driver_get(l->store, r->version_id, &v, &src, len, err, sizeof(err)) == 1 ? src
-		                                                                                            : NULL;
-	if (vmac_driver_path(l->cfg, r->driver, path, sizeof(path)) != 0)
-		return NULL;
-	return vmac_read_file(path, VMAC_DRIVER_FILE_MAX, len, err, sizeof(err), &code);
+	struct vmac_bundle *b;
+	char err[VMAC_PATH_MAX + 128], *data = NULL;
+	size_t len = 0;
+	*bundle = *src = NULL;
+	*blen = *srclen = 0;
+	if (r->version_id <= 0 ||
+	    vmac_store_driver_get(l->store, r->version_id, &v, &data, &len, err, sizeof(err)) != 1)
+		return;
+	if (!vmac_bundle_is_archive(data, len)) {
+		*src = data, *srclen = len;
+		return;
+	}
+	if (vmac_bundle_read(data, len, &b, err, sizeof(err)) == 0) {
+		const struct vmac_bundle_file *f = vmac_bundle_driver(b);
+		if (f && (*src = malloc(f->len + 1))) {
+			memcpy(*src, f->data, f->len + 1);
+			*srclen = f->len;
+		}
+		vmac_bundle_free(b);
+	}
+	*bundle = data, *blen = len;
 }
 
 /* The machine runs on after a capture: a new recorder takes the place of
@@ -189,8 +204,8 @@ static void store_recording(struct vmac_mainloop *l, const struct vmac_bus_msg *
 {
 	struct vmac_recorder *r = m->rec;
 	struct vmac_recording_info info;
-	char err[512], text[700], *file, *src;
-	size_t len, srclen;
+	char err[512], text[700], *file, *src, *bundle;
+	size_t len, srclen, blen;
 	int64_t id;
 	memset(&info, 0, sizeof(info));
 	snprintf(info.machine, sizeof(info.machine), "%s", r->machine);
@@ -198,9 +213,10 @@ static void store_recording(struct vmac_mainloop *l, const struct vmac_bus_msg *
 	snprintf(info.version, sizeof(info.version), "%s", r->version);
 	snprintf(info.reason, sizeof(info.reason), "%s", r->reason);
 	info.time = wall_s(l) - (double)(l->hooks.bus_ns(l->hooks.ctx) - r->when_ns) / 1e9;
-	src = recorded_source(l, r, &srclen);
-	file = vmac_recording_write(r, src, srclen, info.time, &len);
+	recorded_bundle(l, r, &bundle, &blen, &src, &srclen);
+	file = vmac_recording_write(r, src, srclen, bundle, blen, info.time, &len);
 	free(src);
+	free(bundle);
 	if (m->replace)
 		replace_recorder(l, m, r->period_s);
 	vmac_recorder_free(r);

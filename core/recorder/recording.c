@@ -114,7 +114,44 @@ static json_t *event_json(const struct vmac_rec_event *e)
 	return j;
 }
 
-char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_t srclen, double captured, size_t *len)
+/* The header's bundle: its bytes in base64 and their BLAKE2b-256 hash. */
+static void put_bundle(json_t *h, const char *bundle, size_t len)
+{
+	size_t b64len = sodium_base64_ENCODED_LEN(len, sodium_base64_VARIANT_ORIGINAL);
+	char *b64 = malloc(b64len);
+	unsigned char hash[32];
+	char hex[65];
+	if (!b64)
+		return; /* left out: the replay then has the source alone */
+	sodium_bin2base64(b64, b64len, (const unsigned char *)bundle, len, sodium_base64_VARIANT_ORIGINAL);
+	crypto_generichash(hash, sizeof(hash), (const unsigned char *)bundle, len, NULL, 0);
+	sodium_bin2hex(hex, sizeof(hex), hash, sizeof(hash));
+	json_object_set_new(h, "bundle", json_string(b64));
+	json_object_set_new(h, "bundle_hash", json_string(hex));
+	free(b64);
+}
+
+/* The header's bundle into r: 0, or -1 (not base64, or not what its hash
+ * says: damaged). */
+static int get_bundle(json_t *j, struct vmac_recording *r)
+{
+	const char *b64 = json_string_value(json_object_get(j, "bundle"));
+	const char *want = json_string_value(json_object_get(j, "bundle_hash"));
+	size_t n = b64 ? strlen(b64) : 0;
+	unsigned char hash[32];
+	char hex[65];
+	if (!b64 || !want || n / 4 * 3 > (8u << 20) || !(r->bundle = malloc(n / 4 * 3 + 3)))
+		return -1;
+	if (sodium_base642bin((unsigned char *)r->bundle, n / 4 * 3 + 3, b64, n, NULL, &r->bundle_len, NULL,
+	                      sodium_base64_VARIANT_ORIGINAL) != 0)
+		return -1;
+	crypto_generichash(hash, sizeof(hash), (const unsigned char *)r->bundle, r->bundle_len, NULL, 0);
+	sodium_bin2hex(hex, sizeof(hex), hash, sizeof(hash));
+	return strcmp(hex, want) == 0 ? 0 : -1;
+}
+
+char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_t srclen, const char *bundle,
+                           size_t bundlelen, double captured, size_t *len)
 {
 	struct out o = {NULL, 0, 0, 0};
 	uint32_t nt = vmac_rec_nticks(r), ne = vmac_rec_nevents(r), ti = 0, ei = 0, lines = 0;
@@ -133,6 +170,8 @@ char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_
 	              complete, "boards", boards);
 	if (h && src)
 		json_object_set_new(h, "source", json_stringn(src, srclen)); /* NULL (left out) when not UTF-8 */
+	if (h && bundle)
+		put_bundle(h, bundle, bundlelen);
 	if (h && !complete) { /* where a replay can resume: dev.state after a tick the ring still holds */
 		const struct vmac_rec_state *st = vmac_rec_state_base(r);
 		char *x = st ? malloc(2 * (size_t)st->len + 1) : NULL;
@@ -301,6 +340,8 @@ static int read_header(json_t *j, struct vmac_recording *r, char *err, size_t er
 			FAIL("out of memory");
 		memcpy(r->source, json_string_value(json_object_get(j, "source")), r->source_len + 1);
 	}
+	if (json_object_get(j, "bundle") && get_bundle(j, r) != 0)
+		FAIL("recording damaged: its bundle is not what its bundle_hash says");
 	if (json_object_get(j, "state")) {
 		json_t *st = json_object_get(j, "state");
 		const char *x = json_string_value(json_object_get(st, "data"));
@@ -409,8 +450,10 @@ fail:
 void vmac_recording_free(struct vmac_recording *r)
 {
 	free(r->source);
+	free(r->bundle);
 	free(r->lines);
 	free(r->state);
+	r->bundle = NULL;
 	r->state = NULL;
 	r->source = NULL;
 	r->lines = NULL;

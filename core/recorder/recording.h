@@ -12,9 +12,11 @@
 #define VMAC_RECORDING_FORMAT 1
 
 /* The text of recorder r, with the driver's source (src, srclen; NULL when
- * unknown) and when it was captured (Unix time): malloc'd, *len bytes, or
- * NULL (out of memory). */
-char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_t srclen, double captured, size_t *len);
+ * unknown), the bundle it came in (bundle, bundlelen; NULL when unknown or
+ * none: docs/DRIVERS.md "Bundles") and when it was captured (Unix time):
+ * malloc'd, *len bytes, or NULL (out of memory). */
+char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_t srclen, const char *bundle,
+                           size_t bundlelen, double captured, size_t *len);
 
 /* A recording read back: the header's fields and the records in order. */
 struct vmac_recording_line {
@@ -40,6 +42,8 @@ struct vmac_recording {
 	} boards[VMAC_REC_BOARDS];
 	char *source; /* malloc'd, NUL-terminated; NULL when the recording has none */
 	size_t source_len;
+	char *bundle; /* the bundle's bytes (malloc'd; NULL when the recording has none), its hash checked */
+	size_t bundle_len;
 	/* Not complete: dev.state after the machine's tick at state_t_ns, as a
 	 * checkpoint encodes it (malloc'd; NULL when the recording has none). */
 	uint8_t *state;

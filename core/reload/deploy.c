@@ -11,6 +11,7 @@
 
 #include "../common/errors.h"
 #include "../loader/loader.h"
+#include "accept.h"
 
 #define SWAP_TIMEOUT_MS 2000 /* the bus thread takes a request within a tick */
 #define ATTACH_POLL_US 5000  /* how often a machine still registering is looked at again */
@@ -56,6 +57,7 @@ static int64_t mono_ms(void)
 static void store_failed(struct vmac_deploy_result *out, int code, const char *err)
 {
 	out->status = code == -VMAC_ESTOREFULL ? 507 : 500;
+	out->code = code;
 	snprintf(out->error, sizeof(out->error), "%s", err);
 }
 
@@ -107,10 +109,10 @@ static int swap_one(const struct vmac_deploy_ctx *x, const char *driver, const c
 	}
 }
 
-/* Hand every machine of names a fresh instance of driver's src (tagged
- * tag; src NULL: the driver's file). Records each machine in out; returns
- * how many refused. switched[i] says which took it. */
-static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const char *src, size_t len, int64_t tag,
+/* Hand every machine of names a fresh instance of bundle b (tagged tag).
+ * Records each machine in out; returns how many refused. switched[i] says
+ * which took it. */
+static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const struct vmac_bundle *b, int64_t tag,
                     unsigned probation_ms, char (*names)[VMAC_NAME_MAX + 1], int n, int *switched,
                     struct vmac_deploy_result *out)
 {
@@ -122,8 +124,7 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const c
 		int rc = -VMAC_EFAIL;
 		snprintf(r->device, sizeof(r->device), "%s", names[i]);
 		switched[i] = 0;
-		if ((src ? vmac_load_driver_source(x->cfg, driver, names[i], src, len, &drv, r->text, sizeof(r->text))
-		         : vmac_load_driver(x->cfg, driver, names[i], &drv, r->text, sizeof(r->text))) == 0) {
+		if (vmac_load_driver_bundle(x->cfg, b, names[i], &drv, r->text, sizeof(r->text)) == 0) {
 			vmac_driver_set_tag(drv, tag);
 			rc = swap_one(x, driver, names[i], drv, probation_ms, r->text, sizeof(r->text));
 			if (rc != 0 && rc != -VMAC_EDRIVER) /* EDRIVER: it stalled, and went with its worker */
@@ -140,53 +141,134 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const c
 	return refused;
 }
 
-void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char *src, size_t len, const char *by,
-                 unsigned probation_ms, struct vmac_deploy_result *out)
+/* Refuse with code and the message in out. */
+static void refuse(struct vmac_deploy_result *out, int code, const char *err)
+{
+	out->code = code;
+	out->status = deploy_status_of(code);
+	snprintf(out->error, sizeof(out->error), "%s", err);
+}
+
+/* Version id's bundle from the store: 1 and *b (*v), 0 none, < 0 with err. */
+static int stored_bundle(const struct vmac_deploy_ctx *x, const char *driver, int64_t id, struct vmac_driver_version *v,
+                         struct vmac_bundle **b, char *err, size_t errlen)
+{
+	char *data = NULL;
+	size_t len = 0;
+	int rc = vmac_store_driver_get(x->store, id, v, &data, &len, err, errlen);
+	*b = NULL;
+	if (rc == 1 && strcmp(v->driver, driver) != 0)
+		rc = 0;
+	if (rc == 1 && vmac_bundle_of_data(x->cfg, driver, data, len, b, err, errlen) != 0)
+		rc = -VMAC_EFAIL;
+	free(data);
+	return rc;
+}
+
+/* The kept versions' rules, under the deploy lock (docs/API.md "Drivers:
+ * hot reload"): the same content as the active version is no change; the
+ * counter must not be below one accepted before; a version number kept
+ * with other content needs force. 0 go on, 1 nothing to do (out says
+ * so), -1 refused (out says why). */
+struct same_version {
+	const struct vmac_bundle *b;
+	const char *hash;
+	int64_t id; /* a kept version of that number and other content */
+	char hash_kept[65];
+};
+
+static void find_same_version(void *ctx, const struct vmac_driver_version *v)
+{
+	struct same_version *q = ctx;
+	if (strcmp(v->version, q->b->version) == 0 && strcmp(v->hash, q->hash) != 0 &&
+	    (strcmp(v->state, "active") == 0 || strcmp(v->state, "replaced") == 0 ||
+	     strcmp(v->state, "rolled_back") == 0)) {
+		q->id = v->id;
+		snprintf(q->hash_kept, sizeof(q->hash_kept), "%s", v->hash);
+	}
+}
+
+static int version_rules(const struct vmac_deploy_ctx *x, const struct vmac_bundle *b, const char *hash, int force,
+                         int check_counter, struct vmac_deploy_result *out)
+{
+	struct vmac_driver_version active;
+	struct same_version q = {b, hash, 0, ""};
+	char err[VMAC_EVENT_TEXT];
+	uint64_t max;
+	int rc = vmac_store_driver_active(x->store, b->name, &active, NULL, NULL, err, sizeof(err));
+	if (rc < 0 || (rc = vmac_store_driver_counter(x->store, b->name, &max, err, sizeof(err))) < 0 ||
+	    (rc = vmac_store_driver_list(x->store, b->name, find_same_version, &q, err, sizeof(err))) < 0) {
+		store_failed(out, rc, err);
+		return -1;
+	}
+	if (vmac_store_driver_active(x->store, b->name, &active, NULL, NULL, err, sizeof(err)) == 1 &&
+	    strcmp(active.hash, hash) == 0) {
+		out->status = 200;
+		out->unchanged = 1;
+		out->id = active.id;
+		snprintf(out->note, sizeof(out->note), "%s %s (hash %.12s) is active already: nothing changed", b->name,
+		         b->version, hash);
+		return 1;
+	}
+	if (check_counter && b->counter < max) {
+		snprintf(err, sizeof(err),
+		         "%s %s has security counter %llu, below %llu, the highest this host has accepted for %s: "
+		         "vmac rollback is the way back to an older version",
+		         b->name, b->version, (unsigned long long)b->counter, (unsigned long long)max, b->name);
+		refuse(out, -VMAC_ECOUNTER, err);
+		return -1;
+	}
+	if (q.id && !force) {
+		snprintf(err, sizeof(err),
+		         "version %s of %s is kept already (id %lld, hash %.12s) with other content: give the new one "
+		         "another version number, or --force to replace it",
+		         b->version, b->name, (long long)q.id, q.hash_kept);
+		refuse(out, -VMAC_EREFUSED, err);
+		return -1;
+	}
+	if (q.id)
+		snprintf(out->note, sizeof(out->note), "replaced %s %s of id %lld (hash %.12s), --force", b->name,
+		         b->version, (long long)q.id, q.hash_kept);
+	return 0;
+}
+
+/* Store bundle b (its bytes data) as a new version and put it on every
+ * machine of driver; under the deploy lock. On a refusal, the machines
+ * that switched go back to the version before. */
+static void put_in_place(const struct vmac_deploy_ctx *x, const char *driver, const struct vmac_bundle *b,
+                         const struct vmac_driver_upload *u, unsigned probation_ms, struct vmac_deploy_result *out)
 {
 	char names[VMAC_DEPLOY_MACHINES][VMAC_NAME_MAX + 1], err[VMAC_EVENT_TEXT];
-	int switched[VMAC_DEPLOY_MACHINES], n, i, refused;
-	struct vmac_driver *check = NULL;
+	int switched[VMAC_DEPLOY_MACHINES], n, i, refused, have_prev, rc;
 	struct vmac_driver_version prev, cur;
-	char *prev_src = NULL;
-	size_t prev_len = 0;
+	struct vmac_bundle *prev_b = NULL;
 	int64_t id;
-	int have_prev, rc;
 
-	memset(out, 0, sizeof(*out));
-	/* Compile it and check its manifest, off the bus thread. */
-	if (vmac_load_driver_source(x->cfg, driver, "(upload)", src, len, &check, err, sizeof(err)) != 0) {
-		out->status = 400;
-		snprintf(out->error, sizeof(out->error), "%s", err);
-		return;
-	}
-	snprintf(out->version, sizeof(out->version), "%s", vmac_driver_version(check));
-	vmac_driver_free(check);
-
-	pthread_mutex_lock(&deploy_lock);
 	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES, out);
 	if (n < 0)
-		goto done;
-	have_prev = rc = vmac_store_driver_active(x->store, driver, &prev, &prev_src, &prev_len, err, sizeof(err));
-	if (rc < 0 ||
-	    (rc = vmac_store_driver_add(x->store, driver, out->version, src, len, by, &id, err, sizeof(err))) != 0) {
+		return;
+	have_prev = rc = vmac_store_driver_active(x->store, driver, &prev, NULL, NULL, err, sizeof(err));
+	if (rc < 0 || (rc = vmac_store_driver_add(x->store, u, &id, err, sizeof(err))) != 0) {
 		store_failed(out, rc, err);
-		goto done;
+		return;
 	}
-	refused = swap_all(x, driver, src, len, id, probation_ms, names, n, switched, out);
+	refused = swap_all(x, driver, b, id, probation_ms, names, n, switched, out);
 	test_pause(driver);
 	if (refused == 0) {
 		if ((rc = vmac_store_driver_activate(x->store, driver, id, err, sizeof(err))) != 0) {
 			store_failed(out, rc, err);
-			goto done;
+			return;
 		}
 		out->status = 200;
 		out->id = id;
 		if (vmac_store_driver_get(x->store, id, &cur, NULL, NULL, err, sizeof(err)) == 1)
 			snprintf(out->hash, sizeof(out->hash), "%s", cur.hash);
-		goto done;
+		return;
 	}
 	/* Some machine would not take it: one version everywhere, so the ones
 	 * that switched go back to what ran before. */
+	if (have_prev == 1 && stored_bundle(x, driver, prev.id, &prev, &prev_b, err, sizeof(err)) != 1)
+		prev_b = NULL;
 	for (i = 0; i < n; i++) {
 		struct vmac_deploy_result back;
 		char one[1][VMAC_NAME_MAX + 1];
@@ -195,49 +277,113 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const char
 			continue;
 		memcpy(one[0], names[i], sizeof(one[0]));
 		memset(&back, 0, sizeof(back));
-		if (swap_all(x, driver, have_prev == 1 ? prev_src : NULL, prev_len, have_prev == 1 ? prev.id : 0, 0,
-		             one, 1, &sw, &back) != 0)
+		if (!prev_b || swap_all(x, driver, prev_b, prev.id, 0, one, 1, &sw, &back) != 0)
 			snprintf(out->machines[i].text, sizeof(out->machines[i].text),
-			         "took the new version, but going back failed: %s", back.machines[0].text);
+			         "took the new version, but going back failed: %s",
+			         prev_b ? back.machines[0].text : "the version before cannot be read");
 		else
 			snprintf(out->machines[i].text, sizeof(out->machines[i].text),
 			         "took the new version and went back (another machine refused it)");
 		out->machines[i].ok = 0;
 	}
+	vmac_bundle_free(prev_b);
 	for (i = 0; i < out->nmachines && out->machines[i].ok; i++)
 		;
 	snprintf(out->error, sizeof(out->error), "version %s of %s was refused: %s", out->version, driver,
 	         i < out->nmachines ? out->machines[i].text : "a machine refused it");
 	vmac_store_driver_refuse(x->store, id, out->error, err, sizeof(err));
 	out->status = 409;
+	out->code = -VMAC_EREFUSED;
 	out->id = have_prev == 1 ? prev.id : 0;
-done:
+}
+
+void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const struct vmac_deploy_upload *u,
+                 struct vmac_deploy_result *out)
+{
+	struct vmac_bundle *b = NULL;
+	struct vmac_driver_upload up;
+	char err[VMAC_EVENT_TEXT], *data = NULL;
+	size_t len;
+	int rc;
+
+	memset(out, 0, sizeof(*out));
+	/* A bundle of driver, signed as the host needs, that compiles: off the
+	 * bus thread and before the lock. */
+	if ((rc = vmac_bundle_of_data(x->cfg, driver, u->data, u->len, &b, err, sizeof(err))) != 0 ||
+	    (rc = deploy_check_signature(x->trust, b, u->data, u->len, u->sig, u->siglen, out->signer, err,
+	                                 sizeof(err))) != 0) {
+		refuse(out, rc, err);
+		vmac_bundle_free(b);
+		return;
+	}
+	snprintf(out->version, sizeof(out->version), "%s", b->version);
+	out->counter = b->counter;
+	/* An archive is kept as it came (its hash is what was signed); a Lua
+	 * text as the bundle it makes. */
+	if (!vmac_bundle_is_archive(u->data, u->len) &&
+	    (rc = vmac_bundle_write(b, &data, &len, err, sizeof(err))) != 0) {
+		refuse(out, rc, err);
+		vmac_bundle_free(b);
+		return;
+	}
+	up = (struct vmac_driver_upload){driver,
+	                                 b->version,
+	                                 data ? data : u->data,
+	                                 data ? len : u->len,
+	                                 b->counter,
+	                                 out->signer[0] ? out->signer : NULL,
+	                                 u->by,
+	                                 "upload",
+	                                 NULL};
+	vmac_bundle_hash(up.data, up.len, out->hash);
+
+	pthread_mutex_lock(&deploy_lock);
+	if (version_rules(x, b, out->hash, u->force, 1, out) == 0) {
+		up.note = out->note[0] ? out->note : NULL;
+		put_in_place(x, driver, b, &up, u->probation_ms, out);
+	}
 	pthread_mutex_unlock(&deploy_lock);
-	free(prev_src);
+	vmac_bundle_free(b);
+	free(data);
 }
 
 void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, int64_t id, const char *by,
                           unsigned probation_ms, struct vmac_deploy_result *out)
 {
 	struct vmac_driver_version v;
-	char *src = NULL, err[VMAC_EVENT_TEXT];
+	struct vmac_bundle *b = NULL;
+	struct vmac_driver_upload up;
+	char *data = NULL, err[VMAC_EVENT_TEXT];
 	size_t len = 0;
-	int rc = vmac_store_driver_get(x->store, id, &v, &src, &len, err, sizeof(err));
-	if (rc != 1 || strcmp(v.driver, driver) != 0) {
-		memset(out, 0, sizeof(*out));
-		if (rc < 0) {
-			store_failed(out, rc, err);
-		} else {
-			out->status = 404;
-			snprintf(out->error, sizeof(out->error),
-			         "driver %s has no version %lld (vmac drivers %s lists them)", driver, (long long)id,
-			         driver);
-		}
-		free(src);
-		return;
+	int rc;
+
+	memset(out, 0, sizeof(*out));
+	pthread_mutex_lock(&deploy_lock);
+	rc = vmac_store_driver_get(x->store, id, &v, &data, &len, err, sizeof(err));
+	if (rc == 1 && strcmp(v.driver, driver) != 0)
+		rc = 0;
+	if (rc < 0) {
+		store_failed(out, rc, err);
+	} else if (rc == 0) {
+		out->status = 404;
+		snprintf(out->error, sizeof(out->error), "driver %s has no version %lld (vmac drivers %s lists them)",
+		         driver, (long long)id, driver);
+	} else if ((rc = vmac_bundle_of_data(x->cfg, driver, data, len, &b, err, sizeof(err))) != 0) {
+		refuse(out, rc, err);
+	} else {
+		b->counter = v.counter;
+		snprintf(out->version, sizeof(out->version), "%s", b->version);
+		snprintf(out->signer, sizeof(out->signer), "%s", v.signer);
+		snprintf(out->hash, sizeof(out->hash), "%s", v.hash);
+		out->counter = v.counter;
+		up = (struct vmac_driver_upload){driver, v.version, data, len, v.counter, v.signer[0] ? v.signer : NULL,
+		                                 by,     v.origin,  NULL};
+		if (version_rules(x, b, v.hash, 1, 1, out) == 0)
+			put_in_place(x, driver, b, &up, probation_ms, out);
 	}
-	vmac_deploy(x, driver, src, len, by, probation_ms, out);
-	free(src);
+	pthread_mutex_unlock(&deploy_lock);
+	vmac_bundle_free(b);
+	free(data);
 }
 
 void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, const char *by,
@@ -246,8 +392,7 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 	char names[VMAC_DEPLOY_MACHINES][VMAC_NAME_MAX + 1], err[VMAC_EVENT_TEXT], why[120];
 	int switched[VMAC_DEPLOY_MACHINES], n, rc;
 	struct vmac_driver_version cur, target;
-	char *src = NULL;
-	size_t len = 0;
+	struct vmac_bundle *b = NULL;
 
 	memset(out, 0, sizeof(*out));
 	pthread_mutex_lock(&deploy_lock);
@@ -256,34 +401,27 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 		store_failed(out, rc, err);
 		goto done;
 	}
-	if (rc == 0) {
+	if (rc == 0 || !cur.previous) {
 		out->status = 409;
-		snprintf(out->error, sizeof(out->error),
-		         "driver %s runs its file: there is no earlier version to go back to", driver);
+		out->code = -VMAC_EREFUSED;
+		snprintf(out->error, sizeof(out->error), "driver %s has no earlier version that ran to go back to%s%s",
+		         driver, rc ? ": version " : "", rc ? cur.version : "");
 		goto done;
 	}
-	if (cur.previous) {
-		rc = vmac_store_driver_get(x->store, cur.previous, &target, &src, &len, err, sizeof(err));
-		if (rc != 1) {
-			store_failed(out, rc, rc < 0 ? err : "store: the previous version is missing");
-			goto done;
-		}
-		snprintf(out->version, sizeof(out->version), "%s", target.version);
-		snprintf(out->hash, sizeof(out->hash), "%s", target.hash);
-	} else {
-		struct vmac_driver *check = NULL;
-		if (vmac_load_driver(x->cfg, driver, "(rollback)", &check, err, sizeof(err)) != 0) {
-			out->status = 409;
-			snprintf(out->error, sizeof(out->error), "going back to the driver's file: %s", err);
-			goto done;
-		}
-		snprintf(out->version, sizeof(out->version), "%s", vmac_driver_version(check));
-		vmac_driver_free(check);
+	rc = stored_bundle(x, driver, cur.previous, &target, &b, err, sizeof(err));
+	if (rc != 1) {
+		store_failed(out, rc < 0 ? rc : -VMAC_ESTORE, rc < 0 ? err : "store: the previous version is missing");
+		goto done;
 	}
+	b->counter = target.counter;
+	snprintf(out->version, sizeof(out->version), "%s", target.version);
+	snprintf(out->hash, sizeof(out->hash), "%s", target.hash);
+	snprintf(out->signer, sizeof(out->signer), "%s", target.signer);
+	out->counter = target.counter;
 	n = machines_of(x, driver, names, VMAC_DEPLOY_MACHINES, out);
 	if (n < 0)
 		goto done;
-	swap_all(x, driver, src, len, cur.previous, 0, names, n, switched, out);
+	swap_all(x, driver, b, cur.previous, 0, names, n, switched, out);
 	test_pause(driver);
 	snprintf(why, sizeof(why), "rolled back by hand (token %s)", by);
 	rc = vmac_store_driver_roll_back(x->store, driver, cur.id, why, err, sizeof(err));
@@ -295,7 +433,7 @@ void vmac_deploy_rollback(const struct vmac_deploy_ctx *x, const char *driver, c
 	out->id = cur.previous;
 done:
 	pthread_mutex_unlock(&deploy_lock);
-	free(src);
+	vmac_bundle_free(b);
 }
 
 int vmac_deploy_rolled_back(struct vmac_store *store, const char *driver, int64_t id, const char *why, char *err,
@@ -308,26 +446,88 @@ int vmac_deploy_rolled_back(struct vmac_store *store, const char *driver, int64_
 	return rc;
 }
 
+/* The drivers whose folder this process has looked at (vmac_deploy_load):
+ * once per driver while it runs. Under the deploy lock. */
+#define FOLDERS_SEEN 256
+static char folders_seen[FOLDERS_SEEN][VMAC_NAME_MAX + 1];
+static int nfolders_seen;
+
+static int folder_seen(const char *driver)
+{
+	int i;
+	for (i = 0; i < nfolders_seen; i++)
+		if (strcmp(folders_seen[i], driver) == 0)
+			return 1;
+	if (nfolders_seen < FOLDERS_SEEN)
+		snprintf(folders_seen[nfolders_seen++], sizeof(folders_seen[0]), "%s", driver);
+	return 0;
+}
+
+/* What the folder holds for driver, as a version: stored (origin folder)
+ * and made active, when nothing is active or the active version came from
+ * the folder and differs. 0 (*id the active version's, 0 when the store
+ * keeps none), or < 0 with text. Under the deploy lock. */
+static int folder_version(struct vmac_store *store, const struct vmac_config *cfg, const char *driver,
+                          const char *device, int active, const struct vmac_driver_version *v, int64_t *id, char *text,
+                          size_t textlen)
+{
+	struct vmac_bundle *b;
+	struct vmac_driver_upload up;
+	char *data = NULL, hash[65];
+	size_t len;
+	int rc;
+	*id = active ? v->id : 0;
+	if (active && (strcmp(v->origin, "folder") != 0 || folder_seen(driver)))
+		return 0; /* an upload is active, or the folder was looked at already */
+	if (!active)
+		folder_seen(driver);
+	if ((rc = vmac_folder_bundle(cfg, driver, device, &b, text, textlen)) != 0)
+		return active ? 0 : rc; /* a folder that no longer loads leaves the version that ran */
+	if ((rc = vmac_bundle_write(b, &data, &len, text, textlen)) == 0) {
+		vmac_bundle_hash(data, len, hash);
+		if (!active || strcmp(hash, v->hash) != 0) {
+			up = (struct vmac_driver_upload){driver, b->version, data,     len, 0,
+			                                 NULL,   "folder",   "folder", NULL};
+			if ((rc = vmac_store_driver_add(store, &up, id, text, textlen)) == 0)
+				rc = vmac_store_driver_activate(store, driver, *id, text, textlen);
+		}
+	}
+	free(data);
+	vmac_bundle_free(b);
+	return rc;
+}
+
 void vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, const char *driver, const char *device,
                       void (*hand_over)(void *ctx, int rc, struct vmac_driver *drv, const char *text), void *ctx)
 {
 	struct vmac_driver_version v;
 	struct vmac_driver *drv = NULL;
-	char *src = NULL, text[VMAC_EVENT_TEXT] = "";
+	struct vmac_bundle *b = NULL;
+	char *data = NULL, text[VMAC_EVENT_TEXT] = "";
 	size_t len = 0;
+	int64_t id = 0;
 	int rc;
 	pthread_mutex_lock(&deploy_lock); /* waits for a deploy under way: see deploy_lock */
-	rc = store ? vmac_store_driver_active(store, driver, &v, &src, &len, text, sizeof(text)) : 0;
-	if (rc < 0) {
-		rc = -EIO;
-	} else if (rc == 0) {
+	if (!store) {
 		rc = vmac_load_driver(cfg, driver, device, &drv, text, sizeof(text));
-	} else {
-		rc = vmac_load_driver_source(cfg, driver, device, src, len, &drv, text, sizeof(text));
-		if (rc == 0)
-			vmac_driver_set_tag(drv, v.id);
+		goto out;
 	}
-	free(src);
+	rc = vmac_store_driver_active(store, driver, &v, NULL, NULL, text, sizeof(text));
+	if (rc >= 0)
+		rc = folder_version(store, cfg, driver, device, rc == 1, &v, &id, text, sizeof(text));
+	if (rc == 0 && id == 0)
+		rc = -ENOENT;
+	if (rc == 0 && (rc = vmac_store_driver_get(store, id, &v, &data, &len, text, sizeof(text))) == 1)
+		rc = vmac_bundle_of_data(cfg, driver, data, len, &b, text, sizeof(text));
+	else if (rc == 0)
+		rc = -EIO;
+	if (rc == 0 && (rc = vmac_load_driver_bundle(cfg, b, device, &drv, text, sizeof(text))) == 0)
+		vmac_driver_set_tag(drv, id);
+	if (rc == -VMAC_ESTORE || rc == -VMAC_ESTOREFULL)
+		rc = -EIO;
+out:
+	free(data);
+	vmac_bundle_free(b);
 	hand_over(ctx, rc, drv, text);
 	pthread_mutex_unlock(&deploy_lock);
 }

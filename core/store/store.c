@@ -68,6 +68,11 @@ static const char *const migrations[] = {
     " key BLOB NOT NULL,"
     " created REAL NOT NULL,"
     " note TEXT NOT NULL DEFAULT '')",
+    /* bundles (docs/DRIVERS.md "Bundles"): source holds the bundle's archive
+     * from now on (Lua text in older rows), hash the archive's */
+    "ALTER TABLE driver_versions ADD COLUMN counter INTEGER NOT NULL DEFAULT 0;"
+    "ALTER TABLE driver_versions ADD COLUMN signer TEXT NOT NULL DEFAULT '';"
+    "ALTER TABLE driver_versions ADD COLUMN origin TEXT NOT NULL DEFAULT 'upload'",
 };
 
 double store_now_s(void)
@@ -263,7 +268,10 @@ void store_hex(const unsigned char *b, size_t n, char *out)
 
 /* ---- driver versions ---- */
 
-#define VERSION_COLUMNS "id, driver, version, hash, deployed, deployed_by, state, previous, note, length(source)"
+#define VERSION_COLUMNS                                                                                                \
+	"id, driver, version, hash, deployed, deployed_by, state, previous, note, length(source), counter, signer, "   \
+	"origin"
+#define VERSION_NCOLUMNS 13
 
 void store_text_col(sqlite3_stmt *st, int i, char *out, size_t len)
 {
@@ -284,6 +292,9 @@ static void version_row(sqlite3_stmt *st, struct vmac_driver_version *v)
 	v->previous = sqlite3_column_int64(st, 7);
 	store_text_col(st, 8, v->note, sizeof(v->note));
 	v->size = (size_t)sqlite3_column_int64(st, 9);
+	v->counter = (uint64_t)sqlite3_column_int64(st, 10);
+	store_text_col(st, 11, v->signer, sizeof(v->signer));
+	store_text_col(st, 12, v->origin, sizeof(v->origin));
 }
 
 /* The active version's id of driver (0: none, the file runs); -1 on error. */
@@ -303,39 +314,65 @@ static int64_t active_id(struct vmac_store *s, const char *driver)
 	return rc == SQLITE_ROW || rc == SQLITE_DONE ? id : -1;
 }
 
-int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src, size_t len,
-                          const char *by, int64_t *id, char *err, size_t errlen)
+int vmac_store_driver_add(struct vmac_store *s, const struct vmac_driver_upload *u, int64_t *id, char *err,
+                          size_t errlen)
 {
 	unsigned char h[32];
 	char hash[65];
 	sqlite3_stmt *st;
 	int64_t prev;
 	int rc;
-	crypto_generichash(h, sizeof(h), (const unsigned char *)src, len, NULL, 0);
+	crypto_generichash(h, sizeof(h), (const unsigned char *)u->data, u->len, NULL, 0);
 	store_hex(h, sizeof(h), hash);
 	if (store_lock_write(s) != 0)
 		return store_fail_unlock(s, "storing a driver version", err, errlen);
-	prev = active_id(s, driver);
+	prev = active_id(s, u->driver);
 	if (prev < 0)
 		return store_fail_unlock(s, "reading driver versions", err, errlen);
 	if (sqlite3_prepare_v2(
 	        s->db,
 	        "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
-	        "previous) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?)",
+	        "previous, counter, signer, origin, note) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?, ?, ?, ?, ?)",
 	        -1, &st, NULL) != SQLITE_OK)
 		return store_fail_unlock(s, "storing a driver version", err, errlen);
-	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
-	sqlite3_bind_text(st, 2, version, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 1, u->driver, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 2, u->version, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 3, hash, -1, SQLITE_TRANSIENT);
-	sqlite3_bind_blob(st, 4, src, (int)len, SQLITE_TRANSIENT);
+	sqlite3_bind_blob(st, 4, u->data, (int)u->len, SQLITE_TRANSIENT);
 	sqlite3_bind_double(st, 5, store_now_s());
-	sqlite3_bind_text(st, 6, by, -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 6, u->by, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_int64(st, 7, prev);
+	sqlite3_bind_int64(st, 8, (sqlite3_int64)u->counter);
+	sqlite3_bind_text(st, 9, u->signer ? u->signer : "", -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 10, u->origin ? u->origin : "upload", -1, SQLITE_TRANSIENT);
+	sqlite3_bind_text(st, 11, u->note ? u->note : "", -1, SQLITE_TRANSIENT);
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
 		return store_fail_unlock(s, "storing a driver version", err, errlen);
 	*id = sqlite3_last_insert_rowid(s->db); /* of this statement: no other ran since */
+	pthread_mutex_unlock(&s->lock);
+	return 0;
+}
+
+int vmac_store_driver_counter(struct vmac_store *s, const char *driver, uint64_t *max, char *err, size_t errlen)
+{
+	sqlite3_stmt *st;
+	int rc;
+	*max = 0;
+	pthread_mutex_lock(&s->lock);
+	if (sqlite3_prepare_v2(s->db,
+	                       "SELECT max(counter) FROM driver_versions WHERE driver = ? AND state IN "
+	                       "('active', 'replaced', 'rolled_back')",
+	                       -1, &st, NULL) != SQLITE_OK)
+		return store_fail_unlock(s, "reading driver versions", err, errlen);
+	sqlite3_bind_text(st, 1, driver, -1, SQLITE_TRANSIENT);
+	rc = sqlite3_step(st);
+	if (rc == SQLITE_ROW)
+		*max = (uint64_t)sqlite3_column_int64(st, 0); /* NULL (none) reads 0 */
+	sqlite3_finalize(st);
+	if (rc != SQLITE_ROW)
+		return store_fail_unlock(s, "reading driver versions", err, errlen);
 	pthread_mutex_unlock(&s->lock);
 	return 0;
 }
@@ -463,11 +500,11 @@ static int version_where(struct vmac_store *s, const char *where, const char *te
 		found = 1;
 		version_row(st, v);
 		if (src) {
-			*len = (size_t)sqlite3_column_bytes(st, 10);
+			*len = (size_t)sqlite3_column_bytes(st, VERSION_NCOLUMNS);
 			*src = malloc(*len + 1);
 			if (*src) {
 				if (*len)
-					memcpy(*src, sqlite3_column_blob(st, 10), *len);
+					memcpy(*src, sqlite3_column_blob(st, VERSION_NCOLUMNS), *len);
 				(*src)[*len] = 0;
 			} else {
 				found = -1;

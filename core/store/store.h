@@ -121,12 +121,15 @@ int vmac_store_events_list(struct vmac_store *s, uint64_t after, int limit,
                            size_t errlen);
 
 /* ---- driver versions (hot reload, docs/API.md "Drivers") ----
- * Every version uploaded is kept with its source, a BLAKE2b-256 hash of it,
- * when and by which token it was deployed, and its state: pending (being
- * put in place), active (what machines of that driver load; at most one per
- * driver; none: the driver's file), replaced, rolled_back or refused (with
- * a note saying why). previous: the version that was active when it came
- * (0: the file), what a rollback returns to. */
+ * Every version deployed is kept: its bundle (docs/DRIVERS.md "Bundles";
+ * versions stored before bundles hold the driver's Lua text instead), a
+ * BLAKE2b-256 hash of it, when, by which token (or "folder": what the
+ * drivers folder held when a machine of it first loaded), its security
+ * counter and signer (the minisign key id, "" unsigned), and its state:
+ * pending (being put in place), active (what machines of that driver load;
+ * at most one per driver; none: the folder's), replaced, rolled_back or
+ * refused (with a note saying why). previous: the version that was active
+ * when it came (0: none), what a rollback returns to. */
 struct vmac_driver_version {
 	int64_t id;
 	char driver[64];
@@ -137,13 +140,31 @@ struct vmac_driver_version {
 	char state[16];
 	int64_t previous;
 	char note[400];
-	size_t size; /* bytes of source */
+	size_t size; /* bytes of the bundle */
+	uint64_t counter;
+	char signer[17];
+	char origin[12]; /* "upload", "folder" */
+};
+
+/* A version to store. */
+struct vmac_driver_upload {
+	const char *driver, *version;
+	const char *data; /* the bundle's bytes */
+	size_t len;
+	uint64_t counter;
+	const char *signer; /* NULL: unsigned */
+	const char *by;     /* the token's id, or "folder" */
+	const char *origin; /* "upload" (NULL) or "folder" */
+	const char *note;   /* NULL: none */
 };
 
 /* Store a new version, state pending: 0 and *id, or < 0 with err (nothing
  * stored: e.g. the disk is full). */
-int vmac_store_driver_add(struct vmac_store *s, const char *driver, const char *version, const char *src, size_t len,
-                          const char *by, int64_t *id, char *err, size_t errlen);
+int vmac_store_driver_add(struct vmac_store *s, const struct vmac_driver_upload *u, int64_t *id, char *err,
+                          size_t errlen);
+/* The highest security counter of driver's versions that were accepted
+ * (active, replaced or rolled back): 0 (*max; 0 when none), < 0 with err. */
+int vmac_store_driver_counter(struct vmac_store *s, const char *driver, uint64_t *max, char *err, size_t errlen);
 /* Make version id the active one of driver (the one active before becomes
  * replaced), in one transaction. 0, or < 0 with err. */
 int vmac_store_driver_activate(struct vmac_store *s, const char *driver, int64_t id, char *err, size_t errlen);
@@ -154,8 +175,9 @@ int vmac_store_driver_refuse(struct vmac_store *s, int64_t id, const char *why, 
  * not active (nothing changed), < 0 err. */
 int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_t id, const char *why, char *err,
                                 size_t errlen);
-/* driver's active version (1), or none (0: the file runs), or < 0 with err.
- * With src: the source too, in malloc'd memory (NUL-terminated), *len. */
+/* driver's active version (1), or none (0: the folder's runs), or < 0 with
+ * err. With src: its bundle's bytes too (or an old version's Lua text), in
+ * malloc'd memory (NUL-terminated), *len. */
 int vmac_store_driver_active(struct vmac_store *s, const char *driver, struct vmac_driver_version *v, char **src,
                              size_t *len, char *err, size_t errlen);
 /* Version id: 1, 0 no such version, < 0 err; src as above. */

@@ -100,18 +100,27 @@ static int load(struct replay *p, const struct vmac_config *base, int use_record
 		if (vmac_config_set(&cfg, key, val, p->err, sizeof(p->err)) != 0)
 			say(&p->r, "replay: param %s = %s not set: %s\n", e->name, val, p->err);
 	}
-	if (use_recorded && p->rec.source)
-		rc = vmac_load_driver_source(&cfg, p->rec.driver, p->rec.machine, p->rec.source, p->rec.source_len,
-		                             &p->d, msg, sizeof(msg));
-	else
+	if (use_recorded && (p->rec.bundle || p->rec.source)) {
+		/* The bundle that ran (its programmes with it), else the driver's
+		 * source alone: never the programmes on this disk today. */
+		struct vmac_bundle *b = NULL;
+		rc = vmac_bundle_of_data(&cfg, p->rec.driver, p->rec.bundle ? p->rec.bundle : p->rec.source,
+		                         p->rec.bundle ? p->rec.bundle_len : p->rec.source_len, &b, msg, sizeof(msg));
+		if (rc == 0)
+			rc = vmac_load_driver_bundle(&cfg, b, p->rec.machine, &p->d, msg, sizeof(msg));
+		vmac_bundle_free(b);
+	} else {
 		rc = vmac_load_driver(&cfg, p->rec.driver, p->rec.machine, &p->d, msg, sizeof(msg));
+	}
 	if (rc != 0) {
 		say(&p->r, "replay: %s\n", msg);
 		return -1;
 	}
 	say(&p->r, "replay of %s (driver %s %s, recorded: %s) against %s %s\n", p->rec.machine, p->rec.driver,
 	    p->rec.version, p->rec.reason, vmac_driver_name(p->d),
-	    use_recorded && p->rec.source ? "as recorded" : vmac_driver_version(p->d));
+	    use_recorded && p->rec.bundle   ? "its bundle as recorded"
+	    : use_recorded && p->rec.source ? "as recorded"
+	                                    : vmac_driver_version(p->d));
 	return 0;
 }
 

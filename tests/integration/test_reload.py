@@ -7,6 +7,8 @@ machine misses nothing."""
 
 import json
 import os
+import re
+import shutil
 import threading
 import time
 import urllib.error
@@ -120,9 +122,12 @@ def test_reload_keeps_state_and_disturbs_nobody(t):
     code, body = call(host, "GET", "/api/drivers/counter", t.token)
     assert code == 200 and body["active"] > 0, "GET /api/drivers/counter: %d %r" % (code, body)
     states = [(v["version"], v["state"]) for v in body["versions"]]
-    assert states == [("2.0.0", "active")], "versions kept: %r" % states
-    assert len(body["versions"][0]["hash"]) == 64 and body["versions"][0]["deployed_by"], \
-        "a version without its hash or who deployed it: %r" % body["versions"][0]
+    assert states == [("1.0.0", "replaced"), ("2.0.0", "active")], \
+        "versions kept (the folder's that ran, then the upload): %r" % states
+    assert body["versions"][0]["origin"] == "folder" and body["versions"][1]["origin"] == "upload", \
+        "the versions' origins: %r" % [v["origin"] for v in body["versions"]]
+    assert len(body["versions"][1]["hash"]) == 64 and body["versions"][1]["deployed_by"], \
+        "a version without its hash or who deployed it: %r" % body["versions"][1]
 
 
 def test_broken_versions_are_refused_and_change_nothing(t):
@@ -144,7 +149,7 @@ def test_broken_versions_are_refused_and_change_nothing(t):
          "name is 'other'"),
         ("a manifest with a bad channel", call(host, "POST", "/api/drivers/counter", t.token,
                                                good.replace(b'"do0"', b'"do9"')), 400, "do9"),
-        ("an empty body", call(host, "POST", "/api/drivers/counter", t.token, b""), 400, "source"),
+        ("an empty body", call(host, "POST", "/api/drivers/counter", t.token, b""), 400, "bundle"),
         ("a bad probation", call(host, "POST", "/api/drivers/counter?probation=-1", t.token, good), 400,
          "probation"),
         ("an attach that fails", call(host, "POST", "/api/drivers/counter", t.token,
@@ -226,6 +231,21 @@ def test_a_board_attaching_later_loads_the_active_version(t):
 
 
 @plain_pass_only("a reload's migrate under the sanitizers: the other reload tests, whose drivers migrate")
+def washer_copy(t, version):
+    """A drivers folder holding the shipped washer and its programmes, its
+    version made `version`: the path of its washer.lua."""
+    root = os.path.join(os.path.dirname(__file__), "..", "..", "scripts")
+    folder = os.path.join(t.logdir, "washer-%s" % version)
+    shutil.copytree(os.path.join(root, "cycles", "washer"), os.path.join(folder, "cycles", "washer"))
+    with open(os.path.join(root, "drivers", "washer.lua")) as f:
+        src = f.read()
+    assert re.search(r'version = "[^"]+"', src), "the shipped washer declares no version"
+    path = os.path.join(folder, "washer.lua")
+    with open(path, "w") as f:
+        f.write(re.sub(r'version = "[^"]+"', 'version = "%s"' % version, src, count=1))
+    return path
+
+
 def test_a_running_wash_continues_across_a_reload(t):
     """The shipped washer, mid-wash, reloaded with its own file: the cycle
     goes on in the same step with the time it had left, then on to the
@@ -242,7 +262,7 @@ def test_a_running_wash_continues_across_a_reload(t):
                          "the quick programme washing")
     left = host.device("washer-1", s)["variables"]["time_left_s"]
     seq = host.last_event_seq()
-    path = os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "drivers", "washer.lua")
+    path = washer_copy(t, "1.2.99")
     rc, out, err = t.run([t.path("vmac"), "reload", "--http", host.http, path], "reload")
     assert rc == 0, "vmac reload washer.lua mid-wash: exit %d %s %s" % (rc, out, err)
     host.wait_event("reloaded", "washer-1", after_seq=seq)

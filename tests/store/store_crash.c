@@ -37,8 +37,10 @@ static int writer(const char *dir)
 			char version[32];
 			snprintf(version, sizeof(version), "%ld", n);
 			snprintf(src, sizeof(src), "return { name = 'd', version = '%ld' }", n);
-			if (vmac_store_driver_add(s, "d", version, src, strlen(src), "crashtest", &id, err,
-			                          sizeof(err)) != 0 ||
+			if (vmac_store_driver_add(s,
+			                          &(struct vmac_driver_upload){"d", version, src, strlen(src), 0, NULL,
+			                                                       "crashtest", NULL, NULL},
+			                          &id, err, sizeof(err)) != 0 ||
 			    vmac_store_driver_activate(s, "d", id, err, sizeof(err)) != 0) {
 				fprintf(stderr, "store_crash: %s\n", err);
 				return 1;

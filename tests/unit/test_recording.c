@@ -70,7 +70,7 @@ static struct vmac_recorder *recorded(uint32_t nticks)
 static char *round_trip(const struct vmac_recorder *r, const char *src, struct vmac_recording *rec, size_t *len)
 {
 	char err[256] = "";
-	char *text = vmac_recording_write(r, src, src ? strlen(src) : 0, 1795000000.25, len);
+	char *text = vmac_recording_write(r, src, src ? strlen(src) : 0, NULL, 0, 1795000000.25, len);
 	ck_assert_msg(text != NULL, "writing the recording failed");
 	ck_assert_msg(vmac_recording_read(text, *len, rec, err, sizeof(err)) == 0, "reading it back failed: %s", err);
 	return text;
@@ -447,7 +447,7 @@ static char *small_recording(size_t *len)
 	struct vmac_recorder *r = recorded(3);
 	char *text;
 	snprintf(vmac_rec_event(r, 4 * PERIOD_NS, VMAC_REC_DROP)->text, VMAC_REC_TEXT_MAX + 1, "no reply");
-	text = vmac_recording_write(r, SOURCE, strlen(SOURCE), 1795000000.0, len);
+	text = vmac_recording_write(r, SOURCE, strlen(SOURCE), NULL, 0, 1795000000.0, len);
 	ck_assert_ptr_nonnull(text);
 	vmac_recorder_free(r);
 	return text;
@@ -568,7 +568,7 @@ START_TEST(a_machine_or_driver_that_is_no_name_is_refused)
 			struct vmac_recorder *r = recorded(3);
 			char *text;
 			snprintf(as_driver ? r->driver : r->machine, sizeof(r->driver), "%s", bad[i]);
-			text = vmac_recording_write(r, SOURCE, strlen(SOURCE), 1795000000.0, &len);
+			text = vmac_recording_write(r, SOURCE, strlen(SOURCE), NULL, 0, 1795000000.0, &len);
 			ck_assert_ptr_nonnull(text);
 			err[0] = 0;
 			ck_assert_msg(vmac_recording_read(text, len, &rec, err, sizeof(err)) == -1,

@@ -214,7 +214,9 @@ static void *hammer(void *arg)
 
 		snprintf(version, sizeof(version), "1.%d.%d", h->index, i);
 		snprintf(src, sizeof(src), "return {name = '%s', version = '%s'}", driver, version);
-		rc = vmac_store_driver_add(store, driver, version, src, strlen(src), "test", &vid, err, sizeof(err));
+		rc = vmac_store_driver_add(
+		    store, &(struct vmac_driver_upload){driver, version, src, strlen(src), 0, NULL, "test", NULL, NULL},
+		    &vid, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: driver add: %d %s", i, rc, err);
 		rc = vmac_store_driver_get(store, vid, &v, &back, &len, err, sizeof(err));
 		HAMMER_CHECK(rc == 1 && strcmp(v.driver, driver) == 0 && strcmp(v.version, version) == 0 && back &&
@@ -404,7 +406,9 @@ START_TEST(a_full_disk_is_told_by_its_own_code)
 	value.type = VMAC_VALUE_NUMBER;
 
 	disk_full = 1;
-	rc = vmac_store_driver_add(store, "drv", "1.0.0", src, strlen(src), "test", &id, err, sizeof(err));
+	rc = vmac_store_driver_add(
+	    store, &(struct vmac_driver_upload){"drv", "1.0.0", src, strlen(src), 0, NULL, "test", NULL, NULL}, &id,
+	    err, sizeof(err));
 	ck_assert_msg(rc == -VMAC_ESTOREFULL && strstr(err, "full"), "a version added to a full disk: %d %s", rc, err);
 	rc = vmac_store_param_set(store, "machine-1", "count", &value, err, sizeof(err));
 	ck_assert_msg(rc == -VMAC_ESTOREFULL, "a param persisted to a full disk: %d %s", rc, err);
@@ -415,7 +419,9 @@ START_TEST(a_full_disk_is_told_by_its_own_code)
 	ck_assert_str_eq(vmac_strerror(rc), "the store's disk is full");
 
 	disk_full = 0; /* space again: the same writes go through */
-	rc = vmac_store_driver_add(store, "drv", "1.0.0", src, strlen(src), "test", &id, err, sizeof(err));
+	rc = vmac_store_driver_add(
+	    store, &(struct vmac_driver_upload){"drv", "1.0.0", src, strlen(src), 0, NULL, "test", NULL, NULL}, &id,
+	    err, sizeof(err));
 	ck_assert_msg(rc == 0, "a version added once there is space: %d %s", rc, err);
 	rc = vmac_store_driver_activate(store, "drv", id, err, sizeof(err));
 	ck_assert_msg(rc == 0, "activating once there is space: %d %s", rc, err);
