@@ -450,6 +450,8 @@ void bus_rec_input_rc(struct machine *m, uint64_t n, int rc);
 void bus_rec_level(struct vmac_bus *bus, struct machine *m, unsigned level);
 void bus_rec_miss(struct vmac_bus *bus, struct device *d, const char *why);
 void bus_rec_failure(struct vmac_bus *bus, struct machine *m, int kind, const char *text);
+/* Another version took over m (a hot reload, a rollback): the recorder says
+ * so, and keeps the new version's dev.state after its first tick. */
 void bus_rec_swap(struct vmac_bus *bus, struct machine *m);
 /* m is going away: its recorder to the main thread, captured when it has a
  * reason, else to be freed. */

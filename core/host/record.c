@@ -131,6 +131,11 @@ void bus_rec_swap(struct vmac_bus *bus, struct machine *m)
 	describe(bus, m);
 	snprintf(vmac_rec_event(m->rec, rec_now(bus), VMAC_REC_SWAP)->name, VMAC_REC_NAME_MAX + 1, "%s",
 	         m->rec->version);
+	/* The new version's dev.state after its first tick, kept: a recording
+	 * of it (one failing on probation) replays from there, as the reload
+	 * began it. */
+	m->rec->state_wanted = 1;
+	m->want_checkpoint = 1;
 }
 
 /* Hand m's recorder to the main thread: a RECORDING (captured; replace:

@@ -38,15 +38,16 @@ void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j)
 		bus_drop(bus, primary, VMAC_SHUT_DRIVER, "dropped", "its driver failed");
 		return;
 	}
+	/* The failing version's seconds, its recording named after it (and the
+	 * tick it took over at); the machine runs on with a new recorder. */
+	snprintf(why, sizeof(why), "rolled back: %s", m->rollback_why);
+	bus_rec_capture(bus, m, why);
 	m->drv = prev;
-	bus_rec_swap(bus, m);
 	snprintf(text, sizeof(text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
 	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev),
 	         m->rollback_why);
 	bus_post_code(bus, VMAC_EVENT_ROLLED_BACK, m, vmac_driver_version(failed), tag, "rolled_back", text);
 	bus_unload(bus, failed);
-	snprintf(why, sizeof(why), "rolled back: %s", m->rollback_why);
-	bus_rec_capture(bus, m, why); /* the failing version's last seconds; the machine runs on */
 	/* One version everywhere: every other machine on probation with the
 	 * same version goes back too. */
 	for (i = 0; i < bus->nused; i++) {

@@ -99,8 +99,10 @@ void vmac_rec_state(struct vmac_recorder *r, int64_t t_ns, const uint8_t *data, 
 {
 	const struct vmac_rec_state *newest = &r->states[(r->states_next + VMAC_REC_STATES - 1) % VMAC_REC_STATES];
 	struct vmac_rec_state *s = &r->states[r->states_next];
-	if (len == 0 || len > VMAC_REC_STATE_MAX || (newest->len && t_ns - newest->t_ns < r->span_ns / 2))
+	if (len == 0 || len > VMAC_REC_STATE_MAX ||
+	    (!r->state_wanted && newest->len && t_ns - newest->t_ns < r->span_ns / 2))
 		return;
+	r->state_wanted = 0;
 	memcpy(s->data, data, len);
 	s->len = (uint32_t)len;
 	s->t_ns = t_ns;

@@ -90,7 +90,8 @@ struct vmac_recorder {
 		uint8_t *data; /* VMAC_REC_STATE_MAX bytes, allocated with the recorder */
 	} states[VMAC_REC_STATES];
 	uint32_t states_next;
-	int64_t span_ns; /* what the ring holds: ticks_cap x the period */
+	int state_wanted; /* keep the next state whenever it comes (the first after a hot reload) */
+	int64_t span_ns;  /* what the ring holds: ticks_cap x the period */
 };
 
 /* Main thread: a recorder holding seconds of ticks at period_s (at least
@@ -103,7 +104,8 @@ void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, c
                    const struct vmac_outputs *out);
 /* Bus thread, after a checkpoint of the machine's dev.state (data, len bytes)
  * at bus time t_ns: kept when half the ring's span has passed since the
- * newest kept (or none is) and it fits; no allocation. */
+ * newest kept (or none is), or state_wanted is set, and it fits; no
+ * allocation. */
 void vmac_rec_state(struct vmac_recorder *r, int64_t t_ns, const uint8_t *data, size_t len);
 /* The oldest state kept whose tick is still in the ring (NULL: none). */
 const struct vmac_rec_state *vmac_rec_state_base(const struct vmac_recorder *r);

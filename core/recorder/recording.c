@@ -150,6 +150,40 @@ static int get_bundle(json_t *j, struct vmac_recording *r)
 	return strcmp(hex, want) == 0 ? 0 : -1;
 }
 
+/* The bus time the recorded version took over at a hot reload (the last
+ * swap event naming it), or 0 when it ran since attach or the swap left
+ * the ring. */
+static int64_t took_over(const struct vmac_recorder *r)
+{
+	uint32_t i, n = vmac_rec_nevents(r);
+	int64_t t = 0;
+	for (i = 0; i < n; i++) {
+		const struct vmac_rec_event *e = vmac_rec_event_at(r, i);
+		if (e->kind == VMAC_REC_SWAP)
+			t = strcmp(e->name, r->version) == 0 ? e->t_ns : 0;
+	}
+	return t;
+}
+
+/* The state a replay resumes from: the oldest kept whose tick the ring
+ * still holds, and for a version that took over at a hot reload, the
+ * oldest since it did. NULL: none. */
+static const struct vmac_rec_state *resume_state(const struct vmac_recorder *r, int64_t since)
+{
+	const struct vmac_rec_state *best = NULL;
+	uint64_t first = r->ticks_written - vmac_rec_nticks(r);
+	int i;
+	if (!since)
+		return vmac_rec_state_base(r);
+	for (i = 0; i < VMAC_REC_STATES; i++) {
+		const struct vmac_rec_state *s = &r->states[i];
+		if (s->len && s->at >= first && s->at < r->ticks_written && s->t_ns >= since &&
+		    (!best || s->at < best->at))
+			best = s;
+	}
+	return best;
+}
+
 char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_t srclen, const char *bundle,
                            size_t bundlelen, double captured, size_t *len)
 {
@@ -159,6 +193,7 @@ char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_
 	char hex[2 * crypto_generichash_BYTES + 1];
 	json_t *h, *boards = json_array();
 	int i, complete = r->from_attach && r->ticks_written <= r->ticks_cap;
+	int64_t swapped = took_over(r);
 
 	for (i = 0; i < r->nboards; i++)
 		json_array_append_new(
@@ -172,8 +207,10 @@ char *vmac_recording_write(const struct vmac_recorder *r, const char *src, size_
 		json_object_set_new(h, "source", json_stringn(src, srclen)); /* NULL (left out) when not UTF-8 */
 	if (h && bundle)
 		put_bundle(h, bundle, bundlelen);
-	if (h && !complete) { /* where a replay can resume: dev.state after a tick the ring still holds */
-		const struct vmac_rec_state *st = vmac_rec_state_base(r);
+	if (h && swapped)
+		json_object_set_new(h, "took_over_t", json_integer(swapped));
+	if (h && (!complete || swapped)) { /* where a replay can resume: dev.state after a tick the ring still holds */
+		const struct vmac_rec_state *st = resume_state(r, swapped);
 		char *x = st ? malloc(2 * (size_t)st->len + 1) : NULL;
 		if (x) {
 			sodium_bin2hex(x, 2 * (size_t)st->len + 1, st->data, st->len);
@@ -340,6 +377,8 @@ static int read_header(json_t *j, struct vmac_recording *r, char *err, size_t er
 			FAIL("out of memory");
 		memcpy(r->source, json_string_value(json_object_get(j, "source")), r->source_len + 1);
 	}
+	if (json_is_integer(json_object_get(j, "took_over_t")))
+		r->took_over_ns = json_integer_value(json_object_get(j, "took_over_t"));
 	if (json_object_get(j, "bundle") && get_bundle(j, r) != 0)
 		FAIL("recording damaged: its bundle is not what its bundle_hash says");
 	if (json_object_get(j, "state")) {

@@ -42,6 +42,9 @@ struct vmac_recording {
 	} boards[VMAC_REC_BOARDS];
 	char *source; /* malloc'd, NUL-terminated; NULL when the recording has none */
 	size_t source_len;
+	/* The bus time the recorded version took over from another at a hot
+	 * reload (0: it ran since attach): the ticks before ran the other. */
+	int64_t took_over_ns;
 	char *bundle; /* the bundle's bytes (malloc'd; NULL when the recording has none), its hash checked */
 	size_t bundle_len;
 	/* Not complete: dev.state after the machine's tick at state_t_ns, as a

@@ -513,8 +513,20 @@ void vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, c
 		goto out;
 	}
 	rc = vmac_store_driver_active(store, driver, &v, NULL, NULL, text, sizeof(text));
-	if (rc >= 0)
-		rc = folder_version(store, cfg, driver, device, rc == 1, &v, &id, text, sizeof(text));
+	if (rc >= 0) {
+		int active = rc == 1;
+		rc = folder_version(store, cfg, driver, device, active, &v, &id, text, sizeof(text));
+		if (rc == -VMAC_ESTORE || rc == -VMAC_ESTOREFULL) {
+			/* The store cannot keep the folder's version (a full disk): the
+			 * machine runs anyway, the active version or the folder's as
+			 * it is, unrecorded. */
+			if (!active) {
+				rc = vmac_load_driver(cfg, driver, device, &drv, text, sizeof(text));
+				goto out;
+			}
+			rc = 0, id = v.id;
+		}
+	}
 	if (rc == 0 && id == 0)
 		rc = -ENOENT;
 	if (rc == 0 && (rc = vmac_store_driver_get(store, id, &v, &data, &len, text, sizeof(text))) == 1)

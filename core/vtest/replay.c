@@ -124,6 +124,38 @@ static int load(struct replay *p, const struct vmac_config *base, int use_record
 	return 0;
 }
 
+/* Skip the records up to bus time t, keeping the levels they set. */
+static void skip_to(struct replay *p, int64_t t)
+{
+	const struct vmac_recording *rec = &p->rec;
+	for (; p->first < rec->nlines && rec->lines[p->first].t_ns <= t; p->first++)
+		if (!rec->lines[p->first].is_tick && rec->lines[p->first].ev.kind == VMAC_REC_LEVEL)
+			vmac_driver_set_level_now(p->d, (unsigned)rec->lines[p->first].ev.code);
+}
+
+/* A recording of a version that took over at a hot reload (one that
+ * failed on probation): the ticks before ran the version before it, so
+ * the replay starts at the take-over, from the dev.state the recording
+ * holds since then (migrate, as the hot reload did), else afresh. */
+static void took_over(struct replay *p)
+{
+	const struct vmac_recording *rec = &p->rec;
+	int have = rec->state && rec->state_t_ns >= rec->took_over_ns;
+	size_t before;
+	skip_to(p, rec->took_over_ns);
+	before = p->first;
+	if (have)
+		skip_to(p, rec->state_t_ns);
+	p->resume = have && p->first < rec->nlines;
+	say(&p->r,
+	    "  %s %s took over at %.3f s after attach (a hot reload; the %zu records before ran the version before "
+	    "it): the replay starts there, %s; %zu records skipped\n",
+	    rec->driver, rec->version, (double)(rec->took_over_ns - rec->attach_ns) / 1e9, before,
+	    p->resume ? "from the dev.state the recording holds (its migrate(dev, state))"
+	              : "afresh (the recording holds no dev.state since then)",
+	    p->first);
+}
+
 /* The machine's boards and level; a recording that starts after attach
  * resumes from the dev.state it holds (the oldest its ring still covered),
  * as a hot reload would: what came before is skipped, the levels it set
@@ -136,12 +168,14 @@ static void prepare(struct replay *p)
 	for (b = 0; b < rec->nboards; b++)
 		vmac_driver_add_board(p->d, rec->boards[b].minor, rec->boards[b].name);
 	vmac_driver_set_level_now(p->d, rec->level);
+	if (rec->took_over_ns) {
+		took_over(p);
+		return;
+	}
 	if (rec->complete)
 		return;
 	if (rec->state) {
-		for (; p->first < rec->nlines && rec->lines[p->first].t_ns <= rec->state_t_ns; p->first++)
-			if (!rec->lines[p->first].is_tick && rec->lines[p->first].ev.kind == VMAC_REC_LEVEL)
-				vmac_driver_set_level_now(p->d, (unsigned)rec->lines[p->first].ev.code);
+		skip_to(p, rec->state_t_ns);
 		p->resume = p->first < rec->nlines;
 	}
 	if (p->resume)
@@ -160,7 +194,7 @@ static void prepare(struct replay *p)
  * 0, or 1 said. */
 static int attach(struct replay *p, double t)
 {
-	double at = p->rec.complete ? (double)p->rec.attach_ns / 1e9 : t;
+	double at = p->rec.complete && !p->rec.took_over_ns ? (double)p->rec.attach_ns / 1e9 : t;
 	int got;
 	p->attached = 1;
 	if (vmac_driver_attach(p->d, at, p->err, sizeof(p->err)) != 0) {

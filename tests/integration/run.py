@@ -3,7 +3,7 @@
 tests/integration/test_*.py against the real programs, each with fresh
 processes on its own bus, and kills whatever a test started however it ends.
 
-    python3 tests/integration/run.py --bin build/bin [--filter NAME] [-j N]
+    python3 tests/integration/run.py --bin build/bin [--filter NAME ...] [-j N]
 
 Tests run N at a time (default 4: they mostly wait on the programs they
 start, and each has its own bus, ports and state folder), each in a worker
@@ -60,7 +60,8 @@ def on_terminate(signum, frame):
 
 
 def collect(name_filter):
-    """(name, function, serial) of every test, in file order then definition
+    """(name, function, serial) of every test whose name holds one of the
+    texts of name_filter (none: every test), in file order then definition
     order; serial: its file says SERIAL = True."""
     tests = []
     for path in sorted(glob.glob(os.path.join(HERE, "test_*.py"))):
@@ -75,7 +76,7 @@ def collect(name_filter):
         ]
         serial = bool(getattr(module, "SERIAL", False))
         tests += [(name, fn, serial) for _, name, fn in sorted(found)]
-    return [t for t in tests if not name_filter or name_filter in t[0]]
+    return [t for t in tests if not name_filter or any(f in t[0] for f in name_filter)]
 
 
 def reason_of(exc):
@@ -218,7 +219,8 @@ def run_all(tests, args, bindir, times):
 def main():
     ap = argparse.ArgumentParser(description="Run the vmac integration tests.")
     ap.add_argument("--bin", required=True, help="folder with vmacd, vmac-board and vmac")
-    ap.add_argument("--filter", default="", help="run only tests whose name contains this text")
+    ap.add_argument("--filter", action="append", default=[],
+                    help="run only tests whose name contains this text (given again: any of them)")
     ap.add_argument("--keep", action="store_true", help="keep the logs of passed tests too")
     ap.add_argument("--time-limit", type=float, default=300, help="seconds one test may take (default 300)")
     ap.add_argument("-j", "--jobs", type=int, default=int(os.environ.get("VMAC_TEST_JOBS", "4")),

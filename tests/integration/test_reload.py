@@ -9,6 +9,7 @@ import json
 import os
 import re
 import shutil
+import subprocess
 import threading
 import time
 import urllib.error
@@ -165,9 +166,10 @@ def test_broken_versions_are_refused_and_change_nothing(t):
         "a refused upload changed the machine: %s %s" % (d["state"], d["driver_version"])
     assert d["outputs"]["digital"][0] is True, "a refused upload turned the relay off"
     code, body = call(host, "GET", "/api/drivers/counter", t.token)
-    assert body["active"] == 0, "a refused version became active: %r" % body
-    assert [v["state"] for v in body["versions"]] == ["refused"], \
-        "only the version that compiled but failed to take over is kept, as refused: %r" % body["versions"]
+    assert body["active"] == body["versions"][0]["id"], "a refused version became active: %r" % body
+    assert [v["state"] for v in body["versions"]] == ["active", "refused"], \
+        "only the folder's version that runs and the one that failed to take over (refused) are kept: %r" % (
+            body["versions"],)
 
 
 def test_a_version_failing_on_probation_goes_back(t):
@@ -191,8 +193,26 @@ def test_a_version_failing_on_probation_goes_back(t):
     undisturbed(["lights-1"])(s)
     assert not host.find_events("dropped", "lamp-1", after_seq=seq), "lamp-1 was dropped"
     code, body = call(host, "GET", "/api/drivers/counter", t.token)
-    assert body["active"] == 0 and [v["state"] for v in body["versions"]] == ["rolled_back"], \
-        "the store does not say the version was rolled back: %r" % body
+    assert body["active"] == body["versions"][0]["id"] and \
+        [v["state"] for v in body["versions"]] == ["active", "rolled_back"], \
+        "the store does not say the version was rolled back to the folder's: %r" % body
+    # Its recording names the version that failed and when it took over,
+    # and replays from there to the same failure.
+    rec = host.wait_event("recording", "lamp-1", after_seq=seq, timeout_s=30)
+    rec_id = int(re.search(r"recording (\d+)", rec["text"]).group(1))
+    path = os.path.join(t.logdir, "probation.rec")
+    with open(path, "wb") as f:
+        p = subprocess.run([t.path("vmac"), "recording", "get", "--http", host.http, str(rec_id)], stdout=f,
+                           stderr=subprocess.PIPE, env=dict(os.environ, VMAC_TOKEN=t.token), timeout=60)
+    assert p.returncode == 0, "vmac recording get: %s" % p.stderr
+    with open(path) as f:
+        header = json.loads(f.readline())
+    assert header["driver_version"] == "2.0.0" and header.get("took_over_t", 0) > header["attach_t"], (
+        "the recording of the probation failure does not name 2.0.0 and when it took over: %r" % {
+            k: header.get(k) for k in ("driver_version", "version_id", "took_over_t", "attach_t")})
+    rc, out, err = t.run([t.path("vmac"), "test", "--replay", path], "replay")
+    assert rc == 1 and "took over at" in out and "the same tick as in the recording" in out, (
+        "the replay of 2.0.0 does not fail as recorded (exit %d): %s%s" % (rc, out, err))
 
 
 def test_rollback_by_hand_and_the_version_list(t):
@@ -211,12 +231,14 @@ def test_rollback_by_hand_and_the_version_list(t):
                          "lamp-1 back on the file's 1.0.0")
     assert host.device("lamp-1", s)["outputs"]["digital"][0] is True, "the relay went off across the rollbacks"
     rc, out, err = t.run([t.path("vmac"), "rollback", "--http", host.http, "counter"], "rollback")
-    assert rc == 1 and "runs its file" in err, "a rollback with nothing to go back to: exit %d %r" % (rc, err)
+    assert rc == 1 and "no earlier version that ran" in err, "a rollback with nothing to go back to: exit %d %r" % (
+        rc, err)
 
     rc, out, err = t.run([t.path("vmac"), "drivers", "--http", host.http, "counter"], "drivers")
     assert rc == 0, "vmac drivers failed: %s" % err
     lines = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
-    assert [(x[2], x[3]) for x in lines] == [("2.0.0", "rolled_back"), ("3.0.0", "rolled_back")], \
+    assert [(x[2], x[3]) for x in lines] == [("1.0.0", "active"), ("2.0.0", "rolled_back"),
+                                             ("3.0.0", "rolled_back")], \
         "vmac drivers shows: %r" % out
 
 
@@ -302,9 +324,9 @@ def test_activating_a_kept_version(t):
     assert host.device("lamp-1", s)["variables"]["migrated"] is True, "activate did not migrate"
     code, body = call(host, "GET", "/api/drivers/counter", t.token)
     versions = [(v["version"], v["state"]) for v in body["versions"]]
-    assert versions == [("2.0.0", "replaced"), ("3.0.0", "replaced"), ("2.0.0", "active")], \
+    assert versions == [("1.0.0", "replaced"), ("2.0.0", "replaced"), ("3.0.0", "replaced"), ("2.0.0", "active")], \
         "the list after activating: %r" % versions
-    assert body["versions"][0]["hash"] == body["versions"][2]["hash"], "the activated copy has another hash"
+    assert body["versions"][1]["hash"] == body["versions"][3]["hash"], "the activated copy has another hash"
     rc, out, err = t.run([t.path("vmac"), "activate", "--host", host.http, "counter", "9999"], "activate")
     assert rc == 1 and "no version 9999" in err, "activating a version that does not exist: %d %r" % (rc, err)
 
@@ -378,7 +400,8 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
     seq = host.last_event_seq()
 
     # A deploy of another driver, paused between its steps (it holds the lock).
-    lights = open(os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "drivers", "lights.lua")).read()
+    with open(os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "drivers", "lights.lua")) as f:
+        lights = re.sub(r'version = "[^"]+"', 'version = "9.9.9"', f.read(), count=1)  # a new version: no no-op
     answer = []
     mark = host.mark("stderr")
     caller = threading.Thread(target=lambda: answer.append(
@@ -394,7 +417,7 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
     in_deploy = caller.is_alive()
     assert in_deploy, "the deploy of lights ended before the store could be looked at (pause too short)"
     states = [(v["version"], v["state"]) for v in body["versions"]]
-    assert states == [("2.0.0", "active")], \
+    assert states == [("1.0.0", "replaced"), ("2.0.0", "active")], \
         "the store recorded the probation rollback in the middle of another deploy: %r" % states
 
     caller.join(60)
@@ -402,10 +425,10 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
         code, body = call(host, "GET", "/api/drivers/counter", t.token)
-        if body["active"] == 0:
+        if body["active"] == body["versions"][0]["id"]:
             break
         time.sleep(0.05)
-    assert [v["state"] for v in body["versions"]] == ["rolled_back"], \
+    assert [v["state"] for v in body["versions"]] == ["active", "rolled_back"], \
         "the store does not record the rollback once the deploy is over: %r" % body
     assert host.device("lamp-1", host.status())["driver_version"] == "1.0.0", "lamp-1 is not back on 1.0.0"
 
