@@ -35,10 +35,11 @@ int vmac_load_driver_bundle(const struct vmac_config *cfg, const struct vmac_bun
                             struct vmac_driver **out, char *text, size_t textlen);
 
 /* The bundle of data, as an upload, a stored version or a recording holds
- * it: an archive (it must be driver's), or a driver's Lua text alone (a
- * bundle of that one file, without programmes: versions stored before
- * bundles). It is compiled: the manifest must agree. 0, or -VMAC_EBUNDLE
- * (not a bundle of driver) or -VMAC_EFAIL (it does not compile) with err. */
+ * it: an archive (read and checked, it must be driver's; not compiled), or
+ * a driver's Lua text alone (a bundle of that one file, without
+ * programmes: versions stored before bundles), compiled to learn its
+ * version. 0, or -VMAC_EBUNDLE (not a bundle of driver) or -VMAC_EFAIL (a
+ * Lua text that does not compile) with err. */
 int vmac_bundle_of_data(const struct vmac_config *cfg, const char *driver, const char *data, size_t len,
                         struct vmac_bundle **out, char *err, size_t errlen);
 

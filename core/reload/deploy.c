@@ -297,6 +297,16 @@ static void put_in_place(const struct vmac_deploy_ctx *x, const char *driver, co
 	out->id = have_prev == 1 ? prev.id : 0;
 }
 
+/* Whether b's driver compiles with its programmes and declares b's
+ * version: 0, or -VMAC_EFAIL / -VMAC_EBUNDLE with err. */
+static int compiles(const struct vmac_deploy_ctx *x, const struct vmac_bundle *b, char *err, size_t errlen)
+{
+	struct vmac_driver *check = NULL;
+	int rc = vmac_load_driver_bundle(x->cfg, b, "(upload)", &check, err, errlen);
+	vmac_driver_free(check);
+	return rc == 0 || rc == -VMAC_EBUNDLE ? rc : -VMAC_EFAIL;
+}
+
 void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const struct vmac_deploy_upload *u,
                  struct vmac_deploy_result *out)
 {
@@ -307,11 +317,20 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const stru
 	int rc;
 
 	memset(out, 0, sizeof(*out));
-	/* A bundle of driver, signed as the host needs, that compiles: off the
-	 * bus thread and before the lock. */
+	/* A bundle of driver, signed as the host needs (checked before any of
+	 * it runs, even sandboxed), that compiles: off the bus thread and
+	 * before the lock. A Lua text alone is compiled to learn its version,
+	 * so it is never taken where a signature counts. */
+	if (!vmac_bundle_is_archive(u->data, u->len) && (u->sig || (x->trust && x->trust->require))) {
+		refuse(out, u->sig ? -VMAC_ESIGMETA : -VMAC_ESIGMISSING,
+		       "a driver's Lua text alone cannot be checked against a signature: make a bundle (vmac bundle), "
+		       "sign that, and send it");
+		return;
+	}
 	if ((rc = vmac_bundle_of_data(x->cfg, driver, u->data, u->len, &b, err, sizeof(err))) != 0 ||
 	    (rc = deploy_check_signature(x->trust, b, u->data, u->len, u->sig, u->siglen, out->signer, err,
-	                                 sizeof(err))) != 0) {
+	                                 sizeof(err))) != 0 ||
+	    (rc = compiles(x, b, err, sizeof(err))) != 0) {
 		refuse(out, rc, err);
 		vmac_bundle_free(b);
 		return;

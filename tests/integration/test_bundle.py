@@ -14,6 +14,8 @@ import os
 import re
 import shutil
 import subprocess
+import urllib.error
+import urllib.request
 
 from harness import Skip
 
@@ -127,8 +129,18 @@ def test_signed_bundles_and_each_refusal(t):
         s = host.status()
         assert host.device("lamp-1", s)["variables"]["mode"] == "one", "a refused bundle reached the machine"
 
-    # No signature where keys make one needed.
+    # No signature where keys make one needed; a Lua text alone neither.
     refused(good, "ESIGMISSING", "signed bundles only")
+    req = urllib.request.Request("http://%s/api/drivers/lamp" % host.http, method="POST",
+                                 data=(LAMP % {"version": "2.0.1"}).encode(),
+                                 headers={"Authorization": "Bearer " + t.token})
+    try:
+        urllib.request.urlopen(req, timeout=30)
+        assert False, "a Lua text alone was taken by a host that needs signatures"
+    except urllib.error.HTTPError as e:
+        body = json.loads(e.read())
+        assert e.code == 403 and body.get("code") == "ESIGMISSING" and "make a bundle" in body["error"], (
+            "a Lua text alone on a host that needs signatures: %d %r" % (e.code, body))
     # Signed by a key the host does not trust.
     sign(t, other_sec, good, comment)
     refused(good, "ESIGKEY", "not one of deploy_keys")

@@ -8,6 +8,7 @@ a running host is said, once, and written no more."""
 import glob
 import os
 import random
+import re
 import shutil
 import subprocess
 import time
@@ -75,9 +76,20 @@ def test_a_full_disk_is_an_error_not_a_crash(t):
                           capture_output=True, text=True, timeout=60)
     assert " 0 " in fill.stdout or "100%" in fill.stdout, "the tmpfs did not fill: %r %r" % (fill.stdout,
                                                                                             fill.stderr)
-    big = ("-- " + "x" * 76 + "\n") * 9000 + open(os.path.join(os.path.dirname(__file__), "..", "..", "scripts",
-                                                               "drivers", "washer.lua")).read()
-    code, body = post(host, "/api/drivers/washer?probation=0", token, big.encode(), "text/x-lua")
+    # A bundle of the washer and its programmes, its driver padded to 700 KiB.
+    scripts = os.path.join(os.path.dirname(__file__), "..", "..", "scripts")
+    mine = os.path.join(t.logdir, "big")
+    shutil.copytree(os.path.join(scripts, "cycles", "washer"), os.path.join(mine, "cycles", "washer"))
+    with open(os.path.join(scripts, "drivers", "washer.lua")) as f:
+        src = re.sub(r'version = "[^"]+"', 'version = "9.0.0"', f.read(), count=1)
+    with open(os.path.join(mine, "washer.lua"), "w") as f:
+        f.write(("-- " + "x" * 76 + "\n") * 9000 + src)
+    made = subprocess.run([t.path("vmac"), "bundle", os.path.join(mine, "washer.lua"), "-o",
+                           os.path.join(t.logdir, "big.vbundle")], capture_output=True, text=True, timeout=60)
+    assert made.returncode == 0, "vmac bundle of the big washer: %s%s" % (made.stdout, made.stderr)
+    with open(os.path.join(t.logdir, "big.vbundle"), "rb") as f:
+        big = f.read()
+    code, body = post(host, "/api/drivers/washer?probation=0", token, big, "application/octet-stream")
     assert code == 507 and "store" in body and "full" in body, \
         "uploading to a full disk: HTTP %d %s" % (code, body[:300])
     code, body = post(host, "/api/devices/washer-1/input", token, b'{"name": "program", "value": "quick", '
