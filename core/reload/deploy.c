@@ -195,14 +195,13 @@ static int version_rules(const struct vmac_deploy_ctx *x, const struct vmac_bund
 	struct same_version q = {b, hash, 0, ""};
 	char err[VMAC_EVENT_TEXT];
 	uint64_t max;
-	int rc = vmac_store_driver_active(x->store, b->name, &active, NULL, NULL, err, sizeof(err));
+	int have = vmac_store_driver_active(x->store, b->name, &active, NULL, NULL, err, sizeof(err)), rc = have;
 	if (rc < 0 || (rc = vmac_store_driver_counter(x->store, b->name, &max, err, sizeof(err))) < 0 ||
 	    (rc = vmac_store_driver_list(x->store, b->name, find_same_version, &q, err, sizeof(err))) < 0) {
 		store_failed(out, rc, err);
 		return -1;
 	}
-	if (vmac_store_driver_active(x->store, b->name, &active, NULL, NULL, err, sizeof(err)) == 1 &&
-	    strcmp(active.hash, hash) == 0) {
+	if (have == 1 && strcmp(active.hash, hash) == 0) {
 		out->status = 200;
 		out->unchanged = 1;
 		out->id = active.id;

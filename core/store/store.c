@@ -68,11 +68,19 @@ static const char *const migrations[] = {
     " key BLOB NOT NULL,"
     " created REAL NOT NULL,"
     " note TEXT NOT NULL DEFAULT '')",
-    /* bundles (docs/DRIVERS.md "Bundles"): source holds the bundle's archive
-     * from now on (Lua text in older rows), hash the archive's */
+    /* bundles (docs/DRIVERS.md "Bundles"): each version's security counter,
+     * signer and origin */
     "ALTER TABLE driver_versions ADD COLUMN counter INTEGER NOT NULL DEFAULT 0;"
     "ALTER TABLE driver_versions ADD COLUMN signer TEXT NOT NULL DEFAULT '';"
     "ALTER TABLE driver_versions ADD COLUMN origin TEXT NOT NULL DEFAULT 'upload'",
+    /* the bundles (the archive; Lua text in versions stored before them)
+     * in a table of their own, by version id: a blob before the columns a
+     * query reads made every look at a driver's versions read every
+     * bundle it ever kept (a deploy slowed with each one) */
+    "CREATE TABLE driver_bundles (id INTEGER PRIMARY KEY, data BLOB NOT NULL);"
+    "INSERT INTO driver_bundles (id, data) SELECT id, source FROM driver_versions;"
+    "ALTER TABLE driver_versions ADD COLUMN size INTEGER NOT NULL DEFAULT 0;"
+    "UPDATE driver_versions SET size = length(source), source = x''",
 };
 
 double store_now_s(void)
@@ -269,7 +277,7 @@ void store_hex(const unsigned char *b, size_t n, char *out)
 /* ---- driver versions ---- */
 
 #define VERSION_COLUMNS                                                                                                \
-	"id, driver, version, hash, deployed, deployed_by, state, previous, note, length(source), counter, signer, "   \
+	"id, driver, version, hash, deployed, deployed_by, state, previous, note, size, counter, signer, "             \
 	"origin"
 #define VERSION_NCOLUMNS 13
 
@@ -324,21 +332,20 @@ int vmac_store_driver_add(struct vmac_store *s, const struct vmac_driver_upload 
 	int rc;
 	crypto_generichash(h, sizeof(h), (const unsigned char *)u->data, u->len, NULL, 0);
 	store_hex(h, sizeof(h), hash);
-	if (store_lock_write(s) != 0)
+	if (store_begin(s) != 0)
 		return store_fail_unlock(s, "storing a driver version", err, errlen);
 	prev = active_id(s, u->driver);
-	if (prev < 0)
-		return store_fail_unlock(s, "reading driver versions", err, errlen);
-	if (sqlite3_prepare_v2(
-	        s->db,
-	        "INSERT INTO driver_versions (driver, version, hash, source, deployed, deployed_by, state, "
-	        "previous, counter, signer, origin, note) VALUES (?, ?, ?, ?, ?, ?, 'pending', ?, ?, ?, ?, ?)",
-	        -1, &st, NULL) != SQLITE_OK)
-		return store_fail_unlock(s, "storing a driver version", err, errlen);
+	if (prev < 0 || sqlite3_prepare_v2(
+	                    s->db,
+	                    "INSERT INTO driver_versions (driver, version, hash, source, size, deployed, deployed_by, "
+	                    "state, previous, counter, signer, origin, note) "
+	                    "VALUES (?, ?, ?, x'', ?, ?, ?, 'pending', ?, ?, ?, ?, ?)",
+	                    -1, &st, NULL) != SQLITE_OK)
+		return store_end(s, 0, "storing a driver version", err, errlen);
 	sqlite3_bind_text(st, 1, u->driver, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 2, u->version, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_text(st, 3, hash, -1, SQLITE_TRANSIENT);
-	sqlite3_bind_blob(st, 4, u->data, (int)u->len, SQLITE_TRANSIENT);
+	sqlite3_bind_int64(st, 4, (sqlite3_int64)u->len);
 	sqlite3_bind_double(st, 5, store_now_s());
 	sqlite3_bind_text(st, 6, u->by, -1, SQLITE_TRANSIENT);
 	sqlite3_bind_int64(st, 7, prev);
@@ -349,10 +356,16 @@ int vmac_store_driver_add(struct vmac_store *s, const struct vmac_driver_upload 
 	rc = sqlite3_step(st);
 	sqlite3_finalize(st);
 	if (rc != SQLITE_DONE)
-		return store_fail_unlock(s, "storing a driver version", err, errlen);
+		return store_end(s, 0, "storing a driver version", err, errlen);
 	*id = sqlite3_last_insert_rowid(s->db); /* of this statement: no other ran since */
-	pthread_mutex_unlock(&s->lock);
-	return 0;
+	if (sqlite3_prepare_v2(s->db, "INSERT INTO driver_bundles (id, data) VALUES (?, ?)", -1, &st, NULL) !=
+	    SQLITE_OK)
+		return store_end(s, 0, "storing a driver version", err, errlen);
+	sqlite3_bind_int64(st, 1, *id);
+	sqlite3_bind_blob(st, 2, u->data, (int)u->len, SQLITE_TRANSIENT);
+	rc = sqlite3_step(st);
+	sqlite3_finalize(st);
+	return store_end(s, rc == SQLITE_DONE, "storing a driver version", err, errlen);
 }
 
 int vmac_store_driver_counter(struct vmac_store *s, const char *driver, uint64_t *max, char *err, size_t errlen)
@@ -484,10 +497,11 @@ int vmac_store_driver_roll_back(struct vmac_store *s, const char *driver, int64_
 static int version_where(struct vmac_store *s, const char *where, const char *text_arg, int64_t int_arg,
                          struct vmac_driver_version *v, char **src, size_t *len, char *err, size_t errlen)
 {
-	char sql[256];
+	char sql[512];
 	sqlite3_stmt *st;
 	int rc, found = 0;
-	snprintf(sql, sizeof(sql), "SELECT " VERSION_COLUMNS ", source FROM driver_versions WHERE %s", where);
+	snprintf(sql, sizeof(sql), "SELECT " VERSION_COLUMNS "%s FROM driver_versions WHERE %s",
+	         src ? ", (SELECT data FROM driver_bundles b WHERE b.id = driver_versions.id)" : "", where);
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, sql, -1, &st, NULL) != SQLITE_OK)
 		return store_fail_unlock(s, "reading driver versions", err, errlen);
