@@ -64,11 +64,17 @@ same run on the same machine, reported as ratios.
   minisign  checking a bundle's minisign signature (tests/bench/minisign_bench.py):
             us per MiB of a prehashed (ED) and a legacy (Ed) signature next to
             BLAKE2b-512 alone over the same 4 MiB (tests/bench/minisign_verify.c)
+  bundle    deploying a bundle (tests/bench/bundle_bench.py): upload to
+            switched of 100 bundles of the washer, unsigned and signed with
+            minisign, next to 100 uploads of the washer's Lua text alone (its
+            programmes inlined), interleaved on one vmacd, median and p95;
+            with --before-bin DIR also the washer.lua reload of a vmacd from
+            before bundles, on a second host beside
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
                 [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,
-                        metrics,minisign,mqtt-kitchen]
-                [--base-bin DIR]
+                        metrics,minisign,bundle,mqtt-kitchen]
+                [--base-bin DIR] [--before-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
 
@@ -429,9 +435,11 @@ def main():
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only",
                    default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,"
-                           "metrics,minisign")
+                           "metrics,minisign,bundle")
     p.add_argument("--base-bin", default=None,
                    help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
+    p.add_argument("--before-bin", default=None,
+                   help="bundle: a build/bin folder of the code before bundles (1096c82), its reload beside")
     p.add_argument("--cpu-awake", choices=("true", "false"), default="true",
                    help="vmacd's cpu_awake where lateness is compared with cyclictest (default true: like for like)")
     p.add_argument("--max-boards", type=int, default=None,
@@ -537,6 +545,12 @@ def main():
         print("minisign: checking a signature, us per MiB next to BLAKE2b-512 alone", flush=True)
         results["minisign"] = minisign(args)
 
+    if "bundle" in only:
+        from bundle_bench import bundle
+        print("bundle: upload to switched, 100 uploads each of the washer's text, its bundle and its signed "
+              "bundle, interleaved", flush=True)
+        results["bundle"] = bundle(args)
+
     if "reload" in only:
         print("reload: 1000 hot reloads of a driver on 10 of 100 boards at 10 Hz", flush=True)
         results["reload"] = reload_bench(args)
@@ -632,6 +646,9 @@ def report(r):
     if r.get("minisign"):
         from minisign_bench import report_minisign
         report_minisign(r["minisign"])
+    if r.get("bundle"):
+        from bundle_bench import report_bundle
+        report_bundle(r["bundle"])
 
 
 if __name__ == "__main__":
