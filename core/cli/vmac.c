@@ -198,7 +198,7 @@ static const struct vmac_cmd_option bench_options[] = {
     {"seconds", NULL, 0, "N", NULL, NULL, "length of each measurement (default 60)"},
     {"only", NULL, 0, "LIST", NULL, NULL,
      "the figures to take, of lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,"
-     "workers,auth,metrics (default all)"},
+     "workers,auth,metrics,minisign,bundle (default all)"},
     {"max-boards", NULL, 0, "N", NULL, NULL,
      "most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)"},
     {"cpu-awake", NULL, 0, "true|false", NULL, NULL,
@@ -256,7 +256,8 @@ static const struct vmac_cmd bench_cmd = {
              "virtual hour of washing), hot reload (misses and latency of 1,000 reloads, next to the\n"
              "same window without), tick lateness with 50 web UI clients (next to none), the fieldbus\n"
              "modes, the firmware in QEMU, the flight recorder and checkpoints, raw Ethernet's receive\n"
-             "ring, and MQTT through Mosquitto (each next to its own baseline). Figures are ratios to\n"
+             "ring, MQTT through Mosquitto, a bundle's signature check (next to its hash) and a bundle's\n"
+             "upload to switched (next to a driver's text) (each next to its own baseline). Figures are ratios to\n"
              "baselines run in the same run on the same machine. Needs cyclictest (Debian rt-tests) and\n"
              "the bare loop built by 'make bench' (build/bench/bare_loop). See docs/PERFORMANCE.md.\n",
     .own = bench_options,
