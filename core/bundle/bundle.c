@@ -104,10 +104,12 @@ int vmac_bundle_add(struct vmac_bundle *b, const char *path, const void *data, s
 	struct vmac_bundle_file *f = (struct vmac_bundle_file *)vmac_bundle_get(b, path);
 	char *copy;
 	int i;
-	if (!path_ok(b->name, path))
-		return fail(-VMAC_EBUNDLE, err, errlen,
-		            "a bundle of %s holds %s.lua, cycles/NAME.lua, plant.lua and tests/NAME.lua only", b->name,
-		            b->name);
+	if (!path_ok(b->name, path)) {
+		snprintf(err, errlen,
+		         "%s is not a member a bundle may hold (%s.lua, cycles/NAME.lua, plant.lua, tests/NAME.lua)",
+		         path, b->name);
+		return -VMAC_EBUNDLE;
+	}
 	if (len > VMAC_BUNDLE_FILE_MAX)
 		return fail(-VMAC_EBUNDLE, err, errlen, "%s is larger than a bundle's member may be (1 MiB)%s", path,
 		            "");
