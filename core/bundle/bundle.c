@@ -352,8 +352,39 @@ static int entry_data(struct archive *a, struct archive_entry *e, size_t max, ch
 	return 0;
 }
 
-/* Every member after bundle.json into b, each checked against files. */
-static int read_members(struct archive *a, struct vmac_bundle *b, json_t *files, char *err, size_t errlen)
+/* Where the member whose header was read last ends in the archive: past
+ * its headers (pax's too), its data and their padding to 512 bytes. */
+static la_int64_t member_end(struct archive *a, struct archive_entry *e)
+{
+	return archive_filter_bytes(a, -1) + ((archive_entry_size(e) + 511) & ~(la_int64_t)511);
+}
+
+/* What follows the last member, from end: the two zero blocks that end a
+ * tar and nothing else, so that a bundle cut short in them, or one with
+ * bytes after them (another archive, say), is refused as damaged: libarchive
+ * takes both. */
+static int end_ok(const char *data, size_t len, la_int64_t end, char *err, size_t errlen)
+{
+	size_t at = (size_t)end, i;
+	if (end < 0 || at > len || len - at < 1024)
+		return fail(-VMAC_EBUNDLE, err, errlen,
+		            "the bundle is cut short (its end-of-archive blocks are missing): it is damaged%s%s", "",
+		            "");
+	for (i = at; i < at + 1024; i++)
+		if (data[i])
+			return fail(-VMAC_EBUNDLE, err, errlen,
+			            "the bundle's end-of-archive blocks are not zero: it is damaged%s%s", "", "");
+	if (len - at > 1024) {
+		snprintf(err, errlen, "%zu bytes after the end of the archive: the bundle is damaged", len - at - 1024);
+		return -VMAC_EBUNDLE;
+	}
+	return 0;
+}
+
+/* Every member after bundle.json into b, each checked against files; *end
+ * where the last one ends. */
+static int read_members(struct archive *a, struct vmac_bundle *b, json_t *files, la_int64_t *end, char *err,
+                        size_t errlen)
 {
 	struct archive_entry *e;
 	void *it;
@@ -362,6 +393,7 @@ static int read_members(struct archive *a, struct vmac_bundle *b, json_t *files,
 		const char *path = archive_entry_pathname(e), *want;
 		char *data;
 		size_t len;
+		*end = member_end(a, e);
 		if (!path)
 			return fail(-VMAC_EBUNDLE, err, errlen, "a member without a name%s%s", "", "");
 		if (vmac_bundle_get(b, path) || strcmp(path, META) == 0)
@@ -399,6 +431,7 @@ int vmac_bundle_read(const void *data, size_t len, struct vmac_bundle **out, cha
 	json_t *files = NULL;
 	char *meta = NULL;
 	size_t metalen;
+	la_int64_t end;
 	int rc;
 	*out = NULL;
 	if (len > VMAC_BUNDLE_MAX)
@@ -414,9 +447,12 @@ int vmac_bundle_read(const void *data, size_t len, struct vmac_bundle **out, cha
 	} else if (!archive_entry_pathname(e) || strcmp(archive_entry_pathname(e), META) != 0) {
 		rc = fail(-VMAC_EBUNDLE, err, errlen, "not a bundle: its first member is %s, not bundle.json%s",
 		          archive_entry_pathname(e) ? archive_entry_pathname(e) : "unnamed", "");
-	} else if ((rc = entry_data(a, e, META_MAX, &meta, &metalen, err, errlen)) == 0 &&
-	           (rc = meta_read(b, meta, metalen, &files, err, errlen)) == 0) {
-		rc = read_members(a, b, files, err, errlen);
+	} else {
+		end = member_end(a, e);
+		if ((rc = entry_data(a, e, META_MAX, &meta, &metalen, err, errlen)) == 0 &&
+		    (rc = meta_read(b, meta, metalen, &files, err, errlen)) == 0 &&
+		    (rc = read_members(a, b, files, &end, err, errlen)) == 0)
+			rc = end_ok(data, len, end, err, errlen);
 	}
 	archive_read_free(a);
 	json_decref(files);
