@@ -289,7 +289,7 @@ int vmac_bundle_write(const struct vmac_bundle *b, char **data, size_t *len, cha
 	struct archive *a;
 	char *meta, *buf;
 	size_t cap, used = 0;
-	int i, ok;
+	int i, ok, rc;
 	*data = NULL;
 	*len = 0;
 	if (!b->version[0] || !b->api[0] || !vmac_bundle_driver(b))
@@ -310,15 +310,20 @@ int vmac_bundle_write(const struct vmac_bundle *b, char **data, size_t *len, cha
 	     archive_write_open_memory(a, buf, cap, &used) == ARCHIVE_OK && add_entry(a, META, meta, strlen(meta)) == 0;
 	for (i = 0; ok && i < b->nfiles; i++)
 		ok = add_entry(a, b->files[i].path, b->files[i].data, b->files[i].len) == 0;
-	if (!ok)
+	rc = ok && archive_write_close(a) == ARCHIVE_OK ? 0 : -VMAC_EFAIL;
+	if (rc != 0)
 		snprintf(err, errlen, "writing the bundle: %s",
 		         archive_error_string(a) ? archive_error_string(a) : "?");
-	ok = archive_write_close(a) == ARCHIVE_OK && ok;
 	archive_write_free(a);
 	free(meta);
-	if (!ok) {
+	if (rc == 0 && used > VMAC_BUNDLE_MAX) {
+		snprintf(err, errlen, "the bundle of %s would be %zu bytes: a host reads one of at most 4 MiB", b->name,
+		         used);
+		rc = -VMAC_EBUNDLE;
+	}
+	if (rc != 0) {
 		free(buf);
-		return -VMAC_EFAIL;
+		return rc;
 	}
 	*data = buf;
 	*len = used;
