@@ -60,7 +60,7 @@ static inline const char *vmac_strerror(int code)
 static inline const char *vmac_err_name(int code)
 {
 #define VMAC_ERR_NAME(name, text)                                                                                      \
-	case name: return #name + 5;
+	case name: return &#name[5]; /* past "VMAC_" */
 	switch (code < 0 ? -code : code) {
 		VMAC_ERRORS(VMAC_ERR_NAME)
 	default: return "EFAIL";
