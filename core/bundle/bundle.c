@@ -104,10 +104,12 @@ int vmac_bundle_add(struct vmac_bundle *b, const char *path, const void *data, s
 	struct vmac_bundle_file *f = (struct vmac_bundle_file *)vmac_bundle_get(b, path);
 	char *copy;
 	int i;
-	if (!path_ok(b->name, path))
-		return fail(-VMAC_EBUNDLE, err, errlen,
-		            "a bundle of %s holds %s.lua, cycles/NAME.lua, plant.lua and tests/NAME.lua only", b->name,
-		            b->name);
+	if (!path_ok(b->name, path)) {
+		snprintf(err, errlen,
+		         "%s is not a member a bundle may hold (%s.lua, cycles/NAME.lua, plant.lua, tests/NAME.lua)",
+		         path, b->name);
+		return -VMAC_EBUNDLE;
+	}
 	if (len > VMAC_BUNDLE_FILE_MAX)
 		return fail(-VMAC_EBUNDLE, err, errlen, "%s is larger than a bundle's member may be (1 MiB)%s", path,
 		            "");
@@ -178,39 +180,79 @@ static int version_ok(const char *v)
 	return 1;
 }
 
-/* The metadata's fields into b (files are checked against it later). */
+/* bundle.json's fields: each must be there, of its type. */
+static const struct {
+	const char *key;
+	json_type type;
+	const char *is;
+} META_FIELDS[] = {{"format", JSON_STRING, "a string"},
+                   {"format_version", JSON_INTEGER, "a whole number"},
+                   {"name", JSON_STRING, "a string"},
+                   {"version", JSON_STRING, "a string"},
+                   {"counter", JSON_INTEGER, "a whole number"},
+                   {"api", JSON_STRING, "a string"},
+                   {"files", JSON_OBJECT, "an object of PATH: HASH"}};
+
+/* 0 when m has every field of META_FIELDS, of its type; else a message
+ * naming the first that is not. */
+static int meta_fields(json_t *m, char *err, size_t errlen)
+{
+	size_t i;
+	if (!json_is_object(m))
+		return fail(-VMAC_EBUNDLE, err, errlen, "bundle.json is not a JSON object%s%s", "", "");
+	for (i = 0; i < sizeof(META_FIELDS) / sizeof(META_FIELDS[0]); i++) {
+		json_t *v = json_object_get(m, META_FIELDS[i].key);
+		if (!v)
+			return fail(-VMAC_EBUNDLE, err, errlen, "bundle.json lacks the field %s%s", META_FIELDS[i].key,
+			            "");
+		if (json_typeof(v) != META_FIELDS[i].type)
+			return fail(-VMAC_EBUNDLE, err, errlen, "bundle.json: %s is not %s", META_FIELDS[i].key,
+			            META_FIELDS[i].is);
+	}
+	return 0;
+}
+
+/* The metadata's fields into b (files are checked against it later); a
+ * refusal names the field that is wrong. */
 static int meta_read(struct vmac_bundle *b, const char *text, size_t len, json_t **files, char *err, size_t errlen)
 {
 	json_error_t je;
 	json_t *m = json_loadb(text, len, JSON_REJECT_DUPLICATES, &je);
 	const char *format = NULL, *name = NULL, *version = NULL, *api = NULL;
 	json_int_t fv = 0, counter = -1;
+	int rc;
 	*files = NULL;
 	if (!m)
 		return fail(-VMAC_EBUNDLE, err, errlen, "bundle.json is not JSON: %s%s", je.text, "");
-	if (json_unpack(m, "{s:s, s:I, s:s, s:s, s:I, s:s, s:o}", "format", &format, "format_version", &fv, "name",
-	                &name, "version", &version, "counter", &counter, "api", &api, "files", files) != 0 ||
-	    strcmp(format, FORMAT) != 0 || !json_is_object(*files)) {
-		json_decref(m);
-		*files = NULL;
-		return fail(
-		    -VMAC_EBUNDLE, err, errlen,
-		    "bundle.json lacks a field (format, format_version, name, version, counter, api, files)%s%s", "",
-		    "");
-	}
-	if (fv != FORMAT_VERSION) {
-		json_decref(m);
-		*files = NULL;
+	if ((rc = meta_fields(m, err, errlen)) != 0 ||
+	    json_unpack(m, "{s:s, s:I, s:s, s:s, s:I, s:s, s:o}", "format", &format, "format_version", &fv, "name",
+	                &name, "version", &version, "counter", &counter, "api", &api, "files", files) != 0) {
+		rc = rc ? rc : fail(-VMAC_EBUNDLE, err, errlen, "bundle.json cannot be read%s%s", "", "");
+	} else if (strcmp(format, FORMAT) != 0) {
+		rc = fail(-VMAC_EBUNDLE, err, errlen, "bundle.json's format is \"%.40s\", not \"%s\"", format, FORMAT);
+	} else if (fv != FORMAT_VERSION) {
 		snprintf(err, errlen, "a bundle of format version %lld: this host reads version %d", (long long)fv,
 		         FORMAT_VERSION);
-		return -VMAC_EBUNDLE;
+		rc = -VMAC_EBUNDLE;
+	} else if (!vmac_valid_name(name, VMAC_BUNDLE_NAME_MAX)) {
+		rc = fail(-VMAC_EBUNDLE, err, errlen,
+		          "bundle.json: \"%.60s\" is not a driver's name (1..47 of A-Z a-z 0-9 . _ -, not first .)%s",
+		          name, "");
+	} else if (!version_ok(version)) {
+		rc = fail(-VMAC_EBUNDLE, err, errlen,
+		          "bundle.json: version \"%.60s\" is not a version (1..31 printable characters, no space)%s",
+		          version, "");
+	} else if (counter < 0) {
+		snprintf(err, errlen, "bundle.json: counter %lld is below 0", (long long)counter);
+		rc = -VMAC_EBUNDLE;
+	} else if (!api[0] || strlen(api) >= sizeof(b->api)) {
+		rc = fail(-VMAC_EBUNDLE, err, errlen, "bundle.json: api \"%.60s\" is not a driver API (1..15 bytes)%s",
+		          api, "");
 	}
-	if (!vmac_valid_name(name, VMAC_BUNDLE_NAME_MAX) || !version_ok(version) || counter < 0 ||
-	    strlen(api) >= sizeof(b->api) || !api[0]) {
-		json_decref(m);
+	if (rc != 0) {
 		*files = NULL;
-		return fail(-VMAC_EBUNDLE, err, errlen,
-		            "bundle.json: a name, version, counter (0 or more) or api that cannot be%s%s", "", "");
+		json_decref(m);
+		return rc;
 	}
 	snprintf(b->name, sizeof(b->name), "%s", name);
 	snprintf(b->version, sizeof(b->version), "%s", version);
@@ -247,7 +289,7 @@ int vmac_bundle_write(const struct vmac_bundle *b, char **data, size_t *len, cha
 	struct archive *a;
 	char *meta, *buf;
 	size_t cap, used = 0;
-	int i, ok;
+	int i, ok, rc;
 	*data = NULL;
 	*len = 0;
 	if (!b->version[0] || !b->api[0] || !vmac_bundle_driver(b))
@@ -268,15 +310,20 @@ int vmac_bundle_write(const struct vmac_bundle *b, char **data, size_t *len, cha
 	     archive_write_open_memory(a, buf, cap, &used) == ARCHIVE_OK && add_entry(a, META, meta, strlen(meta)) == 0;
 	for (i = 0; ok && i < b->nfiles; i++)
 		ok = add_entry(a, b->files[i].path, b->files[i].data, b->files[i].len) == 0;
-	if (!ok)
+	rc = ok && archive_write_close(a) == ARCHIVE_OK ? 0 : -VMAC_EFAIL;
+	if (rc != 0)
 		snprintf(err, errlen, "writing the bundle: %s",
 		         archive_error_string(a) ? archive_error_string(a) : "?");
-	ok = archive_write_close(a) == ARCHIVE_OK && ok;
 	archive_write_free(a);
 	free(meta);
-	if (!ok) {
+	if (rc == 0 && used > VMAC_BUNDLE_MAX) {
+		snprintf(err, errlen, "the bundle of %s would be %zu bytes: a host reads one of at most 4 MiB", b->name,
+		         used);
+		rc = -VMAC_EBUNDLE;
+	}
+	if (rc != 0) {
 		free(buf);
-		return -VMAC_EFAIL;
+		return rc;
 	}
 	*data = buf;
 	*len = used;
@@ -310,15 +357,48 @@ static int entry_data(struct archive *a, struct archive_entry *e, size_t max, ch
 	return 0;
 }
 
-/* Every member after bundle.json into b, each checked against files. */
-static int read_members(struct archive *a, struct vmac_bundle *b, json_t *files, char *err, size_t errlen)
+/* Where the member whose header was read last ends in the archive: past
+ * its headers (pax's too), its data and their padding to 512 bytes. */
+static la_int64_t member_end(struct archive *a, struct archive_entry *e)
+{
+	return archive_filter_bytes(a, -1) + ((archive_entry_size(e) + 511) & ~(la_int64_t)511);
+}
+
+/* What follows the last member, from end: the two zero blocks that end a
+ * tar and nothing else, so that a bundle cut short in them, or one with
+ * bytes after them (another archive, say), is refused as damaged: libarchive
+ * takes both. */
+static int end_ok(const char *data, size_t len, la_int64_t end, char *err, size_t errlen)
+{
+	size_t at = (size_t)end, i;
+	if (end < 0 || at > len || len - at < 1024)
+		return fail(-VMAC_EBUNDLE, err, errlen,
+		            "the bundle is cut short (its end-of-archive blocks are missing): it is damaged%s%s", "",
+		            "");
+	for (i = at; i < at + 1024; i++)
+		if (data[i])
+			return fail(-VMAC_EBUNDLE, err, errlen,
+			            "the bundle's end-of-archive blocks are not zero: it is damaged%s%s", "", "");
+	if (len - at > 1024) {
+		snprintf(err, errlen, "%zu bytes after the end of the archive: the bundle is damaged", len - at - 1024);
+		return -VMAC_EBUNDLE;
+	}
+	return 0;
+}
+
+/* Every member after bundle.json into b, each checked against files; *end
+ * where the last one ends. */
+static int read_members(struct archive *a, struct vmac_bundle *b, json_t *files, la_int64_t *end, char *err,
+                        size_t errlen)
 {
 	struct archive_entry *e;
+	void *it;
 	int r, rc;
 	while ((r = archive_read_next_header(a, &e)) == ARCHIVE_OK) {
 		const char *path = archive_entry_pathname(e), *want;
 		char *data;
 		size_t len;
+		*end = member_end(a, e);
 		if (!path)
 			return fail(-VMAC_EBUNDLE, err, errlen, "a member without a name%s%s", "", "");
 		if (vmac_bundle_get(b, path) || strcmp(path, META) == 0)
@@ -338,8 +418,11 @@ static int read_members(struct archive *a, struct vmac_bundle *b, json_t *files,
 	if (r != ARCHIVE_EOF)
 		return fail(-VMAC_EBUNDLE, err, errlen, "not a bundle: %s%s",
 		            archive_error_string(a) ? archive_error_string(a) : "a damaged archive", "");
-	if ((int)json_object_size(files) != b->nfiles)
-		return fail(-VMAC_EBUNDLE, err, errlen, "bundle.json lists files the bundle does not hold%s%s", "", "");
+	for (it = json_object_iter(files); it; it = json_object_iter_next(files, it))
+		if (!vmac_bundle_get(b, json_object_iter_key(it)))
+			return fail(-VMAC_EBUNDLE, err, errlen,
+			            "bundle.json lists %s, which the bundle does not hold%s", json_object_iter_key(it),
+			            "");
 	if (!vmac_bundle_driver(b))
 		return fail(-VMAC_EBUNDLE, err, errlen, "the bundle of %s holds no %s.lua", b->name, b->name);
 	return 0;
@@ -353,6 +436,7 @@ int vmac_bundle_read(const void *data, size_t len, struct vmac_bundle **out, cha
 	json_t *files = NULL;
 	char *meta = NULL;
 	size_t metalen;
+	la_int64_t end;
 	int rc;
 	*out = NULL;
 	if (len > VMAC_BUNDLE_MAX)
@@ -368,9 +452,12 @@ int vmac_bundle_read(const void *data, size_t len, struct vmac_bundle **out, cha
 	} else if (!archive_entry_pathname(e) || strcmp(archive_entry_pathname(e), META) != 0) {
 		rc = fail(-VMAC_EBUNDLE, err, errlen, "not a bundle: its first member is %s, not bundle.json%s",
 		          archive_entry_pathname(e) ? archive_entry_pathname(e) : "unnamed", "");
-	} else if ((rc = entry_data(a, e, META_MAX, &meta, &metalen, err, errlen)) == 0 &&
-	           (rc = meta_read(b, meta, metalen, &files, err, errlen)) == 0) {
-		rc = read_members(a, b, files, err, errlen);
+	} else {
+		end = member_end(a, e);
+		if ((rc = entry_data(a, e, META_MAX, &meta, &metalen, err, errlen)) == 0 &&
+		    (rc = meta_read(b, meta, metalen, &files, err, errlen)) == 0 &&
+		    (rc = read_members(a, b, files, &end, err, errlen)) == 0)
+			rc = end_ok(data, len, end, err, errlen);
 	}
 	archive_read_free(a);
 	json_decref(files);

@@ -70,7 +70,8 @@ int vmac_bundle_from_folder(const char *path, const char *cycles_dir, struct vma
                             size_t errlen);
 
 /* The archive of b (malloc'd, *len bytes): the same b always gives the
- * same bytes. 0, or < 0 with err (a bundle without version or driver). */
+ * same bytes. 0, or < 0 with err (a bundle without version or driver, or
+ * one larger than VMAC_BUNDLE_MAX, which no host reads). */
 int vmac_bundle_write(const struct vmac_bundle *b, char **data, size_t *len, char *err, size_t errlen);
 
 /* Read an archive: 0 and *out, or -VMAC_EBUNDLE with err. */

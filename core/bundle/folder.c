@@ -142,7 +142,12 @@ int vmac_bundle_from_folder(const char *path, const char *cycles_dir, struct vma
 		rc = add_folder(b, cycles_dir, "cycles", any_file, NULL, err, errlen);
 	if (rc == 0) {
 		snprintf(sub, sizeof(sub), "%s/plants/%s", dir, file);
-		if (stat(sub, &st) == 0) {
+		if (stat(sub, &st) == 0 && strcmp(file, "plant.lua") == 0) {
+			/* the driver is plant.lua already: its model would replace it */
+			snprintf(err, errlen, "%s: a driver named plant cannot have a plant model (both are plant.lua)",
+			         sub);
+			rc = -VMAC_EBUNDLE;
+		} else if (stat(sub, &st) == 0) {
 			snprintf(sub, sizeof(sub), "%s/plants", dir);
 			rc = add_file(b, sub, file, "plant.lua", err, errlen);
 		}

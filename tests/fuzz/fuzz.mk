@@ -5,7 +5,7 @@
 # helps). Everything a harness links is built again with clang, libFuzzer's
 # coverage and ASan+UBSan, under $(BUILD)/fuzz/obj; what the fuzzer finds
 # goes to $(BUILD)/fuzz/work-NAME, never to the committed seeds.
-FUZZ_TARGETS := proto config console manifest values http checkpoint
+FUZZ_TARGETS := proto config console manifest values http checkpoint bundle
 FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=all
 FUZZ_CFLAGS   = -std=c11 -D_GNU_SOURCE -g -O2 -fno-omit-frame-pointer $(WARN) -Wno-unknown-warning-option $(FUZZ_SAN) \
                 -fsanitize=fuzzer-no-link $(PKG_CFLAGS)
@@ -57,6 +57,11 @@ $(BUILD)/fuzz/fuzz_http: $(call fuzz_obj,tests/fuzz/fuzz_http.c core/api/api_req
 
 # A checkpoint of dev.state offered to a driver (core/driver/checkpoint.c).
 $(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c tests/fuzz/fuzz_arena.c $(driver_SRC) core/common/file.c)
+	$(FUZZ_LINK) $(PKG_LIBS)
+
+# A bundle as a host reads an upload (core/bundle/bundle.c: libarchive,
+# jansson, libsodium), written and read again.
+$(BUILD)/fuzz/fuzz_bundle: $(call fuzz_obj,tests/fuzz/fuzz_bundle.c core/bundle/bundle.c)
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 FUZZ_BINS := $(FUZZ_TARGETS:%=$(BUILD)/fuzz/fuzz_%)
