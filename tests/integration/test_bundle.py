@@ -301,8 +301,9 @@ def test_a_changed_programme_reaches_a_running_wash(t):
                          and host.device("washer-1", s)["variables"].get("time_left_s", 0) > 3, 120, "washing")
     left = host.device("washer-1", s)["variables"]["time_left_s"]
     rc, out, err = vmac(t, "reload", "--http", host.http, "--probation", "0", mine)
-    assert rc == 0 and "washer 1.3.0 is active" in out, "the bundle of the changed programme: %s%s" % (out, err)
-    s = host.wait_status(lambda s: host.device("washer-1", s)["driver_version"] == "1.3.0", 10, "1.3.0 running")
+    assert rc == 0 and "washer 1.3.0 is active" in out and re.search(r"washer-1 +switched", out), (
+        "the bundle of the changed programme did not switch washer-1: %s%s" % (out, err))
+    s = host.wait_status(lambda s: host.device("washer-1", s)["driver_version"] == "1.3.0", 30, "1.3.0 running")
     v = host.device("washer-1", s)["variables"]
     assert v["step"] == "wash" and v["time_left_s"] <= left + 1, (
         "the wash did not go on where it was (step %s, %s s left, %s before)" % (v["step"], v["time_left_s"], left))
