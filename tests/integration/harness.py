@@ -311,6 +311,29 @@ def post(host, path, token, data, content_type="application/json"):
         return e.code, e.read().decode()
 
 
+RECORDING_EVENT = r"recording (\d+) kept \((\d+) bytes\)"  # the text of a `recording` event (RECORDING.md)
+
+
+def recording_id(event):
+    """The store's id of the recording a 'recording' event announces."""
+    m = re.search(RECORDING_EVENT, event["text"])
+    assert m, "the recording event does not say which recording it kept: %r" % event["text"]
+    return int(m.group(1))
+
+
+def fetch_recording(t, host, rec_id, name, token=None):
+    """`vmac recording get ID > FILE` (FILE in the test's log folder, the
+    token the test's deploy token unless given); returns FILE's path."""
+    path = os.path.join(t.logdir, name)
+    env = dict(os.environ, VMAC_TOKEN=token if token is not None else t.token)
+    with open(path, "wb") as f:
+        p = subprocess.run([t.path("vmac"), "recording", "get", "--http", host.http, str(rec_id)], stdout=f,
+                           stderr=subprocess.PIPE, env=env, timeout=60)
+    assert p.returncode == 0, "vmac recording get %d failed (exit %d): %s" % (rec_id, p.returncode,
+                                                                             p.stderr.decode("utf-8", "replace"))
+    return path
+
+
 def describe(status):
     return ", ".join(
         "%s %s misses %d served %d" % (d["name"], d["state"], d["misses"], d["served"]) for d in status["devices"]

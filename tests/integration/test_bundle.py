@@ -17,7 +17,7 @@ import subprocess
 import urllib.error
 import urllib.request
 
-from harness import Skip
+from harness import Skip, fetch_recording, recording_id
 
 LAMP = """
 local programmes = vmac.cycles()
@@ -254,12 +254,7 @@ def test_a_recording_replays_against_the_bundle_that_ran(t):
     rc, out, err = vmac(t, "record", "--http", host.http, "lamp-1")
     assert rc == 0, "vmac record lamp-1: %s%s" % (out, err)
     ev = host.wait_event("recording", "lamp-1", after_seq=since)
-    rec_id = int(re.search(r"recording (\d+)", ev["text"]).group(1))
-    path = os.path.join(t.logdir, "lamp.rec")
-    with open(path, "wb") as f:
-        p = subprocess.run([t.path("vmac"), "recording", "get", "--http", host.http, str(rec_id)], stdout=f,
-                           stderr=subprocess.PIPE, env=dict(os.environ, VMAC_TOKEN=t.token), timeout=60)
-    assert p.returncode == 0, "vmac recording get: %s" % p.stderr
+    path = fetch_recording(t, host, recording_id(ev), "lamp.rec")
     with open(path) as f:
         header = json.loads(f.readline())
     assert len(header.get("bundle_hash", "")) == 64 and header.get("bundle"), "the recording carries no bundle"

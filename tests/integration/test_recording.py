@@ -15,6 +15,8 @@ import subprocess
 import urllib.error
 import urllib.request
 
+from harness import fetch_recording, recording_id
+
 # A driver for a generic board that counts items in batches of seven: with
 # its switch (di0) on it lights do0 and shows on do1 whether the batch in
 # progress is more than half full. Its bug: a full batch (the encoder at a
@@ -48,7 +50,6 @@ return driver
 BUGGY = RARE % {"what": "raises on a full batch", "version": "1.0.0", "zero": ""}
 FIXED = RARE % {"what": "a full batch is an empty one", "version": "1.0.1", "zero": ", [0] = 0"}
 
-RECORDING_EVENT = r"recording (\d+) kept \((\d+) bytes\)"
 
 
 def driver_dir(t, folder, **files):
@@ -78,19 +79,8 @@ def vmac(t, *argv, token=None, stdout_file=None, timeout_s=120):
     return p.returncode, text, p.stderr.decode("utf-8", "replace")
 
 
-def recording_id(event):
-    """The store's id of the recording a 'recording' event announces."""
-    m = re.search(RECORDING_EVENT, event["text"])
-    assert m, "the recording event does not say which recording it kept: %r" % event["text"]
-    return int(m.group(1))
-
-
 def fetch(t, host, rec_id, name, token=None):
-    """vmac recording get ID > FILE; returns FILE's path."""
-    path = os.path.join(t.logdir, name)
-    rc, _, err = vmac(t, "recording", "get", "--http", host.http, str(rec_id), token=token, stdout_file=path)
-    assert rc == 0, "vmac recording get %d failed (exit %d): %s" % (rec_id, rc, err)
-    return path
+    return fetch_recording(t, host, rec_id, name, token)
 
 
 def parse(path):

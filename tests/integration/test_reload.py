@@ -9,13 +9,12 @@ import json
 import os
 import re
 import shutil
-import subprocess
 import threading
 import time
 import urllib.error
 import urllib.request
 
-from harness import plain_pass_only, undisturbed
+from harness import fetch_recording, plain_pass_only, recording_id, undisturbed
 
 # A driver for a lights board that counts its ticks in dev.state, holds its
 # relay from dev.state, and says which version runs. VERSION and the body of
@@ -199,12 +198,7 @@ def test_a_version_failing_on_probation_goes_back(t):
     # Its recording names the version that failed and when it took over,
     # and replays from there to the same failure.
     rec = host.wait_event("recording", "lamp-1", after_seq=seq, timeout_s=30)
-    rec_id = int(re.search(r"recording (\d+)", rec["text"]).group(1))
-    path = os.path.join(t.logdir, "probation.rec")
-    with open(path, "wb") as f:
-        p = subprocess.run([t.path("vmac"), "recording", "get", "--http", host.http, str(rec_id)], stdout=f,
-                           stderr=subprocess.PIPE, env=dict(os.environ, VMAC_TOKEN=t.token), timeout=60)
-    assert p.returncode == 0, "vmac recording get: %s" % p.stderr
+    path = fetch_recording(t, host, recording_id(rec), "probation.rec")
     with open(path) as f:
         header = json.loads(f.readline())
     assert header["driver_version"] == "2.0.0" and header.get("took_over_t", 0) > header["attach_t"], (
