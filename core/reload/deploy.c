@@ -189,7 +189,7 @@ static void find_same_version(void *ctx, const struct vmac_driver_version *v)
 }
 
 static int version_rules(const struct vmac_deploy_ctx *x, const struct vmac_bundle *b, const char *hash, int force,
-                         int check_counter, struct vmac_deploy_result *out)
+                         struct vmac_deploy_result *out)
 {
 	struct vmac_driver_version active;
 	struct same_version q = {b, hash, 0, ""};
@@ -209,7 +209,7 @@ static int version_rules(const struct vmac_deploy_ctx *x, const struct vmac_bund
 		         b->version, hash);
 		return 1;
 	}
-	if (check_counter && b->counter < max) {
+	if (b->counter < max) {
 		snprintf(err, sizeof(err),
 		         "%s %s has security counter %llu, below %llu, the highest this host has accepted for %s: "
 		         "vmac rollback is the way back to an older version",
@@ -356,7 +356,7 @@ void vmac_deploy(const struct vmac_deploy_ctx *x, const char *driver, const stru
 	vmac_bundle_hash(up.data, up.len, out->hash);
 
 	pthread_mutex_lock(&deploy_lock);
-	if (version_rules(x, b, out->hash, u->force, 1, out) == 0) {
+	if (version_rules(x, b, out->hash, u->force, out) == 0) {
 		up.note = out->note[0] ? out->note : NULL;
 		put_in_place(x, driver, b, &up, u->probation_ms, out);
 	}
@@ -396,7 +396,7 @@ void vmac_deploy_activate(const struct vmac_deploy_ctx *x, const char *driver, i
 		out->counter = v.counter;
 		up = (struct vmac_driver_upload){driver, v.version, data, len, v.counter, v.signer[0] ? v.signer : NULL,
 		                                 by,     v.origin,  NULL};
-		if (version_rules(x, b, v.hash, 1, 1, out) == 0)
+		if (version_rules(x, b, v.hash, 1, out) == 0)
 			put_in_place(x, driver, b, &up, probation_ms, out);
 	}
 	pthread_mutex_unlock(&deploy_lock);
