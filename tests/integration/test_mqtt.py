@@ -202,6 +202,9 @@ def test_mqtt_discovery_configs_for_the_kitchen(t):
             hub.wait("%s/%s/_availability" % (PREFIX, name), lambda p: p == "online", what="online")
         assert hub.wait(PREFIX + "/status") == "online"
         assert hub.wait(PREFIX + "/washer-1/program") == "normal"
+        # The lamp's first value published (before it, its retained state is
+        # the cleared one a driver still loading leaves), then a newcomer.
+        hub.wait(PREFIX + "/lights-1/kitchen", lambda p: p == "false", what="the kitchen lamp's first value")
         late = Hub(broker, "late")
         try:
             got, retained = late.wait(PREFIX + "/lights-1/kitchen"), late.latest[PREFIX + "/lights-1/kitchen"][1]
