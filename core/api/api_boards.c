@@ -133,6 +133,7 @@ enum MHD_Result http_board_enroll(struct vmac_http *h, struct MHD_Connection *c,
 		return http_reply(c, MHD_HTTP_CONFLICT, http_error_body(err));
 	}
 	vmac_board_key_fingerprint(key, fp);
+	http_audit_detail(k, "enroll %s key %s%s", board, fp, replace ? " (replace)" : "");
 	snprintf(text, sizeof(text), "%s enrolled%s, key %s (through the API)", board,
 	         replace ? " or its key replaced" : "", fp);
 	vmac_event_log_add(h->log, "enrolled", board, text);
@@ -152,7 +153,9 @@ enum MHD_Result http_board_remove(struct vmac_http *h, struct MHD_Connection *c,
 {
 	const char *board = k->route.name;
 	char err[512], text[200];
-	int rc = vmac_board_key_remove(h->store, board, err, sizeof(err));
+	int rc;
+	http_audit_detail(k, "remove %s", board);
+	rc = vmac_board_key_remove(h->store, board, err, sizeof(err));
 	if (rc < 0)
 		return http_reply(c, rc == -VMAC_ESTOREFULL ? 507 : MHD_HTTP_INTERNAL_SERVER_ERROR,
 		                  http_error_body(err));

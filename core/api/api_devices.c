@@ -1,6 +1,8 @@
 /* The endpoints of machines (docs/API.md): GET /api/status and
  * /api/devices[/NAME], operator input and cycles (through the bus's
- * request slots), the line console, and GET /api/live for the web UI. */
+ * request slots), the line console, and GET /api/live for the web UI.
+ * Input, cycles and the console's writes tell the audit trail what they
+ * asked, as the console writes it (audit.c). */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -17,6 +19,7 @@
 
 #include "../common/addr.h"
 #include "../common/errors.h"
+#include "../host/audit.h"
 #include "../loader/loader.h"
 #include "../reload/deploy.h"
 #include "console.h"
@@ -178,6 +181,18 @@ static unsigned run_input(struct vmac_http *h, struct vmac_bus_input_request *re
 	return req->rc == -VMAC_ENOTRUNNING ? MHD_HTTP_NOT_FOUND : MHD_HTTP_BAD_GATEWAY; /* else -VMAC_EDRIVER */
 }
 
+/* The audit trail's detail of operator input: what the console would
+ * write for it (washer-1.door:true, washer-1.program>quick: a param
+ * persisted, its own type). */
+static void audit_input(const struct conn *k, const struct vmac_bus_input_request *req)
+{
+	char text[2 * VMAC_NAME_MAX + 2 * VMAC_DRIVER_STR_MAX + 32];
+	vmac_audit_input(req, text, sizeof(text));
+	http_audit_detail(k, "%s", text);
+	if (req->persist)
+		http_audit_type(k, "param");
+}
+
 /* POST /api/devices/NAME/input {"name": ..., "value": ...}: operator input
  * to the device's driver, through the bus thread. */
 enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k)
@@ -189,6 +204,7 @@ enum MHD_Result http_device_input(struct vmac_http *h, struct MHD_Connection *c,
 	unsigned code = http_parse_input(device, k->body, k->len, k->too_big, &req, &why);
 	if (code)
 		return http_reply(c, code, http_error_body(why));
+	audit_input(k, &req);
 	code = run_input(h, &req, msg, sizeof(msg));
 	if (code == MHD_HTTP_OK)
 		return http_reply(c, MHD_HTTP_OK,
@@ -209,6 +225,7 @@ enum MHD_Result http_device_cycle(struct vmac_http *h, struct MHD_Connection *c,
 	unsigned code = http_parse_cycle(device, k->body, k->len, k->too_big, &req, &why);
 	if (code)
 		return http_reply(c, code, http_error_body(why));
+	audit_input(k, &req);
 	code = run_input(h, &req, msg, sizeof(msg));
 	if (code == MHD_HTTP_OK)
 		return http_reply(c, MHD_HTTP_OK, json_pack("{s:b, s:s}", "ok", 1, "reply", req.reply));
@@ -263,6 +280,17 @@ static unsigned console_input(void *ctx, struct vmac_bus_input_request *req, cha
 	return run_input(x->h, req, msg, msglen);
 }
 
+/* A submessage that wrote: its answer into the audit trail's detail, its
+ * device the event's (the first one's). */
+static void console_wrote(void *ctx, const char *device, const char *answer)
+{
+	struct console_ctx *x = ctx;
+	if (!x->wrote)
+		http_audit_device(x->k, device);
+	x->wrote = 1;
+	http_audit_detail(x->k, "%s", answer);
+}
+
 /* A new line: the status is read again for it. */
 static void console_new_line(void *ctx)
 {
@@ -284,10 +312,15 @@ enum MHD_Result http_console(struct vmac_http *h, struct MHD_Connection *c, cons
 		return http_reply(c, MHD_HTTP_SERVICE_UNAVAILABLE, http_error_body("out of memory"));
 	ops.device = console_device;
 	ops.input = console_input;
+	ops.wrote = console_wrote;
 	ops.ctx = x;
 	ops.may_operate = k->scope >= VMAC_SCOPE_OPERATE;
 	x->h = h;
+	x->k = k;
+	x->wrote = 0;
 	answer = http_console_answer(&ops, console_new_line, k->body);
+	if (!x->wrote)
+		http_audit_nothing(k); /* reads only: nothing to audit */
 	free(x);
 	return http_reply(c, MHD_HTTP_OK, answer);
 }

@@ -15,7 +15,7 @@ int http_valid_name(const char *s, size_t max)
 	return vmac_valid_name(s, max); /* core/common/name.h: never "." or ".." */
 }
 
-#define HTTP_ROUTE_ROW(endpoint, method, pattern, scope, handler) [endpoint] = {method, pattern, scope},
+#define HTTP_ROUTE_ROW(endpoint, method, pattern, scope, audit, handler) [endpoint] = {method, pattern, scope, audit},
 
 const struct http_route http_routes[HTTP_ROUTE_COUNT] = {HTTP_ROUTES(HTTP_ROUTE_ROW)};
 

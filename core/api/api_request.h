@@ -16,13 +16,16 @@
 
 /* Every route of the API (docs/API.md), declared once:
  *
- *   X(ENDPOINT, METHOD, PATTERN, SCOPE, HANDLER)
+ *   X(ENDPOINT, METHOD, PATTERN, SCOPE, AUDIT, HANDLER)
  *
  * METHOD is "GET" (HEAD too) or "POST". PATTERN is the path, in which one
  * segment may be NAME (a device's or driver's name: http_valid_name, so
  * never "." or ".."), ID (a name of digits only) or, last, FILE (the rest
  * of the path, whatever it holds). SCOPE is the token the route takes
- * (VMAC_SCOPE_NONE: none). HANDLER is the function of http_internal.h that
+ * (VMAC_SCOPE_NONE: none). AUDIT is the type of the audit event every
+ * request of the route makes (core/host/audit.h; docs/API.md "Audit
+ * trail"): every POST changes something and has one; NULL for a read,
+ * audited only when its token is refused. HANDLER is the function of http_internal.h that
  * answers it; only http.c reads that column, so this header and
  * api_request.c stay free of libmicrohttpd. From this list api_request.c
  * makes http_routes[] (below), http.c its handlers indexed the same way,
@@ -30,36 +33,36 @@
  * every row routes back to itself. No path matches two rows (a NAME holds
  * no slash), so the order is only the order GET /api lists them in. */
 #define HTTP_ROUTES(X)                                                                                                 \
-	X(HTTP_UI_PAGE, "GET", "/", VMAC_SCOPE_NONE, http_ui)                                                          \
-	X(HTTP_UI, "GET", "/ui/FILE", VMAC_SCOPE_NONE, http_ui)                                                        \
-	X(HTTP_HEALTH, "GET", "/api/health", VMAC_SCOPE_NONE, http_health)                                             \
-	X(HTTP_INDEX, "GET", "/api", VMAC_SCOPE_READ, http_index)                                                      \
-	X(HTTP_WHOAMI, "GET", "/api/whoami", VMAC_SCOPE_READ, http_whoami)                                             \
-	X(HTTP_STATUS, "GET", "/api/status", VMAC_SCOPE_READ, http_status)                                             \
-	X(HTTP_LIVE, "GET", "/api/live", VMAC_SCOPE_READ, http_live_stream)                                            \
-	X(HTTP_EVENTS, "GET", "/api/events", VMAC_SCOPE_READ, http_events_stream)                                      \
-	X(HTTP_EVENT_LOG, "GET", "/api/events/log", VMAC_SCOPE_READ, http_event_log)                                   \
-	X(HTTP_DEVICES, "GET", "/api/devices", VMAC_SCOPE_READ, http_devices)                                          \
-	X(HTTP_DEVICE, "GET", "/api/devices/NAME", VMAC_SCOPE_READ, http_devices)                                      \
-	X(HTTP_INPUT, "POST", "/api/devices/NAME/input", VMAC_SCOPE_OPERATE, http_device_input)                        \
-	X(HTTP_CYCLE, "POST", "/api/devices/NAME/cycle", VMAC_SCOPE_OPERATE, http_device_cycle)                        \
-	X(HTTP_RECORD, "POST", "/api/devices/NAME/record", VMAC_SCOPE_OPERATE, http_record)                            \
-	X(HTTP_CONSOLE, "POST", "/api/console", VMAC_SCOPE_READ, http_console)                                         \
-	X(HTTP_RECORDINGS, "GET", "/api/recordings", VMAC_SCOPE_READ, http_recordings)                                 \
-	X(HTTP_RECORDING, "GET", "/api/recordings/ID", VMAC_SCOPE_READ, http_recording)                                \
-	X(HTTP_SITE, "GET", "/api/site", VMAC_SCOPE_READ, http_site)                                                   \
-	X(HTTP_DRIVERS, "GET", "/api/drivers", VMAC_SCOPE_READ, http_driver_versions)                                  \
-	X(HTTP_DRIVER, "GET", "/api/drivers/NAME", VMAC_SCOPE_READ, http_driver_versions)                              \
-	X(HTTP_MANIFEST, "GET", "/api/drivers/NAME/manifest", VMAC_SCOPE_READ, http_driver_manifest)                   \
-	X(HTTP_UPLOAD, "POST", "/api/drivers/NAME", VMAC_SCOPE_DEPLOY, http_driver_upload)                             \
-	X(HTTP_ACTIVATE, "POST", "/api/drivers/NAME/activate", VMAC_SCOPE_DEPLOY, http_driver_activate)                \
-	X(HTTP_ROLLBACK, "POST", "/api/drivers/NAME/rollback", VMAC_SCOPE_DEPLOY, http_driver_rollback)                \
-	X(HTTP_BOARDS, "GET", "/api/boards", VMAC_SCOPE_READ, http_boards)                                             \
-	X(HTTP_BOARD_ENROLL, "POST", "/api/boards/NAME", VMAC_SCOPE_DEPLOY, http_board_enroll)                         \
-	X(HTTP_BOARD_REMOVE, "POST", "/api/boards/NAME/remove", VMAC_SCOPE_DEPLOY, http_board_remove)                  \
-	X(HTTP_METRICS, "GET", "/metrics", VMAC_SCOPE_READ, http_metrics)
+	X(HTTP_UI_PAGE, "GET", "/", VMAC_SCOPE_NONE, NULL, http_ui)                                                    \
+	X(HTTP_UI, "GET", "/ui/FILE", VMAC_SCOPE_NONE, NULL, http_ui)                                                  \
+	X(HTTP_HEALTH, "GET", "/api/health", VMAC_SCOPE_NONE, NULL, http_health)                                       \
+	X(HTTP_INDEX, "GET", "/api", VMAC_SCOPE_READ, NULL, http_index)                                                \
+	X(HTTP_WHOAMI, "GET", "/api/whoami", VMAC_SCOPE_READ, NULL, http_whoami)                                       \
+	X(HTTP_STATUS, "GET", "/api/status", VMAC_SCOPE_READ, NULL, http_status)                                       \
+	X(HTTP_LIVE, "GET", "/api/live", VMAC_SCOPE_READ, NULL, http_live_stream)                                      \
+	X(HTTP_EVENTS, "GET", "/api/events", VMAC_SCOPE_READ, NULL, http_events_stream)                                \
+	X(HTTP_EVENT_LOG, "GET", "/api/events/log", VMAC_SCOPE_READ, NULL, http_event_log)                             \
+	X(HTTP_DEVICES, "GET", "/api/devices", VMAC_SCOPE_READ, NULL, http_devices)                                    \
+	X(HTTP_DEVICE, "GET", "/api/devices/NAME", VMAC_SCOPE_READ, NULL, http_devices)                                \
+	X(HTTP_INPUT, "POST", "/api/devices/NAME/input", VMAC_SCOPE_OPERATE, "input", http_device_input)               \
+	X(HTTP_CYCLE, "POST", "/api/devices/NAME/cycle", VMAC_SCOPE_OPERATE, "cycle", http_device_cycle)               \
+	X(HTTP_RECORD, "POST", "/api/devices/NAME/record", VMAC_SCOPE_OPERATE, "record", http_record)                  \
+	X(HTTP_CONSOLE, "POST", "/api/console", VMAC_SCOPE_READ, "console", http_console)                              \
+	X(HTTP_RECORDINGS, "GET", "/api/recordings", VMAC_SCOPE_READ, NULL, http_recordings)                           \
+	X(HTTP_RECORDING, "GET", "/api/recordings/ID", VMAC_SCOPE_READ, NULL, http_recording)                          \
+	X(HTTP_SITE, "GET", "/api/site", VMAC_SCOPE_READ, NULL, http_site)                                             \
+	X(HTTP_DRIVERS, "GET", "/api/drivers", VMAC_SCOPE_READ, NULL, http_driver_versions)                            \
+	X(HTTP_DRIVER, "GET", "/api/drivers/NAME", VMAC_SCOPE_READ, NULL, http_driver_versions)                        \
+	X(HTTP_MANIFEST, "GET", "/api/drivers/NAME/manifest", VMAC_SCOPE_READ, NULL, http_driver_manifest)             \
+	X(HTTP_UPLOAD, "POST", "/api/drivers/NAME", VMAC_SCOPE_DEPLOY, "reload", http_driver_upload)                   \
+	X(HTTP_ACTIVATE, "POST", "/api/drivers/NAME/activate", VMAC_SCOPE_DEPLOY, "activate", http_driver_activate)    \
+	X(HTTP_ROLLBACK, "POST", "/api/drivers/NAME/rollback", VMAC_SCOPE_DEPLOY, "rollback", http_driver_rollback)    \
+	X(HTTP_BOARDS, "GET", "/api/boards", VMAC_SCOPE_READ, NULL, http_boards)                                       \
+	X(HTTP_BOARD_ENROLL, "POST", "/api/boards/NAME", VMAC_SCOPE_DEPLOY, "board", http_board_enroll)                \
+	X(HTTP_BOARD_REMOVE, "POST", "/api/boards/NAME/remove", VMAC_SCOPE_DEPLOY, "board", http_board_remove)         \
+	X(HTTP_METRICS, "GET", "/metrics", VMAC_SCOPE_READ, NULL, http_metrics)
 
-#define HTTP_ROUTE_ENUM(endpoint, method, pattern, scope, handler) endpoint,
+#define HTTP_ROUTE_ENUM(endpoint, method, pattern, scope, audit, handler) endpoint,
 
 /* The rows of HTTP_ROUTES, then what matches none of them. */
 enum http_endpoint {
@@ -73,6 +76,7 @@ struct http_route {
 	const char *method;
 	const char *pattern;
 	enum vmac_scope need;
+	const char *audit; /* the audit event's type; NULL: a read */
 };
 
 extern const struct http_route http_routes[HTTP_ROUTE_COUNT];

@@ -146,7 +146,7 @@ static int submessage(const struct vmac_console_ops *ops, const char *m, struct 
 {
 	const char *dot = strchr(m, '.'), *op = dot ? strpbrk(dot + 1, "?:>!") : NULL;
 	char device[VMAC_NAME_MAX + 1], name[VMAC_NAME_MAX + 1], what[2 * VMAC_NAME_MAX + 2];
-	size_t nd, nn;
+	size_t nd, nn, used;
 	int rc;
 	if (!dot || !op || (nd = (size_t)(dot - m)) >= sizeof(device) ||
 	    (nn = (size_t)(op - dot - 1)) >= sizeof(name) || !valid_name(m, nd) || !valid_name(dot + 1, nn) ||
@@ -160,10 +160,13 @@ static int submessage(const struct vmac_console_ops *ops, const char *m, struct 
 	memcpy(name, dot + 1, nn);
 	name[nn] = 0;
 	snprintf(what, sizeof(what), "%s.%s", device, name);
+	used = a->used;
 	rc = *op == '?' ? read_value(ops, device, name, a, e, what)
 	                : write_value(ops, device, name, *op, op + 1, a, e, what);
 	if (rc)
 		put(a, "%s#%d", what, rc);
+	if (*op != '?' && ops->wrote && used < a->len)
+		ops->wrote(ops->ctx, device, a->p + used);
 	return rc;
 }
 

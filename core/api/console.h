@@ -34,6 +34,10 @@ struct vmac_console_ops {
 	unsigned (*input)(void *ctx, struct vmac_bus_input_request *req, char *msg, size_t msglen);
 	void *ctx;
 	int may_operate; /* the caller's token has scope operate */
+	/* Each submessage that writes (:, > or !) as it was answered,
+	 * DEVICE.NAME:VALUE or DEVICE.NAME#CODE, and its device, for the audit
+	 * trail; NULL: not told. */
+	void (*wrote)(void *ctx, const char *device, const char *answer);
 };
 
 /* Answer one line (without its newline) into answer (one line, no newline)

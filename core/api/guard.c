@@ -10,7 +10,9 @@
  *   slow client is cut off by a reaper thread that shuts its socket down;
  *   libmicrohttpd's own timeout is reset by every byte);
  * - libmicrohttpd bounds connections per address (http_connections_per_address).
- * Each lock-out and each batch of cut-off connections is an event. */
+ * Each lock-out is said in the audit trail with the request that caused it
+ * (its type "lockout", audit.c), each batch of cut-off connections is an
+ * event. */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -27,14 +29,12 @@
  * whether it presented a token of the right shape. */
 static int key_of(struct MHD_Connection *c, const char *token, char *key, size_t len)
 {
-	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
-	char id[VMAC_TOKEN_ID_LEN + 1], addr[INET6_ADDRSTRLEN] = "?";
+	char id[VMAC_TOKEN_ID_LEN + 1], addr[INET6_ADDRSTRLEN];
 	if (token && vmac_token_id(token, id) == 0) {
 		snprintf(key, len, "token %s", id);
 		return 1;
 	}
-	if (ci && ci->client_addr && ci->client_addr->sa_family == AF_INET)
-		inet_ntop(AF_INET, &((const struct sockaddr_in *)ci->client_addr)->sin_addr, addr, sizeof(addr));
+	http_client_address(c, addr, sizeof(addr));
 	snprintf(key, len, "address %s", addr);
 	return 0;
 }
@@ -71,9 +71,10 @@ static struct guard_fail *entry(struct http_guard *g, const char *key, double no
 }
 
 /* One more failure of key: 1 when key was locked out already (answer 429),
- * with *wait_s until it is not; the failure that locks it is answered 401
- * and said in the events. */
-static int failed(struct vmac_http *h, const char *key, double now, double *wait_s)
+ * with *wait_s until it is not; the failure that locks it is answered 401,
+ * and what it locked is said in the audit trail with it (lockout: the
+ * request's note, empty otherwise). */
+static int failed(struct vmac_http *h, const char *key, double now, double *wait_s, char *lockout, size_t len)
 {
 	struct http_guard *g = &h->guard;
 	struct guard_fail *f;
@@ -95,15 +96,12 @@ static int failed(struct vmac_http *h, const char *key, double now, double *wait
 	}
 	pthread_mutex_unlock(&g->lock);
 	if (say == 1)
-		vmac_event_log_add(h->log, "auth", "",
-		                   "every entry of the API's failed-attempt table is locked out: a failing request of "
-		                   "anyone new is refused (429) until one expires");
-	else if (say == 2) {
-		char text[200];
-		snprintf(text, sizeof(text), "%u failed attempts with %s in %.0f s: locked out (429) for %.0f s",
-		         FAIL_LIMIT, key, FAIL_WINDOW_S, *wait_s + 0.5);
-		vmac_event_log_add(h->log, "auth", "", text);
-	}
+		snprintf(lockout, len,
+		         "every entry of the API's failed-attempt table is locked out: a failing request of anyone new "
+		         "is refused (429) until one expires");
+	else if (say == 2)
+		snprintf(lockout, len, "%u failed attempts with %s in %.0f s: locked out (429) for %.0f s", FAIL_LIMIT,
+		         key, FAIL_WINDOW_S, *wait_s + 0.5);
 	return locked;
 }
 
@@ -127,36 +125,64 @@ static enum MHD_Result too_many(struct MHD_Connection *c, const char *key, doubl
 	return http_reply(c, MHD_HTTP_TOO_MANY_REQUESTS, http_error_body(msg));
 }
 
-enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
+/* What the audit trail says of the request's token (k->audit). */
+static void note_token(struct http_audit_note *n, const char *auth, const char *token, int shaped, const char *key,
+                       const struct vmac_token_info *who, enum vmac_scope have)
+{
+	snprintf(n->key, sizeof(n->key), "%s", key);
+	n->token = !auth     ? HTTP_TOKEN_ABSENT
+	           : !shaped ? HTTP_TOKEN_MALFORMED
+	           : have    ? HTTP_TOKEN_VALID
+	                     : HTTP_TOKEN_INVALID;
+	if (shaped)
+		vmac_token_id(token, n->token_id);
+	if (have) {
+		snprintf(n->token_name, sizeof(n->token_name), "%s", who->name);
+		n->token_scope = have;
+	}
+}
+
+enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k,
                                 enum MHD_Result *ret)
 {
 	const char *auth = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
 	const char *token = auth && strncmp(auth, "Bearer ", 7) == 0 ? auth + 7 : NULL;
+	struct http_audit_note *n = k->audit;
+	struct vmac_token_info who;
 	double now = http_mono_s(), wait_s = 0;
-	enum vmac_scope have = VMAC_SCOPE_NONE;
+	enum vmac_scope have = VMAC_SCOPE_NONE, need = k->route.need;
 	char key[80], msg[160];
 	int shaped = key_of(c, token, key, sizeof(key));
+	memset(&who, 0, sizeof(who));
 	/* Without a token of the right shape nothing is looked up once the
 	 * address is locked; a token of the right shape is always checked. */
 	if (!shaped && locked_out(h, key, now, &wait_s)) {
+		note_token(n, auth, token, shaped, key, &who, have);
+		n->refused = 1;
 		*ret = too_many(c, key, wait_s);
 		return VMAC_SCOPE_NONE;
 	}
 	if (shaped)
-		have = vmac_token_check(h->store, token);
+		have = vmac_token_check_info(h->store, token, &who);
+	note_token(n, auth, token, shaped, key, &who, have);
 	if (have == VMAC_SCOPE_NONE) {
-		if (failed(h, key, now, &wait_s)) {
+		n->refused = 1;
+		if (failed(h, key, now, &wait_s, n->lockout, sizeof(n->lockout))) {
 			*ret = too_many(c, key, wait_s);
-			return VMAC_SCOPE_NONE;
+		} else {
+			*ret = http_reply_header(
+			    c, MHD_HTTP_UNAUTHORIZED,
+			    http_error_body(auth
+			                        ? "the token is not valid (unknown, revoked or malformed)"
+			                        : "a token is needed: Authorization: Bearer TOKEN (vmac token create)"),
+			    MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
 		}
-		*ret = http_reply_header(c, MHD_HTTP_UNAUTHORIZED,
-		                         http_error_body(auth ? "the token is not valid (unknown, revoked or malformed)"
-		                                              : "a token is needed: Authorization: Bearer TOKEN (vmac "
-		                                                "token create)"),
-		                         MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"vmac\"");
+		if (n->lockout[0])
+			n->type = "lockout";
 		return VMAC_SCOPE_NONE;
 	}
 	if (have < need) {
+		n->refused = 1;
 		snprintf(msg, sizeof(msg), "this needs a token of scope %s; this one is %s", vmac_scope_name(need),
 		         vmac_scope_name(have));
 		*ret = http_reply(c, MHD_HTTP_FORBIDDEN, http_error_body(msg));
@@ -177,7 +203,6 @@ void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_contex
 	pthread_mutex_lock(&g->lock);
 	if (code == MHD_CONNECTION_NOTIFY_STARTED) {
 		const union MHD_ConnectionInfo *fd = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
-		const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
 		for (i = 0; i < GUARD_CONNS && g->conns[i].fd >= 0; i++)
 			;
 		if (i < GUARD_CONNS && fd) {
@@ -185,10 +210,7 @@ void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_contex
 			slot->fd = fd->connect_fd;
 			slot->since = http_mono_s();
 			slot->phase = GUARD_HEADERS;
-			snprintf(slot->addr, sizeof(slot->addr), "?");
-			if (ci && ci->client_addr && ci->client_addr->sa_family == AF_INET)
-				inet_ntop(AF_INET, &((const struct sockaddr_in *)ci->client_addr)->sin_addr, slot->addr,
-				          sizeof(slot->addr));
+			http_client_address(c, slot->addr, sizeof(slot->addr));
 			*socket_context = slot;
 		}
 	} else if (slot) { /* closed: libmicrohttpd says so before it closes the socket */

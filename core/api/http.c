@@ -6,8 +6,9 @@
  * whoami here, the others in api_devices.c, api_drivers.c, api_events.c,
  * api_recordings.c, api_site.c and api_metrics.c (GET /metrics, and its
  * listener without a token). Every answer is counted by its status code
- * when it ends (GET /metrics shows them). http_internal.h holds what they
- * share. */
+ * when it ends (GET /metrics shows them), and every request that changes
+ * something, or is refused its token, is in the audit trail (audit.c).
+ * http_internal.h holds what they share. */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -37,13 +38,20 @@ double http_mono_s(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
 }
 
+/* The "error" of the last answer of 400 and up this thread queued
+ * (http_last_error). */
+static _Thread_local char last_error[240];
+
 /* Queue code with body as JSON (consumed) and one extra header if given. */
 enum MHD_Result http_reply_header(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
                                   const char *value)
 {
+	const char *error = code >= 400 ? json_string_value(json_object_get(body, "error")) : NULL;
 	char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
 	struct MHD_Response *r;
 	enum MHD_Result ret;
+	if (error)
+		snprintf(last_error, sizeof(last_error), "%s", error);
 	json_decref(body);
 	if (!text) {
 		static char oom[] = "{\"error\":\"out of memory\"}";
@@ -71,6 +79,16 @@ enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body
 json_t *http_error_body(const char *msg)
 {
 	return json_pack("{s:s}", "error", msg);
+}
+
+const char *http_last_error(void)
+{
+	return last_error;
+}
+
+void http_last_error_clear(void)
+{
+	last_error[0] = 0;
 }
 
 void http_count_answer(struct vmac_http *h, struct MHD_Connection *c)
@@ -169,12 +187,31 @@ enum MHD_Result http_whoami(struct vmac_http *h, struct MHD_Connection *c, const
 	return http_reply(c, MHD_HTTP_OK, json_pack("{s:s}", "scope", vmac_scope_name(k->scope)));
 }
 
-#define HTTP_ROUTE_HANDLER(endpoint, method, pattern, scope, handler) [endpoint] = handler,
+#define HTTP_ROUTE_HANDLER(endpoint, method, pattern, scope, audit, handler) [endpoint] = handler,
 
 /* The handler of each row of HTTP_ROUTES, indexed as http_routes[]. */
 static http_handler *const handlers[] = {HTTP_ROUTES(HTTP_ROUTE_HANDLER)};
 
 _Static_assert(sizeof(handlers) / sizeof(handlers[0]) == HTTP_ROUTE_COUNT, "a handler for every route");
+
+/* The whole request is in: the answer its route's handler queues, or the
+ * refusal of its method, token or path. */
+static enum MHD_Result answer(struct vmac_http *h, struct MHD_Connection *c, struct conn *k, const char *method,
+                              const char *url)
+{
+	enum MHD_Result ret;
+	http_last_error_clear();
+	http_route_find(method, url, &k->route); /* which endpoint, and the scope it needs (api_request.c) */
+	if (k->route.endpoint == HTTP_BAD_METHOD)
+		return http_reply(c, MHD_HTTP_METHOD_NOT_ALLOWED,
+		                  http_error_body("only GET, HEAD and POST are used here"));
+	k->audit->type = k->route.endpoint < HTTP_ROUTE_COUNT ? http_routes[k->route.endpoint].audit : NULL;
+	if (k->route.need != VMAC_SCOPE_NONE && !(k->scope = http_authorized(h, c, k, &ret)))
+		return ret;
+	if (k->route.endpoint == HTTP_NOT_FOUND)
+		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
+	return handlers[k->route.endpoint](h, c, k);
+}
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
                                   const char *version, const char *upload_data, size_t *upload_size, void **con_cls)
@@ -187,6 +224,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		k = calloc(1, sizeof(*k));
 		if (!k)
 			return MHD_NO;
+		k->audit = &k->note;
 		*con_cls = k;
 		http_guard_phase(c, h, GUARD_BODY); /* the headers came in time; now the body's deadline */
 		return MHD_YES;
@@ -207,15 +245,9 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return MHD_YES;
 	}
 	http_guard_phase(c, h, GUARD_ANSWERING); /* the whole request is in: no deadline while answering */
-	http_route_find(method, url, &k->route); /* which endpoint, and the scope it needs (api_request.c) */
-	if (k->route.endpoint == HTTP_BAD_METHOD)
-		return http_reply(c, MHD_HTTP_METHOD_NOT_ALLOWED,
-		                  http_error_body("only GET, HEAD and POST are used here"));
-	if (k->route.need != VMAC_SCOPE_NONE && !(k->scope = http_authorized(h, c, k->route.need, &ret)))
-		return ret;
-	if (k->route.endpoint == HTTP_NOT_FOUND)
-		return http_reply(c, MHD_HTTP_NOT_FOUND, http_error_body("no such endpoint (see docs/API.md)"));
-	return handlers[k->route.endpoint](h, c, k);
+	ret = answer(h, c, k, method, url);
+	http_audit_request(h, c, k, method, url); /* once, with the status just queued (audit.c) */
+	return ret;
 }
 
 /* A PEM file's text (at most 64 KiB), or NULL with err. */

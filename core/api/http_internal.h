@@ -107,14 +107,41 @@ struct vmac_http {
 
 #define INPUT_TIMEOUT_MS 2000 /* the bus thread answers within a tick; this bounds a stuck host */
 
+/* The token a request came with, as the audit trail names it. */
+enum http_token_state {
+	HTTP_TOKEN_ABSENT,    /* no Authorization header: "no token" */
+	HTTP_TOKEN_MALFORMED, /* a header, but not a token of the right shape: "a malformed token" */
+	HTTP_TOKEN_INVALID,   /* vmac_ID_SECRET the store does not take: "token ID (not valid)" */
+	HTTP_TOKEN_VALID,     /* "token ID "NAME" (SCOPE)" */
+};
+
+/* What the audit trail is told of a request (audit.c): the token it came
+ * with (guard.c), and what its handler adds to what the route says. */
+struct http_audit_note {
+	const char *type; /* the audit event's type: the route's AUDIT, "lockout", or as a handler says */
+	enum http_token_state token;
+	char token_id[VMAC_TOKEN_ID_LEN + 1];
+	char token_name[VMAC_TOKEN_NAME_MAX + 1];
+	enum vmac_scope token_scope; /* a valid token's, whether or not it was enough */
+	char key[80];                /* whose refusal it is: the guard's key, "token ID" or "address A" */
+	int refused;                 /* its token did not get in (401, 403, 429) */
+	char lockout[240];           /* this request locked its key out: what the guard says of it */
+	char device[VMAC_NAME_MAX + 1];
+	char detail[400];
+	int nothing; /* nothing to audit: it changed nothing and was not refused (a console of reads) */
+};
+
 /* A request as its handler gets it: the body, the route and the scope of
- * the token sent. */
+ * the token sent. audit points at note: a handler that gets k as const
+ * may still tell the audit trail more (http_audit_detail). */
 struct conn {
 	char *body;
 	size_t len;
 	int too_big;
 	struct http_match route; /* route.name: the path's NAME or ID; "" when it has none */
 	enum vmac_scope scope;   /* the token's; VMAC_SCOPE_NONE for a route that takes none */
+	struct http_audit_note *audit;
+	struct http_audit_note note;
 };
 
 /* The HANDLER of a row of HTTP_ROUTES (api_request.h): answers k on c. */
@@ -124,7 +151,9 @@ typedef enum MHD_Result http_handler(struct vmac_http *h, struct MHD_Connection 
 
 struct console_ctx {
 	struct vmac_http *h;
-	int fresh; /* the status was read for this line */
+	const struct conn *k; /* the request: its writes are told to the audit trail */
+	int fresh;            /* the status was read for this line */
+	int wrote;            /* a submessage of the body wrote (:, >, !) */
 	struct vmac_device_status dev;
 };
 
@@ -163,14 +192,22 @@ enum MHD_Result http_reply(struct MHD_Connection *c, unsigned code, json_t *body
 enum MHD_Result http_reply_header(struct MHD_Connection *c, unsigned code, json_t *body, const char *header,
                                   const char *value);
 json_t *http_error_body(const char *msg);
+/* The "error" of the last answer of 400 and up this thread queued through
+ * http_reply since http_last_error_clear ("" for none): the why of a
+ * refusal in the audit trail (a request is answered on one thread). */
+const char *http_last_error(void);
+void http_last_error_clear(void);
 /* The answer of the request on c has ended: counted by its status code (MHD_OPTION_NOTIFY_COMPLETED). */
 void http_count_answer(struct vmac_http *h, struct MHD_Connection *c);
 
-/* guard.c: the scope of the request's token when it has at least `need`;
- * else VMAC_SCOPE_NONE (0), with the answer (401, 403 or 429) queued into
- * *ret. */
-enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, enum vmac_scope need,
+/* guard.c: the scope of the request's token when it has at least the
+ * route's k->route.need; else VMAC_SCOPE_NONE (0), with the answer (401,
+ * 403 or 429) queued into *ret. Either way the token, and a lock-out this
+ * request caused, are in k->audit. */
+enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k,
                                 enum MHD_Result *ret);
+/* The client's address (IPv4 or IPv6) into out, "?" when unknown. */
+void http_client_address(struct MHD_Connection *c, char *out, size_t len);
 /* MHD_OPTION_NOTIFY_CONNECTION: a connection's deadlines start and end. */
 void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_context,
                        enum MHD_ConnectionNotificationCode code);
@@ -181,6 +218,26 @@ int http_guard_start(struct vmac_http *h);
 void http_guard_stop(struct vmac_http *h);
 enum MHD_Result http_stream_response(struct MHD_Connection *c, MHD_ContentReaderCallback read, void *cls,
                                      MHD_ContentReaderFreeCallback done);
+
+/* audit.c: the audit trail of the API (docs/API.md, "Audit trail").
+ * Once per request, after its answer was queued: an audit event when the
+ * request changes something (its route has an AUDIT type, every POST) or
+ * its token was refused, with the route, the status, the token's id,
+ * name and scope, the client's address and the handler's detail. */
+void http_audit_request(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k, const char *method,
+                        const char *url);
+/* A handler's word on its request, added to what the route says (several
+ * calls are joined by a blank): "washer-1.door:true", "washer 1.1.0 (id
+ * 3)". At most 400 bytes in all. */
+void http_audit_detail(const struct conn *k, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* The machine, driver or board the event is about, when the path does not
+ * name it (the console). */
+void http_audit_device(const struct conn *k, const char *device);
+/* Another type than the route's (an input that persists is a "param"). */
+void http_audit_type(const struct conn *k, const char *type);
+/* The request changed nothing and asked to change nothing (a console of
+ * reads only): no event, unless its token was refused. */
+void http_audit_nothing(const struct conn *k);
 
 /* The handlers of HTTP_ROUTES, by the file they are in. */
 /* http.c */

@@ -13,28 +13,34 @@
 
 struct follow {
 	int json;
-	long count; /* stop after this many events; 0: never */
+	const char *kind; /* only events of this kind; NULL: all */
+	long count;       /* stop after this many events; 0: never */
 	long seen;
 	char line[4096];
 	size_t len;
 	char data[4096];
 };
 
+/* One event, unless --kind leaves it out (then it is not counted). */
 static void print_event(struct follow *f)
 {
-	json_t *e;
+	json_t *e = json_loads(f->data, 0, NULL);
+	const char *kind = json_string_value(json_object_get(e, "kind")),
+	           *text = json_string_value(json_object_get(e, "text"));
+	time_t t = (time_t)json_real_value(json_object_get(e, "time"));
+	char when[16];
+	if (!e || (f->kind && (!kind || strcmp(kind, f->kind) != 0))) {
+		json_decref(e);
+		return;
+	}
 	if (f->json) {
 		printf("%s\n", f->data);
-	} else if ((e = json_loads(f->data, 0, NULL)) != NULL) {
-		time_t t = (time_t)json_real_value(json_object_get(e, "time"));
-		char when[16];
-		const char *kind = json_string_value(json_object_get(e, "kind")),
-		           *text = json_string_value(json_object_get(e, "text"));
+	} else {
 		strftime(when, sizeof(when), "%H:%M:%S", localtime(&t));
 		printf("%lld %s %-14s %s\n", (long long)json_integer_value(json_object_get(e, "seq")), when,
 		       kind ? kind : "?", text ? text : "");
-		json_decref(e);
 	}
+	json_decref(e);
 	fflush(stdout);
 	f->seen++;
 }
@@ -72,12 +78,14 @@ static int on_data(void *ctx, const char *data, size_t len)
 	return 0;
 }
 
-enum { EVENTS_AFTER = VMAC_CMD_OWN, EVENTS_COUNT };
+enum { EVENTS_AFTER = VMAC_CMD_OWN, EVENTS_COUNT, EVENTS_KIND };
 
 static const struct vmac_cmd_option events_options[] = {
     [EVENTS_AFTER - VMAC_CMD_OWN] = {"after", NULL, 0, "SEQ", NULL, NULL,
                                      "only the events after SEQ (default 0: all it keeps)"},
     [EVENTS_COUNT - VMAC_CMD_OWN] = {"count", NULL, 0, "N", NULL, NULL, "stop after N events (default: never)"},
+    [EVENTS_KIND - VMAC_CMD_OWN] = {"kind", NULL, 0, "KIND", NULL, NULL,
+                                    "only events of this kind, e.g. audit: who changed what (default: all)"},
     {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
 
 static int events_run(const struct vmac_cmd_args *a)
@@ -105,6 +113,7 @@ static int events_run(const struct vmac_cmd_args *a)
 	if (!(f = calloc(1, sizeof(*f))))
 		return 2;
 	f->json = a->opt[VMAC_CMD_JSON] != NULL;
+	f->kind = a->opt[EVENTS_KIND];
 	f->count = count;
 	snprintf(path, sizeof(path), "/api/events?after=%llu", after);
 	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
@@ -129,7 +138,9 @@ const struct vmac_cmd vmac_events_cmd = {
     .summary = "follow the host's events as they happen",
     .about = "Follow the host's events (attached, dropped, driver errors, ...) as they happen: the ones it\n"
              "still keeps after SEQ, then every new one, one line each: seq, local time, kind, text (with\n"
-             "--json: each event's JSON). Needs a token of scope read.\n"
+             "--json: each event's JSON). --kind audit shows the audit trail: every request that changed\n"
+             "something, or was refused, with its token, name, scope and address. Needs a token of scope\n"
+             "read.\n"
              "Exit 0 when --count is reached or the host ends the stream, 1 when it cannot be followed,\n"
              "2 wrong usage.\n",
     .common = VMAC_CMD_API,

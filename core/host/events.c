@@ -15,6 +15,7 @@ void vmac_event_log_init(struct vmac_event_log *log)
 	pthread_cond_init(&log->grew, &attr);
 	pthread_condattr_destroy(&attr);
 	log->next_seq = 1;
+	vmac_audit_limit_init(&log->audit);
 }
 
 void vmac_event_log_start_at(struct vmac_event_log *log, uint64_t seq)

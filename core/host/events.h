@@ -1,13 +1,15 @@
 /* The host's event log: the last events (attached, dropped, driver errors,
- * missing drivers, malformed frames) kept in memory for the status API and
+ * missing drivers, malformed frames, audit: audit.h) kept in memory for the status API and
  * the event stream, echoed (vmacd: to stderr or the journal), and copied into the store by the main
- * thread (vmac_store_events_add). Written by the main thread, read by the HTTP threads. */
+ * thread (vmac_store_events_add). Written by the main thread (and by the API's and MQTT's threads:
+ * the audit trail, audit.h), read by the HTTP threads. */
 #ifndef VMAC_EVENTS_H
 #define VMAC_EVENTS_H
 
 #include <pthread.h>
 #include <stdint.h>
 
+#include "audit.h"
 #include "bus.h"
 
 #define VMAC_EVENT_LOG_SIZE 100
@@ -38,6 +40,9 @@ struct vmac_event_log {
 	struct vmac_event ring[VMAC_EVENT_LOG_SIZE];
 	struct vmac_event_count kinds[VMAC_EVENT_KINDS]; /* in order of first sight; the last counts the rest */
 	int nkinds;
+	/* The audit trail's rate limit on refusals (audit.h): in the log, so
+	 * that every thread that adds events goes through the same one. */
+	struct vmac_audit_limit audit;
 };
 
 void vmac_event_log_init(struct vmac_event_log *log);

@@ -6,13 +6,16 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "../common/file.h"
+#include "../host/audit.h"
 #include "../loader/loader.h"
 #include "../recorder/recording.h"
 #include "../reload/deploy.h"
 
 #define STALLED_KEPT 32
+#define OUTBOX_BATCH 64 /* audit outbox rows taken per look */
 
 struct vmac_mainloop {
 	const struct vmac_config *cfg;
@@ -35,6 +38,12 @@ struct vmac_mainloop {
 	/* The board keys the bus has: the store's at keys_version. */
 	uint64_t keys_version;
 	int keys_sent;
+	/* The audit outbox (`vmac token`'s rows): looked at when its version
+	 * changed; rows up to outbox_taken are in the log (a delete that
+	 * failed is tried again, the rows not logged twice). */
+	uint64_t outbox_version;
+	int outbox_looked, outbox_failing;
+	int64_t outbox_taken, outbox_deleted;
 };
 
 static double wall_s(const struct vmac_mainloop *l)
@@ -405,6 +414,58 @@ static void sync_keys(struct vmac_mainloop *l)
 	free(x.k);
 }
 
+/* A row of the audit outbox into the log, as an audit event from this
+ * machine (`local`), its time in its text: the host takes it after the
+ * fact, and its own seq and time are when it did. */
+static void take_row(void *ctx, const struct vmac_audit_row *r)
+{
+	struct vmac_mainloop *l = ctx;
+	struct vmac_audit a;
+	char why[sizeof(r->why) + 64], when[32];
+	time_t t = (time_t)r->time;
+	struct tm tm;
+	strftime(when, sizeof(when), "%Y-%m-%dT%H:%M:%SZ", gmtime_r(&t, &tm));
+	snprintf(why, sizeof(why), "%s%sat %s", r->why, r->why[0] ? "; " : "", when);
+	memset(&a, 0, sizeof(a));
+	a.type = r->type;
+	a.who = r->who;
+	a.where = "local";
+	a.what = r->what;
+	a.result = r->result;
+	a.why = why;
+	a.device = "";
+	a.key = strcmp(r->result, "ok") != 0 ? "local" : NULL; /* a refusal, rate-limited as any */
+	vmac_audit_add(l->log, &a);
+	if (r->id > l->outbox_taken)
+		l->outbox_taken = r->id;
+}
+
+/* What `vmac token` changed while the host ran (or before it started):
+ * the outbox's rows into the log, then out of the store. Looked at when
+ * the store's data_version says another process wrote (as for the board
+ * keys), at once at start. A failure is said once. */
+static void take_outbox(struct vmac_mainloop *l)
+{
+	uint64_t version = vmac_store_audit_version(l->store);
+	char err[512], text[600];
+	int n = 0;
+	if (l->outbox_looked && version == l->outbox_version && l->outbox_deleted == l->outbox_taken)
+		return;
+	l->outbox_looked = 1;
+	l->outbox_version = version;
+	do {
+		n = vmac_store_audit_list(l->store, l->outbox_taken, OUTBOX_BATCH, take_row, l, err, sizeof(err));
+	} while (n == OUTBOX_BATCH);
+	if (n >= 0 && l->outbox_taken > l->outbox_deleted &&
+	    (n = vmac_store_audit_delete(l->store, l->outbox_taken, err, sizeof(err))) == 0)
+		l->outbox_deleted = l->outbox_taken;
+	if (n < 0 && !l->outbox_failing) {
+		snprintf(text, sizeof(text), "the audit outbox of vmac token cannot be taken: %s", err);
+		say(l, "warning", "", text);
+	}
+	l->outbox_failing = n < 0;
+}
+
 void vmac_mainloop_service(struct vmac_mainloop *l)
 {
 	struct vmac_bus_msg m;
@@ -430,6 +491,8 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 	}
 	vmac_bus_workers_service(l->bus);
 	sync_keys(l);
+	take_outbox(l);
+	vmac_audit_flush(l->log); /* a window of refusals that has ended says what it left unsaid */
 	store_checkpoints(l);
 	store_events(l);
 }

@@ -19,8 +19,8 @@
 
 #include "site.h"
 
-static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile, &mqtt_ha_profile, &mqtt_health_profile,
-                                                      &mqtt_sparkplug_profile, &mqtt_site_profile};
+static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile,    &mqtt_ha_profile,   &mqtt_health_profile,
+                                                      &mqtt_sparkplug_profile, &mqtt_site_profile, &mqtt_audit_profile};
 #define NPROFILES (int)(sizeof(profiles) / sizeof(profiles[0]))
 
 double mqtt_now_s(void)
@@ -564,6 +564,7 @@ struct vmac_mqtt *vmac_mqtt_start(const struct vmac_mqtt_settings *s, const stru
 	m->s = *s;
 	m->bus = bus;
 	m->log = log;
+	m->audit_after = vmac_event_log_next_seq(log) - 1; /* audit events from now on go out (mqtt_audit.c) */
 	m->site = site;
 	m->status.devices = calloc(cfg->max_devices, sizeof(*m->status.devices));
 	m->status.slot_load = calloc((size_t)1 << cfg->max_level, sizeof(*m->status.slot_load));

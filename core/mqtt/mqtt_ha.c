@@ -404,8 +404,9 @@ static void publish_config(struct vmac_mqtt *m, const char *topic, json_t *o)
 	json_decref(o);
 }
 
-/* The host itself: a device with its connection and its health
- * (PREFIX/HOST/_health, mqtt_health.c), all diagnostic. */
+/* The host itself: a device with its connection, its health
+ * (PREFIX/HOST/_health, mqtt_health.c) and its audit trail
+ * (PREFIX/HOST/audit, mqtt_audit.c), all diagnostic. */
 static void publish_host(struct vmac_mqtt *m)
 {
 	static const struct {
@@ -448,6 +449,16 @@ static void publish_host(struct vmac_mqtt *m)
 		                             fields[i].dc, fields[i].state_class, fields[i].enabled));
 	}
 	json_decref(o);
+	/* The audit trail (mqtt_audit.c): an event entity whose event_type is
+	 * the audit event's type, and whose attributes are the rest. */
+	snprintf(uid, sizeof(uid), "vmac_%s_audit", host_id);
+	snprintf(state, sizeof(state), "%s/%s/audit", m->s.prefix, m->s.host_id);
+	snprintf(topic, sizeof(topic), "%s/event/%s/audit/config", m->s.discovery_prefix, host_id);
+	publish_config(m, topic,
+	               json_pack("{s:s, s:s, s:s, s:o, s:s, s:[{s:s}], s:O, s:o}", "name", "Audit", "unique_id", uid,
+	                         "state_topic", state, "event_types", mqtt_audit_event_types(), "entity_category",
+	                         "diagnostic", "availability", "topic", host_status, "device", device, "origin",
+	                         origin()));
 	json_decref(device);
 }
 

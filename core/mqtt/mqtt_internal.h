@@ -13,6 +13,8 @@
  *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what the two share)
  *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
  *                    /api/site serves, on the network thread
+ *   mqtt_audit.c     commands audited (core/host/audit.h), and profile "audit": the host's audit events
+ *                    published for Home Assistant's event entity
  *   mqtt_stats.c     the client's connections and messages counted for GET /metrics (process-wide)
  * A profile is one way of speaking MQTT over a connection and the same device table (docs/MQTT.md,
  * "Adding a profile"). Everything here runs on the publisher thread unless it says otherwise. */
@@ -157,7 +159,7 @@ struct mqtt_profile {
 };
 
 extern const struct mqtt_profile mqtt_native_profile, mqtt_ha_profile, mqtt_sparkplug_profile, mqtt_site_profile,
-    mqtt_health_profile;
+    mqtt_health_profile, mqtt_audit_profile;
 
 /* Sparkplug's session (mqtt_sparkplug.c). Before every CONNECT the
  * network thread registers the NDEATH with bdseq_next as the will, makes it
@@ -198,6 +200,7 @@ struct vmac_mqtt {
 	double host_health_sent_s, host_health_next_s;
 	struct mqtt_spb spb;
 	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
+	uint64_t audit_after;   /* audit (mqtt_audit.c): the events of the log up to this seq were looked at */
 };
 
 /* The process's client counted (mqtt_stats.c: vmac_mqtt_stats reads it);
@@ -290,6 +293,15 @@ void mqtt_conn_redial(struct mqtt_conn *c);
 /* mqtt_health.c: the event types a machine of this manifest publishes on
  * PREFIX/HOST/DEVICE/_event (a new JSON array of strings). */
 json_t *mqtt_health_event_types(json_t *manifest);
+
+/* mqtt_audit.c: a command that came on connection conn (MQTT_CONN_*)
+ * in the audit trail: its topic, its device (NULL: none), the input it
+ * made (NULL: it did not parse), and code: "ok" or what was published on
+ * _error (refused, malformed, ...) with why. */
+void mqtt_audit_command(struct vmac_mqtt *m, int conn, const char *topic, const char *device,
+                        const struct vmac_bus_input_request *req, const char *code, const char *why);
+/* The event_types of the host's audit event entity (a new JSON array). */
+json_t *mqtt_audit_event_types(void);
 
 /* mqtt_sparkplug.c: the NDEATH payload with bdSeq (malloc'd, *len its size;
  * NULL when out of memory), for the will of a connection. Any thread. */

@@ -3,7 +3,8 @@
  * values (retained), and the command topics PREFIX/HOST/DEVICE/set/NAME
  * and .../cmd/NAME handed to the bus exactly as POST
  * /api/devices/NAME/input hands them (the driver validates; a refusal is
- * published back on PREFIX/HOST/DEVICE/_error, never more than that).
+ * published back on PREFIX/HOST/DEVICE/_error, never more than that;
+ * each command, carried out or not, is in the audit trail).
  * The host's own per-device topics begin with '_', which no name of a
  * driver's can ([a-z][a-z0-9_]*): a variable named error or availability
  * has its state topic like any other. */
@@ -287,8 +288,19 @@ static json_t *declaration(struct vmac_mqtt *m, const char *device, const char *
 	return decl ? decl : json_object_get(json_object_get(d->manifest, "params"), name);
 }
 
+/* A command not carried out: the error published back on _error (device
+ * NULL: the host's error topic) and in the audit trail, with the input
+ * when it parsed. */
+static void refuse(struct vmac_mqtt *m, const char *device, const struct mqtt_message *msg, const char *name,
+                   const struct vmac_bus_input_request *req, const char *code, const char *why)
+{
+	mqtt_publish_error(m, device, msg->topic, name, code, why);
+	mqtt_audit_command(m, msg->conn, msg->topic, device, req, code, why);
+}
+
 /* PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME: operator input, as POST
- * /api/devices/DEVICE/input {"name": NAME, "value": payload} does it. */
+ * /api/devices/DEVICE/input {"name": NAME, "value": payload} does it; each
+ * one, carried out or not, is in the audit trail (mqtt_audit.c). */
 static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *rest)
 {
 	struct vmac_bus_input_request req;
@@ -297,8 +309,7 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 	size_t dn = slash1 ? (size_t)(slash1 - rest) : 0, kn = slash2 ? (size_t)(slash2 - slash1 - 1) : 0;
 	if (!slash2 || dn >= sizeof(device) || kn >= sizeof(kind) || strlen(slash2 + 1) >= sizeof(name) ||
 	    strchr(slash2 + 1, '/')) {
-		mqtt_publish_error(m, NULL, msg->topic, NULL, "malformed",
-		                   "expected PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME");
+		refuse(m, NULL, msg, NULL, NULL, "malformed", "expected PREFIX/HOST/DEVICE/set/NAME or .../cmd/NAME");
 		return;
 	}
 	memcpy(device, rest, dn);
@@ -307,13 +318,12 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 	kind[kn] = 0;
 	snprintf(name, sizeof(name), "%s", slash2 + 1);
 	if (!device_ok(device)) {
-		mqtt_publish_error(m, NULL, msg->topic, name, "malformed", "no such device");
+		refuse(m, NULL, msg, name, NULL, "malformed", "no such device");
 		return;
 	}
 	if ((strcmp(kind, "set") != 0 && strcmp(kind, "cmd") != 0) || !name_ok(name)) {
-		mqtt_publish_error(
-		    m, device, msg->topic, name, "malformed",
-		    "expected .../set/NAME or .../cmd/NAME, NAME a variable, param or command of the driver");
+		refuse(m, device, msg, name, NULL, "malformed",
+		       "expected .../set/NAME or .../cmd/NAME, NAME a variable, param or command of the driver");
 		return;
 	}
 	memset(&req, 0, sizeof(req));
@@ -323,24 +333,26 @@ static void command(struct vmac_mqtt *m, const struct mqtt_message *msg, const c
 		req.value.type = VMAC_VALUE_NONE; /* a button: the command without an argument */
 	} else if (mqtt_payload_typed(msg->payload, msg->len > MQTT_TEXT_PAYLOAD_MAX ? -1 : msg->len,
 	                              declaration(m, device, kind, name), &req.value, &why) != 0) {
-		mqtt_publish_error(m, device, msg->topic, name, "malformed", why);
+		refuse(m, device, msg, name, NULL, "malformed", why);
 		return;
 	}
 	if (strcmp(kind, "set") == 0 && req.value.type == VMAC_VALUE_NONE) {
-		mqtt_publish_error(m, device, msg->topic, name, "malformed", "set needs a value");
+		refuse(m, device, msg, name, &req, "malformed", "set needs a value");
 		return;
 	}
 	if (vmac_bus_request_input(m->bus, &req, MQTT_INPUT_TIMEOUT_MS) != 0) {
-		mqtt_publish_error(m, device, msg->topic, name, "busy", req.reply);
+		refuse(m, device, msg, name, &req, "busy", req.reply);
 		return;
 	}
-	if (req.rc == 0)
-		return; /* the new value is published from the next status copy */
-	mqtt_publish_error(m, device, msg->topic, name,
-	                   req.rc > 0                    ? "refused"
-	                   : req.rc == -VMAC_ENOTRUNNING ? "not_running"
-	                                                 : "driver_failed",
-	                   req.reply);
+	if (req.rc == 0) { /* the new value is published from the next status copy */
+		mqtt_audit_command(m, msg->conn, msg->topic, device, &req, "ok", NULL);
+		return;
+	}
+	refuse(m, device, msg, name, &req,
+	       req.rc > 0                    ? "refused"
+	       : req.rc == -VMAC_ENOTRUNNING ? "not_running"
+	                                     : "driver_failed",
+	       req.reply);
 }
 
 static void connected(struct vmac_mqtt *m)

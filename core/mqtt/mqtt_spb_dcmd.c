@@ -1,7 +1,7 @@
 /* Sparkplug B's DCMD (docs/MQTT.md, "Sparkplug B"): each metric of a
  * spBv1.0/GROUP/DCMD/EDGE/DEVICE payload is operator input through the
  * bus's request slots, with the native profile's checks and refusals
- * (refusals on PREFIX/HOST/DEVICE/_error and in the host's events); and
+ * (refusals on PREFIX/HOST/DEVICE/_error), each one in the audit trail; and
  * the unpacking of received payloads that mqtt_sparkplug.c's NCMD shares.
  * Publisher thread. */
 #include "mqtt_spb.h"
@@ -69,14 +69,15 @@ static int metric_input(const Metric *mt, struct vmac_value *v, const char **why
 }
 
 /* A DCMD not carried out: the error answered on PREFIX/HOST/DEVICE/_error
- * (the native profile's), and an event in the host's log, as for an NCMD,
- * so that what the broker's clients asked and were refused is on record. */
-static void dcmd_refused(struct vmac_mqtt *m, const char *device, const char *topic, const char *name, const char *code,
-                         const char *text)
+ * (the native profile's), and in the audit trail (mqtt_audit.c), so that
+ * what the broker's clients asked and were refused is on record. */
+static void dcmd_refused(struct vmac_mqtt *m, const char *device, const char *topic, const char *name,
+                         const struct vmac_bus_input_request *req, const char *code, const char *text)
 {
+	char why[VMAC_EVENT_TEXT];
 	mqtt_publish_error(m, device, topic, name, code, text);
-	mqtt_event(m, device ? device : "", "Sparkplug: a DCMD%s%s on %s refused (%s): %s", name ? " metric " : "",
-	           name ? name : "", topic, code, text);
+	snprintf(why, sizeof(why), "%s%s%s%s", name ? "metric " : "", name ? name : "", name ? ": " : "", text);
+	mqtt_audit_command(m, MQTT_CONN_SPARKPLUG, topic, device, req, code, why);
 }
 
 /* One DCMD metric into the bus, as the native profile's set/cmd topics. */
@@ -87,7 +88,8 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 	int command = 0;
 	size_t i;
 	if (!name || !name[0]) {
-		dcmd_refused(m, device, topic, NULL, "malformed", "a metric without a name (vmacd uses no aliases)");
+		dcmd_refused(m, device, topic, NULL, NULL, "malformed",
+		             "a metric without a name (vmacd uses no aliases)");
 		return;
 	}
 	if (strncmp(name, COMMANDS, strlen(COMMANDS)) == 0) {
@@ -98,7 +100,7 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 		if (!islower((unsigned char)name[i]) && !isdigit((unsigned char)name[i]) && name[i] != '_')
 			break;
 	if (!name[0] || name[i] || i > VMAC_DRIVER_NAME_MAX || !islower((unsigned char)name[0])) {
-		dcmd_refused(m, device, topic, mt->name, "refused",
+		dcmd_refused(m, device, topic, mt->name, NULL, "refused",
 		             "no such metric: expected a variable, a param or Commands/NAME of the driver");
 		return;
 	}
@@ -106,12 +108,12 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 	snprintf(req.device, sizeof(req.device), "%s", device);
 	snprintf(req.name, sizeof(req.name), "%s", name);
 	if (metric_input(mt, &req.value, &why) != 0) {
-		dcmd_refused(m, device, topic, mt->name, "malformed", why);
+		dcmd_refused(m, device, topic, mt->name, NULL, "malformed", why);
 		return;
 	}
 	if (command) { /* true runs it; false is no command */
 		if (req.value.type != VMAC_VALUE_BOOL) {
-			dcmd_refused(m, device, topic, mt->name, "malformed", "a command metric takes a Boolean");
+			dcmd_refused(m, device, topic, mt->name, NULL, "malformed", "a command metric takes a Boolean");
 			return;
 		}
 		if (req.value.number == 0)
@@ -119,19 +121,21 @@ static void dcmd_metric(struct vmac_mqtt *m, const char *device, const char *top
 		req.value.type = VMAC_VALUE_NONE;
 		req.value.number = 0;
 	} else if (req.value.type == VMAC_VALUE_NONE) {
-		dcmd_refused(m, device, topic, mt->name, "malformed", "set needs a value");
+		dcmd_refused(m, device, topic, mt->name, NULL, "malformed", "set needs a value");
 		return;
 	}
 	if (vmac_bus_request_input(m->bus, &req, MQTT_INPUT_TIMEOUT_MS) != 0) {
-		dcmd_refused(m, device, topic, mt->name, "busy", req.reply);
+		dcmd_refused(m, device, topic, mt->name, &req, "busy", req.reply);
 		return;
 	}
 	if (req.rc != 0)
-		dcmd_refused(m, device, topic, mt->name,
+		dcmd_refused(m, device, topic, mt->name, &req,
 		             req.rc > 0                    ? "refused"
 		             : req.rc == -VMAC_ENOTRUNNING ? "not_running"
 		                                           : "driver_failed",
 		             req.reply);
+	else
+		mqtt_audit_command(m, MQTT_CONN_SPARKPLUG, topic, device, &req, "ok", NULL);
 }
 
 /* A received payload, or NULL with why (malformed, too long). */
@@ -156,15 +160,15 @@ void mqtt_spb_dcmd(struct vmac_mqtt *m, const struct mqtt_message *msg, const ch
 		if (!isalnum((unsigned char)device[i]) && !strchr("._-", device[i]))
 			break;
 	if (!device[0] || device[i] || i > VMAC_NAME_MAX) {
-		dcmd_refused(m, NULL, msg->topic, NULL, "malformed", "no such device");
+		dcmd_refused(m, NULL, msg->topic, NULL, NULL, "malformed", "no such device");
 		return;
 	}
 	if (!(p = mqtt_spb_unpack(msg, &why))) {
-		dcmd_refused(m, device, msg->topic, NULL, "malformed", why);
+		dcmd_refused(m, device, msg->topic, NULL, NULL, "malformed", why);
 		return;
 	}
 	if (p->n_metrics == 0)
-		dcmd_refused(m, device, msg->topic, NULL, "malformed", "a DCMD without metrics");
+		dcmd_refused(m, device, msg->topic, NULL, NULL, "malformed", "a DCMD without metrics");
 	for (i = 0; i < p->n_metrics; i++)
 		dcmd_metric(m, device, msg->topic, p->metrics[i]);
 	sparkplug_b__payload__free_unpacked(p, NULL);

@@ -68,6 +68,17 @@ static const char *const migrations[] = {
     " key BLOB NOT NULL,"
     " created REAL NOT NULL,"
     " note TEXT NOT NULL DEFAULT '')",
+    /* The audit trail: who holds a token, and what `vmac token` changed,
+     * waiting for the host (store_token.c). */
+    "ALTER TABLE tokens ADD COLUMN name TEXT NOT NULL DEFAULT '';"
+    "CREATE TABLE audit_outbox ("
+    " id INTEGER PRIMARY KEY AUTOINCREMENT,"
+    " time REAL NOT NULL,"
+    " type TEXT NOT NULL,"
+    " who TEXT NOT NULL,"
+    " what TEXT NOT NULL,"
+    " result TEXT NOT NULL,"
+    " why TEXT NOT NULL DEFAULT '')",
     /* bundles (docs/DRIVERS.md "Bundles"): each version's security counter,
      * signer and origin */
     "ALTER TABLE driver_versions ADD COLUMN counter INTEGER NOT NULL DEFAULT 0;"

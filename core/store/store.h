@@ -27,6 +27,7 @@
 #define VMAC_TOKEN_ID_LEN 16
 #define VMAC_TOKEN_LEN (5 + VMAC_TOKEN_ID_LEN + 1 + 64) /* without the NUL */
 #define VMAC_TOKEN_NOTE_MAX 120
+#define VMAC_TOKEN_NAME_MAX 32
 
 struct vmac_store;
 
@@ -64,27 +65,68 @@ void vmac_store_stats(struct vmac_store *s, struct vmac_store_stats *out);
 
 struct vmac_token_info {
 	char id[VMAC_TOKEN_ID_LEN + 1];
+	char name[VMAC_TOKEN_NAME_MAX + 1]; /* who holds it (vmac token create --name); "" for none */
 	enum vmac_scope scope;
 	double created; /* Unix time */
 	double revoked; /* Unix time, 0 while valid */
 	char note[VMAC_TOKEN_NOTE_MAX + 1];
 };
 
-/* A new token of this scope: writes it to token (VMAC_TOKEN_LEN + 1 bytes)
- * and its ID to id (may be NULL). 0, or < 0 with err (nothing stored). */
-int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *note, char *token, char *id, char *err,
-                      size_t errlen);
-/* Revoke by ID: 0 done, 1 no such token (or already revoked), < 0 err. */
-int vmac_token_revoke(struct vmac_store *s, const char *id, char *err, size_t errlen);
+/* Whether name can be a token's name: 1..VMAC_TOKEN_NAME_MAX of
+ * [A-Za-z0-9._@+-] (no blank, no quote: the audit trail quotes it). */
+int vmac_token_name_valid(const char *name);
+
+/* A new token of this scope, named name ("" or NULL: none; else
+ * vmac_token_name_valid): writes it to token (VMAC_TOKEN_LEN + 1 bytes)
+ * and its ID to id (may be NULL). by (NULL: not audited) says who made it
+ * ('user "alice" (uid 1000)'): the same transaction puts a row in the
+ * audit outbox (below). 0, or < 0 with err (nothing stored). */
+int vmac_token_create(struct vmac_store *s, enum vmac_scope scope, const char *name, const char *note, const char *by,
+                      char *token, char *id, char *err, size_t errlen);
+/* Revoke by ID: 0 done, 1 no such token (or already revoked), < 0 err.
+ * by as above: the outbox row says the revocation, or its refusal. */
+int vmac_token_revoke(struct vmac_store *s, const char *id, const char *by, char *err, size_t errlen);
 /* Every token, oldest first. Returns how many, or < 0 with err. */
 int vmac_token_list(struct vmac_store *s, void (*fn)(void *ctx, const struct vmac_token_info *t), void *ctx, char *err,
                     size_t errlen);
 /* The scope of a presented token: VMAC_SCOPE_NONE when malformed, unknown,
  * revoked, or when the store cannot be read. */
 enum vmac_scope vmac_token_check(struct vmac_store *s, const char *token);
+/* The same, and with a valid token its id, name and scope in *info (the
+ * audit trail names who asked); info untouched otherwise. */
+enum vmac_scope vmac_token_check_info(struct vmac_store *s, const char *token, struct vmac_token_info *info);
 /* Whether token has a token's shape (vmac_ID_SECRET, hex): 0 and its ID in
  * id, or -1. Nothing is looked up. */
 int vmac_token_id(const char *token, char id[VMAC_TOKEN_ID_LEN + 1]);
+
+/* ---- the audit outbox (docs/API.md, "Audit trail"; store_token.c) ----
+ * What changed the store from outside the host (`vmac token create` and
+ * `revoke`, in a process of their own, host running or not) waits here
+ * for the host: its main loop takes the rows into its event log as
+ * `audit` events, numbered by the host (vmac_event_log), then deletes
+ * them. Ids only grow (a row taken is never confused with a new one). */
+struct vmac_audit_row {
+	int64_t id;
+	double time;     /* Unix time of the change */
+	char type[16];   /* the audit event's type: "token" */
+	char who[160];   /* user "alice" (uid 1000) */
+	char what[320];  /* vmac token create 0123456789abcdef "alice" (operate) */
+	char result[32]; /* ok, refused */
+	char why[200];   /* "" or why it was refused */
+};
+
+/* One more row (id and time are set here). 0, or < 0 with err. */
+int vmac_store_audit_add(struct vmac_store *s, const struct vmac_audit_row *row, char *err, size_t errlen);
+/* The rows after id after, oldest first, at most limit. Returns how many,
+ * or < 0 with err. */
+int vmac_store_audit_list(struct vmac_store *s, int64_t after, int limit,
+                          void (*fn)(void *ctx, const struct vmac_audit_row *r), void *ctx, char *err, size_t errlen);
+/* Delete the rows up to id upto (taken). 0, or < 0 with err. */
+int vmac_store_audit_delete(struct vmac_store *s, int64_t upto, char *err, size_t errlen);
+/* A number that changes whenever the outbox may have grown, by this
+ * process or another one (the store's data_version, as the board keys'
+ * vmac_board_keys_version): the host looks at the rows only then. */
+uint64_t vmac_store_audit_version(struct vmac_store *s);
 
 /* ---- persisted parameters (the console's `>`; docs/API.md) ----
  * A param value per machine (its primary board's name) and param name,

@@ -127,19 +127,24 @@ int vmac_board_key_list(struct vmac_store *s, void (*fn)(void *ctx, const struct
 	return n;
 }
 
-uint64_t vmac_board_keys_version(struct vmac_store *s)
+uint64_t store_data_version(struct vmac_store *s)
 {
 	sqlite3_stmt *st;
-	uint64_t external = 0;
-	/* data_version changes with every commit of another connection (of
-	 * any table: reading the keys again then costs little); this
-	 * connection's own writes are counted in key_writes. */
+	uint64_t version = 0;
 	pthread_mutex_lock(&s->lock);
 	if (sqlite3_prepare_v2(s->db, "PRAGMA data_version", -1, &st, NULL) == SQLITE_OK) {
 		if (sqlite3_step(st) == SQLITE_ROW)
-			external = (uint64_t)sqlite3_column_int64(st, 0);
+			version = (uint64_t)sqlite3_column_int64(st, 0);
 		sqlite3_finalize(st);
 	}
 	pthread_mutex_unlock(&s->lock);
-	return external << 32 ^ atomic_load(&s->key_writes);
+	return version;
+}
+
+uint64_t vmac_board_keys_version(struct vmac_store *s)
+{
+	/* data_version changes with every commit of another connection (of
+	 * any table: reading the keys again then costs little); this
+	 * connection's own writes are counted in key_writes. */
+	return store_data_version(s) << 32 ^ atomic_load(&s->key_writes);
 }

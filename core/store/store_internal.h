@@ -1,5 +1,6 @@
 /* The store's insides, shared by its files (store.c: params, driver
- * versions, events, opening; store_token.c: access tokens; store_checkpoint.c: checkpoints of
+ * versions, events, opening; store_token.c: access tokens and the audit
+ * outbox; store_checkpoint.c: checkpoints of
  * machine state; store_recording.c: flight recordings; store_board.c:
  * board keys). The rest of the
  * host sees only store.h. */
@@ -30,8 +31,9 @@ struct vmac_store {
 	char path[4096];
 	dev_t dev;
 	ino_t ino;
-	int gone;                    /* it was removed or replaced: nothing more is written */
-	_Atomic uint64_t key_writes; /* board keys written through this connection (store_board.c) */
+	int gone;                      /* it was removed or replaced: nothing more is written */
+	_Atomic uint64_t key_writes;   /* board keys written through this connection (store_board.c) */
+	_Atomic uint64_t audit_writes; /* audit outbox rows written through this connection (store_token.c) */
 	_Atomic uint64_t failures[VMAC_STORE_FAILURE_KINDS]; /* every store_fail, by kind (vmac_store_stats) */
 };
 
@@ -52,5 +54,9 @@ int store_lock_write(struct vmac_store *s);
 int store_begin(struct vmac_store *s);
 /* Commit when ok, else roll back; let the other threads in. 0, or < 0 with err. */
 int store_end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen);
+/* SQLite's data_version: it changes with every commit of another
+ * connection to the database (store_board.c; the board keys and the audit
+ * outbox are looked at again when it does). */
+uint64_t store_data_version(struct vmac_store *s);
 
 #endif

@@ -135,6 +135,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	ops.input = fake_input;
 	ops.ctx = NULL;
 	ops.may_operate = may_operate;
+	ops.wrote = NULL;
 	answer = malloc(4096); /* as POST /api/console */
 	errors = malloc(8192);
 	small_answer = malloc(small);

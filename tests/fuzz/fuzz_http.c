@@ -9,7 +9,8 @@
  * thread, the event log) is not reached; docs/TESTING.md, "Fuzzing".
  * Before the first input, every row of the route table (HTTP_ROUTES) is
  * routed from a path made of its pattern, and must come back as itself;
- * with "." or ".." for its NAME or ID, as no route at all (404).
+ * with "." or ".." for its NAME or ID, as no route at all (404); and every
+ * POST has an audit type, every GET none.
  * Seeds: tests/fuzz/corpus-http/. */
 #include <jansson.h>
 #include <stdint.h>
@@ -198,6 +199,9 @@ static void check_table(void)
 		                                                          : "";
 		if (!get && strcmp(row->method, "POST") != 0)
 			fail_route(row->method, row->pattern, &m, "a row whose method is not GET or POST");
+		if (!get != (row->audit != NULL))
+			fail_route(row->method, row->pattern, &m,
+			           "a POST without an audit type, or a read with one (docs/API.md, \"Audit trail\")");
 		make_path(row->pattern, part, path, sizeof(path));
 		http_route_find(row->method, path, &m);
 		if ((int)m.endpoint != i)
@@ -315,7 +319,7 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
 
 static void console(const struct request *q, int operate)
 {
-	struct vmac_console_ops ops = {fake_device, fake_input, NULL, operate};
+	struct vmac_console_ops ops = {fake_device, fake_input, NULL, operate, NULL};
 	json_t *answer, *lines;
 	const char *p;
 	size_t nonblank = 0;

@@ -371,9 +371,11 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
             body, _ = sp.wait(PREFIX + "/washer-1/_error", since=m, raw=True, what="an error for " + what)
             body = json.loads(body)
             assert body["code"] == code and body["topic"] == NODE % "DCMD" + "/washer-1", "%s: %s" % (what, body)
-            # And on record in the host's events, as an NCMD's refusal is.
-            audit = host.wait_event("mqtt", text="refused (%s)" % code, after_seq=seen[0], timeout_s=10)
-            assert "DCMD" in audit["text"], "%s: the event does not say it was a DCMD: %r" % (what, audit["text"])
+            # And on record in the host's audit trail (docs/MQTT.md "Audit").
+            audit = host.wait_event("audit", text=" -> %s (" % code, after_seq=seen[0], timeout_s=10)
+            assert NODE % "DCMD" + "/washer-1" in audit["text"] and "-spb\"" in audit["text"], (
+                "%s: the audit event does not say it was a DCMD on the Sparkplug connection: %r" % (
+                    what, audit["text"]))
             seen[0] = audit["seq"]
 
         seen = [host.last_event_seq()]

@@ -57,7 +57,8 @@ function waitLine(p, re, ms, what) {
 }
 
 function token(scope) {
-  return execFileSync(path.join(BIN, "vmac"), ["token", "create", "--state", STATE, "--scope", scope]).toString().trim();
+  return execFileSync(path.join(BIN, "vmac"), ["token", "create", "--state", STATE, "--scope", scope,
+    "--name", "ui-" + scope]).toString().trim();
 }
 
 async function status(host, tok) {
@@ -182,6 +183,29 @@ async function main() {
       await page.click('nav a[data-page="system"]');
       await page.waitForSelector("#system-facts div", { timeout: 5000 });
       await page.screenshot({ path: path.join(OUT, "7-system.png"), fullPage: true });
+    });
+
+    await check("the light switched in the page is in the audit trail, with the token's name", async () => {
+      // docs/API.md "Audit trail": the click on the kitchen light above.
+      await page.click('nav a[data-page="events"]');
+      const row = '#event-rows tr.audit:has(.audit-what:text("lights-1.kitchen:true"))';
+      await page.waitForSelector(row, { timeout: 5000 });
+      const who = await page.textContent(`${row} .audit-who`);
+      if (!/^token [0-9a-f]{16} "ui-operate" \(operate\)$/.test(who)) throw new Error("who: " + who);
+      const result = await page.textContent(`${row} .audit-result.ok`);
+      if (result !== "200") throw new Error("result: " + result);
+      // The page's own requests were never refused (no /favicon.ico without a token).
+      const refused = await page.locator("#event-rows tr.audit.refused .audit-what").allTextContents();
+      if (refused.length) throw new Error("requests of the page refused: " + refused.join(", "));
+      await page.selectOption("#event-filter", "audit");
+      const others = await page.locator('#event-rows tr:not([hidden]):not([data-kind="audit"])').count();
+      const audits = await page.locator('#event-rows tr[data-kind="audit"]:not([hidden])').count();
+      if (others !== 0 || audits === 0) throw new Error(`the audit filter shows ${others} other and ${audits} audit rows`);
+      await page.screenshot({ path: path.join(OUT, "6c-audit.png"), fullPage: true });
+      await page.selectOption("#event-filter", "other");
+      if (await page.locator('#event-rows tr[data-kind="audit"]:not([hidden])').count() !== 0)
+        throw new Error("audit rows shown with the audit trail filtered out");
+      await page.selectOption("#event-filter", "all");
     });
 
     await check("a read-only token sees no controls and changes nothing", async () => {

@@ -2,7 +2,9 @@
  * asked for, checked by hash, refused when malformed, altered, unknown or
  * revoked, listed without their secrets, and kept across a reopen; two
  * threads using every function at once on the one connection get the
- * answers each would get alone; a full disk is told by its own code. */
+ * answers each would get alone; a full disk is told by its own code;
+ * tokens have names, and what `vmac token` changes waits in the audit
+ * outbox for the host. */
 #include <check.h>
 #include <errno.h>
 #include <pthread.h>
@@ -38,7 +40,8 @@ static void teardown(void)
 static void create(enum vmac_scope scope, char *token, char *id)
 {
 	char err[512] = "";
-	ck_assert_msg(vmac_token_create(store, scope, "test", token, id, err, sizeof(err)) == 0, "create: %s", err);
+	ck_assert_msg(vmac_token_create(store, scope, NULL, "test", NULL, token, id, err, sizeof(err)) == 0,
+	              "create: %s", err);
 	ck_assert_uint_eq(strlen(token), VMAC_TOKEN_LEN);
 }
 
@@ -106,10 +109,10 @@ START_TEST(revoked_tokens_stop_at_once_and_survive_a_reopen)
 	struct seen seen;
 	create(VMAC_SCOPE_DEPLOY, token, id);
 	create(VMAC_SCOPE_READ, keep, NULL);
-	ck_assert_int_eq(vmac_token_revoke(store, id, err, sizeof(err)), 0);
+	ck_assert_int_eq(vmac_token_revoke(store, id, NULL, err, sizeof(err)), 0);
 	ck_assert_int_eq(vmac_token_check(store, token), VMAC_SCOPE_NONE);
-	ck_assert_int_eq(vmac_token_revoke(store, id, err, sizeof(err)), 1);
-	ck_assert_int_eq(vmac_token_revoke(store, "0000000000000000", err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_token_revoke(store, id, NULL, err, sizeof(err)), 1);
+	ck_assert_int_eq(vmac_token_revoke(store, "0000000000000000", NULL, err, sizeof(err)), 1);
 
 	vmac_store_close(store);
 	ck_assert_msg(vmac_store_open(dir, &store, err, sizeof(err)) == 0, "reopen failed: %s", err);
@@ -199,13 +202,13 @@ static void *hammer(void *arg)
 		double got = -1;
 		uint64_t last = 0;
 
-		rc = vmac_token_create(store, VMAC_SCOPE_OPERATE, "test", token, id, err, sizeof(err));
+		rc = vmac_token_create(store, VMAC_SCOPE_OPERATE, NULL, "test", NULL, token, id, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: token create: %d %s", i, rc, err);
 		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_OPERATE, "round %d: a new token is refused",
 		             i);
-		rc = vmac_token_revoke(store, id, err, sizeof(err));
+		rc = vmac_token_revoke(store, id, NULL, err, sizeof(err));
 		HAMMER_CHECK(rc == 0, "round %d: revoking a valid token answered %d (%s)", i, rc, err);
-		rc = vmac_token_revoke(store, id, err, sizeof(err));
+		rc = vmac_token_revoke(store, id, NULL, err, sizeof(err));
 		HAMMER_CHECK(rc == 1, "round %d: revoking it again answered %d, not 1 (%s)", i, rc, err);
 		HAMMER_CHECK(vmac_token_check(store, token) == VMAC_SCOPE_NONE, "round %d: a revoked token is valid",
 		             i);
@@ -391,6 +394,9 @@ static void install_full_vfs(void)
 	ck_assert_int_eq(sqlite3_vfs_register(&full_vfs, 1), SQLITE_OK);
 }
 
+struct rows;
+static int outbox_rows(struct rows *x);
+
 START_TEST(a_full_disk_is_told_by_its_own_code)
 {
 	char token[VMAC_TOKEN_LEN + 1], err[512] = "";
@@ -412,8 +418,10 @@ START_TEST(a_full_disk_is_told_by_its_own_code)
 	ck_assert_msg(rc == -VMAC_ESTOREFULL && strstr(err, "full"), "a version added to a full disk: %d %s", rc, err);
 	rc = vmac_store_param_set(store, "machine-1", "count", &value, err, sizeof(err));
 	ck_assert_msg(rc == -VMAC_ESTOREFULL, "a param persisted to a full disk: %d %s", rc, err);
-	rc = vmac_token_create(store, VMAC_SCOPE_READ, "test", token, NULL, err, sizeof(err));
+	rc =
+	    vmac_token_create(store, VMAC_SCOPE_READ, "x", "test", "user \"t\" (uid 1)", token, NULL, err, sizeof(err));
 	ck_assert_msg(rc == -VMAC_ESTOREFULL, "a token created on a full disk: %d %s", rc, err);
+	ck_assert_msg(outbox_rows(NULL) == 0, "a token refused by a full disk is in the audit outbox");
 	rc = vmac_store_events_add(store, &ev, 1, err, sizeof(err));
 	ck_assert_msg(rc == -VMAC_ESTOREFULL, "events added on a full disk: %d %s", rc, err);
 	ck_assert_str_eq(vmac_strerror(rc), "the store's disk is full");
@@ -432,6 +440,109 @@ START_TEST(a_full_disk_is_told_by_its_own_code)
 	rc = vmac_store_param_set(store, "machine-1", "count", &value, err, sizeof(err));
 	ck_assert_msg(rc == -VMAC_ESTORE, "a param persisted on a failing disk: %d %s", rc, err);
 	disk_full = 0;
+}
+END_TEST
+
+/* ---- token names and the audit outbox ---- */
+
+struct rows {
+	int n;
+	struct vmac_audit_row r[4];
+};
+
+static void see_row(void *ctx, const struct vmac_audit_row *r)
+{
+	struct rows *x = ctx;
+	if (x->n < 4)
+		x->r[x->n] = *r;
+	x->n++;
+}
+
+/* How many rows the outbox holds (with x: them). */
+static int outbox_rows(struct rows *x)
+{
+	struct rows none;
+	char err[512] = "";
+	int n;
+	if (!x)
+		x = &none;
+	memset(x, 0, sizeof(*x));
+	n = vmac_store_audit_list(store, 0, 100, see_row, x, err, sizeof(err));
+	ck_assert_msg(n >= 0, "listing the outbox: %s", err);
+	return n;
+}
+
+static void see_name(void *ctx, const struct vmac_token_info *t)
+{
+	snprintf(ctx, VMAC_TOKEN_NAME_MAX + 1, "%s", t->name);
+}
+
+START_TEST(tokens_have_names_the_audit_trail_shows)
+{
+	char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1], err[512] = "", listed[VMAC_TOKEN_NAME_MAX + 1] = "";
+	static const char *const bad[] = {"with blank", "\"quoted\"", "back\\slash",
+	                                  "abcdefghijklmnopqrstuvwxyz0123456"};
+	struct vmac_token_info who;
+	size_t i;
+	ck_assert_msg(
+	    vmac_token_create(store, VMAC_SCOPE_OPERATE, "alice@panel-1", "", NULL, token, id, err, sizeof(err)) == 0,
+	    "create: %s", err);
+	memset(&who, 0, sizeof(who));
+	ck_assert_int_eq(vmac_token_check_info(store, token, &who), VMAC_SCOPE_OPERATE);
+	ck_assert_str_eq(who.name, "alice@panel-1");
+	ck_assert_str_eq(who.id, id);
+	ck_assert_int_eq(who.scope, VMAC_SCOPE_OPERATE);
+	ck_assert_int_eq(vmac_token_list(store, see_name, listed, err, sizeof(err)), 1);
+	ck_assert_str_eq(listed, "alice@panel-1");
+	for (i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+		ck_assert_msg(!vmac_token_name_valid(bad[i]), "'%s' taken as a name", bad[i]);
+		ck_assert_int_lt(
+		    vmac_token_create(store, VMAC_SCOPE_READ, bad[i], "", NULL, token, NULL, err, sizeof(err)), 0);
+	}
+	ck_assert_int_eq(vmac_token_list(store, see_name, listed, err, sizeof(err)), 1);
+}
+END_TEST
+
+START_TEST(token_changes_wait_in_the_audit_outbox_for_the_host)
+{
+	char token[VMAC_TOKEN_LEN + 1], id[VMAC_TOKEN_ID_LEN + 1], err[512] = "";
+	const char *by = "user \"alice\" (uid 1000)";
+	struct vmac_store *other;
+	struct rows x;
+	uint64_t v0 = vmac_store_audit_version(store), v1;
+	int64_t last;
+	ck_assert_msg(vmac_token_create(store, VMAC_SCOPE_DEPLOY, "ci", "", by, token, id, err, sizeof(err)) == 0,
+	              "create: %s", err);
+	ck_assert_msg(vmac_store_audit_version(store) != v0, "a row of this connection did not change the version");
+	ck_assert_int_eq(vmac_token_revoke(store, id, by, err, sizeof(err)), 0);
+	ck_assert_int_eq(vmac_token_revoke(store, "0123456789abcdef", by, err, sizeof(err)), 1);
+	ck_assert_int_eq(outbox_rows(&x), 3);
+	ck_assert_str_eq(x.r[0].type, "token");
+	ck_assert_str_eq(x.r[0].who, by);
+	ck_assert_msg(strstr(x.r[0].what, "vmac token create ") && strstr(x.r[0].what, id) &&
+	                  strstr(x.r[0].what, "\"ci\" (deploy)"),
+	              "create said as %s", x.r[0].what);
+	ck_assert_str_eq(x.r[0].result, "ok");
+	ck_assert_msg(strstr(x.r[1].what, "vmac token revoke ") && strstr(x.r[1].what, "\"ci\""), "revoke said as %s",
+	              x.r[1].what);
+	ck_assert_str_eq(x.r[2].result, "refused");
+	ck_assert_msg(strstr(x.r[2].why, "no valid token"), "a revocation refused: %s", x.r[2].why);
+	ck_assert_msg(x.r[0].id < x.r[1].id && x.r[1].id < x.r[2].id && x.r[0].time > 0, "ids in order");
+	last = x.r[2].id;
+	ck_assert_msg(vmac_store_audit_delete(store, last, err, sizeof(err)) == 0, "delete: %s", err);
+	ck_assert_int_eq(outbox_rows(NULL), 0);
+	/* Another process's row (another connection): the version says so,
+	 * and its id is past every id taken before, the table emptied or not. */
+	v1 = vmac_store_audit_version(store);
+	ck_assert_msg(vmac_store_open(dir, &other, err, sizeof(err)) == 0, "second connection: %s", err);
+	ck_assert_msg(vmac_token_create(other, VMAC_SCOPE_READ, NULL, "", by, token, NULL, err, sizeof(err)) == 0, "%s",
+	              err);
+	vmac_store_close(other);
+	ck_assert_msg(vmac_store_audit_version(store) != v1, "another connection's row did not change the version");
+	ck_assert_int_eq(outbox_rows(&x), 1);
+	ck_assert_msg(x.r[0].id > last, "an id was used again after the rows were deleted: %lld <= %lld",
+	              (long long)x.r[0].id, (long long)last);
+	ck_assert_msg(strstr(x.r[0].what, "(read)") && !strstr(x.r[0].what, "\""), "an unnamed token: %s", x.r[0].what);
 }
 END_TEST
 
@@ -525,6 +636,8 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_missing_folder_is_an_error);
 	tcase_add_test(tc, two_threads_at_once_get_their_own_answers);
 	tcase_add_test(tc, a_full_disk_is_told_by_its_own_code);
+	tcase_add_test(tc, tokens_have_names_the_audit_trail_shows);
+	tcase_add_test(tc, token_changes_wait_in_the_audit_outbox_for_the_host);
 	tcase_add_test(tc, board_keys_enroll_replace_and_remove);
 	tcase_add_test(tc, board_keys_many_in_one_transaction);
 	tcase_set_timeout(tc, 60);
