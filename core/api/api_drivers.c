@@ -33,9 +33,25 @@ static json_t *version_json(const struct vmac_driver_version *v)
 	                 "origin", v->origin);
 }
 
+/* The names of the tokens (id -> name, as JSON), that a version's
+ * deployed_by_name says who deployed it. */
+static void add_token_name(void *ctx, const struct vmac_token_info *t)
+{
+	if (t->name[0])
+		json_object_set_new(ctx, t->id, json_string(t->name));
+}
+
+struct versions_ctx {
+	json_t *list, *names;
+};
+
 static void append_version(void *ctx, const struct vmac_driver_version *v)
 {
-	json_array_append_new(ctx, version_json(v));
+	struct versions_ctx *x = ctx;
+	json_t *j = version_json(v);
+	const char *name = json_string_value(json_object_get(x->names, v->deployed_by));
+	json_object_set_new(j, "deployed_by_name", json_string(name ? name : ""));
+	json_array_append_new(x->list, j);
 }
 
 /* GET /api/drivers and /api/drivers/NAME: the versions kept. */
@@ -44,9 +60,13 @@ enum MHD_Result http_driver_versions(struct vmac_http *h, struct MHD_Connection 
 	const char *driver = k->route.name[0] ? k->route.name : NULL;
 	char err[512];
 	json_t *list = json_array(), *body;
+	struct versions_ctx x = {list, json_object()};
 	struct vmac_driver_version active;
 	int rc;
-	if (vmac_store_driver_list(h->store, driver, append_version, list, err, sizeof(err)) < 0) {
+	vmac_token_list(h->store, add_token_name, x.names, err, sizeof(err)); /* none: ids only */
+	rc = vmac_store_driver_list(h->store, driver, append_version, &x, err, sizeof(err));
+	json_decref(x.names);
+	if (rc < 0) {
 		json_decref(list);
 		return http_reply(c, MHD_HTTP_INTERNAL_SERVER_ERROR, http_error_body(err));
 	}
@@ -113,9 +133,10 @@ struct deploy_ask {
 
 /* Run a deploy request for driver and answer it (the result is large: on
  * the heap, not the connection thread's stack). */
-static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connection *c, const char *driver,
+static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connection *c, const struct conn *k,
                                         struct deploy_ask *a)
 {
+	const char *driver = k->route.name;
 	struct vmac_deploy_ctx x = {h->bus, h->store, &h->cfg, &h->trust};
 	struct vmac_deploy_result *r = malloc(sizeof(*r));
 	char by[VMAC_TOKEN_ID_LEN + 1];
@@ -130,6 +151,12 @@ static enum MHD_Result deploy_and_reply(struct vmac_http *h, struct MHD_Connecti
 	case ASK_ROLLBACK: vmac_deploy_rollback(&x, driver, by, r); break;
 	}
 	atomic_fetch_add(&h->deploys[a->kind][r->status == 200 ? 0 : r->status < 500 ? 1 : 2], 1);
+	if (r->version[0]) /* the audit trail says which version, its counter and signer */
+		http_audit_detail(k, "%s %s (id %lld, counter %llu, %s%s%s)", driver, r->version, (long long)r->id,
+		                  (unsigned long long)r->counter, r->signer[0] ? "signed by " : "unsigned", r->signer,
+		                  r->unchanged ? ", unchanged"
+		                  : r->note[0] ? ", --force"
+		                               : "");
 	ret = deploy_reply(c, driver, r, a->probation_s);
 	free(r);
 	return ret;
@@ -174,7 +201,7 @@ enum MHD_Result http_driver_upload(struct vmac_http *h, struct MHD_Connection *c
 	a.up.len = k->len;
 	a.up.sig = a.up.siglen ? sig : NULL;
 	a.up.force = force && (strcmp(force, "1") == 0 || strcmp(force, "true") == 0);
-	return deploy_and_reply(h, c, k->route.name, &a);
+	return deploy_and_reply(h, c, k, &a);
 }
 
 /* POST /api/drivers/NAME/activate?id=N[&probation=S] */
@@ -190,7 +217,7 @@ enum MHD_Result http_driver_activate(struct vmac_http *h, struct MHD_Connection 
 		                  http_error_body("id must be a version's id (vmac drivers lists them)"));
 	if (probation_arg(h, c, &a.up.probation_ms, &a.probation_s, &ret) != 0)
 		return ret;
-	return deploy_and_reply(h, c, k->route.name, &a);
+	return deploy_and_reply(h, c, k, &a);
 }
 
 /* POST /api/drivers/NAME/rollback */
@@ -199,7 +226,7 @@ enum MHD_Result http_driver_rollback(struct vmac_http *h, struct MHD_Connection 
 	struct deploy_ask a;
 	memset(&a, 0, sizeof(a));
 	a.kind = ASK_ROLLBACK;
-	return deploy_and_reply(h, c, k->route.name, &a);
+	return deploy_and_reply(h, c, k, &a);
 }
 
 /* GET /api/drivers/NAME/manifest?version=V: a loaded version's declarations. */

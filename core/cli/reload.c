@@ -65,12 +65,14 @@ static void show_versions(json_t *a)
 		const char *note = json_string_value(json_object_get(v, "note"));
 		strftime(when, sizeof(when), "%Y-%m-%d %H:%M:%S", localtime(&t));
 		const char *signer = json_string_value(json_object_get(v, "signer"));
+		const char *by = json_string_value(json_object_get(v, "deployed_by_name"));
+		if (!by || !by[0])
+			by = json_string_value(json_object_get(v, "deployed_by"));
 		printf("%5lld %-14s %-10s %-12s %-19s %-16s %-12.12s %4lld %-16s\n",
 		       json_integer_value(json_object_get(v, "id")), json_string_value(json_object_get(v, "driver")),
 		       json_string_value(json_object_get(v, "version")), json_string_value(json_object_get(v, "state")),
-		       when, json_string_value(json_object_get(v, "deployed_by")),
-		       json_string_value(json_object_get(v, "hash")), json_integer_value(json_object_get(v, "counter")),
-		       signer && signer[0] ? signer : "unsigned");
+		       when, by, json_string_value(json_object_get(v, "hash")),
+		       json_integer_value(json_object_get(v, "counter")), signer && signer[0] ? signer : "unsigned");
 		if (note && note[0])
 			printf("      %s\n", note);
 	}

@@ -176,19 +176,32 @@ def test_signed_bundles_and_each_refusal(t):
     sign(t, sec, wrong, "vmac-bundle name=lamp version=2.0.0 counter=4")
     refused(wrong, "ESIGMETA", "counter=4")
 
-    # The good one, in minisign's legacy (not prehashed) form too.
+    # The good one, in minisign's legacy (not prehashed) form too, deployed
+    # by a token with a name: audited with it, the version and the signer.
     sign(t, sec, good, comment, legacy=True)
     rc, out, err = vmac(t, "bundle", "show", good, "--keys", pub)
     assert rc == 0 and "signature: good" in out, "vmac bundle show does not check the signature: %s%s" % (out, err)
-    rc, out, err = vmac(t, "reload", "--http", host.http, "--probation", "0", good)
+    p = subprocess.run([t.path("vmac"), "token", "create", "--state", t.logdir, "--scope", "deploy", "--name",
+                        "carol"], capture_output=True, text=True, timeout=30)
+    assert p.returncode == 0, "vmac token create --name carol: %s" % p.stderr
+    carol = p.stdout.strip()
+    seq = host.last_event_seq()
+    p = subprocess.run([t.path("vmac"), "reload", "--http", host.http, "--probation", "0", good],
+                       capture_output=True, text=True, timeout=120, env=dict(os.environ, VMAC_TOKEN=carol))
+    rc, out, err = p.returncode, p.stdout, p.stderr
     assert rc == 0, "the signed bundle was refused: %s%s" % (out, err)
+    e = host.wait_event("audit", "lamp", "lamp 2.0.0", after_seq=seq)
+    assert e["text"].startswith("reload by token ") and '"carol" (deploy)' in e["text"] and \
+        "counter 3, signed by " in e["text"] and e["text"].endswith("-> 200"), (
+            "the deploy is not audited with who, the version and the signer: %r" % e["text"])
     host.wait_status(lambda s: host.device("lamp-1", s)["variables"].get("mode") == "two", 10,
                      "lamp-1 running the bundle's programme")
     v = versions(host, t)["versions"][-1]
     assert v["state"] == "active" and v["counter"] == 3 and len(v["signer"]) == 16 and v["origin"] == "upload", (
         "the kept version does not say its counter and signer: %r" % v)
     rc, out, err = vmac(t, "drivers", "--http", host.http, "lamp")
-    assert v["signer"] in out and "unsigned" in out, "vmac drivers does not show who signed what: %s" % out
+    assert v["signer"] in out and "unsigned" in out and "carol" in out, (
+        "vmac drivers does not show who deployed and who signed what: %s" % out)
 
     # The same content again: no change, and it says so.
     rc, out, err = vmac(t, "reload", "--http", host.http, good)
@@ -204,9 +217,14 @@ def test_signed_bundles_and_each_refusal(t):
     rc, out, err = vmac(t, "reload", "--http", host.http, old)
     assert rc == 1 and "below 3" in err and "vmac rollback" in err, "a replayed counter was taken: %s%s" % (out, err)
 
-    # Rollback is the one way back past a counter: to the folder's 1.0.0.
+    # Rollback is the one way back past a counter: to the folder's 1.0.0,
+    # audited too.
+    seq = host.last_event_seq()
     rc, out, err = vmac(t, "rollback", "--http", host.http, "lamp")
     assert rc == 0 and "lamp 1.0.0 is active" in out, "vmac rollback lamp: %s%s" % (out, err)
+    e = host.wait_event("audit", "lamp", "/rollback", after_seq=seq)
+    assert e["text"].startswith("rollback by token ") and "lamp 1.0.0" in e["text"] and \
+        e["text"].endswith("-> 200"), "the rollback is not audited with the version it went to: %r" % e["text"]
     host.wait_status(lambda s: host.device("lamp-1", s)["variables"].get("mode") == "one", 10,
                      "lamp-1 back on the folder's version and programme")
 
