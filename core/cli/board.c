@@ -177,6 +177,22 @@ static int enroll_api(const struct vmac_cmd_args *a, const struct vmac_board_key
 	return failed;
 }
 
+/* A change made in the store by --local, for the host's audit trail
+ * (docs/API.md, "Audit trail"): said on stderr when it cannot be kept. */
+static void audit_local(const struct vmac_cmd_args *a, struct vmac_store *store, const char *what, const char *why)
+{
+	struct vmac_audit_row row;
+	char err[512];
+	memset(&row, 0, sizeof(row));
+	snprintf(row.type, sizeof(row.type), "board");
+	vmac_cmd_who(row.who, sizeof(row.who));
+	snprintf(row.what, sizeof(row.what), "%s", what);
+	snprintf(row.result, sizeof(row.result), "ok");
+	snprintf(row.why, sizeof(row.why), "%s", why);
+	if (vmac_store_audit_add(store, &row, err, sizeof(err)) != 0)
+		fprintf(stderr, "%s: done, but not in the audit trail: %s\n", a->name, err);
+}
+
 static int enroll_local(const struct vmac_cmd_args *a, const struct vmac_board_key *k, int n)
 {
 	struct vmac_store *store;
@@ -185,11 +201,20 @@ static int enroll_local(const struct vmac_cmd_args *a, const struct vmac_board_k
 	if (open_store(a, &store))
 		return 1;
 	rc = vmac_board_keys_set(store, k, n, a->opt[OPT_REPLACE] != NULL, &kept, err, sizeof(err));
-	vmac_store_close(store);
 	if (rc < 0) {
+		vmac_store_close(store);
 		fprintf(stderr, "%s: %s\n", a->name, err);
 		return 1;
 	}
+	for (i = 0; i < n; i++) {
+		char what[200], why[100] = "";
+		snprintf(what, sizeof(what), "vmac board enroll %s key %s%s", k[i].board, k[i].fingerprint,
+		         a->opt[OPT_REPLACE] ? " (replace)" : "");
+		if (kept)
+			snprintf(why, sizeof(why), "%d of the %d boards had a key already and kept it", kept, n);
+		audit_local(a, store, what, why);
+	}
+	vmac_store_close(store);
 	if (kept)
 		fprintf(stderr,
 		        "%s: %d of the boards were enrolled already and kept their keys (--replace gives them "
@@ -308,6 +333,11 @@ static int remove_run(const struct vmac_cmd_args *a)
 	if (open_store(a, &store))
 		return 1;
 	rc = vmac_board_key_remove(store, a->arg[0], err, sizeof(err));
+	if (rc == 0) {
+		char what[100];
+		snprintf(what, sizeof(what), "vmac board remove %s", a->arg[0]);
+		audit_local(a, store, what, "");
+	}
 	vmac_store_close(store);
 	if (rc < 0)
 		fprintf(stderr, "%s: %s\n", a->name, err);

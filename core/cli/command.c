@@ -16,9 +16,11 @@
 #include "command.h"
 
 #include <ctype.h>
+#include <pwd.h>
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "client.h"
 
@@ -306,4 +308,16 @@ int vmac_cmd_main(const struct vmac_cmd *c, const char *parent, int argc, char *
 	    vmac_client_token(a.opt[VMAC_CMD_TOKEN], a.opt[VMAC_CMD_TOKEN_FILE]) != 0)
 		return VMAC_CMD_USAGE;
 	return c->run(&a);
+}
+
+void vmac_cmd_who(char *out, size_t len)
+{
+	const struct passwd *pw = getpwuid(getuid());
+	const char *sudo = getenv("SUDO_USER"), *name = pw ? pw->pw_name : "";
+	char sudo_part[96] = "";
+	if (strpbrk(name, "\" \\"))
+		name = "";
+	if (sudo && sudo[0] && !strpbrk(sudo, "\" \\") && strlen(sudo) < 64)
+		snprintf(sudo_part, sizeof(sudo_part), ", sudo by \"%s\"", sudo);
+	snprintf(out, len, "user \"%.64s\" (uid %u%s)", name[0] ? name : "?", (unsigned)getuid(), sudo_part);
 }

@@ -78,6 +78,13 @@ int vmac_cmd_main(const struct vmac_cmd *c, const char *parent, int argc, char *
 /* c's --help on f. */
 void vmac_cmd_help(const struct vmac_cmd *c, const char *parent, FILE *f);
 
+/* Who runs this command, for the audit trail of what it changes in a
+ * store itself (vmac token, vmac board --local): 'user "alice" (uid
+ * 1000)', with the user sudo was run by when there is one. A name with a
+ * quote or a blank (which the audit's grammar cannot hold) is said by its
+ * uid alone. */
+void vmac_cmd_who(char *out, size_t len);
+
 /* "vmac CMD: MESSAGE (vmac CMD --help)" on stderr; returns VMAC_CMD_USAGE. */
 int vmac_cmd_usage_error(const struct vmac_cmd_args *a, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 

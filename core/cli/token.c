@@ -7,7 +7,6 @@
  * trail"). */
 #include "token.h"
 
-#include <pwd.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,21 +26,6 @@ static void print_token(void *ctx, const struct vmac_token_info *t)
 		strftime(revoked, sizeof(revoked), "%Y-%m-%d %H:%M:%S", localtime(&r));
 	printf("%-16s  %-16s  %-7s  %-19s  %-19s  %s\n", t->id, t->name[0] ? t->name : "-", vmac_scope_name(t->scope),
 	       created, revoked, t->note);
-}
-
-/* Who runs this, for the audit trail: 'user "alice" (uid 1000)', with the
- * user sudo was run by when there is one. A name with a quote or a blank
- * (which the audit's grammar cannot hold) is said by its uid alone. */
-static void who_am_i(char *out, size_t len)
-{
-	const struct passwd *pw = getpwuid(getuid());
-	const char *sudo = getenv("SUDO_USER"), *name = pw ? pw->pw_name : "";
-	char sudo_part[96] = "";
-	if (strpbrk(name, "\" \\"))
-		name = "";
-	if (sudo && sudo[0] && !strpbrk(sudo, "\" \\") && strlen(sudo) < 64)
-		snprintf(sudo_part, sizeof(sudo_part), ", sudo by \"%s\"", sudo);
-	snprintf(out, len, "user \"%.64s\" (uid %u%s)", name[0] ? name : "?", (unsigned)getuid(), sudo_part);
 }
 
 /* The token store of a's --state: 0, or 1 after saying why. */
@@ -89,7 +73,7 @@ static int create_run(const struct vmac_cmd_args *a)
 	}
 	if (open_store(a, &store))
 		return 1;
-	who_am_i(by, sizeof(by));
+	vmac_cmd_who(by, sizeof(by));
 	if (vmac_token_create(store, scope, name, note, by, token, id, err, sizeof(err)) != 0) {
 		fprintf(stderr, "vmac token: %s\n", err);
 		rc = 1;
@@ -126,7 +110,7 @@ static int revoke_run(const struct vmac_cmd_args *a)
 	int rc;
 	if (open_store(a, &store))
 		return 1;
-	who_am_i(by, sizeof(by));
+	vmac_cmd_who(by, sizeof(by));
 	rc = vmac_token_revoke(store, a->arg[0], by, err, sizeof(err));
 	if (rc < 0)
 		fprintf(stderr, "vmac token: %s\n", err);

@@ -168,6 +168,17 @@ def test_every_kind_of_request_is_one_audit_event_with_its_token(t):
         assert (e["type"], e["result"]) == ("token", result), e["text"]
     assert call(host, "GET", "/api/status", bob)[0] == 401, "the revoked token still works"
 
+    # vmac board enroll --local and remove --local, on the store itself: the same way.
+    for argv, what in ((["enroll", "--local", "shed", "--out", os.path.join(t.logdir, "shed.key")],
+                        "vmac board enroll shed key "), (["remove", "--local", "shed"], "vmac board remove shed")):
+        after = host.last_event_seq()
+        p = subprocess.run([t.path("vmac"), "board"] + argv + ["--state", t.logdir], capture_output=True, text=True,
+                           timeout=30)
+        assert p.returncode == 0, "vmac board %s: exit %d %s" % (" ".join(argv), p.returncode, p.stderr)
+        e = the_audit(host, after, what)
+        assert (e["type"], e["where"], e["result"]) == ("board", "local", "ok") and e["who"].startswith('user "'), \
+            e["text"]
+
     # A lock-out: the tenth wrong secret for one token id, once.
     after = host.last_event_seq()
     guessed = "%016x" % 0xA0D17
