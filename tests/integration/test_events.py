@@ -19,13 +19,15 @@ def json_lines(proc):
 
 def test_events_arrive_as_they_happen_and_resume(t):
     host = t.host()
-    # The log begins with the audit event of the test's token, made before
-    # the host started (docs/API.md "Audit trail"); the board's come after it.
-    made = host.wait_event("audit", text="vmac token create")["seq"]
+    # The log begins with the audit events of the test's token and of the
+    # board's key (docs/API.md "Audit trail"); the board's come after them.
+    host.wait_event("audit", text="vmac token create")
+    t.enroll(["lights-1"])
+    made = host.wait_event("audit", text="vmac board enroll lights-1")["seq"]
     follow = events_cmd(t, host, "events-follow", "--json", "--count", "2", "--after", str(made))
     # Whether the stream opens before or after the board attaches, it starts
-    # with the events the log keeps (after the token's), so nothing is missed.
-    board = t.board("lights", "lights-1")
+    # with the events the log keeps (after the key's), so nothing is missed.
+    board = t.board("lights", "lights-1", keyed=False, extra=("--key-dir", t.keys))
     host.wait_running(["lights-1"])
     board.signal(signal.SIGSTOP)
     rc = follow.wait_exit(30)
