@@ -7,13 +7,11 @@
 --   ---@type vmac.Driver
 --   local driver = { name = "porch", version = "1.0.0", io = { ... } }
 
----A channel of the board (DRIVERS.md, "io").
----@alias vmac.Channel
----| "di0" | "di1" | "di2" | "di3" | "di4" | "di5" | "di6" | "di7" # digital inputs: booleans
----| "ai0" | "ai1"                                                 # analog inputs: counts x scale + offset
----| "encoder"                                                     # encoder count, a 32-bit integer that wraps
----| "do0" | "do1" | "do2" | "do3" | "do4" | "do5" | "do6"         # digital outputs: booleans (nil = off)
----| "pwm"                                                         # drive -1000..1000 (nil = 0)
+---A channel of the board (DRIVERS.md, "io"): di0..di7 digital inputs
+---(booleans), ai0 and ai1 analog inputs (counts x scale + offset), encoder
+---(a 32-bit count that wraps), do0..do6 digital outputs (booleans, nil =
+---off), pwm (drive -1000..1000, nil = 0).
+---@alias vmac.Channel "di0"|"di1"|"di2"|"di3"|"di4"|"di5"|"di6"|"di7"|"ai0"|"ai1"|"encoder"|"do0"|"do1"|"do2"|"do3"|"do4"|"do5"|"do6"|"pwm"
 
 ---A value the host publishes or an operator sets.
 ---@alias vmac.Value number|boolean|string
@@ -76,7 +74,7 @@
 ---@field jit? boolean ask for the LuaJIT compiler (honoured only with allow_jit)
 ---@field attach? fun(dev: vmac.Dev) once, before the first tick
 ---@field tick? fun(dev: vmac.Dev, inputs: vmac.Inputs) every service period (required)
----@field input? fun(dev: vmac.Dev, name: string, value: vmac.Value): (ok: true|nil, message: string?) operator input; nil, message refuses it
+---@field input? fun(dev: vmac.Dev, name: string, value: vmac.Value): true|nil, string? operator input; nil, message refuses it
 ---@field detach? fun(dev: vmac.Dev, reason: string) the machine is unloaded in order
 ---@field migrate? fun(dev: vmac.Dev, old_state: table) hot reload: continue from the old dev.state (plain data)
 ---@field recover? fun(dev: vmac.Dev, saved: vmac.Saved) the machine attaches and the host holds a checkpoint

@@ -1,7 +1,8 @@
 """The LuaLS annotation files (scripts/types/) against the docs of the API
 they describe: every function and method that DRIVERS.md, STDLIB.md and
 TESTING.md name has its annotation, and every annotated function is named
-in one of them. A failure names the missing ones and where to add them.
+in one of them; and against the code: the stdlib's modules and the test
+runner's globals. A failure names the missing ones and where to add them.
 
 It reads files and runs no program, so it also runs alone:
 
@@ -27,7 +28,7 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 TYPES = "scripts/types"
-DOCS = ["docs/DRIVERS.md", "docs/STDLIB.md", "docs/TESTING.md"]
+DOCS = ["docs/" + name for name in "DRIVERS.md STDLIB.md TESTING.md".split()]
 
 # The names the docs give objects, and the class of each in scripts/types/.
 METHOD_RECEIVERS = {
@@ -42,11 +43,11 @@ METHOD_RECEIVERS = {
 }
 # Tables of functions: the sandbox's globals and the stdlib's modules.
 MODULES = ["vmac", "os", "timer", "pid", "ramp", "cycle", "interlock", "appliance"]
-# (doc, the header row of its tables starts with, the prefix their names get).
+# (the header row of the tables starts with, the prefix their names get, doc).
 BARE_TABLES = [
-    ("docs/DRIVERS.md", "| callback |", "driver."),
-    ("docs/TESTING.md", "| call | does |", ""),
-    ("docs/TESTING.md", "| call | fails unless |", ""),
+    ("| callback |", "driver.", "docs/DRIVERS.md"),
+    ("| call | does |", "", "docs/TESTING.md"),
+    ("| call | fails unless |", "", "docs/TESTING.md"),
 ]
 # The callbacks: the fun() fields of this class are driver.NAME.
 CALLBACK_CLASS = "vmac.Driver"
@@ -88,7 +89,7 @@ def documented():
                     names.setdefault("%s:%s" % (METHOD_RECEIVERS[m.group(1)], method), where)
             for m in function_re.finditer(code):
                 names.setdefault("%s.%s" % (m.group(1), m.group(2)), where)
-    for doc, header, prefix in BARE_TABLES:
+    for header, prefix, doc in BARE_TABLES:
         text = read(doc)
         starts = [m.start() + 1 for m in re.finditer(re.escape("\n" + header), text)]
         assert starts, "%s has no table whose header starts %r (tests/integration/test_types.py, BARE_TABLES)" % (
@@ -182,6 +183,26 @@ def test_the_test_api_annotated_is_the_runners(t=None):
     failures = ["%s: given by the runner, not annotated in %s/test.lua" % (n, TYPES) for n in sorted(given - typed)]
     failures += ["%s: annotated in %s/test.lua, not given by the runner" % (n, TYPES) for n in sorted(typed - given)]
     assert not failures, "the test API:\n  " + "\n  ".join(failures)
+
+
+def test_each_stdlib_module_annotated_is_the_code(t=None):
+    """stdlib/NAME.lua and scripts/types/stdlib/NAME.lua define the same
+    module functions and methods (`function M.f` and `function C:m`)."""
+    failures = []
+    for rel in type_files():
+        if not rel.startswith(TYPES + "/stdlib/"):
+            continue
+        code = "stdlib/" + os.path.basename(rel)
+        if not os.path.exists(os.path.join(ROOT, code)):
+            continue  # said by test_the_annotation_files_are_luals_meta_files
+        defined = {}
+        for path in (code, rel):
+            defined[path] = set(re.findall(r"^function\s+\w+([.:]\w+)\s*\(", read(path), re.M))
+        failures += ["%s defines %s, %s does not annotate it" % (code, n, rel)
+                     for n in sorted(defined[code] - defined[rel])]
+        failures += ["%s annotates %s, %s does not define it" % (rel, n, code)
+                     for n in sorted(defined[rel] - defined[code])]
+    assert not failures, "the stdlib against its annotations:\n  " + "\n  ".join(failures)
 
 
 if __name__ == "__main__":

@@ -78,8 +78,8 @@ function Cycle:finished() end
 
 ---Run fn(c) as step name (inside the cycle's steps); returns what fn returns.
 ---@param name string
----@param fn fun(c: vmac.Cycle): ...
----@return ...
+---@param fn fun(c: vmac.Cycle): any
+---@return any
 function Cycle:step(name, fn) end
 
 ---Wait s seconds of running time (inside the cycle's steps).
