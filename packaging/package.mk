@@ -38,6 +38,9 @@ DEBS += $(PACKAGE_DEBS)
 # shipped driver tests it runs when given none.
 INSTALL_DATA := $(sort $(wildcard stdlib/*.lua scripts/drivers/*.lua scripts/cycles/*/*.lua tests/drivers/*_test.lua)) \
                 scripts/luacheckrc core/vtest/runner.lua
+# The LuaLS annotations (scripts/types/) go to DATADIR/types, the folder a
+# user's .luarc.json names (docs/DRIVERS.md, "Checking a driver").
+INSTALL_TYPES := $(sort $(wildcard scripts/types/*.lua scripts/types/*/*.lua))
 INSTALL_DOCS := README.md $(sort $(wildcard docs/*.md))
 MAN_PAGES    := $(BUILD)/man/vmacd.1 $(BUILD)/man/vmac.1 $(BUILD)/man/vmac-board.1
 MAN_NAME_vmacd      := the vmac control host: boards on the bus, a Lua driver for each
@@ -63,6 +66,7 @@ install: $(BINS) $(MAN_PAGES)
 		$(DESTDIR)$(UNITDIR) $(DESTDIR)$(SYSUSERSDIR) $(DESTDIR)$(TMPFILESDIR) $(DESTDIR)$(SYSCONFDIR)/vmac
 	install -m 0755 $(BINS) $(DESTDIR)$(BINDIR)/
 	@for f in $(INSTALL_DATA); do install -D -m 0644 $$f $(DESTDIR)$(DATADIR)/$$f || exit 1; done
+	@for f in $(INSTALL_TYPES); do install -D -m 0644 $$f $(DESTDIR)$(DATADIR)/types/$${f#scripts/types/} || exit 1; done
 	install -m 0644 $(INSTALL_DOCS) $(DESTDIR)$(DOCDIR)/
 	install -D -m 0644 docs/grafana/vmac-dashboard.json $(DESTDIR)$(DOCDIR)/grafana/vmac-dashboard.json
 	install -m 0644 $(MAN_PAGES) $(DESTDIR)$(MAN1DIR)/

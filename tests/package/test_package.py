@@ -349,6 +349,8 @@ def expected_install(prefix):
     files = ["bin/vmacd", "bin/vmac", "bin/vmac-board", "lib/systemd/system/vmacd.service", "lib/sysusers.d/vmac.conf",
              "lib/tmpfiles.d/vmac.conf"] + ["share/man/man1/%s.1" % p for p in ("vmacd", "vmac", "vmac-board")]
     files += ["share/vmac/" + f for f in data] + ["share/doc/vmac/" + f for f in docs]
+    files += ["share/vmac/types/" + os.path.relpath(p, os.path.join(ROOT, "scripts", "types"))
+              for p in glob.glob(os.path.join(ROOT, "scripts", "types", "**", "*.lua"), recursive=True)]
     files += ["share/doc/vmac/grafana/vmac-dashboard.json"]
     return sorted([prefix.lstrip("/") + "/" + f for f in files] + ["etc/vmac/vmacd.conf"])
 
