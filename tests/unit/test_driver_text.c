@@ -93,7 +93,11 @@ static int valid_utf8(const char *s)
 {
 	const unsigned char *p = (const unsigned char *)s;
 	while (*p) {
-		int more = *p < 0x80 ? 0 : (*p & 0xE0) == 0xC0 ? 1 : (*p & 0xF0) == 0xE0 ? 2 : (*p & 0xF8) == 0xF0 ? 3 : -1;
+		int more = *p < 0x80             ? 0
+		           : (*p & 0xE0) == 0xC0 ? 1
+		           : (*p & 0xF0) == 0xE0 ? 2
+		           : (*p & 0xF8) == 0xF0 ? 3
+		                                 : -1;
 		if (more < 0)
 			return 0;
 		for (p++; more > 0; more--, p++)
