@@ -166,6 +166,7 @@ CONSOLE = ["--http", "--host", "--token", "--token-file", "--quiet"]
 COMMANDS = {
     "status": API,
     "events": API + ["--after", "--count"],
+    "logs": API + ["--follow", "--level"],
     "bundle": ["--json", "--output", "--counter", "--keys"],
     "reload": API + ["--driver", "--probation", "--force", "--sig", "--counter"],
     "rollback": API,
@@ -190,11 +191,11 @@ COMMANDS = {
     "test": ["--drivers", "--replay", "--filter", "--seed", "--list", "--tap", "--junit", "--trace", "--time-limit",
              "--timeout", "--history"],
 }
-PARENTS = {"": ["status", "lint", "test", "token", "board", "console", "get", "set", "events", "site", "bundle",
+PARENTS = {"": ["status", "lint", "test", "token", "board", "console", "get", "set", "events", "logs", "site", "bundle",
                 "reload", "rollback", "drivers", "activate", "recordings", "recording", "record", "bench"],
            "token": ["create", "list", "revoke"], "board": ["enroll", "list", "remove"],
            "recording": ["get", "to-test"]}
-FLAGS = {"--json", "--quiet", "--list", "--tap", "--local", "--replace", "--force"}  # the options that take no value
+FLAGS = {"--json", "--quiet", "--list", "--tap", "--local", "--replace", "--force", "--follow"}  # the options that take no value
 
 
 def names_option(text, option):
@@ -281,7 +282,7 @@ def test_cli_every_api_command_reaches_the_host_it_is_given(t):
     driver = os.path.join(t.logdir, "counter.lua")
     with open(driver, "w") as f:
         f.write('return { name = "counter", version = "1", io = {}, tick = function() end }\n')
-    arguments = {"status": [], "events": [], "reload": [driver], "rollback": ["counter"],
+    arguments = {"status": [], "events": [], "logs": [], "reload": [driver], "rollback": ["counter"],
                  "activate": ["counter", "2"], "drivers": [], "recordings": [], "recording get": ["1"],
                  "record": ["washer-1"], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": [],
                  "board enroll": ["lamp"], "board list": [], "board remove": ["lamp"]}
