@@ -1,5 +1,7 @@
-/* vmac events: reads the Server-Sent Events of GET /api/events and prints
- * one line per event, as they happen (docs/CLI.md, "vmac events"). */
+/* vmac events and vmac logs: read the Server-Sent Events of GET
+ * /api/events and print one line per event, as they happen (docs/CLI.md,
+ * "vmac events", "vmac logs"). vmac logs is a view of the same stream:
+ * the events of drivers' output, by machine and level. */
 #include "events.h"
 
 #include <jansson.h>
@@ -11,35 +13,72 @@
 #include "client.h"
 #include "command.h"
 
+/* What vmac logs shows: a driver's output by the kind of its event, with
+ * the level it is read as (docs/CLI.md, "vmac logs"). */
+enum log_level { LOG_INFO, LOG_WARN, LOG_ERROR };
+static const struct {
+	const char *kind;
+	enum log_level level;
+} log_kinds[] = {
+    {"driver", LOG_INFO},        /* dev:event(text) */
+    {"warning", LOG_WARN},       /* the host's word on a machine: a cut text value, ... */
+    {"driver_error", LOG_ERROR}, /* the driver failed: file, line, traceback */
+};
+static const char *const log_level_names[] = {"info", "warn", "error"};
+
 struct follow {
 	int json;
 	const char *kind; /* only events of this kind; NULL: all */
 	long count;       /* stop after this many events; 0: never */
 	long seen;
+	int logs;                      /* vmac logs: only log_kinds, as log lines */
+	const char *device;            /* logs: only this machine's; NULL: every machine's */
+	enum log_level at_least;       /* logs: only this level and above */
+	unsigned long long stop_after; /* stop once an event of this seq or later came; 0: never */
+	int done;
 	char line[4096];
 	size_t len;
 	char data[4096];
 };
 
-/* One event, unless --kind leaves it out (then it is not counted). */
+/* The level vmac logs reads an event as, or -1: not a driver's output. */
+static int log_level_of(const char *kind, const char *device)
+{
+	size_t i;
+	if (!kind || !device || !device[0])
+		return -1;
+	for (i = 0; i < sizeof(log_kinds) / sizeof(log_kinds[0]); i++)
+		if (strcmp(kind, log_kinds[i].kind) == 0)
+			return (int)log_kinds[i].level;
+	return -1;
+}
+
+/* One event, unless --kind, or vmac logs' machine and level, leave it out
+ * (then it is not counted). */
 static void print_event(struct follow *f)
 {
 	json_t *e = json_loads(f->data, 0, NULL);
 	const char *kind = json_string_value(json_object_get(e, "kind")),
-	           *text = json_string_value(json_object_get(e, "text"));
+	           *text = json_string_value(json_object_get(e, "text")),
+	           *device = json_string_value(json_object_get(e, "device"));
 	time_t t = (time_t)json_real_value(json_object_get(e, "time"));
+	unsigned long long seq = (unsigned long long)json_integer_value(json_object_get(e, "seq"));
+	int level = log_level_of(kind, device);
 	char when[16];
-	if (!e || (f->kind && (!kind || strcmp(kind, f->kind) != 0))) {
+	if (f->stop_after && seq >= f->stop_after)
+		f->done = 1;
+	if (!e || (f->kind && (!kind || strcmp(kind, f->kind) != 0)) ||
+	    (f->logs && (level < (int)f->at_least || (f->device && strcmp(device, f->device) != 0)))) {
 		json_decref(e);
 		return;
 	}
-	if (f->json) {
+	strftime(when, sizeof(when), "%H:%M:%S", localtime(&t));
+	if (f->json)
 		printf("%s\n", f->data);
-	} else {
-		strftime(when, sizeof(when), "%H:%M:%S", localtime(&t));
-		printf("%lld %s %-14s %s\n", (long long)json_integer_value(json_object_get(e, "seq")), when,
-		       kind ? kind : "?", text ? text : "");
-	}
+	else if (f->logs)
+		printf("%s %-5s %s: %s\n", when, log_level_names[level], device, text ? text : "");
+	else
+		printf("%llu %s %-14s %s\n", seq, when, kind ? kind : "?", text ? text : "");
 	json_decref(e);
 	fflush(stdout);
 	f->seen++;
@@ -52,7 +91,7 @@ static int stream_line(struct follow *f)
 		if (f->data[0]) {
 			print_event(f);
 			f->data[0] = 0;
-			if (f->count && f->seen >= f->count)
+			if ((f->count && f->seen >= f->count) || f->done)
 				return 1;
 		}
 	} else if (strncmp(f->line, "data: ", 6) == 0) {
@@ -88,13 +127,35 @@ static const struct vmac_cmd_option events_options[] = {
                                     "only events of this kind, e.g. audit: who changed what (default: all)"},
     {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
 
+/* Follow GET /api/events after seq `after` into f until f says stop or
+ * the host ends it: 0, or 1 after saying why (who: "vmac events"). */
+static int stream(const struct vmac_cmd_args *a, const char *who, struct follow *f, unsigned long long after)
+{
+	char url[256], path[64], err[512];
+	long code;
+	snprintf(path, sizeof(path), "/api/events?after=%llu", after);
+	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
+	if (vmac_client_stream(url, on_data, f, &code, err, sizeof(err)) != 0) {
+		fprintf(stderr, "%s: %s\n", who, err);
+		return 1;
+	}
+	if (code != 200) {
+		fprintf(stderr, "%s: the host answered HTTP %ld%s%s\n", who, code,
+		        code == 401 || code == 403 ? "\n" : "",
+		        code == 401 || code == 403 ? vmac_client_auth_hint() : "");
+		return 1;
+	}
+	if (!f->done && (!f->count || f->seen < f->count))
+		fprintf(stderr, "%s: the host ended the stream\n", who);
+	return 0;
+}
+
 static int events_run(const struct vmac_cmd_args *a)
 {
 	struct follow *f;
 	unsigned long long after = 0;
 	long count = 0;
-	char url[256], path[64], err[512], *end;
-	long code;
+	char *end;
 	int rc;
 	if (a->opt[EVENTS_AFTER]) {
 		after = strtoull(a->opt[EVENTS_AFTER], &end, 10);
@@ -115,20 +176,7 @@ static int events_run(const struct vmac_cmd_args *a)
 	f->json = a->opt[VMAC_CMD_JSON] != NULL;
 	f->kind = a->opt[EVENTS_KIND];
 	f->count = count;
-	snprintf(path, sizeof(path), "/api/events?after=%llu", after);
-	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], path);
-	rc = vmac_client_stream(url, on_data, f, &code, err, sizeof(err));
-	if (rc != 0) {
-		fprintf(stderr, "vmac events: %s\n", err);
-		rc = 1;
-	} else if (code != 200) {
-		fprintf(stderr, "vmac events: the host answered HTTP %ld%s%s\n", code,
-		        code == 401 || code == 403 ? "\n" : "",
-		        code == 401 || code == 403 ? vmac_client_auth_hint() : "");
-		rc = 1;
-	} else if (!f->count || f->seen < f->count) {
-		fprintf(stderr, "vmac events: the host ended the stream\n");
-	}
+	rc = stream(a, "vmac events", f, after);
 	free(f);
 	return rc;
 }
@@ -146,3 +194,92 @@ const struct vmac_cmd vmac_events_cmd = {
     .common = VMAC_CMD_API,
     .own = events_options,
     .run = events_run};
+
+/* ---- vmac logs ---- */
+
+enum { LOGS_FOLLOW = VMAC_CMD_OWN, LOGS_LEVEL };
+
+static const struct vmac_cmd_option logs_options[] = {
+    [LOGS_FOLLOW - VMAC_CMD_OWN] = {"follow", NULL, 'f', NULL, NULL, NULL,
+                                    "keep following: print each new line as it comes (default: stop)"},
+    [LOGS_LEVEL - VMAC_CMD_OWN] = {"level", NULL, 0, "LEVEL", NULL, NULL,
+                                   "only lines of this level and above: info, warn, error (default: info)"},
+    {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
+
+/* The seq of the newest event the host has (0: none), from its status. 0,
+ * or 1 after saying why. */
+static int newest_seq(const struct vmac_cmd_args *a, unsigned long long *seq)
+{
+	struct vmac_buffer b = {NULL, 0};
+	char url[256], err[512];
+	long code;
+	json_t *s, *e;
+	size_t i;
+	*seq = 0;
+	vmac_client_url(url, sizeof(url), a->opt[VMAC_CMD_HTTP], "/api/status");
+	if (vmac_client_call("GET", url, NULL, &b, &code, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmac logs: %s\n", err);
+		return 1;
+	}
+	if (code != 200 || !(s = json_loads(b.data, 0, NULL))) {
+		fprintf(stderr, "vmac logs: the host answered HTTP %ld to its status%s%s\n", code,
+		        code == 401 || code == 403 ? "\n" : "",
+		        code == 401 || code == 403 ? vmac_client_auth_hint() : "");
+		free(b.data);
+		return 1;
+	}
+	json_array_foreach(json_object_get(s, "events"), i, e)
+	{
+		unsigned long long n = (unsigned long long)json_integer_value(json_object_get(e, "seq"));
+		if (n > *seq)
+			*seq = n;
+	}
+	json_decref(s);
+	free(b.data);
+	return 0;
+}
+
+static int logs_run(const struct vmac_cmd_args *a)
+{
+	struct follow *f;
+	const char *level = a->opt[LOGS_LEVEL] ? a->opt[LOGS_LEVEL] : "info";
+	unsigned long long newest = 0;
+	int rc, i, at = -1;
+	for (i = 0; i < (int)(sizeof(log_level_names) / sizeof(log_level_names[0])); i++)
+		if (strcmp(level, log_level_names[i]) == 0)
+			at = i;
+	if (at < 0) {
+		fprintf(stderr, "vmac logs: --level is info, warn or error, not '%s'\n", level);
+		return 2;
+	}
+	if (!a->opt[LOGS_FOLLOW] && (rc = newest_seq(a, &newest)) != 0)
+		return rc;
+	if (!a->opt[LOGS_FOLLOW] && newest == 0)
+		return 0; /* no event yet: nothing to show */
+	if (!(f = calloc(1, sizeof(*f))))
+		return 2;
+	f->json = a->opt[VMAC_CMD_JSON] != NULL;
+	f->logs = 1;
+	f->device = a->nargs > 0 ? a->arg[0] : NULL;
+	f->at_least = (enum log_level)at;
+	f->stop_after = newest;
+	rc = stream(a, "vmac logs", f, 0);
+	free(f);
+	return rc;
+}
+
+const struct vmac_cmd vmac_logs_cmd = {
+    .name = "logs",
+    .args = "[MACHINE]",
+    .max_args = 1,
+    .summary = "show drivers' output (dev:event, warnings, failures), of one machine or all",
+    .about = "Show what drivers said, from the host's event stream: dev:event(text) as info, the host's\n"
+             "warnings about a machine (a cut text value, ...) as warn, and a driver's failure with its\n"
+             "traceback as error; one line each: local time, level, machine, text (with --json: each\n"
+             "event's JSON). Without -f, the lines among the events the host still keeps (the last 100 of\n"
+             "all kinds), then stop; with -f, those and then each new one as it comes. Needs a token of\n"
+             "scope read.\n"
+             "Exit 0 when done or the host ends the stream, 1 when it cannot be followed, 2 wrong usage.\n",
+    .common = VMAC_CMD_API,
+    .own = logs_options,
+    .run = logs_run};

@@ -27,7 +27,8 @@
 #define VMAC_DRIVER_MAX_IO 32
 #define VMAC_DRIVER_MAX_PARAMS 32
 #define VMAC_DRIVER_NAME_MAX 31                /* names of io, params, variables, commands */
-#define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value */
+#define VMAC_DRIVER_STR_MAX VMAC_VALUE_STR_MAX /* a string variable's value; longer ones are cut */
+#define VMAC_DRIVER_CUT_MARK "\xe2\x80\xa6"    /* "…" (UTF-8): a cut text value ends with it */
 #define VMAC_DRIVER_VERSION_MAX 31
 /* The driver API this host offers (vmac.version; a bundle names the one it
  * needs): MAJOR.MINOR, a bundle of the same major and a minor not above
@@ -91,13 +92,15 @@ struct vmac_driver_limits {
 	void *heap_ctx;
 };
 
-/* What the host offers a running driver (dev:set_level, dev:event). Set by
- * the bus thread with vmac_driver_bind; the calls come from inside a guarded
- * call, on the bus thread. */
+/* What the host offers a running driver (dev:set_level, dev:event). Set
+ * with vmac_driver_bind; the calls come from inside a guarded call, on the
+ * thread that runs the driver (its worker): no I/O there. */
 struct vmac_driver_host {
 	/* Ask for another level; 0, or -1 with err ("schedule full: ..."). */
 	int (*set_level)(void *ctx, unsigned level, char *err, size_t errlen);
-	void (*event)(void *ctx, const char *text);
+	/* An event for people: kind "driver" (dev:event's text) or "warning"
+	 * (the host's word on what the driver did: a cut text value). */
+	void (*event)(void *ctx, const char *kind, const char *text);
 	void *ctx;
 };
 

@@ -193,13 +193,33 @@ static int read_outputs(struct vmac_driver *d, struct vmac_outputs *const out[],
 	return rc;
 }
 
+/* s[0..n) into out (room for VMAC_DRIVER_STR_MAX + 1), cut when longer:
+ * then it ends with VMAC_DRIVER_CUT_MARK, and the cut falls between two
+ * UTF-8 characters (backing off at most 3 continuation bytes), so a valid
+ * UTF-8 text stays valid. */
+static void copy_text(char *out, const char *s, size_t n)
+{
+	const size_t mark = sizeof(VMAC_DRIVER_CUT_MARK) - 1;
+	size_t keep = VMAC_DRIVER_STR_MAX - mark, back = 0;
+	if (n <= VMAC_DRIVER_STR_MAX) {
+		memcpy(out, s, n);
+		out[n] = 0;
+		return;
+	}
+	while (back < 3 && keep > 0 && ((unsigned char)s[keep] & 0xC0) == 0x80)
+		keep--, back++;
+	memcpy(out, s, keep);
+	memcpy(out + keep, VMAC_DRIVER_CUT_MARK, mark + 1);
+}
+
 /* The value on top as a vmac_value; -1 if it has a type a variable cannot.
  * str is "" but for a string: no stack bytes go out with the status (found
- * by tests/fuzz/fuzz_manifest.c). */
-static int to_value(lua_State *L, struct vmac_value *v)
+ * by tests/fuzz/fuzz_manifest.c). *len: a string's length in Lua (more than
+ * VMAC_DRIVER_STR_MAX: it was cut), else 0. */
+static int to_value(lua_State *L, struct vmac_value *v, size_t *len)
 {
-	size_t n;
 	const char *s;
+	*len = 0;
 	v->str[0] = 0;
 	switch (lua_type(L, -1)) {
 	case LUA_TNIL: v->type = VMAC_VALUE_NONE; return 0;
@@ -212,15 +232,25 @@ static int to_value(lua_State *L, struct vmac_value *v)
 		v->number = lua_toboolean(L, -1);
 		return 0;
 	case LUA_TSTRING:
-		s = lua_tolstring(L, -1, &n);
-		if (n > VMAC_DRIVER_STR_MAX)
-			n = VMAC_DRIVER_STR_MAX;
+		s = lua_tolstring(L, -1, len);
 		v->type = VMAC_VALUE_STRING;
-		memcpy(v->str, s, n);
-		v->str[n] = 0;
+		copy_text(v->str, s, *len);
 		return 0;
 	default: return -1;
 	}
+}
+
+/* The first cut of a variable's text in this instance: one warning event. */
+static void warn_cut(struct vmac_driver *d, struct var *v, size_t len)
+{
+	char text[160];
+	if (v->warned_cut || !d->host.event)
+		return;
+	v->warned_cut = 1;
+	snprintf(text, sizeof(text),
+	         "dev.vars.%s: a text of %zu bytes was cut to %d (a text value holds at most %d bytes)", v->pub.name,
+	         len, VMAC_DRIVER_STR_MAX, VMAC_DRIVER_STR_MAX);
+	d->host.event(d->host.ctx, "warning", text);
 }
 
 static int value_equal(const struct vmac_value *a, const struct vmac_value *b)
@@ -239,6 +269,7 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 	lua_State *L = d->L;
 	struct vmac_value now[VMAC_DRIVER_MAX_VARS];
 	int i, j, published = 0, keys = lua_gettop(L) + 1, dev = keys + 1, t = keys + 2;
+	size_t len;
 	if (d->nvars == 0)
 		return 0;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_keys);
@@ -254,13 +285,15 @@ static int publish_vars(struct vmac_driver *d, double time_s, char *err, size_t 
 		struct var *v = &d->vars[i];
 		lua_rawgeti(L, keys, key_var(d, i));
 		lua_rawget(L, t);
-		if (to_value(L, &now[i]) != 0) {
+		if (to_value(L, &now[i], &len) != 0) {
 			snprintf(err, errlen, "%s: dev.vars.%s must be a number, boolean, string or nil, got %s",
 			         d->file, v->pub.name, luaL_typename(L, -1));
 			lua_pop(L, 4);
 			return -1;
 		}
 		lua_pop(L, 1);
+		if (len > VMAC_DRIVER_STR_MAX)
+			warn_cut(d, v, len);
 		v->due = !value_equal(&now[i], &v->pub.value) &&
 		         (v->every_s == 0 || time_s - v->pub.published_s >= v->every_s || v->pub.published_s == 0);
 	}
@@ -482,12 +515,13 @@ static int params_work(struct vmac_driver *d, void *args, char *err, size_t errl
 	struct vmac_variable *out = args;
 	lua_State *L = d->L;
 	int i;
+	size_t len;
 	(void)err;
 	(void)errlen;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_params);
 	for (i = 0; i < d->nparams; i++) {
 		drv_raw_getfield(L, 1, d->params[i].name);
-		to_value(L, &out[i].value);
+		to_value(L, &out[i].value, &len);
 		lua_settop(L, 1);
 	}
 	return 0;

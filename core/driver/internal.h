@@ -62,6 +62,7 @@ struct var {
 	int group;      /* index of the group's first variable + 1; 0 = none */
 	int settable;   /* set = true: an operator may set it */
 	int due;
+	int warned_cut; /* a cut text value of it was told (once per instance) */
 };
 
 struct vmac_driver {

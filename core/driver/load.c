@@ -42,7 +42,7 @@ static int dev_event(lua_State *L)
 		d->events_in_window = 0;
 	}
 	if (++d->events_in_window <= EVENTS_PER_S && d->host.event)
-		d->host.event(d->host.ctx, text);
+		d->host.event(d->host.ctx, "driver", text);
 	return 0;
 }
 

@@ -540,8 +540,9 @@ static int hook_set_level(void *ctx, unsigned level, char *err, size_t errlen)
 	return 0;
 }
 
-/* dev:event(text): to the main thread from the worker that runs the job. */
-static void hook_event(void *ctx, const char *text)
+/* dev:event(text), or the driver module's warning: to the main thread
+ * from the worker that runs the job (its ring: no I/O here). */
+static void hook_event(void *ctx, const char *kind, const char *text)
 {
 	struct job *j = ctx;
 	struct vmac_bus *bus = j->bus;
@@ -552,7 +553,7 @@ static void hook_event(void *ctx, const char *text)
 	m.time_ns = bus->start_ns + (int64_t)(j->time_s * 1e9);
 	memcpy(m.device, j->device, sizeof(m.device));
 	memcpy(m.driver, j->driver, sizeof(m.driver));
-	snprintf(m.event_kind, sizeof(m.event_kind), "driver");
+	snprintf(m.event_kind, sizeof(m.event_kind), "%s", kind);
 	snprintf(m.text, sizeof(m.text), "%s", text);
 	if (bus->virt || w < 0)
 		bus_post(bus, &m); /* virtual mode: one thread */

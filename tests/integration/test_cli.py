@@ -129,6 +129,34 @@ def test_lint_knows_the_sandbox(t):
             "vmac lint did not report %s:\n%s" % (name, out))
 
 
+
+def test_lint_gives_one_answer_for_any_path_to_a_file(t):
+    """A driver test linted by an absolute path from elsewhere, by a relative
+    path, and by one with '..' gets the same warnings: the test API's
+    globals are known however the file is named (scripts/luacheckrc)."""
+    folder = os.path.join(t.logdir, "mine", "tests")
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, "mine_test.lua")
+    with open(path, "w") as f:
+        f.write('test("one", function()\n  local b = board{ plant = "generic" }\n  run_for(1)\n'
+                '  expect(b ~= nil, "a board")\n  local unused = 1\nend)\n')
+    elsewhere = os.path.join(t.logdir, "elsewhere")
+    os.makedirs(elsewhere, exist_ok=True)
+    ways = [(elsewhere, path), (folder, "mine_test.lua"), (t.logdir, "mine/tests/../tests/./mine_test.lua"),
+            (elsewhere, "../mine/tests/mine_test.lua"), ("/", "." + path)]
+    answers = []
+    for cwd, name in ways:
+        p = subprocess.run([t.path("vmac"), "lint", name], cwd=cwd, capture_output=True, text=True, timeout=60)
+        warnings = sorted(re.sub(r"^.*mine_test\.lua:", "", l.strip()) for l in p.stdout.splitlines()
+                          if "mine_test.lua:" in l)
+        answers.append((p.returncode, warnings))
+    assert answers[0][0] == 1 and len(answers[0][1]) == 1 and "unused" in answers[0][1][0], (
+        "vmac lint of the test by its absolute path, from elsewhere: %r (wanted exit 1 and only the unused variable)" % (
+            answers[0],))
+    for (cwd, name), answer in zip(ways[1:], answers[1:]):
+        assert answer == answers[0], "vmac lint %s from %s answered %r, by the absolute path %r" % (
+            name, cwd, answer, answers[0])
+
 # Every vmac command and action (docs/CLI.md) with the options it takes
 # beside --help, as the documentation names them. A command that loses one
 # of them, or its --help, or a command added without an entry here, fails the
@@ -138,6 +166,7 @@ CONSOLE = ["--http", "--host", "--token", "--token-file", "--quiet"]
 COMMANDS = {
     "status": API,
     "events": API + ["--after", "--count"],
+    "logs": API + ["--follow", "--level"],
     "bundle": ["--json", "--output", "--counter", "--keys"],
     "reload": API + ["--driver", "--probation", "--force", "--sig", "--counter"],
     "rollback": API,
@@ -162,11 +191,11 @@ COMMANDS = {
     "test": ["--drivers", "--replay", "--filter", "--seed", "--list", "--tap", "--junit", "--trace", "--time-limit",
              "--timeout", "--history"],
 }
-PARENTS = {"": ["status", "lint", "test", "token", "board", "console", "get", "set", "events", "site", "bundle",
+PARENTS = {"": ["status", "lint", "test", "token", "board", "console", "get", "set", "events", "logs", "site", "bundle",
                 "reload", "rollback", "drivers", "activate", "recordings", "recording", "record", "bench"],
            "token": ["create", "list", "revoke"], "board": ["enroll", "list", "remove"],
            "recording": ["get", "to-test"]}
-FLAGS = {"--json", "--quiet", "--list", "--tap", "--local", "--replace", "--force"}  # the options that take no value
+FLAGS = {"--json", "--quiet", "--list", "--tap", "--local", "--replace", "--force", "--follow"}  # the options that take no value
 
 
 def names_option(text, option):
@@ -253,7 +282,7 @@ def test_cli_every_api_command_reaches_the_host_it_is_given(t):
     driver = os.path.join(t.logdir, "counter.lua")
     with open(driver, "w") as f:
         f.write('return { name = "counter", version = "1", io = {}, tick = function() end }\n')
-    arguments = {"status": [], "events": [], "reload": [driver], "rollback": ["counter"],
+    arguments = {"status": [], "events": [], "logs": [], "reload": [driver], "rollback": ["counter"],
                  "activate": ["counter", "2"], "drivers": [], "recordings": [], "recording get": ["1"],
                  "record": ["washer-1"], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": [],
                  "board enroll": ["lamp"], "board list": [], "board remove": ["lamp"]}

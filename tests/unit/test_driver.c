@@ -405,9 +405,10 @@ static int fake_set_level(void *ctx, unsigned level, char *err, size_t errlen)
 	return 0;
 }
 static int events_seen;
-static void fake_event(void *ctx, const char *text)
+static void fake_event(void *ctx, const char *kind, const char *text)
 {
 	(void)ctx;
+	(void)kind;
 	(void)text;
 	events_seen++;
 }
