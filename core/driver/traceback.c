@@ -1,4 +1,4 @@
-/* A driver error's traceback made for people (docs/DRIVERS.md "Failure"):
+/* A driver error's traceback made for people (docs/DRIVERS.md "The sandbox"):
  * the text LuaJIT's luaL_traceback builds, cleaned before it becomes the
  * err of a failed call and so the driver_error event. */
 #include "internal.h"

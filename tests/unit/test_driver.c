@@ -290,7 +290,7 @@ START_TEST(bad_outputs_fail_and_turn_everything_off)
 END_TEST
 
 /* A driver's error comes back with one clean traceback (docs/DRIVERS.md
- * "Errors"): the message, then the driver's own frames, each once; the C
+ * "The sandbox"): the message, then the driver's own frames, each once; the C
  * frames carry no raw address, and none is listed twice. */
 START_TEST(a_driver_error_has_one_clean_traceback)
 {
