@@ -16,6 +16,7 @@
  *               operator input, params
  *   takeover.c  hot reload: one instance takes over from another
  *   checkpoint.c  dev.state saved and recovered across a restart
+ *   traceback.c the traceback of a driver's error, cleaned for people
  *
  * Internal names carry the prefix drv_. */
 #ifndef VMAC_DRIVER_INTERNAL_H
@@ -169,6 +170,14 @@ int drv_protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, 
 int drv_protect(struct vmac_driver *d, host_work fn, void *args, char *err, size_t errlen);
 void drv_protect_quiet(struct vmac_driver *d, host_work fn, void *args);
 void drv_raw_getfield(lua_State *L, int i, const char *k);
+
+/* traceback.c: text (a message, then luaL_traceback's "stack traceback:"
+ * and its frames) into out, at most outlen bytes with the NUL: the message
+ * as it is, then each frame once, innermost first from the driver's own
+ * line: no frame of the host's C entry named by its address, no error() or
+ * assert() frame above the line that called it, no frame listed twice.
+ * Without frames left, the message alone. */
+void drv_traceback_clean(const char *text, char *out, size_t outlen);
 void drv_raw_setfield(lua_State *L, int i, const char *k);
 
 /* bounded.c: put the bounded functions of lib into the table on top: [-0, +0]. */

@@ -169,11 +169,17 @@ int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned fa
 		const char *trace =
 		    rc != 0 && rc != LUA_ERRMEM && lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
 		if (rc == LUA_ERRMEM || d->mem_refused) {
-			char what[160];
-			memory_message(d, what, sizeof(what));
-			snprintf(err, errlen, "%s%s%s", what, trace ? ": " : "", trace ? trace : "");
+			size_t used;
+			memory_message(d, err, errlen);
+			used = strlen(err);
+			if (trace && used + 2 < errlen) {
+				snprintf(err + used, errlen - used, ": ");
+				drv_traceback_clean(trace, err + used + 2, errlen - used - 2);
+			}
+		} else if (trace) {
+			drv_traceback_clean(trace, err, errlen);
 		} else {
-			snprintf(err, errlen, "%s", trace ? trace : d->overrun ? d->overrun_msg : "unknown error");
+			snprintf(err, errlen, "%s", d->overrun ? d->overrun_msg : "unknown error");
 		}
 		lua_settop(L, base - 1);
 		return -1;

@@ -102,6 +102,18 @@ async function main() {
   try {
     const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
     page.on("pageerror", (e) => { tally.failures++; console.log("FAIL the page raised: " + e.message); });
+    const manifestAsks = []; // every manifest the page asked for, checked at the end
+    page.on("request", (r) => { if (r.url().includes("/manifest")) manifestAsks.push(r.url()); });
+
+    await check("before the first status the page says it is connecting, not that there are no devices", async () => {
+      const cp = await browser.newPage();
+      await cp.route("**/api/live", (r) => r.abort()); // the status never comes
+      await cp.goto(`http://${addr}/#token=${operate}`);
+      await cp.waitForSelector("#conn.down", { timeout: 10000 });
+      const empty = await cp.textContent("#empty");
+      if (!/connecting/i.test(empty) || /no devices/i.test(empty)) throw new Error(`the page says: ${empty}`);
+      await cp.close();
+    });
 
     await check("three cards appear, and the token leaves the address bar", async () => {
       await page.goto(`http://${addr}/#token=${operate}`);
@@ -116,6 +128,66 @@ async function main() {
       if (cards !== 3) throw new Error(`${cards} cards`);
       if (page.url().includes("token")) throw new Error("the token is still in the address bar: " + page.url());
       await page.screenshot({ path: path.join(OUT, "1-kitchen.png"), fullPage: true });
+    });
+
+    await check("an idle machine offers Start and its programme, not Pause, Resume or Cancel", async () => {
+      const card = '[data-device="dish-1"]';
+      await page.waitForSelector(`${card} [data-command="start"]:visible`, { timeout: 5000 });
+      await page.waitForSelector(`${card} [data-param-select="program"]:visible`, { timeout: 5000 });
+      for (const name of ["pause", "resume", "cancel"]) {
+        if (await page.isVisible(`${card} [data-command="${name}"]`)) throw new Error(`${name} offered on an idle dishwasher`);
+      }
+    });
+
+    await check("an unlabelled variable has a readable name and an on/off lamp", async () => {
+      const card = '[data-device="washer-1"]';
+      await page.waitForSelector(`${card} .vars .label:text-is("Running")`, { timeout: 5000 });
+      await page.waitForSelector(`${card} [data-var="running"].onoff:text-is("off")`, { timeout: 5000 });
+      if (await page.locator(`${card} .vars .label:text-is("running")`).count()) throw new Error("a raw name shown");
+      await page.waitForSelector('[data-device="lights-1"] [data-var="kitchen"].onoff', { timeout: 5000 });
+    });
+
+    await check("a flat zero is drawn on a 0..1 axis, not -1..1", async () => {
+      const plot = '[data-device="washer-1"] canvas[data-plot^="drum_rpm"]';
+      await page.waitForFunction((sel) => {
+        const c = document.querySelector(sel);
+        return c && Number(c.dataset.points) > 0 && c.dataset.lo !== undefined;
+      }, plot, { timeout: 10000 });
+      const [lo, hi] = await page.$eval(plot, (c) => [Number(c.dataset.lo), Number(c.dataset.hi)]);
+      if (lo !== 0 || hi !== 1) throw new Error(`the idle drum's axis is ${lo}..${hi}`);
+    });
+
+    await check("messages: one area, the newest three, dismissable, cleared on another page", async () => {
+      await page.evaluate(() => { for (let i = 1; i <= 5; i++) toast("failure " + i, true); });
+      const shown = await page.locator("#messages .toast").allTextContents();
+      if (shown.length !== 3 || !shown[0].startsWith("failure 5")) throw new Error("shown: " + JSON.stringify(shown));
+      await page.evaluate(() => toast("failure 5", true));
+      if (await page.locator("#messages .toast").count() !== 3) throw new Error("the same message shown twice");
+      await page.click("#messages .toast:first-child button.dismiss");
+      if (await page.locator("#messages .toast").count() !== 2) throw new Error("dismiss left the message");
+      await page.screenshot({ path: path.join(OUT, "1b-messages.png") });
+      await page.click('nav a[data-page="system"]');
+      await page.waitForSelector("#messages .toast", { state: "detached", timeout: 2000 });
+      await page.click('nav a[data-page="devices"]');
+    });
+
+    await check("the programme chosen in a card is kept when its machine comes back", async () => {
+      const card = '[data-device="dish-1"]';
+      const options = await page.$$eval(`${card} [data-param-select="program"] option`, (os) => os.map((o) => o.value));
+      const current = await page.inputValue(`${card} [data-param-select="program"]`);
+      const other = options.find((o) => o !== current);
+      if (!other) throw new Error("the dishwasher has one programme only");
+      await page.selectOption(`${card} [data-param-select="program"]`, other);
+      boards["dish-1"].kill("SIGKILL");
+      await page.waitForSelector(card, { state: "detached", timeout: 5000 });
+      boards["dish-1"] = start("dish-1b", [path.join(BIN, "vmac-board"), "--plant", "dishwasher", "--name", "dish-1",
+        "--bus", BUS, "--key-file", path.join(KEYS, "dish-1.key"), "--commands"], true);
+      await page.waitForSelector(`${card}:not(.leaving) [data-param-select="program"]`, { timeout: 30000 });
+      await page.waitForTimeout(1000); // a few statuses, each with the host's own param
+      const now = await page.inputValue(`${card}:not(.leaving) [data-param-select="program"]`);
+      if (now !== other) throw new Error(`chose ${other}, the card shows ${now} after its machine came back`);
+      await page.click('nav a[data-page="system"]'); // the drop's message is not the next check's
+      await page.click('nav a[data-page="devices"]');
     });
 
     await check("the kitchen's boards proved their keys: their cards say sealed", async () => {
@@ -157,6 +229,12 @@ async function main() {
       }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 });
       const step = await page.textContent(`${card} [data-var="step"]`);
       if (step !== "wash") throw new Error("the page shows step " + step);
+      // Running: Pause and Cancel, no Start, no Resume.
+      for (const [name, offered] of [["start", false], ["pause", true], ["resume", false], ["cancel", true]]) {
+        if (await page.isVisible(`${card} [data-command="${name}"]`) !== offered) {
+          throw new Error(`${name} ${offered ? "not offered" : "offered"} while washing`);
+        }
+      }
       await page.screenshot({ path: path.join(OUT, "4-washing.png"), fullPage: true });
     });
 
@@ -223,6 +301,12 @@ async function main() {
       await bad.goto(`http://${addr}/#token=vmac_0000000000000000_${"0".repeat(64)}`);
       await bad.waitForSelector("#signin:not([hidden]) #signin-error:text('not valid')", { timeout: 10000 });
       await bad.close();
+    });
+
+    await check("no manifest was asked for before its version was known", async () => {
+      const empty = manifestAsks.filter((u) => /version=(&|$)/.test(u));
+      if (!manifestAsks.length) throw new Error("no manifest asked for at all");
+      if (empty.length) throw new Error("asked: " + empty.join(", "));
     });
 
     await enrollment(browser, page, addr, { operate, deploy });

@@ -289,6 +289,42 @@ START_TEST(bad_outputs_fail_and_turn_everything_off)
 }
 END_TEST
 
+/* A driver's error comes back with one clean traceback (docs/DRIVERS.md
+ * "The sandbox"): the message, then the driver's own frames, each once; the C
+ * frames carry no raw address, and none is listed twice. */
+START_TEST(a_driver_error_has_one_clean_traceback)
+{
+	struct vmac_driver *d = load_ok("local function inner() error('boom') end\n"
+	                                "local function outer() inner() end\n"
+	                                "local lazy = setmetatable({}, { __index = function() outer() end })\n"
+	                                "return { name = 't', version = '1', io = {},\n"
+	                                "  tick = function(dev) return lazy.x end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	const char *line, *tb;
+	vmac_driver_add_board(d, 0, "b0");
+	memset(&in, 0, sizeof(in));
+	ck_assert_int_ne(tick1(d, 0, &in, &out, err, sizeof(err)), 0);
+	tb = strstr(err, "stack traceback:\n");
+	ck_assert_msg(tb != NULL, "no traceback in: %s", err);
+	ck_assert_msg(strstr(err, "t.lua:1: boom") == err, "the message does not come first: %s", err);
+	ck_assert_msg(strstr(err, " at 0x") == NULL, "a raw address in: %s", err);
+	ck_assert_msg(strncmp(tb, "stack traceback:\n\tt.lua:1: in function 'inner'\n", 46) == 0,
+	              "the driver's line is not the first frame: %s", err);
+	ck_assert_msg(strstr(tb, "t.lua:2: in function 'outer'") != NULL, "no frame of outer: %s", err);
+	for (line = strchr(tb, '\n'); line && line[1]; line = strchr(line + 1, '\n')) {
+		const char *end = strchr(line + 1, '\n');
+		size_t len = end ? (size_t)(end - line) : strlen(line);
+		char frame[200];
+		snprintf(frame, sizeof(frame), "%.*s\n", (int)(len < 190 ? len : 190), line);
+		ck_assert_msg(strstr(line + len, frame) == NULL, "frame listed twice (%.*s) in: %s", (int)len, line + 1,
+		              err);
+	}
+	vmac_driver_free(d);
+}
+END_TEST
+
 /* The tick's tables are looked up by interned keys (load.c, make_keys):
  * a driver that replaces dev.out or dev.vars, or publishes a table, is
  * still caught by name, the stack stays balanced, the outputs stay off. */
@@ -931,6 +967,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, manifest_errors_name_the_field);
 	tcase_add_test(tc, named_io_in_and_out);
 	tcase_add_test(tc, bad_outputs_fail_and_turn_everything_off);
+	tcase_add_test(tc, a_driver_error_has_one_clean_traceback);
 	tcase_add_test(tc, replaced_tables_and_bad_variables_fail_by_name);
 	tcase_add_test(tc, two_boards_one_machine);
 	tcase_add_test(tc, variables_publish_by_their_rules);

@@ -433,6 +433,34 @@ START_TEST(lib_call_names_the_library_function_running)
 }
 END_TEST
 
+/* The traceback's text cleaned (core/driver/traceback.c): each frame once,
+ * no address of the host's C entry, the driver's line first. */
+START_TEST(a_traceback_lists_each_frame_once_without_addresses)
+{
+	static const char doubled[] = "washer.lua:12: boom\nstack traceback:\n"
+	                              "\t[C]: in function 'error'\n"
+	                              "\twasher.lua:12: in function 'fill'\n"
+	                              "\twasher.lua:12: in function 'fill'\n"
+	                              "\t[C]: at 0x562db6e8f180\n"
+	                              "\twasher.lua:40: in function <washer.lua:38>\n"
+	                              "\twasher.lua:40: in function <washer.lua:38>\n"
+	                              "\t[C]: at 0x562db6e8f180";
+	char out[400], small[24];
+	drv_traceback_clean(doubled, out, sizeof(out));
+	ck_assert_str_eq(out, "washer.lua:12: boom\nstack traceback:\n"
+	                      "\twasher.lua:12: in function 'fill'\n"
+	                      "\twasher.lua:40: in function <washer.lua:38>");
+	drv_traceback_clean("t.lua:1: boom\nstack traceback:\n\t[C]: in function 'error'\n\t[C]: at 0x1", out,
+	                    sizeof(out));
+	ck_assert_str_eq(out, "t.lua:1: boom");
+	drv_traceback_clean("no traceback at all", out, sizeof(out));
+	ck_assert_str_eq(out, "no traceback at all");
+	drv_traceback_clean(doubled, small, sizeof(small));
+	ck_assert_msg(strlen(small) == sizeof(small) - 1 && strncmp(small, doubled, sizeof(small) - 1) == 0,
+	              "a short buffer does not hold the start of the text: '%s'", small);
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("isolation");
@@ -448,6 +476,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, an_unprotected_error_stops_the_driver_not_the_process);
 	tcase_add_test(tc, costly_library_calls_are_refused_and_ordinary_ones_run);
 	tcase_add_test(tc, lib_call_names_the_library_function_running);
+	tcase_add_test(tc, a_traceback_lists_each_frame_once_without_addresses);
 	suite_add_tcase(s, tc);
 	return s;
 }

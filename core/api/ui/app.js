@@ -9,12 +9,23 @@
 const PLOT_SECONDS = 300;      // plots show the last five minutes
 const COLOURS = ["#2563eb", "#f59e0b", "#059669", "#dc2626", "#7c3aed", "#0891b2"];
 const CYCLE_VARS = ["state", "cycle", "step", "paused_by", "error", "time_left_s"];
+// The appliance's commands (docs/STDLIB.md "appliance") and the cycle states
+// in which each is offered; any other command is always offered.
+const COMMAND_STATES = {
+  start: ["idle", "done", "cancelled", "failed"],
+  pause: ["running"],
+  resume: ["paused"],
+  cancel: ["running", "paused"],
+};
+const MESSAGES_MAX = 3;        // the message area shows the newest three
 
 const state = {
   token: null,
   scope: "none",
   manifests: {},      // "driver@version" -> manifest (or a promise of it)
   cards: {},          // device name -> card
+  chosen: {},         // device name -> the programme the user chose in its card (kept across redraws)
+  plotHistory: {},    // device name -> variable -> [[time, value]] (kept across redraws)
   lastEventSeq: 0,
   eventsLoaded: false,
   eventFilter: "all", // the Events page shows every event, the audit trail only, or the rest (events.js)
@@ -42,10 +53,23 @@ function el(tag, attrs, ...children) {
   return e;
 }
 
+// The one message area (docs/UI.md "Messages"): newest first, at most
+// MESSAGES_MAX, each dismissable; the same text again moves to the top
+// instead of repeating; news goes after 4 s, a failure stays until it is
+// dismissed or the page changes.
 function toast(text, bad) {
-  const t = el("div", { class: "toast" + (bad ? " bad" : ""), role: "status" }, text);
-  $("#toasts").append(t);
-  setTimeout(() => t.remove(), bad ? 8000 : 4000);
+  const area = $("#messages");
+  for (const old of area.querySelectorAll(".toast")) if (old.dataset.text === text) old.remove();
+  const t = el("div", { class: "toast" + (bad ? " bad" : ""), role: bad ? "alert" : "status", "data-text": text },
+    el("span", {}, text),
+    el("button", { class: "dismiss", "aria-label": "dismiss", title: "dismiss", onclick: () => t.remove() }, "\u00d7"));
+  area.prepend(t);
+  while (area.children.length > MESSAGES_MAX) area.lastChild.remove();
+  if (!bad) setTimeout(() => t.remove(), 4000);
+}
+
+function clearMessages() {
+  $("#messages").replaceChildren();
 }
 
 // ---- the API ----
@@ -80,7 +104,10 @@ async function input(device, name, value, persist) {
   }
 }
 
+// A driver's manifest for the version a machine runs; nothing is asked
+// before that version is known (a machine still attaching has none).
 function manifest(driver, version) {
+  if (!version) return Promise.resolve({ name: driver, version });
   const key = driver + "@" + version;
   if (!state.manifests[key]) {
     state.manifests[key] = api("GET", "/api/drivers/" + encodeURIComponent(driver) + "/manifest?version=" +
@@ -92,6 +119,7 @@ function manifest(driver, version) {
 // ---- sign-in ----
 
 function signedOut(why) {
+  clearMessages();
   state.token = null;
   localStorage.removeItem("vmacToken");
   if (state.stream) state.stream.abort();
@@ -168,6 +196,7 @@ function setConn(how) {
 }
 
 function onStatus(s) {
+  if (!state.status) $("#empty").textContent = "No devices yet. Plug in a board: its card appears here.";
   state.status = s;
   const now = Date.now() / 1000;
   const seen = new Set();
@@ -204,6 +233,17 @@ function removeCard(name) {
 
 // ---- a device's card ----
 
+// A variable's name made readable where its driver gave it no label:
+// time_left_s -> "Time left (s)", drum_rpm -> "Drum (rpm)", running -> "Running".
+const NAME_UNITS = { s: "s", ms: "ms", rpm: "rpm", l: "l", c: "°C", pct: "%", w: "W", kw: "kW", v: "V", a: "A" };
+function readable(name) {
+  const words = name.split("_").filter(Boolean);
+  let unit = "";
+  if (words.length > 1 && NAME_UNITS[words[words.length - 1]]) unit = NAME_UNITS[words.pop()];
+  const text = words.join(" ");
+  return text.charAt(0).toUpperCase() + text.slice(1) + (unit ? " (" + unit + ")" : "");
+}
+
 function fmt(v, unit) {
   if (v === null || v === undefined) return "-";
   if (typeof v === "boolean") return v ? "on" : "off";
@@ -226,7 +266,8 @@ function makeCard(d) {
         title: "its board proved its enrolled key, and every frame with it is sealed" }, "sealed")),
     el("div", { class: "sub" }, d.name + " · " + d.driver + " " + d.driver_version));
   $("#cards").append(root);
-  const card = { root, version: d.driver_version, parts: null, history: {}, name: d.name, waiting: false };
+  const history = state.plotHistory[d.name] = state.plotHistory[d.name] || {};
+  const card = { root, version: d.driver_version, parts: null, history, name: d.name, waiting: false };
   card.update = (dev, now) => updateCard(card, dev, now);
   manifest(d.driver, d.driver_version).then((m) => buildCard(card, m));
   return card;
@@ -273,7 +314,7 @@ function buildCard(card, m) {
         onclick: () => input(device, name, !card.values[name]) }, "Switch");
       parts.toggles[name] = control;
     }
-    list.append(el("span", { class: "label" }, spec.label || name), el("span", {}, value, " ", control));
+    list.append(el("span", { class: "label" }, spec.label || readable(name)), el("span", {}, value, " ", control));
   }
   card.root.append(list);
 
@@ -284,7 +325,7 @@ function buildCard(card, m) {
       "data-points": 0 });
     const legend = el("div", { class: "legend" }, names.map((n, i) =>
       el("span", {}, el("i", { colour: COLOURS[i % COLOURS.length] }),
-        (vars[n] && vars[n].label) || n)));
+        (vars[n] && vars[n].label) || readable(n))));
     parts.plots.push({ canvas, names });
     card.root.append(canvas, legend);
   }
@@ -294,8 +335,10 @@ function buildCard(card, m) {
     const start = commands.start;
     let programme = null;
     if (start && start.arg && params[start.arg] && params[start.arg].values) {
-      programme = el("select", { "aria-label": "programme", "data-param-select": start.arg },
-        params[start.arg].values.map((v) => el("option", { value: v }, v)));
+      programme = el("select", { "aria-label": "programme", "data-param-select": start.arg,
+        onchange: () => { state.chosen[device] = programme.value; } },
+      params[start.arg].values.map((v) => el("option", { value: v }, v)));
+      if (params[start.arg].values.includes(state.chosen[device])) programme.value = state.chosen[device];
       controls.append(programme);
     }
     const order = ["start", "pause", "resume", "cancel"];
@@ -307,6 +350,8 @@ function buildCard(card, m) {
         onclick: () => (name === "start" && programme) ? input(device, name, programme.value) : input(device, name) },
       (spec && spec.label) || name);
       controls.append(b);
+      parts.commands = parts.commands || {};
+      parts.commands[name] = b;
     }
     parts.programme = programme;
     card.root.append(controls);
@@ -366,7 +411,19 @@ function updateCard(card, d, now) {
       v.paused_by ? " · paused by " + v.paused_by : "",
       v.error ? el("div", { class: "note" }, v.error) : "");
   }
-  for (const [name, part] of Object.entries(p.values)) part.el.textContent = fmt(v[name], part.unit);
+  for (const [name, part] of Object.entries(p.values)) {
+    part.el.textContent = fmt(v[name], part.unit);
+    const onoff = typeof v[name] === "boolean";
+    part.el.classList.toggle("onoff", onoff); // a lamp, not a word in a line
+    part.el.classList.toggle("on", v[name] === true);
+  }
+  // With a cycle, only the commands its state allows (docs/UI.md "Devices").
+  if (p.commands && p.cycle && typeof v.state === "string") {
+    for (const [name, b] of Object.entries(p.commands)) {
+      if (COMMAND_STATES[name]) b.hidden = !COMMAND_STATES[name].includes(v.state);
+    }
+    if (p.programme && p.commands.start) p.programme.hidden = p.commands.start.hidden;
+  }
   for (const [name, b] of Object.entries(p.toggles)) {
     b.textContent = v[name] ? "Switch off" : "Switch on";
     b.classList.toggle("on", v[name] === true);
@@ -378,9 +435,8 @@ function updateCard(card, d, now) {
       }
     }
   }
-  if (p.programme && d.params && d.params[p.programme.dataset.paramSelect] && !p.programme.dataset.touched) {
-    p.programme.value = d.params[p.programme.dataset.paramSelect];
-    p.programme.onchange = () => { p.programme.dataset.touched = "1"; };
+  if (p.programme && d.params && d.params[p.programme.dataset.paramSelect] && !state.chosen[card.name]) {
+    p.programme.value = d.params[p.programme.dataset.paramSelect]; // the host's until the user chooses
   }
   p.note.textContent = d.note || "";
   for (const plot of p.plots) {
@@ -409,7 +465,12 @@ function drawPlot(plot, history, now) {
   // The window: the last minute at least, growing to PLOT_SECONDS.
   const span = Math.min(PLOT_SECONDS, Math.max(60, now - first));
   if (onoff) { lo = -0.1; hi = 1 + 0.12 * plot.names.length; } // on/off lines side by side
-  if (hi - lo < 1e-9) { hi += 1; lo -= 1; }
+  else if (hi - lo < 1e-9) { // a flat series: from zero to it (a flat zero: 0..1), drawn at four fifths
+    const v = lo;
+    if (v === 0) { lo = 0; hi = 1; } else if (v > 0) { lo = 0; hi = v * 1.25; } else { lo = v * 1.25; hi = 0; }
+  }
+  c.dataset.lo = lo;
+  c.dataset.hi = hi;
   const pad = (hi - lo) * 0.08;
   lo -= pad; hi += pad;
   ctx.fillStyle = "#6b7280";
@@ -715,7 +776,7 @@ function showPage() {
   siteTimer(name === "site");
 }
 
-window.addEventListener("hashchange", () => { if (state.token) showPage(); });
+window.addEventListener("hashchange", () => { clearMessages(); if (state.token) showPage(); });
 $("#signin-form").addEventListener("submit", (ev) => {
   ev.preventDefault();
   signIn($("#token-input").value.trim());
