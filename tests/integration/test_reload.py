@@ -246,7 +246,6 @@ def test_a_board_attaching_later_loads_the_active_version(t):
         "a board attaching after the reload got %r" % host.device("lamp-2", s)["driver_version"]
 
 
-@plain_pass_only("a reload's migrate under the sanitizers: the other reload tests, whose drivers migrate")
 def washer_copy(t, version):
     """A drivers folder holding the shipped washer and its programmes, its
     version made `version`: the path of its washer.lua."""
@@ -262,6 +261,7 @@ def washer_copy(t, version):
     return path
 
 
+@plain_pass_only("a reload's migrate under the sanitizers: the other reload tests, whose drivers migrate")
 def test_a_running_wash_continues_across_a_reload(t):
     """The shipped washer, mid-wash, reloaded with its own file: the cycle
     goes on in the same step with the time it had left, then on to the
