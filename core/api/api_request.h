@@ -44,6 +44,7 @@
 	X(HTTP_EVENT_LOG, "GET", "/api/events/log", VMAC_SCOPE_READ, NULL, http_event_log)                             \
 	X(HTTP_DEVICES, "GET", "/api/devices", VMAC_SCOPE_READ, NULL, http_devices)                                    \
 	X(HTTP_DEVICE, "GET", "/api/devices/NAME", VMAC_SCOPE_READ, NULL, http_devices)                                \
+	X(HTTP_HISTORY, "GET", "/api/devices/NAME/history", VMAC_SCOPE_READ, NULL, http_device_history)                \
 	X(HTTP_INPUT, "POST", "/api/devices/NAME/input", VMAC_SCOPE_OPERATE, "input", http_device_input)               \
 	X(HTTP_CYCLE, "POST", "/api/devices/NAME/cycle", VMAC_SCOPE_OPERATE, "cycle", http_device_cycle)               \
 	X(HTTP_RECORD, "POST", "/api/devices/NAME/record", VMAC_SCOPE_OPERATE, "record", http_record)                  \

@@ -4,7 +4,7 @@
  * handler its route names (docs/API.md; the routes are HTTP_ROUTES in
  * api_request.h): the web UI's files, the health check, GET /api and
  * whoami here, the others in api_devices.c, api_drivers.c, api_events.c,
- * api_recordings.c, api_site.c and api_metrics.c (GET /metrics, and its
+ * api_recordings.c, api_site.c, history.c and api_metrics.c (GET /metrics, and its
  * listener without a token). Every answer is counted by its status code
  * when it ends (GET /metrics shows them), and every request that changes
  * something, or is refused its token, is in the audit trail (audit.c).
@@ -306,8 +306,8 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	pthread_mutex_init(&h->live_lock, NULL);
 	h->status.devices = calloc(cfg->max_devices, sizeof(*h->status.devices));
 	h->status.slot_load = calloc(1u << cfg->max_level, sizeof(*h->status.slot_load));
-	if (!h->status.devices || !h->status.slot_load) {
-		snprintf(err, errlen, "out of memory");
+	if (!h->status.devices || !h->status.slot_load || http_history_start(h) != 0) {
+		snprintf(err, errlen, "out of memory, or cannot start the API's history thread");
 		vmac_http_stop(h);
 		return NULL;
 	}
@@ -380,6 +380,7 @@ void vmac_http_stop(struct vmac_http *h)
 		MHD_stop_daemon(h->metrics_daemon);
 	if (h->daemon)
 		MHD_stop_daemon(h->daemon);
+	http_history_stop(h); /* it uses the status copy and its lock */
 	pthread_mutex_destroy(&h->status_lock);
 	http_guard_stop(h);
 	pthread_mutex_destroy(&h->live_lock);

@@ -78,6 +78,23 @@ struct http_guard {
 	double cut_said_at;
 };
 
+/* ---- GET /api/devices/NAME/history: the plots' history (history.c) ---- */
+
+#define HISTORY_PERIOD_MS 500 /* a sample every half second: twice the live stream's period */
+#define HISTORY_SAMPLES 240   /* the last 120 s */
+#define HISTORY_SERIES 8      /* plotted variables a machine keeps, the first of ui.plots */
+
+struct history_machine;
+
+struct http_history {
+	pthread_mutex_t lock; /* machines and what they point at; the sampler waits on wake */
+	pthread_cond_t wake;
+	pthread_t thread;
+	int inited, running, stop;
+	unsigned cap;                      /* max_devices */
+	struct history_machine **machines; /* cap entries; NULL: unused */
+};
+
 struct vmac_http {
 	struct MHD_Daemon *daemon;
 	struct vmac_bus *bus;
@@ -93,6 +110,7 @@ struct vmac_http {
 	char *live_json;                       /* the newest status as JSON */
 	_Atomic int stopping;                  /* event streams end */
 	struct http_guard guard;               /* lock-outs and deadlines (guard.c) */
+	struct http_history history;           /* the plots' history (history.c) */
 	struct vmac_site *_Atomic site;        /* GET /api/site (api_site.c); NULL: MQTT off */
 	_Atomic uint64_t answered[HTTP_CODES]; /* answers by status code - HTTP_CODE_FIRST */
 	_Atomic uint64_t deploys[HTTP_DEPLOY_ACTIONS][HTTP_DEPLOY_RESULTS];
@@ -239,11 +257,18 @@ void http_audit_type(const struct conn *k, const char *type);
  * reads only): no event, unless its token was refused. */
 void http_audit_nothing(const struct conn *k);
 
+/* history.c: the sampler thread, started once the status copy is
+ * allocated: 0, or a negative errno. Stop frees every machine's history. */
+int http_history_start(struct vmac_http *h);
+void http_history_stop(struct vmac_http *h);
+
 /* The handlers of HTTP_ROUTES, by the file they are in. */
 /* http.c */
 http_handler http_ui, http_health, http_index, http_whoami;
 /* api_devices.c */
 http_handler http_status, http_devices, http_device_input, http_device_cycle, http_console, http_live_stream;
+/* history.c */
+http_handler http_device_history;
 /* api_events.c */
 http_handler http_events_stream, http_event_log;
 /* api_recordings.c */
