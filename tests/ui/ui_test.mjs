@@ -238,6 +238,30 @@ async function main() {
       await page.screenshot({ path: path.join(OUT, "4-washing.png"), fullPage: true });
     });
 
+    await check("a page opened while it washes draws the drum plot from before it was opened", async () => {
+      // The page's own data: points older than the page itself can only
+      // come from the host's history (GET /api/devices/NAME/history).
+      const fresh = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+      try {
+        await fresh.goto(`http://${addr}/#token=${read}`);
+        const plot = '[data-device="washer-1"] canvas[data-plot^="drum_rpm"]';
+        const got = await fresh.waitForFunction((sel) => {
+          const c = document.querySelector(sel);
+          const opened = performance.timeOrigin / 1000;
+          return c && Number(c.dataset.first) < opened - 2 && Number(c.dataset.points) > 8 &&
+            { first: Number(c.dataset.first), opened, points: Number(c.dataset.points) };
+        }, plot, { timeout: 10000 }).catch(async () => {
+          const c = await fresh.$eval(plot, (e) => ({ ...e.dataset })).catch(() => "no plot");
+          throw new Error("the fresh page's drum plot has no points from before it was opened: " + JSON.stringify(c));
+        });
+        const { first, opened, points } = await got.jsonValue();
+        console.log(`  the fresh page's drum plot: ${points} points, the oldest ${(opened - first).toFixed(1)} s before it was opened`);
+        await fresh.screenshot({ path: path.join(OUT, "4b-fresh-page-history.png"), fullPage: true });
+      } finally {
+        await fresh.close();
+      }
+    });
+
     await check("stopping the washer board removes its card within two seconds", async () => {
       const t0 = Date.now();
       boards["washer-1"].kill("SIGKILL");

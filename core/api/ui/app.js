@@ -389,6 +389,31 @@ function buildCard(card, m) {
   card.root.append(parts.note);
   card.parts = parts;
   if (card.lastDevice) updateCard(card, card.lastDevice, Date.now() / 1000);
+  if (parts.plots.length) loadHistory(card);
+}
+
+// The host's recent samples of the plotted variables (docs/API.md
+// "GET /api/devices/NAME/history"), so a plot drawn now shows the last
+// minutes at once: only what is older than the card's own first point is
+// taken, moved to this browser's clock. A machine without history (just
+// started) keeps its plots as they are.
+async function loadHistory(card) {
+  let h;
+  try {
+    h = await api("GET", "/api/devices/" + encodeURIComponent(card.name) + "/history");
+  } catch (e) {
+    return;
+  }
+  const shift = Date.now() / 1000 - h.now;
+  for (const [name, values] of Object.entries(h.series || {})) {
+    const mine = card.history[name] = card.history[name] || [];
+    const before = mine.length ? mine[0][0] : Infinity;
+    const older = [];
+    h.t.forEach((t, i) => { if (values[i] !== null && t + shift < before) older.push([t + shift, values[i]]); });
+    mine.unshift(...older);
+  }
+  const now = Date.now() / 1000;
+  for (const plot of card.parts.plots) drawPlot(plot, card.history, now);
 }
 
 function updateCard(card, d, now) {
@@ -498,6 +523,7 @@ function drawPlot(plot, history, now) {
     if (i === 0 && h.length) last = h[h.length - 1][1];
   });
   c.dataset.points = points;
+  c.dataset.first = first; // the oldest point's time (this browser's clock, s)
   c.dataset.last = last;
 }
 
