@@ -226,6 +226,55 @@ function Board:history() return current.world:history(self.name) end
 
 local function now() return current.world and current.world:now() or 0 end
 
+-- The grace of an always: `within` seconds, or "N period(s)": N times the
+-- longest service period the host gives the test's boards, read when the
+-- condition turns false (a device's period can change with its level).
+local function grace_s(inv)
+	if not inv.periods then return inv.within end
+	local longest_us = 0
+	for _, b in ipairs(current.boards) do
+		local d = current.world:device(b.name)
+		if d and d.period_us > longest_us then longest_us = d.period_us end
+	end
+	if longest_us == 0 then
+		fail(string.format("always: %s (declared at %s) has a grace of %s, but no board is served yet: "
+			.. "no period to count", inv.what, inv.where, inv.within_text), { where = inv.where })
+	end
+	return inv.periods * longest_us / 1e6
+end
+
+local function violated(inv, t, note)
+	fail(string.format("always: %s (declared at %s) was violated at %.6f s, tick %d%s", inv.what, inv.where, t,
+		math.floor(t / current.world:slot() + 0.5), note or ""), { time = t })
+end
+
+-- An always with a grace whose condition is false: it fails once it has
+-- been false for longer than the grace. `advance` stops the run just past
+-- the earliest such moment (current.grace_due) to look again.
+local function held_false(inv, t)
+	if not inv.false_since then
+		inv.false_since, inv.grace = t, grace_s(inv)
+		local due = t + inv.grace
+		if not current.grace_due or due < current.grace_due then
+			current.grace_due, current.grace_new = due, true
+		end
+	elseif t - inv.false_since > inv.grace then
+		violated(inv, t, string.format(": false since %.6f s, longer than its grace of %g s%s", inv.false_since,
+			inv.grace, inv.periods and " (" .. inv.within_text .. ")" or ""))
+	end
+end
+
+-- The earliest moment a pending grace runs out, or nil.
+local function next_grace_due()
+	local due
+	for _, inv in ipairs(current.always) do
+		if inv.false_since and (not due or inv.false_since + inv.grace < due) then
+			due = inv.false_since + inv.grace
+		end
+	end
+	return due
+end
+
 -- Runs at every check (world.c), so it stays lean: no pcall per condition;
 -- an error raised inside one is named by run_test through current.checking.
 local function check_invariants()
@@ -236,30 +285,58 @@ local function check_invariants()
 		local held = inv.fn()
 		current.checking = nil
 		if not held then
+			if inv.within then
+				held_false(inv, now())
+			else
+				violated(inv, now())
+			end
+		elseif inv.false_since then
+			-- Nothing it reads changed between the last check and this one,
+			-- so it was false all that time.
 			local t = now()
-			fail(string.format("always: %s (declared at %s) was violated at %.6f s, tick %d", inv.what, inv.where,
-				t, math.floor(t / current.world:slot() + 0.5)), { time = t })
+			if t - inv.false_since > inv.grace then
+				violated(inv, inv.false_since + inv.grace, string.format(": false from %.6f s to %.6f s, longer "
+					.. "than its grace of %g s%s", inv.false_since, t, inv.grace,
+					inv.periods and " (" .. inv.within_text .. ")" or ""))
+			end
+			inv.false_since = nil
+			current.grace_due = next_grace_due()
 		end
 	end
 end
 
 -- Advance to `until_t`, stopping early when cond() holds; true if it did.
+-- An always whose grace is running stops the run just past the moment the
+-- grace runs out, to look at its condition there (nothing else may move
+-- then, so no check would run).
 local function advance(until_t, cond)
 	local w = W()
 	local limited = false
 	if until_t > opts.time_limit then until_t, limited = opts.time_limit, true end
-	local check
+	local check, met
 	if cond or #current.always > 0 then
 		check = function()
 			check_invariants()
-			return cond ~= nil and cond() and true or false
+			met = cond ~= nil and cond() and true or false
+			return met or current.grace_new
 		end
 	end
-	local stopped = w:run(until_t, check)
-	if not stopped and limited then
+	while true do
+		current.grace_new = false
+		local stop_at = until_t
+		local due = current.grace_due
+		if due and due + 1e-9 < stop_at then stop_at = due + 1e-9 end
+		local stopped = w:run(stop_at, check)
+		if stopped and met then return true end
+		if not stopped then
+			if stop_at >= until_t then break end
+			check_invariants() -- the grace ran out: still false fails it
+		end
+	end
+	if limited then
 		fail(string.format("the test ran past the virtual-time limit of %g s (--time-limit)", opts.time_limit))
 	end
-	return stopped
+	return false
 end
 
 local function run_for(seconds)
@@ -284,11 +361,26 @@ end
 local function run_until(cond, timeout, what) return wait_for("run_until", cond, timeout, what) end
 local function eventually(cond, within, what) return wait_for("eventually", cond, within, what) end
 
-local function always(what, fn)
+-- always(what, cond [, {within = SECONDS or "N period(s)"}])
+local function always(what, fn, options)
 	if type(what) == "function" then what, fn = fn, what end
-	if type(fn) ~= "function" then fail("always(description, condition): the condition must be a function") end
+	if type(fn) ~= "function" then error("always(description, condition): the condition must be a function", 2) end
+	if options ~= nil and type(options) ~= "table" then
+		error("always(description, condition, options): options must be a table such as {within = 0.05}", 2)
+	end
 	checked()
 	local inv = { what = what or "condition", fn = fn, where = where(2) or "?" }
+	local within = options and options.within
+	if type(within) == "number" and within >= 0 then
+		inv.within = within
+		inv.grace = within
+	elseif type(within) == "string" and within:match("^%s*%d*%.?%d+%s+periods?%s*$") then
+		inv.within, inv.within_text = true, within:match("^%s*(.-)%s*$")
+		inv.periods = tonumber(within:match("%d*%.?%d+"))
+	elseif within ~= nil then
+		error(string.format("always: within = %s: expected seconds (a number >= 0) or \"N periods\" "
+			.. "(\"1 period\")", show(within)), 2)
+	end
 	current.always[#current.always + 1] = inv
 	if current.world then check_invariants() end
 	return inv

@@ -70,6 +70,32 @@ def test_failures_name_the_line(t):
         assert text in out, "the failure report lacks %r:\n%s" % (text, out)
 
 
+def test_always_with_a_grace(t):
+    """always(..., {within = ...}): the door interlock of the dishwasher
+    holds within 2 periods of its driver and not at the instant the door
+    opens; a grace shorter than that, or a condition that stays false,
+    fails when the grace runs out, at the tick it ran out."""
+    rc, out, err = vtest(t, "vtest-always-within", case("always_within"))
+    assert rc == 1, "always_within.lua: exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"ok\s+off within 2 periods of the door opening", out), (
+        "the interlock with a grace of 2 periods fails:\n%s" % out)
+    opened = re.search(r"FAIL\s+off at the moment the door opens\n.*\n\s+always: nothing runs with the door open "
+                       r"\(declared at \S*always_within\.lua:24\) was violated at ([0-9.]+) s", out)
+    assert opened, "the interlock without a grace does not fail at the door's opening:\n%s" % out
+    door_s = float(opened.group(1))
+    short = re.search(r"FAIL\s+off within 1 ms of the door opening\n\s+at \S*always_within\.lua:34\n\s+always: .* "
+                      r"was violated at ([0-9.]+) s, tick \d+: false since ([0-9.]+) s, longer than its grace of "
+                      r"0\.001 s", out)
+    assert short, "a grace of 1 ms is not reported as run out:\n%s" % out
+    assert float(short.group(2)) == door_s and abs(float(short.group(1)) - (door_s + 0.001)) < 1e-6, (
+        "the 1 ms grace did not run out 1 ms after the door opened (%s s):\n%s" % (door_s, short.group(0)))
+    stays = re.search(r"FAIL\s+a grace does not excuse a condition that stays false\n.*\n\s+always: the door stays "
+                      r"closed .* was violated at ([0-9.]+) s, tick \d+: false since ([0-9.]+) s, longer than its "
+                      r"grace of 0\.5 s", out)
+    assert stays and abs(float(stays.group(1)) - float(stays.group(2)) - 0.5) < 1e-6, (
+        "a condition false for good is not reported 0.5 s after it turned false:\n%s" % out)
+
+
 def test_runaway_tests_are_stopped(t):
     rc, out, err = vtest(t, "vtest-endless", "--timeout", "1", case("endless"))
     assert rc == 1, "an endless test: exit %d, expected 1\n%s%s" % (rc, out, err)
