@@ -98,6 +98,7 @@ Failure.__index = Failure
 Failure.__tostring = function(f) return f.message end
 
 local current -- the running test: { file, world, boards, always, ... }
+local loading -- the test file whose top level runs, before its tests do
 
 -- file:line of the innermost frame that is in the test file.
 local function where(level)
@@ -105,8 +106,9 @@ local function where(level)
 	while true do
 		local info = debug.getinfo(level, "Sl")
 		if not info then return nil end
-		if current and info.source == "@" .. current.file and info.currentline > 0 then
-			return current.file .. ":" .. info.currentline
+		local file = current and current.file or loading
+		if file and info.source == "@" .. file and info.currentline > 0 then
+			return file .. ":" .. info.currentline
 		end
 		level = level + 1
 	end
@@ -119,6 +121,16 @@ local function fail(message, extra)
 	local f = setmetatable({ message = message, where = where(2) }, Failure)
 	if extra then for k, v in pairs(extra) do f[k] = v end end
 	error(f, 0)
+end
+
+-- A call into the world the test asked for (plugging a board, an action,
+-- wire faults): what it refuses (an unknown plant, a bad argument) is the
+-- test's mistake, so it fails the test at the test's line, not here.
+-- `what` goes ahead of the world's message ("board{...}: ").
+local function world_call(what, fn, ...)
+	local ok, a, b = pcall(fn, ...)
+	if not ok then fail(what .. (tostring(a):gsub("^[^:]*:%d+: ", ""))) end
+	return a, b
 end
 
 local function show(v)
@@ -135,7 +147,7 @@ local methods -- the world's methods, for the accessors that checks call
 
 local function W()
 	if not current.world then
-		current.world = world.new(current.settings, opts.seed)
+		current.world = world_call("", world.new, current.settings, opts.seed)
 		methods = methods or getmetatable(current.world).__index
 		current.world:trace(current.trace_file, current.trace_name)
 		for _, c in ipairs(current.costs) do current.world:driver_cost(c[1], c[2]) end
@@ -161,14 +173,16 @@ end
 
 local function make_board(spec)
 	if type(spec) ~= "table" then fail("board{...}: expected a table with name and plant") end
-	local name = spec.name or error("board{...}: name is required", 3)
-	local plant = spec.plant or error("board{...}: plant is required (washer, dishwasher, lights, generic)", 3)
+	local name, plant = spec.name, spec.plant
+	if type(name) ~= "string" then fail("board{...}: name is required (a string)") end
+	if type(plant) ~= "string" then fail("board{...}: plant is required (washer, dishwasher, lights, generic)") end
+	if spec.params ~= nil and type(spec.params) ~= "table" then fail("board{...}: params must be a table") end
 	local w = W()
 	local driver = spec.driver or plant
 	for k, v in pairs(spec.params or {}) do
-		w:config("driver." .. driver .. ".param." .. k, tostring(v))
+		world_call("board{...}: ", w.config, w, "driver." .. driver .. ".param." .. k, tostring(v))
 	end
-	w:board(name, plant, spec.driver, spec.major, spec.minor)
+	world_call("board{...}: ", w.board, w, name, plant, spec.driver, spec.major, spec.minor)
 	local b = { name = name, plant_kind = plant, driver = driver }
 	b.io = io_view(b)
 	b.inp, b.out = b.io, b.io
@@ -186,12 +200,22 @@ Board.__index = function(b, k)
 end
 Board.__tostring = function(b) return "board " .. b.name end
 
+local function check_action(verb, name, value)
+	if type(name) ~= "string" then fail(string.format("b:%s(action, value): the action must be a name, not %s", verb,
+		show(name))) end
+	if value ~= nil and type(value) ~= "number" and type(value) ~= "boolean" then
+		fail(string.format("b:%s(%q, value): the value must be a number or a boolean, not %s", verb, name,
+			show(value)))
+	end
+end
+
 function Board:set(name, value)
-	local ok, err = pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value)
-	if not ok then fail((tostring(err):gsub("^[^:]*:%d+: ", ""))) end
+	check_action("set", name, value)
+	world_call("", current.world.set, current.world, self.name, name, value == nil and 1 or value)
 end
 
 function Board:try_set(name, value)
+	check_action("try_set", name, value)
 	return (pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value))
 end
 
@@ -200,12 +224,25 @@ function Board:release(name) self:set(name, 0) end
 function Board:open_door() self:set("door", 0) end
 function Board:close_door() self:set("door", 1) end
 
+local function check_input(verb, name, value)
+	if type(name) ~= "string" then
+		fail(string.format("b:%s(name, value): name must be a command or variable's name, not %s", verb, show(name)))
+	end
+	local t = type(value)
+	if value ~= nil and t ~= "boolean" and t ~= "number" and t ~= "string" then
+		fail(string.format("b:%s(%q, value): the value must be nil, a boolean, a number or a string, not a %s", verb,
+			name, t))
+	end
+end
+
 function Board:try_input(name, value)
+	check_input("try_input", name, value)
 	local rc, reply = current.world:input(self.name, name, value)
 	return rc == 0, reply
 end
 
 function Board:input(name, value)
+	check_input("input", name, value)
 	checked()
 	local rc, reply = current.world:input(self.name, name, value)
 	if rc ~= 0 then
@@ -219,7 +256,10 @@ function Board:unplug() current.world:connect(self.name, false, true) end
 function Board:replug() current.world:connect(self.name, true, true) end
 function Board:power_off() current.world:connect(self.name, true, false) end
 function Board:power_on() current.world:connect(self.name, true, true) end
-function Board:faults(spec) current.world:faults(self.name, spec or {}) end
+function Board:faults(spec)
+	if spec ~= nil and type(spec) ~= "table" then fail("b:faults{...}: expected a table such as {drop = 0.01}") end
+	world_call("", current.world.faults, current.world, self.name, spec or {})
+end
 function Board:history() return current.world:history(self.name) end
 
 -- ---- running time ----
@@ -340,14 +380,18 @@ local function advance(until_t, cond)
 end
 
 local function run_for(seconds)
-	if type(seconds) ~= "number" or seconds < 0 then fail("run_for(seconds): seconds must be a number >= 0") end
+	if type(seconds) ~= "number" or not (seconds >= 0) then
+		fail("run_for(seconds): seconds must be a number >= 0, not " .. show(seconds))
+	end
 	advance(now() + seconds)
 end
 
 local function wait_for(verb, cond, timeout, what)
 	checked()
 	if type(cond) ~= "function" then fail(verb .. "(condition, timeout): the condition must be a function") end
-	if type(timeout) ~= "number" or timeout < 0 then fail(verb .. "(condition, timeout): timeout must be seconds") end
+	if type(timeout) ~= "number" or not (timeout >= 0) then
+		fail(verb .. "(condition, timeout): timeout must be seconds, not " .. show(timeout))
+	end
 	local start = now()
 	W()
 	if cond() then return 0 end
@@ -364,9 +408,9 @@ local function eventually(cond, within, what) return wait_for("eventually", cond
 -- always(what, cond [, {within = SECONDS or "N period(s)"}])
 local function always(what, fn, options)
 	if type(what) == "function" then what, fn = fn, what end
-	if type(fn) ~= "function" then error("always(description, condition): the condition must be a function", 2) end
+	if type(fn) ~= "function" then fail("always(description, condition): the condition must be a function") end
 	if options ~= nil and type(options) ~= "table" then
-		error("always(description, condition, options): options must be a table such as {within = 0.05}", 2)
+		fail("always(description, condition, options): options must be a table such as {within = 0.05}")
 	end
 	checked()
 	local inv = { what = what or "condition", fn = fn, where = where(2) or "?" }
@@ -378,8 +422,8 @@ local function always(what, fn, options)
 		inv.within, inv.within_text = true, within:match("^%s*(.-)%s*$")
 		inv.periods = tonumber(within:match("%d*%.?%d+"))
 	elseif within ~= nil then
-		error(string.format("always: within = %s: expected seconds (a number >= 0) or \"N periods\" "
-			.. "(\"1 period\")", show(within)), 2)
+		fail(string.format("always: within = %s: expected seconds (a number >= 0) or \"N periods\" "
+			.. "(\"1 period\")", show(within)))
 	end
 	current.always[#current.always + 1] = inv
 	if current.world then check_invariants() end
@@ -403,6 +447,10 @@ end
 
 local function expect_near(actual, expected, tolerance, what)
 	checked()
+	if type(expected) ~= "number" or type(tolerance) ~= "number" then
+		fail(string.format("expect_near(actual, expected, tolerance): expected and tolerance must be numbers, not %s "
+			.. "and %s", show(expected), show(tolerance)))
+	end
 	if type(actual) ~= "number" or math.abs(actual - expected) > tolerance then
 		fail(string.format("%s: expected %s +/- %s, got %s (at %.3f s)", what or "value", show(expected),
 			show(tolerance), show(actual), now()), { expected = expected, actual = actual })
@@ -438,6 +486,7 @@ end
 
 local function config(settings)
 	if current.world then fail("config{...} must come before the first board") end
+	if type(settings) ~= "table" then fail("config{...}: expected a table of settings") end
 	local keys = {}
 	for k in pairs(settings) do keys[#keys + 1] = k end
 	table.sort(keys)
@@ -449,10 +498,10 @@ end
 -- the host.
 local function driver_cost(name, seconds)
 	if type(name) ~= "string" or type(seconds) ~= "number" then
-		error("driver_cost(name, seconds) expects a driver name and a number of seconds", 2)
+		fail("driver_cost(name, seconds) expects a driver name and a number of seconds")
 	end
 	current.costs[#current.costs + 1] = { name, seconds }
-	if current.world then current.world:driver_cost(name, seconds) end
+	if current.world then world_call("", current.world.driver_cost, current.world, name, seconds) end
 end
 
 local function kitchen(spec)
@@ -478,7 +527,7 @@ end
 -- (--drivers DIR, else the shipped one): the test fails where an output
 -- differs or the driver fails (docs/RECORDING.md, "Replay").
 local function replay(text)
-	if type(text) ~= "string" then error("replay: expects the recording's text", 2) end
+	if type(text) ~= "string" then fail("replay(text): expects the recording's text") end
 	checked()
 	local rc, report = world.replay(text, current.settings, false)
 	if rc ~= 0 then fail(report) end
@@ -544,11 +593,14 @@ local function load_file(file)
 				.. "at its top level?", opts.timeout), 2)
 		end
 	end, "", 100000)
+	loading = file
 	local ok, lerr = xpcall(chunk, function(e)
+		if getmetatable(e) == Failure then e = (e.where and e.where .. ": " or "") .. e.message end
 		local frames = test_frames(debug.traceback("", 2), file)
 		return tostring(e) .. (#frames > 0 and "\n  from " .. table.concat(frames, "\n  from ") or "")
 	end)
 	debug.sethook()
+	loading = nil
 	if not ok then return cannot_load(lerr) end
 	if #found == 0 then return cannot_load(file .. ": defines no test (call test(name, function() ... end))") end
 	for _, t in ipairs(found) do tests[#tests + 1] = t end

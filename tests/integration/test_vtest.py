@@ -96,6 +96,33 @@ def test_always_with_a_grace(t):
         "a condition false for good is not reported 0.5 s after it turned false:\n%s" % out)
 
 
+def test_api_mistakes_are_the_tests_line(t):
+    """A mistake in the use of the test API (an unknown plant, a bad
+    argument) fails the test at the test file's line, naming the mistake,
+    and no line of the runner shows."""
+    expected = [
+        ("an unknown plant", 4, "board{...}: unknown plant 'dryer' (washer, dishwasher, lights, generic)"),
+        ("an action that is not a name", 9, "b:set(action, value): the action must be a name, not 7"),
+        ("an action the plant does not have", 14, "lights-1: the lights plant refuses doorbell = 1"),
+        ("run_for without seconds", 19, 'run_for(seconds): seconds must be a number >= 0, not "ten"'),
+        ("an input value that is a table", 24, 'b:input("kitchen", value): the value must be nil, a boolean, '
+         "a number or a string, not a table"),
+        ("an unknown wire fault", 29, "faults: unknown key 'lose'"),
+        ("a grace that is not a time", 33, 'always: within = "soon": expected seconds'),
+        ("a mistake inside a helper of the test file", 41, "board{...}: params must be a table"),
+    ]
+    rc, out, err = vtest(t, "vtest-api-errors", case("api_errors"))
+    assert rc == 1, "api_errors.lua: exit %d, expected 1\n%s%s" % (rc, out, err)
+    problems = []
+    for name, line, message in expected:
+        if not re.search(r"FAIL\s+%s\n\s+at \S*api_errors\.lua:%d\n\s+%s" % (re.escape(name), line, re.escape(message)),
+                         out):
+            problems.append("%r: not reported at line %d with %r" % (name, line, message))
+    if "runner.lua" in out:
+        problems.append("a line of the runner shows")
+    assert not problems, "\n".join(problems) + "\n" + out
+
+
 def test_runaway_tests_are_stopped(t):
     rc, out, err = vtest(t, "vtest-endless", "--timeout", "1", case("endless"))
     assert rc == 1, "an endless test: exit %d, expected 1\n%s%s" % (rc, out, err)
