@@ -209,20 +209,41 @@ local function check_action(verb, name, value)
 	end
 end
 
+-- What the test did, for the failure report (details): board is the
+-- board's name, or nil for what acts on every board (the host).
+local function acted(board_name, text)
+	local list = current.actions
+	list[#list + 1] = { time = current.world and current.world:now() or 0, board = board_name, text = text }
+end
+
+local function set_plant(b, verb, name, value)
+	world_call("", current.world.set, current.world, b.name, name, value)
+	acted(b.name, verb)
+end
+
 function Board:set(name, value)
 	check_action("set", name, value)
-	world_call("", current.world.set, current.world, self.name, name, value == nil and 1 or value)
+	set_plant(self, string.format("set(%q, %s)", name, show(value == nil and 1 or value)), name,
+		value == nil and 1 or value)
 end
 
 function Board:try_set(name, value)
 	check_action("try_set", name, value)
-	return (pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value))
+	local ok = pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value)
+	if ok then acted(self.name, string.format("try_set(%q, %s)", name, show(value == nil and 1 or value))) end
+	return ok
 end
 
-function Board:press(name) self:set(name, 1) end
-function Board:release(name) self:set(name, 0) end
-function Board:open_door() self:set("door", 0) end
-function Board:close_door() self:set("door", 1) end
+function Board:press(name)
+	check_action("press", name)
+	set_plant(self, string.format("press(%q)", name), name, 1)
+end
+function Board:release(name)
+	check_action("release", name)
+	set_plant(self, string.format("release(%q)", name), name, 0)
+end
+function Board:open_door() set_plant(self, "open_door()", "door", 0) end
+function Board:close_door() set_plant(self, "close_door()", "door", 1) end
 
 local function check_input(verb, name, value)
 	if type(name) ~= "string" then
@@ -238,6 +259,8 @@ end
 function Board:try_input(name, value)
 	check_input("try_input", name, value)
 	local rc, reply = current.world:input(self.name, name, value)
+	acted(self.name, string.format("try_input(%q%s): %s", name, value == nil and "" or ", " .. show(value),
+		rc == 0 and "accepted" or "refused"))
 	return rc == 0, reply
 end
 
@@ -245,6 +268,8 @@ function Board:input(name, value)
 	check_input("input", name, value)
 	checked()
 	local rc, reply = current.world:input(self.name, name, value)
+	acted(self.name, string.format("input(%q%s): %s", name, value == nil and "" or ", " .. show(value),
+		rc == 0 and "accepted" or "refused"))
 	if rc ~= 0 then
 		fail(string.format("%s: input %s(%s) %s: %s", self.name, name, value == nil and "" or show(value),
 			rc > 0 and "refused" or "failed", reply))
@@ -252,13 +277,17 @@ function Board:input(name, value)
 	return reply
 end
 
-function Board:unplug() current.world:connect(self.name, false, true) end
-function Board:replug() current.world:connect(self.name, true, true) end
-function Board:power_off() current.world:connect(self.name, true, false) end
-function Board:power_on() current.world:connect(self.name, true, true) end
+function Board:unplug() current.world:connect(self.name, false, true) acted(self.name, "unplug()") end
+function Board:replug() current.world:connect(self.name, true, true) acted(self.name, "replug()") end
+function Board:power_off() current.world:connect(self.name, true, false) acted(self.name, "power_off()") end
+function Board:power_on() current.world:connect(self.name, true, true) acted(self.name, "power_on()") end
 function Board:faults(spec)
 	if spec ~= nil and type(spec) ~= "table" then fail("b:faults{...}: expected a table such as {drop = 0.01}") end
 	world_call("", current.world.faults, current.world, self.name, spec or {})
+	local parts = {}
+	for k, v in pairs(spec or {}) do parts[#parts + 1] = k .. " = " .. show(v) end
+	table.sort(parts)
+	acted(self.name, "faults{" .. table.concat(parts, ", ") .. "}")
 end
 function Board:history() return current.world:history(self.name) end
 
@@ -516,11 +545,13 @@ end
 
 local function stop_host()
 	W():stop_host()
+	acted(nil, "stop_host()")
 end
 
 -- A host crash (SIGKILL, a power cut): gone at once, no word to the boards.
 local function crash_host()
 	W():crash_host()
+	acted(nil, "crash_host()")
 end
 
 -- A flight recording (its text) replayed against the driver under test
@@ -538,6 +569,7 @@ end
 -- again and offers each machine its last checkpoint (recover).
 local function start_host()
 	W():start_host()
+	acted(nil, "start_host()")
 end
 
 -- Keep the frames of the test file from a traceback.
@@ -637,8 +669,57 @@ local function fmt_value(v)
 	return tostring(v)
 end
 
+-- A board's last services (--history) as it saw them, and in time among
+-- them what the test did to it or to the host: the latest such action
+-- before the first row shown too, so the cause is in view. The first
+-- service after an action is marked `*`: it is the first the board's view
+-- (and the driver) can show of it.
+local function services_and_actions(h, board_name, period_us)
+	local first = math.max(1, #h - opts.history + 1)
+	if #h == 0 or opts.history <= 0 then return {} end
+	local from_t = h[first].time
+	local acts, before = {}, nil
+	for _, a in ipairs(current.actions) do
+		if a.board == nil or a.board == board_name then
+			if a.time >= from_t then acts[#acts + 1] = a else before = a end
+		end
+	end
+	if before then table.insert(acts, 1, before) end
+	local lines = { string.format("  last %d services (board's view)%s:", #h - first + 1,
+		#acts > 0 and ", with the test's actions (>>; * the first service after one)" or "") }
+	local ai, pending = 1, nil
+	for i = first, #h + 1 do
+		local row = h[i]
+		-- A service at the moment of an action came before it (the action
+		-- is taken between runs of the clock).
+		while acts[ai] and (not row or acts[ai].time >= (i == first and -math.huge or h[i - 1].time)
+			and acts[ai].time < row.time) do
+			local a = acts[ai]
+			lines[#lines + 1] = string.format("    %10.4f >> %s%s", a.time, a.text,
+				row and "" or period_us and string.format("  (no service of this board since: the next within "
+					.. "its period, %g ms)", period_us / 1e3) or "  (no service of this board since)")
+			if a.time >= from_t then pending = pending or a end
+			ai = ai + 1
+		end
+		if not row then break end
+		local names = {}
+		for k in pairs(row.io) do names[#names + 1] = k end
+		table.sort(names)
+		local parts = {}
+		for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(row.io[k]) end
+		local mark = ""
+		if pending then
+			mark = string.format("  (* %.1f ms after %s)", (row.time - pending.time) * 1e3, pending.text)
+		end
+		lines[#lines + 1] = string.format("    %10.4f %s %s%s", row.time, pending and "* " or "  ",
+			table.concat(parts, " "), mark)
+		pending = nil
+	end
+	return lines
+end
+
 -- What a person needs to see when a test fails: the recent services of
--- each board and the recent events.
+-- each board with the test's actions among them, and the recent events.
 local function details()
 	local lines = {}
 	local w = current.world
@@ -656,19 +737,8 @@ local function details()
 			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) end
 			lines[#lines + 1] = "  variables: " .. table.concat(parts, " ")
 		end
-		local h = w:history(b.name)
-		local first = math.max(1, #h - opts.history + 1)
-		if #h > 0 and opts.history > 0 then
-			lines[#lines + 1] = string.format("  last %d services (board's view):", #h - first + 1)
-		end
-		for i = first, #h do
-			local names = {}
-			for k in pairs(h[i].io) do names[#names + 1] = k end
-			table.sort(names)
-			local parts = {}
-			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(h[i].io[k]) end
-			lines[#lines + 1] = string.format("    %10.4f  %s", h[i].time, table.concat(parts, " "))
-		end
+		for _, l in ipairs(services_and_actions(w:history(b.name), b.name,
+			d and d.period_us > 0 and d.period_us or nil)) do lines[#lines + 1] = l end
 	end
 	local ev = w:events(1)
 	if #ev > 0 then
@@ -681,7 +751,7 @@ local function details()
 end
 
 local function run_test(t)
-	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0, costs = {},
+	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0, costs = {}, actions = {},
 		trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
 	if opts.drivers then current.settings[1] = { "drivers", opts.drivers } end
 	local wall0 = world.wall()

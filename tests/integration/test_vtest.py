@@ -96,6 +96,26 @@ def test_always_with_a_grace(t):
         "a condition false for good is not reported 0.5 s after it turned false:\n%s" % out)
 
 
+def test_the_report_shows_the_tests_actions(t):
+    """A failure's report puts what the test did among the board's
+    services: the door opened, and no service since (the next a period
+    away); or the first service after it marked, with how long after."""
+    rc, out, err = vtest(t, "vtest-report-actions", "--history", "3", "--filter", "the moment",
+                         case("always_within"))
+    assert rc == 1, "exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert "last 3 services (board's view), with the test's actions (>>; * the first service after one):" in out, (
+        "the report does not announce the test's actions:\n%s" % out)
+    assert re.search(r"\n\s+0\.0670 >> input\(\"start\", \"normal\"\): accepted\n(\s+39\.\d+    cancel_button=\S+ "
+                     r"door_closed=1 .*\n){3}\s+39\.\d+ >> open_door\(\)  \(no service of this board since: the next "
+                     r"within its period, 32 ms\)\n", out), (
+        "the report does not show the start, three services, then the door opened with no service since:\n%s" % out)
+
+    rc, out, err = vtest(t, "vtest-report-mark", "--history", "20", "--filter", "stays false", case("always_within"))
+    assert rc == 1, "exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"\n\s+39\.\d+ >> open_door\(\)\n\s+39\.\d+ \*  \S.* door_closed=0 .*  \(\* [0-9.]+ ms after "
+                     r"open_door\(\)\)\n", out), "the first service after the door opened is not marked:\n%s" % out
+
+
 def test_api_mistakes_are_the_tests_line(t):
     """A mistake in the use of the test API (an unknown plant, a bad
     argument) fails the test at the test file's line, naming the mistake,
