@@ -98,6 +98,7 @@ Failure.__index = Failure
 Failure.__tostring = function(f) return f.message end
 
 local current -- the running test: { file, world, boards, always, ... }
+local loading -- the test file whose top level runs, before its tests do
 
 -- file:line of the innermost frame that is in the test file.
 local function where(level)
@@ -105,8 +106,9 @@ local function where(level)
 	while true do
 		local info = debug.getinfo(level, "Sl")
 		if not info then return nil end
-		if current and info.source == "@" .. current.file and info.currentline > 0 then
-			return current.file .. ":" .. info.currentline
+		local file = current and current.file or loading
+		if file and info.source == "@" .. file and info.currentline > 0 then
+			return file .. ":" .. info.currentline
 		end
 		level = level + 1
 	end
@@ -119,6 +121,16 @@ local function fail(message, extra)
 	local f = setmetatable({ message = message, where = where(2) }, Failure)
 	if extra then for k, v in pairs(extra) do f[k] = v end end
 	error(f, 0)
+end
+
+-- A call into the world the test asked for (plugging a board, an action,
+-- wire faults): what it refuses (an unknown plant, a bad argument) is the
+-- test's mistake, so it fails the test at the test's line, not here.
+-- `what` goes ahead of the world's message ("board{...}: ").
+local function world_call(what, fn, ...)
+	local ok, a, b = pcall(fn, ...)
+	if not ok then fail(what .. (tostring(a):gsub("^[^:]*:%d+: ", ""))) end
+	return a, b
 end
 
 local function show(v)
@@ -135,7 +147,7 @@ local methods -- the world's methods, for the accessors that checks call
 
 local function W()
 	if not current.world then
-		current.world = world.new(current.settings, opts.seed)
+		current.world = world_call("", world.new, current.settings, opts.seed)
 		methods = methods or getmetatable(current.world).__index
 		current.world:trace(current.trace_file, current.trace_name)
 		for _, c in ipairs(current.costs) do current.world:driver_cost(c[1], c[2]) end
@@ -161,14 +173,16 @@ end
 
 local function make_board(spec)
 	if type(spec) ~= "table" then fail("board{...}: expected a table with name and plant") end
-	local name = spec.name or error("board{...}: name is required", 3)
-	local plant = spec.plant or error("board{...}: plant is required (washer, dishwasher, lights, generic)", 3)
+	local name, plant = spec.name, spec.plant
+	if type(name) ~= "string" then fail("board{...}: name is required (a string)") end
+	if type(plant) ~= "string" then fail("board{...}: plant is required (washer, dishwasher, lights, generic)") end
+	if spec.params ~= nil and type(spec.params) ~= "table" then fail("board{...}: params must be a table") end
 	local w = W()
 	local driver = spec.driver or plant
 	for k, v in pairs(spec.params or {}) do
-		w:config("driver." .. driver .. ".param." .. k, tostring(v))
+		world_call("board{...}: ", w.config, w, "driver." .. driver .. ".param." .. k, tostring(v))
 	end
-	w:board(name, plant, spec.driver, spec.major, spec.minor)
+	world_call("board{...}: ", w.board, w, name, plant, spec.driver, spec.major, spec.minor)
 	local b = { name = name, plant_kind = plant, driver = driver }
 	b.io = io_view(b)
 	b.inp, b.out = b.io, b.io
@@ -186,28 +200,76 @@ Board.__index = function(b, k)
 end
 Board.__tostring = function(b) return "board " .. b.name end
 
+local function check_action(verb, name, value)
+	if type(name) ~= "string" then fail(string.format("b:%s(action, value): the action must be a name, not %s", verb,
+		show(name))) end
+	if value ~= nil and type(value) ~= "number" and type(value) ~= "boolean" then
+		fail(string.format("b:%s(%q, value): the value must be a number or a boolean, not %s", verb, name,
+			show(value)))
+	end
+end
+
+-- What the test did, for the failure report (details): board is the
+-- board's name, or nil for what acts on every board (the host).
+local function acted(board_name, text)
+	local list = current.actions
+	list[#list + 1] = { time = current.world and current.world:now() or 0, board = board_name, text = text }
+end
+
+local function set_plant(b, verb, name, value)
+	world_call("", current.world.set, current.world, b.name, name, value)
+	acted(b.name, verb)
+end
+
 function Board:set(name, value)
-	local ok, err = pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value)
-	if not ok then fail((tostring(err):gsub("^[^:]*:%d+: ", ""))) end
+	check_action("set", name, value)
+	set_plant(self, string.format("set(%q, %s)", name, show(value == nil and 1 or value)), name,
+		value == nil and 1 or value)
 end
 
 function Board:try_set(name, value)
-	return (pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value))
+	check_action("try_set", name, value)
+	local ok = pcall(current.world.set, current.world, self.name, name, value == nil and 1 or value)
+	if ok then acted(self.name, string.format("try_set(%q, %s)", name, show(value == nil and 1 or value))) end
+	return ok
 end
 
-function Board:press(name) self:set(name, 1) end
-function Board:release(name) self:set(name, 0) end
-function Board:open_door() self:set("door", 0) end
-function Board:close_door() self:set("door", 1) end
+function Board:press(name)
+	check_action("press", name)
+	set_plant(self, string.format("press(%q)", name), name, 1)
+end
+function Board:release(name)
+	check_action("release", name)
+	set_plant(self, string.format("release(%q)", name), name, 0)
+end
+function Board:open_door() set_plant(self, "open_door()", "door", 0) end
+function Board:close_door() set_plant(self, "close_door()", "door", 1) end
+
+local function check_input(verb, name, value)
+	if type(name) ~= "string" then
+		fail(string.format("b:%s(name, value): name must be a command or variable's name, not %s", verb, show(name)))
+	end
+	local t = type(value)
+	if value ~= nil and t ~= "boolean" and t ~= "number" and t ~= "string" then
+		fail(string.format("b:%s(%q, value): the value must be nil, a boolean, a number or a string, not a %s", verb,
+			name, t))
+	end
+end
 
 function Board:try_input(name, value)
+	check_input("try_input", name, value)
 	local rc, reply = current.world:input(self.name, name, value)
+	acted(self.name, string.format("try_input(%q%s): %s", name, value == nil and "" or ", " .. show(value),
+		rc == 0 and "accepted" or "refused"))
 	return rc == 0, reply
 end
 
 function Board:input(name, value)
+	check_input("input", name, value)
 	checked()
 	local rc, reply = current.world:input(self.name, name, value)
+	acted(self.name, string.format("input(%q%s): %s", name, value == nil and "" or ", " .. show(value),
+		rc == 0 and "accepted" or "refused"))
 	if rc ~= 0 then
 		fail(string.format("%s: input %s(%s) %s: %s", self.name, name, value == nil and "" or show(value),
 			rc > 0 and "refused" or "failed", reply))
@@ -215,16 +277,72 @@ function Board:input(name, value)
 	return reply
 end
 
-function Board:unplug() current.world:connect(self.name, false, true) end
-function Board:replug() current.world:connect(self.name, true, true) end
-function Board:power_off() current.world:connect(self.name, true, false) end
-function Board:power_on() current.world:connect(self.name, true, true) end
-function Board:faults(spec) current.world:faults(self.name, spec or {}) end
+function Board:unplug() current.world:connect(self.name, false, true) acted(self.name, "unplug()") end
+function Board:replug() current.world:connect(self.name, true, true) acted(self.name, "replug()") end
+function Board:power_off() current.world:connect(self.name, true, false) acted(self.name, "power_off()") end
+function Board:power_on() current.world:connect(self.name, true, true) acted(self.name, "power_on()") end
+function Board:faults(spec)
+	if spec ~= nil and type(spec) ~= "table" then fail("b:faults{...}: expected a table such as {drop = 0.01}") end
+	world_call("", current.world.faults, current.world, self.name, spec or {})
+	local parts = {}
+	for k, v in pairs(spec or {}) do parts[#parts + 1] = k .. " = " .. show(v) end
+	table.sort(parts)
+	acted(self.name, "faults{" .. table.concat(parts, ", ") .. "}")
+end
 function Board:history() return current.world:history(self.name) end
 
 -- ---- running time ----
 
 local function now() return current.world and current.world:now() or 0 end
+
+-- The grace of an always: `within` seconds, or "N period(s)": N times the
+-- longest service period the host gives the test's boards, read when the
+-- condition turns false (a device's period can change with its level).
+local function grace_s(inv)
+	if not inv.periods then return inv.within end
+	local longest_us = 0
+	for _, b in ipairs(current.boards) do
+		local d = current.world:device(b.name)
+		if d and d.period_us > longest_us then longest_us = d.period_us end
+	end
+	if longest_us == 0 then
+		fail(string.format("always: %s (declared at %s) has a grace of %s, but no board is served yet: "
+			.. "no period to count", inv.what, inv.where, inv.within_text), { where = inv.where })
+	end
+	return inv.periods * longest_us / 1e6
+end
+
+local function violated(inv, t, note)
+	fail(string.format("always: %s (declared at %s) was violated at %.6f s, tick %d%s", inv.what, inv.where, t,
+		math.floor(t / current.world:slot() + 0.5), note or ""), { time = t })
+end
+
+-- An always with a grace whose condition is false: it fails once it has
+-- been false for longer than the grace. `advance` stops the run just past
+-- the earliest such moment (current.grace_due) to look again.
+local function held_false(inv, t)
+	if not inv.false_since then
+		inv.false_since, inv.grace = t, grace_s(inv)
+		local due = t + inv.grace
+		if not current.grace_due or due < current.grace_due then
+			current.grace_due, current.grace_new = due, true
+		end
+	elseif t - inv.false_since > inv.grace then
+		violated(inv, t, string.format(": false since %.6f s, longer than its grace of %g s%s", inv.false_since,
+			inv.grace, inv.periods and " (" .. inv.within_text .. ")" or ""))
+	end
+end
+
+-- The earliest moment a pending grace runs out, or nil.
+local function next_grace_due()
+	local due
+	for _, inv in ipairs(current.always) do
+		if inv.false_since and (not due or inv.false_since + inv.grace < due) then
+			due = inv.false_since + inv.grace
+		end
+	end
+	return due
+end
 
 -- Runs at every check (world.c), so it stays lean: no pcall per condition;
 -- an error raised inside one is named by run_test through current.checking.
@@ -236,41 +354,73 @@ local function check_invariants()
 		local held = inv.fn()
 		current.checking = nil
 		if not held then
+			if inv.within then
+				held_false(inv, now())
+			else
+				violated(inv, now())
+			end
+		elseif inv.false_since then
+			-- Nothing it reads changed between the last check and this one,
+			-- so it was false all that time.
 			local t = now()
-			fail(string.format("always: %s (declared at %s) was violated at %.6f s, tick %d", inv.what, inv.where,
-				t, math.floor(t / current.world:slot() + 0.5)), { time = t })
+			if t - inv.false_since > inv.grace then
+				violated(inv, inv.false_since + inv.grace, string.format(": false from %.6f s to %.6f s, longer "
+					.. "than its grace of %g s%s", inv.false_since, t, inv.grace,
+					inv.periods and " (" .. inv.within_text .. ")" or ""))
+			end
+			inv.false_since = nil
+			current.grace_due = next_grace_due()
 		end
 	end
 end
 
 -- Advance to `until_t`, stopping early when cond() holds; true if it did.
+-- An always whose grace is running stops the run just past the moment the
+-- grace runs out, to look at its condition there (nothing else may move
+-- then, so no check would run).
 local function advance(until_t, cond)
 	local w = W()
 	local limited = false
 	if until_t > opts.time_limit then until_t, limited = opts.time_limit, true end
-	local check
+	local check, met
 	if cond or #current.always > 0 then
 		check = function()
 			check_invariants()
-			return cond ~= nil and cond() and true or false
+			met = cond ~= nil and cond() and true or false
+			return met or current.grace_new
 		end
 	end
-	local stopped = w:run(until_t, check)
-	if not stopped and limited then
+	while true do
+		current.grace_new = false
+		local stop_at = until_t
+		local due = current.grace_due
+		if due and due + 1e-9 < stop_at then stop_at = due + 1e-9 end
+		local stopped = w:run(stop_at, check)
+		if stopped and met then return true end
+		if not stopped then
+			if stop_at >= until_t then break end
+			check_invariants() -- the grace ran out: still false fails it
+		end
+	end
+	if limited then
 		fail(string.format("the test ran past the virtual-time limit of %g s (--time-limit)", opts.time_limit))
 	end
-	return stopped
+	return false
 end
 
 local function run_for(seconds)
-	if type(seconds) ~= "number" or seconds < 0 then fail("run_for(seconds): seconds must be a number >= 0") end
+	if type(seconds) ~= "number" or not (seconds >= 0) then
+		fail("run_for(seconds): seconds must be a number >= 0, not " .. show(seconds))
+	end
 	advance(now() + seconds)
 end
 
 local function wait_for(verb, cond, timeout, what)
 	checked()
 	if type(cond) ~= "function" then fail(verb .. "(condition, timeout): the condition must be a function") end
-	if type(timeout) ~= "number" or timeout < 0 then fail(verb .. "(condition, timeout): timeout must be seconds") end
+	if type(timeout) ~= "number" or not (timeout >= 0) then
+		fail(verb .. "(condition, timeout): timeout must be seconds, not " .. show(timeout))
+	end
 	local start = now()
 	W()
 	if cond() then return 0 end
@@ -284,11 +434,26 @@ end
 local function run_until(cond, timeout, what) return wait_for("run_until", cond, timeout, what) end
 local function eventually(cond, within, what) return wait_for("eventually", cond, within, what) end
 
-local function always(what, fn)
+-- always(what, cond [, {within = SECONDS or "N period(s)"}])
+local function always(what, fn, options)
 	if type(what) == "function" then what, fn = fn, what end
 	if type(fn) ~= "function" then fail("always(description, condition): the condition must be a function") end
+	if options ~= nil and type(options) ~= "table" then
+		fail("always(description, condition, options): options must be a table such as {within = 0.05}")
+	end
 	checked()
 	local inv = { what = what or "condition", fn = fn, where = where(2) or "?" }
+	local within = options and options.within
+	if type(within) == "number" and within >= 0 then
+		inv.within = within
+		inv.grace = within
+	elseif type(within) == "string" and within:match("^%s*%d*%.?%d+%s+periods?%s*$") then
+		inv.within, inv.within_text = true, within:match("^%s*(.-)%s*$")
+		inv.periods = tonumber(within:match("%d*%.?%d+"))
+	elseif within ~= nil then
+		fail(string.format("always: within = %s: expected seconds (a number >= 0) or \"N periods\" "
+			.. "(\"1 period\")", show(within)))
+	end
 	current.always[#current.always + 1] = inv
 	if current.world then check_invariants() end
 	return inv
@@ -311,6 +476,10 @@ end
 
 local function expect_near(actual, expected, tolerance, what)
 	checked()
+	if type(expected) ~= "number" or type(tolerance) ~= "number" then
+		fail(string.format("expect_near(actual, expected, tolerance): expected and tolerance must be numbers, not %s "
+			.. "and %s", show(expected), show(tolerance)))
+	end
 	if type(actual) ~= "number" or math.abs(actual - expected) > tolerance then
 		fail(string.format("%s: expected %s +/- %s, got %s (at %.3f s)", what or "value", show(expected),
 			show(tolerance), show(actual), now()), { expected = expected, actual = actual })
@@ -346,6 +515,7 @@ end
 
 local function config(settings)
 	if current.world then fail("config{...} must come before the first board") end
+	if type(settings) ~= "table" then fail("config{...}: expected a table of settings") end
 	local keys = {}
 	for k in pairs(settings) do keys[#keys + 1] = k end
 	table.sort(keys)
@@ -357,10 +527,10 @@ end
 -- the host.
 local function driver_cost(name, seconds)
 	if type(name) ~= "string" or type(seconds) ~= "number" then
-		error("driver_cost(name, seconds) expects a driver name and a number of seconds", 2)
+		fail("driver_cost(name, seconds) expects a driver name and a number of seconds")
 	end
 	current.costs[#current.costs + 1] = { name, seconds }
-	if current.world then current.world:driver_cost(name, seconds) end
+	if current.world then world_call("", current.world.driver_cost, current.world, name, seconds) end
 end
 
 local function kitchen(spec)
@@ -375,18 +545,20 @@ end
 
 local function stop_host()
 	W():stop_host()
+	acted(nil, "stop_host()")
 end
 
 -- A host crash (SIGKILL, a power cut): gone at once, no word to the boards.
 local function crash_host()
 	W():crash_host()
+	acted(nil, "crash_host()")
 end
 
 -- A flight recording (its text) replayed against the driver under test
 -- (--drivers DIR, else the shipped one): the test fails where an output
 -- differs or the driver fails (docs/RECORDING.md, "Replay").
 local function replay(text)
-	if type(text) ~= "string" then error("replay: expects the recording's text", 2) end
+	if type(text) ~= "string" then fail("replay(text): expects the recording's text") end
 	checked()
 	local rc, report = world.replay(text, current.settings, false)
 	if rc ~= 0 then fail(report) end
@@ -397,6 +569,7 @@ end
 -- again and offers each machine its last checkpoint (recover).
 local function start_host()
 	W():start_host()
+	acted(nil, "start_host()")
 end
 
 -- Keep the frames of the test file from a traceback.
@@ -452,11 +625,14 @@ local function load_file(file)
 				.. "at its top level?", opts.timeout), 2)
 		end
 	end, "", 100000)
+	loading = file
 	local ok, lerr = xpcall(chunk, function(e)
+		if getmetatable(e) == Failure then e = (e.where and e.where .. ": " or "") .. e.message end
 		local frames = test_frames(debug.traceback("", 2), file)
 		return tostring(e) .. (#frames > 0 and "\n  from " .. table.concat(frames, "\n  from ") or "")
 	end)
 	debug.sethook()
+	loading = nil
 	if not ok then return cannot_load(lerr) end
 	if #found == 0 then return cannot_load(file .. ": defines no test (call test(name, function() ... end))") end
 	for _, t in ipairs(found) do tests[#tests + 1] = t end
@@ -493,8 +669,57 @@ local function fmt_value(v)
 	return tostring(v)
 end
 
+-- A board's last services (--history) as it saw them, and in time among
+-- them what the test did to it or to the host: the latest such action
+-- before the first row shown too, so the cause is in view. The first
+-- service after an action is marked `*`: it is the first the board's view
+-- (and the driver) can show of it.
+local function services_and_actions(h, board_name, period_us)
+	local first = math.max(1, #h - opts.history + 1)
+	if #h == 0 or opts.history <= 0 then return {} end
+	local from_t = h[first].time
+	local acts, before = {}, nil
+	for _, a in ipairs(current.actions) do
+		if a.board == nil or a.board == board_name then
+			if a.time >= from_t then acts[#acts + 1] = a else before = a end
+		end
+	end
+	if before then table.insert(acts, 1, before) end
+	local lines = { string.format("  last %d services (board's view)%s:", #h - first + 1,
+		#acts > 0 and ", with the test's actions (>>; * the first service after one)" or "") }
+	local ai, pending = 1, nil
+	for i = first, #h + 1 do
+		local row = h[i]
+		-- A service at the moment of an action came before it (the action
+		-- is taken between runs of the clock).
+		while acts[ai] and (not row or acts[ai].time >= (i == first and -math.huge or h[i - 1].time)
+			and acts[ai].time < row.time) do
+			local a = acts[ai]
+			lines[#lines + 1] = string.format("    %10.4f >> %s%s", a.time, a.text,
+				row and "" or period_us and string.format("  (no service of this board since: the next within "
+					.. "its period, %g ms)", period_us / 1e3) or "  (no service of this board since)")
+			if a.time >= from_t then pending = pending or a end
+			ai = ai + 1
+		end
+		if not row then break end
+		local names = {}
+		for k in pairs(row.io) do names[#names + 1] = k end
+		table.sort(names)
+		local parts = {}
+		for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(row.io[k]) end
+		local mark = ""
+		if pending then
+			mark = string.format("  (* %.1f ms after %s)", (row.time - pending.time) * 1e3, pending.text)
+		end
+		lines[#lines + 1] = string.format("    %10.4f %s %s%s", row.time, pending and "* " or "  ",
+			table.concat(parts, " "), mark)
+		pending = nil
+	end
+	return lines
+end
+
 -- What a person needs to see when a test fails: the recent services of
--- each board and the recent events.
+-- each board with the test's actions among them, and the recent events.
 local function details()
 	local lines = {}
 	local w = current.world
@@ -512,19 +737,8 @@ local function details()
 			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) end
 			lines[#lines + 1] = "  variables: " .. table.concat(parts, " ")
 		end
-		local h = w:history(b.name)
-		local first = math.max(1, #h - opts.history + 1)
-		if #h > 0 and opts.history > 0 then
-			lines[#lines + 1] = string.format("  last %d services (board's view):", #h - first + 1)
-		end
-		for i = first, #h do
-			local names = {}
-			for k in pairs(h[i].io) do names[#names + 1] = k end
-			table.sort(names)
-			local parts = {}
-			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(h[i].io[k]) end
-			lines[#lines + 1] = string.format("    %10.4f  %s", h[i].time, table.concat(parts, " "))
-		end
+		for _, l in ipairs(services_and_actions(w:history(b.name), b.name,
+			d and d.period_us > 0 and d.period_us or nil)) do lines[#lines + 1] = l end
 	end
 	local ev = w:events(1)
 	if #ev > 0 then
@@ -537,7 +751,7 @@ local function details()
 end
 
 local function run_test(t)
-	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0, costs = {},
+	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0, costs = {}, actions = {},
 		trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
 	if opts.drivers then current.settings[1] = { "drivers", opts.drivers } end
 	local wall0 = world.wall()

@@ -166,11 +166,13 @@ function run_until(cond, timeout, what) end
 ---@return number seconds it took
 function eventually(cond, within, what) end
 
----From now to the end of the test, cond() must hold at every check.
+---From now to the end of the test, cond() must hold at every check; with
+---within, it may be false for at most that long at a time.
 ---@param what string
 ---@param cond fun(): any
+---@param options? {within?: number|string} within: seconds, or "N periods" of the boards' service period
 ---@return vmac.test.Always
-function always(what, cond) end
+function always(what, cond, options) end
 
 ---Virtual seconds since the test began.
 ---@return number

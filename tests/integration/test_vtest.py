@@ -70,6 +70,79 @@ def test_failures_name_the_line(t):
         assert text in out, "the failure report lacks %r:\n%s" % (text, out)
 
 
+def test_always_with_a_grace(t):
+    """always(..., {within = ...}): the door interlock of the dishwasher
+    holds within 2 periods of its driver and not at the instant the door
+    opens; a grace shorter than that, or a condition that stays false,
+    fails when the grace runs out, at the tick it ran out."""
+    rc, out, err = vtest(t, "vtest-always-within", case("always_within"))
+    assert rc == 1, "always_within.lua: exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"ok\s+off within 2 periods of the door opening", out), (
+        "the interlock with a grace of 2 periods fails:\n%s" % out)
+    opened = re.search(r"FAIL\s+off at the moment the door opens\n.*\n\s+always: nothing runs with the door open "
+                       r"\(declared at \S*always_within\.lua:24\) was violated at ([0-9.]+) s", out)
+    assert opened, "the interlock without a grace does not fail at the door's opening:\n%s" % out
+    door_s = float(opened.group(1))
+    short = re.search(r"FAIL\s+off within 1 ms of the door opening\n\s+at \S*always_within\.lua:34\n\s+always: .* "
+                      r"was violated at ([0-9.]+) s, tick \d+: false since ([0-9.]+) s, longer than its grace of "
+                      r"0\.001 s", out)
+    assert short, "a grace of 1 ms is not reported as run out:\n%s" % out
+    assert float(short.group(2)) == door_s and abs(float(short.group(1)) - (door_s + 0.001)) < 1e-6, (
+        "the 1 ms grace did not run out 1 ms after the door opened (%s s):\n%s" % (door_s, short.group(0)))
+    stays = re.search(r"FAIL\s+a grace does not excuse a condition that stays false\n.*\n\s+always: the door stays "
+                      r"closed .* was violated at ([0-9.]+) s, tick \d+: false since ([0-9.]+) s, longer than its "
+                      r"grace of 0\.5 s", out)
+    assert stays and abs(float(stays.group(1)) - float(stays.group(2)) - 0.5) < 1e-6, (
+        "a condition false for good is not reported 0.5 s after it turned false:\n%s" % out)
+
+
+def test_the_report_shows_the_tests_actions(t):
+    """A failure's report puts what the test did among the board's
+    services: the door opened, and no service since (the next a period
+    away); or the first service after it marked, with how long after."""
+    rc, out, err = vtest(t, "vtest-report-actions", "--history", "3", "--filter", "the moment",
+                         case("always_within"))
+    assert rc == 1, "exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert "last 3 services (board's view), with the test's actions (>>; * the first service after one):" in out, (
+        "the report does not announce the test's actions:\n%s" % out)
+    assert re.search(r"\n\s+0\.0670 >> input\(\"start\", \"normal\"\): accepted\n(\s+39\.\d+    cancel_button=\S+ "
+                     r"door_closed=1 .*\n){3}\s+39\.\d+ >> open_door\(\)  \(no service of this board since: the next "
+                     r"within its period, 32 ms\)\n", out), (
+        "the report does not show the start, three services, then the door opened with no service since:\n%s" % out)
+
+    rc, out, err = vtest(t, "vtest-report-mark", "--history", "20", "--filter", "stays false", case("always_within"))
+    assert rc == 1, "exit %d, expected 1\n%s%s" % (rc, out, err)
+    assert re.search(r"\n\s+39\.\d+ >> open_door\(\)\n\s+39\.\d+ \*  \S.* door_closed=0 .*  \(\* [0-9.]+ ms after "
+                     r"open_door\(\)\)\n", out), "the first service after the door opened is not marked:\n%s" % out
+
+
+def test_api_mistakes_are_the_tests_line(t):
+    """A mistake in the use of the test API (an unknown plant, a bad
+    argument) fails the test at the test file's line, naming the mistake,
+    and no line of the runner shows."""
+    expected = [
+        ("an unknown plant", 4, "board{...}: unknown plant 'dryer' (washer, dishwasher, lights, generic)"),
+        ("an action that is not a name", 9, "b:set(action, value): the action must be a name, not 7"),
+        ("an action the plant does not have", 14, "lights-1: the lights plant refuses doorbell = 1"),
+        ("run_for without seconds", 19, 'run_for(seconds): seconds must be a number >= 0, not "ten"'),
+        ("an input value that is a table", 24, 'b:input("kitchen", value): the value must be nil, a boolean, '
+         "a number or a string, not a table"),
+        ("an unknown wire fault", 29, "faults: unknown key 'lose'"),
+        ("a grace that is not a time", 33, 'always: within = "soon": expected seconds'),
+        ("a mistake inside a helper of the test file", 41, "board{...}: params must be a table"),
+    ]
+    rc, out, err = vtest(t, "vtest-api-errors", case("api_errors"))
+    assert rc == 1, "api_errors.lua: exit %d, expected 1\n%s%s" % (rc, out, err)
+    problems = []
+    for name, line, message in expected:
+        if not re.search(r"FAIL\s+%s\n\s+at \S*api_errors\.lua:%d\n\s+%s" % (re.escape(name), line, re.escape(message)),
+                         out):
+            problems.append("%r: not reported at line %d with %r" % (name, line, message))
+    if "runner.lua" in out:
+        problems.append("a line of the runner shows")
+    assert not problems, "\n".join(problems) + "\n" + out
+
+
 def test_runaway_tests_are_stopped(t):
     rc, out, err = vtest(t, "vtest-endless", "--timeout", "1", case("endless"))
     assert rc == 1, "an endless test: exit %d, expected 1\n%s%s" % (rc, out, err)
