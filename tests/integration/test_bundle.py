@@ -308,6 +308,8 @@ def test_a_changed_programme_reaches_a_running_wash(t):
     host = t.host(settings={"driver.washer.param.time_scale": "0.02"})
     board = t.board("washer", "washer-1", commands=True)
     host.wait_running(["washer-1"])
+    board.send("washer-1 fill_rate_lps 5")  # the plant's tap wide open: the fills take a second or two
+    board.wait_line(r"^washer-1: fill_rate_lps 5", 10, what="the fill rate set")
     board.send("washer-1 door 1")
     host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("door") == "closed", 30, "door closed")
     rc, out, err = vmac(t, "set", "--http", host.http, "washer-1.start:quick")

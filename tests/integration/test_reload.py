@@ -267,7 +267,10 @@ def test_a_running_wash_continues_across_a_reload(t):
     goes on in the same step with the time it had left, then on to the
     next steps (not back to the start)."""
     host = t.host(settings={"driver.washer.param.time_scale": "0.05"})
-    t.board("washer", "washer-1")
+    board = t.board("washer", "washer-1", commands=True)
+    board.send("washer-1 fill_rate_lps 5")  # the plant's tap wide open: the fills take a second or two
+    board.wait_line(r"^washer-1: fill_rate_lps 5", 10, what="the fill rate set")
+    board.send("washer-1 door 1")
     host.wait_status(lambda s: (host.device("washer-1", s) or {}).get("variables", {}).get("door") == "closed", 30,
                      "the washer attached, its door seen closed")
     code, body = call(host, "POST", "/api/devices/washer-1/cycle", t.token,
