@@ -733,8 +733,18 @@ local function details()
 			local names = {}
 			for k in pairs(d.vars) do names[#names + 1] = k end
 			table.sort(names)
+			-- A variable declared update = "timer:N" is the copy of its last
+			-- publication, up to N s old: say so, and how old it is.
+			local timers = w:timers(b.name)
 			local parts = {}
-			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) end
+			for _, k in ipairs(names) do
+				local tv, note = timers[k], ""
+				if tv then
+					note = string.format(" (timer %g s: %s)", tv.every_s, tv.published_s and string.format(
+						"published %.2f s ago", w:now() - tv.published_s) or "not published yet")
+				end
+				parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) .. note
+			end
 			lines[#lines + 1] = "  variables: " .. table.concat(parts, " ")
 		end
 		for _, l in ipairs(services_and_actions(w:history(b.name), b.name,
