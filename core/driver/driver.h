@@ -283,6 +283,10 @@ void vmac_driver_detach(struct vmac_driver *d, const char *reason);
  * order) with its latest published value. */
 int vmac_driver_nvars(const struct vmac_driver *d);
 const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, int i);
+/* How the i-th variable is published: its `update = "timer:N"` period in
+ * seconds, 0 when it is published as it changes. For reports (vmac test:
+ * a timer-updated value is a copy up to that old); the bus does not ask. */
+double vmac_driver_variable_every_s(const struct vmac_driver *d, int i);
 
 /* A number the host attaches to an instance (the store's id of the version
  * it runs; 0 for a driver file). */

@@ -366,6 +366,11 @@ const struct vmac_variable *vmac_driver_variable(const struct vmac_driver *d, in
 	return &d->vars[i].pub;
 }
 
+double vmac_driver_variable_every_s(const struct vmac_driver *d, int i)
+{
+	return d->vars[i].every_s;
+}
+
 void vmac_driver_set_tag(struct vmac_driver *d, int64_t tag)
 {
 	d->tag = tag;

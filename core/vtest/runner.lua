@@ -374,11 +374,62 @@ local function check_invariants()
 	end
 end
 
+-- ---- every: test-side behaviour on a clock ----
+
+local Every = {}
+Every.__index = Every
+
+-- Stops it: fn is not called again (also from inside fn).
+function Every:stop() self.stopped = true end
+
+-- The earliest time an every that runs is due, or nil.
+local function next_every_due()
+	local due
+	for _, e in ipairs(current.every) do
+		if not e.stopped and (not due or e.next_t < due) then due = e.next_t end
+	end
+	return due
+end
+
+-- Calls each every due by time t (in the order they were declared).
+-- current.in_every names the one running: an error it raises is named by
+-- run_test, and it may not run the clock itself.
+local function run_every(t)
+	for _, e in ipairs(current.every) do
+		if not e.stopped and e.next_t <= t then
+			e.calls = e.calls + 1
+			e.next_t = e.start + (e.calls + 1) * e.dt -- not a sum of dt: no drift over an hour
+			current.in_every = e
+			e.fn(t)
+			current.in_every = nil
+		end
+	end
+end
+
+-- every(seconds, fn): fn(t) every `seconds` of virtual time from now,
+-- while the test runs the clock; returns a handle with :stop().
+local function every(seconds, fn)
+	if type(seconds) ~= "number" or not (seconds > 0) or seconds == math.huge then
+		fail("every(seconds, fn): seconds must be a number > 0, not " .. show(seconds))
+	end
+	if type(fn) ~= "function" then fail("every(seconds, fn): fn must be a function, not " .. show(fn)) end
+	local start = now()
+	local e = setmetatable({ dt = seconds, fn = fn, start = start, calls = 0, next_t = start + seconds,
+		where = where(2) or "?" }, Every)
+	current.every[#current.every + 1] = e
+	return e
+end
+
 -- Advance to `until_t`, stopping early when cond() holds; true if it did.
 -- An always whose grace is running stops the run just past the moment the
 -- grace runs out, to look at its condition there (nothing else may move
--- then, so no check would run).
+-- then, so no check would run). An every stops it at its time, to call its
+-- fn (which acts between runs of the clock, as the test does).
 local function advance(until_t, cond)
+	if current.in_every then
+		fail(string.format("every (declared at %s): its fn cannot run the clock (run_for, run_until, eventually): "
+			.. "it is called from inside one", current.in_every.where))
+	end
 	local w = W()
 	local limited = false
 	if until_t > opts.time_limit then until_t, limited = opts.time_limit, true end
@@ -395,11 +446,14 @@ local function advance(until_t, cond)
 		local stop_at = until_t
 		local due = current.grace_due
 		if due and due + 1e-9 < stop_at then stop_at = due + 1e-9 end
+		local every_due = current.every[1] and next_every_due()
+		if every_due and every_due < stop_at then stop_at = every_due end
 		local stopped = w:run(stop_at, check)
 		if stopped and met then return true end
 		if not stopped then
+			if every_due and every_due <= stop_at then run_every(stop_at) end
 			if stop_at >= until_t then break end
-			check_invariants() -- the grace ran out: still false fails it
+			if due and stop_at >= due then check_invariants() end -- the grace ran out: still false fails it
 		end
 	end
 	if limited then
@@ -601,7 +655,7 @@ local function load_file(file)
 	for k, v in pairs {
 		board = make_board, kitchen = kitchen, config = config, driver_cost = driver_cost,
 		run_for = run_for, run_until = run_until,
-		eventually = eventually, always = always, expect = expect, expect_eq = expect_eq,
+		eventually = eventually, always = always, every = every, expect = expect, expect_eq = expect_eq,
 		expect_near = expect_near, expect_event = expect_event, events = events, now = now, fail = fail,
 		stop_host = stop_host, crash_host = crash_host, start_host = start_host, replay = replay,
 	} do
@@ -733,8 +787,18 @@ local function details()
 			local names = {}
 			for k in pairs(d.vars) do names[#names + 1] = k end
 			table.sort(names)
+			-- A variable declared update = "timer:N" is the copy of its last
+			-- publication, up to N s old: say so, and how old it is.
+			local timers = w:timers(b.name)
 			local parts = {}
-			for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) end
+			for _, k in ipairs(names) do
+				local tv, note = timers[k], ""
+				if tv then
+					note = string.format(" (timer %g s: %s)", tv.every_s, tv.published_s and string.format(
+						"published %.2f s ago", w:now() - tv.published_s) or "not published yet")
+				end
+				parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) .. note
+			end
 			lines[#lines + 1] = "  variables: " .. table.concat(parts, " ")
 		end
 		for _, l in ipairs(services_and_actions(w:history(b.name), b.name,
@@ -751,8 +815,8 @@ local function details()
 end
 
 local function run_test(t)
-	current = { file = t.file, settings = {}, boards = {}, always = {}, checks = 0, costs = {}, actions = {},
-		trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
+	current = { file = t.file, settings = {}, boards = {}, always = {}, every = {}, checks = 0, costs = {},
+		actions = {}, trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
 	if opts.drivers then current.settings[1] = { "drivers", opts.drivers } end
 	local wall0 = world.wall()
 	local deadline = wall0 + opts.timeout
@@ -770,6 +834,13 @@ local function run_test(t)
 		if getmetatable(e) == Failure then return e end
 		local msg = tostring(e)
 		local inv = current.checking
+		local ev = current.in_every
+		if ev then
+			local f = setmetatable({ message = string.format("every (declared at %s): its fn raised: %s", ev.where,
+				msg), error = true, where = msg:match("^([^:]+:%d+):") or where(2) }, Failure)
+			f.frames = test_frames(debug.traceback("", 2), t.file)
+			return f
+		end
 		if inv then
 			local f = setmetatable({ message = string.format("always (%s): the condition raised: %s", inv.what, msg),
 				error = true, where = inv.where }, Failure)

@@ -321,6 +321,31 @@ static int l_device(lua_State *L)
 	return 1;
 }
 
+/* w:timers(board) -> { NAME = { every_s =, published_s = } }: the driver's
+ * variables declared `update = "timer:N"`, each with its period and the
+ * virtual time it was last published (nil before the first, or no host). */
+static int l_timers(lua_State *L)
+{
+	struct lworld *lw = check_world(L);
+	struct vt_board *b = check_board(L, lw, 2);
+	const struct vmac_device_status *d = vt_device(lw->w, b->fw.id.board);
+	int i, j;
+	lua_createtable(L, 0, b->ntimers);
+	for (i = 0; i < b->ntimers; i++) {
+		lua_createtable(L, 0, 2);
+		lua_pushnumber(L, b->timers[i].every_s);
+		lua_setfield(L, -2, "every_s");
+		for (j = 0; d && j < d->nvars && strcmp(d->vars[j].name, b->timers[i].name) != 0; j++)
+			;
+		if (d && j < d->nvars && d->vars[j].published_s > 0) {
+			lua_pushnumber(L, (double)lw->w->host_start_ns / 1e9 + d->vars[j].published_s);
+			lua_setfield(L, -2, "published_s");
+		}
+		lua_setfield(L, -2, b->timers[i].name);
+	}
+	return 1;
+}
+
 /* w:input(device, name, value) -> rc (0 accepted, > 0 refused: a vmac_refusal, < 0 failed), reply */
 static int l_input(lua_State *L)
 {
@@ -621,6 +646,7 @@ static int open_world(lua_State *L)
 	                                   {"state", l_state},
 	                                   {"var", l_var},
 	                                   {"device", l_device},
+	                                   {"timers", l_timers},
 	                                   {"input", l_input},
 	                                   {"set", l_set},
 	                                   {"plant", l_plant},

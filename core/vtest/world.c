@@ -300,6 +300,15 @@ static int load_io_map(struct vt_world *w, struct vt_board *b, const char *drive
 		o->offset = io.offset;
 		b->nio++;
 	}
+	n = primary ? vmac_driver_nvars(drv) : 0;
+	for (i = 0; i < n; i++) {
+		double every_s = vmac_driver_variable_every_s(drv, i);
+		if (every_s > 0 && b->ntimers < VMAC_DRIVER_MAX_VARS) {
+			struct vt_timer_var *tv = &b->timers[b->ntimers++];
+			snprintf(tv->name, sizeof(tv->name), "%s", vmac_driver_variable(drv, i)->name);
+			tv->every_s = every_s;
+		}
+	}
 	vmac_driver_free(drv);
 	return 0;
 }
@@ -500,6 +509,7 @@ int vt_start_host(struct vt_world *w, char *err, size_t errlen)
 	if (!w->bus)
 		return -1;
 	vmac_bus_virtual_start_at(w->bus, w->now_ns);
+	w->host_start_ns = w->now_ns;
 	{
 		const struct vmac_mainloop_hooks hooks = {
 		    .ctx = w, .wall_ns = world_ns, .bus_ns = world_ns, .event = keep_event, .loaded = run_commands};

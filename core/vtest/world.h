@@ -62,6 +62,13 @@ struct vt_board {
 	struct vt_io io[VMAC_DRIVER_MAX_IO];
 	int nio;
 	char io_note[200]; /* why there are no names (driver missing, failed to load) */
+	/* The driver's variables declared `update = "timer:N"` (primary board
+	 * only), for the failure report: their values are copies up to N s old. */
+	struct vt_timer_var {
+		char name[VMAC_DRIVER_NAME_MAX + 1];
+		double every_s;
+	} timers[VMAC_DRIVER_MAX_VARS];
+	int ntimers;
 };
 
 struct vt_event {
@@ -79,6 +86,7 @@ struct vt_world {
 	struct vmac_addr bus_group; /* where DISCOVER goes: every board */
 	int64_t now_ns;
 	int64_t next_plant_ns;
+	int64_t host_start_ns; /* when the running host started: its bus time 0 */
 	struct vt_board *boards[VT_MAX_BOARDS];
 	int nboards;
 	struct vt_pkt *q; /* binary heap by (at, order) */

@@ -174,6 +174,20 @@ function eventually(cond, within, what) end
 ---@return vmac.test.Always
 function always(what, cond, options) end
 
+---What every() returns.
+---@class vmac.test.Every
+local Every = {}
+
+---fn is called no more (also from inside fn).
+function Every:stop() end
+
+---fn(t) every seconds (> 0) of virtual time from now, while the test runs
+---the clock (run_for, run_until, eventually); fn may not run the clock itself.
+---@param seconds number
+---@param fn fun(t: number)
+---@return vmac.test.Every
+function every(seconds, fn) end
+
 ---Virtual seconds since the test began.
 ---@return number
 function now() end

@@ -40,6 +40,7 @@ METHOD_RECEIVERS = {
     "il": "vmac.Interlock", "interlock": "vmac.Interlock",
     "control": "vmac.Appliance", "appliance": "vmac.Appliance",
     "b": "vmac.test.Board",
+    "handle": "vmac.test.Every",
 }
 # Tables of functions: the sandbox's globals and the stdlib's modules.
 MODULES = ["vmac", "os", "timer", "pid", "ramp", "cycle", "interlock", "appliance"]

@@ -116,6 +116,43 @@ def test_the_report_shows_the_tests_actions(t):
                      r"open_door\(\)\)\n", out), "the first service after the door opened is not marked:\n%s" % out
 
 
+def test_the_report_says_which_values_are_timer_copies(t):
+    """A variable declared update = "timer:N" is shown as the copy it is:
+    its period and how long ago it was published (never longer than the
+    period); one published as it changes has no such note."""
+    rc, out, err = vtest(t, "vtest-report-timers", "--filter", "the moment", case("always_within"))
+    assert rc == 1, "exit %d, expected 1\n%s%s" % (rc, out, err)
+    line = re.search(r"^\s+variables: (.*)$", out, re.M)
+    assert line, "the report shows no variables:\n%s" % out
+    problems = []
+    for name, every_s in (("level_l", 0.5), ("time_left_s", 1)):
+        m = re.search(r"\b%s=\S+ \(timer %g s: published ([0-9.]+) s ago\)" % (name, every_s), line.group(1))
+        if not m:
+            problems.append("%s (timer:%g) is not shown as a timer copy with its age" % (name, every_s))
+        elif float(m.group(1)) > every_s:
+            problems.append("%s was published %s s ago, longer than its period %g s" % (name, m.group(1), every_s))
+    if not re.search(r"\bstep=wash(?! \()", line.group(1)):
+        problems.append("step (published as it changes) is not shown plainly")
+    assert not problems, "\n".join(problems) + "\n" + line.group(0)
+
+
+def test_every_runs_test_side_behaviour(t):
+    """every(dt, fn): fn at every dt of virtual time while the clock runs,
+    until :stop(); a person opening the door every 5 s; an error in fn
+    fails at fn's line, a dt that is not > 0 at the caller's."""
+    rc, out, err = vtest(t, "vtest-every", case("every"))
+    assert rc == 1, "every.lua: exit %d, expected 1\n%s%s" % (rc, out, err)
+    for name in ("every calls fn at its times while the clock runs", "a person opens and closes the door every 5 s"):
+        assert re.search(r"ok\s+%s" % re.escape(name), out), "%r fails:\n%s" % (name, out)
+    assert re.search(r"FAIL\s+an error in fn fails at fn's line\n\s+at \S*every\.lua:37\n\s+every \(declared at "
+                     r"\S*every\.lua:36\): its fn raised: \S*every\.lua:37: the person tripped\n", out), (
+        "the error in fn is not reported at fn's line:\n%s" % out)
+    assert re.search(r"virtual time 1\.500000 s", out), "the error in fn did not stop the test at 1.5 s:\n%s" % out
+    assert re.search(r"FAIL\s+every needs seconds > 0\n\s+at \S*every\.lua:43\n\s+every\(seconds, fn\): seconds "
+                     r"must be a number > 0, not 0\n", out), "every(0, fn) is not refused at its line:\n%s" % out
+    assert "runner.lua" not in out, "a line of the runner shows:\n%s" % out
+
+
 def test_api_mistakes_are_the_tests_line(t):
     """A mistake in the use of the test API (an unknown plant, a bad
     argument) fails the test at the test file's line, naming the mistake,
