@@ -334,6 +334,36 @@ def fetch_recording(t, host, rec_id, name, token=None):
     return path
 
 
+def small_state(t):
+    """A state folder for a host on a 1 MiB tmpfs of its own, in a mount
+    namespace (needs root, as CI has): (the folder, the wrapper that runs
+    the host in that namespace with the test's store copied in). Raises
+    Skip where that cannot be had (a failure with CI=true: run.py)."""
+    if os.geteuid() != 0:
+        raise Skip("needs root for a tmpfs in a mount namespace; run make test as root")
+    probe = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c",
+                            'mount -t tmpfs -o size=1m tmpfs "$0"', t.logdir], capture_output=True, text=True,
+                           timeout=30)
+    if probe.returncode != 0:
+        raise Skip("cannot mount a tmpfs in a mount namespace here (a container without CAP_SYS_ADMIN?): %s"
+                   % probe.stderr.strip())
+    state = os.path.join(t.logdir, "small")
+    os.makedirs(state)
+    wrapper = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+               'mount -t tmpfs -o size=1m tmpfs "$0" && cp "$1"/vmac.db* "$0"/ && shift && exec "$@"',
+               state, t.logdir]
+    return state, wrapper
+
+
+def fill_state(host, state):
+    """Fill the tmpfs of small_state from inside the host's namespace."""
+    fill = subprocess.run(["nsenter", "-t", str(host.popen.pid), "-m", "sh", "-c",
+                           'dd if=/dev/zero of="%s/fill" bs=4k 2>/dev/null; df -k "%s" | tail -1' % (state, state)],
+                          capture_output=True, text=True, timeout=60)
+    assert " 0 " in fill.stdout or "100%" in fill.stdout, "the tmpfs did not fill: %r %r" % (fill.stdout,
+                                                                                            fill.stderr)
+
+
 def describe(status):
     return ", ".join(
         "%s %s misses %d served %d" % (d["name"], d["state"], d["misses"], d["served"]) for d in status["devices"]

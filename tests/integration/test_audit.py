@@ -26,7 +26,7 @@ import urllib.request
 import test_mqtt as mq
 import test_mqtt_ha as ha
 import test_sparkplug as spb
-from harness import Skip
+from harness import fill_state, small_state
 from test_reload import counter
 
 # docs/API.md "Audit trail": the format a program reads.
@@ -347,27 +347,12 @@ def test_a_full_store_fails_no_request_and_loses_no_audit_event(t):
     answered as ever, each request's audit event is in the status and the
     stream at once, the failure to store events is said once and counted,
     and the events reach the store when space is back."""
-    if os.geteuid() != 0:
-        raise Skip("needs root for a tmpfs in a mount namespace; run make test as root")
-    probe = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c",
-                            'mount -t tmpfs -o size=1m tmpfs "$0"', t.logdir], capture_output=True, text=True,
-                           timeout=30)
-    if probe.returncode != 0:
-        raise Skip("cannot mount a tmpfs in a mount namespace here (a container without CAP_SYS_ADMIN?): %s"
-                   % probe.stderr.strip())
-    state = os.path.join(t.logdir, "small")
-    os.makedirs(state)
     op, op_id = named_token(t, "operate", "panel")  # in the test's state folder: copied below
-    wrapper = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
-               'mount -t tmpfs -o size=1m tmpfs "$0" && cp "$1"/vmac.db* "$0"/ && shift && exec "$@"',
-               state, t.logdir]
+    state, wrapper = small_state(t)
     host = t.host(wrapper=wrapper, extra=("--state", state), settings={"bus_trust": "open"})
     t.board("lights", "lights-1", keyed=False)
     host.wait_running(["lights-1"])
-    fill = subprocess.run(["nsenter", "-t", str(host.popen.pid), "-m", "sh", "-c",
-                           'dd if=/dev/zero of="%s/fill" bs=4k 2>/dev/null; df -k "%s" | tail -1' % (state, state)],
-                          capture_output=True, text=True, timeout=60)
-    assert " 0 " in fill.stdout or "100%" in fill.stdout, "the tmpfs did not fill: %r %r" % (fill.stdout, fill.stderr)
+    fill_state(host, state)
     failed_before = disk_full_failures(host)
 
     def inputs(n):

@@ -299,9 +299,12 @@ def test_every_module_has_its_place(t=None):
     assert not failures, failures_message("modules and their places in the docs", failures)
 
 
-if __name__ == "__main__":
+def run_standalone(names):
+    """Run every test_* function of a module's globals names, without a
+    host or run.py (the checks of files: this one, test_types.py); exit 1
+    when one failed."""
     failed = 0
-    for name, fn in sorted(globals().items()):
+    for name, fn in sorted(names.items()):
         if name.startswith("test_") and callable(fn):
             try:
                 fn()
@@ -310,3 +313,7 @@ if __name__ == "__main__":
                 failed += 1
                 print("FAIL", name[len("test_"):] + ":", e)
     sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    run_standalone(globals())

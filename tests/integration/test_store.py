@@ -13,7 +13,7 @@ import shutil
 import subprocess
 import time
 
-from harness import KITCHEN_NAMES, Skip, post, undisturbed
+from harness import KITCHEN_NAMES, fill_state, post, small_state, undisturbed
 
 RUNS = 200
 
@@ -51,31 +51,13 @@ def test_a_full_disk_is_an_error_not_a_crash(t):
     """The state folder on a small tmpfs of its own (a mount namespace:
     needs root, as CI has), filled up while the host runs. Skipped where
     that cannot be had (a failure with CI=true: run.py)."""
-    if os.geteuid() != 0:
-        raise Skip("needs root for a tmpfs in a mount namespace; run make test as root")
-    probe = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c",
-                            'mount -t tmpfs -o size=1m tmpfs "$0"', t.logdir], capture_output=True, text=True,
-                           timeout=30)
-    if probe.returncode != 0:
-        raise Skip("cannot mount a tmpfs in a mount namespace here (a container without CAP_SYS_ADMIN?): %s"
-                   % probe.stderr.strip())
-    state = os.path.join(t.logdir, "small")
-    os.makedirs(state)
     token = t.make_token("deploy")  # in the test's own state folder: copied below
-    wrapper = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
-               'mount -t tmpfs -o size=1m tmpfs "$0" && cp "$1"/vmac.db* "$0"/ && shift && exec "$@"',
-               state, t.logdir]
+    state, wrapper = small_state(t)
     t.enroll(["washer-1"])  # into the store the host's copies
     host = t.host(wrapper=wrapper, extra=("--state", state))
     t.board("washer", "washer-1", keyed=False, extra=("--key-dir", t.keys))
     version = host.device("washer-1", host.wait_running(["washer-1"]))["driver_version"]
-    # Fill the tmpfs from inside the host's mount namespace.
-    pid = host.popen.pid
-    fill = subprocess.run(["nsenter", "-t", str(pid), "-m", "sh", "-c",
-                           'dd if=/dev/zero of="%s/fill" bs=4k 2>/dev/null; df -k "%s" | tail -1' % (state, state)],
-                          capture_output=True, text=True, timeout=60)
-    assert " 0 " in fill.stdout or "100%" in fill.stdout, "the tmpfs did not fill: %r %r" % (fill.stdout,
-                                                                                            fill.stderr)
+    fill_state(host, state)  # from inside the host's mount namespace
     # A bundle of the washer and its programmes, its driver padded to 700 KiB.
     scripts = os.path.join(os.path.dirname(__file__), "..", "..", "scripts")
     mine = os.path.join(t.logdir, "big")

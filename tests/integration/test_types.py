@@ -24,7 +24,6 @@ vmac.Driver (the callbacks, named driver.NAME)."""
 
 import os
 import re
-import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 TYPES = "scripts/types"
@@ -207,13 +206,5 @@ def test_each_stdlib_module_annotated_is_the_code(t=None):
 
 
 if __name__ == "__main__":
-    failed = 0
-    for name, fn in sorted(globals().items()):
-        if name.startswith("test_") and callable(fn):
-            try:
-                fn()
-                print("PASS", name[len("test_"):])
-            except AssertionError as e:
-                failed += 1
-                print("FAIL", name[len("test_"):] + ":", e)
-    sys.exit(1 if failed else 0)
+    from test_docs import run_standalone
+    run_standalone(globals())
