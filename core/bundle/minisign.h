@@ -22,7 +22,7 @@
 struct vmac_minisign_key {
 	uint8_t id[8];
 	uint8_t pk[32];
-	char id_hex[17]; /* the key id as minisign prints it: 16 uppercase hex digits */
+	char id_hex[17]; /* the key id as minisign prints it: 16 uppercase hex digits (0.11 leaves out leading zeros) */
 };
 
 /* Every key of keys file path into keys (at most max): how many (0: a file
