@@ -37,8 +37,11 @@ def test_logs_show_a_machines_output_by_level_and_follow(t):
     warned = host.wait_event("warning", "chatty-1", text="dev.vars.msg")
     assert "102 bytes" in warned["text"], "the cut warning does not give the length: %r" % warned["text"]
 
-    # The variable as the status shows it: cut between characters, marked.
-    msg = host.device("chatty-1")["variables"]["msg"]
+    # The variable as the status shows it (the warning may come before the
+    # status copy has it): cut between characters, marked.
+    s = host.wait_status(lambda s: host.device("chatty-1", s)["variables"].get("msg") is not None, 10,
+                         "dev.vars.msg in the status")
+    msg = host.device("chatty-1", s)["variables"]["msg"]
     assert msg.endswith(MARK) and len(msg.encode()) <= 63, "dev.vars.msg as published: %r (%d bytes)" % (
         msg, len(msg.encode()))
     assert msg.startswith("a message of more than sixty-three bytes, \u20ac"), "the cut text lost its start: %r" % msg
