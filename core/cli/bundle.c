@@ -12,18 +12,14 @@
 #include "../bundle/bundle.h"
 #include "../bundle/minisign.h"
 #include "../common/file.h"
-#include "../common/paths.h"
 #include "../loader/loader.h"
 
 /* The settings a bundle is compiled with on this machine: the shipped
  * stdlib, as vmac test has it. */
 static void local_config(struct vmac_config *cfg)
 {
-	char root[VMAC_PATH_MAX];
 	vmac_config_defaults(cfg);
-	vmac_root_dir(root, sizeof(root));
-	snprintf(cfg->scripts_dir, sizeof(cfg->scripts_dir), "%s/scripts", root);
-	snprintf(cfg->stdlib_dir, sizeof(cfg->stdlib_dir), "%s/stdlib", root);
+	vmac_config_shipped_dirs(cfg);
 	cfg->driver_budget_us = 0; /* the instruction budget only */
 }
 

@@ -7,6 +7,7 @@
 
 #include "../common/addr.h"
 #include "../common/file.h"
+#include "../common/paths.h"
 #include "../transport/transport.h"
 
 #include <arpa/inet.h>
@@ -90,6 +91,14 @@ static const struct key keys[] = {
     {S(mqtt_sparkplug_primary_host)},
     {U(mqtt_keepalive_s, 5, 3600)},
 };
+
+void vmac_config_shipped_dirs(struct vmac_config *c)
+{
+	char root[VMAC_PATH_MAX];
+	vmac_root_dir(root, sizeof(root));
+	snprintf(c->scripts_dir, sizeof(c->scripts_dir), "%.900s/scripts", root);
+	snprintf(c->stdlib_dir, sizeof(c->stdlib_dir), "%.900s/stdlib", root);
+}
 
 void vmac_config_defaults(struct vmac_config *c)
 {

@@ -88,6 +88,10 @@ static inline uint32_t vmac_config_slot_us(const struct vmac_config *c)
 }
 
 void vmac_config_defaults(struct vmac_config *c);
+/* scripts_dir and stdlib_dir: the shipped ones of the running program
+ * (vmac_root_dir, core/common/paths.h), as vmacd, vmac test and vmac bundle
+ * take them before any setting. */
+void vmac_config_shipped_dirs(struct vmac_config *c);
 /* Apply a Lua config file (plain assignments, evaluated with no library at
  * all; at most 64 KiB). Returns 0, or -1 with err naming the file, line and
  * key. vmac_config_load_text: the same for a file's len bytes already read,

@@ -17,7 +17,6 @@
 #include <unistd.h>
 
 #include "../api/http.h"
-#include "../common/paths.h"
 #include "../common/version.h"
 #include "../config/config.h"
 #include "../host/bus.h"
@@ -142,13 +141,11 @@ static int parse_args(struct host *h, int argc, char **argv)
 	                                     {"help", no_argument, 0, 'h'},
 	                                     {"version", no_argument, 0, 'V'},
 	                                     {0, 0, 0, 0}};
-	char err[VMAC_PATH_MAX + 256], root[VMAC_PATH_MAX];
+	char err[VMAC_PATH_MAX + 256];
 	int opt, i;
 
 	vmac_config_defaults(&h->cfg);
-	vmac_root_dir(root, sizeof(root));
-	snprintf(h->cfg.scripts_dir, sizeof(h->cfg.scripts_dir), "%.900s/scripts", root);
-	snprintf(h->cfg.stdlib_dir, sizeof(h->cfg.stdlib_dir), "%.900s/stdlib", root);
+	vmac_config_shipped_dirs(&h->cfg);
 	/* The config file first, so flags given on the command line win. */
 	for (i = 1; i < argc; i++) {
 		const char *file = NULL;

@@ -62,13 +62,11 @@ static struct vt_board *check_board(lua_State *L, struct lworld *lw, int i)
  * list of {key, value} at index idx over them. Raises on a bad one. */
 static void test_config(lua_State *L, int idx, struct vmac_config *cfg)
 {
-	char err[512], root[VMAC_PATH_MAX];
+	char err[512];
 	int i, n;
 	luaL_checktype(L, idx, LUA_TTABLE);
 	vmac_config_defaults(cfg);
-	vmac_root_dir(root, sizeof(root));
-	snprintf(cfg->scripts_dir, sizeof(cfg->scripts_dir), "%s/scripts", root);
-	snprintf(cfg->stdlib_dir, sizeof(cfg->stdlib_dir), "%s/stdlib", root);
+	vmac_config_shipped_dirs(cfg);
 	cfg->realtime = 0;
 	cfg->max_devices = 64;     /* a scene, not a plant floor: keeps each tick short */
 	cfg->driver_budget_us = 0; /* the instruction budget only: deterministic */
