@@ -189,10 +189,8 @@ int vmac_load_driver_bundle(const struct vmac_config *cfg, const struct vmac_bun
 	return load_bundle(cfg, b, device, b->version, NULL, out, text, textlen);
 }
 
-/* The folders' bundle of driver (vmac_folder_bundle), and its driver
- * loaded for device into *drv when drv is not NULL (else freed). */
-static int folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device,
-                         struct vmac_bundle **out, struct vmac_driver **drv, char *text, size_t textlen)
+int vmac_folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_bundle **out,
+                       struct vmac_driver **drv, char *text, size_t textlen)
 {
 	char path[VMAC_PATH_MAX + 64], cycles[VMAC_PATH_MAX + 64], err[VMAC_DRIVER_ERR_MAX];
 	struct vmac_driver *d;
@@ -223,17 +221,11 @@ static int folder_bundle(const struct vmac_config *cfg, const char *driver, cons
 	return 0;
 }
 
-int vmac_folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_bundle **out,
-                       char *text, size_t textlen)
-{
-	return folder_bundle(cfg, driver, device, out, NULL, text, textlen);
-}
-
 int vmac_load_driver(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_driver **out,
                      char *text, size_t textlen)
 {
 	struct vmac_bundle *b;
-	int rc = folder_bundle(cfg, driver, device, &b, out, text, textlen);
+	int rc = vmac_folder_bundle(cfg, driver, device, &b, out, text, textlen);
 	if (rc == 0)
 		vmac_bundle_free(b);
 	else

@@ -21,11 +21,12 @@
  * "Bundles"): DIR/NAME.lua of the --drivers folder DIR, else the shipped
  * scripts/drivers/NAME.lua; the programmes as above; its plant and tests
  * when the folder has them; version and api from the driver's manifest
- * (it is compiled), counter 0. 0 and *out; -ENOENT (no such file) or
+ * (it is compiled: the instance, loaded for device, goes to *drv when drv
+ * is not NULL), counter 0. 0 and *out; -ENOENT (no such file) or
  * another negative errno, with text saying why in words a person can act
  * on ("no driver 'washer' for washer-1 (looked in ...)"). */
 int vmac_folder_bundle(const struct vmac_config *cfg, const char *driver, const char *device, struct vmac_bundle **out,
-                       char *text, size_t textlen);
+                       struct vmac_driver **drv, char *text, size_t textlen);
 
 /* Load the driver of bundle b for board device: its NAME.lua, with the
  * bundle's programmes and nothing from the host's folders (but the

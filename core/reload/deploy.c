@@ -484,22 +484,26 @@ static int folder_seen(const char *driver)
 /* What the folder holds for driver, as a version: stored (origin folder)
  * and made active, when nothing is active or the active version came from
  * the folder and differs. 0 (*id the active version's, 0 when the store
- * keeps none), or < 0 with text. Under the deploy lock. */
+ * keeps none), or < 0 with text. *drv: the folder's instance, loaded for
+ * device, when the folder was read and its content is what is active now
+ * (or, the store failing, nothing was); else NULL. Under the deploy lock. */
 static int folder_version(struct vmac_store *store, const struct vmac_config *cfg, const char *driver,
-                          const char *device, int active, const struct vmac_driver_version *v, int64_t *id, char *text,
-                          size_t textlen)
+                          const char *device, int active, const struct vmac_driver_version *v, int64_t *id,
+                          struct vmac_driver **drv, char *text, size_t textlen)
 {
 	struct vmac_bundle *b;
+	struct vmac_driver *d = NULL;
 	struct vmac_driver_upload up;
 	char *data = NULL, hash[65];
 	size_t len;
 	int rc;
 	*id = active ? v->id : 0;
+	*drv = NULL;
 	if (active && (strcmp(v->origin, "folder") != 0 || folder_seen(driver)))
 		return 0; /* an upload is active, or the folder was looked at already */
 	if (!active)
 		folder_seen(driver);
-	if ((rc = vmac_folder_bundle(cfg, driver, device, &b, text, textlen)) != 0)
+	if ((rc = vmac_folder_bundle(cfg, driver, device, &b, &d, text, textlen)) != 0)
 		return active ? 0 : rc; /* a folder that no longer loads leaves the version that ran */
 	if ((rc = vmac_bundle_write(b, &data, &len, text, textlen)) == 0) {
 		vmac_bundle_hash(data, len, hash);
@@ -510,6 +514,9 @@ static int folder_version(struct vmac_store *store, const struct vmac_config *cf
 				rc = vmac_store_driver_activate(store, driver, *id, text, textlen);
 		}
 	}
+	if (rc == 0 || (!active && (rc == -VMAC_ESTORE || rc == -VMAC_ESTOREFULL)))
+		*drv = d, d = NULL;
+	vmac_driver_free(d);
 	free(data);
 	vmac_bundle_free(b);
 	return rc;
@@ -533,17 +540,21 @@ void vmac_deploy_load(struct vmac_store *store, const struct vmac_config *cfg, c
 	rc = vmac_store_driver_active(store, driver, &v, NULL, NULL, text, sizeof(text));
 	if (rc >= 0) {
 		int active = rc == 1;
-		rc = folder_version(store, cfg, driver, device, active, &v, &id, text, sizeof(text));
+		rc = folder_version(store, cfg, driver, device, active, &v, &id, &drv, text, sizeof(text));
 		if (rc == -VMAC_ESTORE || rc == -VMAC_ESTOREFULL) {
 			/* The store cannot keep the folder's version (a full disk): the
 			 * machine runs anyway, the active version or the folder's as
-			 * it is, unrecorded. */
+			 * it is, unrecorded (drv, untagged). */
 			if (!active) {
-				rc = vmac_load_driver(cfg, driver, device, &drv, text, sizeof(text));
+				rc = drv ? 0 : -EIO;
 				goto out;
 			}
 			rc = 0, id = v.id;
 		}
+	}
+	if (rc == 0 && drv) { /* the folder's, read just now: what is active */
+		vmac_driver_set_tag(drv, id);
+		goto out;
 	}
 	if (rc == 0 && id == 0)
 		rc = -ENOENT;
