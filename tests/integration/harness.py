@@ -298,6 +298,18 @@ class Host(Proc):
         return max(self.events) if self.events else 0
 
 
+def http_code(host, path, token=None):
+    """The HTTP status of GET path on host's API (with token, when given)."""
+    req = urllib.request.Request("http://%s%s" % (host.http, path))
+    if token:
+        req.add_header("Authorization", "Bearer " + token)
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status
+    except urllib.error.HTTPError as e:
+        return e.code
+
+
 def post(host, path, token, data, content_type="application/json"):
     """POST data to host's API with token: (HTTP status, the answer's text),
     an error status included."""

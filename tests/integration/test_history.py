@@ -5,25 +5,14 @@ samples_max; a machine whose board is gone has none; the route needs a
 token."""
 
 import time
-import urllib.error
-import urllib.request
+
+from harness import http_code
 
 SAMPLES_MAX = 240  # docs/API.md: 120 s at one sample every 0.5 s
 
 
 def history(host, name, token=None):
     return host.get("/api/devices/%s/history" % name, token=token)
-
-
-def http_code(host, path, token=None):
-    req = urllib.request.Request("http://%s%s" % (host.http, path))
-    if token:
-        req.add_header("Authorization", "Bearer " + token)
-    try:
-        with urllib.request.urlopen(req, timeout=10) as r:
-            return r.status
-    except urllib.error.HTTPError as e:
-        return e.code
 
 
 def wait_samples(host, name, count, timeout_s=20):

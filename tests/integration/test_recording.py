@@ -15,7 +15,7 @@ import subprocess
 import urllib.error
 import urllib.request
 
-from harness import fetch_recording, recording_id
+from harness import fetch_recording, http_code, recording_id
 
 # A driver for a generic board that counts items in batches of seven: with
 # its switch (di0) on it lights do0 and shows on do1 whether the batch in
@@ -90,17 +90,6 @@ def parse(path):
     assert lines and lines[0].get("format") == "vmac-recording", "%s does not start with a recording header" % path
     assert "end" in lines[-1], "%s does not end with its end line" % path
     return lines[0], lines[1:-1], lines[-1]
-
-
-def http_status(host, path, token):
-    req = urllib.request.Request("http://%s%s" % (host.http, path))
-    if token:
-        req.add_header("Authorization", "Bearer " + token)
-    try:
-        with urllib.request.urlopen(req, timeout=30) as r:
-            return r.status
-    except urllib.error.HTTPError as e:
-        return e.code
 
 
 def http_post(host, path, body, token):
@@ -368,10 +357,10 @@ def test_a_damaged_recording_gets_a_clear_error(t):
         assert not out, "vmac recording to-test wrote a test of a recording %s: %r" % (what, out[:200])
 
     read = t.make_token("read")
-    assert http_status(host, "/api/recordings/%d" % rec_id, read) == 200, "recording %d is not there" % rec_id
-    assert http_status(host, "/api/recordings/999", read) == 404, "GET /api/recordings/999 is not a 404"
-    assert http_status(host, "/api/recordings", None) == 401, "GET /api/recordings without a token is not a 401"
-    assert http_status(host, "/api/recordings/%d" % rec_id, None) == 401, (
+    assert http_code(host, "/api/recordings/%d" % rec_id, read) == 200, "recording %d is not there" % rec_id
+    assert http_code(host, "/api/recordings/999", read) == 404, "GET /api/recordings/999 is not a 404"
+    assert http_code(host, "/api/recordings", None) == 401, "GET /api/recordings without a token is not a 401"
+    assert http_code(host, "/api/recordings/%d" % rec_id, None) == 401, (
         "GET /api/recordings/ID without a token is not a 401")
     rc, _, err = vmac(t, "recording", "get", "--http", host.http, "999", token=read,
                       stdout_file=os.path.join(t.logdir, "none.rec"))
@@ -408,9 +397,9 @@ def test_recordings_are_bounded(t):
         "vmac recordings lists %r, not the three newest of %r, newest first:\n%s" % (listed, kept, out))
     read = t.make_token("read")
     for gone in kept[:2]:
-        assert http_status(host, "/api/recordings/%d" % gone, read) == 404, "recording %d was not removed" % gone
+        assert http_code(host, "/api/recordings/%d" % gone, read) == 404, "recording %d was not removed" % gone
     for rec_id in kept[2:]:
-        assert http_status(host, "/api/recordings/%d" % rec_id, read) == 200, "recording %d is gone" % rec_id
+        assert http_code(host, "/api/recordings/%d" % rec_id, read) == 200, "recording %d is gone" % rec_id
 
 
 # A driver whose outputs depend on what it counted: from the 80th tick on,
