@@ -7,7 +7,7 @@
 #   make            build build/bin/{vmacd,vmac,vmac-board}
 #   make firmware   the board firmware for a Cortex-M3 (LM3S6965): build/firmware/vmac-board-lm3s6965.{elf,bin}
 #   make deps       install missing Debian packages (apt-get; sudo when not root)
-#   make run        deps + build + the demo kitchen (host and three mock boards)
+#   make run        deps + build + the demo kitchen (host and four mock boards)
 #   make run-qemu   deps + build + firmware + the kitchen with boards in QEMU on raw Ethernet (root)
 #   make test       deps + build + every test (unit, fuzz, integration, the web UI in chromium,
 #                   then again under ASan+UBSan)
@@ -193,18 +193,24 @@ test-unit: $(UNIT_TESTS)
 	@for t in $(UNIT_TESTS); do echo "== $$t"; VMAC_SKIP_FILE=$(SKIPPED) CK_FORK=yes $$t || exit 1; done
 
 # The stdlib's own tests, in the driver sandbox itself (tests/lua/run.c), and
-# luacheck with the sandbox's globals over every shipped script; not over
-# scripts/types/, declarations for editors (LuaLS) that no sandbox runs.
+# luacheck with the sandbox's globals over every shipped script and the
+# kitchen's user content (examples/); not over scripts/types/, declarations
+# for editors (LuaLS) that no sandbox runs.
 test-lua: $(BUILD)/bin/vmac $(BUILD)/tests/lua_tests
 	@echo "== Lua tests of stdlib/, in the driver sandbox"
 	@$(BUILD)/tests/lua_tests
-	@echo "== vmac lint over stdlib/, scripts/ and the driver tests"
-	@$(BUILD)/bin/vmac lint stdlib/*.lua $$(find scripts -name '*.lua' -not -path 'scripts/types/*') $$(find tests -name '*_test.lua')
+	@echo "== vmac lint over stdlib/, scripts/, examples/ and the driver tests"
+	@$(BUILD)/bin/vmac lint stdlib/*.lua $$(find scripts -name '*.lua' -not -path 'scripts/types/*') \
+		$$(find examples -name '*.lua') $$(find tests -name '*_test.lua')
 
-# The shipped drivers against mock boards in virtual time (docs/TESTING.md).
+# The shipped drivers against mock boards in virtual time (docs/TESTING.md),
+# then the kitchen's dryer, user content with its Lua plant, from its own
+# drivers folder as a user runs it (docs/NEW_MACHINE.md).
 test-drivers: $(BUILD)/bin/vmac
 	@echo "== vmac test: the shipped drivers in virtual time"
 	@$(BUILD)/bin/vmac test
+	@echo "== vmac test: the kitchen's dryer (examples/kitchen) in virtual time"
+	@$(BUILD)/bin/vmac test --drivers examples/kitchen examples/kitchen/tests
 
 # Every fuzz target for a few seconds (make fuzz for longer runs).
 test-fuzz: $(FUZZ_BINS)

@@ -1,15 +1,18 @@
 #!/usr/bin/env bash
-# The demo kitchen: vmacd plus three mock boards (washer, dishwasher, lights)
-# in the foreground. Ctrl-C stops everything; every board ends with its
-# outputs off. Usage: scripts/run-kitchen.sh [BIN_DIR] (default build/bin).
+# The demo kitchen: vmacd plus four mock boards (washer, dishwasher, lights,
+# and the dryer, which is user content: its driver, programmes and Lua plant
+# are in examples/kitchen/, read with vmacd --drivers and vmac-board
+# --plant-file, as docs/NEW_MACHINE.md makes them) in the foreground. Ctrl-C
+# stops everything; every board ends with its outputs off. Usage:
+# scripts/run-kitchen.sh [BIN_DIR] (default build/bin).
 # Environment: VMAC_BUS (GROUP:PORT), VMAC_HTTP (ADDR:PORT), VMAC_TIME_SCALE
-# (how fast the washer and dishwasher programmes run; default 0.1, ten times
-# faster than real, so a demonstration wash takes minutes, not an hour),
+# (how fast the washer, dishwasher and dryer programmes run; default 0.1, ten
+# times faster than real, so a demonstration wash takes minutes, not an hour),
 # VMAC_STATE (the host's state folder; default build/state), VMAC_SET (more
 # vmacd settings, KEY=VALUE items separated by spaces, each passed as --set
 # after the demo's own, so they win: `make run VMAC_SET="miss_limit=3"`).
 # Each run makes a fresh operate token in STATE/token (the previous one is
-# revoked), and enrolls the three boards (their keys in STATE/keys).
+# revoked), and enrolls the four boards (their keys in STATE/keys).
 #
 # The demo's reply deadline is 10 ms, not vmacd's 4 ms: the boards here are
 # processes on a PC that also runs builds and browsers, not microcontrollers,
@@ -24,11 +27,13 @@ http=${VMAC_HTTP:-127.0.0.1:8080}
 scale=${VMAC_TIME_SCALE:-0.1}
 state=${VMAC_STATE:-build/state}
 deadline_us=10000
+# The dryer's folder, whatever the current folder.
+kitchen=$(cd "$(dirname "$0")/../examples/kitchen" && pwd) || exit 1
 
 # The demo's slack on a loaded PC (docs/KITCHEN.md, "On a busy machine"):
 # two misses in a row drop a machine, not one; VMAC_SET comes after and wins.
 settings=(--set "driver.washer.param.time_scale=$scale" --set "driver.dishwasher.param.time_scale=$scale"
-	--set "miss_limit=2")
+	--set "driver.dryer.param.time_scale=$scale" --set "miss_limit=2")
 read -r -a extra <<<"${VMAC_SET:-}"
 for item in ${extra[@]+"${extra[@]}"}; do
 	case "$item" in
@@ -55,7 +60,7 @@ fi
 # each has its key in STATE/keys/NAME.key, made the first time, and the
 # host trusts only boards whose announcement proves theirs.
 "$bin/vmac" board enroll --local --state "$state" --key-dir "$state/keys" --replace --quiet \
-	washer-1 dishwasher-1 lights-1 || {
+	washer-1 dishwasher-1 lights-1 dryer-1 || {
 	echo "run-kitchen: cannot enroll the demo's boards in $state" >&2
 	exit 1
 }
@@ -75,7 +80,7 @@ stop() {
 	echo "run-kitchen: stopping the host and the boards"
 	[ "$1" = INT ] || kill -TERM "${pids[@]}" 2>/dev/null
 	[ -n "$reader" ] && kill "$reader" 2>/dev/null
-	exec 4>&- 5>&- 6>&-
+	exec 4>&- 5>&- 6>&- 7>&-
 	wait
 	rm -rf "$fifos"
 	echo "run-kitchen: stopped"
@@ -83,18 +88,21 @@ stop() {
 }
 trap 'stop INT' INT
 trap 'stop TERM' TERM
-"$bin/vmacd" --bus "$bus" --http "$http" --state "$state" "${settings[@]}" &
+"$bin/vmacd" --bus "$bus" --http "$http" --state "$state" --drivers "$kitchen" "${settings[@]}" &
 pids+=($!)
 # Each board reads operator actions from a FIFO; the loop at the end hands
 # each line typed here to the board it names.
-for b in washer-1 dishwasher-1 lights-1; do mkfifo "$fifos/$b"; done
+for b in washer-1 dishwasher-1 lights-1 dryer-1; do mkfifo "$fifos/$b"; done
 "$bin/vmac-board" --plant washer --name washer-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/washer-1" &
 pids+=($!)
 "$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/dishwasher-1" &
 pids+=($!)
 "$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/lights-1" &
 pids+=($!)
-exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1"
+"$bin/vmac-board" --plant-file "$kitchen/plants/dryer.lua" --name dryer-1 --bus "$bus" --key-dir "$state/keys" --quiet \
+	--commands <"$fifos/dryer-1" &
+pids+=($!)
+exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1" 7>"$fifos/dryer-1"
 
 cat <<EOT
 
@@ -111,6 +119,8 @@ The demo kitchen is running.
     washer-1 door 1           close it again
     washer-1 cancel 1         press cancel: the drum stops, the tub drains
     dishwasher-1 start 1      start the dishwasher
+    dryer-1 start 1           start the dryer (programme: cotton; its files: examples/kitchen/)
+    dryer-1 door 0            open the dryer door: no heat, the drum stops; dryer-1 door 1 closes it
   programmes run at time scale $scale (VMAC_TIME_SCALE); reply deadline $deadline_us us, two misses drop a machine${VMAC_SET:+ (VMAC_SET: $VMAC_SET)}
   Ctrl-C stops the host and the boards (all outputs off).
 
@@ -123,8 +133,9 @@ dispatch() {
 		washer-1\ *) echo "$line" >&4 ;;
 		dishwasher-1\ *) echo "$line" >&5 ;;
 		lights-1\ *) echo "$line" >&6 ;;
+		dryer-1\ *) echo "$line" >&7 ;;
 		"") ;;
-		*) echo "run-kitchen: start the line with a board's name: washer-1, dishwasher-1 or lights-1" ;;
+		*) echo "run-kitchen: start the line with a board's name: washer-1, dishwasher-1, lights-1 or dryer-1" ;;
 		esac
 	done
 }
