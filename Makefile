@@ -72,7 +72,7 @@ LDFLAGS_ALL     = $(SAN) $(LDFLAGS)
 # this order, each once, and scripts/check-layers.py reads every archive's
 # symbols (nm) and every include before anything links: an arrow upward is
 # a build error.
-MODULES := api mqtt vtest mainloop reload host loader bundle config driver transport store recorder board sched proto common
+MODULES := api mqtt vtest mainloop reload host loader bundle config sim driver transport store recorder board sched proto common
 MODULE_DIR = $(if $(filter board,$(1)),firmware,core/$(1))
 pkg_libs = $(shell pkg-config --libs $(1) 2>/dev/null)
 OBJ = $(BUILD)/obj
@@ -158,7 +158,7 @@ endef
 # `vmac test`, `vmac site`); vmac-board: the board and the transports.
 VMACD_MODULES      := $(MODULES)
 VMAC_MODULES       := $(call down_from,mqtt)
-VMAC_BOARD_MODULES := transport board proto common
+VMAC_BOARD_MODULES := sim driver transport board proto common
 VMACD_OBJ          := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/vmacd/*.c))
 VMAC_OBJ           := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/cli/*.c))
 VMAC_BOARD_OBJ     := $(patsubst %.c,$(OBJ)/%.o,$(wildcard firmware/posix/*.c))

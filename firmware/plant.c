@@ -183,6 +183,25 @@ uint32_t vmac_plant_unsafe_episodes(const struct vmac_plant *p)
 	return p->kind == VMAC_PLANT_WASHER ? p->s.washer.unsafe_episodes : 0;
 }
 
+static uint32_t safety_episodes(const void *ctx)
+{
+	return vmac_plant_unsafe_episodes((const struct vmac_plant *)ctx);
+}
+
+static size_t safety_text(const void *ctx, const char *board_name, char *buf, size_t cap)
+{
+	return vmac_plant_unsafe_text((const struct vmac_plant *)ctx, board_name, buf, cap);
+}
+
+struct vmac_plant_safety vmac_plant_safety_of(const struct vmac_plant *p)
+{
+	struct vmac_plant_safety s;
+	s.episodes = safety_episodes;
+	s.text = safety_text;
+	s.ctx = p;
+	return s;
+}
+
 /* A line being written into a caller's buffer: whatever does not fit is
  * dropped, the text stays NUL-terminated. */
 struct text {

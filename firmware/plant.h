@@ -105,6 +105,18 @@ uint32_t vmac_plant_unsafe_episodes(const struct vmac_plant *p);
  * written. No stdio: the same text on POSIX and on the MCU. */
 size_t vmac_plant_unsafe_text(const struct vmac_plant *p, const char *board_name, char *buf, size_t cap);
 
+/* A machine's safety monitor as firmware/report.c reads it, whatever
+ * simulates the machine (a C plant here, a Lua plant: core/sim/): the
+ * unsafe episodes counted so far, and the line of the last one in
+ * vmac_plant_unsafe_text's form. */
+struct vmac_plant_safety {
+	uint32_t (*episodes)(const void *ctx);
+	size_t (*text)(const void *ctx, const char *board_name, char *buf, size_t cap);
+	const void *ctx;
+};
+/* The C plant p's own monitor (p must outlive the view). */
+struct vmac_plant_safety vmac_plant_safety_of(const struct vmac_plant *p);
+
 /* A momentary button pressed by an operator action stays down this long (of
  * plant time), long enough for any service period to see it. */
 #define VMAC_PLANT_BUTTON_S 0.5

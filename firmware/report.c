@@ -58,15 +58,15 @@ static struct text start(const struct vmac_board *b, char *line, size_t len)
 	return t;
 }
 
-void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant *p, int quiet)
+void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant_safety *s, int quiet)
 {
 	r->state = b->state;
 	r->outputs = b->outputs;
-	r->unsafe = vmac_plant_unsafe_episodes(p);
+	r->unsafe = s->episodes(s->ctx);
 	r->quiet = quiet;
 }
 
-int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant *p, char *line,
+int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant_safety *s, char *line,
                      size_t len)
 {
 	struct text t;
@@ -95,11 +95,11 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 			return 1;
 		}
 	}
-	if (vmac_plant_unsafe_episodes(p) != r->unsafe) {
+	if (s->episodes(s->ctx) != r->unsafe) {
 		/* A safety event: said even when quiet. Episodes entered since the
 		 * last report share the line of the last. */
-		r->unsafe = vmac_plant_unsafe_episodes(p);
-		vmac_plant_unsafe_text(p, b->id.board, line, len);
+		r->unsafe = s->episodes(s->ctx);
+		s->text(s->ctx, b->id.board, line, len);
 		return 1;
 	}
 	return 0;

@@ -23,13 +23,14 @@ struct vmac_report {
 	int quiet;       /* only what matters for safety: leaving a session, unsafe episodes */
 };
 
-/* Start from what board b and plant p are now: nothing to say yet. */
-void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant *p, int quiet);
+/* Start from what board b and the safety monitor s of its machine
+ * (plant.h) are now: nothing to say yet. */
+void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant_safety *s, int quiet);
 
 /* The next line about what changed since the last one said, into line
  * (len bytes, VMAC_REPORT_LINE is enough): 1, or 0 when nothing more has
  * changed. Call until 0. */
-int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant *p, char *line,
+int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant_safety *s, char *line,
                      size_t len);
 
 /* The line of a watchdog trip ("NAME: watchdog: no frame for N ms, outputs

@@ -17,6 +17,8 @@
  *   takeover.c  hot reload: one instance takes over from another
  *   checkpoint.c  dev.state saved and recovered across a restart
  *   traceback.c the traceback of a driver's error, cleaned for people
+ *   luaplant.c  a plant model in Lua (luaplant.h): another kind of file in
+ *               the same sandbox, stepped by a simulator
  *
  * Internal names carry the prefix drv_. */
 #ifndef VMAC_DRIVER_INTERNAL_H
@@ -197,6 +199,7 @@ int drv_open_lib(lua_State *L, lua_CFunction f, const char *name);
 int drv_dev_checkpoint(lua_State *L);
 
 /* manifest.c */
+int drv_parse_io(struct vmac_driver *d, int t, const char *what, char *err, size_t errlen);
 int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *lim, char *err, size_t errlen);
 int drv_check_value(lua_State *L, int s, char *why, size_t len);
 int drv_describe(struct vmac_driver *d, char *err, size_t errlen);

@@ -115,22 +115,32 @@ static int opt_string(lua_State *L, int t, const char *field, char *out, size_t 
 	return 0;
 }
 
-static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
+/* The io field of the table at t into d->io (sorted by name); what names
+ * the text in errors ("manifest", "plant"). */
+#define BAD_IO(...)                                                                                                    \
+	do {                                                                                                           \
+		char what_[300];                                                                                       \
+		snprintf(what_, sizeof(what_), __VA_ARGS__);                                                           \
+		snprintf(err, errlen, "%s: %s: %s", d->file, what, what_);                                             \
+		return -1;                                                                                             \
+	} while (0)
+
+int drv_parse_io(struct vmac_driver *d, int t, const char *what, char *err, size_t errlen)
 {
 	lua_State *L = d->L;
 	int i, j;
 	lua_getfield(L, t, "io");
 	if (!lua_istable(L, -1))
-		BAD("io must be a table of name = channel (%s)", CHANNELS_TEXT);
+		BAD_IO("io must be a table of name = channel (%s)", CHANNELS_TEXT);
 	lua_pushnil(L);
 	while (lua_next(L, -2)) {
 		struct io *io;
 		const char *chan;
 		int spec = lua_gettop(L);
 		if (!valid_key(L, -2))
-			BAD("io: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
+			BAD_IO("io: names are [a-z][a-z0-9_]* of at most %d characters", VMAC_DRIVER_NAME_MAX);
 		if (d->nio == VMAC_DRIVER_MAX_IO)
-			BAD("io: more than %d names", VMAC_DRIVER_MAX_IO);
+			BAD_IO("io: more than %d names", VMAC_DRIVER_MAX_IO);
 		io = &d->io[d->nio];
 		memset(io, 0, sizeof(*io));
 		snprintf(io->name, sizeof(io->name), "%s", lua_tostring(L, -2));
@@ -144,30 +154,30 @@ static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
 			chan = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
 			lua_pop(L, 1); /* the string stays alive in the spec table */
 			if (!chan)
-				BAD("io.%s: the first element must be the channel (%s)", io->name, CHANNELS_TEXT);
+				BAD_IO("io.%s: the first element must be the channel (%s)", io->name, CHANNELS_TEXT);
 			if (opt_number(L, spec, "scale", 1, &io->scale) ||
 			    opt_number(L, spec, "offset", 0, &io->offset))
-				BAD("io.%s: scale and offset must be numbers", io->name);
+				BAD_IO("io.%s: scale and offset must be numbers", io->name);
 			if (opt_number(L, spec, "board", -1, &minor) ||
 			    (minor != -1 && (minor < 0 || minor > 4294967295.0 || minor != floor(minor))))
-				BAD("io.%s: board must be the minor id of a board of this machine", io->name);
+				BAD_IO("io.%s: board must be the minor id of a board of this machine", io->name);
 			if (minor >= 0) {
 				io->has_minor = 1;
 				io->minor = (uint32_t)minor;
 				io->board = -1;
 			}
 		} else {
-			BAD("io.%s: must be a channel name or {channel, scale = , offset = , board = }", io->name);
+			BAD_IO("io.%s: must be a channel name or {channel, scale = , offset = , board = }", io->name);
 		}
 		if (parse_channel(chan, io) != 0)
-			BAD("io.%s: unknown channel '%s' (%s)", io->name, chan, CHANNELS_TEXT);
+			BAD_IO("io.%s: unknown channel '%s' (%s)", io->name, chan, CHANNELS_TEXT);
 		if ((io->kind == IO_DO || io->kind == IO_PWM) && (io->scale != 1 || io->offset != 0))
-			BAD("io.%s: outputs take no scale or offset", io->name);
+			BAD_IO("io.%s: outputs take no scale or offset", io->name);
 		for (j = 0; j < d->nio; j++) {
 			struct io *o = &d->io[j];
 			if ((io->kind == IO_DO || io->kind == IO_PWM) && o->kind == io->kind &&
 			    o->channel == io->channel && o->has_minor == io->has_minor && o->minor == io->minor)
-				BAD("io.%s: output %s is already io.%s", io->name, chan, o->name);
+				BAD_IO("io.%s: output %s is already io.%s", io->name, chan, o->name);
 		}
 		d->nio++;
 		lua_pop(L, 1);
@@ -181,6 +191,7 @@ static int parse_io(struct vmac_driver *d, int t, char *err, size_t errlen)
 		}
 	return 0;
 }
+#undef BAD_IO
 
 /* Value of the host's setting driver.NAME.<key>, or NULL. */
 static const char *setting(const struct vmac_driver_limits *lim, const char *key)
@@ -504,7 +515,8 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 			    lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : luaL_typename(L, -2));
 		lua_pop(L, 1);
 	}
-	if (parse_io(d, t, err, errlen) || parse_variables(d, t, err, errlen) || parse_params(d, t, lim, err, errlen))
+	if (drv_parse_io(d, t, "manifest", err, errlen) || parse_variables(d, t, err, errlen) ||
+	    parse_params(d, t, lim, err, errlen))
 		return -1;
 	params = lua_gettop(L);
 	if (check_names(d, t, params, err, errlen) || callback_ref(d, t, "tick", 1, err, errlen, &d->ref_tick) ||

@@ -175,14 +175,17 @@ local function make_board(spec)
 	if type(spec) ~= "table" then fail("board{...}: expected a table with name and plant") end
 	local name, plant = spec.name, spec.plant
 	if type(name) ~= "string" then fail("board{...}: name is required (a string)") end
-	if type(plant) ~= "string" then fail("board{...}: plant is required (washer, dishwasher, lights, generic)") end
+	if type(plant) ~= "string" then
+		fail("board{...}: plant is required (washer, dishwasher, lights, generic, or a plant of your own: "
+			.. "plants/NAME.lua)")
+	end
 	if spec.params ~= nil and type(spec.params) ~= "table" then fail("board{...}: params must be a table") end
 	local w = W()
-	local driver = spec.driver or plant
+	-- the driver: as given, else the plant's (a Lua plant may name another)
+	local _, driver = world_call("board{...}: ", w.board, w, name, plant, spec.driver, spec.major, spec.minor)
 	for k, v in pairs(spec.params or {}) do
 		world_call("board{...}: ", w.config, w, "driver." .. driver .. ".param." .. k, tostring(v))
 	end
-	world_call("board{...}: ", w.board, w, name, plant, spec.driver, spec.major, spec.minor)
 	local b = { name = name, plant_kind = plant, driver = driver }
 	b.io = io_view(b)
 	b.inp, b.out = b.io, b.io
@@ -448,7 +451,8 @@ local function advance(until_t, cond)
 		if due and due + 1e-9 < stop_at then stop_at = due + 1e-9 end
 		local every_due = current.every[1] and next_every_due()
 		if every_due and every_due < stop_at then stop_at = every_due end
-		local stopped = w:run(stop_at, check)
+		local stopped, plant_failed = w:run(stop_at, check)
+		if plant_failed then fail(plant_failed) end
 		if stopped and met then return true end
 		if not stopped then
 			if every_due and every_due <= stop_at then run_every(stop_at) end

@@ -143,24 +143,22 @@ static int l_gc(lua_State *L)
 	return 0;
 }
 
-/* w:board(name, plant, driver|nil, major|nil, minor|nil) */
+/* w:board(name, plant, driver|nil, major|nil, minor|nil) -> io_note, driver */
 static int l_board(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
 	const char *name = luaL_checkstring(L, 2), *plant = luaL_checkstring(L, 3);
 	const char *driver = luaL_optstring(L, 4, NULL);
-	enum vmac_plant_kind kind;
-	char err[256];
+	char err[VMAC_DRIVER_ERR_MAX + 200];
 	uint32_t major = lua_isnoneornil(L, 5) ? vmac_proto_default_major(name) : (uint32_t)luaL_checknumber(L, 5);
 	uint32_t minor = (uint32_t)luaL_optnumber(L, 6, 0);
 	struct vt_board *b;
-	if (vmac_plant_kind_from_name(plant, &kind) != 0)
-		return luaL_error(L, "unknown plant '%s' (washer, dishwasher, lights, generic)", plant);
-	b = vt_board_add(lw->w, name, kind, driver, major, minor, err, sizeof(err));
+	b = vt_board_add(lw->w, name, plant, driver, major, minor, err, sizeof(err));
 	if (!b)
 		return luaL_error(L, "%s", err);
 	lua_pushstring(L, b->io_note);
-	return 1;
+	lua_pushstring(L, b->fw.id.driver);
+	return 2;
 }
 
 /* The check after each delivery: calls the registered Lua function; a true
@@ -180,7 +178,8 @@ static int run_check(void *ctx)
 	return stop;
 }
 
-/* w:run(until_s, check|nil) -> true when check stopped it */
+/* w:run(until_s, check|nil) -> true when check stopped it; false and why
+ * when a Lua plant failed (the test fails with it). */
 static int l_run(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
@@ -203,6 +202,11 @@ static int l_run(lua_State *L)
 	lw->check_ref = prev;
 	if (lw->check_failed)
 		return lua_error(L); /* the check's error, as it was raised */
+	if (rc == VT_PLANT_FAILED) {
+		lua_pushboolean(L, 0);
+		lua_pushstring(L, lw->w->plant_failure);
+		return 2;
+	}
 	lua_pushboolean(L, rc != 0);
 	return 1;
 }
@@ -383,9 +387,9 @@ static int l_set(lua_State *L)
 	struct vt_board *b = check_board(L, lw, 2);
 	const char *name = luaL_checkstring(L, 3);
 	double v = lua_isboolean(L, 4) ? lua_toboolean(L, 4) : luaL_optnumber(L, 4, 1);
-	if (vmac_plant_set(&b->plant, name, v) != 0)
-		return luaL_error(L, "%s: the %s plant refuses %s = %g (names and ranges: docs/BOARD.md)",
-		                  b->fw.id.board, vmac_plant_name(b->plant.kind), name, v);
+	char why[VMAC_DRIVER_ERR_MAX + 64];
+	if (vmac_sim_set(&b->sim, name, v, why, sizeof(why)) != 0)
+		return luaL_error(L, "%s: %s", b->fw.id.board, why);
 	return 0;
 }
 
@@ -394,50 +398,23 @@ static int l_plant(lua_State *L)
 {
 	struct lworld *lw = check_world(L);
 	struct vt_board *b = check_board(L, lw, 2);
-	lw->w->reads_plant = 1;
 	const char *f = luaL_checkstring(L, 3);
-	const struct vmac_washer *wa = &b->plant.s.washer;
-	const struct vmac_dishwasher *dw = &b->plant.s.dishwasher;
-	const struct vmac_lights *li = &b->plant.s.lights;
-	switch (b->plant.kind) {
-	case VMAC_PLANT_WASHER:
-		if (!strcmp(f, "drum_rpm"))
-			lua_pushnumber(L, wa->drum_rpm);
-		else if (!strcmp(f, "water_l"))
-			lua_pushnumber(L, wa->water_l);
-		else if (!strcmp(f, "water_c"))
-			lua_pushnumber(L, wa->water_c);
-		else if (!strcmp(f, "load_kg"))
-			lua_pushnumber(L, wa->load_kg);
-		else if (!strcmp(f, "door_closed"))
-			lua_pushboolean(L, wa->door_closed);
-		else if (!strcmp(f, "door_locked"))
-			lua_pushboolean(L, wa->door_locked);
-		else if (!strcmp(f, "unsafe_episodes"))
-			lua_pushnumber(L, wa->unsafe_episodes);
-		else
-			break;
-		return 1;
-	case VMAC_PLANT_DISHWASHER:
-		if (!strcmp(f, "water_l"))
-			lua_pushnumber(L, dw->water_l);
-		else if (!strcmp(f, "wash_time_s"))
-			lua_pushnumber(L, dw->wash_time_s);
-		else if (!strcmp(f, "door_closed"))
-			lua_pushboolean(L, dw->door_closed);
-		else
-			break;
-		return 1;
-	case VMAC_PLANT_LIGHTS:
-		if (!strncmp(f, "on_seconds", 10) && f[10] >= '0' && f[10] <= '4' && !f[11])
-			lua_pushnumber(L, li->on_seconds[f[10] - '0']);
-		else
-			break;
-		return 1;
-	default: break;
+	struct vmac_value v;
+	lw->w->reads_plant = 1;
+	if (vmac_sim_field(&b->sim, f, &v) != 0) {
+		if (vmac_sim_failure(&b->sim))
+			return luaL_error(L, "%s: the %s plant has failed: %s", b->fw.id.board, vmac_sim_name(&b->sim),
+			                  vmac_sim_failure(&b->sim));
+		return luaL_error(L, "%s: the %s plant has no field '%s' (%s; docs/TESTING.md)", b->fw.id.board,
+		                  vmac_sim_name(&b->sim), f, vmac_sim_fields_text(&b->sim));
 	}
-	return luaL_error(L, "%s: the %s plant has no field '%s' (docs/TESTING.md lists them)", b->fw.id.board,
-	                  vmac_plant_name(b->plant.kind), f);
+	if (v.type == VMAC_VALUE_NUMBER)
+		lua_pushnumber(L, v.number);
+	else if (v.type == VMAC_VALUE_BOOL)
+		lua_pushboolean(L, v.number != 0);
+	else
+		lua_pushstring(L, v.str);
+	return 1;
 }
 
 /* w:connect(board, plugged, powered) */

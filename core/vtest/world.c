@@ -3,9 +3,12 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
+#include "../common/name.h"
 #include "../loader/loader.h"
 #include "../mainloop/mainloop.h"
 #include "../proto/auth.h"
@@ -182,7 +185,7 @@ static void record_service(struct vt_world *w, struct vt_board *b, int64_t t)
 	struct vt_service *s = &b->hist[b->nhist++ % VT_HISTORY];
 	int i;
 	s->t_ns = t;
-	vmac_plant_sense(&b->plant, &s->in);
+	vmac_sim_sense(&b->sim, &s->in);
 	s->out = b->fw.outputs;
 	if (!w->trace)
 		return;
@@ -225,16 +228,22 @@ static void deliver(struct vt_world *w, struct vt_pkt *p)
 	}
 }
 
-static void step_plants(struct vt_world *w)
+/* 0, or VT_PLANT_FAILED when a Lua plant failed at this step. */
+static int step_plants(struct vt_world *w)
 {
 	uint64_t ms = (uint64_t)(w->now_ns / 1000000);
-	int i;
+	int i, rc = 0;
 	for (i = 0; i < w->nboards; i++) {
 		struct vt_board *b = w->boards[i];
-		vmac_plant_step(&b->plant, (double)VT_PLANT_STEP_NS / 1e9);
+		if (vmac_sim_step(&b->sim, (double)VT_PLANT_STEP_NS / 1e9) == -2 && rc == 0) {
+			snprintf(w->plant_failure, sizeof(w->plant_failure), "the %s plant of board %s failed: %s",
+			         vmac_sim_name(&b->sim), b->fw.id.board, vmac_sim_failure(&b->sim));
+			rc = VT_PLANT_FAILED;
+		}
 		if (b->powered && vmac_board_poll(&b->fw, ms))
 			w->moved = 1; /* the watchdog turned the outputs off */
 	}
+	return rc;
 }
 
 int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
@@ -249,9 +258,11 @@ int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 			t = until_ns;
 		w->now_ns = t;
 		if (t >= w->next_plant_ns) {
-			step_plants(w);
+			int rc = step_plants(w);
 			w->next_plant_ns += VT_PLANT_STEP_NS;
 			w->plant_moved = 1;
+			if (rc)
+				return rc;
 		}
 		while (w->nq > 0 && w->q[0].at <= t) {
 			struct vt_pkt p;
@@ -330,9 +341,33 @@ static int enroll(struct vt_world *w, struct vmac_board_identity *id, char *err,
 	return 0;
 }
 
-struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_plant_kind plant, const char *driver,
+/* The plant named: plants/NAME.lua of the drivers folder, else the C
+ * plant. 0, or -1 with err. */
+static int make_sim(struct vt_world *w, const char *plant, struct vmac_sim *sim, char *err, size_t errlen)
+{
+	char path[VMAC_PATH_MAX + 64];
+	struct vmac_luaplant_limits lim;
+	struct stat st;
+	memset(&lim, 0, sizeof(lim));
+	lim.seed = w->seed + (uint64_t)w->nboards; /* virtual time: no wall-clock budget */
+	if (w->cfg.drivers_dir[0] && vmac_valid_name(plant, VMAC_NAME_MAX)) {
+		snprintf(path, sizeof(path), "%s/plants/%s.lua", w->cfg.drivers_dir, plant);
+		if (stat(path, &st) == 0)
+			return vmac_sim_init_lua(sim, path, &lim, err, errlen);
+	}
+	if (vmac_sim_init_c(sim, plant) == 0)
+		return 0;
+	snprintf(err, errlen,
+	         "unknown plant '%s': no plants/%s.lua in %s, and no C plant of that name (washer, dishwasher, "
+	         "lights, generic)",
+	         plant, plant, w->cfg.drivers_dir[0] ? w->cfg.drivers_dir : "the drivers folder (none: --drivers DIR)");
+	return -1;
+}
+
+struct vt_board *vt_board_add(struct vt_world *w, const char *name, const char *plant, const char *driver,
                               uint32_t major, uint32_t minor, char *err, size_t errlen)
 {
+	struct vmac_sim sim;
 	struct vmac_board_identity id;
 	struct sockaddr_in *sin;
 	struct vt_board *b;
@@ -346,10 +381,13 @@ struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_pl
 		         VMAC_NAME_MAX);
 		return NULL;
 	}
+	if (make_sim(w, plant, &sim, err, errlen) != 0)
+		return NULL;
 	if (!driver)
-		driver = vmac_plant_default_driver(plant);
+		driver = vmac_sim_driver(&sim);
 	if (strlen(driver) > VMAC_NAME_MAX) {
 		snprintf(err, errlen, "driver name '%s' is longer than %d characters", driver, VMAC_NAME_MAX);
+		vmac_sim_fini(&sim);
 		return NULL;
 	}
 	for (i = 0; i < w->nboards; i++)
@@ -358,6 +396,7 @@ struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_pl
 	b = calloc(1, sizeof(*b));
 	if (!b) {
 		snprintf(err, errlen, "out of memory");
+		vmac_sim_fini(&sim);
 		return NULL;
 	}
 	memset(&id, 0, sizeof(id));
@@ -365,22 +404,20 @@ struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_pl
 	snprintf(id.driver, sizeof(id.driver), "%s", driver);
 	id.major = major;
 	id.minor = minor;
-	id.caps = vmac_plant_caps(plant);
+	id.caps = vmac_sim_caps(&sim);
 	if (enroll(w, &id, err, errlen) != 0) {
+		vmac_sim_fini(&sim);
 		free(b);
 		return NULL;
 	}
-	vmac_plant_init(&b->plant, plant);
+	b->sim = sim;
 	b->plugged = b->powered = 1;
 	sin = (struct sockaddr_in *)&b->addr.ss;
 	sin->sin_family = AF_INET;
 	sin->sin_port = htons(5870);
 	sin->sin_addr.s_addr = htonl(0x0A4D0000u | (uint32_t)(w->nboards + 1)); /* 10.77.0.N */
 	b->addr.len = sizeof(*sin);
-	{
-		static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
-		vmac_board_init(&b->fw, &id, &plant_io, &b->plant, (uint64_t)(w->now_ns / 1000000));
-	}
+	vmac_board_init(&b->fw, &id, &vmac_sim_io, &b->sim, (uint64_t)(w->now_ns / 1000000));
 	load_io_map(w, b, driver, primary);
 	w->boards[w->nboards++] = b;
 	return b;
@@ -424,7 +461,7 @@ int vt_io_value(struct vt_world *w, const struct vt_board *b, const char *name, 
 	default: break;
 	}
 	w->reads_plant = 1;
-	vmac_plant_sense(&b->plant, &in);
+	vmac_sim_sense(&b->sim, &in);
 	if (b->io[i].kind == VMAC_IO_DI) {
 		*is_bool = 1;
 		*value = (in.digital >> b->io[i].channel) & 1;
@@ -539,6 +576,7 @@ struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char
 		return NULL;
 	}
 	w->cfg = *cfg;
+	w->seed = seed;
 	w->rng = seed * 0x9E3779B97F4A7C15ULL + 0x632BE59BD9B4E019ULL;
 	if (!w->rng)
 		w->rng = 1;
@@ -572,8 +610,10 @@ void vt_world_free(struct vt_world *w)
 		vmac_bus_free(w->bus);
 	}
 	vmac_store_close(w->store);
-	for (i = 0; i < w->nboards; i++)
+	for (i = 0; i < w->nboards; i++) {
+		vmac_sim_fini(&w->boards[i]->sim);
 		free(w->boards[i]);
+	}
 	free(w->q);
 	free(w->events);
 	free(w);

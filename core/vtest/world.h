@@ -15,11 +15,11 @@
 #include <stdio.h>
 
 #include "../../firmware/board.h"
-#include "../../firmware/plant.h"
 #include "../config/config.h"
 #include "../host/bus.h"
 #include "../host/events.h"
 #include "../mainloop/mainloop.h"
+#include "../sim/sim.h"
 #include "../store/store.h"
 
 #define VT_WIRE_NS 50000LL          /* one way, host <-> board */
@@ -52,7 +52,7 @@ struct vt_faults {
 
 struct vt_board {
 	struct vmac_board fw;
-	struct vmac_plant plant;
+	struct vmac_sim sim;   /* the machine behind it: a C or a Lua plant */
 	struct vmac_addr addr; /* synthetic, 10.77.0.N:5870 */
 	int plugged;           /* 0: frames to and from it are lost (its watchdog runs on) */
 	int powered;           /* 0: the board is off: silent, outputs off */
@@ -93,6 +93,7 @@ struct vt_world {
 	size_t nq, capq;
 	uint64_t order; /* send order, for ties */
 	uint64_t rng;   /* xorshift64* state (the seed) */
+	uint64_t seed;  /* the run's seed, as given */
 	struct vt_event *events;
 	size_t nevents, capevents;
 	uint64_t frames; /* frames delivered, for the summary */
@@ -104,9 +105,10 @@ struct vt_world {
 	 * alone, so it is not run for one. */
 	int moved, plant_moved;
 	int reads_plant, check_reads_plant;
-	FILE *trace;                      /* CSV of every service, or NULL */
-	char trace_test[128];             /* the running test's name, the CSV's first column */
-	struct vmac_device_status status; /* scratch for vt_device */
+	char plant_failure[VMAC_DRIVER_ERR_MAX + 64]; /* a Lua plant failed: vt_run stopped (VT_PLANT_FAILED) */
+	FILE *trace;                                  /* CSV of every service, or NULL */
+	char trace_test[128];                         /* the running test's name, the CSV's first column */
+	struct vmac_device_status status;             /* scratch for vt_device */
 	/* The host's main thread (core/mainloop/, as in vmacd) and what it
 	 * keeps: the store, in memory, outlives a host (crash_host). */
 	struct vmac_mainloop *main;
@@ -122,16 +124,21 @@ struct vt_world {
 struct vt_world *vt_world_new(const struct vmac_config *cfg, uint64_t seed, char *err, size_t errlen);
 void vt_world_free(struct vt_world *w);
 
-/* A board running the firmware with a plant behind it, announcing `driver`
- * (default: the plant's). Its I/O names come from that driver's manifest
- * (loaded once here; a driver that does not load leaves io_note saying why).
- * Returns the board, or NULL with err. */
-struct vt_board *vt_board_add(struct vt_world *w, const char *name, enum vmac_plant_kind plant, const char *driver,
+/* A board running the firmware with plant `plant` behind it, announcing
+ * `driver` (default: the plant's). The plant is a Lua plant when the
+ * drivers folder has plants/PLANT.lua (seeded from the run's seed), else
+ * the C plant of that name. Its I/O names come from
+ * the driver's manifest (loaded once here; a driver that does not load
+ * leaves io_note saying why). Returns the board, or NULL with err. */
+struct vt_board *vt_board_add(struct vt_world *w, const char *name, const char *plant, const char *driver,
                               uint32_t major, uint32_t minor, char *err, size_t errlen);
 struct vt_board *vt_board_find(struct vt_world *w, const char *name);
 /* Power: off makes the board silent with outputs off; on starts it afresh
  * (unknown, answering discovery). */
 void vt_board_power(struct vt_world *w, struct vt_board *b, int on);
+
+/* vt_run's return when a Lua plant failed (plant_failure says which and why). */
+#define VT_PLANT_FAILED (-100)
 
 /* Called at each bus tick at which a frame has been delivered since the
  * last call; a non-zero return stops the run and is returned by vt_run. */

@@ -71,7 +71,20 @@ static int board_key(const struct boards_config *cfg, struct vmac_board_identity
 	return 0;
 }
 
-static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
+/* Board i's plant: the C plant named, or its own Lua plant (seed + i). */
+static int make_sim(const struct boards_config *cfg, int32_t i, struct vmac_sim *sim, char *err, size_t errlen)
+{
+	struct vmac_luaplant_limits lim = cfg->lua;
+	if (!cfg->plant_file) {
+		if (vmac_sim_init_c(sim, cfg->plant) == 0)
+			return 0;
+		snprintf(err, errlen, "unknown plant '%s'", cfg->plant);
+		return -1;
+	}
+	lim.seed += (uint64_t)i;
+	lim.time_scale = cfg->time_scale;
+	return vmac_sim_init_lua(sim, cfg->plant_file, &lim, err, errlen);
+}
 
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen)
 {
@@ -81,6 +94,7 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 	memset(s, 0, sizeof(*s));
 	s->count = (int32_t)cfg->count;
 	s->eth = cfg->eth;
+	s->time_scale = cfg->time_scale > 0 ? cfg->time_scale : 1.0;
 	/* Locally administered, unicast (first byte 0x02); then 3 bytes of the
 	 * base name's hash, so processes with other names on one link differ;
 	 * then the board's number, so a frame's MAC names its board. */
@@ -128,7 +142,11 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 		memcpy(id.driver, cfg->driver, strlen(cfg->driver) + 1);
 		id.major = cfg->major >= 0 ? (uint32_t)cfg->major : vmac_proto_default_major(id.board);
 		id.minor = (uint32_t)cfg->minor;
-		id.caps = vmac_plant_caps(cfg->kind);
+		if (make_sim(cfg, i, &pb->sim, err, errlen) != 0) {
+			boards_fini(s);
+			return -2;
+		}
+		id.caps = vmac_sim_caps(&pb->sim);
 		id.protocol = cfg->protocol;
 		if (!vmac_board_identity_valid(&id)) {
 			snprintf(err, errlen,
@@ -141,10 +159,10 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 			boards_fini(s);
 			return -2;
 		}
-		vmac_plant_init(&pb->plant, cfg->kind);
-		vmac_board_init(&pb->board, &id, &plant_io, &pb->plant, now_ms);
+		vmac_board_init(&pb->board, &id, &vmac_sim_io, &pb->sim, now_ms);
 		explicit_bzero(id.key, sizeof(id.key)); /* the board holds its copy */
-		vmac_report_init(&pb->report, &pb->board, &pb->plant, 0);
+		pb->safety = vmac_sim_safety(&pb->sim);
+		vmac_report_init(&pb->report, &pb->board, &pb->safety, 0);
 		pb->routed_offset = VMAC_OFFSET_NONE;
 		memcpy(pb->mac, s->mac_prefix, sizeof(s->mac_prefix));
 		pb->mac[4] = (uint8_t)((i + 1) >> 8);
@@ -157,6 +175,9 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 
 void boards_fini(struct board_set *s)
 {
+	int32_t i;
+	for (i = 0; s->boards && i < s->count; i++)
+		vmac_sim_fini(&s->boards[i].sim);
 	free(s->boards);
 	free(s->by_offset);
 	free(s->by_session);
@@ -216,7 +237,7 @@ void boards_report(struct board_set *s, int32_t i)
 	struct posix_board *pb = &s->boards[i];
 	char line[VMAC_REPORT_LINE];
 	pb->report.quiet = s->quiet; /* --quiet is set after the boards are made */
-	while (vmac_report_next(&pb->report, &pb->board, &pb->plant, line, sizeof(line)))
+	while (vmac_report_next(&pb->report, &pb->board, &pb->safety, line, sizeof(line)))
 		printf("%s\n", line);
 }
 
@@ -234,13 +255,17 @@ void boards_housekeep(struct board_set *s, uint64_t now_ms)
 
 	for (i = 0; i < s->count; i++) {
 		struct posix_board *pb = &s->boards[i];
-		double left_s = dt_s;
 		boards_poll_one(s, i, now_ms);
-		while (left_s > 0) {
+		double left_s = dt_s * s->time_scale;
+		int rc = 0;
+		while (left_s > 0 && rc == 0) {
 			double step_s = left_s > PLANT_STEP_MAX_S ? PLANT_STEP_MAX_S : left_s;
-			vmac_plant_step(&pb->plant, step_s);
+			rc = vmac_sim_step(&pb->sim, step_s);
 			left_s -= step_s;
 		}
+		if (rc == -2)
+			printf("%s: plant failed: %s; its inputs hold their last values\n", pb->board.id.board,
+			       vmac_sim_failure(&pb->sim));
 		boards_report(s, i);
 	}
 	if (now_ms > s->last_step_ms)
@@ -269,8 +294,9 @@ void boards_command(struct board_set *s, const char *line)
 				boards_print_counters(s, i);
 				return;
 			}
-			if (vmac_plant_set(&pb->plant, action, value) != 0)
-				printf("%s: refused %s %g\n", name, action, value);
+			char why[300];
+			if (vmac_sim_set(&pb->sim, action, value, why, sizeof(why)) != 0)
+				printf("%s: refused %s %g: %s\n", name, action, value, why);
 			else
 				printf("%s: %s %g\n", name, action, value);
 			boards_report(s, i); /* an action may have begun an unsafe episode */

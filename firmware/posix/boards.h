@@ -9,9 +9,9 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "../../core/sim/sim.h"
 #include "../../core/transport/transport.h"
 #include "../board.h"
-#include "../plant.h"
 #include "../report.h"
 
 #define BOARD_NONE (-1)        /* an empty entry of a routing table */
@@ -21,20 +21,24 @@
 
 struct posix_board {
 	struct vmac_board board;
-	struct vmac_plant plant;
-	struct vmac_report report; /* what its log last said (firmware/report.c) */
-	uint16_t routed_offset;    /* the by_offset entry held for it; VMAC_OFFSET_NONE */
-	uint32_t routed_device_id; /* the session by_session points to it for; 0 none */
-	uint8_t mac[6];            /* Ethernet: the source MAC of its replies */
+	struct vmac_sim sim;             /* the machine behind it: a C or a Lua plant */
+	struct vmac_plant_safety safety; /* sim's safety monitor, as the report reads it */
+	struct vmac_report report;       /* what its log last said (firmware/report.c) */
+	uint16_t routed_offset;          /* the by_offset entry held for it; VMAC_OFFSET_NONE */
+	uint32_t routed_device_id;       /* the session by_session points to it for; 0 none */
+	uint8_t mac[6];                  /* Ethernet: the source MAC of its replies */
 };
 
 /* What every board of the process is made from (main.c's options). */
 struct boards_config {
-	enum vmac_plant_kind kind;
-	const char *name;   /* base name: NAME, or NAME-1..NAME-N with count > 1 */
-	const char *driver; /* announced driver */
-	long count;         /* 1..BOARDS_MAX */
-	long major;         /* -1: hash of each board's name */
+	const char *plant;               /* a C plant by name ("washer"), unless plant_file */
+	const char *plant_file;          /* a Lua plant's file (docs/BOARD.md, "Plant models in Lua") */
+	struct vmac_luaplant_limits lua; /* its limits; board i's seed is lua.seed + i */
+	double time_scale;               /* plant seconds per real second */
+	const char *name;                /* base name: NAME, or NAME-1..NAME-N with count > 1 */
+	const char *driver;              /* announced driver */
+	long count;                      /* 1..BOARDS_MAX */
+	long major;                      /* -1: hash of each board's name */
 	long minor;
 	uint8_t protocol; /* 1 or 2 */
 	int eth;          /* raw Ethernet: each board has a MAC of its own */
@@ -63,15 +67,16 @@ struct board_set {
 	int32_t *reply_board;        /* [BOARDS_REPLY_MAX]: which board each reply is from */
 	int nreplies;
 
-	int64_t late_ns; /* report a reply later than this after its request; 0: never */
+	double time_scale; /* plant seconds per real second */
+	int64_t late_ns;   /* report a reply later than this after its request; 0: never */
 	uint64_t late_replies, unroutable, unsent;
 	uint64_t last_step_ms; /* plant time */
 };
 
 /* Make cfg->count boards (names, identities, keys, MACs, plants) and the
  * routing tables. Returns 0, or with a readable reason in err -2 (a name
- * the protocol refuses, a key file missing or not one) or -1 (out of
- * memory). */
+ * the protocol refuses, a key file missing or not one, a Lua plant that
+ * does not load) or -1 (out of memory). */
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen);
 void boards_fini(struct board_set *s);
 
@@ -92,8 +97,9 @@ void boards_track(struct board_set *s, int32_t i);
 void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms);
 
 /* The periodic work, at most once per few ms of wall time: every watchdog,
- * the plants stepped to now (sub-steps of at most PLANT_STEP_MAX_S), and the
- * state and output lines. */
+ * the plants stepped to now (times the time scale; a Lua plant that fails
+ * is said once and holds its inputs from then on), and the state and
+ * output lines. */
 void boards_housekeep(struct board_set *s, uint64_t now_ms);
 
 /* Print board i's state and output changes since it was last reported, and

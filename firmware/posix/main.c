@@ -7,6 +7,7 @@
 #include <errno.h>
 #include <getopt.h>
 #include <inttypes.h>
+#include <limits.h>
 #include <poll.h>
 #include <sched.h>
 #include <signal.h>
@@ -27,6 +28,7 @@
 #define DEFAULT_BUS "239.255.86.77:5870"
 #define DEFAULT_LATE_US 1000
 #define LATE_US_MAX 60000000
+#define PLANT_BUDGET_US 10000 /* wall clock a Lua plant's step or action may take */
 
 static volatile sig_atomic_t stop_signal;
 
@@ -45,6 +47,11 @@ static void usage(FILE *f)
 	fprintf(f, "usage: vmac-board [options]\n"
 	           "Run generic vmac I/O boards with simulated plants (see docs/BOARD.md).\n\n"
 	           "  --plant KIND      washer, dishwasher, lights or generic (default generic)\n"
+	           "  --plant-file FILE a plant model in Lua instead (docs/BOARD.md, \"Plant models\n"
+	           "                    in Lua\"): each board runs its own, sandboxed\n"
+	           "  --time-scale X    plant time runs X times as fast as the wall clock\n"
+	           "                    (0.001..1000, default 1)\n"
+	           "  --seed N          a Lua plant's math.random seed; board i gets N + i (default 1)\n"
 	           "  --name NAME       board name, [A-Za-z0-9_-], at most 31 (default: the plant's name)\n"
 	           "  --driver NAME     driver the board announces (default: the plant's driver)\n"
 	           "  --bus GROUP:PORT  UDP: discovery multicast group and port (default " DEFAULT_BUS ")\n"
@@ -131,7 +138,7 @@ static void print_start(const struct board_set *s, const struct boards_config *c
 	int32_t i;
 	if (cpu >= 0)
 		snprintf(cpu_text, sizeof(cpu_text), ", CPU %ld", cpu);
-	printf("vmac-board: %ld %s board%s on bus %s", cfg->count, vmac_plant_name(cfg->kind),
+	printf("vmac-board: %ld %s board%s on bus %s", cfg->count, vmac_sim_name(&s->boards[0].sim),
 	       cfg->count == 1 ? "" : "s", bus);
 	if (!s->eth) {
 		printf(" (UDP), interface %s, protocol %u%s\n", iface, (unsigned)cfg->protocol, cpu_text);
@@ -215,13 +222,32 @@ struct runner {
  * or the exit code: 0 after --help or --version, 2 for a wrong value. */
 static int take_option(struct options *o, int opt, const char *arg)
 {
+	enum vmac_plant_kind kind;
 	long number;
+	char *end;
 	switch (opt) {
 	case 'p':
-		if (vmac_plant_kind_from_name(arg, &o->cfg.kind) != 0) {
-			fprintf(stderr, "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic)\n", arg);
+		if (vmac_plant_kind_from_name(arg, &kind) != 0) {
+			fprintf(stderr,
+			        "vmac-board: unknown plant '%s' (washer, dishwasher, lights, generic; a plant of "
+			        "your own: --plant-file FILE)\n",
+			        arg);
 			return 2;
 		}
+		o->cfg.plant = arg;
+		return -1;
+	case 'f': o->cfg.plant_file = arg; return -1;
+	case 'T':
+		o->cfg.time_scale = strtod(arg, &end);
+		if (!*arg || *end || !(o->cfg.time_scale >= 0.001 && o->cfg.time_scale <= 1000)) {
+			fprintf(stderr, "vmac-board: --time-scale takes a number 0.001..1000, got '%s'\n", arg);
+			return 2;
+		}
+		return -1;
+	case 'S':
+		if (parse_number("--seed", arg, 0, LONG_MAX, 0, &number) != 0)
+			return 2;
+		o->cfg.lua.seed = (uint64_t)number;
 		return -1;
 	case 'n': o->cfg.name = arg; return -1;
 	case 'd': o->cfg.driver = arg; return -1;
@@ -274,33 +300,55 @@ static int take_bus(struct options *o)
 	return -1;
 }
 
+/* The plant's names: the C plant's, or those the Lua plant's file gives
+ * (loaded once here, so a file that does not load is refused before any
+ * board starts). Returns -1 to go on, or 2 with the reason printed. */
+static int take_plant(struct options *o)
+{
+	static char name[VMAC_NAME_MAX + 1], driver[VMAC_NAME_MAX + 1];
+	struct vmac_sim sim;
+	char err[512];
+	if (!o->cfg.plant_file) {
+		vmac_sim_init_c(&sim, o->cfg.plant);
+	} else if (vmac_sim_init_lua(&sim, o->cfg.plant_file, &o->cfg.lua, err, sizeof(err)) != 0) {
+		fprintf(stderr, "vmac-board: --plant-file: %s\n", err);
+		return 2;
+	}
+	snprintf(name, sizeof(name), "%s", vmac_sim_name(&sim));
+	snprintf(driver, sizeof(driver), "%s", vmac_sim_driver(&sim));
+	vmac_sim_fini(&sim);
+	if (!o->cfg.name)
+		o->cfg.name = name;
+	if (!o->cfg.driver)
+		o->cfg.driver = driver;
+	return -1;
+}
+
 /* The command line into o. Returns -1 to go on, or the exit code. */
 static int parse_options(int argc, char **argv, struct options *o)
 {
-	static const struct option opts[] = {{"plant", required_argument, 0, 'p'},
-	                                     {"name", required_argument, 0, 'n'},
-	                                     {"driver", required_argument, 0, 'd'},
-	                                     {"bus", required_argument, 0, 'b'},
-	                                     {"iface", required_argument, 0, 'i'},
-	                                     {"count", required_argument, 0, 'c'},
-	                                     {"major", required_argument, 0, 'M'},
-	                                     {"minor", required_argument, 0, 'm'},
-	                                     {"protocol", required_argument, 0, 'P'},
-	                                     {"cpu", required_argument, 0, 'u'},
-	                                     {"late-us", required_argument, 0, 'l'},
-	                                     {"commands", no_argument, 0, 'C'},
-	                                     {"quiet", no_argument, 0, 'q'},
-	                                     {"no-realtime", no_argument, 0, 'R'},
-	                                     {"key-file", required_argument, 0, 'K'},
-	                                     {"key-dir", required_argument, 0, 'D'},
-	                                     {"help", no_argument, 0, 'h'},
-	                                     {"version", no_argument, 0, 'V'},
-	                                     {0, 0, 0, 0}};
-	struct boards_config cfg = {VMAC_PLANT_GENERIC, NULL, NULL, 1, -1, 0, VMAC_PROTO_VERSION, 0, NULL, NULL};
+	static const struct option opts[] = {
+	    {"plant", required_argument, 0, 'p'},      {"name", required_argument, 0, 'n'},
+	    {"plant-file", required_argument, 0, 'f'}, {"time-scale", required_argument, 0, 'T'},
+	    {"seed", required_argument, 0, 'S'},       {"driver", required_argument, 0, 'd'},
+	    {"bus", required_argument, 0, 'b'},        {"iface", required_argument, 0, 'i'},
+	    {"count", required_argument, 0, 'c'},      {"major", required_argument, 0, 'M'},
+	    {"minor", required_argument, 0, 'm'},      {"protocol", required_argument, 0, 'P'},
+	    {"cpu", required_argument, 0, 'u'},        {"late-us", required_argument, 0, 'l'},
+	    {"commands", no_argument, 0, 'C'},         {"quiet", no_argument, 0, 'q'},
+	    {"no-realtime", no_argument, 0, 'R'},      {"key-file", required_argument, 0, 'K'},
+	    {"key-dir", required_argument, 0, 'D'},    {"help", no_argument, 0, 'h'},
+	    {"version", no_argument, 0, 'V'},          {0, 0, 0, 0}};
 	int opt, rc;
 
 	memset(o, 0, sizeof(*o));
-	o->cfg = cfg;
+	o->cfg.plant = "generic";
+	o->cfg.count = 1;
+	o->cfg.major = -1;
+	o->cfg.protocol = VMAC_PROTO_VERSION;
+	o->cfg.time_scale = 1.0;
+	o->cfg.lua.seed = 1;
+	o->cfg.lua.budget_us = PLANT_BUDGET_US;
 	o->bus = DEFAULT_BUS;
 	o->cpu = -1;
 	o->late_us = DEFAULT_LATE_US;
@@ -312,10 +360,8 @@ static int parse_options(int argc, char **argv, struct options *o)
 		fprintf(stderr, "vmac-board: unexpected argument '%s'\n", argv[optind]);
 		return 2;
 	}
-	if (!o->cfg.name)
-		o->cfg.name = vmac_plant_name(o->cfg.kind);
-	if (!o->cfg.driver)
-		o->cfg.driver = vmac_plant_default_driver(o->cfg.kind);
+	if ((rc = take_plant(o)) >= 0)
+		return rc;
 	if (o->cfg.key_file && o->cfg.key_dir) {
 		fprintf(stderr, "vmac-board: --key-file and --key-dir both given: one board's key, or a folder "
 		                "of NAME.key files, not both\n");

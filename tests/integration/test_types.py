@@ -1,8 +1,8 @@
 """The LuaLS annotation files (scripts/types/) against the docs of the API
 they describe: every function and method that DRIVERS.md, STDLIB.md and
 TESTING.md name has its annotation, and every annotated function is named
-in one of them; and against the code: the stdlib's modules and the test
-runner's globals. A failure names the missing ones and where to add them.
+in one of them; the plant API's fields against BOARD.md's table; and
+against the code: the stdlib's modules and the test runner's globals. A failure names the missing ones and where to add them.
 
 It reads files and runs no program, so it also runs alone:
 
@@ -203,6 +203,24 @@ def test_each_stdlib_module_annotated_is_the_code(t=None):
         failures += ["%s annotates %s, %s does not define it" % (rel, n, code)
                      for n in sorted(defined[rel] - defined[code])]
     assert not failures, "the stdlib against its annotations:\n  " + "\n  ".join(failures)
+
+
+def test_the_plant_api_annotated_is_board_md(t=None):
+    """The fields of vmac.Plant (scripts/types/plant.lua) are the rows of
+    BOARD.md's table of what a plant file returns, and the reverse."""
+    board = read("docs/BOARD.md")
+    table = re.search(r"^\| field \| required \| meaning \|\n(.*?)\n\n", board, re.S | re.M)
+    assert table, "docs/BOARD.md: no table headed | field | required | meaning | (Plant models in Lua)"
+    documented_fields = set()
+    for row in re.findall(r"^\| ([^|]+) \|", table.group(1), re.M):
+        documented_fields |= set(re.findall(r"`(\w+)", row))
+    text = read(TYPES + "/plant.lua")
+    block = re.search(r"^---@class\s+vmac\.Plant\b[^\n]*\n((?:---[^\n]*\n)*)", text, re.M)
+    assert block, "%s/plant.lua has no ---@class vmac.Plant" % TYPES
+    typed = set(re.findall(r"^---@field\s+(\w+)", block.group(1), re.M))
+    failures = ["%s: in BOARD.md's table, not a field of vmac.Plant" % n for n in sorted(documented_fields - typed)]
+    failures += ["%s: a field of vmac.Plant, not in BOARD.md's table" % n for n in sorted(typed - documented_fields)]
+    assert not failures, "the plant API:\n  " + "\n  ".join(failures)
 
 
 if __name__ == "__main__":

@@ -35,21 +35,23 @@ START_TEST(a_change_is_said_once_in_the_words_the_tests_read)
 {
 	struct vmac_board b;
 	struct vmac_plant p;
+	struct vmac_plant_safety s;
 	struct vmac_report r;
 	char line[VMAC_REPORT_LINE];
 	make(&b, &p);
-	vmac_report_init(&r, &b, &p, 0);
-	ck_assert_int_eq(vmac_report_next(&r, &b, &p, line, sizeof(line)), 0);
+	s = vmac_plant_safety_of(&p);
+	vmac_report_init(&r, &b, &s, 0);
+	ck_assert_int_eq(vmac_report_next(&r, &b, &s, line, sizeof(line)), 0);
 	b.state = VMAC_BOARD_KNOWN;
 	b.device_id = 0x00030025u;
 	b.watchdog_ms = 500;
 	b.outputs.digital = 0x05;
 	b.outputs.pwm = -250;
-	ck_assert_int_eq(vmac_report_next(&r, &b, &p, line, sizeof(line)), 1);
+	ck_assert_int_eq(vmac_report_next(&r, &b, &s, line, sizeof(line)), 1);
 	ck_assert_str_eq(line, "washer-1: state known device 0x00030025 watchdog 500 ms");
-	ck_assert_int_eq(vmac_report_next(&r, &b, &p, line, sizeof(line)), 1);
+	ck_assert_int_eq(vmac_report_next(&r, &b, &s, line, sizeof(line)), 1);
 	ck_assert_str_eq(line, "washer-1: outputs digital=0x05 pwm=-250");
-	ck_assert_int_eq(vmac_report_next(&r, &b, &p, line, sizeof(line)), 0);
+	ck_assert_int_eq(vmac_report_next(&r, &b, &s, line, sizeof(line)), 0);
 	vmac_report_watchdog(&b, line, sizeof(line));
 	ck_assert_str_eq(line, "washer-1: watchdog: no frame for 500 ms, outputs off");
 }
@@ -59,18 +61,20 @@ START_TEST(quiet_says_only_leaving_a_session)
 {
 	struct vmac_board b;
 	struct vmac_plant p;
+	struct vmac_plant_safety s;
 	struct vmac_report r;
 	char line[VMAC_REPORT_LINE];
 	make(&b, &p);
-	vmac_report_init(&r, &b, &p, 1);
+	s = vmac_plant_safety_of(&p);
+	vmac_report_init(&r, &b, &s, 1);
 	b.state = VMAC_BOARD_KNOWN;
 	b.outputs.digital = 1;
-	ck_assert_msg(vmac_report_next(&r, &b, &p, line, sizeof(line)) == 0, "quiet said: %s", line);
+	ck_assert_msg(vmac_report_next(&r, &b, &s, line, sizeof(line)) == 0, "quiet said: %s", line);
 	b.state = VMAC_BOARD_UNKNOWN;
 	b.outputs.digital = 0;
-	ck_assert_int_eq(vmac_report_next(&r, &b, &p, line, sizeof(line)), 1);
+	ck_assert_int_eq(vmac_report_next(&r, &b, &s, line, sizeof(line)), 1);
 	ck_assert_str_eq(line, "washer-1: state unknown device 0x00000000 watchdog 500 ms");
-	ck_assert_int_eq(vmac_report_next(&r, &b, &p, line, sizeof(line)), 0);
+	ck_assert_int_eq(vmac_report_next(&r, &b, &s, line, sizeof(line)), 0);
 }
 END_TEST
 

@@ -19,7 +19,8 @@ static struct vmac_plant plant;
 static struct vmac_board board;
 static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_write};
 
-static struct vmac_report reported; /* what the log last said (firmware/report.c) */
+static struct vmac_report reported;     /* what the log last said (firmware/report.c) */
+static struct vmac_plant_safety safety; /* the plant's safety monitor, as the report reads it */
 static uint64_t last_step_ms, last_housekeep_ms;
 
 static void put_name(void)
@@ -33,7 +34,7 @@ static void report(void)
 {
 	char line[VMAC_REPORT_LINE];
 	reported.quiet = settings.quiet;
-	while (vmac_report_next(&reported, &board, &plant, line, sizeof(line))) {
+	while (vmac_report_next(&reported, &board, &safety, line, sizeof(line))) {
 		vmac_mcu_uart_puts(line);
 		vmac_mcu_uart_puts("\n");
 	}
@@ -244,7 +245,8 @@ int main(void)
 	now_ms = vmac_mcu_now_ms();
 	vmac_plant_init(&plant, settings.kind);
 	vmac_board_init(&board, &settings.id, &plant_io, &plant, now_ms);
-	vmac_report_init(&reported, &board, &plant, settings.quiet);
+	safety = vmac_plant_safety_of(&plant);
+	vmac_report_init(&reported, &board, &safety, settings.quiet);
 	last_step_ms = last_housekeep_ms = now_ms;
 	vmac_mcu_enet_init(settings.mac);
 	print_start();
