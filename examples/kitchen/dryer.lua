@@ -66,7 +66,7 @@ local driver = {
 		target_c = { unit = "degC", label = "Target temperature", precision = 0 },
 		heater = { label = "Heater", device_class = "heat" },
 		drum = { label = "Drum turning", device_class = "moving" },
-		door_open = { label = "Door", device_class = "door" },
+		door_open = { label = "Door open", device_class = "door" },
 	},
 	commands = {
 		start = { label = "Start", arg = "program" },
