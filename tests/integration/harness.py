@@ -464,6 +464,11 @@ def watchdog_trip(board, name, since, timeout_s=30):
 
 KITCHEN = (("washer", "washer-1"), ("dishwasher", "dish-1"), ("lights", "lights-1"))
 KITCHEN_NAMES = [name for _, name in KITCHEN]
+# The kitchen's fourth machine, user content: its drivers folder (for
+# host(drivers=...)) and its plant in Lua (for board(plant_file=...)).
+EXAMPLES_KITCHEN = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                                "examples", "kitchen")
+DRYER_PLANT = os.path.join(EXAMPLES_KITCHEN, "plants", "dryer.lua")
 
 
 class Context:
@@ -537,14 +542,17 @@ class Context:
         return h
 
     def board(self, plant, name, driver=None, count=None, commands=False, major=None, minor=None, wrapper=(), bus=None,
-              extra=(), keyed=True):
+              extra=(), keyed=True, plant_file=None):
         """Start vmac-board: count boards NAME-1..NAME-count, else one named
         NAME. keyed: each has its own key, enrolled in this test's state
-        folder first (enroll), as a host with bus_trust enrolled wants."""
+        folder first (enroll), as a host with bus_trust enrolled wants.
+        plant_file: a plant in Lua (--plant-file, BOARD.md "Plant models in
+        Lua") instead of the C plant `plant` (then None)."""
         # Late-reply lines only for replies that took a quarter of the tests'
         # reply deadline (TIMING): the ones that matter here.
-        argv = list(wrapper) + [self.path("vmac-board"), "--plant", plant, "--name", name, "--bus", bus or self.bus,
-                                "--late-us", str(TIMING["reply_deadline_us"] // 4)]
+        argv = list(wrapper) + [self.path("vmac-board")] + (["--plant-file", plant_file] if plant_file else [
+            "--plant", plant]) + ["--name", name, "--bus", bus or self.bus,
+                                  "--late-us", str(TIMING["reply_deadline_us"] // 4)]
         if keyed:
             self.enroll([name] if not count else ["%s-%d" % (name, i) for i in range(1, count + 1)])
             argv += ["--key-dir", self.keys]

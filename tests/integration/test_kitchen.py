@@ -1,36 +1,48 @@
-"""The demo kitchen (washer, dishwasher, lights) against a real host: attach,
-a board that stops answering, and the two ways the host can go away."""
+"""The demo kitchen (washer, dishwasher, lights, and the dryer of
+examples/kitchen/ with its plant in Lua) against a real host: attach, a
+board that stops answering, the two ways the host can go away, and `make
+run`'s own script starting all four."""
 
 import json
+import os
 import re
 import signal
+import socket
 import time
+import urllib.request
 
-from harness import KITCHEN, KITCHEN_NAMES, TIMING, undisturbed, watchdog_trip
+from harness import (DRYER_PLANT, EXAMPLES_KITCHEN, KITCHEN, KITCHEN_NAMES, POLL_S, TIMING, Proc, undisturbed,
+                     watchdog_trip)
 
-EXPECTED_DRIVER = {"washer-1": "washer", "dish-1": "dishwasher", "lights-1": "lights"}
+EXPECTED_DRIVER = {"washer-1": "washer", "dish-1": "dishwasher", "lights-1": "lights", "dryer-1": "dryer"}
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def test_kitchen_attaches(t):
-    host = t.host()
+    host = t.host(drivers=EXAMPLES_KITCHEN)
     for plant, name in KITCHEN:
         t.board(plant, name)
+    t.board(None, "dryer-1", plant_file=DRYER_PLANT)
+    names = KITCHEN_NAMES + ["dryer-1"]
     # A few discovery periods on a healthy machine; generous for a slow one.
-    first = host.wait_running(KITCHEN_NAMES, timeout_s=30)
+    first = host.wait_running(names, timeout_s=30)
     for name, driver in EXPECTED_DRIVER.items():
         d = host.device(name, first)
         assert d["driver"] == driver, "%s runs driver %r, expected %r" % (name, d["driver"], driver)
         assert d["misses_host"] == 0, "%s missed %d replies by the host's fault while attaching" % (
             name, d["misses_host"])
-    served = {n: host.device(n, first)["served"] for n in KITCHEN_NAMES}
+    served = {n: host.device(n, first)["served"] for n in names}
     host.wait_status(
-        lambda s: all(host.device(n, s)["served"] > served[n] + 10 for n in KITCHEN_NAMES),
+        lambda s: all(host.device(n, s)["served"] > served[n] + 10 for n in names),
         30,
         "served counters of every device growing",
-        undisturbed(KITCHEN_NAMES),
+        undisturbed(names),
     )
-    for name in KITCHEN_NAMES:
+    for name in names:
         assert host.find_events("attached", name), "no 'attached' event for %s" % name
+    dryer = host.device("dryer-1")
+    assert abs(dryer["variables"].get("temp_c", 0) - 20) < 1 and dryer["variables"].get("door_open") is False, (
+        "the dryer's Lua plant at rest reads %r" % dryer["variables"])
 
     rc, out, err = t.run([t.path("vmac"), "status", "--http", host.http], "vmac-status")
     assert rc == 0, "vmac status exited %d: %s" % (rc, err)
@@ -47,7 +59,7 @@ def test_kitchen_attaches(t):
         raw = json.loads(out)
     except ValueError as e:
         raise AssertionError("vmac status --json printed no valid JSON (%s): %.200s" % (e, out))
-    assert sorted(d["name"] for d in raw["devices"]) == sorted(KITCHEN_NAMES), (
+    assert sorted(d["name"] for d in raw["devices"]) == sorted(names), (
         "vmac status --json lists devices %s" % [d["name"] for d in raw["devices"]])
     assert raw["bus"]["group"] == t.bus, "status reports bus %r, started on %r" % (raw["bus"]["group"], t.bus)
 
@@ -142,3 +154,71 @@ def test_host_sigterm_boards_go_safe(t):
         outputs = board.find_lines(r"^%s: outputs " % name)
         assert not outputs or "digital=0x00 pwm=0" in outputs[-1].text, (
             "%s ended with %r" % (name, outputs[-1].text))
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_make_run_starts_four_machines(t):
+    """scripts/run-kitchen.sh, what `make run` runs: vmacd and four boards,
+    the dryer from examples/kitchen with its Lua plant; the help names it;
+    a line typed for dryer-1 reaches its board; TERM stops everything with
+    every board safe. Its own bus, port and state folder; the demo's
+    settings otherwise (10 ms deadline, two misses drop a machine), so a
+    board this shared machine holds off may drop and come back: judged is
+    that all four come to run together."""
+    state = os.path.join(t.logdir, "kitchen")
+    http = "127.0.0.1:%d" % free_port()
+    env = dict(os.environ, VMAC_STATE=state, VMAC_HTTP=http, VMAC_BUS=t.bus, VMAC_TIME_SCALE="0.05",
+               VMAC_SET="realtime=false")
+    kitchen = Proc(t._name("run-kitchen"), [os.path.join(ROOT, "scripts", "run-kitchen.sh"), t.bindir], t.logdir,
+                   stdin=True, env=env)
+    t.procs.append(kitchen)
+    kitchen.wait_line(r"^The demo kitchen is running", 60, what="the kitchen's help")
+    kitchen.wait_line(r"^    dryer-1 start 1 ", 10, what="the help line starting the dryer")
+    with open(os.path.join(state, "token")) as f:
+        token = f.read().strip()
+
+    def devices():
+        req = urllib.request.Request("http://%s/api/status" % http, headers={"Authorization": "Bearer " + token})
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return {d["name"]: d for d in json.loads(r.read())["devices"]}
+
+    def wait(predicate, what, timeout_s=60):
+        deadline, last = time.monotonic() + timeout_s, {}
+        while True:
+            try:
+                last = devices()
+            except OSError:
+                pass
+            if predicate(last):
+                return last
+            assert kitchen.alive(), "run-kitchen.sh ended while waiting for %s: %s" % (what, kitchen.text("stdout"))
+            assert time.monotonic() < deadline, "%s not seen within %.0f s; devices: %s" % (
+                what, timeout_s, {n: d["state"] for n, d in last.items()})
+            time.sleep(POLL_S)
+
+    kitchen_names = ["washer-1", "dishwasher-1", "lights-1", "dryer-1"]
+    running = wait(lambda ds: all(ds.get(n, {}).get("state") == "running" for n in kitchen_names),
+                   "the four machines running")
+    assert sorted(running) == sorted(kitchen_names), "make run's kitchen has %s" % sorted(running)
+    drivers = {n: running[n]["driver"] for n in kitchen_names}
+    assert drivers == {"washer-1": "washer", "dishwasher-1": "dishwasher", "lights-1": "lights",
+                       "dryer-1": "dryer"}, "the kitchen's drivers: %s" % drivers
+    assert all(running[n].get("authenticated") for n in kitchen_names), "a board of the kitchen is not sealed: %s" % {
+        n: running[n].get("authenticated") for n in kitchen_names}
+
+    kitchen.send("dryer-1 start 1")
+    wait(lambda ds: ds.get("dryer-1", {}).get("variables", {}).get("state") == "running",
+         "the dryer started by its typed start button")
+
+    mark = kitchen.mark()
+    kitchen.signal(signal.SIGTERM)
+    kitchen.wait_line(r"^run-kitchen: stopped", 60, since=mark, what="'run-kitchen: stopped'")
+    assert kitchen.wait_exit(30) == 0, "run-kitchen.sh did not exit 0 on TERM"
+    safe = kitchen.find_lines(r"^vmac-board: stopped by signal \d+, all outputs off", since=mark)
+    assert len(safe) == 4, "%d of the four boards said they stopped with their outputs off: %s" % (
+        len(safe), kitchen.text("stdout").splitlines()[-12:])

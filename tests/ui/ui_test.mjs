@@ -1,7 +1,8 @@
 // The web UI in a real browser (docs/UI.md): Debian's chromium, headless,
-// driven by playwright-core, against vmacd and the three mock boards of the
-// demo kitchen, all started here on a bus of their own. The kitchen's
-// boards are enrolled and keyed (bus_trust enrolled, the default); a fourth
+// driven by playwright-core, against vmacd and the four mock boards of the
+// demo kitchen (the dryer from examples/kitchen/, its driver read with
+// --drivers and its plant in Lua), all started here on a bus of their own. The kitchen's
+// boards are enrolled and keyed (bus_trust enrolled, the default); a fifth
 // board, started without a key, waits for approval and is enrolled and
 // removed through the Boards page.
 //
@@ -20,6 +21,7 @@ import { args, check, tally, until } from "./common.mjs";
 const BIN = path.resolve(args.bin || "build/bin");
 const OUT = path.resolve(args.out || "build/ui");
 const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
+const KITCHEN = path.resolve(path.dirname(new URL(import.meta.url).pathname), "..", "..", "examples", "kitchen");
 fs.mkdirSync(OUT, { recursive: true });
 const STATE = fs.mkdtempSync(path.join(os.tmpdir(), "vmac-ui-"));
 const KEYS = path.join(STATE, "keys"); // the boards' key files
@@ -81,8 +83,9 @@ async function main() {
   const deploy = token("deploy");
   fs.mkdirSync(KEYS, { mode: 0o700 });
   execFileSync(path.join(BIN, "vmac"), ["board", "enroll", "--local", "--state", STATE, "--key-dir", KEYS,
-    "washer-1", "dish-1", "lights-1"]);
+    "washer-1", "dish-1", "lights-1", "dryer-1"]);
   const host = start("vmacd", [path.join(BIN, "vmacd"), "--bus", BUS, "--http", "127.0.0.1:0", "--state", STATE,
+    "--drivers", KITCHEN, "--set", "driver.dryer.param.time_scale=0.05",
     "--set", "realtime=false", "--set", "slice_us=1250", "--set", "slices_per_slot=5", "--set", "watchdog_ms=1500",
     "--set", "reply_deadline_us=80000", "--set", "discovery_period_ms=300",
     "--set", "driver.washer.param.time_scale=0.05"]);
@@ -93,6 +96,9 @@ async function main() {
     boards[name] = start(name, [path.join(BIN, "vmac-board"), "--plant", plant, "--name", name, "--bus", BUS,
       "--key-file", path.join(KEYS, name + ".key"), "--commands"], true);
   }
+  boards["dryer-1"] = start("dryer-1", [path.join(BIN, "vmac-board"), "--plant-file",
+    path.join(KITCHEN, "plants", "dryer.lua"), "--name", "dryer-1", "--bus", BUS,
+    "--key-file", path.join(KEYS, "dryer-1.key"), "--commands"], true);
 
   const browser = await chromium.launch({
     executablePath: CHROMIUM,
@@ -115,17 +121,17 @@ async function main() {
       await cp.close();
     });
 
-    await check("three cards appear, and the token leaves the address bar", async () => {
+    await check("four cards appear, and the token leaves the address bar", async () => {
       await page.goto(`http://${addr}/#token=${operate}`);
-      for (const name of ["washer-1", "dish-1", "lights-1"]) {
+      for (const name of ["washer-1", "dish-1", "lights-1", "dryer-1"]) {
         await page.waitForSelector(`[data-device="${name}"] [data-var]`, { timeout: 30000 });
       }
       // A machine dropped and attached again (a slow start) leaves its old
       // card fading out for half a second: count the cards that stay.
-      await page.waitForFunction(() => document.querySelectorAll(".card:not(.leaving)").length === 3 &&
+      await page.waitForFunction(() => document.querySelectorAll(".card:not(.leaving)").length === 4 &&
         !document.querySelector(".card.leaving"), null, { timeout: 10000 }).catch(() => {});
       const cards = await page.locator(".card:not(.leaving)").count();
-      if (cards !== 3) throw new Error(`${cards} cards`);
+      if (cards !== 4) throw new Error(`${cards} cards`);
       if (page.url().includes("token")) throw new Error("the token is still in the address bar: " + page.url());
       await page.screenshot({ path: path.join(OUT, "1-kitchen.png"), fullPage: true });
     });
@@ -191,9 +197,38 @@ async function main() {
     });
 
     await check("the kitchen's boards proved their keys: their cards say sealed", async () => {
-      for (const name of ["washer-1", "dish-1", "lights-1"]) {
+      for (const name of ["washer-1", "dish-1", "lights-1", "dryer-1"]) {
         await page.waitForSelector(`[data-device="${name}"] [data-sealed]:not([hidden])`, { timeout: 5000 });
       }
+    });
+
+    await check("the dryer's card, user content: its title, its temperature in °C, lamps, plots and programmes", async () => {
+      const card = '[data-device="dryer-1"]';
+      const title = await page.textContent(`${card} .title`);
+      if (title !== "Dryer") throw new Error("the dryer's card is titled " + title);
+      await page.waitForSelector(`${card} [data-var="temp_c"]:text("°C")`, { timeout: 5000 });
+      for (const name of ["heater", "drum", "door_open"]) {
+        await page.waitForSelector(`${card} [data-var="${name}"].onoff`, { timeout: 5000 });
+      }
+      for (const plot of ["temp_c,target_c", "heater,drum"]) {
+        if (!await page.locator(`${card} canvas[data-plot="${plot}"]`).count()) throw new Error("no plot of " + plot);
+      }
+      const options = await page.$$eval(`${card} [data-param-select="program"] option`, (os) => os.map((o) => o.value));
+      if (options.join(",") !== "cotton,delicate") throw new Error("the dryer's programmes: " + options.join(","));
+    });
+
+    await check("delicate started in the dryer's card warms its plant up, the heater lamp lit", async () => {
+      const card = '[data-device="dryer-1"]';
+      await page.selectOption(`${card} [data-param-select="program"]`, "delicate");
+      await page.click(`${card} [data-command="start"]`);
+      await page.waitForSelector(`${card} [data-var="step"]:text("warm up")`, { timeout: 10000 });
+      await page.waitForSelector(`${card} [data-var="heater"].onoff:text("on")`, { timeout: 20000 });
+      await until(async () => {
+        const v = (await status(addr, operate)).devices.find((d) => d.name === "dryer-1").variables;
+        return v.temp_c > 22;
+      }, 30000, "the dryer's air past 22 °C");
+      await page.screenshot({ path: path.join(OUT, "3b-dryer-warming.png"), fullPage: true });
+      await page.click(`${card} [data-command="cancel"]`);
     });
 
     await check("switching the kitchen light on in the page turns the board's output on", async () => {
