@@ -28,6 +28,7 @@ EXAMPLES = {
     "scripts/cycles/washer/wool.lua": "KITCHEN.md: a programme to add",
     "tests/drivers/washer_drop_test.lua": "RECORDING.md: a test made of a recording",
     "tests/blinker_test.lua": "TESTING.md: a test in a folder of one's own",
+    "tests/dryer_test.lua": "NEW_MACHINE.md: the test in a user's own folder (examples/kitchen/tests/)",
 }
 
 # Section references known to be wrong, each with the fix it needs
