@@ -317,6 +317,18 @@ int vmac_luaplant_load(const char *file, const char *src, size_t len, const char
 	return 0;
 }
 
+/* The path as messages show it: its last folder and its name
+ * ("plants/dryer.lua"), short enough for Lua's chunk names. */
+static const char *shown_name(const char *path)
+{
+	const char *last = strrchr(path, '/'), *p;
+	if (!last)
+		return path;
+	for (p = last - 1; p > path && *p != '/'; p--)
+		;
+	return *p == '/' ? p + 1 : path;
+}
+
 int vmac_luaplant_load_file(const char *path, const struct vmac_luaplant_limits *lim, struct vmac_luaplant **out,
                             char *err, size_t errlen)
 {
@@ -332,7 +344,7 @@ int vmac_luaplant_load_file(const char *path, const struct vmac_luaplant_limits 
 	n = strlen(name);
 	if (n > 4 && strcmp(name + n - 4, ".lua") == 0)
 		name[n - 4] = '\0';
-	rc = vmac_luaplant_load(path, src, len, name, lim, out, err, errlen);
+	rc = vmac_luaplant_load(shown_name(path), src, len, name, lim, out, err, errlen);
 	free(src);
 	return rc;
 }
