@@ -1,5 +1,5 @@
 """make bench, plant: what one step of a plant model in Lua costs, as
-vmac-board steps it at 1 kHz (core/sim/, the wall-clock budget armed),
+vmac-board steps it at 1 kHz (core/sim/),
 next to the C washer stepped the same way in the same run
 (tests/bench/plant_step.c, built beside bare_loop). The plant is the demo
 kitchen's dryer, a user's plant (examples/kitchen/plants/dryer.lua). Run

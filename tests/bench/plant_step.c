@@ -1,5 +1,5 @@
 /* What one step of a plant model in Lua costs (core/driver/luaplant.c
- * through core/sim/, as vmac-board steps it: the wall-clock budget armed),
+ * through core/sim/, as vmac-board steps it),
  * next to the C washer (firmware/plants/washer.c) stepped the same way in
  * the same run, both at 1 kHz (dt = 1 ms) of plant time:
  *
@@ -22,7 +22,6 @@
 #define REPEATS 11
 #define STEPS 20000
 #define DT_S 0.001
-#define BUDGET_US 10000 /* vmac-board's (firmware/posix/main.c) */
 
 static volatile unsigned sink; /* every result feeds it: no loop is optimised away */
 
@@ -76,7 +75,6 @@ int main(int argc, char **argv)
 		return 2;
 	}
 	memset(&lim, 0, sizeof(lim));
-	lim.budget_us = BUDGET_US;
 	lim.seed = 1;
 	if (vmac_sim_init_c(&c, "washer") != 0 || vmac_sim_init_lua(&lua, argv[1], &lim, err, sizeof(err)) != 0) {
 		fprintf(stderr, "plant_step: %s\n", err);
