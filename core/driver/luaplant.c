@@ -237,7 +237,6 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	struct load_args *a = args;
 	struct vmac_luaplant *p = a->p;
 	lua_State *L = d->L;
-	char chunkname[80];
 	int t, i, nout = 0;
 	/* math.random's state is the one the sandbox's copy of it uses */
 	lua_getglobal(L, "math");
@@ -245,13 +244,8 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pushnumber(L, (double)(a->seed & ((1ull << 52) - 1)));
 	lua_call(L, 1, 0);
 	lua_pop(L, 1);
-	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
-	if (luaL_loadbufferx(L, a->src, a->len, chunkname, "t") != 0) {
-		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
+	if (drv_load_chunk(d, a->src, a->len, err, errlen) != 0)
 		return -1;
-	}
-	drv_make_env(L);
-	lua_setfenv(L, -2);
 	if (drv_guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen) != 0)
 		return -1;
 	if (!lua_istable(L, -1))
