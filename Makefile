@@ -301,11 +301,16 @@ $(BUILD)/bench/auth_frames: $(OBJ)/tests/bench/auth_frames.o $(call archives,pro
 $(BUILD)/bench/minisign_verify: $(OBJ)/tests/bench/minisign_verify.o $(call archives,bundle common)
 	$(call link,$<,bundle common)
 
+# One step of a plant model in Lua, next to the C washer's, in us
+# (tests/bench/plant_step.c).
+$(BUILD)/bench/plant_step: $(OBJ)/tests/bench/plant_step.o $(call archives,$(call down_from,sim))
+	$(call link,$<,$(call down_from,sim))
+
 BENCH_SECONDS ?= 60
 bench:
 	@$(MAKE) --no-print-directory deps EXTRA_DEBS="$(BENCH_DEBS)"
 	@$(MAKE) --no-print-directory all $(BUILD)/bench/bare_loop $(BUILD)/bench/auth_frames \
-		$(BUILD)/bench/minisign_verify
+		$(BUILD)/bench/minisign_verify $(BUILD)/bench/plant_step
 	python3 tests/bench/bench.py --bin $(BUILD)/bin --bare $(BUILD)/bench/bare_loop --seconds $(BENCH_SECONDS) \
 		--out $(BUILD)/bench/results.json
 

@@ -195,6 +195,11 @@ int drv_valid_module_name(const char *name, size_t maxlen);
 void drv_make_env(lua_State *L);
 int drv_open_lib(lua_State *L, lua_CFunction f, const char *name);
 
+/* load.c: a text compiled as file d->file with the sandbox's environment
+ * (text only, no bytecode): [-0, +1] the chunk; or the error message and
+ * -1 with err (the syntax error and its line). Protected work only. */
+int drv_load_chunk(struct vmac_driver *d, const char *src, size_t len, char *err, size_t errlen);
+
 /* checkpoint.c */
 int drv_dev_checkpoint(lua_State *L);
 

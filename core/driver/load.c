@@ -171,18 +171,26 @@ struct load_args {
 	const struct vmac_driver_limits *limits;
 };
 
-static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+int drv_load_chunk(struct vmac_driver *d, const char *src, size_t len, char *err, size_t errlen)
 {
-	struct load_args *a = args;
 	lua_State *L = d->L;
 	char chunkname[80];
 	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
-	if (luaL_loadbufferx(L, a->src, a->len, chunkname, "t") != 0) {
+	if (luaL_loadbufferx(L, src, len, chunkname, "t") != 0) {
 		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
 		return -1;
 	}
 	drv_make_env(L);
 	lua_setfenv(L, -2);
+	return 0;
+}
+
+static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
+{
+	struct load_args *a = args;
+	lua_State *L = d->L;
+	if (drv_load_chunk(d, a->src, a->len, err, errlen) != 0)
+		return -1;
 	d->loading = 1;
 	if (drv_guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen) != 0) {
 		d->loading = 0;

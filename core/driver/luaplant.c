@@ -237,7 +237,6 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	struct load_args *a = args;
 	struct vmac_luaplant *p = a->p;
 	lua_State *L = d->L;
-	char chunkname[80];
 	int t, i, nout = 0;
 	/* math.random's state is the one the sandbox's copy of it uses */
 	lua_getglobal(L, "math");
@@ -245,13 +244,8 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pushnumber(L, (double)(a->seed & ((1ull << 52) - 1)));
 	lua_call(L, 1, 0);
 	lua_pop(L, 1);
-	snprintf(chunkname, sizeof(chunkname), "@%s", d->file);
-	if (luaL_loadbufferx(L, a->src, a->len, chunkname, "t") != 0) {
-		snprintf(err, errlen, "%s", lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "not enough memory");
+	if (drv_load_chunk(d, a->src, a->len, err, errlen) != 0)
 		return -1;
-	}
-	drv_make_env(L);
-	lua_setfenv(L, -2);
 	if (drv_guarded_call(d, 0, 1, VMAC_DRIVER_LOAD_FACTOR, err, errlen) != 0)
 		return -1;
 	if (!lua_istable(L, -1))
@@ -317,6 +311,18 @@ int vmac_luaplant_load(const char *file, const char *src, size_t len, const char
 	return 0;
 }
 
+/* The path as messages show it: its last folder and its name
+ * ("plants/dryer.lua"), short enough for Lua's chunk names. */
+static const char *shown_name(const char *path)
+{
+	const char *last = strrchr(path, '/'), *p;
+	if (!last)
+		return path;
+	for (p = last - 1; p > path && *p != '/'; p--)
+		;
+	return *p == '/' ? p + 1 : path;
+}
+
 int vmac_luaplant_load_file(const char *path, const struct vmac_luaplant_limits *lim, struct vmac_luaplant **out,
                             char *err, size_t errlen)
 {
@@ -332,7 +338,7 @@ int vmac_luaplant_load_file(const char *path, const struct vmac_luaplant_limits 
 	n = strlen(name);
 	if (n > 4 && strcmp(name + n - 4, ".lua") == 0)
 		name[n - 4] = '\0';
-	rc = vmac_luaplant_load(path, src, len, name, lim, out, err, errlen);
+	rc = vmac_luaplant_load(shown_name(path), src, len, name, lim, out, err, errlen);
 	free(src);
 	return rc;
 }

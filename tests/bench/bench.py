@@ -65,6 +65,9 @@ same run on the same machine, reported as ratios.
   minisign  checking a bundle's minisign signature (tests/bench/minisign_bench.py):
             us per MiB of a prehashed (ED) and a legacy (Ed) signature next to
             BLAKE2b-512 alone over the same 4 MiB (tests/bench/minisign_verify.c)
+  plant     one step of a plant model in Lua (tests/bench/plant_bench.py), the
+            kitchen's dryer, at 1 kHz as vmac-board steps it, next to the C
+            washer in the same run (tests/bench/plant_step.c), us a step
   bundle    deploying a bundle (tests/bench/bundle_bench.py): upload to
             switched of 100 bundles of the washer, unsigned and signed with
             minisign, next to 100 uploads of the washer's Lua text alone (its
@@ -74,7 +77,7 @@ same run on the same machine, reported as ratios.
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
                 [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,
-                        metrics,minisign,bundle,mqtt-kitchen]
+                        metrics,minisign,bundle,plant,mqtt-kitchen]
                 [--base-bin DIR] [--before-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
@@ -445,7 +448,7 @@ def main():
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only",
                    default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,"
-                           "metrics,minisign,bundle")
+                           "metrics,minisign,bundle,plant")
     p.add_argument("--base-bin", default=None,
                    help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
     p.add_argument("--before-bin", default=None,
@@ -555,6 +558,11 @@ def main():
         print("minisign: checking a signature, us per MiB next to BLAKE2b-512 alone", flush=True)
         results["minisign"] = minisign(args)
 
+    if "plant" in only:
+        from plant_bench import plant
+        print("plant: one step of the dryer's Lua plant at 1 kHz, next to the C washer", flush=True)
+        results["plant"] = plant(args)
+
     if "bundle" in only:
         from bundle_bench import bundle
         print("bundle: upload to switched, 100 uploads each of the washer's text, its bundle and its signed "
@@ -659,6 +667,9 @@ def report(r):
     if r.get("minisign"):
         from minisign_bench import report_minisign
         report_minisign(r["minisign"])
+    if r.get("plant"):
+        from plant_bench import report_plant
+        report_plant(r["plant"])
     if r.get("bundle"):
         from bundle_bench import report_bundle
         report_bundle(r["bundle"])

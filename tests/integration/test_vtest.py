@@ -341,6 +341,104 @@ end)
     assert "blinker" in out, "the failure does not name the missing driver:\n%s" % out
 
 
+HEATER_DRIVER = """-- Heats to 60 degC while the lid is closed (a plant of its own below).
+return {
+	name = "heater", version = "0.1.0", level = 5,
+	io = { element = "do0", lid_closed = "di0", temp_c = { "ai0", scale = 0.05, offset = -20 } },
+	variables = { temp_c = { unit = "degC" } },
+	tick = function(dev, inputs)
+		dev.out.element = inputs.lid_closed and inputs.temp_c < 60
+		dev.vars.temp_c = inputs.temp_c
+	end,
+}
+"""
+
+HEATER_PLANT = """-- The heater's physics: an element that warms a pot, a lid, a noisy sensor.
+return {
+	io = { element = "do0", lid_closed = "di0", temp_c = { "ai0", scale = 0.05, offset = -20 } },
+	state = { temp_c = 20, true_c = 20, lid_closed = true, noise = 0, broken = false },
+	step = function(p, dt, out)
+		if p.broken then error("the model broke") end
+		p.true_c = p.true_c + dt * ((out.element and 3 or 0) - 0.02 * (p.true_c - 20))
+		p.temp_c = p.true_c + p.noise * (math.random() - 0.5)
+		if out.element and not p.lid_closed then return "element on with the lid open" end
+	end,
+	actions = {
+		lid = function(p, v)
+			if v ~= 0 and v ~= 1 then return false, "lid takes 0 (open) or 1 (closed)" end
+			p.lid_closed = v == 1
+		end,
+	},
+}
+"""
+
+HEATER_TEST = """test("heats to 60 with the lid closed, stops with it open", function()
+	local b = board { name = "pot-1", plant = "heater" }
+	run_until(function() return b.state == "running" end, 5, "the heater attached")
+	eventually(function() return b.plant.true_c > 59 end, 120, "the pot reached 60")
+	expect(b.plant.unsafe_episodes == 0, "no unsafe episode with the lid closed")
+	b:set("lid", 0)
+	run_for(1)
+	expect(b.plant.unsafe_episodes == 1, "opening the lid with the element on is one episode")
+	expect(not b.plant.lid_closed, "the lid is open")
+	expect(not b:try_set("lid", 7), "lid 7 is refused")
+	b:set("noise", 2)
+	run_for(1)
+	print("temp_c=" .. b.plant.temp_c)
+end)
+test("a refused action says why", function()
+	local b = board { name = "pot-1", plant = "heater" }
+	b:set("lid", 7)
+end)
+test("a plant that breaks fails the test at its line", function()
+	local b = board { name = "pot-1", plant = "heater" }
+	b:set("broken", 1)
+	run_for(5)
+end)
+"""
+
+
+def test_a_plant_of_ones_own(t):
+    """A driver with a plant model in Lua of its own (docs/BOARD.md, "Plant
+    models in Lua"): board{plant=} finds DIR/plants/NAME.lua, the driver's
+    outputs drive it, its actions, refusals, unsafe episodes and fields are
+    the test's; a plant that breaks fails the test naming the plant file's
+    line; math.random follows --seed."""
+    home = os.path.join(t.logdir, "plant")
+    for sub in ("plants", "tests"):
+        os.makedirs(os.path.join(home, sub), exist_ok=True)
+    with open(os.path.join(home, "heater.lua"), "w") as f:
+        f.write(HEATER_DRIVER)
+    with open(os.path.join(home, "plants", "heater.lua"), "w") as f:
+        f.write(HEATER_PLANT)
+    with open(os.path.join(home, "tests", "heater_test.lua"), "w") as f:
+        f.write(HEATER_TEST)
+    test_file = os.path.join(home, "tests", "heater_test.lua")
+    rc, out, err = vtest(t, "vtest-plant", "--drivers", home, "--seed", "3", test_file)
+    assert rc == 1, "expected exit 1 (two tests fail on purpose), got %d:\n%s%s" % (rc, out, err)
+    assert re.search(r"ok\s+heats to 60 with the lid closed", out), "the plant's test fails:\n%s" % out
+    refused = re.search(r"FAIL\s+a refused action says why\n\s+at (\S+):(\d+)\n\s+(.*)", out)
+    assert refused and refused.group(1).endswith("heater_test.lua") and refused.group(2) == "17", (
+        "the refusal is not reported at the test's line 17:\n%s" % out)
+    assert "the heater plant refuses lid = 7: lid takes 0 (open) or 1 (closed)" in refused.group(3), refused.group(3)
+    broke = re.search(r"FAIL\s+a plant that breaks fails the test at its line\n\s+at (\S+):(\d+)\n\s+(.*)", out)
+    assert broke and broke.group(2) == "22", "the plant's failure is not at the test's line 22 (run_for):\n%s" % out
+    assert "the heater plant of board pot-1 failed: plants/heater.lua:6: the model broke" in broke.group(3), (
+        broke.group(3))
+
+    # The same seed gives the same noise, another seed other noise.
+    temps = []
+    for seed in ("3", "3", "4"):
+        rc, out, err = vtest(t, "vtest-plant-seed-" + seed, "--drivers", home, "--seed", seed, "--filter",
+                             "heats to 60", test_file)
+        assert rc == 0, "seed %s: exit %d\n%s%s" % (seed, rc, out, err)
+        m = re.search(r"temp_c=([-\d.]+)", out)
+        assert m, "the test printed no temperature:\n%s" % out
+        temps.append(m.group(1))
+    assert temps[0] == temps[1], "the same seed gave other noise: %s" % temps
+    assert temps[0] != temps[2], "seeds 3 and 4 gave the same noise: %s" % temps
+
+
 def test_programmes_come_from_the_drivers_folder(t):
     """A driver's programmes (vmac.cycles()) come from DIR/cycles/NAME/,
     inside the --drivers folder DIR, when it holds that folder, else from
