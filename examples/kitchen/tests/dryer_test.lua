@@ -150,3 +150,27 @@ test("the thermal cut-out: a weak one trips, the heater loses its supply, the wa
 	d:set("reset_cutout")
 	expect(not d.plant.cutout_open, "the cut-out reset once cool")
 end)
+
+for _, opened in ipairs { false, true } do
+	local what = opened and "the door opened meanwhile: cancelled, saying why" or "the programme resumes"
+	test("the host restarted while drying, " .. what, function()
+		local d = dryer()
+		rules(d)
+		d:input("start", "cotton")
+		run_until(function() return d.var.step == "dry" end, 600, "the dry step")
+		crash_host()
+		eventually(function() return not (d.out.heater or d.out.drum) end, 1, "the board's watchdog: all off")
+		if opened then d:open_door() end
+		start_host()
+		run_until(function() return d.var and d.var.state ~= nil and d.var.state ~= "idle" end, 10, "the restart")
+		if opened then
+			expect_event({ kind = "driver", text = "the door is open" }, "the cancel says why")
+			run_until(function() return d.var.paused_by == "door open" end, 1, "the cancel's cool-down held by the door")
+			d:close_door()
+			finish(d, "cancelled")
+		else
+			expect_eq(d.var.step, "dry", "the step after the restart")
+			finish(d)
+		end
+	end)
+end
