@@ -285,7 +285,8 @@ def test_new_machine_page(t):
 def attached(live):
     """The host attaches the dryer board and loads the user's driver."""
     d = live.wait(lambda d: d["state"] == "running" and var(d, "state") == "idle", "dryer-1 running its driver")
-    assert d["driver"] == "dryer" and d["driver_version"] == "1.0.0", "dryer-1 runs %s %s" % (d["driver"], d["driver_version"])
+    assert d["driver"] == "dryer" and d["driver_version"] == "1.0.0", "dryer-1 runs %s %s" % (
+        d["driver"], d["driver_version"])
     live.wait_board_line(r"^dryer-1: state known ", 0, "'state known'")
     assert var(d, "temp_c") is not None and abs(var(d, "temp_c") - 20) < 1, (
         "the plant at rest reads %r C" % var(d, "temp_c"))

@@ -202,7 +202,7 @@ async function main() {
       }
     });
 
-    await check("the dryer's card, user content: its title, its temperature in °C, lamps, plots and programmes", async () => {
+    await check("the dryer's card, user content: title, temperature in °C, lamps, plots, programmes", async () => {
       const card = '[data-device="dryer-1"]';
       const title = await page.textContent(`${card} .title`);
       if (title !== "Dryer") throw new Error("the dryer's card is titled " + title);
