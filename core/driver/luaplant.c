@@ -21,7 +21,7 @@ struct vmac_luaplant {
 	struct vmac_outputs out;
 	double button_left_s[VMAC_DIGITAL_INPUTS]; /* real seconds a button action holds each input on */
 	double time_scale;                         /* plant seconds per real second */
-	double time_s;                             /* plant time since load: os.clock() */
+	double time_s;                             /* plant time since load; os.clock() reads d->now_s */
 	int unsafe;                                /* the last step returned a text */
 	uint32_t unsafe_episodes;
 	char unsafe_text[VMAC_LUAPLANT_UNSAFE_MAX + 1];
@@ -49,11 +49,6 @@ static int valid_board_name(const char *s)
 		      s[n] == '-' || s[n] == '_'))
 			return 0;
 	return n > 0 && n <= VMAC_NAME_MAX;
-}
-
-static double plant_clock(void *ctx)
-{
-	return ((const struct vmac_luaplant *)ctx)->time_s;
 }
 
 /* Converter counts of an analog value: rounded, clipped to 0..VMAC_ANALOG_MAX, NaN 0. */
@@ -297,8 +292,6 @@ int vmac_luaplant_load(const char *file, const char *src, size_t len, const char
 	dl.memory_bytes = lim->memory_bytes ? lim->memory_bytes : VMAC_LUAPLANT_MEMORY;
 	dl.instructions = lim->instructions ? lim->instructions : VMAC_LUAPLANT_INSTRUCTIONS;
 	dl.budget_us = lim->budget_us;
-	dl.clock = plant_clock;
-	dl.clock_ctx = p;
 	if (vmac_driver_new(file, &dl, &p->d, err, errlen) != 0) {
 		free(p);
 		return -1;
@@ -406,6 +399,7 @@ static int step_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 		lua_rawset(L, o);
 	}
 	lua_pop(L, 1);
+	d->now_s = p->time_s + a->dt_s; /* os.clock(): the time the step brings the plant to */
 	if (drv_guarded_call(d, 3, 1, 1, err, errlen) != 0)
 		return -1;
 	if (lua_type(L, -1) == LUA_TSTRING) {
@@ -524,6 +518,7 @@ static int set_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 	struct vmac_luaplant *p = a->p;
 	lua_State *L = d->L;
 	int i;
+	d->now_s = p->time_s;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, p->ref_actions);
 	drv_raw_getfield(L, lua_gettop(L), a->name);
 	if (lua_isfunction(L, -1)) {
