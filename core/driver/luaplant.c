@@ -29,6 +29,10 @@ struct vmac_luaplant {
 	char failure[VMAC_DRIVER_ERR_MAX];
 };
 
+/* A button's hold left shorter than this is over: 0.5 s less five steps of
+ * 0.1 s is 3e-17 s in doubles, not 0, and must not hold the input a sixth. */
+#define BUTTON_SLACK_S 1e-9
+
 #define BAD(...)                                                                                                       \
 	do {                                                                                                           \
 		char what_[300];                                                                                       \
@@ -417,8 +421,11 @@ static int step_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pop(L, 1);
 	p->time_s += a->dt_s;
 	for (i = 0; i < VMAC_DIGITAL_INPUTS; i++)
-		if (p->button_left_s[i] > 0)
+		if (p->button_left_s[i] > 0) {
 			p->button_left_s[i] -= a->dt_s / p->time_scale;
+			if (p->button_left_s[i] < BUTTON_SLACK_S)
+				p->button_left_s[i] = 0;
+		}
 	read_inputs(p);
 	return 0;
 }
