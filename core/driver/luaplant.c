@@ -192,7 +192,10 @@ static int check_plant(struct vmac_luaplant *p, int t, const char *default_name,
 }
 
 /* actions: each a function (p, value) or the name of a digital input in
- * io (a button): [-0, +0]. */
+ * io (a button). Kept as a copy only the host holds (ref_actions: name ->
+ * the function, or the button's input channel), so that a plant changing
+ * its own actions table later cannot make an action name what was never
+ * checked: [-0, +0]. */
 static int check_actions(struct vmac_luaplant *p, int t, char *err, size_t errlen)
 {
 	struct vmac_driver *d = p->d;
@@ -204,8 +207,9 @@ static int check_actions(struct vmac_luaplant *p, int t, char *err, size_t errle
 	} else if (!lua_istable(L, -1)) {
 		BAD("actions must be a table of name = function (p, value) or name = \"input\"");
 	}
+	lua_newtable(L);
 	lua_pushnil(L);
-	while (lua_next(L, -2)) {
+	while (lua_next(L, -3)) {
 		const char *k = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : NULL;
 		if (!k || !valid_board_name(k))
 			BAD("actions: names are 1..%d of A-Z a-z 0-9 _ -", VMAC_NAME_MAX);
@@ -214,12 +218,17 @@ static int check_actions(struct vmac_luaplant *p, int t, char *err, size_t errle
 			if (i < 0 || d->io[i].kind != IO_DI)
 				BAD("actions.%s: '%s' is not a digital input of io (a button names one)", k,
 				    lua_tostring(L, -1));
+			lua_pop(L, 1);
+			lua_pushinteger(L, (lua_Integer)d->io[i].channel);
 		} else if (!lua_isfunction(L, -1)) {
 			BAD("actions.%s: must be a function (p, value) or the name of a digital input", k);
 		}
-		lua_pop(L, 1);
+		lua_pushvalue(L, -2);
+		lua_insert(L, -2);
+		lua_rawset(L, -4);
 	}
 	p->ref_actions = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_pop(L, 1);
 	return 0;
 }
 
@@ -524,7 +533,7 @@ static int set_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 	struct set_args *a = args;
 	struct vmac_luaplant *p = a->p;
 	lua_State *L = d->L;
-	int i;
+	int channel;
 	d->now_s = p->time_s;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, p->ref_actions);
 	drv_raw_getfield(L, lua_gettop(L), a->name);
@@ -539,9 +548,9 @@ static int set_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 			         lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "the plant's action says no");
 		}
 		lua_pop(L, 2);
-	} else if (lua_type(L, -1) == LUA_TSTRING) {
-		i = find_io(d, lua_tostring(L, -1));
-		p->button_left_s[d->io[i].channel] = VMAC_LUAPLANT_BUTTON_S; /* a digital input: checked at load */
+	} else if (lua_type(L, -1) == LUA_TNUMBER) {
+		channel = (int)lua_tointeger(L, -1); /* a digital input's: checked at load */
+		p->button_left_s[channel] = VMAC_LUAPLANT_BUTTON_S;
 		lua_pop(L, 1);
 	} else {
 		lua_pop(L, 1);
