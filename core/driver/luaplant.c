@@ -367,8 +367,9 @@ static void fail(struct vmac_luaplant *p, const char *why)
 	snprintf(p->failure, sizeof(p->failure), "%s", why);
 }
 
-/* The unsafe text of a step, one printable line, cut (if it must be)
- * before a UTF-8 character rather than inside one. */
+/* The unsafe text of the step that began an episode, one printable line
+ * (control characters, DEL too, made spaces), cut (if it must be) before a
+ * UTF-8 character rather than inside one. */
 static void keep_unsafe(struct vmac_luaplant *p, const char *text)
 {
 	size_t n = strlen(text), i;
@@ -378,7 +379,7 @@ static void keep_unsafe(struct vmac_luaplant *p, const char *text)
 			n--;
 	}
 	for (i = 0; i < n; i++)
-		p->unsafe_text[i] = (unsigned char)text[i] < 0x20 ? ' ' : text[i];
+		p->unsafe_text[i] = (unsigned char)text[i] < 0x20 || text[i] == 0x7F ? ' ' : text[i];
 	p->unsafe_text[n] = '\0';
 }
 
@@ -416,10 +417,11 @@ static int step_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	if (drv_guarded_call(d, 3, 1, 1, err, errlen) != 0)
 		return -1;
 	if (lua_type(L, -1) == LUA_TSTRING) {
-		if (!p->unsafe)
+		if (!p->unsafe) {
 			p->unsafe_episodes++;
+			keep_unsafe(p, lua_tostring(L, -1));
+		}
 		p->unsafe = 1;
-		keep_unsafe(p, lua_tostring(L, -1));
 	} else if (lua_isnil(L, -1) || (lua_isboolean(L, -1) && !lua_toboolean(L, -1))) {
 		p->unsafe = 0;
 	} else {

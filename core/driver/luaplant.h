@@ -59,7 +59,8 @@ int vmac_luaplant_set(struct vmac_luaplant *p, const char *name, double value, c
  * plant has failed. "unsafe_episodes" is the count below. */
 int vmac_luaplant_field(struct vmac_luaplant *p, const char *name, struct vmac_value *v);
 
-/* Unsafe episodes since load, and the text of the last one. */
+/* Unsafe episodes since load, and the text the step that began the last
+ * one returned (as the C washer's line gives the moment it began). */
 uint32_t vmac_luaplant_unsafe_episodes(const struct vmac_luaplant *p);
 const char *vmac_luaplant_unsafe_text(const struct vmac_luaplant *p);
 /* Why it failed, or NULL while it runs. */
