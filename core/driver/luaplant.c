@@ -282,6 +282,22 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	return 0;
 }
 
+/* The name a plant's file goes by in its messages: the path as given when
+ * Lua's messages show it whole (LUA_IDSIZE - 1 bytes; longer, they cut it
+ * at its start, to "...ac-it-x/pla:4:"), else its longest tail that
+ * begins after a '/' and fits ("drivers/plants/dryer.lua"), so the
+ * messages keep naming the file and its line. */
+static const char *shown_name(const char *path)
+{
+	size_t n = strlen(path);
+	const char *slash;
+	while (n > LUA_IDSIZE - 1 && (slash = strchr(path, '/')) != NULL) {
+		n -= (size_t)(slash + 1 - path);
+		path = slash + 1;
+	}
+	return path;
+}
+
 int vmac_luaplant_load(const char *file, const char *src, size_t len, const char *default_name,
                        const struct vmac_luaplant_limits *lim, struct vmac_luaplant **out, char *err, size_t errlen)
 {
@@ -305,7 +321,7 @@ int vmac_luaplant_load(const char *file, const char *src, size_t len, const char
 	dl.memory_bytes = lim->memory_bytes ? lim->memory_bytes : VMAC_LUAPLANT_MEMORY;
 	dl.instructions = lim->instructions ? lim->instructions : VMAC_LUAPLANT_INSTRUCTIONS;
 	dl.budget_us = lim->budget_us;
-	if (vmac_driver_new(file, &dl, &p->d, err, errlen) != 0) {
+	if (vmac_driver_new(shown_name(file), &dl, &p->d, err, errlen) != 0) {
 		free(p);
 		return -1;
 	}

@@ -30,6 +30,7 @@ struct vmac_luaplant_limits {
 struct vmac_luaplant; /* opaque */
 
 /* Load a plant from text (file names it in messages, "plants/dryer.lua";
+ * a path too long for Lua's messages by its tail after a '/';
  * default_name is its name when the file gives none). 0 and *out, or -1
  * with err ("plants/dryer.lua:12: ...", "plants/dryer.lua: plant: step
  * must be a function"). */
