@@ -158,7 +158,8 @@ def test_api_mistakes_are_the_tests_line(t):
     argument) fails the test at the test file's line, naming the mistake,
     and no line of the runner shows."""
     expected = [
-        ("an unknown plant", 4, "board{...}: unknown plant 'dryer' (washer, dishwasher, lights, generic)"),
+        ("an unknown plant", 4, "board{...}: unknown plant 'dryer': no plants/dryer.lua in the drivers folder "
+         "(none: --drivers DIR), and no C plant of that name (washer, dishwasher, lights, generic)"),
         ("an action that is not a name", 9, "b:set(action, value): the action must be a name, not 7"),
         ("an action the plant does not have", 14, "lights-1: the lights plant refuses doorbell = 1"),
         ("run_for without seconds", 19, 'run_for(seconds): seconds must be a number >= 0, not "ten"'),
