@@ -306,11 +306,17 @@ $(BUILD)/bench/minisign_verify: $(OBJ)/tests/bench/minisign_verify.o $(call arch
 $(BUILD)/bench/plant_step: $(OBJ)/tests/bench/plant_step.o $(call archives,$(call down_from,sim))
 	$(call link,$<,$(call down_from,sim))
 
+# Ten boards acting on one host instant by their disciplined clocks, next to
+# acting on arrival, simulated on the oscillator model (tests/bench/clock_sync.c,
+# docs/TIME.md).
+$(BUILD)/bench/clock_sync: $(OBJ)/tests/bench/clock_sync.o $(OBJ)/firmware/posix/oscillator.o $(call archives,board proto common)
+	$(call link,$< $(OBJ)/firmware/posix/oscillator.o,board proto common)
+
 BENCH_SECONDS ?= 60
 bench:
 	@$(MAKE) --no-print-directory deps EXTRA_DEBS="$(BENCH_DEBS)"
 	@$(MAKE) --no-print-directory all $(BUILD)/bench/bare_loop $(BUILD)/bench/auth_frames \
-		$(BUILD)/bench/minisign_verify $(BUILD)/bench/plant_step
+		$(BUILD)/bench/minisign_verify $(BUILD)/bench/plant_step $(BUILD)/bench/clock_sync
 	python3 tests/bench/bench.py --bin $(BUILD)/bin --bare $(BUILD)/bench/bare_loop --seconds $(BENCH_SECONDS) \
 		--out $(BUILD)/bench/results.json
 

@@ -21,13 +21,17 @@ struct vmac_luaplant {
 	struct vmac_outputs out;
 	double button_left_s[VMAC_DIGITAL_INPUTS]; /* real seconds a button action holds each input on */
 	double time_scale;                         /* plant seconds per real second */
-	double time_s;                             /* plant time since load: os.clock() */
+	double time_s;                             /* plant time since load; os.clock() reads d->now_s */
 	int unsafe;                                /* the last step returned a text */
 	uint32_t unsafe_episodes;
 	char unsafe_text[VMAC_LUAPLANT_UNSAFE_MAX + 1];
 	int failed;
 	char failure[VMAC_DRIVER_ERR_MAX];
 };
+
+/* A button's hold left shorter than this is over: 0.5 s less five steps of
+ * 0.1 s is 3e-17 s in doubles, not 0, and must not hold the input a sixth. */
+#define BUTTON_SLACK_S 1e-9
 
 #define BAD(...)                                                                                                       \
 	do {                                                                                                           \
@@ -49,11 +53,6 @@ static int valid_board_name(const char *s)
 		      s[n] == '-' || s[n] == '_'))
 			return 0;
 	return n > 0 && n <= VMAC_NAME_MAX;
-}
-
-static double plant_clock(void *ctx)
-{
-	return ((const struct vmac_luaplant *)ctx)->time_s;
 }
 
 /* Converter counts of an analog value: rounded, clipped to 0..VMAC_ANALOG_MAX, NaN 0. */
@@ -193,7 +192,10 @@ static int check_plant(struct vmac_luaplant *p, int t, const char *default_name,
 }
 
 /* actions: each a function (p, value) or the name of a digital input in
- * io (a button): [-0, +0]. */
+ * io (a button). Kept as a copy only the host holds (ref_actions: name ->
+ * the function, or the button's input channel), so that a plant changing
+ * its own actions table later cannot make an action name what was never
+ * checked: [-0, +0]. */
 static int check_actions(struct vmac_luaplant *p, int t, char *err, size_t errlen)
 {
 	struct vmac_driver *d = p->d;
@@ -205,8 +207,9 @@ static int check_actions(struct vmac_luaplant *p, int t, char *err, size_t errle
 	} else if (!lua_istable(L, -1)) {
 		BAD("actions must be a table of name = function (p, value) or name = \"input\"");
 	}
+	lua_newtable(L);
 	lua_pushnil(L);
-	while (lua_next(L, -2)) {
+	while (lua_next(L, -3)) {
 		const char *k = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : NULL;
 		if (!k || !valid_board_name(k))
 			BAD("actions: names are 1..%d of A-Z a-z 0-9 _ -", VMAC_NAME_MAX);
@@ -215,12 +218,17 @@ static int check_actions(struct vmac_luaplant *p, int t, char *err, size_t errle
 			if (i < 0 || d->io[i].kind != IO_DI)
 				BAD("actions.%s: '%s' is not a digital input of io (a button names one)", k,
 				    lua_tostring(L, -1));
+			lua_pop(L, 1);
+			lua_pushinteger(L, (lua_Integer)d->io[i].channel);
 		} else if (!lua_isfunction(L, -1)) {
 			BAD("actions.%s: must be a function (p, value) or the name of a digital input", k);
 		}
-		lua_pop(L, 1);
+		lua_pushvalue(L, -2);
+		lua_insert(L, -2);
+		lua_rawset(L, -4);
 	}
 	p->ref_actions = luaL_ref(L, LUA_REGISTRYINDEX);
+	lua_pop(L, 1);
 	return 0;
 }
 
@@ -268,6 +276,22 @@ static int load_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	return 0;
 }
 
+/* The name a plant's file goes by in its messages: the path as given when
+ * Lua's messages show it whole (LUA_IDSIZE - 1 bytes; longer, they cut it
+ * at its start, to "...ac-it-x/pla:4:"), else its longest tail that
+ * begins after a '/' and fits ("drivers/plants/dryer.lua"), so the
+ * messages keep naming the file and its line. */
+static const char *shown_name(const char *path)
+{
+	size_t n = strlen(path);
+	const char *slash;
+	while (n > LUA_IDSIZE - 1 && (slash = strchr(path, '/')) != NULL) {
+		n -= (size_t)(slash + 1 - path);
+		path = slash + 1;
+	}
+	return path;
+}
+
 int vmac_luaplant_load(const char *file, const char *src, size_t len, const char *default_name,
                        const struct vmac_luaplant_limits *lim, struct vmac_luaplant **out, char *err, size_t errlen)
 {
@@ -291,9 +315,7 @@ int vmac_luaplant_load(const char *file, const char *src, size_t len, const char
 	dl.memory_bytes = lim->memory_bytes ? lim->memory_bytes : VMAC_LUAPLANT_MEMORY;
 	dl.instructions = lim->instructions ? lim->instructions : VMAC_LUAPLANT_INSTRUCTIONS;
 	dl.budget_us = lim->budget_us;
-	dl.clock = plant_clock;
-	dl.clock_ctx = p;
-	if (vmac_driver_new(file, &dl, &p->d, err, errlen) != 0) {
+	if (vmac_driver_new(shown_name(file), &dl, &p->d, err, errlen) != 0) {
 		free(p);
 		return -1;
 	}
@@ -311,18 +333,6 @@ int vmac_luaplant_load(const char *file, const char *src, size_t len, const char
 	return 0;
 }
 
-/* The path as messages show it: its last folder and its name
- * ("plants/dryer.lua"), short enough for Lua's chunk names. */
-static const char *shown_name(const char *path)
-{
-	const char *last = strrchr(path, '/'), *p;
-	if (!last)
-		return path;
-	for (p = last - 1; p > path && *p != '/'; p--)
-		;
-	return *p == '/' ? p + 1 : path;
-}
-
 int vmac_luaplant_load_file(const char *path, const struct vmac_luaplant_limits *lim, struct vmac_luaplant **out,
                             char *err, size_t errlen)
 {
@@ -338,7 +348,7 @@ int vmac_luaplant_load_file(const char *path, const struct vmac_luaplant_limits 
 	n = strlen(name);
 	if (n > 4 && strcmp(name + n - 4, ".lua") == 0)
 		name[n - 4] = '\0';
-	rc = vmac_luaplant_load(shown_name(path), src, len, name, lim, out, err, errlen);
+	rc = vmac_luaplant_load(path, src, len, name, lim, out, err, errlen);
 	free(src);
 	return rc;
 }
@@ -367,8 +377,9 @@ static void fail(struct vmac_luaplant *p, const char *why)
 	snprintf(p->failure, sizeof(p->failure), "%s", why);
 }
 
-/* The unsafe text of a step, one printable line, cut (if it must be)
- * before a UTF-8 character rather than inside one. */
+/* The unsafe text of the step that began an episode, one printable line
+ * (control characters, DEL too, made spaces), cut (if it must be) before a
+ * UTF-8 character rather than inside one. */
 static void keep_unsafe(struct vmac_luaplant *p, const char *text)
 {
 	size_t n = strlen(text), i;
@@ -378,7 +389,7 @@ static void keep_unsafe(struct vmac_luaplant *p, const char *text)
 			n--;
 	}
 	for (i = 0; i < n; i++)
-		p->unsafe_text[i] = (unsigned char)text[i] < 0x20 ? ' ' : text[i];
+		p->unsafe_text[i] = (unsigned char)text[i] < 0x20 || text[i] == 0x7F ? ' ' : text[i];
 	p->unsafe_text[n] = '\0';
 }
 
@@ -412,13 +423,15 @@ static int step_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 		lua_rawset(L, o);
 	}
 	lua_pop(L, 1);
+	d->now_s = p->time_s + a->dt_s; /* os.clock(): the time the step brings the plant to */
 	if (drv_guarded_call(d, 3, 1, 1, err, errlen) != 0)
 		return -1;
 	if (lua_type(L, -1) == LUA_TSTRING) {
-		if (!p->unsafe)
+		if (!p->unsafe) {
 			p->unsafe_episodes++;
+			keep_unsafe(p, lua_tostring(L, -1));
+		}
 		p->unsafe = 1;
-		keep_unsafe(p, lua_tostring(L, -1));
 	} else if (lua_isnil(L, -1) || (lua_isboolean(L, -1) && !lua_toboolean(L, -1))) {
 		p->unsafe = 0;
 	} else {
@@ -429,8 +442,11 @@ static int step_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 	lua_pop(L, 1);
 	p->time_s += a->dt_s;
 	for (i = 0; i < VMAC_DIGITAL_INPUTS; i++)
-		if (p->button_left_s[i] > 0)
+		if (p->button_left_s[i] > 0) {
 			p->button_left_s[i] -= a->dt_s / p->time_scale;
+			if (p->button_left_s[i] < BUTTON_SLACK_S)
+				p->button_left_s[i] = 0;
+		}
 	read_inputs(p);
 	return 0;
 }
@@ -529,7 +545,8 @@ static int set_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 	struct set_args *a = args;
 	struct vmac_luaplant *p = a->p;
 	lua_State *L = d->L;
-	int i;
+	int channel;
+	d->now_s = p->time_s;
 	lua_rawgeti(L, LUA_REGISTRYINDEX, p->ref_actions);
 	drv_raw_getfield(L, lua_gettop(L), a->name);
 	if (lua_isfunction(L, -1)) {
@@ -543,9 +560,9 @@ static int set_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 			         lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "the plant's action says no");
 		}
 		lua_pop(L, 2);
-	} else if (lua_type(L, -1) == LUA_TSTRING) {
-		i = find_io(d, lua_tostring(L, -1));
-		p->button_left_s[d->io[i].channel] = VMAC_LUAPLANT_BUTTON_S; /* a digital input: checked at load */
+	} else if (lua_type(L, -1) == LUA_TNUMBER) {
+		channel = (int)lua_tointeger(L, -1); /* a digital input's: checked at load */
+		p->button_left_s[channel] = VMAC_LUAPLANT_BUTTON_S;
 		lua_pop(L, 1);
 	} else {
 		lua_pop(L, 1);

@@ -30,6 +30,7 @@ struct vmac_luaplant_limits {
 struct vmac_luaplant; /* opaque */
 
 /* Load a plant from text (file names it in messages, "plants/dryer.lua";
+ * a path too long for Lua's messages by its tail after a '/';
  * default_name is its name when the file gives none). 0 and *out, or -1
  * with err ("plants/dryer.lua:12: ...", "plants/dryer.lua: plant: step
  * must be a function"). */
@@ -59,7 +60,8 @@ int vmac_luaplant_set(struct vmac_luaplant *p, const char *name, double value, c
  * plant has failed. "unsafe_episodes" is the count below. */
 int vmac_luaplant_field(struct vmac_luaplant *p, const char *name, struct vmac_value *v);
 
-/* Unsafe episodes since load, and the text of the last one. */
+/* Unsafe episodes since load, and the text the step that began the last
+ * one returned (as the C washer's line gives the moment it began). */
 uint32_t vmac_luaplant_unsafe_episodes(const struct vmac_luaplant *p);
 const char *vmac_luaplant_unsafe_text(const struct vmac_luaplant *p);
 /* Why it failed, or NULL while it runs. */

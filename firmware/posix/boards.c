@@ -248,9 +248,24 @@ void boards_print_counters(const struct board_set *s, int32_t i)
 	printf("%s\n", line);
 }
 
+char *boards_one_line(const char *text, char *out, size_t len)
+{
+	const char *trace = strstr(text, "\nstack traceback:");
+	size_t n = trace ? (size_t)(trace - text) : strlen(text), i;
+	if (len == 0)
+		return out;
+	if (n >= len)
+		n = len - 1;
+	for (i = 0; i < n; i++)
+		out[i] = (unsigned char)text[i] < 0x20 || text[i] == 0x7F ? ' ' : text[i];
+	out[n] = '\0';
+	return out;
+}
+
 void boards_housekeep(struct board_set *s, uint64_t now_ms)
 {
 	double dt_s = now_ms > s->last_step_ms ? (double)(now_ms - s->last_step_ms) / 1000.0 : 0.0;
+	char why[VMAC_DRIVER_ERR_MAX];
 	int32_t i;
 
 	for (i = 0; i < s->count; i++) {
@@ -265,7 +280,7 @@ void boards_housekeep(struct board_set *s, uint64_t now_ms)
 		}
 		if (rc == -2)
 			printf("%s: plant failed: %s; its inputs hold their last values\n", pb->board.id.board,
-			       vmac_sim_failure(&pb->sim));
+			       boards_one_line(vmac_sim_failure(&pb->sim), why, sizeof(why)));
 		boards_report(s, i);
 	}
 	if (now_ms > s->last_step_ms)
@@ -294,9 +309,10 @@ void boards_command(struct board_set *s, const char *line)
 				boards_print_counters(s, i);
 				return;
 			}
-			char why[300];
+			char why[VMAC_DRIVER_ERR_MAX + 128], one[sizeof(why)];
 			if (vmac_sim_set(&pb->sim, action, value, why, sizeof(why)) != 0)
-				printf("%s: refused %s %g: %s\n", name, action, value, why);
+				printf("%s: refused %s %g: %s\n", name, action, value,
+				       boards_one_line(why, one, sizeof(one)));
 			else
 				printf("%s: %s %g\n", name, action, value);
 			boards_report(s, i); /* an action may have begun an unsafe episode */

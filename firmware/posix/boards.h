@@ -9,6 +9,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "../../core/driver/driver.h"
 #include "../../core/sim/sim.h"
 #include "../../core/transport/transport.h"
 #include "../board.h"
@@ -105,6 +106,12 @@ void boards_housekeep(struct board_set *s, uint64_t now_ms);
 /* Print board i's state and output changes since it was last reported, and
  * a line for each unsafe episode its plant entered (even with --quiet). */
 void boards_report(struct board_set *s, int32_t i);
+
+/* text (a plant's failure or refusal: a message, maybe a traceback) as
+ * one line for the log into out (len bytes at most with its NUL): the
+ * message without its traceback, control characters made spaces. Returns
+ * out. */
+char *boards_one_line(const char *text, char *out, size_t len);
 
 /* The frame counters of board i, one line (firmware/report.c). */
 void boards_print_counters(const struct board_set *s, int32_t i);

@@ -306,11 +306,11 @@ static int take_plant(struct options *o)
 {
 	static char name[VMAC_NAME_MAX + 1], driver[VMAC_NAME_MAX + 1];
 	struct vmac_sim sim;
-	char err[512];
+	char err[VMAC_DRIVER_ERR_MAX], line[sizeof(err)];
 	if (!o->cfg.plant_file) {
 		vmac_sim_init_c(&sim, o->cfg.plant);
 	} else if (vmac_sim_init_lua(&sim, o->cfg.plant_file, &o->cfg.lua, err, sizeof(err)) != 0) {
-		fprintf(stderr, "vmac-board: --plant-file: %s\n", err);
+		fprintf(stderr, "vmac-board: --plant-file: %s\n", boards_one_line(err, line, sizeof(line)));
 		return 2;
 	}
 	snprintf(name, sizeof(name), "%s", vmac_sim_name(&sim));

@@ -68,6 +68,10 @@ same run on the same machine, reported as ratios.
   plant     one step of a plant model in Lua (tests/bench/plant_bench.py), the
             kitchen's dryer, at 1 kHz as vmac-board steps it, next to the C
             washer in the same run (tests/bench/plant_step.c), us a step
+  sync      the boards' disciplined clocks, simulated (tests/bench/sync_bench.py):
+            the spread of the true instants at which ten boards act on one
+            host instant, next to acting on arrival in the same run
+            (tests/bench/clock_sync.c); --seconds of simulated time
   bundle    deploying a bundle (tests/bench/bundle_bench.py): upload to
             switched of 100 bundles of the washer, unsigned and signed with
             minisign, next to 100 uploads of the washer's Lua text alone (its
@@ -77,7 +81,7 @@ same run on the same machine, reported as ratios.
 
 usage: bench.py --bin build/bin --bare build/bench/bare_loop [--seconds S]
                 [--only lateness,capacity,cost,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,
-                        metrics,minisign,bundle,plant,mqtt-kitchen]
+                        metrics,minisign,bundle,plant,sync,mqtt-kitchen]
                 [--base-bin DIR] [--before-bin DIR]
                 [--cpu-awake true|false]   (vmacd's cpu_awake beside cyclictest; default true)
 Writes build/bench/results.json and prints a table. Numbers, never pass/fail."""
@@ -448,7 +452,7 @@ def main():
     p.add_argument("--seconds", type=int, default=60, help="length of each measurement (default 60)")
     p.add_argument("--only",
                    default="lateness,cost,capacity,vtest,reload,ui,fieldbus,qemu,recorder,ethring,mqtt,workers,auth,"
-                           "metrics,minisign,bundle,plant")
+                           "metrics,minisign,bundle,plant,sync")
     p.add_argument("--base-bin", default=None,
                    help="workers: a folder with a vmacd of the code that ran drivers on its bus thread")
     p.add_argument("--before-bin", default=None,
@@ -563,6 +567,12 @@ def main():
         print("plant: one step of the dryer's Lua plant at 1 kHz, next to the C washer", flush=True)
         results["plant"] = plant(args)
 
+    if "sync" in only:
+        from sync_bench import sync
+        print("sync: ten boards acting on one host instant by their clocks, next to on arrival (simulated)",
+              flush=True)
+        results["sync"] = sync(args)
+
     if "bundle" in only:
         from bundle_bench import bundle
         print("bundle: upload to switched, 100 uploads each of the washer's text, its bundle and its signed "
@@ -670,6 +680,9 @@ def report(r):
     if r.get("plant"):
         from plant_bench import report_plant
         report_plant(r["plant"])
+    if r.get("sync"):
+        from sync_bench import report_sync
+        report_sync(r["sync"])
     if r.get("bundle"):
         from bundle_bench import report_bundle
         report_bundle(r["bundle"])
