@@ -37,6 +37,7 @@ import time
 import urllib.request
 
 import test_mqtt as mqtt
+import test_mqtt_ha as ha
 from harness import POLL_S, Proc, plain_pass_only
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -183,7 +184,8 @@ def check_vmac_test_output(out_block, printed, line):
 
 
 def check_home_assistant(hub):
-    """The dryer's discovery configs, as NEW_MACHINE.md lists them."""
+    """The dryer's discovery configs, as NEW_MACHINE.md lists them, and
+    each as Home Assistant reads it (test_mqtt_ha's checkers)."""
     def config(component, obj):
         with hub.cond:
             topics = [tp for tp in hub.latest if re.fullmatch(
@@ -217,6 +219,9 @@ def check_home_assistant(hub):
     programmes = load(("select", "program"))
     assert programmes.get("options") == ["cotton", "delicate"], "the programmes in HA: %r" % programmes
     assert load(("button", "start"))["device"]["name"] == "dryer-1", "the start button's device"
+    # Every config, by every rule of MQTT.md's "Conformance: Home Assistant".
+    judged = [tp for tp in ha.check_all(hub) if "_dryer-1/" in tp]
+    assert len(judged) >= len(want), "only %d of the dryer's configs judged: %s" % (len(judged), judged)
 
 
 @plain_pass_only("the page's commands under the sanitizers: test-drivers runs its vmac test blocks (the dryer's "
