@@ -262,6 +262,15 @@ void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
 /* The same with a number rounded to precision decimals (0..6; -1: as it is),
  * -0 written 0: a value is published when this text changes. */
 void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, size_t outlen);
+/* The precision throttle with its hysteresis: whether a value whose text
+ * at its precision is text goes out, sent being the text published last.
+ * A number with a precision (0..6) goes out when it is a whole step
+ * (10^-precision) or more from the number sent, not when it merely rounds
+ * to a neighbour: noise at a rounding boundary does not flip it back and
+ * forth, and the number shown is always less than a step from the value
+ * now. Anything else (no precision, None, another kind) when its text
+ * changes. */
+int mqtt_value_moved(const struct vmac_value *v, int precision, const char *text, const char *sent);
 /* The precision a declaration gives its numbers: "precision" 0..6, not for
  * a choice of values (its state is the option's text); else -1. */
 int mqtt_declared_precision(json_t *decl);

@@ -83,6 +83,106 @@ START_TEST(a_declared_precision_rounds_what_is_published)
 }
 END_TEST
 
+/* Whether x, with sent published last, goes out at precision. */
+static int moves(double x, int precision, const char *sent)
+{
+	struct vmac_value v = number(x);
+	char text[MQTT_TEXT_MAX];
+	mqtt_value_text_at(&v, precision, text, sizeof(text));
+	return mqtt_value_moved(&v, precision, text, sent);
+}
+
+START_TEST(a_precision_goes_out_a_whole_step_from_what_was_sent)
+{
+	struct vmac_value none, word;
+	/* 37.45 C read with +-2 counts of 0.025 C: neighbours of 37.4 that are not a step away stay unsent. */
+	ck_assert_msg(!moves(37.45, 1, "37.4") && !moves(37.475, 1, "37.4"), "noise at 37.45 moved 37.4");
+	ck_assert_msg(!moves(37.425, 1, "37.5") && !moves(37.45, 1, "37.5"), "noise at 37.45 moved 37.5");
+	ck_assert_msg(moves(37.5, 1, "37.4") && moves(37.4, 1, "37.5"), "a whole step (binary 0.1 +- an ulp) stays");
+	ck_assert_msg(moves(37.3, 1, "37.5") && moves(38.0, 1, "37.4"), "more than a step stays");
+	ck_assert_msg(!moves(37.4, 1, "37.4"), "the same text went out again");
+	ck_assert_msg(moves(45.0, 0, "44") && !moves(44.6, 0, "44"), "precision 0: a step is 1");
+	ck_assert_msg(moves(0.000001, 6, "0.000000") && !moves(0.0000004, 6, "0.000000"), "precision 6: 1e-6");
+	/* Anything else goes out when its text changes. */
+	ck_assert_msg(moves(21.44, 1, "None") && moves(21.44, 1, "true"), "a number after None or a boolean");
+	ck_assert_msg(moves(21.44, -1, "21.45") && !moves(21.44, -1, "21.44"), "no precision: every change");
+	memset(&none, 0, sizeof(none));
+	ck_assert_msg(mqtt_value_moved(&none, 1, "None", "21.4"), "None after a number");
+	word = number(0);
+	word.type = VMAC_VALUE_STRING;
+	strcpy(word.str, "21.41");
+	ck_assert_msg(mqtt_value_moved(&word, 1, "21.41", "21.4"), "a string after a number");
+}
+END_TEST
+
+/* Noise of -n..+n counts of 0.025 C, the sum of n draws of -1, 0, +1 (the
+ * washer plant's is n = 2), from a fixed LCG: the same every run. */
+static int noise_counts(unsigned *state, int n)
+{
+	int k, sum = 0;
+	for (k = 0; k < n; k++) {
+		*state = *state * 1103515245u + 12345u;
+		sum += (int)((*state >> 16) % 3u) - 1;
+	}
+	return sum;
+}
+
+/* Readings of exact_c (falling by fall_c each) with noise of noise_n counts
+ * through the throttle at one decimal, as mqtt_devices.c applies it: the
+ * messages and the changes of the rounded text; every number shown is less
+ * than a step from the reading. */
+static void throttle(double exact_c, double fall_c, int noise_n, int readings, int *messages, int *flickers)
+{
+	char sent[MQTT_TEXT_MAX] = "None", text[MQTT_TEXT_MAX], last[MQTT_TEXT_MAX] = "";
+	unsigned state = 1;
+	int k;
+	*messages = *flickers = 0;
+	for (k = 0; k < readings; k++, exact_c -= fall_c) {
+		struct vmac_value v = number((floor(exact_c * 40 + 0.5) + noise_counts(&state, noise_n)) * 0.025);
+		mqtt_value_text_at(&v, 1, text, sizeof(text));
+		*flickers += strcmp(text, last) != 0;
+		snprintf(last, sizeof(last), "%s", text);
+		if (mqtt_value_moved(&v, 1, text, sent)) {
+			snprintf(sent, sizeof(sent), "%s", text);
+			++*messages;
+		}
+		ck_assert_msg(fabs(strtod(sent, NULL) - v.number) < 0.1,
+		              "reading %d: %.3f C shown as %s, a step or more off", k, v.number, sent);
+	}
+}
+
+START_TEST(noise_narrower_than_a_step_does_not_flip_what_is_shown)
+{
+	int messages, flickers;
+	/* 37.45 C, right on a rounding boundary of 0.1 C, with +-1 count (0.05 C from end to end). */
+	throttle(37.45, 0, 1, 1000, &messages, &flickers);
+	ck_assert_msg(messages == 1 && flickers > 100,
+	              "a still 37.45 C with +-1 count of noise: %d messages (%d changes "
+	              "of its rounded text), not 1",
+	              messages, flickers);
+	/* Cooling by a count every 6 readings, 3.6 C: once per 0.1 C it falls. */
+	throttle(37.5, 0.004, 1, 900, &messages, &flickers);
+	ck_assert_msg(messages <= 37 && flickers > 3 * messages,
+	              "a fall of 36 steps with +-1 count of noise: %d messages "
+	              "(%d changes of its rounded text)",
+	              messages, flickers);
+}
+END_TEST
+
+/* With +-2 counts, readings 0.1 C apart come from one temperature: a whole
+ * step, which goes out (a change of a step always does), but only when both
+ * ends of the noise come while it sits on the boundary's count. */
+START_TEST(noise_of_a_whole_step_flips_it_far_less_than_its_rounding)
+{
+	int messages, flickers;
+	throttle(37.5, 0.004, 2, 900, &messages, &flickers);
+	ck_assert_msg(messages <= 36 * 3 / 2 && flickers > 4 * messages,
+	              "a fall of 36 steps with +-2 counts of noise: %d "
+	              "messages, %d changes of its rounded text",
+	              messages, flickers);
+}
+END_TEST
+
 /* payload (NUL-terminated) read against decl (JSON text, or NULL). */
 static int typed(const char *payload, const char *decl, struct vmac_value *v, const char **why)
 {
@@ -293,6 +393,9 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_select_or_text_gets_the_payload_as_a_string);
 	tcase_add_test(tc, a_number_boolean_or_numeric_choice_gets_its_type);
 	tcase_add_test(tc, a_declared_precision_rounds_what_is_published);
+	tcase_add_test(tc, a_precision_goes_out_a_whole_step_from_what_was_sent);
+	tcase_add_test(tc, noise_narrower_than_a_step_does_not_flip_what_is_shown);
+	tcase_add_test(tc, noise_of_a_whole_step_flips_it_far_less_than_its_rounding);
 	suite_add_tcase(s, tc);
 	tcase_add_test(tc, ui_url_from_the_setting_or_the_http_address);
 	tcase_add_test(tc, a_machine_is_found_in_any_order);
