@@ -213,6 +213,8 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 		return; /* the site view's, applied here (mqtt_site.c) */
 	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic))
 		return;
+	if (c->index == MQTT_CONN_SPARKPLUG && mqtt_spb_ids_foreign(m, msg->topic))
+		return; /* another node's birth: nothing to check (mqtt_spb_ids.c) */
 	if (msg->retain && !(c->index == MQTT_CONN_SPARKPLUG && strncmp(msg->topic, "spBv1.0/STATE/", 14) == 0))
 		return; /* a retained command is an old one: never acted on (a host application's STATE is news) */
 	pthread_mutex_lock(&m->lock);

@@ -10,7 +10,9 @@
  *   mqtt_health.c    profile "health": each machine's and the host's health (_health) and events (_event)
  *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
  *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
- *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what the two share)
+ *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what these share)
+ *   mqtt_spb_ids.c   its ids checked against the group's: another node with this descriptor, ids that
+ *                    differ only in case
  *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
  *                    /api/site serves, on the network thread
  *   mqtt_audit.c     commands audited (core/host/audit.h), and profile "audit": the host's audit events
@@ -39,6 +41,7 @@
 #define MQTT_HEALTH_HEARTBEAT_S 60 /* _health goes out at least this often (mqtt_health.c) */
 #define MQTT_HEALTH_EXPIRE_S 150   /* HA's expire_after of the health sensors (mqtt_ha.c) */
 #define MQTT_PAYLOAD_NONE "None"   /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
+#define MQTT_SPB_SENT_BIRTHS 4     /* NBIRTHs remembered to know this node's own when they come back */
 
 /* A value as published: its text at its precision. */
 struct mqtt_value {
@@ -177,6 +180,11 @@ struct mqtt_spb {
 	 * timestamp; an older one than what was seen is ignored. */
 	int host_online;
 	int64_t host_ts;
+	/* The last NBIRTHs sent (mqtt_spb_ids.c): their payload timestamps and
+	 * bdSeqs, to tell this node's own from another's with its descriptor. */
+	uint64_t sent_ts[MQTT_SPB_SENT_BIRTHS];
+	int sent_bdseq[MQTT_SPB_SENT_BIRTHS];
+	unsigned nsent;
 };
 
 struct vmac_mqtt {
@@ -250,6 +258,25 @@ const struct vmac_value *mqtt_status_value(const struct vmac_device_status *st, 
 /* A machine in connection c's table (mqtt_device_find: the main one's). */
 struct mqtt_device *mqtt_conn_device_find(struct mqtt_conn *c, const char *name);
 struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
+
+/* mqtt_spb_ids.c: Sparkplug ids that clash. An NBIRTH of another Edge
+ * Node of the group whose id is not this node's in any case is dropped on
+ * the network thread before it takes a place in the queue that commands
+ * use: 1 for such a topic. Any thread. */
+int mqtt_spb_ids_foreign(const struct vmac_mqtt *m, const char *topic);
+/* An NBIRTH this node published (its payload timestamp and bdSeq), so that
+ * its own, back from the broker, does not read as a twin's. */
+void mqtt_spb_ids_nbirth_sent(struct vmac_mqtt *m, uint64_t timestamp, int bdseq);
+/* The edge id of a topic spBv1.0/GROUP/NBIRTH/EDGE of this node's group,
+ * else NULL. */
+const char *mqtt_spb_ids_nbirth_edge(const struct vmac_mqtt *m, const char *topic);
+/* An NBIRTH of the group seen (timestamp and bdSeq from its payload; 0 and
+ * -1 when it had none or was not one): another node with this node's
+ * descriptor, or this node's edge id in another case, said in the events. */
+void mqtt_spb_ids_nbirth(struct vmac_mqtt *m, const char *edge, uint64_t timestamp, int64_t bdseq);
+/* d up on Sparkplug's connection: a machine up whose name differs from d's
+ * only in case is said. */
+void mqtt_spb_ids_device_up(struct vmac_mqtt *m, const struct mqtt_device *d);
 
 /* mqtt_site.c: a message on the main connection, on libmosquitto's network
  * thread: 1 when it was one of the site view's topics (applied or counted

@@ -11,11 +11,15 @@ Sparkplug TCK's monitor does:
 - a Primary Host Application (mqtt_sparkplug_primary_host): no NBIRTH before
   its STATE says online, NDEATH and a new connection when it says offline, a
   stale or malformed STATE ignored;
-- a hot reload: the device's DDEATH before its new DBIRTH.
+- a hot reload: the device's DDEATH before its new DBIRTH;
+- ids that clash: another node with this one's descriptor, an edge id or
+  machine names that differ only in case, said in the host's events.
 SKIPPED without mosquitto, paho or Tahu, as test_sparkplug.py."""
 
 import json
 import os
+import random
+import re
 import shutil
 import signal
 import subprocess
@@ -363,5 +367,71 @@ def test_sparkplug_datatypes_of_value_lists(t):
                          "the params set by the DCMD as declared")
         payloads, _ = tahu_agrees(sp.node_raw())
         assert payloads >= 3, payloads
+    finally:
+        sp.close()
+
+
+def other_node(t, broker, host_id, client_id, folder):
+    """Another vmacd as a Sparkplug Edge Node of GROUP on the same broker:
+    a bus and a state folder of its own (no board: an NBIRTH is all it
+    says), its bdSeq from 100 (two fresh nodes both start at 0, and two
+    NBIRTHs of one Rebirth may share a millisecond: then a twin's reads as
+    the node's own)."""
+    state = os.path.join(t.logdir, folder)
+    os.makedirs(state, exist_ok=True)
+    with open(os.path.join(state, "sparkplug-bdseq"), "w") as f:
+        f.write("100\n")
+    rnd = random.SystemRandom()
+    bus = "239.255.%d.%d:%d" % (rnd.randint(1, 254), rnd.randint(1, 254), rnd.randint(20000, 60000))
+    return t.host(bus=bus, extra=("--state", state), settings={
+        "mqtt_url": broker.url, "mqtt_host_id": host_id, "mqtt_client_id": client_id, "mqtt_sparkplug": "true",
+        "mqtt_sparkplug_group": GROUP, "mqtt_keepalive_s": 5})
+
+
+def test_sparkplug_ids_that_clash_are_told(t):
+    """An Edge Node Descriptor MUST be unique (tck-id-intro-edge-node-id-
+    uniqueness, tck-id-topic-structure-namespace-unique-edge-node-
+    descriptor, tck-id-payloads-nbirth-edge-node-descriptor): no node can
+    enforce it, but vmacd sees the group's NBIRTHs and says in its events
+    when another node publishes as its GROUP/EDGE, or as an edge id that
+    differs from its own only in case; two of its machines whose names
+    differ only in case are said too (tck-id-case-sensitivity-sparkplug-ids,
+    a SHOULD NOT). Its own NBIRTH, which the broker brings back to it, is not
+    taken for another's."""
+    broker = Broker(t)
+    sp = SpHost(broker)
+    a = spb_host(t, broker)
+    try:
+        t.board("lights", "lamp-a")
+        a.wait_running(["lamp-a"])
+        t.board("lights", "LAMP-A")
+        a.wait_running(["lamp-a", "LAMP-A"])
+        said = a.wait_event("mqtt", text="differ only in case", timeout_s=30)
+        assert "lamp-a" in said["text"] and "LAMP-A" in said["text"] and "SHOULD NOT" in said["text"], said["text"]
+        for name in ("lamp-a", "LAMP-A"):
+            sp.wait(NODE % "DBIRTH" + "/" + name, what="DBIRTH of " + name)
+        # Its own NBIRTH back (a Rebirth): nothing said. The node that comes
+        # next, its edge id in another case, shows that it was handled.
+        seq = a.last_event_seq()
+        mark = sp.mark()
+        sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
+        sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH after a Rebirth")
+        other_node(t, broker, HOST_ID.upper(), "vmac-upper", "state-upper")
+        told = a.wait_event("mqtt", text="has an id that differs from this one", after_seq=seq, timeout_s=30)
+        assert "another Edge Node of group %s, %s," % (GROUP, HOST_ID.upper()) in told["text"], told["text"]
+        assert not a.find_events("mqtt", text="another Edge Node publishes as", after_seq=seq), \
+            "its own NBIRTH was taken for another node's: %s" % [e["text"] for e in a.find_events("mqtt",
+                                                                                              after_seq=seq)]
+        # A second node with the same descriptor: said by the first when its
+        # NBIRTH comes, and by the second when both obey one Rebirth.
+        seq = a.last_event_seq()
+        twin = other_node(t, broker, HOST_ID, "vmac-twin", "state-twin")
+        twice = "another Edge Node publishes as %s/%s" % (GROUP, HOST_ID)
+        told = a.wait_event("mqtt", text=twice, after_seq=seq, timeout_s=30)
+        assert "MUST be unique" in told["text"] and "mqtt_host_id" in told["text"], told["text"]
+        # (The second's API takes no token of this test's: its stderr shows
+        # its events.)
+        sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
+        twin.wait_line(re.escape(twice), 30, stream="stderr", what="the second node telling of the first")
     finally:
         sp.close()
