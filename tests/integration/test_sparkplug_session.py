@@ -28,15 +28,18 @@ import time
 from harness import KITCHEN_NAMES, Skip
 from mqtt_proxy import MqttProxy, client_ids
 from test_mqtt import HOST_ID, PREFIX, Broker
-from test_sparkplug import BOOLEAN, DOUBLE, GROUP, INT64, NODE, STRING, SpHost, check_seq, command, decode, has_value, spb_host, \
-    tahu_agrees
+from test_sparkplug import BOOLEAN, DOUBLE, GROUP, INT64, NODE, STRING, SpHost, check_session, command, decode, \
+    has_value, spb_host, tahu_agrees
 
 MAIN_ID = "vmac-spbtest"
 
 
 def will_bdseq(payload):
-    """The bdSeq metric of an NDEATH will: (datatype, value)."""
-    m = decode(payload)["by_name"]["bdSeq"]
+    """The bdSeq metric of an NDEATH will, its only one (tck-id-topics-
+    ndeath-payload): (datatype, value)."""
+    p = decode(payload)
+    assert [m.get("name") for m in p["metrics"]] == ["bdSeq"], "a will's metrics: %s (only bdSeq)" % p["metrics"]
+    m = p["by_name"]["bdSeq"]
     return m["datatype"], m["value"]
 
 
@@ -142,7 +145,7 @@ def test_sparkplug_lives_on_while_the_main_connection_is_down(t):
         assert not {"NBIRTH", "DBIRTH", "DDEATH", "NDEATH"} & set(kinds), \
             "the main connection's return re-birthed on Sparkplug: %s" % kinds
         assert said.count(("NBIRTH", None)) == 1, "one NBIRTH in the whole test: %s" % said
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
         tahu_agrees(sp.node_raw())
         host.signal(signal.SIGTERM)  # an orderly stop: DDEATHs and the NDEATH, through the relay
         assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
@@ -185,7 +188,7 @@ def test_sparkplug_connection_lost_and_back_counts_bdseq_and_births_once(t):
         for name in KITCHEN_NAMES:
             assert said.count("DBIRTH/" + name) == 1, "DBIRTHs of %s after the NBIRTH: %s" % (name, said)
         assert not [k for k in said if k.startswith(("DDEATH", "NBIRTH"))], "a death or second NBIRTH: %s" % said
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
         wire_ok(proxy, {"NBIRTH", "DBIRTH", "DDATA"})
     finally:
         proxy.close()
@@ -230,20 +233,29 @@ def state(online, ts):
 
 def test_sparkplug_primary_host_state(t):
     """mqtt_sparkplug_primary_host: births only once the host application's
-    STATE says online; its offline ends the session (NDEATH with the
-    session's bdSeq, a new CONNECT) and the next online brings an NBIRTH
-    with the next bdSeq. An older STATE and a malformed one change nothing."""
+    STATE says online, on its own id's topic (another id's online, one in
+    another case, changes nothing); its offline ends the session (NDEATH
+    with the session's bdSeq, a new CONNECT, never while the old one is
+    open) and the next online brings an NBIRTH with the next bdSeq. An
+    older STATE and a malformed one change nothing."""
     broker = Broker(t)
+    proxy = MqttProxy(broker.port)
     sp = SpHost(broker)
     topic = "spBv1.0/STATE/scada"
     t0 = int(time.time() * 1000)
     sp.publish(topic, state(False, t0), qos=1, retain=True)
-    host = spb_host(t, broker, extra={"mqtt_sparkplug_primary_host": "scada"})
+    host = spb_host(t, broker, extra={"mqtt_sparkplug_primary_host": "scada", "mqtt_url": proxy.url,
+                                      "mqtt_client_id": MAIN_ID})
     t.kitchen(host)
     try:
         host.wait_event("mqtt", text="waiting for the primary host scada", timeout_s=30)
         host.wait_running(KITCHEN_NAMES)
         seq = host.last_event_seq()
+        # Online, but for other ids (tck-id-message-flow-edge-node-birth-
+        # publish-phid-wait-id): no births; the malformed STATE after them,
+        # said in the events, shows they were past.
+        for other in ("spBv1.0/STATE/scada2", "spBv1.0/STATE/SCADA", "spBv1.0/STATE/scad"):
+            sp.publish(other, state(True, t0 + 1), qos=1)
         sp.publish(topic, "not json", qos=1)
         host.wait_event("mqtt", text="STATE of the primary host scada ignored", after_seq=seq)
         assert not [k for k, d, p, r, q in sp.node_messages() if k in ("NBIRTH", "DBIRTH")], \
@@ -283,8 +295,15 @@ def test_sparkplug_primary_host_state(t):
         again, _ = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH when the primary host is back (a real timestamp)")
         assert again["by_name"]["bdSeq"]["value"] == (bdseq + 1) % 256, \
             "the new session's bdSeq: %s after %s" % (again["by_name"]["bdSeq"], bdseq)
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
+        # One server, one Sparkplug connection at a time (tck-id-operational-
+        # behavior-primary-application-state-with-multiple-servers-single-
+        # server): the redial's CONNECT came after the old connection closed.
+        spb = client_ids(proxy.connects, "-spb")
+        assert len(spb) >= 2, "no second Sparkplug CONNECT after the offline STATE: %s" % [c for c, _, _ in spb]
+        assert proxy.overlaps("-spb") == [], "two Sparkplug connections open at once: %s" % proxy.overlaps("-spb")
     finally:
+        proxy.close()
         sp.close()
 
 
@@ -313,7 +332,7 @@ def test_sparkplug_hot_reload_ddeath_before_the_new_dbirth(t):
         kinds = [tp.split("/")[2] for tp, _, _, _ in sp.log[mark:i] if tp.endswith("/lights-1")]
         assert kinds and kinds[-1] == "DBIRTH" and "DDEATH" in kinds and kinds.index("DDEATH") < len(kinds) - 1, \
             "no DDEATH of lights-1 before its new DBIRTH: %s" % kinds
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
     finally:
         sp.close()
 

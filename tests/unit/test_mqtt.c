@@ -11,6 +11,7 @@
 #include "../../core/mqtt/mqtt_internal.h"
 #include "../../core/mqtt/site.h"
 #include "check_main.h"
+#include "proto_helpers.h"
 
 static const char *text_of(struct vmac_value v)
 {
@@ -180,6 +181,38 @@ START_TEST(noise_of_a_whole_step_flips_it_far_less_than_its_rounding)
 	              "a fall of 36 steps with +-2 counts of noise: %d "
 	              "messages, %d changes of its rounded text",
 	              messages, flickers);
+}
+END_TEST
+
+/* A machine is named by its board's ANNOUNCE, and that name is the
+ * Sparkplug Device ID in every topic (tck-id-intro-device-id-string,
+ * -chars, tck-id-topic-structure-namespace-valid-device-id): each byte the
+ * bus's decoder lets through is an ASCII letter, digit, '_' or '-', so the
+ * id is UTF-8 and holds no '+', '/', '#' or control character. */
+START_TEST(every_machine_name_the_bus_takes_is_a_sparkplug_device_id)
+{
+	struct vmac_msg m = sample_announce(), out;
+	uint8_t frame[VMAC_FRAME_MAX];
+	int n = vmac_proto_encode(&m, frame, sizeof(frame)), c, at = -1, k;
+	ck_assert_msg(n > 0, "the sample ANNOUNCE does not encode: %s", errname(n));
+	for (k = 0; k + 7 <= n; k++) /* where its board name, "bench-1", is in the frame */
+		if (memcmp(frame + k, "bench-1", 7) == 0)
+			at = k;
+	ck_assert_msg(at >= 0, "the board name is not in the encoded ANNOUNCE");
+	for (c = 0; c < 256; c++) {
+		int allowed =
+		    (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
+		int rc;
+		frame[at + 5] = (uint8_t)c; /* bench-1 with byte c in the middle */
+		rc = decode_exact(frame, (size_t)n, &out);
+		ck_assert_msg((rc == 0) == allowed,
+		              "a board name with byte 0x%02x: decode says %s, a Sparkplug Device ID "
+		              "%s",
+		              c, errname(rc), allowed ? "may hold it" : "may not");
+		if (rc == 0)
+			ck_assert_msg(strlen(out.u.announce.board) == 7 && (unsigned char)out.u.announce.board[5] == c,
+			              "byte 0x%02x: the board name came back as \"%s\"", c, out.u.announce.board);
+	}
 }
 END_TEST
 
@@ -401,6 +434,9 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_machine_is_found_in_any_order);
 	tc = tcase_create("site");
 	tcase_add_test(tc, site_view_reads_host_topics_and_none);
+	suite_add_tcase(s, tc);
+	tc = tcase_create("sparkplug ids");
+	tcase_add_test(tc, every_machine_name_the_bus_takes_is_a_sparkplug_device_id);
 	suite_add_tcase(s, tc);
 	return s;
 }
