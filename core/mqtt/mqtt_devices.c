@@ -250,9 +250,11 @@ void mqtt_devices_free(struct vmac_mqtt *m)
 				free(d->configs[k]);
 			free(d->configs);
 			free(d->spb_metrics);
+			mqtt_ha_left_free(&d->ha_left);
 		}
 		free(conn->devices);
 		conn->devices = NULL;
 		conn->ndevices = conn->cap = 0;
 	}
+	mqtt_ha_left_free(&m->ha_host_left);
 }

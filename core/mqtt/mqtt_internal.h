@@ -7,6 +7,8 @@
  *   mqtt_native.c    profile "vmac": the host's and devices' availability, state topics, the command
  *                    topics into the bus's request slots, errors published back
  *   mqtt_ha.c        profile "ha": Home Assistant discovery configs from each driver's manifest
+ *   mqtt_ha_device.c those configs as one per HA device (mqtt_discovery_mode = device), and the move
+ *                    from one mode to the other
  *   mqtt_health.c    profile "health": each machine's and the host's health (_health) and events (_event)
  *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
  *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
@@ -58,6 +60,13 @@ struct mqtt_spb_metric {
 	unsigned datatype;
 };
 
+/* ha: retained discovery configs of the other mode (mqtt_ha_device.c)
+ * found for one HA device, to be cleared once its configs are out again. */
+struct mqtt_ha_left {
+	char **topics;
+	int n;
+};
+
 /* A machine as one connection's profiles know it (by its primary board's
  * name): each connection has a table of its own, so what one connection
  * said (up, down, which values) is independent of the other's outages. */
@@ -74,6 +83,8 @@ struct mqtt_device {
 	/* ha: the kind of each variable, then each param, in those configs ('n', 'b', 's'; '?' where neither
 	 * the declaration nor a value said it yet, configured as a string until a value says otherwise). */
 	char kinds[MQTT_VALUES + 1];
+	int ha_watched;              /* ha: its configs of the other mode looked for on this connection */
+	struct mqtt_ha_left ha_left; /* ha: ... and those found, to clear */
 	/* sparkplug: DBIRTH sent in this Sparkplug session, and the datatype of each variable and param in it
 	 * (a value of another type brings a new DBIRTH). */
 	int spb_born;
@@ -95,6 +106,7 @@ struct mqtt_message {
 	char payload[MQTT_PAYLOAD_MAX + 1]; /* NUL after len bytes; binary payloads (Sparkplug) use len */
 	int len;                            /* -1: longer than MQTT_PAYLOAD_MAX (payload holds its start) */
 	int conn;                           /* the connection it came on (MQTT_CONN_*) */
+	int retained;                       /* the broker's retained message (only discovery configs and STATE) */
 };
 
 /* The connections: the main one (profiles vmac and ha; its will PREFIX/HOST/status offline), and
@@ -209,6 +221,7 @@ struct vmac_mqtt {
 	struct mqtt_spb spb;
 	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
 	uint64_t audit_after;   /* audit (mqtt_audit.c): the events of the log up to this seq were looked at */
+	struct mqtt_ha_left ha_host_left; /* ha: the host's own configs of the other mode, to clear */
 };
 
 /* The process's client counted (mqtt_stats.c: vmac_mqtt_stats reads it);
@@ -321,6 +334,30 @@ void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char 
  * {config topic: config payload object} from its manifest and status. */
 json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
                         json_t *manifest, const struct vmac_device_status *st);
+
+/* mqtt_ha_device.c: Home Assistant's two discovery modes. Publish the
+ * configs of one HA device ({config topic: config}, as mqtt_ha_configs
+ * makes them, o is taken): per entity (an empty retained payload first on
+ * each topic of before[] that configs lack), or with mqtt_discovery_mode =
+ * device as one config on DISCOVERY/device/NODE/config, the entities of
+ * before[] it lacks sent once with their platform alone (HA's removal of a
+ * component) before it. */
+void mqtt_ha_publish(struct vmac_mqtt *m, json_t *o, char *const *before, int nbefore);
+/* Look, on the main connection, for the retained configs of HA device node
+ * in the other mode (left by a vmacd that ran in it). */
+void mqtt_ha_watch(struct vmac_mqtt *m, const char *node);
+/* Whether a retained message on topic may be handed to the profiles: a
+ * discovery config (a leftover of the other mode). Network thread. */
+int mqtt_ha_takes_retained(const struct vmac_mqtt *m, const char *topic);
+/* A message on a discovery config topic: a retained leftover of the other
+ * mode for node (the host's, or one of the machines') is told to HA to
+ * migrate (its documented {"migrate_discovery": true}) and kept in *left.
+ * 1 when msg was a config topic of node, else 0. */
+int mqtt_ha_leftover(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *node, struct mqtt_ha_left *left);
+/* After the configs of left's HA device went out again: its leftovers
+ * cleared (an empty retained payload each), left emptied. */
+void mqtt_ha_left_clear(struct vmac_mqtt *m, struct mqtt_ha_left *left, const char *device);
+void mqtt_ha_left_free(struct mqtt_ha_left *left);
 
 /* Disconnect c (after what is queued) and connect again, with the
  * reconnect's backoff from 1 s; said by the caller. Publisher thread. */

@@ -430,7 +430,7 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 		if (!slash || !(slash = strchr(slash + 1, '/')) || strchr(slash + 1, '/'))
 			return 0;
 	}
-	if (m->s.commands)
+	if (m->s.commands && !msg->retained) /* a retained command is an old one (a discovery prefix like this one) */
 		command(m, msg, msg->topic + n);
 	return 1;
 }
