@@ -85,6 +85,7 @@ static const struct key keys[] = {
     {S(mqtt_keyfile)},
     {S(mqtt_prefix)},
     {S(mqtt_discovery_prefix)},
+    {S(mqtt_discovery_mode)},
     {B(mqtt_commands)},
     {B(mqtt_sparkplug)},
     {S(mqtt_sparkplug_group)},
@@ -136,6 +137,7 @@ void vmac_config_defaults(struct vmac_config *c)
 	snprintf(c->bus_trust, sizeof(c->bus_trust), "enrolled");
 	snprintf(c->mqtt_prefix, sizeof(c->mqtt_prefix), "vmac");
 	snprintf(c->mqtt_discovery_prefix, sizeof(c->mqtt_discovery_prefix), "homeassistant");
+	snprintf(c->mqtt_discovery_mode, sizeof(c->mqtt_discovery_mode), "component");
 	snprintf(c->mqtt_sparkplug_group, sizeof(c->mqtt_sparkplug_group), "vmac");
 	c->mqtt_keepalive_s = 30;
 }

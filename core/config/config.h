@@ -72,6 +72,7 @@ struct vmac_config {
 	char mqtt_keyfile[VMAC_PATH_MAX];
 	char mqtt_prefix[128];                /* topics: PREFIX/HOST/DEVICE/... */
 	char mqtt_discovery_prefix[128];      /* Home Assistant's discovery prefix */
+	char mqtt_discovery_mode[16];         /* "component" (one config per entity) or "device" (one per machine) */
 	int mqtt_commands;                    /* accept operator input from the command topics */
 	int mqtt_sparkplug;                   /* also speak Sparkplug B (an Edge Node; docs/MQTT.md) */
 	char mqtt_sparkplug_group[128];       /* its group id: spBv1.0/GROUP/... */

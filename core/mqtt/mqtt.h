@@ -31,6 +31,7 @@ struct vmac_mqtt_settings {
 	char cafile[VMAC_PATH_MAX], certfile[VMAC_PATH_MAX], keyfile[VMAC_PATH_MAX];
 	char prefix[VMAC_MQTT_TOPIC_MAX];
 	char discovery_prefix[VMAC_MQTT_TOPIC_MAX];
+	int ha_device; /* mqtt_discovery_mode = device: Home Assistant's device-based discovery */
 	int commands;  /* subscribe to the command topics */
 	int sparkplug; /* also a Sparkplug B Edge Node, on a connection of its own */
 	char sparkplug_group[VMAC_MQTT_TOPIC_MAX];

@@ -213,8 +213,12 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 		return; /* the site view's, applied here (mqtt_site.c) */
 	if (!msg->topic || strlen(msg->topic) >= sizeof(q->topic))
 		return;
-	if (msg->retain && !(c->index == MQTT_CONN_SPARKPLUG && strncmp(msg->topic, "spBv1.0/STATE/", 14) == 0))
-		return; /* a retained command is an old one: never acted on (a host application's STATE is news) */
+	if (c->index == MQTT_CONN_SPARKPLUG && mqtt_spb_ids_foreign(m, msg->topic))
+		return; /* another node's birth: nothing to check (mqtt_spb_ids.c) */
+	if (msg->retain && !(c->index == MQTT_CONN_SPARKPLUG && strncmp(msg->topic, "spBv1.0/STATE/", 14) == 0) &&
+	    !(c->index == MQTT_CONN_MAIN && mqtt_ha_takes_retained(m, msg->topic)))
+		return; /* a retained command is an old one: never acted on (a host application's STATE is news, and
+		           so is a discovery config left by another mode: mqtt_ha_device.c) */
 	pthread_mutex_lock(&m->lock);
 	if (m->nqueue == MQTT_QUEUE) {
 		m->dropped++;
@@ -223,6 +227,7 @@ static void on_message(struct mosquitto *mosq, void *obj, const struct mosquitto
 		q = &m->queue[m->nqueue++];
 		snprintf(q->topic, sizeof(q->topic), "%s", msg->topic);
 		q->conn = c->index;
+		q->retained = msg->retain;
 		q->len = msg->payloadlen > MQTT_PAYLOAD_MAX ? -1 : msg->payloadlen;
 		if (msg->payloadlen > 0) /* an empty payload may come as NULL */
 			memcpy(q->payload, msg->payload, q->len < 0 ? MQTT_PAYLOAD_MAX : (size_t)q->len);

@@ -8,7 +8,8 @@
  * that changed go out, the newest only (a value that changed five times
  * while the broker was away is published once, as it is now). A variable
  * declared with update = "timer:N" goes out at most every N s; a number
- * declared with a precision goes out when it changes at that precision. */
+ * declared with a precision goes out when it has moved a whole step of that
+ * precision from what was published (mqtt_value_moved). */
 #include "mqtt_internal.h"
 
 #include <stdio.h>
@@ -106,9 +107,9 @@ static void publish_values(struct vmac_mqtt *m, struct mqtt_device *d, const str
 		if (shown.type != VMAC_VALUE_NONE && ((v->kind == 'n' && shown.type != VMAC_VALUE_NUMBER) ||
 		                                      (v->kind == 'b' && shown.type != VMAC_VALUE_BOOL)))
 			shown.type = VMAC_VALUE_NONE; /* not what its entity reads: unknown, not an error in HA's log */
-		mqtt_value_text_at(&shown, v->precision, text, sizeof(text)); /* a change that shows */
-		if (!force && v->sent && strcmp(v->text, text) == 0)
-			continue;
+		mqtt_value_text_at(&shown, v->precision, text, sizeof(text));
+		if (!force && v->sent && !mqtt_value_moved(&shown, v->precision, text, v->text))
+			continue; /* no change, or one under a step of its precision */
 		snprintf(v->text, sizeof(v->text), "%s", text);
 		v->sent = 1;
 		changed[n++] = v;
@@ -249,9 +250,11 @@ void mqtt_devices_free(struct vmac_mqtt *m)
 				free(d->configs[k]);
 			free(d->configs);
 			free(d->spb_metrics);
+			mqtt_ha_left_free(&d->ha_left);
 		}
 		free(conn->devices);
 		conn->devices = NULL;
 		conn->ndevices = conn->cap = 0;
 	}
+	mqtt_ha_left_free(&m->ha_host_left);
 }

@@ -15,7 +15,9 @@
  * driver's hints (core/driver/hints.c) are checked against it at load, and
  * a class is put only on the platform that takes it. Beside the values,
  * every machine has diagnostic sensors of its health and an event entity
- * (mqtt_health.c publishes both), and so does the host. */
+ * (mqtt_health.c publishes both), and so does the host. mqtt_ha_device.c
+ * publishes them per entity or, with mqtt_discovery_mode = device, one per
+ * HA device, and migrates what the other mode left on the broker. */
 #include "mqtt_internal.h"
 
 #include <ctype.h>
@@ -394,14 +396,20 @@ json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, 
 	return h.out;
 }
 
-/* A config out, retained (o is taken). */
-static void publish_config(struct vmac_mqtt *m, const char *topic, json_t *o)
+/* A config into the host's configs (o is taken). */
+static void publish_config(json_t *configs, const char *topic, json_t *o)
 {
-	char *body = o ? json_dumps(o, JSON_COMPACT) : NULL;
-	if (body)
-		mqtt_publish(m, topic, body, -1, 1, 1);
-	free(body);
-	json_decref(o);
+	if (o)
+		json_object_set_new(configs, topic, o);
+}
+
+/* The node of a machine's configs: HOST_DEVICE (ha_id of each). */
+static void node_of(const struct vmac_mqtt *m, const char *device, char *out, size_t outlen)
+{
+	char host_id[80], dev[80];
+	ha_id(host_id, sizeof(host_id), m->s.host_id);
+	ha_id(dev, sizeof(dev), device);
+	snprintf(out, outlen, "%s_%s", host_id, dev);
 }
 
 /* The host itself: a device with its connection, its health
@@ -420,7 +428,7 @@ static void publish_host(struct vmac_mqtt *m)
 	    {"lateness_max_ms", "Lateness (most)", "ms", "duration", "measurement", 0},
 	};
 	char host_id[80], topic[512], uid[160], state[300], name[100], via[100], host_status[300];
-	json_t *o, *device;
+	json_t *o, *device, *configs = json_object();
 	size_t i;
 	ha_id(host_id, sizeof(host_id), m->s.host_id);
 	snprintf(uid, sizeof(uid), "vmac_%s_status", host_id);
@@ -435,7 +443,7 @@ static void publish_host(struct vmac_mqtt *m)
 	              "state_topic", state, "payload_on", "online", "payload_off", "offline", "device_class",
 	              "connectivity", "entity_category", "diagnostic", "device", device, "origin", origin());
 	snprintf(topic, sizeof(topic), "%s/binary_sensor/%s/status/config", m->s.discovery_prefix, host_id);
-	publish_config(m, topic, o);
+	publish_config(configs, topic, o);
 	snprintf(state, sizeof(state), "%s/%s/_health", m->s.prefix, m->s.host_id);
 	snprintf(host_status, sizeof(host_status), "%s/%s/status", m->s.prefix, m->s.host_id);
 	o = json_pack("{s:[{s:s}], s:O, s:o}", "availability", "topic", host_status, "device", device, "origin",
@@ -444,7 +452,7 @@ static void publish_host(struct vmac_mqtt *m)
 		snprintf(uid, sizeof(uid), "vmac_%s__health_%s", host_id, fields[i].field);
 		snprintf(topic, sizeof(topic), "%s/sensor/%s/_health_%s/config", m->s.discovery_prefix, host_id,
 		         fields[i].field);
-		publish_config(m, topic,
+		publish_config(configs, topic,
 		               health_sensor(o, uid, fields[i].label, state, fields[i].field, fields[i].unit,
 		                             fields[i].dc, fields[i].state_class, fields[i].enabled));
 	}
@@ -454,12 +462,13 @@ static void publish_host(struct vmac_mqtt *m)
 	snprintf(uid, sizeof(uid), "vmac_%s_audit", host_id);
 	snprintf(state, sizeof(state), "%s/%s/audit", m->s.prefix, m->s.host_id);
 	snprintf(topic, sizeof(topic), "%s/event/%s/audit/config", m->s.discovery_prefix, host_id);
-	publish_config(m, topic,
+	publish_config(configs, topic,
 	               json_pack("{s:s, s:s, s:s, s:o, s:s, s:[{s:s}], s:O, s:o}", "name", "Audit", "unique_id", uid,
 	                         "state_topic", state, "event_types", mqtt_audit_event_types(), "entity_category",
 	                         "diagnostic", "availability", "topic", host_status, "device", device, "origin",
 	                         origin()));
 	json_decref(device);
+	mqtt_ha_publish(m, configs, NULL, 0);
 }
 
 static void free_configs(struct mqtt_device *d)
@@ -477,29 +486,28 @@ static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct v
 	json_t *configs = mqtt_ha_configs(&m->s, d->name, d->driver, d->version, d->manifest, st), *c;
 	const char *topic;
 	char **kept;
-	int i, n = 0;
+	int n = 0;
 	if (!configs)
 		return;
 	kinds_of(d->manifest, st, d->kinds, sizeof(d->kinds));
-	/* Entities of the version before (or of a kind guessed before) that these
-	 * configs do not have: removed. */
-	for (i = 0; i < d->nconfigs; i++)
-		if (!json_object_get(configs, d->configs[i]))
-			mqtt_publish(m, d->configs[i], "", 0, 1, 1);
-	free_configs(d);
 	kept = calloc(json_object_size(configs) + 1, sizeof(*kept));
 	json_object_foreach(configs, topic, c)
 	{
-		char *body = json_dumps(c, JSON_COMPACT);
-		if (body)
-			mqtt_publish(m, topic, body, -1, 1, 1);
-		free(body);
 		if (kept && (kept[n] = strdup(topic)) != NULL)
 			n++;
 	}
+	/* Entities of the version before (or of a kind guessed before) that these
+	 * configs do not have: removed. */
+	mqtt_ha_publish(m, configs, d->configs, d->nconfigs);
+	free_configs(d);
 	d->configs = kept;
 	d->nconfigs = kept ? n : 0;
-	json_decref(configs);
+	if (!d->ha_watched) { /* configs of the other mode left on the broker: migrated (mqtt_ha_device.c) */
+		char node[200];
+		node_of(m, d->name, node, sizeof(node));
+		mqtt_ha_watch(m, node);
+		d->ha_watched = 1;
+	}
 }
 
 /* An entity configured before its kind was known ('?') whose value now says
@@ -522,10 +530,54 @@ static void values(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac
 
 static void connected(struct vmac_mqtt *m)
 {
-	char topic[300];
+	struct mqtt_conn *c = &m->conns[MQTT_CONN_MAIN];
+	char topic[300], host_id[80];
+	int i;
 	snprintf(topic, sizeof(topic), "%s/status", m->s.discovery_prefix);
 	mqtt_subscribe(m, topic, 1);
 	publish_host(m);
+	ha_id(host_id, sizeof(host_id), m->s.host_id);
+	mqtt_ha_watch(m, host_id);
+	for (i = 0; i < c->ndevices; i++) /* a new session: subscriptions again as they come up */
+		c->devices[i].ha_watched = 0;
+}
+
+/* A discovery config of the other mode for the host or one of its
+ * machines (mqtt_ha_device.c): 1 when msg was one of theirs. */
+static int leftover(struct vmac_mqtt *m, const struct mqtt_message *msg)
+{
+	struct mqtt_conn *c = &m->conns[MQTT_CONN_MAIN];
+	char node[200];
+	int i;
+	if (!mqtt_ha_takes_retained(m, msg->topic))
+		return 0;
+	ha_id(node, sizeof(node), m->s.host_id);
+	if (mqtt_ha_leftover(m, msg, node, &m->ha_host_left))
+		return 1;
+	for (i = 0; i < c->ndevices; i++) {
+		node_of(m, c->devices[i].name, node, sizeof(node));
+		if (mqtt_ha_leftover(m, msg, node, &c->devices[i].ha_left))
+			return 1;
+	}
+	return 0;
+}
+
+/* Leftovers of the other mode found since the last read: the configs again
+ * in this mode, then the leftovers cleared. */
+static void tick(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
+{
+	if (!d->ha_left.n)
+		return;
+	device_up(m, d, st);
+	mqtt_ha_left_clear(m, &d->ha_left, d->name);
+}
+
+static void poll(struct vmac_mqtt *m)
+{
+	if (!m->ha_host_left.n)
+		return;
+	publish_host(m);
+	mqtt_ha_left_clear(m, &m->ha_host_left, "");
 }
 
 /* HA (re)started: it has forgotten what it was told; tell it again. */
@@ -534,8 +586,10 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 	char topic[300];
 	int i;
 	snprintf(topic, sizeof(topic), "%s/status", m->s.discovery_prefix);
-	if (strcmp(msg->topic, topic) != 0)
+	if (msg->conn != MQTT_CONN_MAIN)
 		return 0;
+	if (strcmp(msg->topic, topic) != 0)
+		return leftover(m, msg);
 	if (msg->len == 6 && memcmp(msg->payload, "online", 6) == 0) {
 		mqtt_event(m, "", "Home Assistant is online: discovery configs published again");
 		publish_host(m);
@@ -554,5 +608,7 @@ const struct mqtt_profile mqtt_ha_profile = {
     .connected = connected,
     .device_up = device_up,
     .values = values,
+    .tick = tick,
+    .poll = poll,
     .message = message,
 };

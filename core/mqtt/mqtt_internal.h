@@ -7,10 +7,14 @@
  *   mqtt_native.c    profile "vmac": the host's and devices' availability, state topics, the command
  *                    topics into the bus's request slots, errors published back
  *   mqtt_ha.c        profile "ha": Home Assistant discovery configs from each driver's manifest
+ *   mqtt_ha_device.c those configs as one per HA device (mqtt_discovery_mode = device), and the move
+ *                    from one mode to the other
  *   mqtt_health.c    profile "health": each machine's and the host's health (_health) and events (_event)
  *   mqtt_sparkplug.c profile "sparkplug": Sparkplug B 3.0 (vmacd an Edge Node, each machine a Device), on a
  *                    connection of its own (its will is the NDEATH), payloads in sparkplug_b.proto
- *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what the two share)
+ *   mqtt_spb_dcmd.c  its DCMDs into the bus's request slots (mqtt_spb.h is what these share)
+ *   mqtt_spb_ids.c   its ids checked against the group's: another node with this descriptor, ids that
+ *                    differ only in case
  *   mqtt_site.c      profile "site": every host's native topics into the site view (site.h) that GET
  *                    /api/site serves, on the network thread
  *   mqtt_audit.c     commands audited (core/host/audit.h), and profile "audit": the host's audit events
@@ -39,6 +43,7 @@
 #define MQTT_HEALTH_HEARTBEAT_S 60 /* _health goes out at least this often (mqtt_health.c) */
 #define MQTT_HEALTH_EXPIRE_S 150   /* HA's expire_after of the health sensors (mqtt_ha.c) */
 #define MQTT_PAYLOAD_NONE "None"   /* no value (nil, NaN, inf): Home Assistant's PAYLOAD_NONE */
+#define MQTT_SPB_SENT_BIRTHS 4     /* NBIRTHs remembered to know this node's own when they come back */
 
 /* A value as published: its text at its precision. */
 struct mqtt_value {
@@ -53,6 +58,13 @@ struct mqtt_value {
 struct mqtt_spb_metric {
 	char name[VMAC_DRIVER_NAME_MAX + 1];
 	unsigned datatype;
+};
+
+/* ha: retained discovery configs of the other mode (mqtt_ha_device.c)
+ * found for one HA device, to be cleared once its configs are out again. */
+struct mqtt_ha_left {
+	char **topics;
+	int n;
 };
 
 /* A machine as one connection's profiles know it (by its primary board's
@@ -71,6 +83,8 @@ struct mqtt_device {
 	/* ha: the kind of each variable, then each param, in those configs ('n', 'b', 's'; '?' where neither
 	 * the declaration nor a value said it yet, configured as a string until a value says otherwise). */
 	char kinds[MQTT_VALUES + 1];
+	int ha_watched;              /* ha: its configs of the other mode looked for on this connection */
+	struct mqtt_ha_left ha_left; /* ha: ... and those found, to clear */
 	/* sparkplug: DBIRTH sent in this Sparkplug session, and the datatype of each variable and param in it
 	 * (a value of another type brings a new DBIRTH). */
 	int spb_born;
@@ -92,6 +106,7 @@ struct mqtt_message {
 	char payload[MQTT_PAYLOAD_MAX + 1]; /* NUL after len bytes; binary payloads (Sparkplug) use len */
 	int len;                            /* -1: longer than MQTT_PAYLOAD_MAX (payload holds its start) */
 	int conn;                           /* the connection it came on (MQTT_CONN_*) */
+	int retained;                       /* the broker's retained message (only discovery configs and STATE) */
 };
 
 /* The connections: the main one (profiles vmac and ha; its will PREFIX/HOST/status offline), and
@@ -177,6 +192,11 @@ struct mqtt_spb {
 	 * timestamp; an older one than what was seen is ignored. */
 	int host_online;
 	int64_t host_ts;
+	/* The last NBIRTHs sent (mqtt_spb_ids.c): their payload timestamps and
+	 * bdSeqs, to tell this node's own from another's with its descriptor. */
+	uint64_t sent_ts[MQTT_SPB_SENT_BIRTHS];
+	int sent_bdseq[MQTT_SPB_SENT_BIRTHS];
+	unsigned nsent;
 };
 
 struct vmac_mqtt {
@@ -201,6 +221,7 @@ struct vmac_mqtt {
 	struct mqtt_spb spb;
 	struct vmac_site *site; /* the site view (vmacd's; NULL: none), fed on the network thread */
 	uint64_t audit_after;   /* audit (mqtt_audit.c): the events of the log up to this seq were looked at */
+	struct mqtt_ha_left ha_host_left; /* ha: the host's own configs of the other mode, to clear */
 };
 
 /* The process's client counted (mqtt_stats.c: vmac_mqtt_stats reads it);
@@ -251,6 +272,25 @@ const struct vmac_value *mqtt_status_value(const struct vmac_device_status *st, 
 struct mqtt_device *mqtt_conn_device_find(struct mqtt_conn *c, const char *name);
 struct mqtt_device *mqtt_device_find(struct vmac_mqtt *m, const char *name);
 
+/* mqtt_spb_ids.c: Sparkplug ids that clash. An NBIRTH of another Edge
+ * Node of the group whose id is not this node's in any case is dropped on
+ * the network thread before it takes a place in the queue that commands
+ * use: 1 for such a topic. Any thread. */
+int mqtt_spb_ids_foreign(const struct vmac_mqtt *m, const char *topic);
+/* An NBIRTH this node published (its payload timestamp and bdSeq), so that
+ * its own, back from the broker, does not read as a twin's. */
+void mqtt_spb_ids_nbirth_sent(struct vmac_mqtt *m, uint64_t timestamp, int bdseq);
+/* The edge id of a topic spBv1.0/GROUP/NBIRTH/EDGE of this node's group,
+ * else NULL. */
+const char *mqtt_spb_ids_nbirth_edge(const struct vmac_mqtt *m, const char *topic);
+/* An NBIRTH of the group seen (timestamp and bdSeq from its payload; 0 and
+ * -1 when it had none or was not one): another node with this node's
+ * descriptor, or this node's edge id in another case, said in the events. */
+void mqtt_spb_ids_nbirth(struct vmac_mqtt *m, const char *edge, uint64_t timestamp, int64_t bdseq);
+/* d up on Sparkplug's connection: a machine up whose name differs from d's
+ * only in case is said. */
+void mqtt_spb_ids_device_up(struct vmac_mqtt *m, const struct mqtt_device *d);
+
 /* mqtt_site.c: a message on the main connection, on libmosquitto's network
  * thread: 1 when it was one of the site view's topics (applied or counted
  * as malformed), 0 when it is for the queue. */
@@ -262,6 +302,15 @@ void mqtt_value_text(const struct vmac_value *v, char *out, size_t outlen);
 /* The same with a number rounded to precision decimals (0..6; -1: as it is),
  * -0 written 0: a value is published when this text changes. */
 void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, size_t outlen);
+/* The precision throttle with its hysteresis: whether a value whose text
+ * at its precision is text goes out, sent being the text published last.
+ * A number with a precision (0..6) goes out when it is a whole step
+ * (10^-precision) or more from the number sent, not when it merely rounds
+ * to a neighbour: noise at a rounding boundary does not flip it back and
+ * forth, and the number shown is always less than a step from the value
+ * now. Anything else (no precision, None, another kind) when its text
+ * changes. */
+int mqtt_value_moved(const struct vmac_value *v, int precision, const char *text, const char *sent);
 /* The precision a declaration gives its numbers: "precision" 0..6, not for
  * a choice of values (its state is the option's text); else -1. */
 int mqtt_declared_precision(json_t *decl);
@@ -285,6 +334,30 @@ void mqtt_topic(const struct vmac_mqtt *m, char *out, size_t outlen, const char 
  * {config topic: config payload object} from its manifest and status. */
 json_t *mqtt_ha_configs(const struct vmac_mqtt_settings *s, const char *device, const char *driver, const char *version,
                         json_t *manifest, const struct vmac_device_status *st);
+
+/* mqtt_ha_device.c: Home Assistant's two discovery modes. Publish the
+ * configs of one HA device ({config topic: config}, as mqtt_ha_configs
+ * makes them, o is taken): per entity (an empty retained payload first on
+ * each topic of before[] that configs lack), or with mqtt_discovery_mode =
+ * device as one config on DISCOVERY/device/NODE/config, the entities of
+ * before[] it lacks sent once with their platform alone (HA's removal of a
+ * component) before it. */
+void mqtt_ha_publish(struct vmac_mqtt *m, json_t *o, char *const *before, int nbefore);
+/* Look, on the main connection, for the retained configs of HA device node
+ * in the other mode (left by a vmacd that ran in it). */
+void mqtt_ha_watch(struct vmac_mqtt *m, const char *node);
+/* Whether a retained message on topic may be handed to the profiles: a
+ * discovery config (a leftover of the other mode). Network thread. */
+int mqtt_ha_takes_retained(const struct vmac_mqtt *m, const char *topic);
+/* A message on a discovery config topic: a retained leftover of the other
+ * mode for node (the host's, or one of the machines') is told to HA to
+ * migrate (its documented {"migrate_discovery": true}) and kept in *left.
+ * 1 when msg was a config topic of node, else 0. */
+int mqtt_ha_leftover(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *node, struct mqtt_ha_left *left);
+/* After the configs of left's HA device went out again: its leftovers
+ * cleared (an empty retained payload each), left emptied. */
+void mqtt_ha_left_clear(struct vmac_mqtt *m, struct mqtt_ha_left *left, const char *device);
+void mqtt_ha_left_free(struct mqtt_ha_left *left);
 
 /* Disconnect c (after what is queued) and connect again, with the
  * reconnect's backoff from 1 s; said by the caller. Publisher thread. */

@@ -64,6 +64,25 @@ void mqtt_value_text_at(const struct vmac_value *v, int precision, char *out, si
 		snprintf(out, outlen, "%.*f", precision, 0.0);
 }
 
+/* A whole step less this share of one still counts as one: the texts read
+ * back are binary approximations (37.5 - 37.4 is 0.1000000000000014, and
+ * another pair of texts gives 0.0999999999999996). */
+#define STEP_TOLERANCE 1e-9
+
+int mqtt_value_moved(const struct vmac_value *v, int precision, const char *text, const char *sent)
+{
+	double shown;
+	char *end;
+	if (strcmp(text, sent) == 0)
+		return 0;
+	if (precision < 0 || precision > 6 || v->type != VMAC_VALUE_NUMBER || !isfinite(v->number))
+		return 1;
+	shown = strtod(sent, &end);
+	if (end == sent || *end || !isfinite(shown))
+		return 1; /* None, or not a number before: a change of kind */
+	return fabs(v->number - shown) >= pow(10.0, -precision) * (1.0 - STEP_TOLERANCE);
+}
+
 int mqtt_declared_precision(json_t *decl)
 {
 	json_t *p = json_object_get(decl, "precision");
@@ -411,7 +430,7 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 		if (!slash || !(slash = strchr(slash + 1, '/')) || strchr(slash + 1, '/'))
 			return 0;
 	}
-	if (m->s.commands)
+	if (m->s.commands && !msg->retained) /* a retained command is an old one (a discovery prefix like this one) */
 		command(m, msg, msg->topic + n);
 	return 1;
 }

@@ -155,6 +155,53 @@ static int ui_url(const struct vmac_config *cfg, const char *hostname, struct vm
 	return 0;
 }
 
+/* mqtt_discovery_mode: Home Assistant's single component discovery (one
+ * config per entity, the default) or its device-based discovery (one per
+ * machine, HA 2024.11 and later). */
+static int discovery_mode(const struct vmac_config *cfg, struct vmac_mqtt_settings *s, char *err, size_t errlen)
+{
+	if (strcmp(cfg->mqtt_discovery_mode, "device") != 0 && strcmp(cfg->mqtt_discovery_mode, "component") != 0) {
+		snprintf(err, errlen, "mqtt_discovery_mode '%s': expected component or device",
+		         cfg->mqtt_discovery_mode);
+		return -EINVAL;
+	}
+	s->ha_device = strcmp(cfg->mqtt_discovery_mode, "device") == 0;
+	return 0;
+}
+
+/* mqtt_sparkplug_group and mqtt_sparkplug_primary_host: one topic level each. */
+static int sparkplug_ids(const struct vmac_config *cfg, struct vmac_mqtt_settings *s, char *err, size_t errlen)
+{
+	size_t i;
+	/* A Sparkplug group id is one topic level; '.' allowed (names such as plant.hall2). */
+	for (i = 0; cfg->mqtt_sparkplug_group[i]; i++)
+		if (!isalnum((unsigned char)cfg->mqtt_sparkplug_group[i]) &&
+		    !strchr("_-.", cfg->mqtt_sparkplug_group[i]))
+			break;
+	if (!cfg->mqtt_sparkplug_group[0] || cfg->mqtt_sparkplug_group[i] ||
+	    strlen(cfg->mqtt_sparkplug_group) >= sizeof(s->sparkplug_group)) {
+		snprintf(err, errlen, "mqtt_sparkplug_group '%s': expected letters, digits, '_', '-' and '.' only",
+		         cfg->mqtt_sparkplug_group);
+		return -EINVAL;
+	}
+	snprintf(s->sparkplug_group, sizeof(s->sparkplug_group), "%s", cfg->mqtt_sparkplug_group);
+	/* The Primary Host Application's id: one topic level of spBv1.0/STATE/ID. */
+	for (i = 0; cfg->mqtt_sparkplug_primary_host[i]; i++)
+		if (!isalnum((unsigned char)cfg->mqtt_sparkplug_primary_host[i]) &&
+		    !strchr("_-.", cfg->mqtt_sparkplug_primary_host[i]))
+			break;
+	if (cfg->mqtt_sparkplug_primary_host[i] ||
+	    strlen(cfg->mqtt_sparkplug_primary_host) >= sizeof(s->sparkplug_primary_host)) {
+		snprintf(err, errlen,
+		         "mqtt_sparkplug_primary_host '%s': expected a host application id of letters, digits, '_', "
+		         "'-' and '.' (at most 63)",
+		         cfg->mqtt_sparkplug_primary_host);
+		return -EINVAL;
+	}
+	snprintf(s->sparkplug_primary_host, sizeof(s->sparkplug_primary_host), "%s", cfg->mqtt_sparkplug_primary_host);
+	return 0;
+}
+
 int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_settings *out, char *err, size_t errlen)
 {
 	struct vmac_mqtt_settings *s = out;
@@ -235,32 +282,8 @@ int vmac_mqtt_settings_parse(const struct vmac_config *cfg, struct vmac_mqtt_set
 	}
 	snprintf(s->prefix, sizeof(s->prefix), "%s", cfg->mqtt_prefix);
 	snprintf(s->discovery_prefix, sizeof(s->discovery_prefix), "%s", cfg->mqtt_discovery_prefix);
-	/* A Sparkplug group id is one topic level; '.' allowed (names such as plant.hall2). */
-	for (i = 0; cfg->mqtt_sparkplug_group[i]; i++)
-		if (!isalnum((unsigned char)cfg->mqtt_sparkplug_group[i]) &&
-		    !strchr("_-.", cfg->mqtt_sparkplug_group[i]))
-			break;
-	if (!cfg->mqtt_sparkplug_group[0] || cfg->mqtt_sparkplug_group[i] ||
-	    strlen(cfg->mqtt_sparkplug_group) >= sizeof(s->sparkplug_group)) {
-		snprintf(err, errlen, "mqtt_sparkplug_group '%s': expected letters, digits, '_', '-' and '.' only",
-		         cfg->mqtt_sparkplug_group);
-		return -EINVAL;
-	}
-	snprintf(s->sparkplug_group, sizeof(s->sparkplug_group), "%s", cfg->mqtt_sparkplug_group);
-	/* The Primary Host Application's id: one topic level of spBv1.0/STATE/ID. */
-	for (i = 0; cfg->mqtt_sparkplug_primary_host[i]; i++)
-		if (!isalnum((unsigned char)cfg->mqtt_sparkplug_primary_host[i]) &&
-		    !strchr("_-.", cfg->mqtt_sparkplug_primary_host[i]))
-			break;
-	if (cfg->mqtt_sparkplug_primary_host[i] ||
-	    strlen(cfg->mqtt_sparkplug_primary_host) >= sizeof(s->sparkplug_primary_host)) {
-		snprintf(err, errlen,
-		         "mqtt_sparkplug_primary_host '%s': expected a host application id of letters, digits, '_', "
-		         "'-' and '.' (at most 63)",
-		         cfg->mqtt_sparkplug_primary_host);
-		return -EINVAL;
-	}
-	snprintf(s->sparkplug_primary_host, sizeof(s->sparkplug_primary_host), "%s", cfg->mqtt_sparkplug_primary_host);
+	if ((rc = discovery_mode(cfg, s, err, errlen)) != 0 || (rc = sparkplug_ids(cfg, s, err, errlen)) != 0)
+		return rc;
 	s->sparkplug = cfg->mqtt_sparkplug;
 	s->commands = cfg->mqtt_commands;
 	s->keepalive_s = cfg->mqtt_keepalive_s;

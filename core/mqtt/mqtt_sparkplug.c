@@ -385,6 +385,7 @@ static void nbirth(struct vmac_mqtt *m)
 	mt->boolean_value = 0;
 	m->spb.seq = 0;
 	spb_topic(m, topic, sizeof(topic), "NBIRTH", NULL);
+	mqtt_spb_ids_nbirth_sent(m, o->ts, bdseq); /* before it can come back */
 	if (out_send(m, topic, o, 1) == 0)
 		m->spb.born = bdseq + 1;
 	free(o);
@@ -421,6 +422,8 @@ static void connected(struct vmac_mqtt *m)
 		c->devices[i].spb_born = 0; /* a new session */
 	spb_topic(m, topic, sizeof(topic), "NCMD", NULL);
 	mqtt_conn_subscribe(c, topic, 1);
+	snprintf(topic, sizeof(topic), "spBv1.0/%s/NBIRTH/+", m->s.sparkplug_group); /* ids that clash */
+	mqtt_conn_subscribe(c, topic, 0);
 	if (m->s.commands) {
 		spb_topic(m, topic, sizeof(topic), "DCMD", "+");
 		mqtt_conn_subscribe(c, topic, 1);
@@ -438,6 +441,7 @@ static void connected(struct vmac_mqtt *m)
  * without variables or params is born now. */
 static void device_up(struct vmac_mqtt *m, struct mqtt_device *d, const struct vmac_device_status *st)
 {
+	mqtt_spb_ids_device_up(m, d);
 	ddeath(m, d);
 	if (live(m) && json_object_size(json_object_get(d->manifest, "variables")) == 0 &&
 	    json_object_size(json_object_get(d->manifest, "params")) == 0)
@@ -603,9 +607,30 @@ static void host_state(struct vmac_mqtt *m, const struct mqtt_message *msg)
 	}
 }
 
+/* An NBIRTH of the group (this node's own edge id in some case: the
+ * others are dropped on the network thread), for mqtt_spb_ids.c: its
+ * payload timestamp and bdSeq. One that does not unpack (over 1024 bytes,
+ * not protobuf) is no NBIRTH of this node's. */
+static void nbirth_seen(struct vmac_mqtt *m, const struct mqtt_message *msg, const char *edge)
+{
+	const char *why;
+	Payload *p = mqtt_spb_unpack(msg, &why);
+	uint64_t ts = p && p->has_timestamp ? p->timestamp : 0;
+	int64_t bdseq = -1;
+	size_t i;
+	for (i = 0; p && i < p->n_metrics; i++)
+		if (p->metrics[i]->name && strcmp(p->metrics[i]->name, "bdSeq") == 0 &&
+		    p->metrics[i]->value_case == SPARKPLUG_B__PAYLOAD__METRIC__VALUE_LONG_VALUE)
+			bdseq = (int64_t)p->metrics[i]->long_value;
+	if (p)
+		sparkplug_b__payload__free_unpacked(p, NULL);
+	mqtt_spb_ids_nbirth(m, edge, ts, bdseq);
+}
+
 static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 {
 	char mine[300];
+	const char *edge;
 	size_t n;
 	if (msg->conn != MQTT_CONN_SPARKPLUG)
 		return 0;
@@ -619,6 +644,10 @@ static int message(struct vmac_mqtt *m, const struct mqtt_message *msg)
 	spb_topic(m, mine, sizeof(mine), "NCMD", NULL);
 	if (strcmp(msg->topic, mine) == 0) {
 		ncmd(m, msg);
+		return 1;
+	}
+	if ((edge = mqtt_spb_ids_nbirth_edge(m, msg->topic)) != NULL) {
+		nbirth_seen(m, msg, edge);
 		return 1;
 	}
 	spb_topic(m, mine, sizeof(mine), "DCMD", "");

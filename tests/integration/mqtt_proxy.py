@@ -3,11 +3,14 @@ CONNECT packet going through it, as the Sparkplug TCK's monitor reads them:
 the client id and the will (topic and payload), so a test can see each
 CONNECT's NDEATH will and its bdSeq, including those the broker refused.
 It can also cut the connections of one client id and keep closing its new
-ones (a main connection lost while the Sparkplug one stays). Everything
+ones (a main connection lost while the Sparkplug one stays), and it keeps
+when each connection began (its CONNECT) and ended (the client's side
+closed), so a test can see whether a client held two at once. Everything
 else is passed through untouched in both directions."""
 
 import socket
 import threading
+import time
 
 
 def _varint_len(data, i):
@@ -69,6 +72,7 @@ class MqttProxy:
         self.connects = []
         self.flags = []  # connect_flags() of each CONNECT, as connects
         self.publishes = []  # (client id, topic, QoS, retain, connection) of every PUBLISH a client sent
+        self.spans = []  # [monotonic time of the CONNECT, of the client's close or None], as connects
         self.blocked = set()
         self.live = []  # (client id, client socket, broker socket)
         self.port = 0
@@ -122,11 +126,13 @@ class MqttProxy:
         with self.cond:
             self.connects.append((cid, will_topic, will_payload))
             self.flags.append(connect_flags(packet))
+            self.spans.append([time.monotonic(), None])
             conn = len(self.connects) - 1  # this connection: the index of its CONNECT
             self.cond.notify_all()
             blocked = cid in self.blocked
         if blocked:
             client.close()
+            self._ended(conn)
             return
         upstream = socket.create_connection(("127.0.0.1", self.broker_port))
         upstream.sendall(packet)
@@ -163,11 +169,28 @@ class MqttProxy:
                                                    bool(packet[0] & 1), conn))
         except OSError:
             pass
+        if cid is not None:
+            self._ended(conn)
         for s in (src, dst):
             try:
                 s.shutdown(socket.SHUT_RDWR)
             except OSError:
                 pass
+
+    def _ended(self, conn):
+        with self.cond:
+            if self.spans[conn][1] is None:
+                self.spans[conn][1] = time.monotonic()
+            self.cond.notify_all()
+
+    def overlaps(self, suffix):
+        """Pairs of connections of client ids ending in suffix that were
+        open at the same time: (client id, CONNECT index) of each."""
+        with self.cond:
+            mine = [(self.spans[i][0], self.spans[i][1], (c[0], i)) for i, c in enumerate(self.connects)
+                    if c[0].endswith(suffix)]
+        mine.sort(key=lambda x: x[0])
+        return [(a[2], b[2]) for a, b in zip(mine, mine[1:]) if a[1] is None or a[1] > b[0]]
 
     def wait_connects(self, predicate, timeout_s, what):
         """Until predicate(connects) holds; the list."""

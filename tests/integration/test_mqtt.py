@@ -458,6 +458,7 @@ def test_mqtt_bad_settings_stop_the_host(t):
         ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_sparkplug_group": "plant+1"}, "mqtt_sparkplug_group"),
         ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_sparkplug_group": "pl\u00e4nt"}, "mqtt_sparkplug_group"),
         ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_host_id": "kitchen#2"}, "mqtt_host_id"),
+        ({"mqtt_url": "mqtt://127.0.0.1:1883", "mqtt_discovery_mode": "entity"}, "mqtt_discovery_mode"),
     ]
     for settings, want in cases:
         argv = [vmacd, "--http", "127.0.0.1:0", "--state", t.logdir, "--set", "realtime=false"]

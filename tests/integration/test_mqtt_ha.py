@@ -6,10 +6,15 @@ as the matrix names it (C1.., S1.., N1..) with the HA source it comes from.
 A config that breaks a rule fails with the config's topic and the rule.
 Beside them: the health topics the diagnostic sensors read, and the
 washer's event entity saying a programme started and that it was dropped.
+With mqtt_discovery_mode = device, the same checker reads each device
+config as HA's discovery.py does (rules D1..D5), and the move from one
+mode to the other follows HA's migration (migrate_discovery, the configs
+in the new mode, the old ones cleared) both ways.
 Real Mosquitto as in test_mqtt.py; SKIPPED without it or paho-mqtt."""
 
 import json
 import math
+import os
 import re
 import signal
 import time
@@ -234,6 +239,54 @@ def check_event(topic, cfg, value):
          "event/__init__.py: a doorbell without the ring event type is warned about")
 
 
+# Device-based discovery (mqtt_discovery_mode = device): homeassistant/
+# components/mqtt/discovery.py (TOPIC_MATCHER, the subscription to
+# DISCOVERY/device/+/config, _parse_device_payload, the loop that makes a
+# config of each component) and schemas.py (DEVICE_DISCOVERY_SCHEMA,
+# SHARED_OPTIONS, check_unique_id).
+DEVICE_TOPIC = re.compile(r"^%s/device/(?:([a-zA-Z0-9_-]+)/)?([a-zA-Z0-9_-]+)/config$" % DISCOVERY)
+AVAILABILITY = {"availability", "availability_mode", "availability_template", "availability_topic",
+                "payload_available", "payload_not_available"}  # MQTT_AVAILABILITY_SCHEMA
+DEVICE_ROOT = {"device", "components", "origin", "state_topic", "command_topic", "qos", "encoding",
+               "message_expiry_interval"} | AVAILABILITY
+SHARED = AVAILABILITY - {"availability_template"} | {"command_topic", "state_topic"}  # SHARED_OPTIONS
+SUPPORTED = {"alarm_control_panel", "binary_sensor", "button", "camera", "climate", "cover", "date", "datetime",
+             "device_automation", "device_tracker", "event", "fan", "humidifier", "image", "lawn_mower", "light",
+             "lock", "notify", "number", "scene", "select", "sensor", "siren", "switch", "tag", "text", "time",
+             "update", "vacuum", "valve", "water_heater"}  # const.py SUPPORTED_COMPONENTS
+
+
+def expand_device(topic, payload):
+    """A device config as discovery.py reads it (rules D1..D4): the config
+    HA makes of each component, with the single component topic that has
+    the same discovery id (DISCOVERY/PLATFORM/OBJECT/COMPONENT_ID/config)."""
+    m = DEVICE_TOPIC.match(topic)
+    rule(m is not None, topic, "D1", "discovery.py TOPIC_MATCHER: bad device config topic")
+    rule(isinstance(payload, dict) and set(payload) <= DEVICE_ROOT, topic, "D2",
+         "schemas.py DEVICE_DISCOVERY_SCHEMA: root keys %s are not allowed (the whole payload is refused)" %
+         sorted(set(payload) - DEVICE_ROOT))
+    rule(all(k in payload for k in ("device", "components", "origin")), topic, "D2",
+         "DEVICE_DISCOVERY_SCHEMA: device, components and origin are required")
+    comps = payload["components"]
+    rule(isinstance(comps, dict) and comps, topic, "D3", "components: a mapping of component ids")
+    out = []
+    for cid, comp in sorted(comps.items()):
+        rule(isinstance(comp, dict) and comp.get("platform") in SUPPORTED, topic, "D3",
+             "component %s: platform required, one of SUPPORTED_COMPONENTS (COMPONENT_CONFIG_SCHEMA)" % cid)
+        rule(re.match(r"^[a-zA-Z0-9_-]+$", cid) is not None, topic, "D3", "component id %r" % cid)
+        rest = {k: v for k, v in comp.items() if k != "platform"}
+        if not rest:
+            continue  # the platform alone: the component's removal
+        rule(isinstance(rest.get("unique_id"), str), topic, "D4",
+             "component %s: an entity component needs a unique_id (schemas.py check_unique_id)" % cid)
+        cfg = dict(rest, device=payload["device"], origin=payload["origin"])
+        for k in SHARED:  # _merge_common_device_options
+            if k in payload and k not in cfg:
+                cfg[k] = payload[k]
+        out.append(("%s/%s/%s/%s/config" % (DISCOVERY, comp["platform"], m.group(2), cid), cfg))
+    return out
+
+
 CHECKERS = {"sensor": check_sensor, "binary_sensor": check_binary_sensor, "switch": check_switch,
             "number": check_number, "select": check_select, "text": check_text, "button": check_button,
             "event": check_event}
@@ -250,9 +303,19 @@ def check_config(topic, cfg, value=None):
 
 
 def check_all(hub):
+    """Every config the hub holds (single component ones, and those HA makes
+    of each device config) by the rules; {topic: config} of them."""
     with hub.cond:
         latest = dict(hub.latest)
-    configs = {tp: json.loads(p) for tp, (p, _) in latest.items() if tp.startswith(DISCOVERY + "/") and p}
+    raw = {tp: json.loads(p) for tp, (p, _) in latest.items() if tp.startswith(DISCOVERY + "/") and p and
+           tp.endswith("/config")}
+    configs = {tp: c for tp, c in raw.items() if not DEVICE_TOPIC.match(tp)}
+    for tp, payload in sorted(raw.items()):
+        if DEVICE_TOPIC.match(tp):
+            for ctp, cfg in expand_device(tp, payload):
+                rule(ctp not in configs, tp, "D5", "%s is also discovered on %s: HA takes the first and warns of "
+                     "a conflicting discovery message (entity.py)" % (cfg.get("unique_id"), ctp))
+                configs[ctp] = cfg
     uids = [c.get("unique_id") for c in configs.values()]
     dup = {u for u in uids if uids.count(u) > 1}
     rule(not dup, "(all configs)", "C3", "unique_id used twice: %s" % sorted(dup))
@@ -301,6 +364,20 @@ def test_mqtt_ha_checker_names_the_config_and_the_rule(t):
         else:
             raise AssertionError("the checker passed a %s config breaking rule %s: %s" % (component, code, cfg))
     check_config(DISCOVERY + "/number/n/o/config", dict(rw, device_class="temperature", unit_of_measurement="K"), "0")
+    dev = {"device": {"identifiers": ["d"]}, "origin": {"name": "vmac"},
+           "components": {"o": {"platform": "sensor", "unique_id": "u", "state_topic": "s"}, "gone": {"platform": "text"}}}
+    topic = DISCOVERY + "/device/n/config"
+    made = expand_device(topic, dev)
+    assert [tp for tp, _ in made] == [DISCOVERY + "/sensor/n/o/config"] and made[0][1]["device"] == dev["device"], made
+    for payload, code in ((dict(dev, name="x"), "D2"), ({k: dev[k] for k in dev if k != "origin"}, "D2"),
+                          (dict(dev, components={"o": {"unique_id": "u"}}), "D3"),
+                          (dict(dev, components={"o": {"platform": "sensor", "state_topic": "s"}}), "D4")):
+        try:
+            expand_device(topic, payload)
+        except AssertionError as e:
+            assert ("rule %s" % code) in str(e), "wanted rule %s: %s" % (code, e)
+        else:
+            raise AssertionError("the checker passed a device config breaking rule %s: %s" % (code, payload))
 
 
 def test_mqtt_ha_kitchen_configs_follow_home_assistant(t):
@@ -356,5 +433,144 @@ def test_mqtt_ha_events_say_a_start_and_a_drop(t):
             hub.wait(events, lambda p: "dropped" in p, since=since, what="a drop event")
         finally:
             boards["washer-1"].signal(signal.SIGCONT)
+    finally:
+        hub.close()
+
+
+def device_topic(node):
+    return "%s/device/%s/config" % (DISCOVERY, node)
+
+
+NODES = [HOST_ID] + ["%s_%s" % (HOST_ID, name) for name in KITCHEN_NAMES]  # the host's HA device, its machines'
+
+
+def retained_configs(broker, want, what):
+    """The discovery configs the broker holds ({topic: payload}), once
+    want(configs) holds, as an HA that starts now reads them: a new
+    subscriber's retained messages, and what came on those topics since
+    (a config published later, or cleared with an empty payload)."""
+    late = base.Hub(broker, "late")
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            with late.cond:
+                got = {tp: p for tp, (p, retained) in late.latest.items()
+                       if p and tp.startswith(DISCOVERY + "/") and tp.endswith("/config")}
+            if want(got):
+                check_all(late)
+                return got
+            assert time.monotonic() < deadline, "%s: not within 30 s; retained configs: %s" % (what, sorted(got))
+            time.sleep(0.1)  # between two looks at what the late subscriber got
+    finally:
+        late.close()
+
+
+def ours(configs, device_based):
+    """The configs of the host's nodes among configs, device ones or single
+    component ones."""
+    return {tp for tp in configs if (DEVICE_TOPIC.match(tp) is not None) == device_based and
+            any("/%s/" % node in tp for node in NODES)}
+
+
+def test_mqtt_ha_device_discovery_kitchen_and_a_removed_entity(t):
+    """mqtt_discovery_mode = device: one config per HA device (the host and
+    each machine), read as HA's discovery.py reads it by the same checker;
+    a hot reload that drops the TV sends it once with its platform alone
+    (HA's removal of a component), then the config without it."""
+    broker = base.Broker(t)
+    host = base.mqtt_host(t, broker, extra={"mqtt_discovery_mode": "device"})
+    t.kitchen(host)
+    hub = base.Hub(broker)
+    try:
+        for node in NODES:
+            hub.wait(device_topic(node), lambda p: p != "", what="the device config of " + node)
+        washer = json.loads(hub.wait(device_topic(HOST_ID + "_washer-1")))
+        temp = washer["components"]["temp_c"]
+        assert (temp["platform"], temp["device_class"], temp["unique_id"]) == (
+            "sensor", "temperature", "vmac_test_washer-1_temp_c") and "device" not in temp, temp
+        assert washer["device"]["identifiers"] == ["vmac_test_washer-1"] and washer["origin"]["name"] == "vmac", \
+            washer
+        retained = retained_configs(broker, lambda c: len(ours(c, True)) == len(NODES), "every device config")
+        assert not ours(retained, False), "single component configs beside the device ones: %s" % ours(retained, False)
+        assert len(check_all(hub)) > 40, "the device configs make only %d entities" % len(check_all(hub))
+
+        here = os.path.dirname(os.path.abspath(__file__))
+        with open(os.path.join(here, "..", "..", "scripts", "drivers", "lights.lua")) as f:
+            src = f.read()
+        new = src.replace('version = "1.2.0"', 'version = "1.2.1-ha"').replace(
+            '\t\ttv = { set = true, device_class = "switch", label = "TV" },\n', "")
+        assert new != src and "1.2.1-ha" in new, "the lights driver changed: this test needs updating"
+        path = os.path.join(t.logdir, "lights.lua")
+        with open(path, "w") as f:
+            f.write(new)
+        mark = hub.mark()
+        rc, out, err = t.run([t.path("vmac"), "reload", "--http", host.http, "--probation", "0", path], "reload")
+        assert rc == 0, "vmac reload failed (exit %d): %s %s" % (rc, out, err)
+        lights = device_topic(HOST_ID + "_lights-1")
+        hub.wait(lights, lambda p: p and json.loads(p)["components"].get("tv") == {"platform": "switch"}, since=mark,
+                 what="the TV with its platform alone (its removal)")
+        hub.wait(lights, lambda p: p and "tv" not in json.loads(p)["components"] and
+                 json.loads(p)["device"]["model"] == "lights 1.2.1-ha", since=mark,
+                 what="the lights' config without the TV, naming the new version")
+        retained = retained_configs(broker, lambda c: "tv" not in json.loads(c.get(lights, "{}")).get(
+            "components", {"tv": 1}), "the lights' retained config without the TV")
+        assert "kitchen" in json.loads(retained[lights])["components"], retained[lights]
+    finally:
+        hub.close()
+
+
+def moved(t, broker, hub, mode, old_topics, device_based):
+    """vmacd started in mode after a vmacd of the other mode left old_topics
+    on the broker: each is told migrate_discovery, the configs of its HA
+    device come again in the new mode after that, then it is cleared; every
+    node says so in the events. The host."""
+    mark = hub.mark()
+    host = base.mqtt_host(t, broker, extra={"mqtt_discovery_mode": mode})
+    host.wait_running(KITCHEN_NAMES)
+    migrate = lambda p: p.startswith("{") and json.loads(p) == {"migrate_discovery": True}  # noqa: E731
+    for tp in sorted(old_topics):
+        hub.wait(tp, migrate, since=mark, what="migrate_discovery on %s" % tp)
+        hub.wait(tp, lambda p: p == "", since=mark, what="%s cleared after the migration" % tp)
+        with hub.cond:
+            log = [(i, topic, p) for i, (topic, p) in enumerate(hub.log) if i >= mark]
+        told = min(i for i, topic, p in log if topic == tp and migrate(p))
+        cleared = max(i for i, topic, p in log if topic == tp and p == "")
+        node = next(n for n in sorted(NODES, key=len, reverse=True) if "/%s/" % n in tp)
+        again = [i for i, topic, p in log if told < i < cleared and p and
+                 (topic == device_topic(node) if device_based else "/%s/" % node in topic and topic != tp)]
+        assert again, "%s: no config of %s in the new mode between its migrate_discovery and its clearing" % (tp, node)
+    for name in [""] + KITCHEN_NAMES:
+        host.wait_event("mqtt", device=name or None, text="migrated to %s discovery" % (
+            "device-based" if device_based else "single component"))
+    return host
+
+
+def test_mqtt_ha_discovery_mode_moved_both_ways(t):
+    """HA's documented migration between its two discovery modes, done by
+    vmacd when it finds the other mode's retained configs of its own HA
+    devices: single component to device-based and back; after each, the
+    broker holds only the new mode's configs, which the checker passes."""
+    broker = base.Broker(t)
+    host = base.mqtt_host(t, broker)
+    t.kitchen(host)
+    hub = base.Hub(broker)
+    try:
+        # Settled: the lights' kitchen is configured as a text until its first
+        # value says it is a switch (test_mqtt.py), so the set of configs
+        # is the kitchen's once that guess is gone.
+        guess = "%s/text/%s_lights-1/kitchen/config" % (DISCOVERY, HOST_ID)
+        switch = "%s/switch/%s_lights-1/kitchen/config" % (DISCOVERY, HOST_ID)
+        singles = ours(retained_configs(broker, lambda c: len(ours(c, False)) > 40 and switch in c and guess not in c,
+                                        "the single component configs"), False)
+        host.signal(signal.SIGTERM)
+        assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
+        host = moved(t, broker, hub, "device", singles, True)
+        retained = retained_configs(broker, lambda c: not ours(c, False) and len(ours(c, True)) == len(NODES),
+                                    "device configs alone")
+        host.signal(signal.SIGTERM)
+        assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
+        moved(t, broker, hub, "component", ours(retained, True), False)
+        retained_configs(broker, lambda c: not ours(c, True) and ours(c, False) == singles,
+                         "the single component configs alone, as before")
     finally:
         hub.close()

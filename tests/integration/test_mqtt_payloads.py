@@ -31,6 +31,7 @@ local driver = {
 		seen = { label = "Seen" },
 		temp_c = { unit = "degC", precision = 1, label = "Temperature" },
 		raw_c = { label = "Temperature, every digit" }, -- no unit: a unit brings a default precision (DRIVERS.md)
+		edge_c = { unit = "degC", precision = 1, label = "Temperature on a rounding boundary" },
 	},
 }
 local ticks = 0
@@ -40,6 +41,7 @@ function driver.tick(dev, inputs)
 	ticks = ticks + 1
 	dev.vars.temp_c = 20 + p.speed + (ticks % 4) * 0.01 -- noise below the declared precision
 	dev.vars.raw_c = dev.vars.temp_c
+	dev.vars.edge_c = 20 + p.speed + 0.04 + (ticks % 3) * 0.01 -- rounds to x.0 and x.1 by turns
 	dev.vars.error = "E42"
 	dev.vars.reading = p.speed ~= 3 and p.speed or nil
 	dev.vars.ratio = p.speed == 0 and 0 / 0 or p.speed == 10 and math.huge or p.speed * 10
@@ -110,16 +112,21 @@ def test_mqtt_payloads_names_nothing_and_typed_commands(t):
                     "a late subscriber gets %s %r retained, got %r" % (name, want, late.latest[DEV + "/" + name])
         finally:
             late.close()
-        # A declared precision: the noise below it is not published.
+        # A declared precision: the noise below it is not published, nor
+        # noise across a rounding boundary (30.04, 30.05, 30.06: 30.0 and
+        # 30.1 by turns), which is less than a step from what went out.
         hub.wait(DEV + "/temp_c", lambda p: p == "30.0", what="temp_c 30.0 at speed 10 (one decimal)")
+        hub.wait(DEV + "/edge_c", lambda p: p in ("30.0", "30.1"), what="edge_c 30.0 or 30.1 at speed 10")
         hub.wait(DEV + "/raw_c", lambda p: p != "30", what="raw_c with its noise")
         mark = hub.mark()
         time.sleep(2)  # 20 ticks, and 8 reads of the status copy
         with hub.cond:
             temps = [p for tp, p in hub.log[mark:] if tp == DEV + "/temp_c"]
+            edges = [p for tp, p in hub.log[mark:] if tp == DEV + "/edge_c"]
             raws = [p for tp, p in hub.log[mark:] if tp == DEV + "/raw_c"]
-        assert temps == [] and len(raws) >= 3, "in 2 s: temp_c %r (precision 1), raw_c %r (no precision)" % (
-            temps, raws)
+        assert temps == [] and edges == [] and len(raws) >= 3, \
+            "in 2 s: temp_c %r, edge_c %r (precision 1, noise across 30.05), raw_c %r (no precision)" % (
+                temps, edges, raws)
         # The host's own site view: error a value, None no value.
         deadline = time.monotonic() + 30
         while True:
@@ -129,5 +136,9 @@ def test_mqtt_payloads_names_nothing_and_typed_commands(t):
                 break
             assert time.monotonic() < deadline, "the site view: error a value, ratio (None) none: %s" % site
             time.sleep(0.2)
+        # A whole step of edge_c is published.
+        mark = hub.mark()
+        hub.publish(DEV + "/set/speed", "9")
+        hub.wait(DEV + "/edge_c", lambda p: p in ("29.0", "29.1"), since=mark, what="edge_c at speed 9, a step down")
     finally:
         hub.close()

@@ -3,8 +3,8 @@ mosquitto started by each test (test_mqtt.py's Broker), a paho-mqtt client
 as the Sparkplug host application. Payloads are decoded and commands encoded
 here by a small protobuf reader and writer that use the specification's
 field numbers (Payload: timestamp 1, metrics 2, seq 3; Metric: name 1,
-timestamp 3, datatype 4, is_null 7, int 10, long 11, float 12, double 13,
-boolean 14, string 15), not vmacd's own .proto: a wrong field number there
+timestamp 3, datatype 4, is_historical 5, is_null 7, int 10, long 11, float
+12, double 13, boolean 14, string 15), not vmacd's own .proto: a wrong field number there
 fails here. Every payload the node published is decoded again by Eclipse
 Tahu's JavaScript codec (npm sparkplug-payload, pinned in
 tests/mqtt/tahu/package-lock.json, run through tests/mqtt/tahu/codec.mjs)
@@ -81,6 +81,8 @@ def decode_metric(data):
             m["timestamp"] = v
         elif num == 4:
             m["datatype"] = v
+        elif num == 5:
+            m["is_historical"] = bool(v)
         elif num == 7:
             m["is_null"] = bool(v)
         elif num in (10, 11):
@@ -320,6 +322,44 @@ def check_seq(messages):
         prev = p["seq"]
 
 
+def check_session(messages):
+    """check_seq, and what the births promise of every message of the node:
+    the NBIRTH's metrics are the node's only ones (bdSeq and Node
+    Control/Rebirth) and no NDATA comes (tck-id-topics-nbirth-metric-reqs,
+    tck-id-operational-behavior-data-publish-nbirth); an NDEATH holds bdSeq
+    alone (tck-id-topics-ndeath-payload); each DDATA metric is one of its
+    device's DBIRTH in that session (tck-id-topics-dbirth-metric-reqs,
+    tck-id-operational-behavior-data-publish-dbirth); no metric is
+    historical, and each metric's timestamps go forward in the order the
+    messages came (tck-id-operational-behavior-data-publish-nbirth-order,
+    -dbirth-order)."""
+    check_seq(messages)
+    born, last = {}, {}
+    for kind, device, p, retain, qos in messages:
+        names = [m.get("name") for m in p["metrics"]]
+        assert kind != "NDATA", "an NDATA, but the NBIRTH says the node has no metric of its own to report: %s" % p
+        if kind == "NBIRTH":
+            assert sorted(names) == ["Node Control/Rebirth", "bdSeq"], "the NBIRTH's metrics: %s" % names
+            born = {}  # a new session: every device is born again
+        elif kind == "NDEATH":
+            assert names == ["bdSeq"], "an NDEATH's metrics: %s (only bdSeq)" % names
+        elif kind == "DBIRTH":
+            born[device] = set(names)
+        elif kind == "DDEATH":
+            born.pop(device, None)
+        elif kind == "DDATA":
+            assert device in born, "a DDATA of %s without its DBIRTH in the session" % device
+            assert set(names) <= born[device], "DDATA metrics of %s its DBIRTH did not have: %s" % (
+                device, sorted(set(names) - born[device]))
+        for m in p["metrics"]:
+            assert not m.get("is_historical"), "%s %s: a metric marked historical: %s" % (kind, device, m)
+            if kind != "NDEATH":  # the will's time is its CONNECT's
+                key = (device, m.get("name"))
+                assert m["timestamp"] >= last.get(key, 0), "%s %s: metric %s at %d, after one at %d" % (
+                    kind, device, key[1], m["timestamp"], last[key])
+                last[key] = m["timestamp"]
+
+
 def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
     broker = Broker(t)
     sp = SpHost(broker)
@@ -419,7 +459,7 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
             _, since = sp.wait(NODE % "DDATA" + "/lights-1", has_value("tv", n % 2 == 0), since=since,
                                what="DDATA tv %d" % n)
         messages = sp.node_messages()
-        check_seq(messages)
+        check_session(messages)
         tv = [p["seq"] for k, d, p, r, q in messages if k == "DDATA" and "tv" in p["by_name"]]
         assert len(tv) >= 6, "a DDATA per switch of the TV: %s" % tv
         host.status()
@@ -434,6 +474,7 @@ def test_sparkplug_births_ddata_dcmd_rebirth_and_ndeath(t):
             "the NDEATH's bdSeq (name, Int64, value) is not the NBIRTH's: %s, %s" % (ndeath, bdseq)
         assert "seq" not in ndeath, ndeath
         assert [q for k, d, p, r, q in sp.node_messages() if k == "NDEATH"] == [1], "the NDEATH QoS"
+        check_session(sp.node_messages())
         # Every payload again through Eclipse Tahu's decoder: it reads what the test's reader read.
         payloads, metrics = tahu_agrees(sp.node_raw())
         assert payloads >= 10 and metrics >= 50, "only %d payloads and %d metrics compared" % (payloads, metrics)
@@ -467,7 +508,7 @@ def test_sparkplug_dropped_board_ddeath_commands_off_and_bdseq_across_restarts(t
         finally:
             boards["washer-1"].signal(signal.SIGCONT)
         sp.wait(NODE % "DBIRTH" + "/washer-1", since=mark, timeout_s=60, what="DBIRTH of washer-1 again")
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
         # An orderly stop: DDEATHs and the NDEATH; the next start counts bdSeq on.
         mark = sp.mark()
         host.signal(signal.SIGTERM)
@@ -475,6 +516,7 @@ def test_sparkplug_dropped_board_ddeath_commands_off_and_bdseq_across_restarts(t
         ndeath, i = sp.wait(NODE % "NDEATH", since=mark, what="NDEATH at an orderly stop")
         assert ndeath["by_name"]["bdSeq"]["value"] == first["by_name"]["bdSeq"]["value"], ndeath
         assert [k for k, d, p, r, q in sp.node_messages()[-4:]].count("DDEATH") == 3, "a DDEATH per machine"
+        check_session(sp.node_messages())
         host2 = spb_host(t, broker, commands=False)  # the same state folder: bdSeq counts on
         second, _ = sp.wait(NODE % "NBIRTH", since=i, what="NBIRTH after a restart")
         assert second["by_name"]["bdSeq"]["value"] == (first["by_name"]["bdSeq"]["value"] + 1) % 256, \
@@ -499,7 +541,8 @@ def test_sparkplug_seq_wraps_from_255_to_0(t):
     """Over 256 messages of one node: seq counts on from 255 to 0 (the NBIRTH
     is the only 0 that is not a wrap), and Tahu reads every payload. Eight
     boards whose driver counts its ticks change a value at every poll of the
-    MQTT client, so the node sends some 30 DDATA a second."""
+    MQTT client, so the node sends some 30 DDATA a second; a Rebirth amid
+    them stops the DDATA for the whole birth sequence."""
     broker = Broker(t)
     sp = SpHost(broker)
     settings = {"mqtt_url": broker.url, "mqtt_host_id": HOST_ID, "mqtt_keepalive_s": 5, "miss_limit": 3,
@@ -513,8 +556,28 @@ def test_sparkplug_seq_wraps_from_255_to_0(t):
             assert time.monotonic() < deadline, "the node sent only %d messages in 120 s: %s" % (
                 len(sp.node_messages()), sorted({(k, d) for k, d, p, r, q in sp.node_messages()}))
             time.sleep(0.2)
+        # A Rebirth while DDATA flows (tck-id-operational-behavior-data-
+        # commands-rebirth-action-1 and -2): after the NCMD, at most the DDATA
+        # of the status copy being sent when it came (one per machine), then
+        # the NBIRTH and every DBIRTH with no DDATA among them.
+        mark = sp.mark()
+        sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
+        _, i = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH after a Rebirth amid DDATA")
+        devices = ["count-%d" % n for n in range(1, 9)]
+        for name in devices:
+            _, end = sp.wait(NODE % "DBIRTH" + "/" + name, since=i, what="DBIRTH of %s after the Rebirth" % name)
+            i = max(i, end)
+        with sp.cond:
+            after = [tp.split("/") for tp, _, _, _ in sp.log[mark:i] if tp.startswith("spBv1.0/")]
+        ncmd = next(k for k, parts in enumerate(after) if parts[2] == "NCMD")
+        nbirth = next(k for k, parts in enumerate(after) if parts[2] == "NBIRTH")
+        before_birth = [parts[2] + "/" + parts[-1] for parts in after[ncmd + 1:nbirth]]
+        assert all(k.startswith("DDATA/") for k in before_birth) and len(before_birth) == len(set(before_birth)), \
+            "after the NCMD and before the NBIRTH, more than one status copy's DDATA: %s" % before_birth
+        births = [parts[2] for parts in after[nbirth + 1:]]
+        assert births == ["DBIRTH"] * len(devices), "between the NBIRTH and the last DBIRTH: %s" % births
         messages = sp.node_messages()
-        check_seq(messages)
+        check_session(messages)
         seqs = [p["seq"] for k, d, p, r, q in messages]
         wraps = [i for i in range(1, len(seqs)) if seqs[i - 1] == 255 and seqs[i] == 0]
         assert wraps and messages[wraps[0]][0] != "NBIRTH", \

@@ -11,11 +11,15 @@ Sparkplug TCK's monitor does:
 - a Primary Host Application (mqtt_sparkplug_primary_host): no NBIRTH before
   its STATE says online, NDEATH and a new connection when it says offline, a
   stale or malformed STATE ignored;
-- a hot reload: the device's DDEATH before its new DBIRTH.
+- a hot reload: the device's DDEATH before its new DBIRTH;
+- ids that clash: another node with this one's descriptor, an edge id or
+  machine names that differ only in case, said in the host's events.
 SKIPPED without mosquitto, paho or Tahu, as test_sparkplug.py."""
 
 import json
 import os
+import random
+import re
 import shutil
 import signal
 import subprocess
@@ -24,15 +28,18 @@ import time
 from harness import KITCHEN_NAMES, Skip
 from mqtt_proxy import MqttProxy, client_ids
 from test_mqtt import HOST_ID, PREFIX, Broker
-from test_sparkplug import BOOLEAN, DOUBLE, GROUP, INT64, NODE, STRING, SpHost, check_seq, command, decode, has_value, spb_host, \
-    tahu_agrees
+from test_sparkplug import BOOLEAN, DOUBLE, GROUP, INT64, NODE, STRING, SpHost, check_session, command, decode, \
+    has_value, spb_host, tahu_agrees
 
 MAIN_ID = "vmac-spbtest"
 
 
 def will_bdseq(payload):
-    """The bdSeq metric of an NDEATH will: (datatype, value)."""
-    m = decode(payload)["by_name"]["bdSeq"]
+    """The bdSeq metric of an NDEATH will, its only one (tck-id-topics-
+    ndeath-payload): (datatype, value)."""
+    p = decode(payload)
+    assert [m.get("name") for m in p["metrics"]] == ["bdSeq"], "a will's metrics: %s (only bdSeq)" % p["metrics"]
+    m = p["by_name"]["bdSeq"]
     return m["datatype"], m["value"]
 
 
@@ -138,7 +145,7 @@ def test_sparkplug_lives_on_while_the_main_connection_is_down(t):
         assert not {"NBIRTH", "DBIRTH", "DDEATH", "NDEATH"} & set(kinds), \
             "the main connection's return re-birthed on Sparkplug: %s" % kinds
         assert said.count(("NBIRTH", None)) == 1, "one NBIRTH in the whole test: %s" % said
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
         tahu_agrees(sp.node_raw())
         host.signal(signal.SIGTERM)  # an orderly stop: DDEATHs and the NDEATH, through the relay
         assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
@@ -181,7 +188,7 @@ def test_sparkplug_connection_lost_and_back_counts_bdseq_and_births_once(t):
         for name in KITCHEN_NAMES:
             assert said.count("DBIRTH/" + name) == 1, "DBIRTHs of %s after the NBIRTH: %s" % (name, said)
         assert not [k for k in said if k.startswith(("DDEATH", "NBIRTH"))], "a death or second NBIRTH: %s" % said
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
         wire_ok(proxy, {"NBIRTH", "DBIRTH", "DDATA"})
     finally:
         proxy.close()
@@ -226,20 +233,29 @@ def state(online, ts):
 
 def test_sparkplug_primary_host_state(t):
     """mqtt_sparkplug_primary_host: births only once the host application's
-    STATE says online; its offline ends the session (NDEATH with the
-    session's bdSeq, a new CONNECT) and the next online brings an NBIRTH
-    with the next bdSeq. An older STATE and a malformed one change nothing."""
+    STATE says online, on its own id's topic (another id's online, one in
+    another case, changes nothing); its offline ends the session (NDEATH
+    with the session's bdSeq, a new CONNECT, never while the old one is
+    open) and the next online brings an NBIRTH with the next bdSeq. An
+    older STATE and a malformed one change nothing."""
     broker = Broker(t)
+    proxy = MqttProxy(broker.port)
     sp = SpHost(broker)
     topic = "spBv1.0/STATE/scada"
     t0 = int(time.time() * 1000)
     sp.publish(topic, state(False, t0), qos=1, retain=True)
-    host = spb_host(t, broker, extra={"mqtt_sparkplug_primary_host": "scada"})
+    host = spb_host(t, broker, extra={"mqtt_sparkplug_primary_host": "scada", "mqtt_url": proxy.url,
+                                      "mqtt_client_id": MAIN_ID})
     t.kitchen(host)
     try:
         host.wait_event("mqtt", text="waiting for the primary host scada", timeout_s=30)
         host.wait_running(KITCHEN_NAMES)
         seq = host.last_event_seq()
+        # Online, but for other ids (tck-id-message-flow-edge-node-birth-
+        # publish-phid-wait-id): no births; the malformed STATE after them,
+        # said in the events, shows they were past.
+        for other in ("spBv1.0/STATE/scada2", "spBv1.0/STATE/SCADA", "spBv1.0/STATE/scad"):
+            sp.publish(other, state(True, t0 + 1), qos=1)
         sp.publish(topic, "not json", qos=1)
         host.wait_event("mqtt", text="STATE of the primary host scada ignored", after_seq=seq)
         assert not [k for k, d, p, r, q in sp.node_messages() if k in ("NBIRTH", "DBIRTH")], \
@@ -279,8 +295,15 @@ def test_sparkplug_primary_host_state(t):
         again, _ = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH when the primary host is back (a real timestamp)")
         assert again["by_name"]["bdSeq"]["value"] == (bdseq + 1) % 256, \
             "the new session's bdSeq: %s after %s" % (again["by_name"]["bdSeq"], bdseq)
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
+        # One server, one Sparkplug connection at a time (tck-id-operational-
+        # behavior-primary-application-state-with-multiple-servers-single-
+        # server): the redial's CONNECT came after the old connection closed.
+        spb = client_ids(proxy.connects, "-spb")
+        assert len(spb) >= 2, "no second Sparkplug CONNECT after the offline STATE: %s" % [c for c, _, _ in spb]
+        assert proxy.overlaps("-spb") == [], "two Sparkplug connections open at once: %s" % proxy.overlaps("-spb")
     finally:
+        proxy.close()
         sp.close()
 
 
@@ -309,7 +332,7 @@ def test_sparkplug_hot_reload_ddeath_before_the_new_dbirth(t):
         kinds = [tp.split("/")[2] for tp, _, _, _ in sp.log[mark:i] if tp.endswith("/lights-1")]
         assert kinds and kinds[-1] == "DBIRTH" and "DDEATH" in kinds and kinds.index("DDEATH") < len(kinds) - 1, \
             "no DDEATH of lights-1 before its new DBIRTH: %s" % kinds
-        check_seq(sp.node_messages())
+        check_session(sp.node_messages())
     finally:
         sp.close()
 
@@ -363,5 +386,71 @@ def test_sparkplug_datatypes_of_value_lists(t):
                          "the params set by the DCMD as declared")
         payloads, _ = tahu_agrees(sp.node_raw())
         assert payloads >= 3, payloads
+    finally:
+        sp.close()
+
+
+def other_node(t, broker, host_id, client_id, folder):
+    """Another vmacd as a Sparkplug Edge Node of GROUP on the same broker:
+    a bus and a state folder of its own (no board: an NBIRTH is all it
+    says), its bdSeq from 100 (two fresh nodes both start at 0, and two
+    NBIRTHs of one Rebirth may share a millisecond: then a twin's reads as
+    the node's own)."""
+    state = os.path.join(t.logdir, folder)
+    os.makedirs(state, exist_ok=True)
+    with open(os.path.join(state, "sparkplug-bdseq"), "w") as f:
+        f.write("100\n")
+    rnd = random.SystemRandom()
+    bus = "239.255.%d.%d:%d" % (rnd.randint(1, 254), rnd.randint(1, 254), rnd.randint(20000, 60000))
+    return t.host(bus=bus, extra=("--state", state), settings={
+        "mqtt_url": broker.url, "mqtt_host_id": host_id, "mqtt_client_id": client_id, "mqtt_sparkplug": "true",
+        "mqtt_sparkplug_group": GROUP, "mqtt_keepalive_s": 5})
+
+
+def test_sparkplug_ids_that_clash_are_told(t):
+    """An Edge Node Descriptor MUST be unique (tck-id-intro-edge-node-id-
+    uniqueness, tck-id-topic-structure-namespace-unique-edge-node-
+    descriptor, tck-id-payloads-nbirth-edge-node-descriptor): no node can
+    enforce it, but vmacd sees the group's NBIRTHs and says in its events
+    when another node publishes as its GROUP/EDGE, or as an edge id that
+    differs from its own only in case; two of its machines whose names
+    differ only in case are said too (tck-id-case-sensitivity-sparkplug-ids,
+    a SHOULD NOT). Its own NBIRTH, which the broker brings back to it, is not
+    taken for another's."""
+    broker = Broker(t)
+    sp = SpHost(broker)
+    a = spb_host(t, broker)
+    try:
+        t.board("lights", "lamp-a")
+        a.wait_running(["lamp-a"])
+        t.board("lights", "LAMP-A")
+        a.wait_running(["lamp-a", "LAMP-A"])
+        said = a.wait_event("mqtt", text="differ only in case", timeout_s=30)
+        assert "lamp-a" in said["text"] and "LAMP-A" in said["text"] and "SHOULD NOT" in said["text"], said["text"]
+        for name in ("lamp-a", "LAMP-A"):
+            sp.wait(NODE % "DBIRTH" + "/" + name, what="DBIRTH of " + name)
+        # Its own NBIRTH back (a Rebirth): nothing said. The node that comes
+        # next, its edge id in another case, shows that it was handled.
+        seq = a.last_event_seq()
+        mark = sp.mark()
+        sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
+        sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH after a Rebirth")
+        other_node(t, broker, HOST_ID.upper(), "vmac-upper", "state-upper")
+        told = a.wait_event("mqtt", text="has an id that differs from this one", after_seq=seq, timeout_s=30)
+        assert "another Edge Node of group %s, %s," % (GROUP, HOST_ID.upper()) in told["text"], told["text"]
+        assert not a.find_events("mqtt", text="another Edge Node publishes as", after_seq=seq), \
+            "its own NBIRTH was taken for another node's: %s" % [e["text"] for e in a.find_events("mqtt",
+                                                                                              after_seq=seq)]
+        # A second node with the same descriptor: said by the first when its
+        # NBIRTH comes, and by the second when both obey one Rebirth.
+        seq = a.last_event_seq()
+        twin = other_node(t, broker, HOST_ID, "vmac-twin", "state-twin")
+        twice = "another Edge Node publishes as %s/%s" % (GROUP, HOST_ID)
+        told = a.wait_event("mqtt", text=twice, after_seq=seq, timeout_s=30)
+        assert "MUST be unique" in told["text"] and "mqtt_host_id" in told["text"], told["text"]
+        # (The second's API takes no token of this test's: its stderr shows
+        # its events.)
+        sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
+        twin.wait_line(re.escape(twice), 30, stream="stderr", what="the second node telling of the first")
     finally:
         sp.close()

@@ -11,6 +11,7 @@
 #include "../../core/mqtt/mqtt_internal.h"
 #include "../../core/mqtt/site.h"
 #include "check_main.h"
+#include "proto_helpers.h"
 
 static const char *text_of(struct vmac_value v)
 {
@@ -80,6 +81,138 @@ START_TEST(a_declared_precision_rounds_what_is_published)
 	ck_assert_int_eq(precision_of("{\"precision\": 7}"), -1);
 	ck_assert_int_eq(precision_of("{\"precision\": 1.5}"), -1);
 	ck_assert_int_eq(precision_of("{\"precision\": 1, \"values\": [1.5, 2.5]}"), -1); /* options stay as written */
+}
+END_TEST
+
+/* Whether x, with sent published last, goes out at precision. */
+static int moves(double x, int precision, const char *sent)
+{
+	struct vmac_value v = number(x);
+	char text[MQTT_TEXT_MAX];
+	mqtt_value_text_at(&v, precision, text, sizeof(text));
+	return mqtt_value_moved(&v, precision, text, sent);
+}
+
+START_TEST(a_precision_goes_out_a_whole_step_from_what_was_sent)
+{
+	struct vmac_value none, word;
+	/* 37.45 C read with +-2 counts of 0.025 C: neighbours of 37.4 that are not a step away stay unsent. */
+	ck_assert_msg(!moves(37.45, 1, "37.4") && !moves(37.475, 1, "37.4"), "noise at 37.45 moved 37.4");
+	ck_assert_msg(!moves(37.425, 1, "37.5") && !moves(37.45, 1, "37.5"), "noise at 37.45 moved 37.5");
+	ck_assert_msg(moves(37.5, 1, "37.4") && moves(37.4, 1, "37.5"), "a whole step (binary 0.1 +- an ulp) stays");
+	ck_assert_msg(moves(37.3, 1, "37.5") && moves(38.0, 1, "37.4"), "more than a step stays");
+	ck_assert_msg(!moves(37.4, 1, "37.4"), "the same text went out again");
+	ck_assert_msg(moves(45.0, 0, "44") && !moves(44.6, 0, "44"), "precision 0: a step is 1");
+	ck_assert_msg(moves(0.000001, 6, "0.000000") && !moves(0.0000004, 6, "0.000000"), "precision 6: 1e-6");
+	/* Anything else goes out when its text changes. */
+	ck_assert_msg(moves(21.44, 1, "None") && moves(21.44, 1, "true"), "a number after None or a boolean");
+	ck_assert_msg(moves(21.44, -1, "21.45") && !moves(21.44, -1, "21.44"), "no precision: every change");
+	memset(&none, 0, sizeof(none));
+	ck_assert_msg(mqtt_value_moved(&none, 1, "None", "21.4"), "None after a number");
+	word = number(0);
+	word.type = VMAC_VALUE_STRING;
+	strcpy(word.str, "21.41");
+	ck_assert_msg(mqtt_value_moved(&word, 1, "21.41", "21.4"), "a string after a number");
+}
+END_TEST
+
+/* Noise of -n..+n counts of 0.025 C, the sum of n draws of -1, 0, +1 (the
+ * washer plant's is n = 2), from a fixed LCG: the same every run. */
+static int noise_counts(unsigned *state, int n)
+{
+	int k, sum = 0;
+	for (k = 0; k < n; k++) {
+		*state = *state * 1103515245u + 12345u;
+		sum += (int)((*state >> 16) % 3u) - 1;
+	}
+	return sum;
+}
+
+/* Readings of exact_c (falling by fall_c each) with noise of noise_n counts
+ * through the throttle at one decimal, as mqtt_devices.c applies it: the
+ * messages and the changes of the rounded text; every number shown is less
+ * than a step from the reading. */
+static void throttle(double exact_c, double fall_c, int noise_n, int readings, int *messages, int *flickers)
+{
+	char sent[MQTT_TEXT_MAX] = "None", text[MQTT_TEXT_MAX], last[MQTT_TEXT_MAX] = "";
+	unsigned state = 1;
+	int k;
+	*messages = *flickers = 0;
+	for (k = 0; k < readings; k++, exact_c -= fall_c) {
+		struct vmac_value v = number((floor(exact_c * 40 + 0.5) + noise_counts(&state, noise_n)) * 0.025);
+		mqtt_value_text_at(&v, 1, text, sizeof(text));
+		*flickers += strcmp(text, last) != 0;
+		snprintf(last, sizeof(last), "%s", text);
+		if (mqtt_value_moved(&v, 1, text, sent)) {
+			snprintf(sent, sizeof(sent), "%s", text);
+			++*messages;
+		}
+		ck_assert_msg(fabs(strtod(sent, NULL) - v.number) < 0.1,
+		              "reading %d: %.3f C shown as %s, a step or more off", k, v.number, sent);
+	}
+}
+
+START_TEST(noise_narrower_than_a_step_does_not_flip_what_is_shown)
+{
+	int messages, flickers;
+	/* 37.45 C, right on a rounding boundary of 0.1 C, with +-1 count (0.05 C from end to end). */
+	throttle(37.45, 0, 1, 1000, &messages, &flickers);
+	ck_assert_msg(messages == 1 && flickers > 100,
+	              "a still 37.45 C with +-1 count of noise: %d messages (%d changes "
+	              "of its rounded text), not 1",
+	              messages, flickers);
+	/* Cooling by a count every 6 readings, 3.6 C: once per 0.1 C it falls. */
+	throttle(37.5, 0.004, 1, 900, &messages, &flickers);
+	ck_assert_msg(messages <= 37 && flickers > 3 * messages,
+	              "a fall of 36 steps with +-1 count of noise: %d messages "
+	              "(%d changes of its rounded text)",
+	              messages, flickers);
+}
+END_TEST
+
+/* With +-2 counts, readings 0.1 C apart come from one temperature: a whole
+ * step, which goes out (a change of a step always does), but only when both
+ * ends of the noise come while it sits on the boundary's count. */
+START_TEST(noise_of_a_whole_step_flips_it_far_less_than_its_rounding)
+{
+	int messages, flickers;
+	throttle(37.5, 0.004, 2, 900, &messages, &flickers);
+	ck_assert_msg(messages <= 36 * 3 / 2 && flickers > 4 * messages,
+	              "a fall of 36 steps with +-2 counts of noise: %d "
+	              "messages, %d changes of its rounded text",
+	              messages, flickers);
+}
+END_TEST
+
+/* A machine is named by its board's ANNOUNCE, and that name is the
+ * Sparkplug Device ID in every topic (tck-id-intro-device-id-string,
+ * -chars, tck-id-topic-structure-namespace-valid-device-id): each byte the
+ * bus's decoder lets through is an ASCII letter, digit, '_' or '-', so the
+ * id is UTF-8 and holds no '+', '/', '#' or control character. */
+START_TEST(every_machine_name_the_bus_takes_is_a_sparkplug_device_id)
+{
+	struct vmac_msg m = sample_announce(), out;
+	uint8_t frame[VMAC_FRAME_MAX];
+	int n = vmac_proto_encode(&m, frame, sizeof(frame)), c, at = -1, k;
+	ck_assert_msg(n > 0, "the sample ANNOUNCE does not encode: %s", errname(n));
+	for (k = 0; k + 7 <= n; k++) /* where its board name, "bench-1", is in the frame */
+		if (memcmp(frame + k, "bench-1", 7) == 0)
+			at = k;
+	ck_assert_msg(at >= 0, "the board name is not in the encoded ANNOUNCE");
+	for (c = 0; c < 256; c++) {
+		int allowed =
+		    (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
+		int rc;
+		frame[at + 5] = (uint8_t)c; /* bench-1 with byte c in the middle */
+		rc = decode_exact(frame, (size_t)n, &out);
+		ck_assert_msg((rc == 0) == allowed,
+		              "a board name with byte 0x%02x: decode says %s, a Sparkplug Device ID "
+		              "%s",
+		              c, errname(rc), allowed ? "may hold it" : "may not");
+		if (rc == 0)
+			ck_assert_msg(strlen(out.u.announce.board) == 7 && (unsigned char)out.u.announce.board[5] == c,
+			              "byte 0x%02x: the board name came back as \"%s\"", c, out.u.announce.board);
+	}
 }
 END_TEST
 
@@ -293,11 +426,17 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_select_or_text_gets_the_payload_as_a_string);
 	tcase_add_test(tc, a_number_boolean_or_numeric_choice_gets_its_type);
 	tcase_add_test(tc, a_declared_precision_rounds_what_is_published);
+	tcase_add_test(tc, a_precision_goes_out_a_whole_step_from_what_was_sent);
+	tcase_add_test(tc, noise_narrower_than_a_step_does_not_flip_what_is_shown);
+	tcase_add_test(tc, noise_of_a_whole_step_flips_it_far_less_than_its_rounding);
 	suite_add_tcase(s, tc);
 	tcase_add_test(tc, ui_url_from_the_setting_or_the_http_address);
 	tcase_add_test(tc, a_machine_is_found_in_any_order);
 	tc = tcase_create("site");
 	tcase_add_test(tc, site_view_reads_host_topics_and_none);
+	suite_add_tcase(s, tc);
+	tc = tcase_create("sparkplug ids");
+	tcase_add_test(tc, every_machine_name_the_bus_takes_is_a_sparkplug_device_id);
 	suite_add_tcase(s, tc);
 	return s;
 }

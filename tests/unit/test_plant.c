@@ -2,7 +2,8 @@
  * plant interface (firmware/plant.h): the PTC door lock that stays engaged
  * for lock_release_s after the solenoid goes off, the emergency release, and
  * the safety monitor that counts a closed door left unlocked while the drum
- * turns or the water is above the door. */
+ * turns or the water is above the door, and the motor's noise on the
+ * temperature reading. */
 #include <check.h>
 #include <math.h>
 #include <stdio.h>
@@ -15,10 +16,13 @@
 #define OUT_DOOR_LOCK 0x08    /* do3 */
 #define OUT_MOTOR_ENABLE 0x10 /* do4 */
 #define OUT_DRAIN_PUMP 0x04   /* do2 */
+#define OUT_HOT_VALVE 0x01    /* do0 */
 #define IN_DOOR_CLOSED 0x01   /* di0 */
 #define IN_DOOR_LOCKED 0x02   /* di1 */
 #define STEP_S 0.01           /* vmac-board's physics sub-step */
 #define DEFAULT_LOCK_RELEASE_S 2.0
+#define TEMP_COUNTS_PER_C 40.0 /* analog1 */
+#define NOISE_MAX_COUNTS 2
 
 static struct vmac_plant plant;
 static const struct vmac_washer *washer = &plant.s.washer;
@@ -307,6 +311,102 @@ START_TEST(other_plants_have_no_unsafe_episodes)
 }
 END_TEST
 
+/* analog1 as sensed less the exact reading of the water's temperature. */
+static int temp_noise_counts(const struct vmac_plant *p)
+{
+	struct vmac_inputs in;
+	memset(&in, 0, sizeof(in));
+	vmac_plant_sense(p, &in);
+	return (int)in.analog[1] - (int)floor(p->s.washer.water_c * TEMP_COUNTS_PER_C + 0.5);
+}
+
+/* Warm water in the tub (not a whole number of counts), the door locked. */
+static void fill_warm(struct vmac_plant *p)
+{
+	struct vmac_outputs out;
+	long k;
+	out.digital = OUT_DOOR_LOCK | OUT_HOT_VALVE;
+	out.pwm = 0;
+	vmac_plant_actuate(p, &out);
+	for (k = 0; k < 1000; k++) /* 10 s: 5 l at 60 C */
+		vmac_plant_step(p, STEP_S);
+	out.digital = OUT_DOOR_LOCK;
+	vmac_plant_actuate(p, &out);
+}
+
+START_TEST(temperature_reads_exactly_while_the_motor_is_off)
+{
+	long k;
+	fill_warm(&plant);
+	for (k = 0; k < 1000; k++) {
+		vmac_plant_step(&plant, STEP_S);
+		ck_assert_msg(temp_noise_counts(&plant) == 0,
+		              "step %ld with the motor off: the temperature reads %d counts "
+		              "off its exact %g C",
+		              k, temp_noise_counts(&plant), washer->water_c);
+	}
+}
+END_TEST
+
+START_TEST(the_motor_adds_a_count_or_two_of_noise)
+{
+	long seen[2 * NOISE_MAX_COUNTS + 1] = {0}, k, steps = 6000, changes = 0, sum = 0;
+	int last = 0, i;
+	fill_warm(&plant);
+	drive(OUT_DOOR_LOCK | OUT_MOTOR_ENABLE, 45);
+	for (k = 0; k < steps; k++) {
+		int off;
+		vmac_plant_step(&plant, STEP_S);
+		off = temp_noise_counts(&plant);
+		ck_assert_msg(off >= -NOISE_MAX_COUNTS && off <= NOISE_MAX_COUNTS,
+		              "step %ld: the temperature reads %d counts off, more than %d", k, off, NOISE_MAX_COUNTS);
+		seen[off + NOISE_MAX_COUNTS]++;
+		changes += k > 0 && off != last;
+		sum += off;
+		last = off;
+	}
+	for (i = 0; i <= 2 * NOISE_MAX_COUNTS; i++)
+		ck_assert_msg(seen[i] > steps / 20,
+		              "an offset of %d counts came %ld times in %ld readings (1 in 9 expected "
+		              "at +-2, 2 in 9 at +-1, 3 in 9 at 0)",
+		              i - NOISE_MAX_COUNTS, seen[i], steps);
+	ck_assert_msg(seen[NOISE_MAX_COUNTS] > seen[0] && seen[NOISE_MAX_COUNTS] > seen[2 * NOISE_MAX_COUNTS],
+	              "0 counts off (%ld) is not the most frequent: -2 %ld, +2 %ld", seen[NOISE_MAX_COUNTS], seen[0],
+	              seen[2 * NOISE_MAX_COUNTS]);
+	ck_assert_msg(labs(sum) < steps / 20, "the noise is biased: %ld counts over %ld readings", sum, steps);
+	ck_assert_msg(changes > steps / 2, "the offset changed in %ld of %ld steps of a turning drum", changes, steps);
+}
+END_TEST
+
+START_TEST(the_noise_is_the_same_every_run)
+{
+	static struct vmac_plant again;
+	struct vmac_outputs out;
+	long k;
+	vmac_plant_init(&again, VMAC_PLANT_WASHER);
+	fill_warm(&plant);
+	fill_warm(&again);
+	out.digital = OUT_DOOR_LOCK | OUT_MOTOR_ENABLE;
+	out.pwm = 45;
+	vmac_plant_actuate(&plant, &out);
+	vmac_plant_actuate(&again, &out);
+	for (k = 0; k < 3000; k++) {
+		struct vmac_inputs a, b;
+		vmac_plant_step(&plant, STEP_S);
+		vmac_plant_step(&again, STEP_S);
+		memset(&a, 0, sizeof(a));
+		memset(&b, 0, sizeof(b));
+		vmac_plant_sense(&plant, &a);
+		vmac_plant_sense(&again, &b);
+		ck_assert_msg(a.analog[1] == b.analog[1], "step %ld: two runs read %u and %u counts", k,
+		              (unsigned)a.analog[1], (unsigned)b.analog[1]);
+		vmac_plant_sense(&plant, &b);
+		ck_assert_msg(a.analog[1] == b.analog[1], "step %ld: two readings of one state differ (%u, %u)", k,
+		              (unsigned)a.analog[1], (unsigned)b.analog[1]);
+	}
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("washer plant");
@@ -330,6 +430,13 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, monitor_stays_quiet_through_a_safe_cycle);
 	tcase_add_test(tc, unsafe_text_fits_any_buffer);
 	tcase_add_test(tc, other_plants_have_no_unsafe_episodes);
+	suite_add_tcase(s, tc);
+
+	tc = tcase_create("temperature noise");
+	tcase_add_checked_fixture(tc, setup, NULL);
+	tcase_add_test(tc, temperature_reads_exactly_while_the_motor_is_off);
+	tcase_add_test(tc, the_motor_adds_a_count_or_two_of_noise);
+	tcase_add_test(tc, the_noise_is_the_same_every_run);
 	suite_add_tcase(s, tc);
 	return s;
 }
