@@ -8,7 +8,6 @@
 #include <sqlite3.h>
 #include <stdio.h>
 #include <string.h>
-#include <time.h>
 
 int vmac_board_name_valid(const char *name)
 {
@@ -128,34 +127,16 @@ int vmac_board_key_list(struct vmac_store *s, void (*fn)(void *ctx, const struct
 	return n;
 }
 
-/* Another process's writes are noticed within this much real time: the
- * host's main loop looks on every service, which `vmac test` runs every
- * virtual millisecond, where a statement each time cost it most of its
- * time. This connection's own writes are counted apart, and seen at once. */
-#define DATA_VERSION_EVERY_NS 20000000LL
-
 uint64_t store_data_version(struct vmac_store *s)
 {
 	sqlite3_stmt *st;
-	struct timespec ts;
-	int64_t now;
-	uint64_t version;
-	clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
-	now = (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+	uint64_t version = 0;
 	pthread_mutex_lock(&s->lock);
-	if (s->data_version_ns != 0 && now - s->data_version_ns < DATA_VERSION_EVERY_NS) {
-		version = s->data_version;
-		pthread_mutex_unlock(&s->lock);
-		return version;
-	}
-	version = 0;
 	if (sqlite3_prepare_v2(s->db, "PRAGMA data_version", -1, &st, NULL) == SQLITE_OK) {
 		if (sqlite3_step(st) == SQLITE_ROW)
 			version = (uint64_t)sqlite3_column_int64(st, 0);
 		sqlite3_finalize(st);
 	}
-	s->data_version = version;
-	s->data_version_ns = now;
 	pthread_mutex_unlock(&s->lock);
 	return version;
 }

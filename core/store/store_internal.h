@@ -34,11 +34,6 @@ struct vmac_store {
 	int gone;                      /* it was removed or replaced: nothing more is written */
 	_Atomic uint64_t key_writes;   /* board keys written through this connection (store_board.c) */
 	_Atomic uint64_t audit_writes; /* audit outbox rows written through this connection (store_token.c) */
-	/* store_data_version's last answer and when it was asked (CLOCK_MONOTONIC
-	 * ns), under lock: asked again sooner than DATA_VERSION_EVERY_NS, it is
-	 * given again without a statement. */
-	uint64_t data_version;
-	int64_t data_version_ns;
 	_Atomic uint64_t failures[VMAC_STORE_FAILURE_KINDS]; /* every store_fail, by kind (vmac_store_stats) */
 };
 
@@ -61,8 +56,7 @@ int store_begin(struct vmac_store *s);
 int store_end(struct vmac_store *s, int ok, const char *what, char *err, size_t errlen);
 /* SQLite's data_version: it changes with every commit of another
  * connection to the database (store_board.c; the board keys and the audit
- * outbox are looked at again when it does). Asked again within 20 ms of
- * real time, the last answer. */
+ * outbox are looked at again when it does). */
 uint64_t store_data_version(struct vmac_store *s);
 
 #endif
