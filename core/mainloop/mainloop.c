@@ -16,6 +16,12 @@
 
 #define STALLED_KEPT 32
 #define OUTBOX_BATCH 64 /* audit outbox rows taken per look */
+/* The store's board keys and audit outbox are looked at no more often
+ * than this much bus time: each look asks SQLite for its data_version,
+ * and vmac test services every virtual millisecond, where two statements
+ * a time were most of its work. vmacd services every 50 ms at least; the
+ * host's own writes (the API's) are looked at the next service. */
+#define STORE_LOOK_NS 20000000LL
 
 struct vmac_mainloop {
 	const struct vmac_config *cfg;
@@ -43,6 +49,13 @@ struct vmac_mainloop {
 	 * failed is tried again, the rows not logged twice). */
 	uint64_t outbox_version;
 	int outbox_looked, outbox_failing;
+	/* When the store was last looked at for keys and outbox (bus time),
+	 * and this connection's writes then: a write of the host's own (the
+	 * API's) is looked at the next service, another process's within
+	 * STORE_LOOK_NS. */
+	int store_looked;
+	int64_t store_looked_ns;
+	uint64_t store_writes;
 	int64_t outbox_taken, outbox_deleted;
 };
 
@@ -384,8 +397,9 @@ static void collect_key(void *ctx, const struct vmac_board_key *k)
 
 /* The bus gets the store's board keys whenever they changed (enrolled or
  * removed here through the API, or by `vmac board --local` in another
- * process), looked at on every service: vmacd services at least every
- * 50 ms, and at once when the API changed them. */
+ * process), looked at on a service at once after the API changed them,
+ * else at most every STORE_LOOK_NS of bus time (vmacd services at least
+ * every 50 ms). */
 static void sync_keys(struct vmac_mainloop *l)
 {
 	struct key_list x = {0};
@@ -469,6 +483,8 @@ static void take_outbox(struct vmac_mainloop *l)
 void vmac_mainloop_service(struct vmac_mainloop *l)
 {
 	struct vmac_bus_msg m;
+	uint64_t writes;
+	int64_t now;
 	while (vmac_bus_poll_msg(l->bus, &m)) {
 		switch (m.kind) {
 		case VMAC_MSG_EVENT: on_event(l, &m); break;
@@ -490,8 +506,16 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 			store_events(l);
 	}
 	vmac_bus_workers_service(l->bus);
-	sync_keys(l);
-	take_outbox(l);
+	now = l->hooks.bus_ns(l->hooks.ctx);
+	writes = vmac_store_local_writes(l->store);
+	if (!l->store_looked || writes != l->store_writes || now - l->store_looked_ns >= STORE_LOOK_NS ||
+	    now < l->store_looked_ns) {
+		l->store_looked = 1;
+		l->store_looked_ns = now;
+		l->store_writes = writes;
+		sync_keys(l);
+		take_outbox(l);
+	}
 	vmac_audit_flush(l->log); /* a window of refusals that has ended says what it left unsaid */
 	store_checkpoints(l);
 	store_events(l);

@@ -315,5 +315,9 @@ int vmac_board_key_list(struct vmac_store *s, void (*fn)(void *ctx, const struct
  * process or another one (`vmac board enroll --state`): the host reads
  * the keys again when it does. */
 uint64_t vmac_board_keys_version(struct vmac_store *s);
+/* The board keys and audit rows written through this connection so far:
+ * a counter, no statement (the host looks at the store at once when it
+ * moved, else at intervals: core/mainloop/). */
+uint64_t vmac_store_local_writes(struct vmac_store *s);
 
 #endif

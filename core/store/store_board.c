@@ -141,6 +141,11 @@ uint64_t store_data_version(struct vmac_store *s)
 	return version;
 }
 
+uint64_t vmac_store_local_writes(struct vmac_store *s)
+{
+	return atomic_load(&s->key_writes) + atomic_load(&s->audit_writes);
+}
+
 uint64_t vmac_board_keys_version(struct vmac_store *s)
 {
 	/* data_version changes with every commit of another connection (of
