@@ -252,6 +252,7 @@ void vmac_store_close(struct vmac_store *s)
 {
 	if (!s)
 		return;
+	sqlite3_finalize(s->data_version_st);
 	sqlite3_close(s->db);
 	pthread_mutex_destroy(&s->lock);
 	free(s);

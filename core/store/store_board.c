@@ -129,13 +129,14 @@ int vmac_board_key_list(struct vmac_store *s, void (*fn)(void *ctx, const struct
 
 uint64_t store_data_version(struct vmac_store *s)
 {
-	sqlite3_stmt *st;
 	uint64_t version = 0;
 	pthread_mutex_lock(&s->lock);
-	if (sqlite3_prepare_v2(s->db, "PRAGMA data_version", -1, &st, NULL) == SQLITE_OK) {
-		if (sqlite3_step(st) == SQLITE_ROW)
-			version = (uint64_t)sqlite3_column_int64(st, 0);
-		sqlite3_finalize(st);
+	/* Prepared once: the host asks often, and parsing it was the cost. */
+	if (s->data_version_st ||
+	    sqlite3_prepare_v2(s->db, "PRAGMA data_version", -1, &s->data_version_st, NULL) == SQLITE_OK) {
+		if (sqlite3_step(s->data_version_st) == SQLITE_ROW)
+			version = (uint64_t)sqlite3_column_int64(s->data_version_st, 0);
+		sqlite3_reset(s->data_version_st);
 	}
 	pthread_mutex_unlock(&s->lock);
 	return version;

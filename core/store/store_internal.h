@@ -34,6 +34,7 @@ struct vmac_store {
 	int gone;                      /* it was removed or replaced: nothing more is written */
 	_Atomic uint64_t key_writes;   /* board keys written through this connection (store_board.c) */
 	_Atomic uint64_t audit_writes; /* audit outbox rows written through this connection (store_token.c) */
+	sqlite3_stmt *data_version_st; /* PRAGMA data_version, prepared once (store_data_version), under lock */
 	_Atomic uint64_t failures[VMAC_STORE_FAILURE_KINDS]; /* every store_fail, by kind (vmac_store_stats) */
 };
 
