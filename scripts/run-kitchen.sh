@@ -93,15 +93,30 @@ pids+=($!)
 # Each board reads operator actions from a FIFO; the loop at the end hands
 # each line typed here to the board it names.
 for b in washer-1 dishwasher-1 lights-1 dryer-1; do mkfifo "$fifos/$b"; done
-"$bin/vmac-board" --plant washer --name washer-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/washer-1" &
-pids+=($!)
-"$bin/vmac-board" --plant dishwasher --name dishwasher-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/dishwasher-1" &
-pids+=($!)
-"$bin/vmac-board" --plant lights --name lights-1 --bus "$bus" --key-dir "$state/keys" --quiet --commands <"$fifos/lights-1" &
-pids+=($!)
-"$bin/vmac-board" --plant-file "$kitchen/plants/dryer.lua" --name dryer-1 --bus "$bus" --key-dir "$state/keys" --quiet \
-	--commands <"$fifos/dryer-1" &
-pids+=($!)
+# Each board's lines go to this terminal and, with the time, to
+# STATE/boards.log, which `vmac logs --board-log` reads beside the host's
+# events (docs/CLI.md, "vmac logs"): through a FIFO to a reader of its own,
+# which stop() waits for, so that no board's last line is lost.
+board_log() {
+	local line
+	while IFS= read -r line; do
+		printf '%s\n' "$line"
+		printf '%(%H:%M:%S)T %s\n' -1 "$line" >>"$state/boards.log"
+	done
+}
+start_board() { # NAME, then vmac-board's arguments
+	local name=$1
+	shift
+	mkfifo "$fifos/$name.out"
+	board_log <"$fifos/$name.out" &
+	"$bin/vmac-board" --name "$name" --bus "$bus" --key-dir "$state/keys" --quiet --commands "$@" \
+		<"$fifos/$name" >"$fifos/$name.out" &
+	pids+=($!)
+}
+start_board washer-1 --plant washer
+start_board dishwasher-1 --plant dishwasher
+start_board lights-1 --plant lights
+start_board dryer-1 --plant-file "$kitchen/plants/dryer.lua"
 exec 4>"$fifos/washer-1" 5>"$fifos/dishwasher-1" 6>"$fifos/lights-1" 7>"$fifos/dryer-1"
 
 cat <<EOT
@@ -110,6 +125,7 @@ The demo kitchen is running.
   in a browser:  http://$http/#token=$(cat "$state/token")
                  (signs in with the operate token once; docs/UI.md)
   status:        VMAC_TOKEN_FILE=$state/token $bin/vmac status --http $http
+  boards' lines: VMAC_TOKEN_FILE=$state/token $bin/vmac logs -f --http $http --board-log $state/boards.log
   status (JSON): curl -H "Authorization: Bearer \$(cat $state/token)" http://$http/api/status
                  (the API needs the token in $state/token: docs/API.md, "Access")
   type here, then Enter (docs/KITCHEN.md lists more):

@@ -4,7 +4,9 @@
  * the events of drivers' output, by machine and level. */
 #include "events.h"
 
+#include <errno.h>
 #include <jansson.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -197,13 +199,17 @@ const struct vmac_cmd vmac_events_cmd = {
 
 /* ---- vmac logs ---- */
 
-enum { LOGS_FOLLOW = VMAC_CMD_OWN, LOGS_LEVEL };
+enum { LOGS_FOLLOW = VMAC_CMD_OWN, LOGS_LEVEL, LOGS_BOARD_LOG };
 
 static const struct vmac_cmd_option logs_options[] = {
     [LOGS_FOLLOW - VMAC_CMD_OWN] = {"follow", NULL, 'f', NULL, NULL, NULL,
                                     "keep following: print each new line as it comes (default: stop)"},
     [LOGS_LEVEL - VMAC_CMD_OWN] = {"level", NULL, 0, "LEVEL", NULL, NULL,
                                    "only lines of this level and above: info, warn, error (default: info)"},
+    [LOGS_BOARD_LOG - VMAC_CMD_OWN] = {"board-log", NULL, 0, "FILE", NULL, NULL,
+                                       "also the simulated boards' lines (their plants' unsafe episodes and "
+                                       "failures, watchdog trips) from vmac-board's output kept in FILE (make "
+                                       "run: STATE/boards.log)"},
     {NULL, NULL, 0, NULL, NULL, NULL, NULL}};
 
 /* The seq of the newest event the host has (0: none), from its status. 0,
@@ -239,8 +245,94 @@ static int newest_seq(const struct vmac_cmd_args *a, unsigned long long *seq)
 	return 0;
 }
 
+/* ---- a simulator's lines (vmac logs --board-log) ---- */
+
+struct board_log {
+	FILE *file;
+	const char *device; /* only this board's; NULL: every board's */
+	enum log_level at_least;
+	int json;
+	int stop; /* set by the main thread: the stream ended */
+};
+
+/* The board a vmac-board line is about ("NAME: ...", "PLANT UNSAFE: NAME
+ * ..."), into name; 0, or -1 for a line of the process itself. */
+static int board_of(const char *text, char *name, size_t len)
+{
+	const char *u = strstr(text, " UNSAFE: "), *start = u ? u + 9 : text, *end = start;
+	while (*end && *end != ':' && *end != ' ')
+		end++;
+	if (end == start || (!u && *end != ':') || (size_t)(end - start) >= len ||
+	    strncmp(start, "vmac-board", 10) == 0)
+		return -1;
+	memcpy(name, start, (size_t)(end - start));
+	name[end - start] = 0;
+	return 0;
+}
+
+/* The level of a vmac-board line: a plant's unsafe episode or failure is
+ * an error, a watchdog trip, a refusal or a late reply a warning. */
+static enum log_level board_level(const char *text)
+{
+	if (strstr(text, " UNSAFE: ") || strstr(text, ": plant failed: "))
+		return LOG_ERROR;
+	if (strstr(text, ": watchdog: ") || strstr(text, ": refused ") || strstr(text, ": late reply ") ||
+	    strstr(text, ": clock lost"))
+		return LOG_WARN;
+	return LOG_INFO;
+}
+
+/* One line of the board log ("HH:MM:SS TEXT" as make run keeps it, or
+ * vmac-board's TEXT alone), printed as vmac logs prints a host's line. */
+static void board_line(const struct board_log *b, char *line)
+{
+	char name[64], when[9] = "--:--:--";
+	const char *text = line;
+	enum log_level level;
+	json_t *j;
+	char *s;
+	line[strcspn(line, "\r\n")] = 0;
+	if (strlen(line) > 9 && line[2] == ':' && line[5] == ':' && line[8] == ' ') {
+		memcpy(when, line, 8);
+		text = line + 9;
+	}
+	if (board_of(text, name, sizeof(name)) != 0 || (b->device && strcmp(name, b->device) != 0))
+		return;
+	if ((level = board_level(text)) < b->at_least)
+		return;
+	if (!b->json) {
+		printf("%s %-5s %s\n", when, log_level_names[level], text);
+	} else if ((j = json_pack("{s:s, s:s, s:s, s:s}", "kind", "board", "level", log_level_names[level], "device",
+	                          name, "text", text)) != NULL) {
+		if ((s = json_dumps(j, JSON_COMPACT)) != NULL)
+			printf("%s\n", s);
+		free(s);
+		json_decref(j);
+	}
+	fflush(stdout);
+}
+
+/* Every line of the board log now; then, following, each new one as it
+ * is written, until the stream ends (a thread beside the stream's). */
+static void *board_log_run(void *arg)
+{
+	struct board_log *b = arg;
+	char line[1024];
+	for (;;) {
+		while (fgets(line, sizeof(line), b->file))
+			board_line(b, line);
+		if (__atomic_load_n(&b->stop, __ATOMIC_ACQUIRE))
+			return NULL;
+		clearerr(b->file);
+		nanosleep(&(struct timespec){0, 200000000}, NULL); /* as tail -f looks for more */
+	}
+}
+
 static int logs_run(const struct vmac_cmd_args *a)
 {
+	struct board_log board = {0};
+	pthread_t tail;
+	int tailing = 0;
 	struct follow *f;
 	const char *level = a->opt[LOGS_LEVEL] ? a->opt[LOGS_LEVEL] : "info";
 	unsigned long long newest = 0;
@@ -252,19 +344,49 @@ static int logs_run(const struct vmac_cmd_args *a)
 		fprintf(stderr, "vmac logs: --level is info, warn or error, not '%s'\n", level);
 		return 2;
 	}
-	if (!a->opt[LOGS_FOLLOW] && (rc = newest_seq(a, &newest)) != 0)
-		return rc;
-	if (!a->opt[LOGS_FOLLOW] && newest == 0)
-		return 0; /* no event yet: nothing to show */
-	if (!(f = calloc(1, sizeof(*f))))
+	if (a->opt[LOGS_BOARD_LOG] && !(board.file = fopen(a->opt[LOGS_BOARD_LOG], "r"))) {
+		fprintf(stderr, "vmac logs: --board-log %s: %s\n", a->opt[LOGS_BOARD_LOG], strerror(errno));
 		return 2;
-	f->json = a->opt[VMAC_CMD_JSON] != NULL;
-	f->logs = 1;
-	f->device = a->nargs > 0 ? a->arg[0] : NULL;
-	f->at_least = (enum log_level)at;
-	f->stop_after = newest;
-	rc = stream(a, "vmac logs", f, 0);
-	free(f);
+	}
+	board.device = a->nargs > 0 ? a->arg[0] : NULL;
+	board.at_least = (enum log_level)at;
+	board.json = a->opt[VMAC_CMD_JSON] != NULL;
+	rc = 0;
+	if (!a->opt[LOGS_FOLLOW] && (rc = newest_seq(a, &newest)) == 0 && newest > 0) {
+		if (!(f = calloc(1, sizeof(*f))))
+			rc = 2;
+		else {
+			f->json = board.json;
+			f->logs = 1;
+			f->device = board.device;
+			f->at_least = board.at_least;
+			f->stop_after = newest;
+			rc = stream(a, "vmac logs", f, 0);
+			free(f);
+		}
+	} else if (a->opt[LOGS_FOLLOW]) {
+		/* the boards' lines beside the host's, each as it comes */
+		tailing = board.file && pthread_create(&tail, NULL, board_log_run, &board) == 0;
+		if (!(f = calloc(1, sizeof(*f))))
+			rc = 2;
+		else {
+			f->json = board.json;
+			f->logs = 1;
+			f->device = board.device;
+			f->at_least = board.at_least;
+			rc = stream(a, "vmac logs", f, 0);
+			free(f);
+		}
+		__atomic_store_n(&board.stop, 1, __ATOMIC_RELEASE);
+		if (tailing)
+			pthread_join(tail, NULL);
+	}
+	if (board.file && !a->opt[LOGS_FOLLOW] && rc == 0) {
+		board.stop = 1;
+		board_log_run(&board); /* the boards' lines after the host's */
+	}
+	if (board.file)
+		fclose(board.file);
 	return rc;
 }
 
@@ -277,8 +399,10 @@ const struct vmac_cmd vmac_logs_cmd = {
              "warnings about a machine (a cut text value, ...) as warn, and a driver's failure with its\n"
              "traceback as error; one line each: local time, level, machine, text (with --json: each\n"
              "event's JSON). Without -f, the lines among the events the host still keeps (the last 100 of\n"
-             "all kinds), then stop; with -f, those and then each new one as it comes. Needs a token of\n"
-             "scope read.\n"
+             "all kinds), then stop; with -f, those and then each new one as it comes. --board-log FILE\n"
+             "adds the simulated boards' lines (vmac-board's output, as make run keeps it in\n"
+             "STATE/boards.log): a plant's unsafe episode or failure as error, a watchdog trip or a\n"
+             "refused action as warn, the rest as info. Needs a token of scope read.\n"
              "Exit 0 when done or the host ends the stream, 1 when it cannot be followed, 2 wrong usage.\n",
     .common = VMAC_CMD_API,
     .own = logs_options,

@@ -215,6 +215,24 @@ def test_make_run_starts_four_machines(t):
     wait(lambda ds: ds.get("dryer-1", {}).get("variables", {}).get("state") == "running",
          "the dryer started by its typed start button")
 
+    # The boards' lines, kept with their time in STATE/boards.log, read by
+    # vmac logs --board-log beside the host's: a refused action is a warn.
+    logs = [t.path("vmac"), "logs", "--http", http, "--token-file", os.path.join(state, "token"), "--board-log",
+            os.path.join(state, "boards.log")]
+    follow = Proc(t._name("logs-boards"), logs + ["-f", "dryer-1"], t.logdir)
+    t.procs.append(follow)
+    kitchen.send("dryer-1 spin 3")
+    kitchen.wait_line(r"^dryer-1: refused spin 3: ", 30, what="the dryer's refusal of an unknown action")
+    follow.wait_line(r"^\d\d:\d\d:\d\d warn  dryer-1: refused spin 3: the dryer plant refuses spin = 3: no action",
+                     30, what="vmac logs -f showing the board's refusal as warn, with the time make run kept")
+    once = Proc(t._name("logs-boards-once"), logs + ["--level", "warn"], t.logdir)
+    t.procs.append(once)
+    assert once.wait_exit(30) == 0, "vmac logs --board-log did not stop by itself: %s" % once.text("stderr")
+    lines = once.text("stdout").splitlines()
+    assert any(re.match(r"^\d\d:\d\d:\d\d warn  dryer-1: refused spin 3", l) for l in lines), (
+        "vmac logs --level warn --board-log left out the refusal: %s" % lines)
+    assert not any(" info  " in l for l in lines), "--level warn showed info lines: %s" % lines
+
     mark = kitchen.mark()
     kitchen.signal(signal.SIGTERM)
     kitchen.wait_line(r"^run-kitchen: stopped", 60, since=mark, what="'run-kitchen: stopped'")
