@@ -114,3 +114,24 @@ def test_version_1_and_plain_boards_are_unaffected(t):
         else:
             assert int(status[-1].group(3)) > 0 and int(status[-1].group(5)) == 0, \
                 "the plain board: %s (want SYNC accepted)" % status[-1].group(0)
+
+
+def test_boards_lock_onto_the_host_on_raw_ethernet(t):
+    """SYNC as an Ethernet broadcast; the boards' receive times from the
+    packet ring (root: a veth pair and a namespace, else SKIP)."""
+    host_if, ns, board_if = t.eth_link()
+    host = t.host(bus="eth:" + host_if, settings=SYNC_SETTINGS)
+    board = t.board("lights", "lights", count=2, bus="eth:" + board_if, wrapper=("ip", "netns", "exec", ns),
+                    extra=["--clock-ppm", "-150", "--clock-offset", "-1.5", "--clock-jitter-us", str(JITTER_US)])
+    host.wait_running(["lights-1", "lights-2"])
+    for name in ("lights-1", "lights-2"):
+        locking, _ = clock_line(board, name, "locking", 30)
+        locked, _ = clock_line(board, name, "locked", 30)
+        took_ms = int(locked.group(6)) - int(locking.group(6))
+        assert took_ms <= LOCK_WITHIN_MS, "%s locked %d ms after its first SYNC, more than %d" % (
+            name, took_ms, LOCK_WITHIN_MS)
+        assert abs(float(locked.group(3)) + 1.5) <= OFFSET_TOLERANCE_S and \
+            abs(float(locked.group(4)) + 150) <= DRIFT_TOLERANCE_PPM, \
+            "%s locked at %s (its counter: -1.5 s, -150 ppm)" % (name, locked.group(0))
+    c = host.status()["counters"]
+    assert c["syncs"] > 0 and c["malformed_frames"] == 0, "host counters: %r" % c
