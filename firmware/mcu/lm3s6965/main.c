@@ -134,18 +134,14 @@ static int split_words(char *line, char **words, int max)
 }
 
 /* The board's counters as vmac-board prints them (firmware/report.c),
- * then the MAC's and the stack's. */
+ * then the MAC's and the stack's; then, once SYNC frames came, the clock's
+ * line. */
 static void print_counters(void)
 {
 	const struct vmac_mcu_enet_counters *e = vmac_mcu_enet_counters();
 	char line[VMAC_REPORT_LINE];
 	vmac_report_counters(&board, line, sizeof(line));
 	vmac_mcu_uart_puts(line);
-	if (board.clock.state != VMAC_CLOCK_UNSYNCED || board.counters.sync_ignored) {
-		vmac_report_clock(&board, 1, line, sizeof(line));
-		vmac_mcu_uart_puts("\n");
-		vmac_mcu_uart_puts(line);
-	}
 	vmac_mcu_uart_puts("; Ethernet received ");
 	vmac_mcu_uart_putu(e->received);
 	vmac_mcu_uart_puts(", sent ");
@@ -159,6 +155,11 @@ static void print_counters(void)
 	vmac_mcu_uart_puts("; stack used ");
 	vmac_mcu_uart_putu(vmac_mcu_stack_used());
 	vmac_mcu_uart_puts(" bytes\n");
+	if (board.clock.state != VMAC_CLOCK_UNSYNCED || board.counters.sync_ignored) {
+		vmac_report_clock(&board, 1, line, sizeof(line)); /* the clock's line, as vmac-board's */
+		vmac_mcu_uart_puts(line);
+		vmac_mcu_uart_puts("\n");
+	}
 }
 
 /* An operator line, as vmac-board --commands takes it: 'NAME ACTION VALUE'
