@@ -178,7 +178,7 @@ START_TEST(board_clock_locks_onto_the_host_from_sync_frames)
 	local = board_counter(HOST_START_NS + 1500000000ull, offset_ns, drift_ppb);
 	ck_assert_int_eq(vmac_board_clock_offset(&b, local, &offset, &bound), 0);
 	/* the board takes the host's send time for the arrival: the path's 3 us
-	 * is in the offset (docs/TIME.md, "What host time means at the board") */
+	 * is in the offset (docs/TIME.md, "The clock model") */
 	want = offset_ns + 1500 * drift_ppb / 1000 + 3000;
 	ck_assert_msg(offset - want < 2000 && offset - want > -2000, "offset %lld ns, want %lld within 2 us",
 	              (long long)offset, (long long)want);
