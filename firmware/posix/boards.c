@@ -88,12 +88,20 @@ static int make_sim(const struct boards_config *cfg, int32_t i, struct vmac_sim 
 }
 
 /* Board i's oscillator: at true time 0 (the process's start) its counter
- * reads CLOCK_MONOTONIC + offset, then runs at 1 + ppm. */
+ * reads CLOCK_MONOTONIC + offset, then runs at 1 + ppm. 0, or -2 (an
+ * offset that puts the counter below 0) or -1 (no memory) with err. */
 static int clock_init(struct board_set *s, const struct boards_config *cfg, int32_t i, char *err, size_t errlen)
 {
 	struct oscillator_config oc;
 	memset(&oc, 0, sizeof(oc));
 	oc.offset_s = (double)s->clock_base_ns / 1e9 + cfg->clock.offset_s;
+	if (oc.offset_s <= 0) {
+		snprintf(err, errlen,
+		         "--clock-offset %g: a counter that far behind CLOCK_MONOTONIC (%.0f s since boot) would start "
+		         "below 0",
+		         cfg->clock.offset_s, (double)s->clock_base_ns / 1e9);
+		return -2;
+	}
 	oc.drift_ppm = cfg->clock.ppm;
 	oc.step_at_s = -1;
 	oc.jitter_us = cfg->clock.jitter_us;
@@ -147,6 +155,7 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 {
 	uint32_t hash = vmac_proto_default_major(cfg->name), slots = 2;
 	int32_t i;
+	int rc;
 
 	memset(s, 0, sizeof(*s));
 	s->count = (int32_t)cfg->count;
@@ -222,9 +231,9 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 		pb->safety = vmac_sim_safety(&pb->sim);
 		vmac_report_init(&pb->report, &pb->board, &pb->safety, 0);
 		pb->routed_offset = VMAC_OFFSET_NONE;
-		if (cfg->clock.on && clock_init(s, cfg, i, err, errlen) != 0) {
+		if (cfg->clock.on && (rc = clock_init(s, cfg, i, err, errlen)) != 0) {
 			boards_fini(s);
-			return -1;
+			return rc;
 		}
 		memcpy(pb->mac, s->mac_prefix, sizeof(s->mac_prefix));
 		pb->mac[4] = (uint8_t)((i + 1) >> 8);

@@ -92,7 +92,8 @@ struct board_set {
 /* Make cfg->count boards (names, identities, keys, MACs, plants) and the
  * routing tables. Returns 0, or with a readable reason in err -2 (a name
  * the protocol refuses, a key file missing or not one, a Lua plant that
- * does not load) or -1 (out of memory). */
+ * does not load, a --clock-offset below the counter's 0) or -1 (out of
+ * memory). */
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen);
 void boards_fini(struct board_set *s);
 
