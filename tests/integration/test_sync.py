@@ -21,7 +21,11 @@ JITTER_US = 20
 
 LOCK_WITHIN_MS = 5000  # first SYNC to locked, by the board's own clock lines (about 1.5 s measured)
 OFFSET_TOLERANCE_S = 0.05  # the offset has drifted by at most 200 ppm x the seconds since the start
-DRIFT_TOLERANCE_PPM = 20
+# The first frequency estimate can be 20 ppm off when the clock locks (its
+# bound is about time, not frequency: 20 ppm is 0.3 us a 16 ms window); the
+# servo has taken it within a few ppm by the time SYNC stops, 3 s later.
+DRIFT_AT_LOCK_PPM = 50
+DRIFT_AT_HOLDOVER_PPM = 10
 
 CLOCK_LINE = re.compile(r"^(\S+): clock (\w+)(?:, offset ([-+][0-9.]+) s, drift ([-+][0-9.]+) ppm, "
                         r"bound ([0-9.]+) us)?(?:, acting on arrival)?; at (\d+) ms$")
@@ -62,8 +66,8 @@ def test_boards_lock_onto_the_host_and_are_lost_when_it_stops(t):
         offset, drift, bound = float(locked.group(3)), float(locked.group(4)), float(locked.group(5))
         assert abs(offset - offset_s) <= OFFSET_TOLERANCE_S, \
             "%s locked at an offset of %.6f s, its counter is %.2f s ahead" % (name, offset, offset_s)
-        assert abs(drift - ppm) <= DRIFT_TOLERANCE_PPM, \
-            "%s learnt a drift of %+.1f ppm, its counter runs %+d ppm" % (name, drift, ppm)
+        assert abs(drift - ppm) <= DRIFT_AT_LOCK_PPM, \
+            "%s locked with a drift of %+.1f ppm, its counter runs %+d ppm" % (name, drift, ppm)
         assert bound <= 10.0, "%s says locked with a bound of %.1f us (locked: within 10 us)" % (name, bound)
         marks[name] = line.index + 1
     c = host.status()["counters"]
@@ -92,6 +96,9 @@ def test_boards_lock_onto_the_host_and_are_lost_when_it_stops(t):
         assert held_ms >= 1000, "%s held over only %d ms without SYNC before it was lost" % (name, held_ms)
         assert float(holdover.group(5)) <= 50.0, "%s went holdover with a bound of %s us, past lost's 50" % (
             name, holdover.group(5))
+        ppm = CLOCKS[name][0]
+        assert abs(float(holdover.group(4)) - ppm) <= DRIFT_AT_HOLDOVER_PPM, \
+            "%s holds over at a drift of %s ppm, its counter runs %+d ppm" % (name, holdover.group(4), ppm)
 
 
 def test_version_1_and_plain_boards_are_unaffected(t):
@@ -142,7 +149,7 @@ def test_boards_lock_onto_the_host_on_raw_ethernet(t):
         assert took_ms <= LOCK_WITHIN_MS, "%s locked %d ms after its first SYNC, more than %d" % (
             name, took_ms, LOCK_WITHIN_MS)
         assert abs(float(locked.group(3)) + 1.5) <= OFFSET_TOLERANCE_S and \
-            abs(float(locked.group(4)) + 150) <= DRIFT_TOLERANCE_PPM, \
+            abs(float(locked.group(4)) + 150) <= DRIFT_AT_LOCK_PPM, \
             "%s locked at %s (its counter: -1.5 s, -150 ppm)" % (name, locked.group(0))
     c = host.status()["counters"]
     assert c["syncs"] > 0 and c["malformed_frames"] == 0, "host counters: %r" % c
