@@ -156,7 +156,8 @@ static int feed(struct vmac_board *b, int first_ms, int n, int64_t offset_ns, in
 			replied += vmac_board_receive_at(b, frame, (size_t)len, (uint64_t)(first_ms + k), rx, reply,
 			                                 sizeof(reply));
 		else
-			replied += vmac_board_receive(b, frame, (size_t)len, (uint64_t)(first_ms + k), reply, sizeof(reply));
+			replied +=
+			    vmac_board_receive(b, frame, (size_t)len, (uint64_t)(first_ms + k), reply, sizeof(reply));
 	}
 	return replied;
 }
@@ -186,10 +187,10 @@ START_TEST(board_clock_locks_onto_the_host_from_sync_frames)
 	ck_assert_msg(b.state == VMAC_BOARD_UNKNOWN && io.writes == 1 && b.counters.frames_ok == 0,
 	              "SYNC changed the board: state %s, %d writes (1 at init), frames_ok %u",
 	              vmac_board_state_name(b.state), io.writes, (unsigned)b.counters.frames_ok);
-	ck_assert_msg(b.counters.frames_malformed == 0 && b.counters.sync_ignored == 0 &&
-	                  b.clock.counters.accepted == 1500,
-	              "malformed %u, sync_ignored %u, accepted %u: want 0, 0, 1500", (unsigned)b.counters.frames_malformed,
-	              (unsigned)b.counters.sync_ignored, (unsigned)b.clock.counters.accepted);
+	ck_assert_msg(
+	    b.counters.frames_malformed == 0 && b.counters.sync_ignored == 0 && b.clock.counters.accepted == 1500,
+	    "malformed %u, sync_ignored %u, accepted %u: want 0, 0, 1500", (unsigned)b.counters.frames_malformed,
+	    (unsigned)b.counters.sync_ignored, (unsigned)b.clock.counters.accepted);
 }
 END_TEST
 
