@@ -4,7 +4,8 @@
  * locks onto a host whose counter differs by an offset and a drift, a SYNC
  * is never answered, never drives, never feeds the watchdog, and the boards
  * that cannot use it (version 1, no receive time, sealed) ignore it without
- * counting it malformed. The clock's filter itself is test_clock.c's. */
+ * counting it malformed, as every board now ignores a system op of a later
+ * protocol. The clock's filter itself is test_clock.c's. */
 #include <check.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -257,6 +258,35 @@ START_TEST(boards_that_cannot_use_sync_ignore_it_without_counting_it_malformed)
 }
 END_TEST
 
+START_TEST(a_later_system_op_is_ignored_not_malformed)
+{
+	/* What SYNC is to firmware built before it: a host frame of the system
+	 * channel with an op it does not know (here 0x06, 4 bytes of data). */
+	uint8_t frame[] = {'V', 'M', 0x02, 0x00, 0x00, 0x07, 0, 0, 0, 0, 0xFF, 0x06, 0x04, 1, 2, 3, 4};
+	uint8_t reply[VMAC_BOARD_REPLY_MAX];
+	struct vmac_board b;
+	struct fake_io io;
+
+	board_start(&b, &io, 2);
+	ck_assert_int_eq(vmac_board_receive_at(&b, frame, sizeof(frame), 0, 1000, reply, sizeof(reply)), 0);
+	ck_assert_msg(b.counters.frames_ignored == 1 && b.counters.frames_malformed == 0,
+	              "system op 0x06: ignored %u, malformed %u; want 1, 0", (unsigned)b.counters.frames_ignored,
+	              (unsigned)b.counters.frames_malformed);
+	frame[3] = VMAC_FLAG_REPLY; /* no board's reply has an op of later protocols */
+	vmac_board_receive_at(&b, frame, sizeof(frame), 0, 1000, reply, sizeof(reply));
+	frame[3] = 0;
+	frame[9] = 1; /* a device id on the system channel */
+	vmac_board_receive_at(&b, frame, sizeof(frame), 0, 1000, reply, sizeof(reply));
+	frame[9] = 0;
+	vmac_board_receive_at(&b, frame, sizeof(frame) - 1, 0, 1000, reply, sizeof(reply)); /* cut short */
+	frame[11] = VMAC_SYS_ANNOUNCE; /* a known op, not as a request */
+	vmac_board_receive_at(&b, frame, sizeof(frame), 0, 1000, reply, sizeof(reply));
+	ck_assert_msg(b.counters.frames_ignored == 1 && b.counters.frames_malformed == 4,
+	              "reply, device id, short, ANNOUNCE request: ignored %u, malformed %u; want 1, 4",
+	              (unsigned)b.counters.frames_ignored, (unsigned)b.counters.frames_malformed);
+}
+END_TEST
+
 static uint32_t no_episodes(const void *ctx)
 {
 	(void)ctx;
@@ -312,6 +342,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, board_clock_locks_onto_the_host_from_sync_frames);
 	tcase_add_test(tc, sync_does_not_feed_the_watchdog_of_a_session);
 	tcase_add_test(tc, boards_that_cannot_use_sync_ignore_it_without_counting_it_malformed);
+	tcase_add_test(tc, a_later_system_op_is_ignored_not_malformed);
 	tcase_add_test(tc, the_report_says_when_the_clock_locks_and_is_lost);
 	suite_add_tcase(s, tc);
 	return s;
