@@ -50,6 +50,7 @@ void vmac_board_init(struct vmac_board *b, const struct vmac_board_identity *id,
                      void *io_ctx, uint64_t now_ms)
 {
 	memset(b, 0, sizeof(*b));
+	vmac_clock_init(&b->clock);
 	b->id = *id;
 	if (b->id.protocol == 0 || b->id.protocol > VMAC_PROTO_VERSION)
 		b->id.protocol = VMAC_PROTO_VERSION;
@@ -237,15 +238,82 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	return answer_ack(b, req, b->device_id, reply, cap);
 }
 
+/* SYNC: the host's send time and our receive time, one sample for the
+ * clock. Nothing else changes: no answer, no outputs, no watchdog. A keyed
+ * board takes it too, unsealed: its clock decides nothing yet (docs/TIME.md,
+ * "Trust"); a sealed SYNC is not defined, and ignored. */
+static int on_sync(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx_local_ns)
+{
+	if (b->id.protocol < 2 || (req->flags & VMAC_FLAG_AUTH) || rx_local_ns == VMAC_BOARD_NO_STAMP) {
+		b->counters.sync_ignored++;
+		return 0;
+	}
+	if (b->clock_local_ns < rx_local_ns)
+		b->clock_local_ns = rx_local_ns;
+	vmac_clock_feed(&b->clock, req->u.sync.host_ns, rx_local_ns);
+	return 0;
+}
+
+enum vmac_clock_state vmac_board_clock_poll(struct vmac_board *b, uint64_t local_ns)
+{
+	if (b->clock_local_ns < local_ns)
+		b->clock_local_ns = local_ns;
+	return vmac_clock_tick(&b->clock, local_ns);
+}
+
+int vmac_board_clock_offset(const struct vmac_board *b, uint64_t local_ns, int64_t *offset_ns, uint64_t *bound_ns)
+{
+	uint64_t host_ns;
+	if (vmac_clock_to_host(&b->clock, local_ns, &host_ns) != 0)
+		return -1;
+	*offset_ns = local_ns >= host_ns ? (int64_t)(local_ns - host_ns) : -(int64_t)(host_ns - local_ns);
+	*bound_ns = vmac_clock_bound_ns(&b->clock, local_ns);
+	return 0;
+}
+
+/* A host frame of the system channel, whole and well made but for an op
+ * this code does not know: one a later protocol added (as SYNC was), which
+ * goes to every board on the bus. Ignored, not counted malformed, so that
+ * the next such op reaches boards of today harmlessly. */
+static int later_system_op(const uint8_t *frame, size_t len)
+{
+	uint8_t op = len >= VMAC_HDR_LEN ? frame[11] : 0;
+	if (op == VMAC_SYS_DISCOVER || op == VMAC_SYS_CYCLIC || op == VMAC_SYS_SYNC || op == VMAC_SYS_ANNOUNCE)
+		return 0; /* known, so malformed as it came */
+	return len >= VMAC_HDR_LEN && frame[10] == VMAC_CH_SYSTEM &&
+	       (frame[3] & ~VMAC_FLAG_AUTH) == 0 && /* a request; no reserved flag */
+	       (frame[6] | frame[7] | frame[8] | frame[9]) == 0 && vmac_proto_frame_length(frame, len) == (int)len;
+}
+
 int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint8_t *reply,
                        size_t cap)
 {
+	return vmac_board_receive_at(b, frame, len, now_ms, VMAC_BOARD_NO_STAMP, reply, cap);
+}
+
+int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
+                          uint8_t *reply, size_t cap)
+{
 	struct vmac_msg req;
 	uint32_t id;
+	int rc;
 
 	vmac_board_poll(b, now_ms);
+	rc = vmac_proto_decode(frame, len, &req);
+	if (rc == VMAC_EPROTO_OP && later_system_op(frame, len)) {
+		b->counters.frames_ignored++; /* a system op of a later protocol: not for us to judge */
+		return 0;
+	}
+	if (rc != 0) {
+		b->counters.frames_malformed++;
+		return 0;
+	}
+	/* SYNC goes to every board on the bus, of every version and state: a
+	 * board that cannot use it ignores it, never counts it malformed. */
+	if (req.channel == VMAC_CH_SYSTEM && req.op == VMAC_SYS_SYNC && !(req.flags & VMAC_FLAG_REPLY))
+		return on_sync(b, &req, rx_local_ns);
 	/* A board of version 1 knows no later frame: it is malformed to it. */
-	if (vmac_proto_decode(frame, len, &req) != 0 || req.version > b->id.protocol) {
+	if (req.version > b->id.protocol) {
 		b->counters.frames_malformed++;
 		return 0;
 	}

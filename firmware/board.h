@@ -10,10 +10,14 @@
 
 #include "../core/proto/auth.h"
 #include "../core/proto/proto.h"
+#include "clock.h"
 
 #define VMAC_FIRMWARE_MAJOR 1
 #define VMAC_FIRMWARE_MINOR 0
 #define VMAC_BOARD_DEFAULT_WATCHDOG_MS 500
+/* A receive time the caller does not have (vmac_board_receive): a SYNC
+ * frame is then of no use to the clock, and ignored. */
+#define VMAC_BOARD_NO_STAMP UINT64_MAX
 /* The largest reply a board sends: a frame and its authentication trailer. */
 #define VMAC_BOARD_REPLY_MAX (VMAC_FRAME_MAX + VMAC_AUTH_TRAILER_LEN)
 
@@ -46,7 +50,8 @@ struct vmac_board_identity {
 
 struct vmac_board_counters {
 	uint32_t frames_ok, frames_malformed, frames_ignored, watchdog_trips;
-	uint32_t auth_failed; /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
+	uint32_t auth_failed;  /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
+	uint32_t sync_ignored; /* SYNC frames not fed to the clock: version 1, sealed, or no receive time */
 };
 
 struct vmac_board {
@@ -65,6 +70,12 @@ struct vmac_board {
 	uint8_t nonce[VMAC_NONCE_LEN];
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
 	uint32_t rx_counter, rx_cyclic_counter, tx_counter;
+	/* The board's clock (docs/TIME.md), on the caller's free-running
+	 * counter (ns), fed by the host's SYNC frames in any board state; its
+	 * counter at the last feed or vmac_board_clock_poll, the instant its
+	 * state was last looked at. */
+	struct vmac_clock clock;
+	uint64_t clock_local_ns;
 	const struct vmac_board_io *io;
 	void *io_ctx;
 };
@@ -86,6 +97,27 @@ int vmac_board_poll(struct vmac_board *b, uint64_t now_ms);
  * many records the frame carries. Never reads past frame + len. */
 int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint8_t *reply,
                        size_t cap);
+
+/* The same, with the frame's receive time rx_local_ns on the board's own
+ * free-running counter (ns; the kernel's receive timestamp in vmac-board,
+ * the Ethernet interrupt's timer on a microcontroller): a SYNC frame
+ * (docs/PROTOCOL.md, "SYNC") is fed to the board's clock with it. A SYNC
+ * frame is never answered and never feeds the watchdog; a board of
+ * version 1, a sealed SYNC (not defined yet) and a call without a receive
+ * time (VMAC_BOARD_NO_STAMP) count it in sync_ignored and leave the clock
+ * alone. A keyed board's clock is fed by unsealed SYNC frames: it decides
+ * nothing yet (docs/TIME.md, "Trust"). */
+int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
+                          uint8_t *reply, size_t cap);
+
+/* Time passes for the clock (vmac_clock_tick at local_ns: holdover, lost):
+ * call as often as its state must be current. Returns its state. */
+enum vmac_clock_state vmac_board_clock_poll(struct vmac_board *b, uint64_t local_ns);
+
+/* The clock's estimate of (board counter - host time) at local_ns, ns, into
+ * *offset_ns, and its error bound there: 0, or -1 when it has none
+ * (unsynced, lost). */
+int vmac_board_clock_offset(const struct vmac_board *b, uint64_t local_ns, int64_t *offset_ns, uint64_t *bound_ns);
 
 /* Outputs off, session forgotten: what SHUTDOWN, comm loss and a board
  * process exiting all do. */

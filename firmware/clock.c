@@ -13,16 +13,26 @@
 #define EWMA 8                  /* every running mean weighs its newest value 1/8 */
 #define FAR_NS (UINT64_MAX / 4) /* a bound past any limit, safe to add to */
 #define DEV_START_DIV 4         /* the servo starts with a spread of a quarter of the jitter, not 0 */
+#define DIFF_MAX_NS ((int64_t)1 << 62)
+/* A sample's lateness as the jitter and the window's mean see it: at most
+ * +-2^30 ns (1.07 s), so that 16 of them sum and the jitter times 2^32
+ * stay in 64 bits. Far beyond the 1 ms of a step: such a sample starts
+ * over anyway, by its own (unclamped) times. */
+#define LATE_CLAMP_NS ((int64_t)1 << 30)
 
 static uint64_t magnitude(int64_t v)
 {
 	return v < 0 ? (uint64_t)0 - (uint64_t)v : (uint64_t)v;
 }
 
-/* a - b, signed, without relying on conversions out of range. */
+/* a - b, signed, saturated at +-2^62 (any two times of one run are far
+ * closer; a host time from a forged or broken frame may not be), so that a
+ * sum or difference of two never overflows. */
 static int64_t diff_ns(uint64_t a, uint64_t b)
 {
-	return a >= b ? (int64_t)(a - b) : -(int64_t)(b - a);
+	uint64_t d = a >= b ? a - b : b - a;
+	int64_t m = d > (uint64_t)DIFF_MAX_NS ? DIFF_MAX_NS : (int64_t)d;
+	return a >= b ? m : -m;
 }
 
 /* (dt x f) / 2^32, rounded toward zero, for |f| < 2^31. */
@@ -37,6 +47,11 @@ static int64_t scale_q32(int64_t dt, int64_t f)
 static uint64_t elapsed(uint64_t now, uint64_t since)
 {
 	return now > since ? now - since : 0;
+}
+
+static int64_t clamp_late(int64_t lateness)
+{
+	return lateness > LATE_CLAMP_NS ? LATE_CLAMP_NS : lateness < -LATE_CLAMP_NS ? -LATE_CLAMP_NS : lateness;
 }
 
 static int64_t clamp_freq(int64_t f)
@@ -222,7 +237,7 @@ static void close_window(struct vmac_clock *c, uint64_t now_local)
 {
 	uint64_t bound;
 	c->counters.windows++;
-	ewma(&c->jitter_ns, c->window_sum_ns / (int64_t)c->window_n - c->window_min_ns);
+	ewma(&c->jitter_ns, c->window_sum_ns / (int64_t)c->window_n - clamp_late(c->window_min_ns));
 	if (c->servo && spike(c, now_local)) {
 		window_reset(c);
 		return;
@@ -303,7 +318,7 @@ int vmac_clock_feed(struct vmac_clock *c, uint64_t host_ns, uint64_t local_ns)
 		c->window_min_host = host_ns;
 	}
 	c->window_n++;
-	c->window_sum_ns += lateness;
+	c->window_sum_ns += clamp_late(lateness);
 	if (c->window_n >= VMAC_CLOCK_WINDOW)
 		close_window(c, local_ns);
 	return VMAC_CLOCK_ACCEPTED;

@@ -29,6 +29,43 @@ static void add_unsigned(struct text *t, uint32_t v)
 	}
 }
 
+static void add_u64(struct text *t, uint64_t v)
+{
+	char d[21];
+	int n = 0;
+	do
+		d[n++] = (char)('0' + v % 10);
+	while ((v /= 10) != 0);
+	while (n > 0) {
+		char c[2] = {d[--n], 0};
+		add(t, c);
+	}
+}
+
+/* v in units of 10^-decimals, as a decimal with its sign when sign is set
+ * ("-1.999871234", "+199.9"; decimals 1..9). */
+static void add_fixed(struct text *t, int64_t v, int decimals, int sign)
+{
+	uint64_t m = v < 0 ? (uint64_t)0 - (uint64_t)v : (uint64_t)v, scale = 1, frac;
+	char digits[10];
+	int i;
+	for (i = 0; i < decimals; i++)
+		scale *= 10;
+	if (v < 0)
+		add(t, "-");
+	else if (sign)
+		add(t, "+");
+	add_u64(t, m / scale);
+	add(t, ".");
+	frac = m % scale;
+	for (i = decimals - 1; i >= 0; i--) {
+		digits[i] = (char)('0' + frac % 10);
+		frac /= 10;
+	}
+	digits[decimals] = 0;
+	add(t, digits);
+}
+
 static void add_signed(struct text *t, int32_t v)
 {
 	if (v < 0) {
@@ -63,6 +100,7 @@ void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const s
 	r->state = b->state;
 	r->outputs = b->outputs;
 	r->unsafe = s->episodes(s->ctx);
+	r->clock = b->clock.state;
 	r->quiet = quiet;
 }
 
@@ -81,6 +119,13 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 			add(&t, " watchdog ");
 			add_unsigned(&t, b->watchdog_ms);
 			add(&t, " ms");
+			return 1;
+		}
+	}
+	if (b->clock.state != r->clock) {
+		r->clock = b->clock.state;
+		if (!r->quiet || b->clock.state == VMAC_CLOCK_LOST) {
+			vmac_report_clock(b, 0, line, len);
 			return 1;
 		}
 	}
@@ -111,6 +156,35 @@ void vmac_report_watchdog(const struct vmac_board *b, char *line, size_t len)
 	add(&t, "watchdog: no frame for ");
 	add_unsigned(&t, b->watchdog_ms);
 	add(&t, " ms, outputs off");
+}
+
+void vmac_report_clock(const struct vmac_board *b, int with_counters, char *line, size_t len)
+{
+	struct text t = start(b, line, len);
+	int64_t offset_ns;
+	uint64_t bound_ns;
+	add(&t, "clock ");
+	add(&t, vmac_clock_state_name(b->clock.state));
+	if (vmac_board_clock_offset(b, b->clock_local_ns, &offset_ns, &bound_ns) == 0) {
+		add(&t, ", offset ");
+		add_fixed(&t, offset_ns, 9, 1);
+		add(&t, " s, drift ");
+		/* the learnt frequency is host ns per local ns, - 1: the counter's own drift is its opposite */
+		add_fixed(&t, -(int64_t)vmac_clock_freq_ppb(&b->clock) / 100, 1, 1);
+		add(&t, " ppm, bound ");
+		add_fixed(&t, (int64_t)(bound_ns > 999999999 ? 999999999 : bound_ns) / 100, 1, 0);
+		add(&t, " us");
+	} else if (b->clock.state == VMAC_CLOCK_LOST) {
+		add(&t, ", acting on arrival");
+	}
+	if (!with_counters)
+		return;
+	add(&t, "; sync accepted ");
+	add_unsigned(&t, b->clock.counters.accepted);
+	add(&t, ", rejected ");
+	add_unsigned(&t, b->clock.counters.rejected);
+	add(&t, ", ignored ");
+	add_unsigned(&t, b->counters.sync_ignored);
 }
 
 void vmac_report_counters(const struct vmac_board *b, char *line, size_t len)

@@ -19,8 +19,9 @@
 struct vmac_report {
 	enum vmac_board_state state;
 	struct vmac_outputs outputs;
-	uint32_t unsafe; /* the plant's unsafe episodes already named */
-	int quiet;       /* only what matters for safety: leaving a session, unsafe episodes */
+	uint32_t unsafe;             /* the plant's unsafe episodes already named */
+	enum vmac_clock_state clock; /* the board clock's state last named */
+	int quiet;                   /* only what matters for safety: leaving a session, unsafe episodes */
 };
 
 /* Start from what board b and the safety monitor s of its machine
@@ -36,6 +37,14 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 /* The line of a watchdog trip ("NAME: watchdog: no frame for N ms, outputs
  * off"); the caller may add the times its clock gives. */
 void vmac_report_watchdog(const struct vmac_board *b, char *line, size_t len);
+
+/* The board clock's line (docs/BOARD.md, "What it prints"): "NAME: clock
+ * STATE, offset S s, drift P ppm, bound B us" at the instant it was last
+ * looked at (b->clock_local_ns), offset being the board's counter less
+ * host time; lost or unsynced, "NAME: clock lost, acting on arrival".
+ * with_counters adds "; sync accepted N, rejected N, ignored N". A change
+ * of state is said by vmac_report_next (with --quiet only lost). */
+void vmac_report_clock(const struct vmac_board *b, int with_counters, char *line, size_t len);
 
 /* The board's frame counters, one line: "NAME: frames ok N, malformed N,
  * ignored N, watchdog trips N, auth_failed N" (auth_failed: frames of a

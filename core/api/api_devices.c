@@ -126,10 +126,13 @@ static json_t *status_json(struct vmac_http *h)
 		const struct {
 			const char *name;
 			uint64_t value;
-		} more[] = {
-		    {"schedule_full", s->counters.schedule_full},       {"misses_host", s->counters.misses_host},
-		    {"attach_refused", s->counters.attach_refused},     {"auth_failed", s->counters.auth_failed},
-		    {"takeover_refused", s->counters.takeover_refused}, {"waiting", s->counters.waiting}};
+		} more[] = {{"schedule_full", s->counters.schedule_full},
+		            {"misses_host", s->counters.misses_host},
+		            {"attach_refused", s->counters.attach_refused},
+		            {"auth_failed", s->counters.auth_failed},
+		            {"takeover_refused", s->counters.takeover_refused},
+		            {"waiting", s->counters.waiting},
+		            {"syncs", s->counters.syncs}};
 		for (i = 0; i < (int)(sizeof(more) / sizeof(more[0])); i++)
 			json_object_set_new(json_object_get(root, "counters"), more[i].name,
 			                    json_integer((json_int_t)more[i].value));

@@ -50,6 +50,7 @@ static const struct key keys[] = {
     {U(default_level, 0, 12)},
     {U(reply_deadline_us, 50, 10000000)},
     {U(discovery_period_ms, 10, 600000)},
+    {U(clock_sync_ms, 0, 40)},
     {U(watchdog_ms, 1, 60000)},
     {U(miss_limit, 1, 1000)},
     {U(sleep_s, 1, 3600)},

@@ -42,10 +42,10 @@ double bus_time(const struct vmac_bus *bus)
 }
 
 /* Per flush at most: one request per device, a WATCHDOG beside it, a
- * DISCOVER, and a CYCLIC frame per chunk of offsets, sealed and not. */
+ * DISCOVER, a SYNC, and a CYCLIC frame per chunk of offsets, sealed and not. */
 static int tx_max(const struct vmac_bus *bus)
 {
-	return 2 * (int)bus->ndev + 2 + (int)bus->nchunks + (int)bus->nauth_chunks;
+	return 2 * (int)bus->ndev + 3 + (int)bus->nchunks + (int)bus->nauth_chunks;
 }
 
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
@@ -90,6 +90,11 @@ void bus_flush(struct vmac_bus *bus)
 	int sent;
 	if (bus->ntx == 0)
 		return;
+	if (bus->sync_tx >= 0) {
+		/* As late as the host can take it: the send itself follows. */
+		vmac_proto_sync_stamp(bus->tx[bus->sync_tx].data, (uint64_t)bus_now(bus));
+		bus->sync_tx = -1;
+	}
 	if (bus->virt) {
 		bus->link.send(bus->link.ctx, bus->tx, bus->ntx);
 		sent = bus->ntx;
@@ -146,6 +151,33 @@ static void send_discover(struct vmac_bus *bus)
 	p->len = (size_t)n;
 	p->addr = bus->tr.group;
 	bus->counters.discoveries++;
+}
+
+/* SYNC to the group (docs/TIME.md): queued before this tick's CYCLIC
+ * frames, its host time written by bus_flush just before the batch is
+ * handed to the kernel. No allocation, no log: it runs on every tick due. */
+static void send_sync(struct vmac_bus *bus)
+{
+	struct vmac_packet *p = tx_slot(bus);
+	struct vmac_msg m;
+	int n;
+	if (!p)
+		return;
+	memset(&m, 0, sizeof(m));
+	m.version = 2;
+	m.channel = VMAC_CH_SYSTEM;
+	m.op = VMAC_SYS_SYNC;
+	m.seq = ++bus->sync_seq;
+	n = vmac_proto_encode(&m, p->data, sizeof(p->data));
+	if (n <= 0) {
+		bus->ntx--;
+		return;
+	}
+	p->len = (size_t)n;
+	p->addr = bus->tr.group;
+	memset(p->mac, 0, sizeof(p->mac));
+	bus->sync_tx = bus->ntx - 1;
+	bus->counters.syncs++;
 }
 
 /* REGISTER goes out at once, whatever the slot: a board is not in the
@@ -349,6 +381,13 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 		}
 		return 0;
 	}
+	if (bus->cfg.clock_sync_ms > 0 && !bus->virt && now >= bus->next_sync_ns) {
+		int64_t period = (int64_t)bus->cfg.clock_sync_ms * 1000000;
+		send_sync(bus);
+		bus->next_sync_ns += period;
+		if (bus->next_sync_ns <= now) /* late ticks: on from now, no burst */
+			bus->next_sync_ns = now + period;
+	}
 	if (now >= bus->next_discover_ns) {
 		send_discover(bus);
 		bus->next_discover_ns = now + (int64_t)bus->cfg.discovery_period_ms * 1000000;
@@ -392,6 +431,7 @@ static void *bus_main(void *arg)
 	if (bus->timerfd_wait)
 		timerfd_settime(bus->tfd, TFD_TIMER_ABSTIME, &its, NULL);
 	bus->next_discover_ns = bus->start_ns;
+	bus->next_sync_ns = bus->start_ns;
 	bus_loop(bus);
 	return NULL;
 }
@@ -423,6 +463,7 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->wakefd = -1;
 	bus->cpu_awake_fd = -1;
 	bus->tr.fd = -1;
+	bus->sync_tx = -1;
 	bus->ndev = cfg->max_devices;
 	bus->slot_ns = (int64_t)vmac_config_slot_us(cfg) * 1000;
 	bus->reply_deadline_ns = (int64_t)cfg->reply_deadline_us * 1000;

@@ -281,6 +281,9 @@ struct vmac_bus {
 	uint64_t slots_done; /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;
+	uint16_t sync_seq;         /* seq of the latest SYNC frame */
+	int64_t next_sync_ns;      /* when the next SYNC is due (clock_sync_ms) */
+	int sync_tx;               /* its index in tx until bus_flush stamps it; -1 none */
 	int64_t next_probation_ns; /* next look for reloads whose probation is over */
 	struct vmac_packet *tx;
 	int ntx;

@@ -18,6 +18,12 @@ static void put32(uint8_t *p, uint32_t v)
 	p[3] = (uint8_t)v;
 }
 
+static void put64(uint8_t *p, uint64_t v)
+{
+	put32(p, (uint32_t)(v >> 32));
+	put32(p + 4, (uint32_t)v);
+}
+
 static uint16_t get16(const uint8_t *p)
 {
 	return (uint16_t)((p[0] << 8) | p[1]);
@@ -26,6 +32,11 @@ static uint16_t get16(const uint8_t *p)
 static uint32_t get32(const uint8_t *p)
 {
 	return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | p[3];
+}
+
+static uint64_t get64(const uint8_t *p)
+{
+	return ((uint64_t)get32(p) << 32) | get32(p + 4);
 }
 
 /* Names (driver and board) are 1..31 bytes of [A-Za-z0-9_-]: a driver name
@@ -72,6 +83,8 @@ static int data_len_for(uint8_t version, uint8_t channel, uint8_t op, int reply)
 			return LEN_ANNOUNCE;
 		if (op == VMAC_SYS_CYCLIC && !reply && version >= 2)
 			return LEN_CYCLIC;
+		if (op == VMAC_SYS_SYNC && !reply && version >= 2)
+			return VMAC_SYNC_LEN;
 		return -1;
 	}
 	if (channel != VMAC_CH_DEVICE)
@@ -202,6 +215,7 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		if (n)
 			memcpy(d, m->u.discover.nonce, VMAC_NONCE_LEN);
 		break;
+	case SYS_KEY | VMAC_SYS_SYNC: put64(d, m->u.sync.host_ns); break;
 	case SYS_KEY | VMAC_SYS_ANNOUNCE: {
 		size_t room = cap - VMAC_HDR_LEN;
 		n = encode_announce(&m->u.announce, d, room > VMAC_DATA_MAX ? VMAC_DATA_MAX : room);
@@ -324,6 +338,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 			memcpy(m->u.discover.nonce, d, VMAC_NONCE_LEN);
 		break;
 	case SYS_KEY | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
+	case SYS_KEY | VMAC_SYS_SYNC: m->u.sync.host_ns = get64(d); break;
 	case SYS_KEY | VMAC_SYS_CYCLIC:
 		/* Records are checked one by one when read (a board reads only its
 		 * own): decoding stays O(1) however many the frame carries. */
@@ -477,6 +492,11 @@ int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct v
 	return 0;
 }
 
+void vmac_proto_sync_stamp(uint8_t *buf, uint64_t host_ns)
+{
+	put64(buf + VMAC_HDR_LEN, host_ns);
+}
+
 const char *vmac_proto_strerror(int err)
 {
 	switch (err) {
@@ -501,6 +521,7 @@ const char *vmac_proto_opname(uint8_t channel, uint8_t op)
 		return op == VMAC_SYS_DISCOVER   ? "DISCOVER"
 		       : op == VMAC_SYS_ANNOUNCE ? "ANNOUNCE"
 		       : op == VMAC_SYS_CYCLIC   ? "CYCLIC"
+		       : op == VMAC_SYS_SYNC     ? "SYNC"
 		                                 : "?";
 	if (channel != VMAC_CH_DEVICE)
 		return "?";

@@ -48,6 +48,7 @@ enum vmac_channel { VMAC_CH_DEVICE = 0x00, VMAC_CH_SYSTEM = 0xFF };
 enum vmac_sys_op {
 	VMAC_SYS_DISCOVER = 0x01, /* host -> group: who is unknown? */
 	VMAC_SYS_CYCLIC = 0x04,   /* v2, host -> group: outputs of every device due, at their offsets */
+	VMAC_SYS_SYNC = 0x05,     /* v2, host -> group: the host's clock at the frame's send (docs/TIME.md) */
 	VMAC_SYS_ANNOUNCE = 0x10, /* board -> host: driver name, major, minor, ... */
 };
 
@@ -151,6 +152,15 @@ struct vmac_discover {
 	uint8_t nonce[VMAC_NONCE_LEN];
 };
 
+/* SYNC's data (v2, host -> group): the host's CLOCK_MONOTONIC at the
+ * frame's send, taken as late as the host can; the header's seq is the
+ * sync sequence number. A board feeds it to its clock (firmware/clock.h)
+ * with its own receive timestamp. */
+#define VMAC_SYNC_LEN 8
+struct vmac_sync {
+	uint64_t host_ns;
+};
+
 struct vmac_error {
 	uint8_t code; /* enum vmac_board_error */
 	uint8_t op;   /* the op of the request that failed */
@@ -179,6 +189,7 @@ struct vmac_msg {
 		uint8_t record_size;           /* v2 SIZE reply: bytes per cyclic record */
 		uint16_t offset;               /* v2 OFFSET request and reply, OFFSET_GET reply */
 		struct vmac_cyclic cyclic;     /* v2 CYCLIC (decode only; build with vmac_proto_cyclic_*) */
+		struct vmac_sync sync;         /* v2 SYNC */
 	} u;
 };
 
@@ -220,6 +231,11 @@ void vmac_proto_cyclic_put(uint8_t *frame, unsigned index, uint16_t tag, uint8_t
  * frame's record is read here; its MAC is checked by
  * vmac_proto_cyclic_open_record (auth.h). */
 int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct vmac_cyclic_record *r);
+
+/* Write host_ns into an encoded SYNC frame (buf, at least VMAC_HDR_LEN +
+ * VMAC_SYNC_LEN bytes): the host stamps it at the last moment before the
+ * send, after the frame was built. */
+void vmac_proto_sync_stamp(uint8_t *buf, uint64_t host_ns);
 
 /* A short English text for a negative vmac_proto_err. Never NULL. */
 const char *vmac_proto_strerror(int err);

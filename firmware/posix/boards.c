@@ -10,8 +10,9 @@
 
 #include "keyfile.h"
 
-#define PLANT_STEP_MAX_S 0.01 /* physics sub-step */
-#define SESSIONS 65536        /* device_id & 0xFFFF: the host's slot of the device */
+#define PLANT_STEP_MAX_S 0.01    /* physics sub-step */
+#define OSC_BACK_NS 4000000000LL /* the oscillator keeps 4.096 s behind its newest: stay within */
+#define SESSIONS 65536           /* device_id & 0xFFFF: the host's slot of the device */
 
 static uint32_t identity_hash(uint32_t major, uint32_t minor)
 {
@@ -86,13 +87,79 @@ static int make_sim(const struct boards_config *cfg, int32_t i, struct vmac_sim 
 	return vmac_sim_init_lua(sim, cfg->plant_file, &lim, err, errlen);
 }
 
+/* Board i's oscillator: at true time 0 (the process's start) its counter
+ * reads CLOCK_MONOTONIC + offset, then runs at 1 + ppm. 0, or -2 (an
+ * offset that puts the counter below 0) or -1 (no memory) with err. */
+static int clock_init(struct board_set *s, const struct boards_config *cfg, int32_t i, char *err, size_t errlen)
+{
+	struct oscillator_config oc;
+	memset(&oc, 0, sizeof(oc));
+	oc.offset_s = (double)s->clock_base_ns / 1e9 + cfg->clock.offset_s;
+	if (oc.offset_s <= 0) {
+		snprintf(err, errlen,
+		         "--clock-offset %g: a counter that far behind CLOCK_MONOTONIC (%.0f s since boot) would start "
+		         "below 0",
+		         cfg->clock.offset_s, (double)s->clock_base_ns / 1e9);
+		return -2;
+	}
+	oc.drift_ppm = cfg->clock.ppm;
+	oc.step_at_s = -1;
+	oc.jitter_us = cfg->clock.jitter_us;
+	oc.seed = cfg->clock.seed + (uint64_t)i;
+	s->boards[i].osc = malloc(sizeof(*s->boards[i].osc));
+	if (!s->boards[i].osc) {
+		snprintf(err, errlen, "out of memory for the clocks of %ld boards", cfg->count);
+		return -1;
+	}
+	oscillator_init(s->boards[i].osc, &oc);
+	return 0;
+}
+
+uint64_t boards_local_ns(struct board_set *s, int32_t i, int64_t mono_ns, int rx)
+{
+	struct oscillator *o = s->boards[i].osc;
+	int64_t true_ns = mono_ns - s->clock_base_ns, oldest;
+	if (!o)
+		return mono_ns > 0 ? (uint64_t)mono_ns : 0;
+	oldest = o->newest * (int64_t)OSCILLATOR_STEP_NS - OSC_BACK_NS;
+	if (true_ns < oldest)
+		true_ns = oldest;
+	if (true_ns < 0)
+		true_ns = 0;
+	if (rx)
+		true_ns += (int64_t)oscillator_rx_delay_ns(o);
+	return oscillator_local_ns(o, (uint64_t)true_ns);
+}
+
+void boards_clock_poll(struct board_set *s, int64_t now_ns)
+{
+	int32_t i;
+	for (i = 0; i < s->count; i++) {
+		struct vmac_board *b = &s->boards[i].board;
+		if (b->clock.state == VMAC_CLOCK_UNSYNCED)
+			continue; /* nothing to age: no sync frame yet */
+		vmac_board_clock_poll(b, boards_local_ns(s, i, now_ns, 0));
+	}
+}
+
+void boards_print_clock(const struct board_set *s, int32_t i)
+{
+	char line[VMAC_REPORT_LINE];
+	if (s->boards[i].board.clock.state == VMAC_CLOCK_UNSYNCED && s->boards[i].board.counters.sync_ignored == 0)
+		return;
+	vmac_report_clock(&s->boards[i].board, 1, line, sizeof(line));
+	printf("%s\n", line);
+}
+
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen)
 {
 	uint32_t hash = vmac_proto_default_major(cfg->name), slots = 2;
 	int32_t i;
+	int rc;
 
 	memset(s, 0, sizeof(*s));
 	s->count = (int32_t)cfg->count;
+	s->clock_base_ns = vmac_now_ns();
 	s->eth = cfg->eth;
 	s->time_scale = cfg->time_scale > 0 ? cfg->time_scale : 1.0;
 	/* Locally administered, unicast (first byte 0x02); then 3 bytes of the
@@ -164,6 +231,10 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 		pb->safety = vmac_sim_safety(&pb->sim);
 		vmac_report_init(&pb->report, &pb->board, &pb->safety, 0);
 		pb->routed_offset = VMAC_OFFSET_NONE;
+		if (cfg->clock.on && (rc = clock_init(s, cfg, i, err, errlen)) != 0) {
+			boards_fini(s);
+			return rc;
+		}
 		memcpy(pb->mac, s->mac_prefix, sizeof(s->mac_prefix));
 		pb->mac[4] = (uint8_t)((i + 1) >> 8);
 		pb->mac[5] = (uint8_t)(i + 1);
@@ -176,8 +247,10 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 void boards_fini(struct board_set *s)
 {
 	int32_t i;
-	for (i = 0; s->boards && i < s->count; i++)
+	for (i = 0; s->boards && i < s->count; i++) {
 		vmac_sim_fini(&s->boards[i].sim);
+		free(s->boards[i].osc);
+	}
 	free(s->boards);
 	free(s->by_offset);
 	free(s->by_session);
@@ -237,8 +310,17 @@ void boards_report(struct board_set *s, int32_t i)
 	struct posix_board *pb = &s->boards[i];
 	char line[VMAC_REPORT_LINE];
 	pb->report.quiet = s->quiet; /* --quiet is set after the boards are made */
-	while (vmac_report_next(&pb->report, &pb->board, &pb->safety, line, sizeof(line)))
-		printf("%s\n", line);
+	for (;;) {
+		enum vmac_clock_state clock = pb->report.clock;
+		if (!vmac_report_next(&pb->report, &pb->board, &pb->safety, line, sizeof(line)))
+			break;
+		/* A clock line carries the process's CLOCK_MONOTONIC, as a trip line
+		 * does: a test judges how long locking took by it. */
+		if (pb->report.clock != clock)
+			printf("%s; at %" PRId64 " ms\n", line, vmac_now_ns() / 1000000);
+		else
+			printf("%s\n", line);
+	}
 }
 
 void boards_print_counters(const struct board_set *s, int32_t i)
@@ -294,8 +376,10 @@ void boards_command(struct board_set *s, const char *line)
 	int32_t i;
 	int fields = sscanf(line, "%63s %63s %lf", name, action, &value);
 	if (fields == 1 && strcmp(name, "status") == 0) {
-		for (i = 0; i < s->count; i++)
+		for (i = 0; i < s->count; i++) {
 			boards_print_counters(s, i);
+			boards_print_clock(s, i);
+		}
 		return;
 	}
 	if (fields < 2) {
@@ -307,6 +391,7 @@ void boards_command(struct board_set *s, const char *line)
 		if (strcmp(pb->board.id.board, name) == 0) {
 			if (fields == 2 && strcmp(action, "status") == 0) {
 				boards_print_counters(s, i);
+				boards_print_clock(s, i);
 				return;
 			}
 			char why[VMAC_DRIVER_ERR_MAX + 128], one[sizeof(why)];

@@ -14,6 +14,7 @@
 #include "../../core/transport/transport.h"
 #include "../board.h"
 #include "../report.h"
+#include "oscillator.h"
 
 #define BOARD_NONE (-1)        /* an empty entry of a routing table */
 #define BOARDS_MAX 65535       /* a board's number (1-based) is the last 16 bits of its MAC */
@@ -28,6 +29,18 @@ struct posix_board {
 	uint16_t routed_offset;          /* the by_offset entry held for it; VMAC_OFFSET_NONE */
 	uint32_t routed_device_id;       /* the session by_session points to it for; 0 none */
 	uint8_t mac[6];                  /* Ethernet: the source MAC of its replies */
+	struct oscillator *osc;          /* its counter, when the clocks are simulated (--clock-*); else NULL */
+};
+
+/* The boards' local counters (--clock-ppm, --clock-offset, --clock-jitter-us,
+ * --clock-seed): each board's counter is the oscillator model of the true
+ * clock (CLOCK_MONOTONIC, the host's too on one machine), and each receive
+ * timestamp is late by a random delay. Off: the counter is CLOCK_MONOTONIC
+ * itself and timestamps are the kernel's. */
+struct boards_clock_config {
+	int on;
+	double ppm, offset_s, jitter_us;
+	uint64_t seed; /* board i's streams: seed + i */
 };
 
 /* What every board of the process is made from (main.c's options). */
@@ -47,6 +60,7 @@ struct boards_config {
 	 * NAME.key files, one per board; both NULL: unkeyed. */
 	const char *key_file;
 	const char *key_dir;
+	struct boards_clock_config clock;
 };
 
 struct board_set {
@@ -72,12 +86,14 @@ struct board_set {
 	int64_t late_ns;   /* report a reply later than this after its request; 0: never */
 	uint64_t late_replies, unroutable, unsent;
 	uint64_t last_step_ms; /* plant time */
+	int64_t clock_base_ns; /* CLOCK_MONOTONIC at start: the oscillators' true time 0 */
 };
 
 /* Make cfg->count boards (names, identities, keys, MACs, plants) and the
  * routing tables. Returns 0, or with a readable reason in err -2 (a name
  * the protocol refuses, a key file missing or not one, a Lua plant that
- * does not load) or -1 (out of memory). */
+ * does not load, a --clock-offset below the counter's 0) or -1 (out of
+ * memory). */
 int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t now_ms, char *err, size_t errlen);
 void boards_fini(struct board_set *s);
 
@@ -102,6 +118,20 @@ void boards_poll_one(struct board_set *s, int32_t i, uint64_t now_ms);
  * is said once and holds its inputs from then on), and the state and
  * output lines. */
 void boards_housekeep(struct board_set *s, uint64_t now_ms);
+
+/* Board i's own counter (ns) at CLOCK_MONOTONIC mono_ns: the oscillator's
+ * when simulated, else mono_ns. rx: mono_ns is a receive timestamp, late
+ * by the model's jitter. A time more than 4 s older than one already asked
+ * for (frames queued while the process was stopped) is taken as 4 s. */
+uint64_t boards_local_ns(struct board_set *s, int32_t i, int64_t mono_ns, int rx);
+
+/* Every board's clock brought to now (holdover, lost: vmac_board_clock_poll)
+ * and its state line printed when it changed. */
+void boards_clock_poll(struct board_set *s, int64_t now_ns);
+
+/* Board i's clock line with its sync counters (status, exit), unless it
+ * never had a sync frame. */
+void boards_print_clock(const struct board_set *s, int32_t i);
 
 /* Print board i's state and output changes since it was last reported, and
  * a line for each unsafe episode its plant entered (even with --quiet). */

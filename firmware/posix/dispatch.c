@@ -64,6 +64,20 @@ static void route_cyclic(struct board_set *s, const struct vmac_packet *p, uint6
 	}
 }
 
+/* SYNC goes to every board (docs/TIME.md), each with the frame's receive
+ * time on its own counter; it is never answered. O(boards) a frame, as
+ * DISCOVER, but at the host's clock_sync_ms. */
+static void route_sync(struct board_set *s, const struct vmac_packet *p, uint64_t now_ms)
+{
+	uint8_t none[VMAC_BOARD_REPLY_MAX];
+	int32_t i;
+	for (i = 0; i < s->count; i++) {
+		boards_poll_one(s, i, now_ms);
+		vmac_board_receive_at(&s->boards[i].board, p->data, p->len, now_ms, boards_local_ns(s, i, p->rx_ns, 1),
+		                      none, sizeof(none));
+	}
+}
+
 /* UDP: a REGISTER goes to the board of the identity it names. */
 static int32_t route_register(struct board_set *s, const struct vmac_packet *p)
 {
@@ -87,6 +101,8 @@ static void route(struct board_set *s, const struct vmac_packet *p, uint64_t now
 	if (d[10] == VMAC_CH_SYSTEM) {
 		if (d[11] == VMAC_SYS_CYCLIC) {
 			route_cyclic(s, p, now_ms);
+		} else if (d[11] == VMAC_SYS_SYNC) {
+			route_sync(s, p, now_ms);
 		} else if (d[11] == VMAC_SYS_DISCOVER) {
 			/* Rare (once per discovery period): only unknown boards answer. */
 			for (i = 0; i < s->count; i++)

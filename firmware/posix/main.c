@@ -64,6 +64,12 @@ static void usage(FILE *f)
 	           "  --key-file FILE   keyed: the board's 16-byte key, 32 hex digits (vmac board enroll\n"
 	           "                    --out FILE writes it); it answers only a host that authenticates\n"
 	           "  --key-dir DIR     keyed: each board NAME reads its key from DIR/NAME.key\n"
+	           "  --clock-ppm P     simulate each board's clock: its counter runs P ppm fast (-500..500)\n"
+	           "  --clock-offset S  ...and reads S seconds ahead of the host's clock (may be negative)\n"
+	           "  --clock-jitter-us U  ...and stamps each frame's arrival late by a random delay of\n"
+	           "                    mean U us (0..10000); --clock-seed N its random streams, board i\n"
+	           "                    N + i (default 1). docs/TIME.md; without any, the counter is\n"
+	           "                    CLOCK_MONOTONIC and stamps are the kernel's\n"
 	           "  --cpu K           run on CPU K only\n"
 	           "  --late-us N       print each reply that left more than N us after its request\n"
 	           "                    came in (default 1000; 0: never)\n"
@@ -217,6 +223,24 @@ struct runner {
 	struct vmac_packet *pkts;
 };
 
+/* The --clock-* options without a letter of their own. */
+enum { OPT_CLOCK_PPM = 0x100, OPT_CLOCK_OFFSET, OPT_CLOCK_JITTER, OPT_CLOCK_SEED };
+
+/* A --clock-* number in min..max into *out, the clocks then simulated.
+ * Returns -1 to go on, or 2 with the error printed. */
+static int clock_number(struct options *o, const char *option, const char *text, double min, double max, double *out)
+{
+	char *end;
+	double v = strtod(text, &end);
+	if (!*text || *end || !(v >= min && v <= max)) {
+		fprintf(stderr, "vmac-board: %s takes a number %g..%g, got '%s'\n", option, min, max, text);
+		return 2;
+	}
+	*out = v;
+	o->cfg.clock.on = 1;
+	return -1;
+}
+
 /* One option (getopt_long's opt and optarg) into o. Returns -1 to go on,
  * or the exit code: 0 after --help or --version, 2 for a wrong value. */
 static int take_option(struct options *o, int opt, const char *arg)
@@ -267,6 +291,15 @@ static int take_option(struct options *o, int opt, const char *arg)
 	case 'R': o->realtime = 0; return -1;
 	case 'K': o->cfg.key_file = arg; return -1;
 	case 'D': o->cfg.key_dir = arg; return -1;
+	case OPT_CLOCK_PPM: return clock_number(o, "--clock-ppm", arg, -500, 500, &o->cfg.clock.ppm);
+	case OPT_CLOCK_OFFSET: return clock_number(o, "--clock-offset", arg, -1e6, 1e6, &o->cfg.clock.offset_s);
+	case OPT_CLOCK_JITTER: return clock_number(o, "--clock-jitter-us", arg, 0, 10000, &o->cfg.clock.jitter_us);
+	case OPT_CLOCK_SEED:
+		if (parse_number("--clock-seed", arg, 0, LONG_MAX, 0, &number) != 0)
+			return 2;
+		o->cfg.clock.seed = (uint64_t)number;
+		o->cfg.clock.on = 1;
+		return -1;
 	case 'h': usage(stdout); return 0;
 	case 'V': printf("vmac-board %s\n", VMAC_VERSION_STRING); return 0;
 	default: usage(stderr); return 2;
@@ -326,18 +359,32 @@ static int take_plant(struct options *o)
 /* The command line into o. Returns -1 to go on, or the exit code. */
 static int parse_options(int argc, char **argv, struct options *o)
 {
-	static const struct option opts[] = {
-	    {"plant", required_argument, 0, 'p'},      {"name", required_argument, 0, 'n'},
-	    {"plant-file", required_argument, 0, 'f'}, {"time-scale", required_argument, 0, 'T'},
-	    {"seed", required_argument, 0, 'S'},       {"driver", required_argument, 0, 'd'},
-	    {"bus", required_argument, 0, 'b'},        {"iface", required_argument, 0, 'i'},
-	    {"count", required_argument, 0, 'c'},      {"major", required_argument, 0, 'M'},
-	    {"minor", required_argument, 0, 'm'},      {"protocol", required_argument, 0, 'P'},
-	    {"cpu", required_argument, 0, 'u'},        {"late-us", required_argument, 0, 'l'},
-	    {"commands", no_argument, 0, 'C'},         {"quiet", no_argument, 0, 'q'},
-	    {"no-realtime", no_argument, 0, 'R'},      {"key-file", required_argument, 0, 'K'},
-	    {"key-dir", required_argument, 0, 'D'},    {"help", no_argument, 0, 'h'},
-	    {"version", no_argument, 0, 'V'},          {0, 0, 0, 0}};
+	static const struct option opts[] = {{"plant", required_argument, 0, 'p'},
+	                                     {"name", required_argument, 0, 'n'},
+	                                     {"plant-file", required_argument, 0, 'f'},
+	                                     {"time-scale", required_argument, 0, 'T'},
+	                                     {"seed", required_argument, 0, 'S'},
+	                                     {"driver", required_argument, 0, 'd'},
+	                                     {"bus", required_argument, 0, 'b'},
+	                                     {"iface", required_argument, 0, 'i'},
+	                                     {"count", required_argument, 0, 'c'},
+	                                     {"major", required_argument, 0, 'M'},
+	                                     {"minor", required_argument, 0, 'm'},
+	                                     {"protocol", required_argument, 0, 'P'},
+	                                     {"cpu", required_argument, 0, 'u'},
+	                                     {"late-us", required_argument, 0, 'l'},
+	                                     {"commands", no_argument, 0, 'C'},
+	                                     {"quiet", no_argument, 0, 'q'},
+	                                     {"no-realtime", no_argument, 0, 'R'},
+	                                     {"key-file", required_argument, 0, 'K'},
+	                                     {"key-dir", required_argument, 0, 'D'},
+	                                     {"help", no_argument, 0, 'h'},
+	                                     {"clock-ppm", required_argument, 0, OPT_CLOCK_PPM},
+	                                     {"clock-offset", required_argument, 0, OPT_CLOCK_OFFSET},
+	                                     {"clock-jitter-us", required_argument, 0, OPT_CLOCK_JITTER},
+	                                     {"clock-seed", required_argument, 0, OPT_CLOCK_SEED},
+	                                     {"version", no_argument, 0, 'V'},
+	                                     {0, 0, 0, 0}};
 	int opt, rc;
 
 	memset(o, 0, sizeof(*o));
@@ -346,6 +393,7 @@ static int parse_options(int argc, char **argv, struct options *o)
 	o->cfg.major = -1;
 	o->cfg.protocol = VMAC_PROTO_VERSION;
 	o->cfg.time_scale = 1.0;
+	o->cfg.clock.seed = 1;
 	o->cfg.lua.seed = 1; /* no wall-clock budget: a busy machine must not fail a plant (BOARD.md) */
 	o->bus = DEFAULT_BUS;
 	o->cpu = -1;
@@ -458,6 +506,7 @@ static int serve(struct runner *r)
 		 * already timed out. */
 		t = vmac_now_ns();
 		if (t - last_housekeep_ns >= HOUSEKEEP_NS) {
+			boards_clock_poll(&r->set, t);
 			boards_housekeep(&r->set, (uint64_t)(t / 1000000));
 			last_housekeep_ns = t;
 			if (t - last_sync_ns >= CLOCK_SYNC_NS) {
@@ -487,8 +536,10 @@ static void finish(struct runner *r, long late_us)
 		const struct vmac_board_counters *c = &s->boards[k].board.counters;
 		vmac_board_safe(&s->boards[k].board);
 		boards_report(s, k);
-		if (s->count <= BOARDS_LIST_MACS_MAX)
+		if (s->count <= BOARDS_LIST_MACS_MAX) {
 			boards_print_counters(s, k);
+			boards_print_clock(s, k);
+		}
 		sum.frames_ok += c->frames_ok;
 		sum.frames_malformed += c->frames_malformed;
 		sum.frames_ignored += c->frames_ignored;

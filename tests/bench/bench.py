@@ -172,11 +172,17 @@ return driver
 """
 
 
+# --set KEY=VALUE: host settings on top of the bench's own, for a kitchen
+# measured with a setting changed (e.g. clock_sync_ms=1, docs/TIME.md).
+HOST_SETTINGS = {}
+
+
 def start_kitchen(ctx, boards, period_us, deadline_us):
     settings = {"reply_deadline_us": deadline_us, "realtime": "true", "cpu_awake": cpu_awake(),
                 "watchdog_ms": max(500, 4 * period_us // 1000), "discovery_period_ms": 200,
                 "max_devices": max(1024, boards + 8)}
     settings.update(schedule_for(boards, period_us))
+    settings.update(HOST_SETTINGS)
     host = ctx.host(drivers=ctx.drivers(benchprobe=BENCH_LUA), settings=settings)
     ctx.board("generic", "b", count=boards, driver="benchprobe", wrapper=board_wrapper())
     names = ["b-%d" % i for i in range(1, boards + 1)] if boards > 1 else ["b"]
@@ -463,7 +469,13 @@ def main():
                    help="most boards a capacity search tries (default 2000; fieldbus: 4088, max_devices' range)")
     p.add_argument("--bisect", type=int, default=3, help="bisection steps per capacity search")
     p.add_argument("--out", default="build/bench/results.json")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a vmacd setting on top of the bench's where it starts the 10-board kitchen (lateness, "
+                        "cost, ui, metrics...), e.g. clock_sync_ms=1")
     args = p.parse_args()
+    for kv in args.set:
+        key, _, value = kv.partition("=")
+        HOST_SETTINGS[key] = value
     os.environ["VMAC_BENCH_CPU_AWAKE"] = args.cpu_awake  # read by cpu_awake(), here and in fieldbus.py
     # A SIGTERM unwinds like Ctrl-C: every context's cleanup runs (the
     # fieldbus's network namespace and veth pair are removed).

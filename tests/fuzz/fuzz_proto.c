@@ -3,7 +3,9 @@
  * answer only with well-formed replies and never drive outputs outside a
  * session; a keyed board (docs/PROTOCOL.md, "Authenticated frames") fed the
  * same bytes never starts a session at all: no input can forge its MACs.
- * Build and run: see tests/fuzz/make_corpus.c. */
+ * Every frame comes with a receive time, so SYNC frames of any host time
+ * reach the board's clock (firmware/clock.c); a SYNC is never answered.
+ * Build and run: see tests/fuzz/make_corpus.c (firmware/clock.c linked too). */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -124,9 +126,13 @@ static void deliver(struct vmac_board *b, struct fake_io *io, const uint8_t *fra
 	uint8_t reply[VMAC_BOARD_REPLY_MAX]; /* exactly the documented bound, so ASan sees overflow */
 	struct vmac_msg request, answer;
 	int request_ok = vmac_proto_decode(frame, len, &request) == 0;
-	int n = vmac_board_receive(b, frame, len, now_ms, reply, sizeof(reply));
+	int n = vmac_board_receive_at(b, frame, len, now_ms, now_ms * 1000000u, reply, sizeof(reply));
 
 	if (n < 0 || n > VMAC_BOARD_REPLY_MAX)
+		abort();
+	if (n > 0 && request_ok && request.channel == VMAC_CH_SYSTEM && request.op == VMAC_SYS_SYNC)
+		abort(); /* a SYNC is never answered */
+	if ((unsigned)b->clock.state > VMAC_CLOCK_LOST)
 		abort();
 	if (b->id.keyed && (b->state == VMAC_BOARD_KNOWN || (n > 0 && request.channel != VMAC_CH_SYSTEM)))
 		abort(); /* a keyed board obeyed or answered a frame no one could have sealed */
@@ -165,6 +171,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 			if (len > size - at)
 				len = size - at;
 			vmac_board_poll(&board, now_ms);
+			vmac_board_clock_poll(&board, now_ms * 1000000u);
 			check_board(&board, &io);
 			deliver(&board, &io, data + at, len, now_ms);
 			at += len;

@@ -5,7 +5,7 @@
  *   /tmp/make_corpus tests/fuzz/corpus-proto
  * Fuzz (new finds go to the first directory, not the committed seeds):
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined tests/fuzz/fuzz_proto.c \
- *     core/proto/proto.c firmware/board.c -o /tmp/fuzz_proto
+ *     core/proto/proto.c core/proto/auth.c core/proto/siphash.c firmware/board.c firmware/clock.c -o /tmp/fuzz_proto
  *   mkdir -p /tmp/fuzz_work && /tmp/fuzz_proto -max_total_time=30 /tmp/fuzz_work tests/fuzz/corpus-proto */
 #include <stdio.h>
 #include <stdlib.h>
@@ -169,6 +169,23 @@ int main(int argc, char **argv)
 		s.len += (size_t)n;
 		append(&s, 60, &get);
 		write_file("session_cyclic", s.bytes, s.len);
+	}
+
+	/* SYNC (docs/TIME.md): one, then a second of them at 5 ms, then quiet. */
+	m = msg(2, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, 0, 1);
+	m.u.sync.host_ns = 5000000000ull;
+	seed("sync", &m);
+	{
+		int k;
+		memset(&s, 0, sizeof(s));
+		for (k = 0; k < 40; k++) {
+			m.seq = (uint16_t)(k + 1);
+			m.u.sync.host_ns = 5000000000ull + (uint64_t)k * 5 * FUZZ_STEP_MS * 1000000u;
+			append(&s, 5, &m);
+		}
+		m.u.sync.host_ns += 60000000000ull; /* a minute later: a step */
+		append(&s, 255, &m);
+		write_file("session_sync", s.bytes, s.len);
 	}
 
 	/* Register, drive, sleep a second, wake and rediscover. */

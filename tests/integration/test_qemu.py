@@ -368,3 +368,30 @@ def test_a_keyed_qemu_board_never_attaches_to_a_host_without_its_key(t):
     d = host.device("klights-1", host.status())
     assert d is None or d.get("state") != "running", "a keyed board runs on a host without its key"
     assert not board.find_lines(r"^klights-1: state known"), "the keyed board took a session"
+
+
+def test_a_qemu_board_feeds_its_clock_from_sync(t):
+    """SYNC from vmacd (clock_sync_ms 1, 1 ms slots) reaches the firmware's
+    clock, stamped on SysTick's nanoseconds (docs/TIME.md, "The wiring"):
+    the board says its clock is locking, its status counts SYNC frames
+    accepted and nothing malformed, and the board is served as ever. Not
+    that it locks: QEMU's SysTick loses milliseconds when QEMU is held off
+    the CPU (about 2,000 ppm, in bursts, on the shared VM), beyond the
+    clock's 1,000 ppm clamp."""
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "lights-1")
+    settings = dict(RELAXED, clock_sync_ms=1, slice_us=200, slices_per_slot=5)
+    host = t.host(bus="eth:" + link.bridge, settings=settings)
+    host.wait_running(["lights-1"], timeout_s=30)
+    board.wait_line(r"^lights-1: clock locking, offset [-+][0-9.]+ s, drift ", 30, what="the clock's first SYNC")
+    served = host.device("lights-1")["served"]
+    host.wait_status(lambda s: host.device("lights-1", s)["served"] > served + 20, 30, "20 more periods",
+                     undisturbed(["lights-1"]))
+    mark = board.mark()
+    board.send("status")
+    counters = board.wait_line(r"^lights-1: frames ok ", 30, since=mark, what="the counters")
+    assert ", malformed 0," in counters.text, "the QEMU board counted frames malformed: %r" % counters.text
+    clock = board.wait_line(r"^lights-1: clock \w+.*; sync accepted \d+", 30, since=mark, what="the clock's line")
+    accepted = int(re.search(r"sync accepted (\d+)", clock.text).group(1))
+    assert accepted > 100, "the QEMU board's clock accepted only %d SYNC frames: %r" % (accepted, clock.text)

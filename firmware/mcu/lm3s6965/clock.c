@@ -1,10 +1,13 @@
-/* The system clock (PLL, 50 MHz) and the millisecond time the board logic
- * and the plant run on (SysTick). */
+/* The system clock (PLL, 50 MHz), the millisecond time the board logic
+ * and the plant run on (SysTick), and the free-running nanosecond counter
+ * the board's disciplined clock runs on (SysTick's milliseconds and the
+ * cycles into the current one). */
 #include "lm3s6965.h"
 #include "mcu.h"
 
 #define SYSCLK_HZ 50000000u /* PLL 400 MHz / 2 / SYSDIV 4 */
 #define TICK_HZ 1000u
+#define NS_PER_CYCLE (1000000000u / SYSCLK_HZ) /* 20 ns */
 
 static volatile uint32_t ticks_ms; /* written by the interrupt only */
 static uint32_t seen_ticks;        /* the main loop's last look at it */
@@ -48,4 +51,19 @@ uint64_t vmac_mcu_now_ms(void)
 	now_ms += (uint32_t)(t - seen_ticks);
 	seen_ticks = t;
 	return now_ms;
+}
+
+uint64_t vmac_mcu_now_ns(void)
+{
+	uint64_t ms = vmac_mcu_now_ms(); /* the 64-bit milliseconds as of seen_ticks */
+	uint32_t before, after, cycles_left;
+	/* SysTick counts down from RVR to 0, then the interrupt adds a
+	 * millisecond: a tick between the two reads is read again. */
+	do {
+		before = ticks_ms;
+		cycles_left = SYST_CVR;
+		after = ticks_ms;
+	} while (before != after);
+	ms += (uint32_t)(before - seen_ticks);
+	return ms * 1000000u + (uint64_t)(SYST_RVR - cycles_left) * NS_PER_CYCLE;
 }

@@ -55,6 +55,7 @@ static void housekeep(uint64_t now_ms)
 {
 	double left_s = now_ms > last_step_ms ? (double)(now_ms - last_step_ms) / 1000.0 : 0.0;
 	poll_watchdog(now_ms);
+	vmac_board_clock_poll(&board, vmac_mcu_now_ns()); /* holdover, lost: said by report() */
 	while (left_s > 0) {
 		double step_s = left_s > PLANT_STEP_MAX_S ? PLANT_STEP_MAX_S : left_s;
 		vmac_plant_step(&plant, step_s);
@@ -65,15 +66,17 @@ static void housekeep(uint64_t now_ms)
 	report();
 }
 
-/* One received vmac frame: the watchdog first (a frame that waited while
+/* One received vmac frame, stamped rx_ns when it left the FIFO (not at the
+ * interrupt: a SYNC read late is only late, which the clock's minimum
+ * filter is for): the watchdog first (a frame that waited while
  * the board could not run never revives a session already timed out),
  * then the board, then its reply, if any, back to the sender. */
-static void handle_frame(const uint8_t *frame, size_t len, const uint8_t src[6], uint64_t now_ms)
+static void handle_frame(const uint8_t *frame, size_t len, const uint8_t src[6], uint64_t now_ms, uint64_t rx_ns)
 {
 	static uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int n;
 	poll_watchdog(now_ms);
-	n = vmac_board_receive(&board, frame, len, now_ms, reply, sizeof(reply));
+	n = vmac_board_receive_at(&board, frame, len, now_ms, rx_ns, reply, sizeof(reply));
 	if (n > 0)
 		vmac_mcu_enet_send(src, reply, (size_t)n);
 }
@@ -131,7 +134,8 @@ static int split_words(char *line, char **words, int max)
 }
 
 /* The board's counters as vmac-board prints them (firmware/report.c),
- * then the MAC's and the stack's. */
+ * then the MAC's and the stack's; then, once SYNC frames came, the clock's
+ * line. */
 static void print_counters(void)
 {
 	const struct vmac_mcu_enet_counters *e = vmac_mcu_enet_counters();
@@ -151,6 +155,11 @@ static void print_counters(void)
 	vmac_mcu_uart_puts("; stack used ");
 	vmac_mcu_uart_putu(vmac_mcu_stack_used());
 	vmac_mcu_uart_puts(" bytes\n");
+	if (board.clock.state != VMAC_CLOCK_UNSYNCED || board.counters.sync_ignored) {
+		vmac_report_clock(&board, 1, line, sizeof(line)); /* the clock's line, as vmac-board's */
+		vmac_mcu_uart_puts(line);
+		vmac_mcu_uart_puts("\n");
+	}
 }
 
 /* An operator line, as vmac-board --commands takes it: 'NAME ACTION VALUE'
@@ -264,7 +273,7 @@ int main(void)
 		for (frames = 0; frames < FRAMES_PER_TURN && (len = vmac_mcu_enet_receive(&frame, src)) >= 0;
 		     frames++) {
 			if (len > 0)
-				handle_frame(frame, (size_t)len, src, vmac_mcu_now_ms());
+				handle_frame(frame, (size_t)len, src, vmac_mcu_now_ms(), vmac_mcu_now_ns());
 		}
 		while (vmac_mcu_uart_getline(line, sizeof(line)) >= 0)
 			command(line);

@@ -20,6 +20,10 @@ void vmac_mcu_clock_init(void);
 /* Milliseconds since power-on; call at least every 49 days (it extends the
  * 32-bit tick count the interrupt keeps). */
 uint64_t vmac_mcu_now_ms(void);
+/* Nanoseconds since power-on, to the processor's cycle (20 ns): the
+ * counter the board's clock (firmware/clock.h) is disciplined on. Call from
+ * the main loop, interrupts enabled. */
+uint64_t vmac_mcu_now_ns(void);
 void vmac_mcu_systick_handler(void);
 
 /* ---- uart.c: UART0, 115200 8N1 ---- */
