@@ -16,19 +16,6 @@ static void add(struct text *t, const char *s)
 	t->buf[t->at] = 0;
 }
 
-static void add_unsigned(struct text *t, uint32_t v)
-{
-	char d[11];
-	int n = 0;
-	do
-		d[n++] = (char)('0' + v % 10);
-	while ((v /= 10) != 0);
-	while (n > 0) {
-		char c[2] = {d[--n], 0};
-		add(t, c);
-	}
-}
-
 static void add_u64(struct text *t, uint64_t v)
 {
 	char d[21];
@@ -40,6 +27,11 @@ static void add_u64(struct text *t, uint64_t v)
 		char c[2] = {d[--n], 0};
 		add(t, c);
 	}
+}
+
+static void add_unsigned(struct text *t, uint32_t v)
+{
+	add_u64(t, v);
 }
 
 /* v in units of 10^-decimals, as a decimal with its sign when sign is set

@@ -328,12 +328,29 @@ static void *board_log_run(void *arg)
 	}
 }
 
+/* The host's lines as board's filter says (its machine, level, --json),
+ * up to the event of seq stop_after (0: until the host ends the stream). */
+static int host_lines(const struct vmac_cmd_args *a, const struct board_log *board, unsigned long long stop_after)
+{
+	struct follow *f = calloc(1, sizeof(*f));
+	int rc;
+	if (!f)
+		return 2;
+	f->json = board->json;
+	f->logs = 1;
+	f->device = board->device;
+	f->at_least = board->at_least;
+	f->stop_after = stop_after;
+	rc = stream(a, "vmac logs", f, 0);
+	free(f);
+	return rc;
+}
+
 static int logs_run(const struct vmac_cmd_args *a)
 {
 	struct board_log board = {0};
 	pthread_t tail;
 	int tailing = 0;
-	struct follow *f;
 	const char *level = a->opt[LOGS_LEVEL] ? a->opt[LOGS_LEVEL] : "info";
 	unsigned long long newest = 0;
 	int rc, i, at = -1;
@@ -353,30 +370,11 @@ static int logs_run(const struct vmac_cmd_args *a)
 	board.json = a->opt[VMAC_CMD_JSON] != NULL;
 	rc = 0;
 	if (!a->opt[LOGS_FOLLOW] && (rc = newest_seq(a, &newest)) == 0 && newest > 0) {
-		if (!(f = calloc(1, sizeof(*f))))
-			rc = 2;
-		else {
-			f->json = board.json;
-			f->logs = 1;
-			f->device = board.device;
-			f->at_least = board.at_least;
-			f->stop_after = newest;
-			rc = stream(a, "vmac logs", f, 0);
-			free(f);
-		}
+		rc = host_lines(a, &board, newest);
 	} else if (a->opt[LOGS_FOLLOW]) {
 		/* the boards' lines beside the host's, each as it comes */
 		tailing = board.file && pthread_create(&tail, NULL, board_log_run, &board) == 0;
-		if (!(f = calloc(1, sizeof(*f))))
-			rc = 2;
-		else {
-			f->json = board.json;
-			f->logs = 1;
-			f->device = board.device;
-			f->at_least = board.at_least;
-			rc = stream(a, "vmac logs", f, 0);
-			free(f);
-		}
+		rc = host_lines(a, &board, 0);
 		__atomic_store_n(&board.stop, 1, __ATOMIC_RELEASE);
 		if (tailing)
 			pthread_join(tail, NULL);
