@@ -11,14 +11,19 @@ process of its own; a test file that must have the machine to itself says
 SERIAL = True and its tests run one at a time after the others. Against a
 sanitized build (make test-asan's second pass) the tests marked
 harness.plain_pass_only are not run and are listed as PLAIN. The longest
-start first, by how long each passed in the last run that timed it
-(build/integration-times.json, which every run updates; tests it does not
-know keep their file order): a long test started last kept the others
-waiting for it.
+start first, by how long each passed in the last run of the same build
+that timed it (integration-times.json beside the --bin folder when that is
+inside build/: build/ for build/bin, build/asan/ for build/asan/bin; every
+run updates its own); a test that build has no time for takes the plain
+build's, else what the test says with harness.takes_about (a fresh clone,
+as CI's, has no times at all), else keeps its file order: a long test
+started last kept the others waiting for it.
 
-Prints one PASS/FAIL/SKIP line per test and ends with 'N passed, N failed,
-N skipped'; the exit code is 1 when any test failed. A failed test keeps its
-programs' output in the log directory its FAIL line names.
+Prints one PASS/FAIL/SKIP line per test and ends with the longest tests
+(LONGEST of them, slowest first, with the sum of every test's time against
+the run's own) and 'N passed, N failed, N skipped'; the exit code is 1 when
+any test failed. A failed test keeps its programs' output in the log
+directory its FAIL line names.
 
 A test that cannot run on this machine raises harness.Skip(reason) (e.g. one
 that needs root for a mount namespace). It is printed as SKIP with a banner,
@@ -132,38 +137,74 @@ def run_worker(name, bindir, limit_s, keep):
     return 0
 
 
-TIMES_FILE = os.path.join(HERE, "..", "..", "build", "integration-times.json")
+BUILD_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "build"))
+PLAIN_TIMES_FILE = os.path.join(BUILD_DIR, "integration-times.json")
 UNKNOWN_S = 5.0  # where a test with no time yet goes in the order: about the median
+LONGEST = 15     # the longest tests the summary lists
 
 
-def load_times():
+def times_file(bindir):
+    """Where the times of the tests run against bindir are kept: beside it
+    when it is inside build/ (build/asan/bin: build/asan/), else build/.
+    A sanitized build's tests take other times than the plain build's
+    (three times as long, or less where the ASan pass runs less of them)."""
+    parent = os.path.dirname(os.path.normpath(bindir))
+    inside = parent == BUILD_DIR or parent.startswith(BUILD_DIR + os.sep)
+    return os.path.join(parent, "integration-times.json") if inside else PLAIN_TIMES_FILE
+
+
+def load_times(path):
     """{test name: seconds it took to pass} of earlier runs, or {}."""
     try:
-        with open(TIMES_FILE) as f:
+        with open(path) as f:
             times = json.load(f)
         return {k: float(v) for k, v in times.items()} if isinstance(times, dict) else {}
     except (OSError, ValueError, TypeError, AttributeError):
         return {}
 
 
-def save_times(times):
-    """Keep times for the next run's order; nothing if build/ is not there."""
-    if not os.path.isdir(os.path.dirname(TIMES_FILE)):
+def save_times(path, times):
+    """Keep times for the next run's order; nothing if its folder is not there."""
+    if not os.path.isdir(os.path.dirname(path)):
         return
-    tmp = TIMES_FILE + ".tmp"
+    tmp = path + ".tmp"
     try:
         with open(tmp, "w") as f:
             json.dump(times, f, indent=0, sort_keys=True)
-        os.replace(tmp, TIMES_FILE)
+        os.replace(tmp, path)
     except OSError:
         pass
 
 
-def run_all(tests, args, bindir, times):
-    """Run tests in worker processes, args.jobs at a time, the longest known
-    first, the serial ones alone at the end; yields (name, outcome, reason,
-    seconds) as each ends."""
-    parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -times.get(n, UNKNOWN_S))
+def expected_times(tests, own, plain):
+    """{test name: seconds expected} for the order: the time of the last run
+    of this build, else of the plain build, else harness.takes_about's."""
+    expected = {}
+    for name, fn, _ in tests:
+        for source in (own.get(name), plain.get(name), getattr(fn, "takes_about", None)):
+            if source is not None:
+                expected[name] = float(source)
+                break
+    return expected
+
+
+def longest_report(took, wall_s, jobs):
+    """The summary's lines on the longest tests: the LONGEST slowest, and
+    the sum of every test's time against the run's own (what -j bought)."""
+    if not took:
+        return []
+    lines = ["the %d longest of %d tests (%.0f s of tests in %.0f s at -j %d):" % (
+        min(LONGEST, len(took)), len(took), sum(took.values()), wall_s, jobs)]
+    for name, seconds in sorted(took.items(), key=lambda kv: (-kv[1], kv[0]))[:LONGEST]:
+        lines.append("  %6.1f s  %s" % (seconds, name))
+    return lines
+
+
+def run_all(tests, args, bindir, expected):
+    """Run tests in worker processes, args.jobs at a time, the longest
+    expected first, the serial ones alone at the end; yields (name, outcome,
+    reason, seconds) as each ends."""
+    parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -expected.get(n, UNKNOWN_S))
     serial = [t[0] for t in tests if t[2]]
     running = {}  # Popen -> [name, start, output so far]
     sel = selectors.DefaultSelector()
@@ -254,8 +295,12 @@ def main():
     passed = failed = 0
     skips = []
     started = time.monotonic()
-    times = load_times()
-    for name, outcome, reason, took in run_all(tests, args, bindir, times):
+    own_file = times_file(bindir)
+    times = load_times(own_file)
+    expected = expected_times(tests, times, load_times(PLAIN_TIMES_FILE) if own_file != PLAIN_TIMES_FILE else {})
+    took_s = {}  # every test that ran: seconds
+    for name, outcome, reason, took in run_all(tests, args, bindir, expected):
+        took_s[name] = took
         if outcome == "skip" and ci:
             outcome, reason = "fail", "could not run, and CI=true makes that a failure: %s" % reason
         if outcome == "pass":
@@ -268,8 +313,9 @@ def main():
         else:
             failed += 1
             print("FAIL %s (%.1f s): %s" % (name, took, reason), flush=True)
-    print("total %.0f s" % (time.monotonic() - started), file=sys.stderr, flush=True)
-    save_times(times)
+    wall_s = time.monotonic() - started
+    print("total %.0f s" % wall_s, file=sys.stderr, flush=True)
+    save_times(own_file, times)
     if skips:
         print("SKIPPED (did not run, not passed):", flush=True)
         for name, reason in skips:
@@ -278,6 +324,8 @@ def main():
             with open(skip_file, "a") as f:
                 for name, reason in skips:
                     f.write("integration test %s (%s): %s\n" % (name, args.bin, reason))
+    for line in longest_report(took_s, wall_s, max(1, args.jobs)):
+        print(line, flush=True)
     print("%d passed, %d failed, %d skipped%s" % (passed, failed, len(skips), ", %d left to the plain pass" % len(
         plain_only) if plain_only else ""), flush=True)
     return 1 if failed else 0
