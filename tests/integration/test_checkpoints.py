@@ -2,8 +2,8 @@
 "Recovery after a restart"): one older than recover_max_age_s makes the
 washer drain and unlock, saying why; a damaged one is refused with the
 reason and the washer starts afresh, its door still held over the water.
-Beside the other tests (test_recovery.py's 50 crashes run alone): the kill
-to outputs-off time is checked only loosely here."""
+The kill to outputs-off time is checked only loosely here (test_recovery.py's
+50 crashes check it tightly)."""
 
 import os
 import sqlite3
@@ -15,7 +15,7 @@ from test_recovery import (CLEANUP_STEPS, RESTART_S, SHORT_LOCK_RELEASE_S, TUB_E
 
 # Judged by the board's own clock; a board that cannot have real-time
 # scheduling may still be held off the CPU while other tests load the
-# machine. The crash test measures it alone, tightly.
+# machine. The crash test measures it 50 times, tightly.
 LATE_S = 2.0
 
 
