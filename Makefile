@@ -259,11 +259,20 @@ test-asan: asan-build
 	@$(MAKE) --no-print-directory $(ASAN) test-drivers
 	@$(MAKE) --no-print-directory $(ASAN) test-integration
 
-# Every suite, each timed: $(TIMES) lists how long each took, printed at
-# the end with what was skipped (if anything): what did not run did not pass.
+# Every suite, each timed: $(TIMES) lists how long each step of make test
+# (suites run at once) took and, for a step of several, each of its suites
+# (the longest is the one the step waited for), printed at the end with
+# what was skipped (if anything): what did not run did not pass.
+# timed-SUITE makes SUITE and notes its time in $(TIMES).each.
 TIMES ?= $(BUILD)/times
-timed = t0=$$(date +%s); $(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) $(2) $(1) || exit 1; \
-	echo "$(1): $$(( $$(date +%s) - t0 )) s" >> $(abspath $(TIMES))
+timed = t0=$$(date +%s); rm -f $(abspath $(TIMES)).each; \
+	$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) $(2) $(addprefix timed-,$(1)) || exit 1; \
+	echo "$(1): $$(( $$(date +%s) - t0 )) s$(if $(word 2,$(1)), ($$(paste -sd, $(abspath $(TIMES)).each | sed 's/,/, /g')))" \
+		>> $(abspath $(TIMES))
+
+timed-%:
+	@t0=$$(date +%s); $(MAKE) --no-print-directory $* || exit 1; \
+	echo "$* $$(( $$(date +%s) - t0 )) s" >> $(abspath $(TIMES)).each
 
 test: deps
 	@mkdir -p $(BUILD) && rm -f $(SKIPPED) $(TIMES)
@@ -272,7 +281,7 @@ test: deps
 	@$(call timed,test-unit test-lua test-drivers test-fuzz,-j2)
 	@$(call timed,test-integration asan-build test-soak,-j3)
 	@$(call timed,test-ui test-asan test-package,-j3 VMAC_SCHED_PROPERTY_RUNS=10000)
-	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
+	@rm -f $(TIMES).each; echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \
 		echo "make test: every suite that ran passed, but these were SKIPPED (not run, not passed):"; \
