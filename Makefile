@@ -10,7 +10,7 @@
 #   make run        deps + build + the demo kitchen (host and four mock boards)
 #   make run-qemu   deps + build + firmware + the kitchen with boards in QEMU on raw Ethernet (root)
 #   make test       deps + build + every test (unit, fuzz, integration, the web UI in chromium,
-#                   then again under ASan+UBSan)
+#                   and again under ASan+UBSan: make test-asan)
 #   make fuzz       every libFuzzer harness FUZZ_SECONDS each (default 60) in FUZZ_JOBS processes
 #                   (default nproc), executions per target
 #   make bench      timing figures as ratios to baselines run alongside (BENCH_SECONDS=60)
@@ -109,6 +109,7 @@ BINS := $(BUILD)/bin/vmacd $(BUILD)/bin/vmac $(BUILD)/bin/vmac-board
 
 .PHONY: format format-check test-build asan-build
 .PHONY: all deps run test test-unit test-lua test-drivers test-fuzz fuzz test-integration test-ui test-asan bench clean
+.PHONY: test-asan-unit test-asan-integration
 .PHONY: firmware run-qemu soak test-soak tahu-deps mcu-auth-bench
 all: $(BINS)
 
@@ -244,7 +245,8 @@ test-integration: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS) tahu-d
 # The whole unit and integration suite again, built with AddressSanitizer
 # and UndefinedBehaviorSanitizer, any report fatal. asan-build builds that
 # tree quietly (its log in build/asan-build.log), so make test can run it
-# beside the plain integration tests, which mostly wait.
+# beside the plain integration tests, which mostly wait; then its unit and
+# driver tests (a minute of CPU) beside its own integration tests.
 ASAN := BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer -DVMAC_CHECK_THREADS" SAN="-fsanitize=address,undefined -fno-sanitize-recover=all"
 test-build: $(BINS) $(UNIT_TESTS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS)
 
@@ -254,25 +256,47 @@ asan-build:
 		echo "== the AddressSanitizer build is ready (build/asan)"; \
 	else tail -40 build/asan-build.log; echo "the AddressSanitizer build failed: build/asan-build.log"; exit 1; fi
 
-test-asan: asan-build
+test-asan-unit: asan-build
 	@$(MAKE) --no-print-directory $(ASAN) test-unit
 	@$(MAKE) --no-print-directory $(ASAN) test-drivers
+
+test-asan-integration: asan-build
 	@$(MAKE) --no-print-directory $(ASAN) test-integration
 
-# Every suite, each timed: $(TIMES) lists how long each took, printed at
-# the end with what was skipped (if anything): what did not run did not pass.
-TIMES ?= $(BUILD)/times
-timed = t0=$$(date +%s); $(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) $(2) $(1) || exit 1; \
-	echo "$(1): $$(( $$(date +%s) - t0 )) s" >> $(abspath $(TIMES))
+# The whole second pass: the build, then its unit and driver tests beside
+# its integration tests (one after the other without make -j).
+test-asan: asan-build
+	@$(MAKE) --no-print-directory test-asan-unit test-asan-integration
 
+# Every suite, each timed: $(TIMES) lists how long each step of make test
+# (suites run at once) took and, for a step of several, each of its suites
+# (the longest is the one the step waited for), printed at the end with
+# what was skipped (if anything): what did not run did not pass.
+# timed-SUITE makes SUITE and notes its time in $(TIMES).each.
+TIMES ?= $(BUILD)/times
+timed = t0=$$(date +%s); rm -f $(abspath $(TIMES)).each; \
+	$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) $(2) $(addprefix timed-,$(1)) || exit 1; \
+	echo "$(1): $$(( $$(date +%s) - t0 )) s$(if $(word 2,$(1)), ($$(paste -sd, $(abspath $(TIMES)).each | sed 's/,/, /g')))" \
+		>> $(abspath $(TIMES))
+
+timed-%:
+	@t0=$$(date +%s); $(MAKE) --no-print-directory $* || exit 1; \
+	echo "$* $$(( $$(date +%s) - t0 )) s" >> $(abspath $(TIMES)).each
+
+# The steps of make test, the suites of a step at once. The integration
+# tests, plain and under ASan, mostly wait on real time (plant physics,
+# watchdogs, restarts): over three minutes each, a core's worth of CPU
+# for both. So the last step runs both passes at once, beside what needs
+# the CPU (the ASan build and its unit tests, the package's build and
+# test, the web UI in chromium) and the soak, which waits too. -j6: one
+# job a suite, and one for the ASan pass's second half.
 test: deps
 	@mkdir -p $(BUILD) && rm -f $(SKIPPED) $(TIMES)
 	@$(call timed,format-check)
 	@$(call timed,test-build,-j2)
 	@$(call timed,test-unit test-lua test-drivers test-fuzz,-j2)
-	@$(call timed,test-integration asan-build test-soak,-j3)
-	@$(call timed,test-ui test-asan test-package,-j3 VMAC_SCHED_PROPERTY_RUNS=10000)
-	@echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
+	@$(call timed,test-integration test-asan test-package test-soak test-ui,-j6 VMAC_SCHED_PROPERTY_RUNS=10000)
+	@rm -f $(TIMES).each; echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \
 		echo "make test: every suite that ran passed, but these were SKIPPED (not run, not passed):"; \

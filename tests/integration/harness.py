@@ -395,6 +395,18 @@ def plain_pass_only(why):
     return mark
 
 
+def takes_about(seconds):
+    """Marks a test that takes about seconds (the plain pass, on the 2-core
+    machine make test runs on). run.py starts the longest tests first by
+    the times of the last run; for a test it has no time of (a fresh clone,
+    as CI's, has none) it goes by this, so a long test is not started last
+    with the others done and the pass waiting for it alone."""
+    def mark(fn):
+        fn.takes_about = float(seconds)
+        return fn
+    return mark
+
+
 def sanitized(program):
     """Whether program was built with AddressSanitizer (make test's second
     pass): its memory figures then include the sanitizer's own."""

@@ -11,14 +11,20 @@ process of its own; a test file that must have the machine to itself says
 SERIAL = True and its tests run one at a time after the others. Against a
 sanitized build (make test-asan's second pass) the tests marked
 harness.plain_pass_only are not run and are listed as PLAIN. The longest
-start first, by how long each passed in the last run that timed it
-(build/integration-times.json, which every run updates; tests it does not
-know keep their file order): a long test started last kept the others
-waiting for it.
+start first, by how long each passed in the last run of the same build
+that timed it (integration-times.json beside the --bin folder when that is
+inside build/: build/ for build/bin, build/asan/ for build/asan/bin; every
+run updates its own); a test that build has no time for takes the plain
+build's, else what the test says with harness.takes_about (a fresh clone,
+as CI's, has no times at all), else keeps its file order: a long test
+started last kept the others waiting for it.
 
-Prints one PASS/FAIL/SKIP line per test and ends with 'N passed, N failed,
-N skipped'; the exit code is 1 when any test failed. A failed test keeps its
-programs' output in the log directory its FAIL line names.
+Prints one PASS/FAIL/SKIP line per test and ends with the longest tests
+(LONGEST of them, slowest first, with the CPU each used, and the sums of
+every test's time and CPU against the run's own time) and 'N passed, N
+failed, N skipped'; the exit code is 1 when
+any test failed. A failed test keeps its programs' output in the log
+directory its FAIL line names.
 
 A test that cannot run on this machine raises harness.Skip(reason) (e.g. one
 that needs root for a mount namespace). It is printed as SKIP with a banner,
@@ -32,6 +38,7 @@ import json
 import selectors
 import importlib.util
 import os
+import resource
 import shutil
 import signal
 import sys
@@ -59,12 +66,13 @@ def on_terminate(signum, frame):
     raise KeyboardInterrupt("runner got signal %d" % signum)
 
 
-def collect(name_filter):
-    """(name, function, serial) of every test whose name holds one of the
-    texts of name_filter (none: every test), in file order then definition
-    order; serial: its file says SERIAL = True."""
+def collect(name_filter, paths=None):
+    """(name, function, serial, path) of every test of the files paths
+    (default: every test_*.py here) whose name holds one of the texts of
+    name_filter (none: every test), in file order then definition order;
+    serial: its file says SERIAL = True."""
     tests = []
-    for path in sorted(glob.glob(os.path.join(HERE, "test_*.py"))):
+    for path in paths or sorted(glob.glob(os.path.join(HERE, "test_*.py"))):
         module_name = os.path.splitext(os.path.basename(path))[0]
         spec = importlib.util.spec_from_file_location(module_name, path)
         module = importlib.util.module_from_spec(spec)
@@ -75,7 +83,7 @@ def collect(name_filter):
             if name.startswith("test_") and callable(fn) and getattr(fn, "__module__", None) == module_name
         ]
         serial = bool(getattr(module, "SERIAL", False))
-        tests += [(name, fn, serial) for _, name, fn in sorted(found)]
+        tests += [(name, fn, serial, path) for _, name, fn in sorted(found)]
     return [t for t in tests if not name_filter or any(f in t[0] for f in name_filter)]
 
 
@@ -120,57 +128,108 @@ def run_one(name, fn, bindir, limit_s, keep):
     return "pass", ""
 
 
-def run_worker(name, bindir, limit_s, keep):
-    """Worker mode: run the one test named exactly name and print its result
-    as one JSON line (the parent prints the report)."""
+def run_worker(name, path, bindir, limit_s, keep):
+    """Worker mode: run the one test named exactly name, of the file path,
+    and print its result as one JSON line (the parent prints the report).
+    Only that file is loaded (and what it imports): loading every test file
+    took a quarter of a CPU second, in each of the 187 workers of a pass."""
     signal.signal(signal.SIGALRM, on_alarm)
     signal.signal(signal.SIGTERM, on_terminate)
-    fn = next(f for n, f, _ in collect(name) if n == name)
+    fn = next(f for n, f, _, _ in collect([name], [path]) if n == name)
     t0 = time.monotonic()
     outcome, reason = run_one(name, fn, bindir, limit_s, keep)
-    print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": time.monotonic() - t0}), flush=True)
+    took = time.monotonic() - t0
+    print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": took, "cpu": cpu_seconds()}),
+          flush=True)
     return 0
 
 
-TIMES_FILE = os.path.join(HERE, "..", "..", "build", "integration-times.json")
+def cpu_seconds():
+    """CPU seconds (user and system) of this worker and of every program
+    its test started (each reaped by the test's cleanup): on the 2-core
+    machine make test runs on, the suite's CPU is what the tests beside a
+    test wait for."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+BUILD_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "build"))
+PLAIN_TIMES_FILE = os.path.join(BUILD_DIR, "integration-times.json")
 UNKNOWN_S = 5.0  # where a test with no time yet goes in the order: about the median
+LONGEST = 15     # the longest tests the summary lists
 
 
-def load_times():
+def times_file(bindir):
+    """Where the times of the tests run against bindir are kept: beside it
+    when it is inside build/ (build/asan/bin: build/asan/), else build/.
+    A sanitized build's tests take other times than the plain build's
+    (three times as long, or less where the ASan pass runs less of them)."""
+    parent = os.path.dirname(os.path.normpath(bindir))
+    inside = parent == BUILD_DIR or parent.startswith(BUILD_DIR + os.sep)
+    return os.path.join(parent, "integration-times.json") if inside else PLAIN_TIMES_FILE
+
+
+def load_times(path):
     """{test name: seconds it took to pass} of earlier runs, or {}."""
     try:
-        with open(TIMES_FILE) as f:
+        with open(path) as f:
             times = json.load(f)
         return {k: float(v) for k, v in times.items()} if isinstance(times, dict) else {}
     except (OSError, ValueError, TypeError, AttributeError):
         return {}
 
 
-def save_times(times):
-    """Keep times for the next run's order; nothing if build/ is not there."""
-    if not os.path.isdir(os.path.dirname(TIMES_FILE)):
+def save_times(path, times):
+    """Keep times for the next run's order; nothing if its folder is not there."""
+    if not os.path.isdir(os.path.dirname(path)):
         return
-    tmp = TIMES_FILE + ".tmp"
+    tmp = path + ".tmp"
     try:
         with open(tmp, "w") as f:
             json.dump(times, f, indent=0, sort_keys=True)
-        os.replace(tmp, TIMES_FILE)
+        os.replace(tmp, path)
     except OSError:
         pass
 
 
-def run_all(tests, args, bindir, times):
-    """Run tests in worker processes, args.jobs at a time, the longest known
-    first, the serial ones alone at the end; yields (name, outcome, reason,
-    seconds) as each ends."""
-    parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -times.get(n, UNKNOWN_S))
+def expected_times(tests, own, plain):
+    """{test name: seconds expected} for the order: the time of the last run
+    of this build, else of the plain build, else harness.takes_about's."""
+    expected = {}
+    for name, fn, _, _ in tests:
+        for source in (own.get(name), plain.get(name), getattr(fn, "takes_about", None)):
+            if source is not None:
+                expected[name] = float(source)
+                break
+    return expected
+
+
+def longest_report(took, cpu, wall_s, jobs):
+    """The summary's lines on the longest tests: the LONGEST slowest with
+    the CPU each used, and the sum of every test's time and CPU against
+    the run's own time (what -j bought, and what the machine had to give)."""
+    if not took:
+        return []
+    lines = ["the %d longest of %d tests (%.0f s of tests and %.0f s of CPU in %.0f s at -j %d):" % (
+        min(LONGEST, len(took)), len(took), sum(took.values()), sum(cpu.values()), wall_s, jobs)]
+    for name, seconds in sorted(took.items(), key=lambda kv: (-kv[1], kv[0]))[:LONGEST]:
+        lines.append("  %6.1f s  %6s s CPU  %s" % (seconds, "%.1f" % cpu[name] if name in cpu else "?", name))
+    return lines
+
+
+def run_all(tests, args, bindir, expected):
+    """Run tests in worker processes, args.jobs at a time, the longest
+    expected first, the serial ones alone at the end; yields (name, outcome,
+    reason, seconds, CPU seconds or None) as each ends."""
+    parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -expected.get(n, UNKNOWN_S))
     serial = [t[0] for t in tests if t[2]]
+    path_of = {t[0]: t[3] for t in tests}
     running = {}  # Popen -> [name, start, output so far]
     sel = selectors.DefaultSelector()
 
     def start(name):
-        argv = [sys.executable, os.path.abspath(__file__), "--bin", bindir, "--worker", name,
-                "--time-limit", str(args.time_limit)] + (["--keep"] if args.keep else [])
+        argv = [sys.executable, os.path.abspath(__file__), "--bin", bindir, "--worker", name, "--file",
+                path_of[name], "--time-limit", str(args.time_limit)] + (["--keep"] if args.keep else [])
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, start_new_session=True)
         os.set_blocking(p.stdout.fileno(), False)
         running[p] = [name, time.monotonic(), b""]
@@ -184,10 +243,10 @@ def run_all(tests, args, bindir, times):
         out = raw.decode(errors="replace")
         try:
             r = json.loads(out.strip().splitlines()[-1])
-            return name, r["outcome"], r["reason"], r["took"]
+            return name, r["outcome"], r["reason"], r["took"], r.get("cpu")
         except (ValueError, IndexError, KeyError):
             return name, "fail", "its worker ended (exit %s) without a result: %s" % (p.returncode, out[-500:]), (
-                time.monotonic() - t0)
+                time.monotonic() - t0), None
 
     try:
         for batch, width in ((parallel, max(1, args.jobs)), (serial, 1)):
@@ -226,11 +285,12 @@ def main():
     ap.add_argument("-j", "--jobs", type=int, default=int(os.environ.get("VMAC_TEST_JOBS", "4")),
                     help="tests run at a time (default 4, or $VMAC_TEST_JOBS)")
     ap.add_argument("--worker", metavar="NAME", help=argparse.SUPPRESS)
+    ap.add_argument("--file", metavar="PATH", help=argparse.SUPPRESS)  # the worker's test file
     args = ap.parse_args()
 
     bindir = os.path.abspath(args.bin)
     if args.worker:
-        return run_worker(args.worker, bindir, args.time_limit, args.keep)
+        return run_worker(args.worker, args.file, bindir, args.time_limit, args.keep)
     for program in ("vmacd", "vmac-board", "vmac"):
         if not os.access(os.path.join(bindir, program), os.X_OK):
             print("run.py: no executable %s in %s (build first: make all)" % (program, bindir), file=sys.stderr)
@@ -245,7 +305,7 @@ def main():
     if harness.sanitized(os.path.join(bindir, "vmacd")):
         plain_only = [t for t in tests if getattr(t[1], "plain_pass_only", None)]
         tests = [t for t in tests if t not in plain_only]
-        for name, fn, _ in plain_only:
+        for name, fn, _, _ in plain_only:
             print("PLAIN %s: run by the plain pass only (%s)" % (name, fn.plain_pass_only), flush=True)
 
     signal.signal(signal.SIGTERM, on_terminate)
@@ -254,8 +314,14 @@ def main():
     passed = failed = 0
     skips = []
     started = time.monotonic()
-    times = load_times()
-    for name, outcome, reason, took in run_all(tests, args, bindir, times):
+    own_file = times_file(bindir)
+    times = load_times(own_file)
+    expected = expected_times(tests, times, load_times(PLAIN_TIMES_FILE) if own_file != PLAIN_TIMES_FILE else {})
+    took_s, cpu_s = {}, {}  # every test that ran: seconds, and CPU seconds where its worker said
+    for name, outcome, reason, took, cpu in run_all(tests, args, bindir, expected):
+        took_s[name] = took
+        if cpu is not None:
+            cpu_s[name] = cpu
         if outcome == "skip" and ci:
             outcome, reason = "fail", "could not run, and CI=true makes that a failure: %s" % reason
         if outcome == "pass":
@@ -268,8 +334,9 @@ def main():
         else:
             failed += 1
             print("FAIL %s (%.1f s): %s" % (name, took, reason), flush=True)
-    print("total %.0f s" % (time.monotonic() - started), file=sys.stderr, flush=True)
-    save_times(times)
+    wall_s = time.monotonic() - started
+    print("total %.0f s" % wall_s, file=sys.stderr, flush=True)
+    save_times(own_file, times)
     if skips:
         print("SKIPPED (did not run, not passed):", flush=True)
         for name, reason in skips:
@@ -278,6 +345,8 @@ def main():
             with open(skip_file, "a") as f:
                 for name, reason in skips:
                     f.write("integration test %s (%s): %s\n" % (name, args.bin, reason))
+    for line in longest_report(took_s, cpu_s, wall_s, max(1, args.jobs)):
+        print(line, flush=True)
     print("%d passed, %d failed, %d skipped%s" % (passed, failed, len(skips), ", %d left to the plain pass" % len(
         plain_only) if plain_only else ""), flush=True)
     return 1 if failed else 0

@@ -2,8 +2,8 @@
 "Recovery after a restart"): one older than recover_max_age_s makes the
 washer drain and unlock, saying why; a damaged one is refused with the
 reason and the washer starts afresh, its door still held over the water.
-Beside the other tests (test_recovery.py's 50 crashes run alone): the kill
-to outputs-off time is checked only loosely here."""
+The kill to outputs-off time is checked only loosely here (test_recovery.py's
+50 crashes check it tightly)."""
 
 import os
 import sqlite3
@@ -15,8 +15,12 @@ from test_recovery import (CLEANUP_STEPS, RESTART_S, SHORT_LOCK_RELEASE_S, TUB_E
 
 # Judged by the board's own clock; a board that cannot have real-time
 # scheduling may still be held off the CPU while other tests load the
-# machine. The crash test measures it alone, tightly.
+# machine. The crash test measures it 50 times, tightly.
 LATE_S = 2.0
+# The PTC lock's delay once the restarted host holds the door again: the
+# board's SHORT_LOCK_RELEASE_S held it through the kill, the 2 s wait and
+# the restart; from then on a short one shows the door released sooner.
+QUICK_RELEASE_S = 1
 
 
 def wash_with_water(host, board, guard):
@@ -39,6 +43,10 @@ def test_a_checkpoint_too_old_drains_the_washer(t):
                           invariant=guard)
     assert "checkpoint" in why["text"] and "old" in why["text"], "the event does not say why: %r" % why["text"]
     host.wait_status(lambda s: var(host, s, "state") == "cancelling", 10, "the programme cancelling", guard)
+    host.wait_status(lambda s: washer(host, s)["outputs"]["digital"][LOCK_BIT], 10,
+                     "the cancelling washer holding the door locked", guard)
+    board.send("washer-1 lock_release_s %d" % QUICK_RELEASE_S)
+    board.wait_line(r"^washer-1: lock_release_s %d$" % QUICK_RELEASE_S, 10, what="the lock's delay set")
     steps = []
 
     def follow(s):
@@ -54,7 +62,7 @@ def test_a_checkpoint_too_old_drains_the_washer(t):
     assert d["inputs"]["digital"][TUB_EMPTY_BIT], "cancelled with %.1f l in the tub" % level_l(host, s)
     # The lock solenoid off, and the PTC lock releasing the door after its delay.
     host.wait_status(lambda s: not washer(host, s)["outputs"]["digital"][LOCK_BIT]
-                     and not washer(host, s)["inputs"]["digital"][DOOR_LOCKED_BIT], SHORT_LOCK_RELEASE_S + 10,
+                     and not washer(host, s)["inputs"]["digital"][DOOR_LOCKED_BIT], QUICK_RELEASE_S + 10,
                      "the door unlocked after the cancel", guard)
     assert_safe_board(board, "after the old checkpoint")
 

@@ -248,10 +248,15 @@ def test_a_stopped_qemu_board_is_dropped_and_comes_back(t):
 
 
 def test_the_host_killed_turns_a_qemu_boards_outputs_off(t):
+    # What is timed here is the board's watchdog after the kill, which the
+    # host's deadline and miss limit do not change; before it, the light
+    # switched on is not about timing (a drop then, as in make test's ASan
+    # pass beside the package build, restarts the driver and loses the
+    # switch's change).
     image = firmware_image(t)
     link = Link(t)
     board = qemu_board(t, image, link, "lights", "lights-1")
-    host = t.host(bus="eth:" + link.bridge)
+    host = t.host(bus="eth:" + link.bridge, settings=RELAXED)
     host.wait_running(["lights-1"], timeout_s=30)
     first_tick(host)
     mark = board.mark()

@@ -10,10 +10,11 @@ door while the host is away, docs/BOARD.md) and the host's status keeps
 test_kitchen_cycles' door guard. Old and damaged checkpoints:
 test_checkpoints.py.
 
-Serial: every trial measures the board's watchdog against the moment of the
-kill, and the host's restart time, to a few hundred milliseconds; with three
-other suites on the two cores of the machine the suite runs on, that is
-noise. The 50 crashes take about two minutes."""
+The 50 crashes take about two minutes and run beside the other tests: each
+trial judges the watchdog by the board's own clock (harness.watchdog_trip),
+not by when the harness read its line, and the restart only against a
+bound (RESTART_S); make test ran them beside the soak and the sanitizer
+build all along."""
 
 import os
 import random
@@ -23,10 +24,8 @@ import statistics
 import sys
 import time
 
-from harness import watchdog_trip
+from harness import sanitized, takes_about, watchdog_trip
 from test_kitchen_cycles import DOOR_LEVEL_L, DOOR_LOCKED_BIT, LOCK_BIT, WASHER_STEPS, door_guard
-
-SERIAL = True
 
 TRIALS = 50
 SANITIZED_TRIALS = 3
@@ -168,6 +167,7 @@ class Programme:
         self.pos = None     # index into STEPS[phase]
         self.history = []   # (time.monotonic, phase, pos) on this host
         self.cancels = self.finished = 0
+        self.ends = 0       # programmes seen ending, done or cancelled, as ended() wants
 
     def on_new_host(self, host):
         self.host = host
@@ -210,6 +210,7 @@ class Programme:
         assert d["inputs"]["digital"][TUB_EMPTY_BIT], "the programme %s with %.1f l in the tub" % (
             state, level_l(self.host, s))
         self.finished += state == "done"
+        self.ends += 1
         self.phase, self.pos = state, None
 
     def active(self):
@@ -279,6 +280,12 @@ class CrashLoop:
         self.guard(s)
         self.programme.check(s)
 
+    def lock_off_at_the_end(self):
+        """After a programme's end: the door lock's solenoid off."""
+        host = self.host
+        host.wait_status(lambda s: not washer(host, s)["outputs"]["digital"][LOCK_BIT], 10,
+                         "the door lock off at the end", self.guard)
+
     def run_to_kill_point(self):
         """Let the programme run a random while; one that ends (or reaches
         its last step, unlock) is followed by a new one. Returns the status
@@ -292,6 +299,7 @@ class CrashLoop:
                 return s
             if programme.active():  # in its last step: let it end
                 host.wait_status(lambda s: not programme.active(), 60, "the programme's end", self.check)
+            self.lock_off_at_the_end()
             start_programme(host, self.board, self.check)
             kill_at = max(kill_at, time.monotonic() + KILL_AFTER_S[0])
 
@@ -320,6 +328,7 @@ class CrashLoop:
                     "after the restart the programme is %s" % var(host, s, "state")
                 self.programme.check(s)
                 self.ended_before_kill += 1
+                self.lock_off_at_the_end()
                 start_programme(host, self.board, self.check)
                 return None
             outcome = self.programme.resumed_from(phase_before, pos_before, s)
@@ -333,13 +342,15 @@ class CrashLoop:
         return outcome, killed, running_s, watchdog_s
 
 
+@takes_about(140)
 def test_the_washer_survives_50_host_crashes(t):
     seed = random.SystemRandom().randrange(1 << 30)
     loop = CrashLoop(t, seed)
     # Under the sanitizers (make test-asan runs every test again with
     # build/asan/bin) 3 trials look for memory errors on the same paths; the
     # 50 that judge the behaviour run in the plain build.
-    trials_wanted = SANITIZED_TRIALS if os.sep + "asan" + os.sep in t.bindir + os.sep else TRIALS
+    under_asan = sanitized(t.path("vmacd"))
+    trials_wanted = SANITIZED_TRIALS if under_asan else TRIALS
     trials = []  # (outcome, where killed, restart to running s, kill to watchdog s)
     with open(os.path.join(t.logdir, "recovery-trials.txt"), "w") as record:
         while len(trials) < trials_wanted:
@@ -353,11 +364,19 @@ def test_the_washer_survives_50_host_crashes(t):
                              "kill\n" % ((n, result[1], result[0], loop.programme.where()) + result[2:]))
                 record.flush()
 
-        # The last programme runs to its end: done, or cancelled with the tub drained.
-        host = loop.host
-        host.wait_status(lambda s: not loop.programme.active(), 180, "the last programme's end", loop.check)
-        host.wait_status(lambda s: not washer(host, s)["outputs"]["digital"][LOCK_BIT], 10,
-                         "the door lock off at the end", loop.guard)
+        # A programme killed into runs to its end: done, or cancelled with
+        # the tub drained, and the lock off. The 50 trials go through about
+        # a programme and a quarter, so one usually ended among them (each
+        # end is judged as it comes); if none did, the last one runs to its
+        # end now, up to a minute of plant physics. Not under the
+        # sanitizers: there that minute runs C paths the trials have run
+        # (checkpoints, resume); the plain pass judges the end, and
+        # test-drivers runs whole programmes, host crashes among them, under
+        # the sanitizers in virtual time.
+        if not under_asan and not loop.programme.ends:
+            host = loop.host
+            host.wait_status(lambda s: not loop.programme.active(), 180, "the last programme's end", loop.check)
+            loop.lock_off_at_the_end()
         assert_safe_board(loop.board, "after %d trials (seed %d)" % (trials_wanted, seed))
         outcomes = [r[0] for r in trials]
         running_s, watchdog_s = [r[2] for r in trials], [r[3] for r in trials]
@@ -366,8 +385,8 @@ def test_the_washer_survives_50_host_crashes(t):
         summary = "recovery: %d/%d trials safe, %d resumed, %d drained, restart-to-running p50 %.2f s max %.2f s" % (
             len(trials), trials_wanted, resumed, drained, statistics.median(running_s), max(running_s))
         detail = "recovery: seed %d; kill to outputs off (watchdog %.1f s) p50 %.2f s max %.2f s; %d programmes " \
-            "done, %d cancels drained, %d kills just after a programme ended (repeated)" % (
+            "done, %d cancels drained, %d ends seen, %d kills just after a programme ended (repeated)" % (
                 seed, WATCHDOG_S, statistics.median(watchdog_s), max(watchdog_s), loop.programme.finished,
-                loop.programme.cancels, loop.ended_before_kill)
+                loop.programme.cancels, loop.programme.ends, loop.ended_before_kill)
         record.write(summary + "\n" + detail + "\n")
     print(summary + "\n" + detail, file=sys.stderr, flush=True)  # the runner keeps a worker's stdout for itself
