@@ -20,7 +20,7 @@ import signal
 import time
 
 import test_mqtt as base
-from harness import KITCHEN_NAMES, undisturbed
+from harness import KITCHEN_NAMES, plain_pass_only, undisturbed
 
 DISCOVERY, PREFIX, HOST_ID = base.DISCOVERY, base.PREFIX, base.HOST_ID
 
@@ -545,6 +545,9 @@ def moved(t, broker, hub, mode, old_topics, device_based):
     return host
 
 
+@plain_pass_only("device-based discovery under the sanitizers: "
+                 "test_mqtt_ha_device_discovery_kitchen_and_a_removed_entity; this one, three hosts one after "
+                 "the other, once missed its last 30 s bound under ASan on a loaded VM")
 def test_mqtt_ha_discovery_mode_moved_both_ways(t):
     """HA's documented migration between its two discovery modes, done by
     vmacd when it finds the other mode's retained configs of its own HA
