@@ -231,6 +231,9 @@ def test_a_board_stopped_mid_wash_is_recorded_and_replays_exactly(t):
     # Started by operator input (the API), which the recording keeps too:
     # refused with the door open, taken once it is closed.
     start = {"name": "start", "value": "quick"}
+    board.send("washer-1 door 0")  # the plant starts with its door closed
+    host.wait_status(lambda s: host.device("washer-1", s)["variables"].get("door") == "open", 30,
+                     "the driver saying the door is open")
     code, body = http_post(host, "/api/devices/washer-1/input", start, t.token)
     assert code == 409 and "door" in body, "the washer did not refuse to start with its door open: %d %s" % (
         code, body)
