@@ -126,13 +126,29 @@ void bus_send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason, i
 
 /* ---- the tick ---- */
 
-static void send_discover(struct vmac_bus *bus)
+/* A system frame to every board (the discovery group; broadcast on raw
+ * Ethernet, from the interface's own MAC) queued: its slot, or NULL when
+ * there is none or it did not encode. */
+static struct vmac_packet *queue_group(struct vmac_bus *bus, const struct vmac_msg *m)
 {
 	struct vmac_packet *p = tx_slot(bus);
-	struct vmac_msg m;
 	int n;
 	if (!p)
-		return;
+		return NULL;
+	n = vmac_proto_encode(m, p->data, sizeof(p->data));
+	if (n <= 0) {
+		bus->ntx--;
+		return NULL;
+	}
+	p->len = (size_t)n;
+	p->addr = bus->tr.group;
+	memset(p->mac, 0, sizeof(p->mac));
+	return p;
+}
+
+static void send_discover(struct vmac_bus *bus)
+{
+	struct vmac_msg m;
 	memset(&m, 0, sizeof(m));
 	m.version = 1; /* boards of every version answer it, each in its own */
 	m.channel = VMAC_CH_SYSTEM;
@@ -143,14 +159,8 @@ static void send_discover(struct vmac_bus *bus)
 	bus_nonce_next(bus);
 	m.u.discover.has_nonce = 1;
 	memcpy(m.u.discover.nonce, bus->nonce, sizeof(m.u.discover.nonce));
-	n = vmac_proto_encode(&m, p->data, sizeof(p->data));
-	if (n <= 0) {
-		bus->ntx--;
-		return;
-	}
-	p->len = (size_t)n;
-	p->addr = bus->tr.group;
-	bus->counters.discoveries++;
+	if (queue_group(bus, &m))
+		bus->counters.discoveries++;
 }
 
 /* SYNC to the group (docs/TIME.md): queued before this tick's CYCLIC
@@ -158,24 +168,14 @@ static void send_discover(struct vmac_bus *bus)
  * handed to the kernel. No allocation, no log: it runs on every tick due. */
 static void send_sync(struct vmac_bus *bus)
 {
-	struct vmac_packet *p = tx_slot(bus);
 	struct vmac_msg m;
-	int n;
-	if (!p)
-		return;
 	memset(&m, 0, sizeof(m));
 	m.version = 2;
 	m.channel = VMAC_CH_SYSTEM;
 	m.op = VMAC_SYS_SYNC;
 	m.seq = ++bus->sync_seq;
-	n = vmac_proto_encode(&m, p->data, sizeof(p->data));
-	if (n <= 0) {
-		bus->ntx--;
+	if (!queue_group(bus, &m))
 		return;
-	}
-	p->len = (size_t)n;
-	p->addr = bus->tr.group;
-	memset(p->mac, 0, sizeof(p->mac));
 	bus->sync_tx = bus->ntx - 1;
 	bus->counters.syncs++;
 }
