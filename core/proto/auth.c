@@ -8,7 +8,7 @@
 #define MAC_INPUT_MAX (VMAC_FRAME_MAX + 4 + VMAC_NONCE_LEN)
 /* A CYCLIC record's: the frame's header, first offset and counter, the
  * record's offset and its 6 bytes. */
-#define RECORD_INPUT_LEN (VMAC_HDR_LEN + 2 + 4 + 2 + 6)
+#define RECORD_INPUT_MAX (VMAC_HDR_LEN + 2 + 4 + VMAC_CYCLIC_TIMING_LEN + 2 + 6)
 
 static const char to_board_label[] = "vmac-to-board";
 static const char to_host_label[] = "vmac-to-host";
@@ -90,13 +90,14 @@ int vmac_proto_open(const uint8_t *frame, size_t len, const uint8_t key[VMAC_KEY
 static void record_mac(const uint8_t *frame, unsigned index, const uint8_t *r, const uint8_t key[VMAC_KEY_LEN],
                        uint8_t mac[VMAC_AUTH_MAC_LEN])
 {
-	uint8_t in[RECORD_INPUT_LEN];
+	uint8_t in[RECORD_INPUT_MAX];
+	size_t head = vmac_proto_cyclic_head_len(frame); /* header, first offset, counter, timing */
 	unsigned offset = (unsigned)((frame[VMAC_HDR_LEN] << 8) | frame[VMAC_HDR_LEN + 1]) + index;
-	memcpy(in, frame, VMAC_HDR_LEN + 6); /* header, first offset, counter */
-	in[VMAC_HDR_LEN + 6] = (uint8_t)(offset >> 8);
-	in[VMAC_HDR_LEN + 7] = (uint8_t)offset;
-	memcpy(in + VMAC_HDR_LEN + 8, r, 6);
-	vmac_siphash24(key, in, sizeof(in), mac);
+	memcpy(in, frame, head);
+	in[head] = (uint8_t)(offset >> 8);
+	in[head + 1] = (uint8_t)offset;
+	memcpy(in + head + 2, r, 6);
+	vmac_siphash24(key, in, head + 8, mac);
 }
 
 void vmac_proto_cyclic_seal_record(uint8_t *frame, unsigned index, const uint8_t key[VMAC_KEY_LEN])

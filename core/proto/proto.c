@@ -62,6 +62,32 @@ static int is_cyclic(const uint8_t *buf)
 	return buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC;
 }
 
+size_t vmac_proto_cyclic_head_len(const uint8_t *frame)
+{
+	return VMAC_HDR_LEN + 2 + ((frame[3] & VMAC_FLAG_AUTH) ? 4 : 0) +
+	       ((frame[3] & VMAC_FLAG_TIMED) ? VMAC_CYCLIC_TIMING_LEN : 0);
+}
+
+/* Which flags a frame may carry: TIMED only on a version-2 CYCLIC and an
+ * UPDATE reply of version 2. */
+static int flags_ok(const uint8_t *buf)
+{
+	uint8_t f = buf[3];
+	if ((f & ~(VMAC_FLAG_REPLY | VMAC_FLAG_AUTH | VMAC_FLAG_TIMED)) != 0)
+		return 0;
+	if (!(f & VMAC_FLAG_TIMED))
+		return 1;
+	return buf[2] >= 2 &&
+	       (is_cyclic(buf) ? !(f & VMAC_FLAG_REPLY)
+	                       : (f & VMAC_FLAG_REPLY) && buf[10] == VMAC_CH_DEVICE && buf[11] == VMAC_OP_UPDATE);
+}
+
+static int latch_clock_ok(uint8_t clock)
+{
+	return (clock & ~(VMAC_CLOCK_STATE_MASK | VMAC_CLOCK_ARRIVAL)) == 0 &&
+	       (clock & VMAC_CLOCK_STATE_MASK) <= VMAC_LATCH_STATE_MAX;
+}
+
 static int outputs_ok(const struct vmac_outputs *o)
 {
 	return (o->digital & 0x80) == 0 && o->pwm >= -VMAC_PWM_MAX && o->pwm <= VMAC_PWM_MAX;
@@ -197,9 +223,15 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 
 	if (version < VMAC_PROTO_VERSION_MIN || version > VMAC_PROTO_VERSION)
 		return VMAC_EPROTO_VERSION;
-	/* CYCLIC is built in place (vmac_proto_cyclic_begin), never from a msg. */
-	if (want == -1 || want == LEN_CYCLIC || (m->flags & ~VMAC_FLAG_REPLY) != 0)
+	/* CYCLIC is built in place (vmac_proto_cyclic_begin), never from a msg;
+	 * TIMED only on a version-2 UPDATE reply (sealing comes after). */
+	if (want == -1 || want == LEN_CYCLIC || (m->flags & ~(VMAC_FLAG_REPLY | VMAC_FLAG_TIMED)) != 0)
 		return VMAC_EPROTO_OP;
+	if ((m->flags & VMAC_FLAG_TIMED) &&
+	    (version < 2 || m->channel != VMAC_CH_DEVICE || !reply || m->op != VMAC_OP_UPDATE))
+		return VMAC_EPROTO_OP;
+	if (m->flags & VMAC_FLAG_TIMED)
+		want = VMAC_TIMED_REPLY_LEN;
 	if (cap < VMAC_HDR_LEN)
 		return VMAC_EPROTO_SPACE;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
@@ -266,6 +298,14 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		put32(d + 5, (uint32_t)in->encoder);
 		d[9] = in->applied.digital;
 		put16(d + 10, (uint16_t)in->applied.pwm);
+		if (m->flags & VMAC_FLAG_TIMED) {
+			if (!latch_clock_ok(m->latch.clock))
+				return VMAC_EPROTO_VALUE;
+			put64(d + 12, m->latch.latched_at);
+			d[20] = m->latch.clock;
+			put32(d + 21, m->latch.bound_ns);
+			put64(d + 25, (uint64_t)m->latch.offset_ns);
+		}
 		break;
 	}
 	case 0x100 | VMAC_OP_ERROR:
@@ -309,7 +349,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	         ? n < 1 || n > ((buf[3] & VMAC_FLAG_AUTH) ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX)
 	         : n > VMAC_DATA_MAX))
 		return VMAC_EPROTO_LENGTH;
-	if ((buf[3] & ~(VMAC_FLAG_REPLY | VMAC_FLAG_AUTH)) != 0)
+	if (!flags_ok(buf))
 		return VMAC_EPROTO_OP;
 
 	memset(m, 0, sizeof(*m));
@@ -326,6 +366,8 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		return VMAC_EPROTO_OP;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
 		return VMAC_EPROTO_VALUE;
+	if (m->flags & VMAC_FLAG_TIMED && !is_cyclic(buf))
+		want = VMAC_TIMED_REPLY_LEN;
 	if (want == LEN_DISCOVER ? n != 0 && n != VMAC_NONCE_LEN : want >= 0 && (size_t)want != n)
 		return VMAC_EPROTO_PAYLOAD;
 	if ((m->flags & VMAC_FLAG_AUTH) && !is_cyclic(buf))
@@ -345,10 +387,13 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		m->u.cyclic.first = get16(d);
 		m->u.cyclic.count = (uint8_t)n;
 		m->u.cyclic.frame = buf;
-		m->u.cyclic.records = d + 2;
-		if (m->flags & VMAC_FLAG_AUTH) {
+		m->u.cyclic.records = buf + vmac_proto_cyclic_head_len(buf);
+		if (m->flags & VMAC_FLAG_AUTH)
 			m->counter = get32(d + 2);
-			m->u.cyclic.records = d + 6;
+		if (m->flags & VMAC_FLAG_TIMED) {
+			const uint8_t *t = m->u.cyclic.records - VMAC_CYCLIC_TIMING_LEN;
+			m->u.cyclic.out_at = get64(t);
+			m->u.cyclic.in_at = get64(t + 8);
 		}
 		if ((unsigned)m->u.cyclic.first + n > 0xFFFF) /* 0xFFFF is VMAC_OFFSET_NONE */
 			return VMAC_EPROTO_VALUE;
@@ -396,6 +441,14 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		in->applied.pwm = (int16_t)get16(d + 10);
 		if (in->analog[0] > VMAC_ANALOG_MAX || in->analog[1] > VMAC_ANALOG_MAX || !outputs_ok(&in->applied))
 			return VMAC_EPROTO_VALUE;
+		if (m->flags & VMAC_FLAG_TIMED) {
+			m->latch.latched_at = get64(d + 12);
+			m->latch.clock = d[20];
+			m->latch.bound_ns = get32(d + 21);
+			m->latch.offset_ns = (int64_t)get64(d + 25);
+			if (!latch_clock_ok(m->latch.clock))
+				return VMAC_EPROTO_VALUE;
+		}
 		break;
 	}
 	case 0x100 | VMAC_OP_ERROR:
@@ -418,15 +471,15 @@ int vmac_proto_frame_length(const uint8_t *buf, size_t len)
 		return VMAC_EPROTO_MAGIC;
 	auth = (buf[3] & VMAC_FLAG_AUTH) != 0;
 	if (is_cyclic(buf))
-		return auth ? VMAC_HDR_LEN + 2 + 4 + VMAC_CYCLIC_AUTH_RECORD_LEN * buf[12]
-		            : VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * buf[12];
+		return (int)vmac_proto_cyclic_head_len(buf) +
+		       (auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) * buf[12];
 	return VMAC_HDR_LEN + buf[12] + (auth ? VMAC_AUTH_TRAILER_LEN : 0);
 }
 
 static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
-                        uint32_t counter)
+                        uint32_t counter, const uint64_t *at)
 {
-	size_t head = VMAC_HDR_LEN + 2 + (auth ? 4 : 0);
+	size_t head = VMAC_HDR_LEN + 2 + (auth ? 4 : 0) + (at ? VMAC_CYCLIC_TIMING_LEN : 0);
 	size_t n = head + (size_t)(auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) * count;
 	if (count < 1 || count > (auth ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX) ||
 	    (unsigned)first + count > 0xFFFF)
@@ -436,7 +489,7 @@ static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, 
 	buf[0] = VMAC_MAGIC0;
 	buf[1] = VMAC_MAGIC1;
 	buf[2] = 2;
-	buf[3] = auth ? VMAC_FLAG_AUTH : 0;
+	buf[3] = (uint8_t)((auth ? VMAC_FLAG_AUTH : 0) | (at ? VMAC_FLAG_TIMED : 0));
 	put16(buf + 4, seq);
 	put32(buf + 6, 0);
 	buf[10] = VMAC_CH_SYSTEM;
@@ -445,25 +498,36 @@ static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, 
 	put16(buf + VMAC_HDR_LEN, first);
 	if (auth)
 		put32(buf + VMAC_HDR_LEN + 2, counter);
+	if (at) {
+		put64(buf + head - VMAC_CYCLIC_TIMING_LEN, at[0]);
+		put64(buf + head - 8, at[1]);
+	}
 	memset(buf + head, 0, n - head);
 	return (int)n;
 }
 
 int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count)
 {
-	return cyclic_begin(buf, cap, seq, first, count, 0, 0);
+	return cyclic_begin(buf, cap, seq, first, count, 0, 0, NULL);
 }
 
 int vmac_proto_cyclic_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count,
                                  uint32_t counter)
 {
-	return cyclic_begin(buf, cap, seq, first, count, 1, counter);
+	return cyclic_begin(buf, cap, seq, first, count, 1, counter, NULL);
+}
+
+int vmac_proto_cyclic_begin_timed(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
+                                  uint32_t counter, uint64_t out_at, uint64_t in_at)
+{
+	uint64_t at[2] = {out_at, in_at};
+	return cyclic_begin(buf, cap, seq, first, count, auth != 0, counter, at);
 }
 
 uint8_t *vmac_proto_cyclic_slot(uint8_t *frame, unsigned index)
 {
-	return frame[3] & VMAC_FLAG_AUTH ? frame + VMAC_HDR_LEN + 6 + (size_t)VMAC_CYCLIC_AUTH_RECORD_LEN * index
-	                                 : frame + VMAC_HDR_LEN + 2 + (size_t)VMAC_CYCLIC_RECORD_LEN * index;
+	return frame + vmac_proto_cyclic_head_len(frame) +
+	       (size_t)((frame[3] & VMAC_FLAG_AUTH) ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) * index;
 }
 
 void vmac_proto_cyclic_put(uint8_t *frame, unsigned index, uint16_t tag, uint8_t flags, const struct vmac_outputs *out)

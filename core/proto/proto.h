@@ -18,6 +18,9 @@
 
 #define VMAC_FLAG_REPLY 0x01 /* set on every frame a board sends */
 #define VMAC_FLAG_AUTH 0x02  /* the frame is authenticated: a trailer (or CYCLIC's record MACs) follows */
+#define VMAC_FLAG_TIMED                                                                                                \
+	0x04 /* v2: a CYCLIC carries the host instants its records act at; an UPDATE                                   \
+	      * reply to it, the latch time and the board's clock (docs/TIME.md) */
 
 /* Authenticated frames (docs/PROTOCOL.md, "Authenticated frames"; the
  * keyed functions are in auth.h). A frame with VMAC_FLAG_AUTH carries,
@@ -36,7 +39,9 @@
  * them, so it fits one Ethernet payload (1500 bytes). */
 #define VMAC_CYCLIC_RECORD_LEN 6 /* tag u16, flags u8, digital u8, pwm i16 */
 #define VMAC_CYCLIC_RECORDS_MAX 240
-#define VMAC_CYCLIC_FRAME_MAX (VMAC_HDR_LEN + 2 + VMAC_CYCLIC_RECORD_LEN * VMAC_CYCLIC_RECORDS_MAX) /* 1455 */
+#define VMAC_CYCLIC_TIMING_LEN 16 /* TIMED: out_at u64, in_at u64, after first (and counter) */
+#define VMAC_CYCLIC_FRAME_MAX                                                                                          \
+	(VMAC_HDR_LEN + 2 + VMAC_CYCLIC_TIMING_LEN + VMAC_CYCLIC_RECORD_LEN * VMAC_CYCLIC_RECORDS_MAX) /* 1471 */
 #define VMAC_CYCLIC_DUE 0x01    /* record flag: answer this frame with your inputs */
 #define VMAC_OFFSET_NONE 0xFFFF /* OFFSET_GET's answer from a board that has none */
 #define VMAC_PACKET_MAX 1500    /* the largest frame of any version: one Ethernet payload */
@@ -139,6 +144,8 @@ struct vmac_cyclic_record {
 /* A decoded CYCLIC frame: records first..first+count-1, still in the
  * frame's bytes (read one with vmac_proto_cyclic_record). */
 struct vmac_cyclic {
+	uint64_t out_at, in_at; /* TIMED: the host instants (CLOCK_MONOTONIC ns) the records' outputs take
+	                         * effect and the DUE records' inputs are latched; 0 when not TIMED */
 	uint16_t first;         /* offset of the first record */
 	uint8_t count;          /* 1..VMAC_CYCLIC_RECORDS_MAX (authenticated: ..VMAC_CYCLIC_AUTH_RECORDS_MAX) */
 	const uint8_t *records; /* into the decoded buffer: valid while it is */
@@ -161,6 +168,20 @@ struct vmac_sync {
 	uint64_t host_ns;
 };
 
+/* What a board adds to its UPDATE reply to a TIMED CYCLIC (VMAC_FLAG_TIMED
+ * on the reply; 21 bytes after the 12 of inputs): when it latched them and
+ * how good its clock is (docs/TIME.md, "Time-triggered I/O"). */
+#define VMAC_TIMED_REPLY_LEN 33    /* inputs 12, latched_at u64, clock u8, bound_ns u32, offset_ns i64 */
+#define VMAC_CLOCK_STATE_MASK 0x07 /* the clock byte's state: enum vmac_clock_state (firmware/clock.h) */
+#define VMAC_LATCH_STATE_MAX 4     /* unsynced 0, locking 1, locked 2, holdover 3, lost 4 */
+#define VMAC_CLOCK_ARRIVAL 0x80    /* the clock byte: this service was acted on arrival, not at the instants */
+struct vmac_latch {
+	uint64_t latched_at; /* host ns at which the inputs were latched, by the board's clock; 0: it cannot tell */
+	uint8_t clock;       /* state (VMAC_CLOCK_STATE_MASK) | VMAC_CLOCK_ARRIVAL */
+	uint32_t bound_ns;   /* the clock's estimated error bound, saturating; 0xFFFFFFFF when unknown */
+	int64_t offset_ns;   /* the board's counter less host time; 0 when unknown */
+};
+
 struct vmac_error {
 	uint8_t code; /* enum vmac_board_error */
 	uint8_t op;   /* the op of the request that failed */
@@ -175,7 +196,8 @@ struct vmac_msg {
 	uint32_t device_id; /* session id the host gave in REGISTER; 0 before */
 	uint8_t channel;
 	uint8_t op;
-	uint32_t counter; /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC: the frame's) */
+	uint32_t counter;        /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC: the frame's) */
+	struct vmac_latch latch; /* an UPDATE reply with VMAC_FLAG_TIMED (version 2) */
 	union {
 		struct vmac_discover discover; /* DISCOVER */
 		struct vmac_announce announce; /* ANNOUNCE */
@@ -218,7 +240,16 @@ int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t fir
 int vmac_proto_cyclic_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count,
                                  uint32_t counter);
 
-/* Where record index of a cyclic frame starts (either kind). */
+/* The same, TIMED (auth as above when auth is nonzero): the frame carries
+ * the host instants out_at and in_at before its records. */
+int vmac_proto_cyclic_begin_timed(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
+                                  uint32_t counter, uint64_t out_at, uint64_t in_at);
+
+/* How many bytes of a CYCLIC frame come before its first record (header,
+ * first, and the counter and the timing when it has them). */
+size_t vmac_proto_cyclic_head_len(const uint8_t *frame);
+
+/* Where record index of a cyclic frame starts (any kind). */
 uint8_t *vmac_proto_cyclic_slot(uint8_t *frame, unsigned index);
 
 /* Write record index (0..count-1) of a frame made by vmac_proto_cyclic_begin.

@@ -111,12 +111,12 @@ START_TEST(cyclic_of_240_records_is_the_largest_frame)
 	struct vmac_msg m;
 	int n, rc;
 
-	ck_assert_msg(VMAC_CYCLIC_FRAME_MAX == 1455, "VMAC_CYCLIC_FRAME_MAX is %d, want 15 + 6 * 240 = 1455",
-	              VMAC_CYCLIC_FRAME_MAX);
+	ck_assert_msg(VMAC_CYCLIC_FRAME_MAX == 1471,
+	              "VMAC_CYCLIC_FRAME_MAX is %d, want 15 + 16 + 6 * 240 = 1471 (TIMED)", VMAC_CYCLIC_FRAME_MAX);
 	ck_assert_msg(VMAC_CYCLIC_FRAME_MAX <= VMAC_PACKET_MAX, "largest CYCLIC (%d) exceeds one Ethernet payload (%d)",
 	              VMAC_CYCLIC_FRAME_MAX, VMAC_PACKET_MAX);
 	n = vmac_proto_cyclic_begin(buf, sizeof(buf), 9, 240, VMAC_CYCLIC_RECORDS_MAX);
-	ck_assert_msg(n == VMAC_CYCLIC_FRAME_MAX, "cyclic_begin of 240 records returned %s, want %d", errname(n),
+	ck_assert_msg(n == 15 + 6 * 240, "cyclic_begin of 240 records returned %s, want %d", errname(n),
 	              VMAC_CYCLIC_FRAME_MAX);
 	ck_assert_msg(buf[12] == 240, "len byte of a 240-record CYCLIC is %u, want 240", buf[12]);
 	put_record(buf, 0, 1, VMAC_CYCLIC_DUE, 0x01, 1);
@@ -169,8 +169,7 @@ START_TEST(cyclic_begin_refuses_bad_counts_offsets_and_small_buffers)
 
 	/* The edges that are allowed. */
 	n = vmac_proto_cyclic_begin(buf, VMAC_PACKET_MAX, 1, 0xFFFF - 240, 240);
-	ck_assert_msg(n == VMAC_CYCLIC_FRAME_MAX, "cyclic_begin of 240 records from 65295 (last 65534): got %s",
-	              errname(n));
+	ck_assert_msg(n == 15 + 6 * 240, "cyclic_begin of 240 records from 65295 (last 65534): got %s", errname(n));
 	n = vmac_proto_cyclic_begin(buf, 21, 1, 0xFFFE, 1);
 	ck_assert_msg(n == 21, "cyclic_begin of 1 record at 65534 into exactly 21 bytes: got %s", errname(n));
 }
@@ -280,8 +279,8 @@ START_TEST(cyclic_from_a_board_or_for_a_device_is_refused)
 
 	buf[3] = VMAC_FLAG_REPLY;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "CYCLIC with the REPLY flag");
-	buf[3] = 0x04;
-	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "CYCLIC with flag bit 2");
+	buf[3] = 0x08;
+	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "CYCLIC with flag bit 3");
 	buf[3] = 0;
 	buf[8] = 0x00;
 	buf[9] = 0x25;

@@ -8,7 +8,7 @@ CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
 # trip runs over a veth pair in a network namespace of its own (root), else
 # it is SKIPPED into $(SKIPPED); test_minisign signs and checks with the
 # real minisign command (SKIPPED without it).
-UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto test_cyclic:proto \
+UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto test_cyclic:proto test_timed:proto \
                     test_board:board test_plant:board test_board_v2:board test_board_cyclic:board \
                     test_sched:sched test_store:store test_recording:recorder test_transport:transport \
                     test_driver:driver test_driver_text:driver test_hints:driver test_isolation:driver test_checkpoint:driver test_luaplant:sim test_luaplant_run:sim test_host:host test_audit:host \
