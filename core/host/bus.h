@@ -85,6 +85,19 @@ struct vmac_host_cmd {
 	char text[VMAC_EVENT_TEXT];
 };
 
+/* A board's clock as its TIMED replies tell it (docs/TIME.md,
+ * "Time-triggered I/O"; PROTOCOL.md, "The TIMED reply"). */
+struct vmac_board_clock_status {
+	int known;                 /* it has sent a TIMED reply: the rest is valid */
+	uint8_t state;             /* its clock: 0 unsynced, 1 locking, 2 locked, 3 holdover, 4 lost */
+	int on_arrival;            /* its last service was acted on arrival (the fallback), not at the instants */
+	uint32_t bound_ns;         /* its clock's estimated error bound (0xFFFFFFFF: unknown) */
+	int64_t offset_ns;         /* its counter less host time */
+	uint64_t latched_at_ns;    /* host ns (CLOCK_MONOTONIC) its last inputs were latched at; 0: unknown */
+	uint64_t services_timed;   /* TIMED replies acted at the host's instants */
+	uint64_t services_arrival; /* TIMED replies acted on arrival */
+};
+
 /* A device as the status shows it (copied out of the bus thread). */
 struct vmac_device_status {
 	char name[VMAC_NAME_MAX + 1];
@@ -113,6 +126,7 @@ struct vmac_device_status {
 	unsigned offset;
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs;
+	struct vmac_board_clock_status clock; /* known = 0 until its first TIMED reply */
 	/* The machine's driver (primary board only; 0 when none runs): heap
 	 * bytes and its cap, VM instructions in all calls (counted in steps of
 	 * 1,000: vmac_driver_instructions) and the budget of one call, and the
