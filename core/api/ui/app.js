@@ -264,7 +264,8 @@ function makeCard(d) {
     el("h2", {}, el("span", { class: "title" }, d.driver), el("span", { class: "badge" }, d.state),
       el("span", { class: "badge sealed", "data-sealed": "", hidden: true,
         title: "its board proved its enrolled key, and every frame with it is sealed" }, "sealed")),
-    el("div", { class: "sub" }, d.name + " · " + d.driver + " " + d.driver_version));
+    el("div", { class: "sub" }, d.name + " · " + d.driver + " " + d.driver_version),
+    el("div", { class: "clocks", "data-clocks": "", hidden: true })); // its boards' clocks (clock.js)
   $("#cards").append(root);
   const history = state.plotHistory[d.name] = state.plotHistory[d.name] || {};
   const card = { root, version: d.driver_version, parts: null, history, name: d.name, waiting: false };
@@ -423,6 +424,7 @@ function updateCard(card, d, now) {
   badge.textContent = d.state;
   badge.className = "badge " + d.state;
   $("[data-sealed]", card.root).hidden = !d.authenticated;
+  drawClocks($("[data-clocks]", card.root), state.status, card.name); // clock.js
   const p = card.parts;
   if (!p) return;
   const v = card.values;
