@@ -30,13 +30,20 @@ void http_prom_board_clocks(struct http_prom *p, const struct vmac_status *s)
 	http_prom_family(p, "vmac_board_clock_state", "gauge",
 	                 "1 for the state of the board's clock (unsynced, locking, locked, holdover, lost), 0 for "
 	                 "the others; boards that sent a TIMED reply only");
-	EACH_CLOCK for (k = 0; http_prom_clock_states[k]; k++)
-		http_prom_u64(p, "vmac_board_clock_state", d->clock.state == k ? 1 : 0, LABELS, "state",
-		              http_prom_clock_states[k], NULL);
+	EACH_CLOCK
+	{
+		for (k = 0; http_prom_clock_states[k]; k++)
+			http_prom_u64(p, "vmac_board_clock_state", d->clock.state == k ? 1 : 0, LABELS, "state",
+			              http_prom_clock_states[k], NULL);
+	}
 	http_prom_family(p, "vmac_board_clock_bound_seconds", "gauge",
 	                 "The estimated error bound of the board's clock, as it last said");
-	EACH_CLOCK if (d->clock.bound_ns != BOUND_UNKNOWN)
-		http_prom_f64(p, "vmac_board_clock_bound_seconds", (double)d->clock.bound_ns / 1e9, LABELS, NULL);
+	EACH_CLOCK
+	{
+		if (d->clock.bound_ns != BOUND_UNKNOWN)
+			http_prom_f64(p, "vmac_board_clock_bound_seconds", (double)d->clock.bound_ns / 1e9, LABELS,
+			              NULL);
+	}
 	http_prom_family(p, "vmac_board_clock_offset_seconds", "gauge",
 	                 "The board's clock less the host's, as it last said");
 	EACH_CLOCK http_prom_f64(p, "vmac_board_clock_offset_seconds", (double)d->clock.offset_ns / 1e9, LABELS, NULL);
