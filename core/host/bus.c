@@ -381,7 +381,7 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 		}
 		return 0;
 	}
-	if (bus->cfg.clock_sync_ms > 0 && !bus->virt && now >= bus->next_sync_ns) {
+	if (bus->cfg.clock_sync_ms > 0 && now >= bus->next_sync_ns) {
 		int64_t period = (int64_t)bus->cfg.clock_sync_ms * 1000000;
 		send_sync(bus);
 		bus->next_sync_ns += period;
