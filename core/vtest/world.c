@@ -216,7 +216,10 @@ static void deliver(struct vt_world *w, struct vt_pkt *p)
 			return;
 		vmac_board_poll(&b->fw, ms);
 		memset(&r, 0, sizeof(r));
-		len = vmac_board_receive(&b->fw, p->p.data, p->p.len, ms, r.p.data, sizeof(r.p.data));
+		/* Stamped by the board's counter as its receive path would: SYNC
+		 * feeds its clock with it (clocks.h). */
+		len = vmac_board_receive_at(&b->fw, p->p.data, p->p.len, ms, vt_clock_local_ns(w, b, 1), r.p.data,
+		                            sizeof(r.p.data));
 		if (len <= 0)
 			return;
 		record_service(w, b, w->now_ns);
@@ -243,6 +246,7 @@ static int step_plants(struct vt_world *w)
 		if (b->powered && vmac_board_poll(&b->fw, ms))
 			w->moved = 1; /* the watchdog turned the outputs off */
 	}
+	vt_clock_poll(w); /* holdover and lost come with time, not only with frames */
 	return rc;
 }
 
@@ -612,6 +616,7 @@ void vt_world_free(struct vt_world *w)
 	vmac_store_close(w->store);
 	for (i = 0; i < w->nboards; i++) {
 		vmac_sim_fini(&w->boards[i]->sim);
+		vt_clock_free(w->boards[i]);
 		free(w->boards[i]);
 	}
 	free(w->q);
