@@ -230,13 +230,13 @@ static void send_sync(struct vmac_bus *bus)
 	m.channel = VMAC_CH_SYSTEM;
 	m.op = VMAC_SYS_SYNC;
 	m.seq = ++bus->sync_seq;
+	send_sync_sealed(bus);
 	/* Plain, always (one short frame): unkeyed boards sync before they
 	 * announce, so the host cannot know whether any listens. */
 	if (queue_group(bus, &m)) {
 		bus->sync_tx = bus->ntx - 1;
 		bus->counters.syncs++;
 	}
-	send_sync_sealed(bus);
 }
 
 /* REGISTER goes out at once, whatever the slot: a board is not in the
