@@ -51,7 +51,8 @@ struct vmac_board_identity {
 struct vmac_board_counters {
 	uint32_t frames_ok, frames_malformed, frames_ignored, watchdog_trips;
 	uint32_t auth_failed;  /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
-	uint32_t sync_ignored; /* SYNC frames not fed to the clock: version 1, sealed, or no receive time */
+	uint32_t sync_ignored; /* SYNC frames not fed to the clock: version 1, no receive time; unkeyed: sealed;
+	                        * keyed: unsealed, before a session and offset, or no MAC for our offset */
 };
 
 struct vmac_board {
@@ -70,6 +71,7 @@ struct vmac_board {
 	uint8_t nonce[VMAC_NONCE_LEN];
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
 	uint32_t rx_counter, rx_cyclic_counter, tx_counter;
+	uint32_t rx_sync_counter; /* the last sealed SYNC's counter fed to the clock in this session */
 	/* The board's clock (docs/TIME.md), on the caller's free-running
 	 * counter (ns), fed by the host's SYNC frames in any board state; its
 	 * counter at the last feed or vmac_board_clock_poll, the instant its
@@ -103,10 +105,11 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
  * the Ethernet interrupt's timer on a microcontroller): a SYNC frame
  * (docs/PROTOCOL.md, "SYNC") is fed to the board's clock with it. A SYNC
  * frame is never answered and never feeds the watchdog; a board of
- * version 1, a sealed SYNC (not defined yet) and a call without a receive
- * time (VMAC_BOARD_NO_STAMP) count it in sync_ignored and leave the clock
- * alone. A keyed board's clock is fed by unsealed SYNC frames: it decides
- * nothing yet (docs/TIME.md, "Trust"). */
+ * version 1 and a call without a receive time (VMAC_BOARD_NO_STAMP) count
+ * it in sync_ignored and leave the clock alone. An unkeyed board takes
+ * only plain SYNC frames; a keyed one only a sealed SYNC whose MAC at its
+ * offset opens under its session's key with a fresh counter, so it syncs
+ * from its registration on (docs/TIME.md, "Trust"). */
 int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
                           uint8_t *reply, size_t cap);
 
