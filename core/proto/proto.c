@@ -254,7 +254,10 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 		if (n)
 			memcpy(d, m->u.discover.nonce, VMAC_NONCE_LEN);
 		break;
-	case SYS_KEY | VMAC_SYS_SYNC: put64(d, m->u.sync.host_ns); break;
+	case SYS_KEY | VMAC_SYS_SYNC:
+		put64(d, m->u.sync.host_ns);
+		put64(d + 8, m->u.sync.prev_tx_ns);
+		break;
 	case SYS_KEY | VMAC_SYS_ANNOUNCE: {
 		size_t room = cap - VMAC_HDR_LEN;
 		n = encode_announce(&m->u.announce, d, room > VMAC_DATA_MAX ? VMAC_DATA_MAX : room);
@@ -354,6 +357,7 @@ static int decode_sync_auth(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	m->channel = VMAC_CH_SYSTEM;
 	m->op = VMAC_SYS_SYNC;
 	m->u.sync.host_ns = get64(d);
+	m->u.sync.prev_tx_ns = get64(d + 8);
 	m->counter = get32(d + VMAC_SYNC_LEN);
 	m->u.sync.first = get16(d + VMAC_SYNC_LEN + 4);
 	m->u.sync.count = n;
@@ -416,7 +420,10 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 			memcpy(m->u.discover.nonce, d, VMAC_NONCE_LEN);
 		break;
 	case SYS_KEY | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
-	case SYS_KEY | VMAC_SYS_SYNC: m->u.sync.host_ns = get64(d); break;
+	case SYS_KEY | VMAC_SYS_SYNC:
+		m->u.sync.host_ns = get64(d);
+		m->u.sync.prev_tx_ns = get64(d + 8);
+		break;
 	case SYS_KEY | VMAC_SYS_CYCLIC:
 		/* Records are checked one by one when read (a board reads only its
 		 * own): decoding stays O(1) however many the frame carries. */
@@ -599,6 +606,11 @@ void vmac_proto_sync_stamp(uint8_t *buf, uint64_t host_ns)
 	put64(buf + VMAC_HDR_LEN, host_ns);
 }
 
+void vmac_proto_sync_set_prev(uint8_t *buf, uint64_t prev_tx_ns)
+{
+	put64(buf + VMAC_HDR_LEN + 8, prev_tx_ns);
+}
+
 int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t counter, uint16_t first, unsigned count)
 {
 	size_t n = VMAC_SYNC_AUTH_HEAD_LEN + (size_t)VMAC_AUTH_MAC_LEN * count;
@@ -616,6 +628,7 @@ int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t 
 	buf[11] = VMAC_SYS_SYNC;
 	buf[12] = (uint8_t)count;
 	put64(buf + VMAC_HDR_LEN, 0);
+	put64(buf + VMAC_HDR_LEN + 8, 0);
 	put32(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN, counter);
 	put16(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN + 4, first);
 	memset(buf + VMAC_SYNC_AUTH_HEAD_LEN, 0, n - VMAC_SYNC_AUTH_HEAD_LEN);

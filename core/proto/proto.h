@@ -160,18 +160,21 @@ struct vmac_discover {
 };
 
 /* SYNC's data (v2, host -> group): the host's CLOCK_MONOTONIC at the
- * frame's send, taken as late as the host can; the header's seq is the
- * sync sequence number. A board feeds it to its clock (firmware/clock.h)
- * with its own receive timestamp. */
-#define VMAC_SYNC_LEN 8
+ * frame's send, taken as late as the host can (one-step), then the
+ * kernel's transmit time of the previous SYNC of the same stream (the
+ * plain frame, or one sealed chunk), 0 when unknown (two-step); the
+ * header's seq is the sync sequence number. A board feeds one of them to
+ * its clock (firmware/clock.h) with its own receive timestamp. */
+#define VMAC_SYNC_LEN 16
 /* Sealed (VMAC_FLAG_AUTH; docs/PROTOCOL.md, "Authenticated frames"): one
- * frame for many keyed boards, as the sealed CYCLIC. After host_ns come the
- * host's SYNC counter (u32) and the first offset (u16), then `len` MACs of
+ * frame for many keyed boards, as the sealed CYCLIC. After host_ns and
+ * prev_tx_ns come the host's SYNC counter (u32) and the first offset (u16), then `len` MACs of
  * 8 bytes, MAC i for the board at offset first + i (zeros: no board). */
-#define VMAC_SYNC_AUTH_HEAD_LEN (VMAC_HDR_LEN + VMAC_SYNC_LEN + 4 + 2) /* 27 */
-#define VMAC_SYNC_AUTH_MACS_MAX 100                                    /* 27 + 8 x 100 = 827 bytes */
+#define VMAC_SYNC_AUTH_HEAD_LEN (VMAC_HDR_LEN + VMAC_SYNC_LEN + 4 + 2) /* 35 */
+#define VMAC_SYNC_AUTH_MACS_MAX 100                                    /* 35 + 8 x 100 = 835 bytes */
 struct vmac_sync {
 	uint64_t host_ns;
+	uint64_t prev_tx_ns;  /* the previous SYNC's of this stream, as the kernel stamped its send; 0 unknown */
 	uint16_t first;       /* sealed: the offset of the first MAC (the counter is msg->counter) */
 	uint8_t count;        /* sealed: the number of MACs, 1..VMAC_SYNC_AUTH_MACS_MAX; 0 unsealed */
 	const uint8_t *frame; /* sealed: the frame itself, for vmac_proto_sync_open (auth.h) */
@@ -276,6 +279,10 @@ int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct v
  * VMAC_SYNC_LEN bytes): the host stamps it at the last moment before the
  * send, after the frame was built. */
 void vmac_proto_sync_stamp(uint8_t *buf, uint64_t host_ns);
+
+/* Write prev_tx_ns (0: unknown) into an encoded SYNC frame, plain or
+ * sealed, before it is sealed. */
+void vmac_proto_sync_set_prev(uint8_t *buf, uint64_t prev_tx_ns);
 
 /* Start a sealed SYNC frame in buf (cap bytes) for the count offsets from
  * first, with the host's SYNC counter: host_ns 0 (vmac_proto_sync_stamp

@@ -114,6 +114,7 @@ static void check_codec(const uint8_t *data, size_t size)
 		if (n < 0 || (size_t)n != size)
 			abort();
 		vmac_proto_sync_stamp(again, msg.u.sync.host_ns);
+		vmac_proto_sync_set_prev(again, msg.u.sync.prev_tx_ns);
 		memcpy(again + VMAC_SYNC_AUTH_HEAD_LEN, data + VMAC_SYNC_AUTH_HEAD_LEN, size - VMAC_SYNC_AUTH_HEAD_LEN);
 		if (memcmp(again, data, size) != 0)
 			abort();

@@ -173,15 +173,19 @@ int main(int argc, char **argv)
 		write_file("session_cyclic", s.bytes, s.len);
 	}
 
-	/* SYNC (docs/TIME.md): one, then a second of them at 5 ms, then quiet. */
+	/* SYNC (docs/TIME.md): one, then a second of them at 5 ms, then quiet;
+	 * from the second on each names its predecessor's transmit time, 7 us
+	 * after that one's host_ns (the two-step), the 15th none (a lost stamp);
+	 * 30 of them, as 40 of the longer frame would not fit a session. */
 	m = msg(2, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, 0, 1);
 	m.u.sync.host_ns = 5000000000ull;
 	seed("sync", &m);
 	{
 		int k;
 		memset(&s, 0, sizeof(s));
-		for (k = 0; k < 40; k++) {
+		for (k = 0; k < 30; k++) {
 			m.seq = (uint16_t)(k + 1);
+			m.u.sync.prev_tx_ns = k > 0 && k != 15 ? m.u.sync.host_ns + 7000 : 0;
 			m.u.sync.host_ns = 5000000000ull + (uint64_t)k * 5 * FUZZ_STEP_MS * 1000000u;
 			append(&s, 5, &m);
 		}
@@ -198,6 +202,7 @@ int main(int argc, char **argv)
 		uint8_t frame[VMAC_PACKET_MAX];
 		int n = vmac_proto_sync_begin_auth(frame, sizeof(frame), 2, 1, 0, 8);
 		vmac_proto_sync_stamp(frame, 5000000000ull);
+		vmac_proto_sync_set_prev(frame, 4999000000ull + 7000);
 		vmac_proto_sync_seal(frame, SESSION_V2 & 0xFFFF, key);
 		write_file("sync_sealed", frame, (size_t)n);
 	}

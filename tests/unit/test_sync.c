@@ -41,25 +41,30 @@ START_TEST(sync_has_pinned_wire_bytes_and_round_trips)
 	    'V',  'M',  0x02, 0x00,                         /* magic, version 2, flags */
 	    0x01, 0x02,                                     /* seq: the sync sequence number */
 	    0x00, 0x00, 0x00, 0x00,                         /* device 0: the system channel */
-	    0xFF, 0x05, 0x08,                               /* system channel, SYNC, 8 bytes */
+	    0xFF, 0x05, 0x10,                               /* system channel, SYNC, 16 bytes */
 	    0x00, 0x00, 0x12, 0x34, 0x56, 0x78, 0x9A, 0xBC, /* host time, ns */
+	    0x00, 0x00, 0x12, 0x34, 0x56, 0x77, 0x9A, 0xC5, /* the previous SYNC's transmit time, ns */
 	};
 	struct vmac_msg m = sync_msg(0x0102, 0x123456789ABCull), back;
 	uint8_t buf[VMAC_FRAME_MAX];
-	int n = vmac_proto_encode(&m, buf, sizeof(buf)), rc;
+	int n, rc;
+
+	m.u.sync.prev_tx_ns = 0x123456779AC5ull; /* 1 ms less 9 us before: 9 us after the previous stamp */
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
 
 	expect_bytes(buf, n, want, (int)sizeof(want), "SYNC");
 	rc = decode_exact(want, sizeof(want), &back);
 	ck_assert_msg(rc == 0, "decode of the pinned SYNC returned %s", errname(rc));
 	ck_assert_msg(back.op == VMAC_SYS_SYNC && back.channel == VMAC_CH_SYSTEM && back.seq == 0x0102 &&
-	                  back.u.sync.host_ns == 0x123456789ABCull,
-	              "pinned SYNC decoded as op 0x%02x seq 0x%04x host %llx", back.op, back.seq,
-	              (unsigned long long)back.u.sync.host_ns);
+	                  back.u.sync.host_ns == 0x123456789ABCull && back.u.sync.prev_tx_ns == 0x123456779AC5ull,
+	              "pinned SYNC decoded as op 0x%02x seq 0x%04x host %llx prev %llx", back.op, back.seq,
+	              (unsigned long long)back.u.sync.host_ns, (unsigned long long)back.u.sync.prev_tx_ns);
 	vmac_proto_sync_stamp(buf, 0xFEDCBA9876543210ull);
+	vmac_proto_sync_set_prev(buf, 0);
 	rc = decode_exact(buf, (size_t)n, &back);
-	ck_assert_msg(rc == 0 && back.u.sync.host_ns == 0xFEDCBA9876543210ull,
-	              "a stamped SYNC decoded as %s, host %llx, want the stamp", errname(rc),
-	              (unsigned long long)back.u.sync.host_ns);
+	ck_assert_msg(rc == 0 && back.u.sync.host_ns == 0xFEDCBA9876543210ull && back.u.sync.prev_tx_ns == 0,
+	              "a stamped SYNC decoded as %s, host %llx prev %llx, want the stamp and 0", errname(rc),
+	              (unsigned long long)back.u.sync.host_ns, (unsigned long long)back.u.sync.prev_tx_ns);
 	ck_assert_str_eq(vmac_proto_opname(VMAC_CH_SYSTEM, VMAC_SYS_SYNC), "SYNC");
 }
 END_TEST
@@ -88,12 +93,14 @@ START_TEST(sync_is_refused_in_version_1_as_a_reply_and_at_other_lengths)
 	buf[3] = VMAC_FLAG_REPLY;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "SYNC as a reply");
 	buf[3] = 0;
-	buf[12] = 7; /* seven bytes of time */
-	expect_decode_err(buf, (size_t)n - 1, VMAC_EPROTO_PAYLOAD, "SYNC of 7 data bytes");
-	buf[12] = 9;
+	buf[12] = 8; /* a SYNC of before the two-step: host time alone */
+	expect_decode_err(buf, (size_t)n - 8, VMAC_EPROTO_PAYLOAD, "SYNC of 8 data bytes");
+	buf[12] = 15;
+	expect_decode_err(buf, (size_t)n - 1, VMAC_EPROTO_PAYLOAD, "SYNC of 15 data bytes");
+	buf[12] = 17;
 	buf[n] = 0;
-	expect_decode_err(buf, (size_t)n + 1, VMAC_EPROTO_PAYLOAD, "SYNC of 9 data bytes");
-	buf[12] = 8;
+	expect_decode_err(buf, (size_t)n + 1, VMAC_EPROTO_PAYLOAD, "SYNC of 17 data bytes");
+	buf[12] = 16;
 	buf[9] = 1; /* device id 1 on the system channel */
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_VALUE, "SYNC with a device id");
 }

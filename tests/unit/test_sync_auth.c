@@ -17,6 +17,7 @@
 
 #define SESSION 0x00030001u /* generation 3, slot (offset) 1 */
 #define HOST_NS 0x123456789ABCull
+#define PREV_TX_NS 0x123456779AC5ull /* the previous SYNC left 1 ms less 9 us before */
 
 /* The byte example's to_board key: 00 01 .. 0F. */
 static const uint8_t doc_key[VMAC_KEY_LEN] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
@@ -24,17 +25,19 @@ static const uint8_t key[VMAC_KEY_LEN] = {9, 8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3,
 static const uint8_t nonce[VMAC_NONCE_LEN] = {1, 2, 3, 4, 5, 6, 7, 8};
 
 /* The byte example of docs/PROTOCOL.md: seq 0x0102, host time
- * 0x123456789ABC ns, counter 9, offsets 0 (empty) and 1 (a keyed board
+ * 0x123456789ABC ns, the previous SYNC's transmit time 0x123456779AC5 ns,
+ * counter 9, offsets 0 (empty) and 1 (a keyed board
  * whose to_board key is doc_key). The MAC is libsodium's
  * crypto_shorthash_siphash24 of the head and offset 00 01, computed apart
  * (PyNaCl), not by this code. */
 static const uint8_t doc_frame[] = {
     0x56, 0x4D, 0x02, 0x02, 0x01, 0x02, 0x00, 0x00, 0x00, 0x00, 0xFF, 0x05, 0x02, /* header: AUTH, 2 MACs */
     0x00, 0x00, 0x12, 0x34, 0x56, 0x78, 0x9A, 0xBC,                               /* host_ns */
+    0x00, 0x00, 0x12, 0x34, 0x56, 0x77, 0x9A, 0xC5,                               /* prev_tx_ns */
     0x00, 0x00, 0x00, 0x09,                                                       /* counter */
     0x00, 0x00,                                                                   /* first */
     0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,                               /* offset 0: no board */
-    0xA5, 0x47, 0xDE, 0xA9, 0xDF, 0x9D, 0x0F, 0x45,                               /* offset 1's MAC */
+    0xFC, 0x4E, 0xEE, 0x28, 0xA8, 0xE8, 0x33, 0x54,                               /* offset 1's MAC */
 };
 
 /* A sealed SYNC for offsets first..first+count-1 at host_ns with counter,
@@ -45,6 +48,7 @@ static int sealed_sync(uint8_t *buf, size_t cap, uint16_t seq, uint64_t host_ns,
 	int n = vmac_proto_sync_begin_auth(buf, cap, seq, counter, first, count);
 	ck_assert_int_gt(n, 0);
 	vmac_proto_sync_stamp(buf, host_ns);
+	vmac_proto_sync_set_prev(buf, PREV_TX_NS);
 	if (keyed_at >= first && keyed_at < first + count)
 		vmac_proto_sync_seal(buf, keyed_at - first, k);
 	return n;
@@ -61,7 +65,8 @@ START_TEST(sealed_sync_has_pinned_wire_bytes_and_round_trips)
 	rc = decode_exact(doc_frame, sizeof(doc_frame), &m);
 	ck_assert_msg(rc == 0, "decode of the pinned sealed SYNC returned %s", errname(rc));
 	ck_assert_msg(m.op == VMAC_SYS_SYNC && m.flags == VMAC_FLAG_AUTH && m.seq == 0x0102 &&
-	                  m.u.sync.host_ns == HOST_NS && m.counter == 9 && m.u.sync.first == 0 && m.u.sync.count == 2,
+	                  m.u.sync.host_ns == HOST_NS && m.u.sync.prev_tx_ns == PREV_TX_NS && m.counter == 9 &&
+	                  m.u.sync.first == 0 && m.u.sync.count == 2,
 	              "decoded op 0x%02x flags 0x%02x seq 0x%04x host %llx counter %u first %u count %u", m.op, m.flags,
 	              m.seq, (unsigned long long)m.u.sync.host_ns, (unsigned)m.counter, (unsigned)m.u.sync.first,
 	              (unsigned)m.u.sync.count);
@@ -71,12 +76,12 @@ START_TEST(sealed_sync_has_pinned_wire_bytes_and_round_trips)
 	ck_assert_int_eq(vmac_proto_sync_open(&m, 1, key), VMAC_EPROTO_AUTH);
 	ck_assert_int_eq(vmac_proto_sync_open(&m, 0, doc_key), 1); /* zeros: no board there */
 	ck_assert_int_eq(vmac_proto_sync_open(&m, 2, doc_key), 1); /* outside the frame */
-	/* the largest: 100 MACs, 827 bytes, one Ethernet payload */
-	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, VMAC_SYNC_AUTH_MACS_MAX), 827);
+	/* the largest: 100 MACs, 835 bytes, one Ethernet payload */
+	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, VMAC_SYNC_AUTH_MACS_MAX), 835);
 	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, VMAC_SYNC_AUTH_MACS_MAX + 1),
 	                 VMAC_EPROTO_VALUE);
 	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, 0), VMAC_EPROTO_VALUE);
-	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, 40, 1, 1, 0, 2), VMAC_EPROTO_SPACE);
+	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, 50, 1, 1, 0, 2), VMAC_EPROTO_SPACE);
 }
 END_TEST
 
@@ -100,8 +105,8 @@ START_TEST(sealed_sync_is_refused_at_a_wrong_length_count_or_flag)
 	buf[9] = 1;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_VALUE, "sealed SYNC with a device id");
 	buf[9] = 0;
-	buf[25] = 0xFF; /* first 0xFFFF: its second MAC past the last offset */
-	buf[26] = 0xFF;
+	buf[33] = 0xFF; /* first 0xFFFF: its second MAC past the last offset */
+	buf[34] = 0xFF;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_VALUE, "sealed SYNC past offset 0xFFFE");
 }
 END_TEST
