@@ -31,6 +31,23 @@ struct vmac_packet {
 	uint8_t mac[6];        /* Ethernet only. receive: the destination MAC the frame was sent to; send: the
 	                        * source MAC to put on it (all zero: the interface's own) */
 	int64_t rx_ns;         /* receive: kernel timestamp, CLOCK_MONOTONIC ns */
+	int32_t tx_cookie;     /* send: >= 0 asks for the kernel's transmit timestamp, returned with this
+	                        * cookie by vmac_transport_tx_read; negative: none. Ignored unless
+	                        * vmac_transport_tx_stamps_on succeeded on the transport */
+};
+
+/* A transmit timestamp: when the kernel handed a packet that asked for one
+ * to the device's driver (software: no hardware stamps), CLOCK_MONOTONIC ns. */
+struct vmac_tx_stamp {
+	uint32_t cookie; /* the packet's tx_cookie */
+	int64_t tx_ns;
+};
+
+/* Sends that asked for a stamp and have not had it yet, at most. */
+#define VMAC_TRANSPORT_TX_PENDING 64
+struct vmac_tx_pending {
+	uint32_t id; /* the kernel's OPT_ID counter for it */
+	uint32_t cookie;
 };
 
 enum vmac_transport_kind { VMAC_TRANSPORT_UDP, VMAC_TRANSPORT_ETH };
@@ -58,6 +75,14 @@ struct vmac_transport {
 	                           * mmap'd; unmapped by vmac_transport_close), NULL when frames are read with
 	                           * recvmmsg instead */
 	uint32_t rx_next;         /* Ethernet: the ring slot to read next, where the last receive stopped */
+	/* Transmit timestamps (tx_stamp.c): on or not, the kernel's counter of
+	 * the next send that asks, the sends waiting for theirs (a ring), and
+	 * how often the counters were set back to 0 after a send that failed. */
+	int tx_stamps;
+	uint32_t tx_next_id;
+	struct vmac_tx_pending tx_pending[VMAC_TRANSPORT_TX_PENDING];
+	uint32_t tx_head, tx_count;
+	uint64_t tx_resyncs;
 };
 
 /* The EtherType of vmac frames on raw Ethernet (IEEE local experimental). */
@@ -108,6 +133,19 @@ int vmac_transport_recv(struct vmac_transport *t, int fd, struct vmac_packet *pk
 /* Resample the realtime/monotonic offset used to convert kernel stamps. */
 void vmac_transport_clock_sync(struct vmac_transport *t);
 
+/* Ask the kernel for software transmit timestamps of the packets whose
+ * tx_cookie is not negative (SO_TIMESTAMPING: SOFTWARE, OPT_ID, OPT_TSONLY;
+ * TX_SOFTWARE per send). Returns 0, or a negative errno and stamps stay
+ * off. Each stamp then waits in the socket's error queue, which makes epoll
+ * report EPOLLERR on the socket until vmac_transport_tx_read empties it. */
+int vmac_transport_tx_stamps_on(struct vmac_transport *t);
+
+/* Read up to max transmit stamps waiting, never blocking, each matched to
+ * its packet's cookie (stamps matching no pending send are dropped). Reads
+ * at most 2 x VMAC_TRANSPORT_TX_PENDING messages a call. Returns how many
+ * were written to out (0 when stamps are off or none waits). */
+int vmac_transport_tx_read(struct vmac_transport *t, struct vmac_tx_stamp *out, int max);
+
 /* Same peer: family and IPv4 address and port, or MAC and ifindex. */
 int vmac_addr_equal(const struct vmac_addr *a, const struct vmac_addr *b);
 /* "127.0.0.1:40123" or "02:00:00:00:00:07" into buf; returns buf. */
@@ -141,6 +179,18 @@ void vmac_eth_close(struct vmac_transport *t);
  * SO_TIMESTAMPNS control message, in CLOCK_MONOTONIC ns; now_ns (read before
  * the receive) when there is none or it lies after now_ns (a realtime step). */
 int64_t vmac_transport_rx_stamp(const struct vmac_transport *t, struct msghdr *h, int64_t now_ns);
+
+/* The control buffer of one send that asks for a transmit stamp. */
+#define VMAC_TRANSPORT_TX_CMSG_SPACE CMSG_SPACE(sizeof(uint32_t))
+
+/* The senders, per packet before the send: if stamps are on and p asks
+ * for one, h's control message asks the kernel for it (in ctrl). */
+void vmac_transport_tx_ask(const struct vmac_transport *t, const struct vmac_packet *p, struct msghdr *h,
+                           uint8_t ctrl[VMAC_TRANSPORT_TX_CMSG_SPACE]);
+/* ...and after it: of pkts[0..tried), the first `sent` were taken by the
+ * kernel. Their stamps are awaited; a stamped packet not taken sets the
+ * kernel's counter and ours back to 0 (the kernel may have counted it). */
+void vmac_transport_tx_sent(struct vmac_transport *t, const struct vmac_packet *pkts, int tried, int sent);
 
 /* "what: strerror(errno)" into err; returns -errno (-EINVAL if errno is 0). */
 int vmac_transport_fail(char *err, size_t errlen, const char *what);

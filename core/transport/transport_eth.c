@@ -216,6 +216,7 @@ int vmac_eth_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
 	struct mmsghdr msgs[BATCH_MAX];
 	struct iovec iov[BATCH_MAX][3]; /* header, payload, padding */
 	uint8_t hdr[BATCH_MAX][ETH_HLEN];
+	uint8_t ctrl[BATCH_MAX][VMAC_TRANSPORT_TX_CMSG_SPACE];
 	int sent = 0;
 
 	while (sent < n) {
@@ -244,15 +245,19 @@ int vmac_eth_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
 			memset(&msgs[built], 0, sizeof(msgs[built]));
 			msgs[built].msg_hdr.msg_iov = iov[built];
 			msgs[built].msg_hdr.msg_iovlen = niov;
+			vmac_transport_tx_ask(t, p, &msgs[built].msg_hdr, ctrl[built]);
 		}
 		if (built == 0) /* pkts[sent] has no Ethernet destination or is too long */
 			return sent > 0 ? sent : -EINVAL;
 		r = sendmmsg(t->fd, msgs, (unsigned)built, MSG_DONTWAIT);
 		if (r < 0) {
-			if (errno == EINTR)
+			int e = errno;
+			if (e == EINTR)
 				continue;
-			return sent > 0 ? sent : -errno;
+			vmac_transport_tx_sent(t, pkts + sent, 1, 0);
+			return sent > 0 ? sent : -e;
 		}
+		vmac_transport_tx_sent(t, pkts + sent, r < built ? r + 1 : r, r);
 		sent += r;
 		if (r == 0)
 			break;

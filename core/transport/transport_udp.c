@@ -115,6 +115,7 @@ int vmac_udp_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
 {
 	struct mmsghdr msgs[BATCH_MAX];
 	struct iovec iov[BATCH_MAX];
+	uint8_t ctrl[BATCH_MAX][VMAC_TRANSPORT_TX_CMSG_SPACE];
 	int sent = 0;
 
 	while (sent < n) {
@@ -128,21 +129,25 @@ int vmac_udp_send(struct vmac_transport *t, struct vmac_packet *pkts, int n)
 			msgs[i].msg_hdr.msg_namelen = p->addr.len;
 			msgs[i].msg_hdr.msg_iov = &iov[i];
 			msgs[i].msg_hdr.msg_iovlen = 1;
+			vmac_transport_tx_ask(t, p, &msgs[i].msg_hdr, ctrl[i]);
 		}
 		r = sendmmsg(t->fd, msgs, (unsigned)chunk, MSG_DONTWAIT);
 		if (r < 0) {
-			if (errno == EINTR)
+			int e = errno;
+			if (e == EINTR)
 				continue;
+			vmac_transport_tx_sent(t, pkts + sent, 1, 0);
 			if (sent > 0)
 				return sent;
 			/* A datagram the kernel refused (e.g. ECONNREFUSED left over
 			 * from an ICMP) is skipped, not retried forever. */
-			if (errno == ECONNREFUSED || errno == EHOSTUNREACH || errno == ENETUNREACH) {
+			if (e == ECONNREFUSED || e == EHOSTUNREACH || e == ENETUNREACH) {
 				sent++;
 				continue;
 			}
-			return -errno;
+			return -e;
 		}
+		vmac_transport_tx_sent(t, pkts + sent, r < chunk ? r + 1 : r, r);
 		sent += r;
 		if (r < chunk && r == 0)
 			break;

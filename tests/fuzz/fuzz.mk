@@ -32,7 +32,7 @@ $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c core/proto/
 
 # The config file and key=value settings (vmac_config_load/set/check).
 $(BUILD)/fuzz/fuzz_config: $(call fuzz_obj,tests/fuzz/fuzz_config.c core/config/config.c core/common/addr.c core/common/file.c core/common/paths.c \
-                            core/transport/transport.c core/transport/transport_udp.c core/transport/transport_eth.c \
+                            core/transport/transport.c core/transport/transport_udp.c core/transport/transport_eth.c core/transport/tx_stamp.c \
                             core/proto/proto.c)
 	$(FUZZ_LINK) $(PKG_LIBS)
 
