@@ -133,7 +133,8 @@ static json_t *status_json(struct vmac_http *h)
 		            {"takeover_refused", s->counters.takeover_refused},
 		            {"waiting", s->counters.waiting},
 		            {"syncs", s->counters.syncs},
-		            {"syncs_sealed", s->counters.syncs_sealed}};
+		            {"syncs_sealed", s->counters.syncs_sealed},
+		            {"sync_stamps", s->counters.sync_stamps}};
 		for (i = 0; i < (int)(sizeof(more) / sizeof(more[0])); i++)
 			json_object_set_new(json_object_get(root, "counters"), more[i].name,
 			                    json_integer((json_int_t)more[i].value));

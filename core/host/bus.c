@@ -52,7 +52,8 @@ static int tx_max(const struct vmac_bus *bus)
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
 {
 	if (bus->ntx >= tx_max(bus))
-		bus_flush(bus); /* cannot happen: see the size in vmac_bus_new */
+		bus_flush(bus);           /* cannot happen: see the size in vmac_bus_new */
+	bus->tx[bus->ntx].tx_cookie = -1; /* no transmit stamp, but for SYNC */
 	return &bus->tx[bus->ntx++];
 }
 
@@ -95,18 +96,24 @@ static int sync_keyed(const struct device *d)
 /* The SYNC frames of this batch get the host's time as late as the host
  * can take it, the send itself follows; the sealed ones are sealed after
  * the stamp (their MACs cover it), one SipHash per keyed board: a delay
- * common to every board of the frame (docs/TIME.md, "Trust"). */
+ * common to every board of the frame (docs/TIME.md, "Trust"), and which
+ * the next frame's prev_tx_ns, the kernel's stamp of this one, leaves out
+ * (sync.c). */
 static void sync_stamp(struct vmac_bus *bus)
 {
 	uint64_t now = (uint64_t)bus_now(bus);
 	int k;
-	if (bus->sync_tx >= 0)
-		vmac_proto_sync_stamp(bus->tx[bus->sync_tx].data, now);
+	if (bus->sync_tx >= 0) {
+		uint8_t *f = bus->tx[bus->sync_tx].data;
+		vmac_proto_sync_stamp(f, now);
+		bus_sync_sent(bus, 0, (uint16_t)(f[4] << 8 | f[5]), (int64_t)now);
+	}
 	bus->sync_tx = -1;
 	for (k = 0; k < bus->nsync_auth; k++) {
 		uint8_t *f = bus->tx[bus->sync_auth_tx[k]].data;
 		uint32_t first = (uint32_t)(f[VMAC_SYNC_AUTH_HEAD_LEN - 2] << 8 | f[VMAC_SYNC_AUTH_HEAD_LEN - 1]), i;
 		vmac_proto_sync_stamp(f, now);
+		bus_sync_sent(bus, 1 + first / VMAC_SYNC_AUTH_MACS_MAX, (uint16_t)(f[4] << 8 | f[5]), (int64_t)now);
 		for (i = 0; i < f[12]; i++)
 			if (sync_keyed(&bus->dev[first + i]))
 				vmac_proto_sync_seal(f, i, bus->dev[first + i].to_board);
@@ -214,6 +221,9 @@ static void send_sync_sealed(struct vmac_bus *bus)
 		p->len = (size_t)n;
 		p->addr = bus->tr.group;
 		memset(p->mac, 0, sizeof(p->mac));
+		p->tx_cookie = bus_sync_cookie(1 + first / VMAC_SYNC_AUTH_MACS_MAX, bus->sync_seq);
+		vmac_proto_sync_set_prev(p->data,
+		                         bus_sync_prev(bus, 1 + first / VMAC_SYNC_AUTH_MACS_MAX, bus->sync_seq));
 		bus->sync_auth_tx[bus->nsync_auth++] = (int)(p - bus->tx);
 		bus->counters.syncs_sealed++;
 	}
@@ -224,16 +234,19 @@ static void send_sync_sealed(struct vmac_bus *bus)
  * handed to the kernel. No allocation, no log: it runs on every tick due. */
 static void send_sync(struct vmac_bus *bus)
 {
+	struct vmac_packet *p;
 	struct vmac_msg m;
 	memset(&m, 0, sizeof(m));
 	m.version = 2;
 	m.channel = VMAC_CH_SYSTEM;
 	m.op = VMAC_SYS_SYNC;
 	m.seq = ++bus->sync_seq;
+	m.u.sync.prev_tx_ns = bus_sync_prev(bus, 0, m.seq);
 	send_sync_sealed(bus);
 	/* Plain, always (one short frame): unkeyed boards sync before they
 	 * announce, so the host cannot know whether any listens. */
-	if (queue_group(bus, &m)) {
+	if ((p = queue_group(bus, &m))) {
+		p->tx_cookie = bus_sync_cookie(0, m.seq);
 		bus->sync_tx = bus->ntx - 1;
 		bus->counters.syncs++;
 	}
@@ -534,13 +547,14 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->auth_chunk_tx = calloc(bus->nauth_chunks, sizeof(*bus->auth_chunk_tx));
 	bus->nsync_chunks = (bus->ndev + VMAC_SYNC_AUTH_MACS_MAX - 1) / VMAC_SYNC_AUTH_MACS_MAX;
 	bus->sync_auth_tx = calloc(bus->nsync_chunks, sizeof(*bus->sync_auth_tx));
+	bus->sync_streams = calloc(1 + bus->nsync_chunks, sizeof(*bus->sync_streams));
 	bus->tx = calloc((size_t)tx_max(bus), sizeof(*bus->tx));
 	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
 	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
 	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->auth_chunk_tx || !bus->sync_auth_tx ||
-	    !bus->status.devices || !bus->status.slot_load || !bus->slot_entries || !bus->sched ||
+	    !bus->sync_streams || !bus->status.devices || !bus->status.slot_load || !bus->slot_entries || !bus->sched ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus) ||
 	    bus_jobs_init(bus)) {
@@ -579,6 +593,11 @@ struct vmac_bus *vmac_bus_new(const struct vmac_config *cfg, char *err, size_t e
 	bus_nonce_init(bus);
 	if (vmac_transport_open_host(&bus->tr, &spec, err, errlen) < 0)
 		goto fail;
+	/* SYNC's two-step: the kernel's transmit stamps, where it gives them
+	 * (off, every prev_tx_ns is 0 and boards take the one-step host_ns;
+	 * VMAC_SYNC_ONE_STEP=1 turns them off for a measurement's baseline). */
+	if (cfg->clock_sync_ms > 0 && !getenv("VMAC_SYNC_ONE_STEP"))
+		vmac_transport_tx_stamps_on(&bus->tr);
 	vmac_addr_format(&bus->tr.local, bus->host_addr, sizeof(bus->host_addr));
 	bus->tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
 	if (bus->tfd < 0) {
@@ -691,6 +710,7 @@ void vmac_bus_free(struct vmac_bus *bus)
 	free(bus->chunk_tx);
 	free(bus->auth_chunk_tx);
 	free(bus->sync_auth_tx);
+	free(bus->sync_streams);
 	vmac_bus_keys_free(bus->keys);
 	free(bus->status.devices);
 	free(bus->status.slot_load);

@@ -143,6 +143,7 @@ struct vmac_bus_counters {
 	uint64_t misses, drops, discoveries, announces;
 	uint64_t syncs;        /* SYNC frames sent (clock_sync_ms) */
 	uint64_t syncs_sealed; /* sealed SYNC frames sent (one per chunk of offsets holding a keyed board) */
+	uint64_t sync_stamps;  /* the kernel's transmit stamps of SYNC frames, each named in the next (two-step) */
 	uint64_t misses_host;  /* of misses: the host's own (a request the kernel refused to send) */
 	uint64_t ticks, ticks_skipped;
 	uint64_t events_lost; /* event ring full */

@@ -292,6 +292,10 @@ struct vmac_bus {
 	int nsync_auth;
 	uint32_t nsync_chunks; /* chunks of VMAC_SYNC_AUTH_MACS_MAX offsets */
 	uint32_t sync_counter;
+	/* The two-step SYNC (sync.c): per stream (the plain SYNC, then each
+	 * sealed chunk: 1 + nsync_chunks), its last frame sent and the kernel's
+	 * transmit time of it, named in the stream's next frame. */
+	struct sync_stream *sync_streams;
 	int64_t next_probation_ns; /* next look for reloads whose probation is over */
 	struct vmac_packet *tx;
 	int ntx;
@@ -356,6 +360,24 @@ void bus_flush(struct vmac_bus *bus);
 void bus_send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason, int expect_reply);
 void bus_begin_stop(struct vmac_bus *bus, int64_t now);
 int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations);
+
+/* sync.c: the two-step SYNC. Stream 0 is the plain SYNC, 1 + c the
+ * sealed chunk c (offsets from c x VMAC_SYNC_AUTH_MACS_MAX). */
+struct sync_stream {
+	uint16_t seq;    /* its last SYNC frame stamped (host_ns) */
+	uint8_t stamped; /* tx_ns is that frame's transmit time, from the kernel */
+	int64_t host_ns, tx_ns;
+};
+/* The cookie a stream's frame of seq asks the transport's stamp with. */
+int32_t bus_sync_cookie(uint32_t stream, uint16_t seq);
+/* prev_tx_ns for the stream's frame of seq: the transmit time of its frame
+ * of seq - 1 when the kernel gave it, else 0. */
+uint64_t bus_sync_prev(const struct vmac_bus *bus, uint32_t stream, uint16_t seq);
+/* The stream's frame of seq stamped host_ns, about to go. */
+void bus_sync_sent(struct vmac_bus *bus, uint32_t stream, uint16_t seq, int64_t host_ns);
+/* The transmit stamps waiting on the socket, read (never blocking) and
+ * kept for the next frames. */
+void bus_sync_read_stamps(struct vmac_bus *bus);
 
 /* mailbox.c */
 /* 0, or -EAGAIN when the ring to the main thread is full (counted in events_lost). */
