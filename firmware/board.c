@@ -263,10 +263,50 @@ static int sync_opens(struct vmac_board *b, const struct vmac_msg *req)
 	return 1;
 }
 
+/* The two-step SYNC's prev_tx_ns names the transmit time of last, the
+ * SYNC before req of the same stream: req follows it at once and the time
+ * is plausible (not before last's host_ns, not long after). */
+static int names_last(const struct vmac_board_sync_last *last, const struct vmac_msg *req, uint16_t stream)
+{
+	uint64_t tx = req->u.sync.prev_tx_ns;
+	return last->valid && last->stream == stream && (uint16_t)(last->seq + 1) == req->seq && tx != 0 &&
+	       tx >= last->host_ns && tx - last->host_ns <= VMAC_BOARD_TWO_STEP_SPAN_NS;
+}
+
+/* A SYNC taken (docs/TIME.md, "The two-step SYNC"): the sample held back
+ * from the last one goes to the clock first, with the transmit time this
+ * one names for it (two-step), or, not named (a lost stamp, a lost frame,
+ * another stream), with its own host_ns (one-step, late). This one's own
+ * sample is held back in turn when it names its predecessor's time (the
+ * host stamps, so the next will likely name its) and SYNC frames come
+ * often enough (VMAC_BOARD_TWO_STEP_GAP_NS); else it goes now, one-step.
+ * Samples reach the clock in the order of their receive times. */
+static void sync_feed(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx_local_ns)
+{
+	struct vmac_board_sync_last *last = &b->sync_last;
+	uint16_t stream = (req->flags & VMAC_FLAG_AUTH) ? req->u.sync.first : VMAC_OFFSET_NONE;
+	uint64_t gap = last->valid && rx_local_ns >= last->rx_local_ns ? rx_local_ns - last->rx_local_ns : UINT64_MAX;
+	int named = names_last(last, req, stream);
+	if (last->valid && last->deferred) {
+		if (named)
+			b->counters.sync_two_step++;
+		vmac_clock_feed(&b->clock, named ? req->u.sync.prev_tx_ns : last->host_ns, last->rx_local_ns);
+	}
+	last->valid = 1;
+	last->deferred = req->u.sync.prev_tx_ns != 0 && gap <= VMAC_BOARD_TWO_STEP_GAP_NS;
+	last->seq = req->seq;
+	last->stream = stream;
+	last->host_ns = req->u.sync.host_ns;
+	last->rx_local_ns = rx_local_ns;
+	if (!last->deferred)
+		vmac_clock_feed(&b->clock, req->u.sync.host_ns, rx_local_ns);
+}
+
 /* SYNC: the host's send time and our receive time, one sample for the
- * clock. Nothing else changes: no answer, no outputs, no watchdog. A keyed
- * board takes only a sealed SYNC that carries its MAC (sync_opens), an
- * unkeyed one only the plain SYNC, in any state (docs/TIME.md, "Trust"). */
+ * clock (sync_feed: now, or with the next SYNC, two-step). Nothing else
+ * changes: no answer, no outputs, no watchdog. A keyed board takes only a
+ * sealed SYNC that carries its MAC (sync_opens), an unkeyed one only the
+ * plain SYNC, in any state (docs/TIME.md, "Trust"). */
 static int on_sync(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx_local_ns)
 {
 	if (b->id.protocol < 2 || rx_local_ns == VMAC_BOARD_NO_STAMP ||
@@ -278,7 +318,7 @@ static int on_sync(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx
 		return 0;
 	if (b->clock_local_ns < rx_local_ns)
 		b->clock_local_ns = rx_local_ns;
-	vmac_clock_feed(&b->clock, req->u.sync.host_ns, rx_local_ns);
+	sync_feed(b, req, rx_local_ns);
 	return 0;
 }
 

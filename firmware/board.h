@@ -50,9 +50,29 @@ struct vmac_board_identity {
 
 struct vmac_board_counters {
 	uint32_t frames_ok, frames_malformed, frames_ignored, watchdog_trips;
-	uint32_t auth_failed;  /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
-	uint32_t sync_ignored; /* SYNC frames not fed to the clock: version 1, no receive time; unkeyed: sealed;
-	                        * keyed: unsealed, before a session and offset, or no MAC for our offset */
+	uint32_t auth_failed;   /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
+	uint32_t sync_ignored;  /* SYNC frames not fed to the clock: version 1, no receive time; unkeyed: sealed;
+	                         * keyed: unsealed, before a session and offset, or no MAC for our offset */
+	uint32_t sync_two_step; /* clock samples fed with the kernel's transmit time (prev_tx_ns), not host_ns */
+};
+
+/* The two-step SYNC (docs/TIME.md, "The two-step SYNC"): a SYNC whose
+ * sample waits for the next SYNC of its stream to name its transmit time is
+ * held only while SYNC frames come at most this far apart, so that no
+ * sample reaches the clock more than this late (its holdover counts from a
+ * sample's receive time). */
+#define VMAC_BOARD_TWO_STEP_GAP_NS 20000000u
+/* A prev_tx_ns later than the frame's host_ns by more than this is not
+ * believed (the kernel sends within microseconds): the one-step sample. */
+#define VMAC_BOARD_TWO_STEP_SPAN_NS 10000000u
+
+/* The last SYNC taken: its seq, its stream (the sealed chunk's first
+ * offset; VMAC_OFFSET_NONE for the plain SYNC), host time and receive
+ * time, the interval before it, and whether its sample waits (deferred). */
+struct vmac_board_sync_last {
+	uint8_t valid, deferred;
+	uint16_t seq, stream;
+	uint64_t host_ns, rx_local_ns;
 };
 
 struct vmac_board {
@@ -78,6 +98,7 @@ struct vmac_board {
 	 * state was last looked at. */
 	struct vmac_clock clock;
 	uint64_t clock_local_ns;
+	struct vmac_board_sync_last sync_last;
 	const struct vmac_board_io *io;
 	void *io_ctx;
 };

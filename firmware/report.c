@@ -177,6 +177,8 @@ void vmac_report_clock(const struct vmac_board *b, int with_counters, char *line
 	add_unsigned(&t, b->clock.counters.rejected);
 	add(&t, ", ignored ");
 	add_unsigned(&t, b->counters.sync_ignored);
+	add(&t, ", two-step ");
+	add_unsigned(&t, b->counters.sync_two_step);
 }
 
 void vmac_report_counters(const struct vmac_board *b, char *line, size_t len)

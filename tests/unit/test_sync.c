@@ -336,7 +336,8 @@ START_TEST(the_report_says_when_the_clock_locks_and_is_lost)
 	ck_assert_int_eq(vmac_report_next(&quiet, &b, &safety, line, sizeof(line)), 1);
 	ck_assert_str_eq(line, "sync-1: clock lost, acting on arrival");
 	vmac_report_clock(&b, 1, line, sizeof(line));
-	ck_assert_str_eq(line, "sync-1: clock lost, acting on arrival; sync accepted 1500, rejected 0, ignored 0");
+	ck_assert_str_eq(
+	    line, "sync-1: clock lost, acting on arrival; sync accepted 1500, rejected 0, ignored 0, two-step 0");
 }
 END_TEST
 

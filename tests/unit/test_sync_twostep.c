@@ -79,7 +79,8 @@ static void run(struct vmac_board *b, int n, int two_step, int lose_stamp, int d
 	int k;
 	for (k = 0; k < n; k++)
 		if (k != drop)
-			sync_at(b, (uint16_t)k, (uint64_t)k, two_step && k > 0 && k != lose_stamp ? tx_of((uint64_t)k - 1) : 0);
+			sync_at(b, (uint16_t)k, (uint64_t)k,
+			        two_step && k > 0 && k != lose_stamp ? tx_of((uint64_t)k - 1) : 0);
 }
 
 static uint32_t fed(const struct vmac_board *b)
@@ -155,8 +156,8 @@ START_TEST(a_lost_frame_pairs_no_time_with_the_wrong_frame)
 	              "a lost frame: two-step %u, fed %u, starts %u, spikes %u; want 1496, 1498, 1, 0",
 	              (unsigned)b.counters.sync_two_step, (unsigned)fed(&b), (unsigned)b.clock.counters.starts,
 	              (unsigned)b.clock.counters.spikes);
-	ck_assert_msg(off > (int64_t)PATH_NS - 2000 && off < (int64_t)PATH_NS + 2000, "offset %lld ns after a lost frame",
-	              (long long)off);
+	ck_assert_msg(off > (int64_t)PATH_NS - 2000 && off < (int64_t)PATH_NS + 2000,
+	              "offset %lld ns after a lost frame", (long long)off);
 }
 END_TEST
 
@@ -169,11 +170,12 @@ START_TEST(an_implausible_or_slow_two_step_falls_back_to_one_step)
 	board_start(&b);
 	sync_at(&b, 1, 0, 0);
 	sync_at(&b, 2, 1, tx_of(0));
-	sync_at(&b, 3, 2, HOST_START_NS + 1000000u - 1); /* names 2's time 1 ns before its host_ns */
+	sync_at(&b, 3, 2, HOST_START_NS + 1000000u - 1);           /* names 2's time 1 ns before its host_ns */
 	sync_at(&b, 4, 3, tx_of(2));                               /* a good one: 3 two-step */
 	sync_at(&b, 5, 4, tx_of(3) + VMAC_BOARD_TWO_STEP_SPAN_NS); /* 10 ms after it left */
-	ck_assert_msg(b.counters.sync_two_step == 1 && fed(&b) == 4, "implausible times: two-step %u, fed %u; want 1, 4",
-	              (unsigned)b.counters.sync_two_step, (unsigned)fed(&b));
+	ck_assert_msg(b.counters.sync_two_step == 1 && fed(&b) == 4,
+	              "implausible times: two-step %u, fed %u; want 1, 4", (unsigned)b.counters.sync_two_step,
+	              (unsigned)fed(&b));
 
 	/* SYNC 30 ms apart: no sample waits (it would count against holdover) */
 	board_start(&b);
