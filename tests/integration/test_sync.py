@@ -7,7 +7,9 @@ Boards that cannot use SYNC (version 1) and boards started as before (no
 clock options) are served as ever and count nothing malformed. A keyed
 board takes only the host's sealed SYNC (its MAC judged here by libsodium,
 not the host's code), an unkeyed one only the plain SYNC, and a forged
-SYNC moves no keyed board's clock."""
+SYNC moves no keyed board's clock. Every SYNC names the kernel's
+transmit time of its stream's previous one (the two-step), on raw
+Ethernet and on UDP, and boards take it."""
 
 import os
 import re
@@ -19,6 +21,7 @@ import time
 
 import frames
 from harness import KITCHEN, KITCHEN_NAMES, Skip, bus_socket
+from sync_wire import Capture, lateness, streams
 
 # 1 ms slots so that a SYNC goes out every millisecond (at most one a tick),
 # the rate the clock's filter is made for; the tests' relaxed deadlines stay.
@@ -40,7 +43,8 @@ CLOCK_LINE = re.compile(r"^(\S+): clock (\w+)(?:, offset ([-+][0-9.]+) s, drift 
                         r"bound ([0-9.]+) us)?(?:, acting on arrival)?; at (\d+) ms$")
 COUNTERS = re.compile(r"^(\S+): frames ok (\d+), malformed (\d+), ignored (\d+), watchdog trips (\d+), "
                       r"auth_failed (\d+)$")
-CLOCK_STATUS = re.compile(r"^(\S+): clock (\w+).*; sync accepted (\d+), rejected (\d+), ignored (\d+)$")
+CLOCK_STATUS = re.compile(r"^(\S+): clock (\w+).*; sync accepted (\d+), rejected (\d+), ignored (\d+), "
+                          r"two-step (\d+)$")
 
 
 def clock_line(board, name, state, timeout_s, since=0):
@@ -329,3 +333,50 @@ def test_an_open_bus_syncs_keyed_and_unkeyed_boards_each_by_its_frame(t):
         end = exit_clock_line(board, name)
         assert int(end.group(3)) > 0 and int(end.group(5)) > 0, \
             "%s: %s (want its own SYNC accepted, the other kind ignored)" % (name, end.group(0))
+
+
+def two_step_on(t, bus, wrapper=(), board_bus=None):
+    """vmacd with clock_sync_ms 1 and bus_trust open on bus, an unkeyed and
+    a keyed board (so a plain SYNC and a sealed one each millisecond): every
+    SYNC that follows its stream's previous one names that one's transmit
+    time, which the kernel took after its host_ns (user space stamps, then
+    hands the frame over) and, as the host believes no other, within 10 ms
+    of it (a preempted host takes a millisecond at times); both boards lock
+    and take most of their samples two-step."""
+    heard = Capture(bus)
+    try:
+        host = t.host(bus=bus, settings=dict(SYNC_SETTINGS, bus_trust="open"))
+        plain = t.board("lights", "plain-1", keyed=False, bus=board_bus or bus, wrapper=wrapper)
+        sealed = t.board("lights", "sealed-1", bus=board_bus or bus, wrapper=wrapper)
+        host.wait_running(["plain-1", "sealed-1"])
+        for name, board in (("plain-1", plain), ("sealed-1", sealed)):
+            clock_line(board, name, "locked", 30)
+        time.sleep(0.5)
+    finally:
+        heard.close()
+    got = streams(heard.got)
+    assert "plain" in got and len(got) >= 2, "SYNC streams heard: %r" % {k: len(v) for k, v in got.items()}
+    for key, frames_of in got.items():
+        named, followers, deltas = lateness(frames_of)
+        assert followers >= 500 and named >= 0.9 * followers, \
+            "stream %s: %d of %d SYNC name the previous one's transmit time" % (key, named, followers)
+        assert min(deltas) >= 0 and max(deltas) <= 10000000, \
+            "stream %s: prev_tx_ns - the previous host_ns from %d to %d ns (want >= 0, <= 10 ms)" % (
+                key, min(deltas), max(deltas))
+    c = host.status()["counters"]
+    assert c["sync_stamps"] > 0 and c["malformed_frames"] == 0, "host counters: %r" % c
+    for name, board in (("plain-1", plain), ("sealed-1", sealed)):
+        end = exit_clock_line(board, name)
+        assert int(end.group(6)) >= 0.5 * int(end.group(3)), \
+            "%s took %s of %s samples two-step" % (name, end.group(6), end.group(3))
+
+
+def test_sync_names_the_kernels_transmit_time_on_raw_ethernet(t):
+    """The two-step SYNC on raw Ethernet over a veth pair (root, namespaces)."""
+    host_if, ns, board_if = t.eth_link()
+    two_step_on(t, "eth:" + host_if, wrapper=("ip", "netns", "exec", ns), board_bus="eth:" + board_if)
+
+
+def test_sync_names_the_kernels_transmit_time_on_udp(t):
+    """The two-step SYNC on UDP multicast over loopback."""
+    two_step_on(t, t.bus)
