@@ -376,8 +376,9 @@ uint64_t bus_sync_prev(const struct vmac_bus *bus, uint32_t stream, uint16_t seq
 /* The stream's frame of seq stamped host_ns, about to go. */
 void bus_sync_sent(struct vmac_bus *bus, uint32_t stream, uint16_t seq, int64_t host_ns);
 /* The transmit stamps waiting on the socket, read (never blocking) and
- * kept for the next frames. */
-void bus_sync_read_stamps(struct vmac_bus *bus);
+ * kept for the next frames; all: whatever waits in the error queue, even
+ * with no SYNC awaiting its stamp (epoll said EPOLLERR). */
+void bus_sync_read_stamps(struct vmac_bus *bus, int all);
 
 /* mailbox.c */
 /* 0, or -EAGAIN when the ring to the main thread is full (counted in events_lost). */

@@ -207,9 +207,8 @@ void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 
 void bus_drain(struct vmac_bus *bus)
 {
-	/* The error queue first: its transmit stamps make epoll report EPOLLERR
-	 * until they are read (the two-step SYNC, sync.c). */
-	bus_sync_read_stamps(bus);
+	/* The transmit stamps of the SYNC frames sent (the two-step, sync.c) */
+	bus_sync_read_stamps(bus, 0);
 	for (;;) {
 		int i, n = vmac_transport_recv(&bus->tr, bus->tr.fd, bus->rx, RX_BATCH);
 		if (n <= 0)

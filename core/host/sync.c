@@ -30,12 +30,12 @@ void bus_sync_sent(struct vmac_bus *bus, uint32_t stream, uint16_t seq, int64_t 
 	s->host_ns = host_ns;
 }
 
-void bus_sync_read_stamps(struct vmac_bus *bus)
+void bus_sync_read_stamps(struct vmac_bus *bus, int all)
 {
 	struct vmac_tx_stamp got[16];
 	int i, n;
 	do {
-		n = vmac_transport_tx_read(&bus->tr, got, 16);
+		n = vmac_transport_tx_read(&bus->tr, all, got, 16);
 		for (i = 0; i < n; i++) {
 			uint32_t stream = got[i].cookie >> 16;
 			struct sync_stream *s;

@@ -55,6 +55,10 @@ void bus_loop(struct vmac_bus *bus)
 			continue; /* the tick first: what else is ready is still ready after it */
 		for (i = 0; i < n; i++) {
 			if (ev[i].data.fd == bus->tr.fd) {
+				/* EPOLLERR: the error queue holds something (the
+				 * transmit stamps of SYNC), said until it is read */
+				if (ev[i].events & EPOLLERR)
+					bus_sync_read_stamps(bus, 1);
 				bus_drain(bus);
 			} else if (ev[i].data.fd == bus->wakefd) {
 				if (read(bus->wakefd, &count, sizeof(count)) != sizeof(count))

@@ -142,9 +142,11 @@ int vmac_transport_tx_stamps_on(struct vmac_transport *t);
 
 /* Read up to max transmit stamps waiting, never blocking, each matched to
  * its packet's cookie (stamps matching no pending send are dropped). Reads
- * at most 2 x VMAC_TRANSPORT_TX_PENDING messages a call. Returns how many
- * were written to out (0 when stamps are off or none waits). */
-int vmac_transport_tx_read(struct vmac_transport *t, struct vmac_tx_stamp *out, int max);
+ * at most 2 x VMAC_TRANSPORT_TX_PENDING messages a call, and none (no
+ * system call) when no send awaits a stamp, unless all (epoll said
+ * EPOLLERR: whatever waits is read, so that it stops saying so). Returns
+ * how many were written to out (0 when stamps are off or none waits). */
+int vmac_transport_tx_read(struct vmac_transport *t, int all, struct vmac_tx_stamp *out, int max);
 
 /* Same peer: family and IPv4 address and port, or MAC and ifindex. */
 int vmac_addr_equal(const struct vmac_addr *a, const struct vmac_addr *b);

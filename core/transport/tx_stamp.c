@@ -8,7 +8,9 @@
 
 #include <errno.h>
 #include <linux/errqueue.h>
+#include <linux/if_packet.h>
 #include <linux/net_tstamp.h>
+#include <netinet/in.h>
 #include <string.h>
 #include <sys/socket.h>
 
@@ -114,6 +116,15 @@ static int take_pending(struct vmac_transport *t, uint32_t id, uint32_t *cookie)
 	return -1;
 }
 
+/* The extended error of an error-queue message: IPv4's, IPv6's or a
+ * packet socket's. */
+static int is_extended_err(const struct cmsghdr *c)
+{
+	return (c->cmsg_level == SOL_IP && c->cmsg_type == IP_RECVERR) ||
+	       (c->cmsg_level == SOL_IPV6 && c->cmsg_type == IPV6_RECVERR) ||
+	       (c->cmsg_level == SOL_PACKET && c->cmsg_type == PACKET_TX_TIMESTAMP);
+}
+
 /* One error-queue message: its software stamp and the counter, 0; or -1
  * for anything else (another error, no stamp). */
 static int parse_stamp(const struct vmac_transport *t, struct msghdr *h, uint32_t *id, int64_t *tx_ns)
@@ -121,12 +132,13 @@ static int parse_stamp(const struct vmac_transport *t, struct msghdr *h, uint32_
 	struct cmsghdr *c;
 	int has_ts = 0, has_id = 0;
 	for (c = CMSG_FIRSTHDR(h); c; c = CMSG_NXTHDR(h, c)) {
-		if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPING) {
+		if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPING &&
+		    c->cmsg_len >= CMSG_LEN(3 * sizeof(struct timespec))) {
 			struct timespec ts[3];
 			memcpy(ts, CMSG_DATA(c), sizeof(ts));
 			*tx_ns = (int64_t)ts[0].tv_sec * 1000000000 + ts[0].tv_nsec - t->rt_minus_mono_ns;
 			has_ts = ts[0].tv_sec != 0 || ts[0].tv_nsec != 0;
-		} else {
+		} else if (is_extended_err(c) && c->cmsg_len >= CMSG_LEN(sizeof(struct sock_extended_err))) {
 			struct sock_extended_err e;
 			memcpy(&e, CMSG_DATA(c), sizeof(e));
 			if (e.ee_errno == ENOMSG && e.ee_origin == SO_EE_ORIGIN_TIMESTAMPING) {
@@ -138,11 +150,11 @@ static int parse_stamp(const struct vmac_transport *t, struct msghdr *h, uint32_
 	return has_ts && has_id ? 0 : -1;
 }
 
-int vmac_transport_tx_read(struct vmac_transport *t, struct vmac_tx_stamp *out, int max)
+int vmac_transport_tx_read(struct vmac_transport *t, int all, struct vmac_tx_stamp *out, int max)
 {
 	uint8_t ctrl[256];
 	int n = 0, reads;
-	if (!t->tx_stamps)
+	if (!t->tx_stamps || (t->tx_count == 0 && !all))
 		return 0;
 	/* Bounded: what is left waits for the next call (epoll says EPOLLERR
 	 * again while the queue is not empty). */
