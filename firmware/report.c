@@ -93,6 +93,7 @@ void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const s
 	r->outputs = b->outputs;
 	r->unsafe = s->episodes(s->ctx);
 	r->clock = b->clock.state;
+	r->timed = b->timed.mode;
 	r->quiet = quiet;
 }
 
@@ -118,6 +119,21 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 		r->clock = b->clock.state;
 		if (!r->quiet || b->clock.state == VMAC_CLOCK_LOST) {
 			vmac_report_clock(b, 0, line, len);
+			return 1;
+		}
+	}
+	if (b->timed.mode != r->timed) {
+		r->timed = b->timed.mode;
+		if (b->timed.mode == VMAC_TIMED_MODE_INSTANTS && !r->quiet) {
+			t = start(b, line, len);
+			add(&t, "acting at host instants");
+			return 1;
+		}
+		if (b->timed.mode == VMAC_TIMED_MODE_ARRIVAL) {
+			t = start(b, line, len);
+			add(&t, "acting on arrival (clock ");
+			add(&t, vmac_clock_state_name(b->clock.state));
+			add(&t, ")");
 			return 1;
 		}
 	}
