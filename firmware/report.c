@@ -209,3 +209,21 @@ void vmac_report_counters(const struct vmac_board *b, char *line, size_t len)
 	add(&t, ", auth_failed ");
 	add_unsigned(&t, b->counters.auth_failed);
 }
+
+int vmac_report_timed(const struct vmac_board *b, char *line, size_t len)
+{
+	const struct vmac_board_counters *c = &b->counters;
+	struct text t;
+	if (c->timed == 0 && c->timed_arrival == 0)
+		return 0;
+	t = start(b, line, len);
+	add(&t, "timed ");
+	add_unsigned(&t, c->timed);
+	add(&t, ", on arrival ");
+	add_unsigned(&t, c->timed_arrival);
+	add(&t, ", late ");
+	add_unsigned(&t, c->timed_late);
+	add(&t, ", overrun ");
+	add_unsigned(&t, c->timed_overrun);
+	return 1;
+}

@@ -56,4 +56,9 @@ void vmac_report_clock(const struct vmac_board *b, int with_counters, char *line
  * keyed board's session that did not open under its key, or replays). */
 void vmac_report_counters(const struct vmac_board *b, char *line, size_t len);
 
+/* The board's TIMED CYCLIC services, one line: "NAME: timed N, on arrival
+ * N, late N, overrun N" (firmware/board.h says what each counts); 0 and
+ * no line when it never had one. */
+int vmac_report_timed(const struct vmac_board *b, char *line, size_t len);
+
 #endif

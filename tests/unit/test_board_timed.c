@@ -22,8 +22,8 @@
 #define SESSION 0x00030025u
 #define TAG 3
 #define OFFSET 0x25
-#define SKEW_NS 3500000000ull   /* the board's counter less host time */
-#define HOST0_NS 5000000000ull  /* host time at the start of each test */
+#define SKEW_NS 3500000000ull  /* the board's counter less host time */
+#define HOST0_NS 5000000000ull /* host time at the start of each test */
 #define MS 1000000ull
 #define ACTIONS_MAX 16
 
@@ -113,8 +113,8 @@ static int take_reply(int n)
 
 static int deliver(const uint8_t *frame, size_t len)
 {
-	return take_reply(vmac_board_receive_at(&rig.board, frame, len, now_ms(), local(rig.host_ns), rig.reply,
-	                                        sizeof(rig.reply)));
+	return take_reply(
+	    vmac_board_receive_at(&rig.board, frame, len, now_ms(), local(rig.host_ns), rig.reply, sizeof(rig.reply)));
 }
 
 static int send_msg(struct vmac_msg *m)
@@ -232,7 +232,8 @@ static void expect_timed_reply(uint16_t seq, uint8_t applied, uint8_t clock, con
 	              rig.answer.seq, (unsigned)rig.answer.device_id, seq);
 	ck_assert_msg((rig.answer.flags & (VMAC_FLAG_REPLY | VMAC_FLAG_TIMED)) == (VMAC_FLAG_REPLY | VMAC_FLAG_TIMED),
 	              "%s: reply flags 0x%02x, want REPLY | TIMED", when, rig.answer.flags);
-	ck_assert_msg(rig.reply_len == VMAC_HDR_LEN + VMAC_TIMED_REPLY_LEN + (rig.board.id.keyed ? VMAC_AUTH_TRAILER_LEN : 0),
+	ck_assert_msg(rig.reply_len ==
+	                  VMAC_HDR_LEN + VMAC_TIMED_REPLY_LEN + (rig.board.id.keyed ? VMAC_AUTH_TRAILER_LEN : 0),
 	              "%s: a TIMED reply of %d bytes", when, rig.reply_len);
 	ck_assert_msg(rig.answer.u.inputs.digital == 0x81 && rig.answer.u.inputs.encoder == 42,
 	              "%s: reply inputs not the HAL's", when);
@@ -311,7 +312,8 @@ START_TEST(an_instant_already_past_is_acted_on_at_once)
 	ck_assert_msg(rig.driven.digital == 0x06 && rig.driven.pwm == 100, "not driven at once");
 	ck_assert_msg(llabs(diff(rig.answer.latch.latched_at, t)) <= 1000, "latched_at is not the arrival");
 	ck_assert_msg(rig.board.counters.timed == 1 && rig.board.counters.timed_late == 1,
-	              "counted timed %u late %u, want 1 and 1", rig.board.counters.timed, rig.board.counters.timed_late);
+	              "counted timed %u late %u, want 1 and 1", rig.board.counters.timed,
+	              rig.board.counters.timed_late);
 	ck_assert_msg(rig.acts[0].how == VMAC_TIMED_LATE, "the action is not said late");
 	expect_nothing_waits("after a late record");
 }
