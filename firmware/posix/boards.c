@@ -328,6 +328,8 @@ void boards_print_counters(const struct board_set *s, int32_t i)
 	char line[VMAC_REPORT_LINE];
 	vmac_report_counters(&s->boards[i].board, line, sizeof(line));
 	printf("%s\n", line);
+	if (vmac_report_timed(&s->boards[i].board, line, sizeof(line)))
+		printf("%s\n", line);
 }
 
 char *boards_one_line(const char *text, char *out, size_t len)
