@@ -178,6 +178,11 @@ int vmac_board_next_deadline(const struct vmac_board *b, uint64_t *local_ns);
  * vmac_board_next_deadline says something is due. */
 int vmac_board_run_due(struct vmac_board *b, uint64_t now_local_ns, uint8_t *reply, size_t cap);
 
+/* Whether the board may act by its clock at all: 0 for a keyed board, whose
+ * clock unsealed SYNC frames feed (docs/TIME.md, "Trust"); it serves TIMED
+ * records on arrival, its clock usable or not. */
+int vmac_board_clock_trusted(const struct vmac_board *b);
+
 /* Forget whatever waits, doing none of it (the safe state never waits). */
 void vmac_board_timed_cancel(struct vmac_board *b);
 

@@ -433,6 +433,8 @@ END_TEST
 
 START_TEST(a_keyed_board_takes_timed_records_sealed_and_seals_its_answer)
 {
+	struct vmac_report rep;
+	char line[VMAC_REPORT_LINE];
 	uint8_t buf[VMAC_CYCLIC_FRAME_MAX];
 	struct vmac_outputs out = {0x05, 0};
 	uint64_t t;
@@ -452,11 +454,25 @@ START_TEST(a_keyed_board_takes_timed_records_sealed_and_seals_its_answer)
 	ck_assert_int_eq(deliver(buf, (size_t)n), 0);
 	expect_nothing_waits("a sealed TIMED record whose out_at was changed");
 	ck_assert_int_eq(rig.writes, 0);
-	ck_assert_int_eq(timed(6, VMAC_CYCLIC_DUE, 0x05, 0, t + MS, t + MS), 0);
-	ck_assert_int_gt(run_due_at(t + MS), 0);
+	/* Its clock is locked, but fed by unsealed SYNC: it acts on arrival,
+	 * says so, and seals its answer. */
+	ck_assert_int_gt(timed(6, VMAC_CYCLIC_DUE, 0x05, 0, t + MS, t + MS), 0);
 	ck_assert_msg(rig.answer.flags == (VMAC_FLAG_REPLY | VMAC_FLAG_TIMED | VMAC_FLAG_AUTH),
 	              "a keyed board's TIMED reply has flags 0x%02x, want 0x07", rig.answer.flags);
-	expect_timed_reply(6, 0x05, VMAC_CLOCK_LOCKED, "sealed");
+	expect_timed_reply(6, 0x05, VMAC_CLOCK_LOCKED | VMAC_CLOCK_ARRIVAL, "sealed, SYNC not");
+	ck_assert_msg(rig.answer.latch.latched_at != 0, "a locked clock says when, even on arrival");
+	expect_nothing_waits("a keyed board");
+	vmac_report_init(&rep, &rig.board, &none, 0);
+	rig.board.timed.mode = VMAC_TIMED_MODE_NONE;
+	rep.timed = VMAC_TIMED_MODE_NONE;
+	timed(7, 0, 0x01, 0, t + MS, t + MS);
+	ck_assert_int_eq(vmac_report_next(&rep, &rig.board, &none, line, sizeof(line)), 1);
+	ck_assert_str_eq(line, "motor-1: acting on arrival (clock locked, SYNC not sealed)");
+	/* Were its clock trusted (sealed SYNC), it would wait for the instant:
+	 * the same board, its key forgotten for the clock's sake only. */
+	rig.board.id.keyed = 0;
+	ck_assert_int_eq(vmac_board_clock_trusted(&rig.board), 1);
+	rig.board.id.keyed = 1;
 }
 END_TEST
 
