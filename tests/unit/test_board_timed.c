@@ -476,6 +476,33 @@ START_TEST(a_keyed_board_takes_timed_records_sealed_and_seals_its_answer)
 }
 END_TEST
 
+/* A clock lost while outputs wait: they are driven at the counter's
+ * instant they were given (no output waits forever on a clock), the latch
+ * says lost without a time, and the next record acts on arrival. */
+START_TEST(outputs_waiting_when_the_clock_is_lost_are_still_driven_at_their_instant)
+{
+	struct vmac_msg m;
+	uint64_t t, at;
+	start(0, 1);
+	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_WATCHDOG, SESSION, 4);
+	m.u.watchdog_ms = 60000; /* the session outlives the wait */
+	ck_assert_int_gt(send_msg(&m), 0);
+	t = rig.host_ns;
+	at = t + 40000 * MS; /* 40 s ahead, no SYNC meanwhile: lost before */
+	ck_assert_int_eq(timed(1, VMAC_CYCLIC_DUE, 0x05, 0, at, at), 0);
+	ck_assert_int_eq(vmac_board_clock_poll(&rig.board, local(at)), VMAC_CLOCK_LOST);
+	ck_assert_int_gt(run_due_at(at), 0);
+	ck_assert_msg(rig.driven.digital == 0x05, "the waiting outputs were not driven once the clock was lost");
+	expect_timed_reply(1, 0x05, VMAC_CLOCK_LOST, "latched with the clock lost");
+	ck_assert_msg(rig.answer.latch.latched_at == 0 && rig.answer.latch.bound_ns == 0xFFFFFFFFu,
+	              "a lost clock claims a latch time or bound");
+	ck_assert_int_gt(timed(2, VMAC_CYCLIC_DUE, 0x00, 0, at + MS, at + MS), 0);
+	expect_timed_reply(2, 0x00, VMAC_CLOCK_LOST | VMAC_CLOCK_ARRIVAL, "the next record, clock lost");
+	ck_assert_msg(rig.driven.digital == 0 && rig.board.counters.timed_arrival == 1, "not served on arrival");
+	expect_nothing_waits("after a lost clock");
+}
+END_TEST
+
 START_TEST(the_board_announces_firmware_1_1_and_says_when_it_acts_at_instants)
 {
 	struct vmac_report rep;
@@ -510,6 +537,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_record_finding_outputs_waiting_drives_them_at_once);
 	tcase_add_test(tc, shutdown_sleep_register_and_the_watchdog_cancel_what_waits);
 	tcase_add_test(tc, a_keyed_board_takes_timed_records_sealed_and_seals_its_answer);
+	tcase_add_test(tc, outputs_waiting_when_the_clock_is_lost_are_still_driven_at_their_instant);
 	tcase_add_test(tc, the_board_announces_firmware_1_1_and_says_when_it_acts_at_instants);
 	suite_add_tcase(s, tc);
 	return s;
