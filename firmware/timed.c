@@ -167,22 +167,29 @@ int vmac_board_timed_record(struct vmac_board *b, const struct vmac_msg *req, co
 		usable = vmac_clock_usable(&b->clock) && vmac_board_clock_trusted(b);
 	}
 	n = overrun(b, now, due, stamped, reply, cap);
+	t->mode = usable ? VMAC_TIMED_MODE_INSTANTS : VMAC_TIMED_MODE_ARRIVAL;
 	t->out = rec->outputs;
 	t->out_host = req->u.cyclic.out_at;
 	t->out_pending = 1;
-	t->latch_pending = (uint8_t)due;
-	t->latch_host = req->u.cyclic.in_at;
-	t->latch_seq = req->seq;
-	t->latch_stamped = (uint8_t)stamped;
-	t->mode = usable ? VMAC_TIMED_MODE_INSTANTS : VMAC_TIMED_MODE_ARRIVAL;
+	if (due) { /* else an earlier latch still waiting keeps its place */
+		t->latch_pending = 1;
+		t->latch_host = req->u.cyclic.in_at;
+		t->latch_seq = req->seq;
+		t->latch_stamped = (uint8_t)stamped;
+	}
 	if (!usable) {
 		b->counters.timed_arrival++;
-		t->out_local = t->latch_local = now;
-		t->out_how = t->latch_how = VMAC_TIMED_ON_ARRIVAL;
+		t->out_local = now;
+		t->out_how = VMAC_TIMED_ON_ARRIVAL;
+		if (due) {
+			t->latch_local = now;
+			t->latch_how = VMAC_TIMED_ON_ARRIVAL;
+		}
 	} else {
 		b->counters.timed++;
 		t->out_how = when(b, t->out_host, now, &t->out_local);
-		t->latch_how = due ? when(b, t->latch_host, now, &t->latch_local) : VMAC_TIMED_AT_INSTANT;
+		if (due)
+			t->latch_how = when(b, t->latch_host, now, &t->latch_local);
 		if (t->out_how == VMAC_TIMED_LATE || (due && t->latch_how == VMAC_TIMED_LATE))
 			b->counters.timed_late++;
 	}

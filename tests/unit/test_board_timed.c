@@ -388,6 +388,16 @@ START_TEST(a_record_finding_outputs_waiting_drives_them_at_once)
 	ck_assert_int_gt(run_due_at(t + 6 * MS), 0);
 	expect_timed_reply(4, 0x04, VMAC_CLOCK_LOCKED, "the new latch");
 	ck_assert_int_eq(rig.board.counters.timed_overrun, 2);
+	/* A record without DUE leaves a waiting latch in its place: its
+	 * answer still comes, at its instant. */
+	t = rig.host_ns;
+	timed(5, VMAC_CYCLIC_DUE, 0x05, 0, t + 5 * MS, t + 5 * MS);
+	ck_assert_int_eq(timed(6, 0, 0x06, 0, t + 6 * MS, t + 6 * MS), 0);
+	ck_assert_msg(rig.driven.digital == 0x05, "the earlier outputs not driven at once");
+	ck_assert_int_gt(run_due_at(t + 5 * MS), 0);
+	expect_timed_reply(5, 0x05, VMAC_CLOCK_LOCKED, "the latch a record without DUE found waiting");
+	ck_assert_int_eq(run_due_at(t + 6 * MS), 0);
+	ck_assert_msg(rig.driven.digital == 0x06, "the record without DUE not driven at its instant");
 }
 END_TEST
 
