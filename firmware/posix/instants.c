@@ -59,17 +59,30 @@ void boards_timed_init(struct board_set *s)
 	}
 }
 
+void boards_timed_track(struct board_set *s, int32_t i)
+{
+	uint64_t local;
+	if (s->boards[i].waiting || !vmac_board_next_deadline(&s->boards[i].board, &local))
+		return;
+	s->boards[i].waiting = 1;
+	s->waiting[s->nwaiting++] = i;
+}
+
 int64_t boards_next_instant(struct board_set *s, int64_t now_ns)
 {
 	int64_t next = INT64_MAX;
-	int32_t i;
-	if (!s->timed_seen)
-		return next;
-	for (i = 0; i < s->count; i++) {
+	int32_t k = 0;
+	while (k < s->nwaiting) {
+		int32_t i = s->waiting[k];
 		uint64_t local, now_local;
 		int64_t at;
-		if (!vmac_board_next_deadline(&s->boards[i].board, &local))
+		if (!vmac_board_next_deadline(&s->boards[i].board, &local)) {
+			/* done or cancelled: off the list (the last one takes its place) */
+			s->boards[i].waiting = 0;
+			s->waiting[k] = s->waiting[--s->nwaiting];
 			continue;
+		}
+		k++;
 		now_local = boards_local_ns(s, i, now_ns, 0);
 		if (local <= now_local)
 			return now_ns;
@@ -83,14 +96,13 @@ int64_t boards_next_instant(struct board_set *s, int64_t now_ns)
 
 void boards_run_instants(struct board_set *s, int64_t now_ns)
 {
-	int32_t i;
-	if (!s->timed_seen)
-		return;
-	for (i = 0; i < s->count; i++) {
+	int32_t k;
+	for (k = 0; k < s->nwaiting; k++) {
+		int32_t i = s->waiting[k];
 		struct posix_board *pb = &s->boards[i];
 		uint64_t local;
 		if (!vmac_board_next_deadline(&pb->board, &local))
-			continue;
+			continue;                                    /* dropped by the next boards_next_instant */
 		boards_poll_one(s, i, (uint64_t)(now_ns / 1000000)); /* a trip cancels what waits */
 		for (;;) {
 			struct vmac_packet *out;

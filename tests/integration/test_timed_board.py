@@ -139,9 +139,9 @@ def io_log(path):
     return rows
 
 
-def start_board(t, name, clock=()):
+def start_board(t, name, clock=(), count=None):
     log = os.path.join(t.logdir, name + ".io.log")
-    return t.board("generic", name, keyed=False, extra=["--io-log", log] + list(clock)), log
+    return t.board("generic", name, keyed=False, count=count, extra=["--io-log", log] + list(clock)), log
 
 
 def stop(board):
@@ -163,9 +163,20 @@ def test_two_boards_of_other_oscillators_change_their_outputs_at_one_host_instan
         "axis-b": ("--clock-ppm", "-200", "--clock-offset", "-2.25", "--clock-jitter-us", "20", "--clock-seed", "2")})
 
 
-def two_boards_at_one_instant(t, clocks):
-    names = sorted(clocks)
-    boards = {name: start_board(t, name, clocks[name]) for name in names}
+def test_three_boards_of_one_process_change_their_outputs_at_one_host_instant(t):
+    """vmac-board --count 3: the loop wakes for each board's instant."""
+    two_boards_at_one_instant(t, {"axis": ()}, count=3)
+
+
+def two_boards_at_one_instant(t, clocks, count=None):
+    """clocks: {process name: its --clock-* options}; count: boards per
+    process (NAME-1..NAME-count), else one named NAME."""
+    procs = {name: start_board(t, name, clocks[name], count) for name in sorted(clocks)}
+    boards = {}  # board name: (its process, its process's io-log)
+    for name, proc in procs.items():
+        for board in (["%s-%d" % (name, i) for i in range(1, count + 1)] if count else [name]):
+            boards[board] = proc
+    names = sorted(boards)
     host = Host(t.bus)
     try:
         host.join(names)
@@ -188,11 +199,12 @@ def two_boards_at_one_instant(t, clocks):
             time.sleep(0.05)
         for name, (board, _) in boards.items():
             board.wait_line(r"^%s: acting at host instants$" % name, 10, what="'acting at host instants'")
+        for board, _ in procs.values():
             stop(board)
     finally:
         host.close()
 
-    rows = {name: io_log(path) for name, (_, path) in boards.items()}
+    rows = {name: [r for r in io_log(path) if r["board"] == name] for name, (_, path) in boards.items()}
     for name in names:
         # (on arrival, a clock not usable on a busy machine: driven before the SHUTDOWN, not waiting)
         assert not [r for r in rows[name] if r["host"] == at and r["how"] == "instant"], \
