@@ -272,3 +272,35 @@ def test_a_board_without_a_usable_clock_acts_on_arrival_and_says_so(t):
     assert all(r["done"] < at for r in rows), "acted on arrival, yet at or after the instant: %r" % rows
     counters = board.find_lines(r"^axis-c: timed \d+, on arrival 1, late 0, overrun 0$")
     assert counters, "no timed counters line at exit"
+
+
+def test_a_board_whose_clock_is_lost_falls_back_to_arrival_and_says_so(t):
+    """The host's SYNC stops: the board holds over, still acting at the
+    instants, then is lost (its bound past 50 us, some 20 s later) and acts
+    on arrival, saying so in its answer (ARRIVAL, lost) and its log."""
+    board, path = start_board(t, "axis-d")
+    host = Host(t.bus)
+    try:
+        host.join(["axis-d"])
+        vmacd = t.host(settings=SYNC_SETTINGS)
+        board.wait_line(r"^axis-d: clock locked", 60, what="the clock locked")
+        for _ in range(FRAMES):  # until one is served at its instant (a busy machine may unlock a window)
+            at = time.monotonic_ns() + AHEAD_NS
+            locked = host.answers(host.timed({"axis-d": (0x01, 0)}, at))["axis-d"]
+            if not locked.clock & CLOCK_ARRIVAL:
+                break
+        vmacd.signal(signal.SIGTERM)
+        assert vmacd.wait_exit(30) == 0, "vmacd did not exit cleanly"
+        board.wait_line(r"^axis-d: clock lost, acting on arrival", 120, what="the clock lost")
+        late = time.monotonic_ns() + 5 * 10**9
+        lost = host.answers(host.timed({"axis-d": (0x02, 0)}, late))["axis-d"]
+        board.wait_line(r"^axis-d: acting on arrival \(clock lost\)$", 10, what="'acting on arrival (clock lost)'")
+        stop(board)
+    finally:
+        host.close()
+    assert not locked.clock & CLOCK_ARRIVAL, "acted on arrival with its clock locked: %r" % (locked,)
+    assert lost.clock == CLOCK_ARRIVAL | 4 and lost.latched_at == 0, "a lost clock's answer: %r" % (lost,)
+    assert lost.applied_digital == 0x02, "applied 0x%02x, want 0x02 driven on arrival" % lost.applied_digital
+    rows = io_log(path)
+    assert [(r["how"], r["clock"]) for r in rows if r["host"] == late] == [("arrival", "lost")] * 2, rows
+    assert all(r["done"] < late for r in rows if r["host"] == late), "acted on arrival, yet after the instant"
