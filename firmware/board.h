@@ -150,8 +150,10 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
  * frame is never answered and never feeds the watchdog; a board of
  * version 1, a sealed SYNC (not defined yet) and a call without a receive
  * time (VMAC_BOARD_NO_STAMP) count it in sync_ignored and leave the clock
- * alone. A keyed board's clock is fed by unsealed SYNC frames: it decides
- * nothing yet (docs/TIME.md, "Trust"). */
+ * alone. A keyed board's clock is fed by unsealed SYNC frames, so it does
+ * not act by it (docs/TIME.md, "Trust"). A TIMED CYCLIC record's instants
+ * are put on the same counter, the arrival being rx_local_ns (below,
+ * "Time-triggered I/O"). */
 int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
                           uint8_t *reply, size_t cap);
 
