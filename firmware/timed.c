@@ -145,10 +145,14 @@ static int overrun(struct vmac_board *b, uint64_t now, int due, int stamped, uin
 }
 
 /* When, on the board's counter, to act at host instant host_ns, the frame
- * having come at now: *local and how (at the instant, or late: at once). */
+ * having come at now: *local and how (at the instant, or late: at once).
+ * Past or future is judged in host time first: an instant far in the past
+ * (0, a host's bug) must not wrap the counter into the far future. */
 static enum vmac_timed_how when(const struct vmac_board *b, uint64_t host_ns, uint64_t now, uint64_t *local)
 {
-	if (vmac_clock_to_local(&b->clock, host_ns, local) == 0 && *local >= now)
+	uint64_t host_now;
+	if (vmac_clock_to_host(&b->clock, now, &host_now) == 0 && host_ns > host_now &&
+	    vmac_clock_to_local(&b->clock, host_ns, local) == 0 && *local >= now)
 		return VMAC_TIMED_AT_INSTANT;
 	*local = now;
 	return VMAC_TIMED_LATE;

@@ -32,7 +32,8 @@ static const uint8_t nonce[VMAC_NONCE_LEN] = {1, 2, 3, 4, 5, 6, 7, 8};
 
 static struct {
 	struct vmac_board board;
-	uint64_t host_ns; /* host time now; the board's counter reads host_ns + SKEW_NS */
+	uint64_t host_ns; /* host time now; the board's counter reads host_ns + skew */
+	int64_t skew;     /* SKEW_NS, unless a test says otherwise before start() */
 	struct vmac_outputs driven;
 	int writes;
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
@@ -94,7 +95,7 @@ static uint64_t now_ms(void)
 
 static uint64_t local(uint64_t host_ns)
 {
-	return host_ns + SKEW_NS;
+	return host_ns + (uint64_t)rig.skew;
 }
 
 /* The reply (if any) decoded into rig.answer, opened first when sealed. */
@@ -141,11 +142,12 @@ static void sync_frames(int n)
 
 /* A board (keyed or not), its clock locked (locked 0: never synced), in a
  * session at OFFSET with a watchdog of 500 ms. */
-static void start(int keyed, int locked)
+static void start_skewed(int keyed, int locked, int64_t skew)
 {
 	struct vmac_board_identity id;
 	struct vmac_msg m;
 	memset(&rig, 0, sizeof(rig));
+	rig.skew = skew;
 	memset(&id, 0, sizeof(id));
 	strcpy(id.driver, "motor");
 	strcpy(id.board, "motor-1");
@@ -177,6 +179,11 @@ static void start(int keyed, int locked)
 	ck_assert_int_eq(rig.board.state, VMAC_BOARD_KNOWN);
 	rig.writes = 0;
 	rig.nacts = 0;
+}
+
+static void start(int keyed, int locked)
+{
+	start_skewed(keyed, locked, (int64_t)SKEW_NS);
 }
 
 /* A TIMED CYCLIC of one record at OFFSET, sealed on a keyed board. */
@@ -316,6 +323,14 @@ START_TEST(an_instant_already_past_is_acted_on_at_once)
 	              rig.board.counters.timed_late);
 	ck_assert_msg(rig.acts[0].how == VMAC_TIMED_LATE, "the action is not said late");
 	expect_nothing_waits("after a late record");
+	/* Instants at host time 0 and 1 (a host's bug), on a counter 4 s
+	 * behind host time (host 0 is before its 0): long past, never the
+	 * counter's far future. */
+	start_skewed(0, 1, -4000000000LL);
+	ck_assert_int_gt(timed(8, VMAC_CYCLIC_DUE, 0x01, 0, 0, 1), 0);
+	expect_timed_reply(8, 0x01, VMAC_CLOCK_LOCKED, "instants at host time 0 and 1");
+	expect_nothing_waits("after instants at host time 0");
+	ck_assert_int_eq(rig.board.counters.timed_late, 1);
 }
 END_TEST
 
