@@ -225,6 +225,7 @@ static int register_opens(struct vmac_board *b, const uint8_t *frame, size_t len
 	memcpy(b->to_host, to_host, VMAC_KEY_LEN);
 	b->rx_counter = req->counter;
 	b->rx_cyclic_counter = 0;
+	b->rx_sync_counter = 0;
 	b->tx_counter = 0;
 	return 1;
 }
@@ -247,16 +248,43 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	return answer_ack(b, req, b->device_id, reply, cap);
 }
 
+/* Whether a keyed board may feed its clock from this SYNC: a sealed one
+ * whose MAC at our offset opens under our session's key, with a counter
+ * above the last SYNC we took in this session. Without a session and an
+ * offset we have no key to check it with. 1, or 0 (counted). */
+static int sync_opens(struct vmac_board *b, const struct vmac_msg *req)
+{
+	int rc;
+	if (!(req->flags & VMAC_FLAG_AUTH) || b->state != VMAC_BOARD_KNOWN || b->offset == VMAC_OFFSET_NONE) {
+		b->counters.sync_ignored++; /* unsealed, or nothing to check it with yet */
+		return 0;
+	}
+	rc = vmac_proto_sync_open(req, b->offset, b->to_board);
+	if (rc == 1) {
+		b->counters.sync_ignored++; /* no MAC for our offset: another chunk's frame */
+		return 0;
+	}
+	if (rc != 0 || req->counter <= b->rx_sync_counter) {
+		b->counters.auth_failed++; /* forged, another board's, or replayed */
+		return 0;
+	}
+	b->rx_sync_counter = req->counter;
+	return 1;
+}
+
 /* SYNC: the host's send time and our receive time, one sample for the
  * clock. Nothing else changes: no answer, no outputs, no watchdog. A keyed
- * board takes it too, unsealed: its clock decides nothing yet (docs/TIME.md,
- * "Trust"); a sealed SYNC is not defined, and ignored. */
+ * board takes only a sealed SYNC that carries its MAC (sync_opens), an
+ * unkeyed one only the plain SYNC, in any state (docs/TIME.md, "Trust"). */
 static int on_sync(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx_local_ns)
 {
-	if (b->id.protocol < 2 || (req->flags & VMAC_FLAG_AUTH) || rx_local_ns == VMAC_BOARD_NO_STAMP) {
+	if (b->id.protocol < 2 || rx_local_ns == VMAC_BOARD_NO_STAMP ||
+	    (!b->id.keyed && (req->flags & VMAC_FLAG_AUTH))) {
 		b->counters.sync_ignored++;
 		return 0;
 	}
+	if (b->id.keyed && !sync_opens(b, req))
+		return 0;
 	if (b->clock_local_ns < rx_local_ns)
 		b->clock_local_ns = rx_local_ns;
 	vmac_clock_feed(&b->clock, req->u.sync.host_ns, rx_local_ns);

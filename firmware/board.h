@@ -51,7 +51,8 @@ struct vmac_board_identity {
 struct vmac_board_counters {
 	uint32_t frames_ok, frames_malformed, frames_ignored, watchdog_trips;
 	uint32_t auth_failed;  /* keyed: a frame unsealed, of a wrong MAC, or replayed: ignored */
-	uint32_t sync_ignored; /* SYNC frames not fed to the clock: version 1, sealed, or no receive time */
+	uint32_t sync_ignored; /* SYNC frames not fed to the clock: version 1, no receive time; unkeyed: sealed;
+	                        * keyed: unsealed, before a session and offset, or no MAC for our offset */
 	/* TIMED CYCLIC records served (docs/TIME.md, "Time-triggered I/O"):
 	 * by the clock at the host's instants; on arrival (the clock not
 	 * usable, or no receive time); late (by the clock, but an instant
@@ -110,6 +111,7 @@ struct vmac_board {
 	uint8_t nonce[VMAC_NONCE_LEN];
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
 	uint32_t rx_counter, rx_cyclic_counter, tx_counter;
+	uint32_t rx_sync_counter; /* the last sealed SYNC's counter fed to the clock in this session */
 	/* The board's clock (docs/TIME.md), on the caller's free-running
 	 * counter (ns), fed by the host's SYNC frames in any board state; its
 	 * counter at the last feed or vmac_board_clock_poll, the instant its
@@ -148,12 +150,13 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
  * the Ethernet interrupt's timer on a microcontroller): a SYNC frame
  * (docs/PROTOCOL.md, "SYNC") is fed to the board's clock with it. A SYNC
  * frame is never answered and never feeds the watchdog; a board of
- * version 1, a sealed SYNC (not defined yet) and a call without a receive
- * time (VMAC_BOARD_NO_STAMP) count it in sync_ignored and leave the clock
- * alone. A keyed board's clock is fed by unsealed SYNC frames, so it does
- * not act by it (docs/TIME.md, "Trust"). A TIMED CYCLIC record's instants
- * are put on the same counter, the arrival being rx_local_ns (below,
- * "Time-triggered I/O"). */
+ * version 1 and a call without a receive time (VMAC_BOARD_NO_STAMP) count
+ * it in sync_ignored and leave the clock alone. An unkeyed board takes
+ * only plain SYNC frames; a keyed one only a sealed SYNC whose MAC at its
+ * offset opens under its session's key with a fresh counter, so it syncs
+ * from its registration on (docs/TIME.md, "Trust"). A TIMED CYCLIC
+ * record's instants are put on the same counter, the arrival being
+ * rx_local_ns (below, "Time-triggered I/O"). */
 int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
                           uint8_t *reply, size_t cap);
 
@@ -179,11 +182,6 @@ int vmac_board_next_deadline(const struct vmac_board *b, uint64_t *local_ns);
  * when the session is), or 0 when no latch was due. Call again while
  * vmac_board_next_deadline says something is due. */
 int vmac_board_run_due(struct vmac_board *b, uint64_t now_local_ns, uint8_t *reply, size_t cap);
-
-/* Whether the board may act by its clock at all: 0 for a keyed board, whose
- * clock unsealed SYNC frames feed (docs/TIME.md, "Trust"); it serves TIMED
- * records on arrival, its clock usable or not. */
-int vmac_board_clock_trusted(const struct vmac_board *b);
 
 /* Forget whatever waits, doing none of it (the safe state never waits). */
 void vmac_board_timed_cancel(struct vmac_board *b);

@@ -133,7 +133,7 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 			t = start(b, line, len);
 			add(&t, "acting on arrival (clock ");
 			add(&t, vmac_clock_state_name(b->clock.state));
-			add(&t, vmac_board_clock_trusted(b) ? ")" : ", SYNC not sealed)");
+			add(&t, ")");
 			return 1;
 		}
 	}

@@ -10,14 +10,6 @@
 
 #include "board_internal.h"
 
-int vmac_board_clock_trusted(const struct vmac_board *b)
-{
-	/* A keyed board obeys nothing unsealed, yet its clock is fed by
-	 * unsealed SYNC frames, which anyone on the wire can forge (docs/TIME.md,
-	 * "Trust"): it does not act by that clock until SYNC is sealed. */
-	return !b->id.keyed;
-}
-
 static void tell(struct vmac_board *b, enum vmac_timed_kind kind, enum vmac_timed_how how, uint64_t local_ns,
                  uint64_t host_ns)
 {
@@ -168,7 +160,7 @@ int vmac_board_timed_record(struct vmac_board *b, const struct vmac_msg *req, co
 	int usable = 0, n;
 	if (stamped) {
 		vmac_board_clock_poll(b, rx_local_ns); /* holdover, lost: as of the arrival */
-		usable = vmac_clock_usable(&b->clock) && vmac_board_clock_trusted(b);
+		usable = vmac_clock_usable(&b->clock); /* a keyed board's: fed by sealed SYNC only */
 	}
 	n = overrun(b, now, due, stamped, reply, cap);
 	t->mode = usable ? VMAC_TIMED_MODE_INSTANTS : VMAC_TIMED_MODE_ARRIVAL;

@@ -132,7 +132,8 @@ static json_t *status_json(struct vmac_http *h)
 		            {"auth_failed", s->counters.auth_failed},
 		            {"takeover_refused", s->counters.takeover_refused},
 		            {"waiting", s->counters.waiting},
-		            {"syncs", s->counters.syncs}};
+		            {"syncs", s->counters.syncs},
+		            {"syncs_sealed", s->counters.syncs_sealed}};
 		for (i = 0; i < (int)(sizeof(more) / sizeof(more[0])); i++)
 			json_object_set_new(json_object_get(root, "counters"), more[i].name,
 			                    json_integer((json_int_t)more[i].value));

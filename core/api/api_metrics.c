@@ -12,7 +12,8 @@
  * Names and labels follow Prometheus's naming guide: the vmac_ prefix,
  * base units (seconds, bytes), _total for counters, _info for a gauge of
  * metadata; a board's series are labelled machine, board and driver, a
- * machine's (its driver's) machine and driver. */
+ * machine's (its driver's) machine and driver. A board's clock, when it
+ * has sent a TIMED reply: prom_clock.c. */
 #include "http_internal.h"
 
 #include <arpa/inet.h>
@@ -23,6 +24,7 @@
 
 #include "../common/addr.h"
 #include "../mqtt/mqtt.h"
+#include "prom_clock.h"
 #include "prom_text.h"
 
 /* The lateness histogram's buckets, in us: each a bound of the bus's own
@@ -178,6 +180,7 @@ static void device_series(struct http_prom *p, const struct vmac_status *s)
 	http_prom_family(p, "vmac_device_drops_total", "counter",
 	                 "Times the host dropped the board (a miss, an error, or a board of its machine dropped)");
 	EACH_DEVICE http_prom_u64(p, "vmac_device_drops_total", d->drops, DEVICE_LABELS, NULL);
+	http_prom_board_clocks(p, s); /* the clocks of boards that sent a TIMED reply (prom_clock.c) */
 	http_prom_family(p, "vmac_driver_info", "gauge", "1 for each machine a driver runs, with the driver's version");
 	EACH_MACHINE http_prom_u64(p, "vmac_driver_info", 1, MACHINE_LABELS, "version", d->driver_version, NULL);
 	http_prom_family(p, "vmac_driver_memory_bytes", "gauge", "Bytes in the machine's driver's Lua heap");

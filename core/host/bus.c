@@ -42,10 +42,11 @@ double bus_time(const struct vmac_bus *bus)
 }
 
 /* Per flush at most: one request per device, a WATCHDOG beside it, a
- * DISCOVER, a SYNC, and a CYCLIC frame per chunk of offsets, sealed and not. */
+ * DISCOVER, a SYNC and its sealed chunks, and a CYCLIC frame per chunk of
+ * offsets, sealed and not. */
 static int tx_max(const struct vmac_bus *bus)
 {
-	return 2 * (int)bus->ndev + 3 + (int)bus->nchunks + (int)bus->nauth_chunks;
+	return 2 * (int)bus->ndev + 3 + (int)bus->nchunks + (int)bus->nauth_chunks + (int)bus->nsync_chunks;
 }
 
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
@@ -83,6 +84,36 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 	}
 }
 
+/* A keyed board that holds a session (and, v2 cyclic, its offset: its
+ * slot): the sealed SYNC carries a MAC for it. */
+static int sync_keyed(const struct device *d)
+{
+	return d->keyed && d->cyclic &&
+	       (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP);
+}
+
+/* The SYNC frames of this batch get the host's time as late as the host
+ * can take it, the send itself follows; the sealed ones are sealed after
+ * the stamp (their MACs cover it), one SipHash per keyed board: a delay
+ * common to every board of the frame (docs/TIME.md, "Trust"). */
+static void sync_stamp(struct vmac_bus *bus)
+{
+	uint64_t now = (uint64_t)bus_now(bus);
+	int k;
+	if (bus->sync_tx >= 0)
+		vmac_proto_sync_stamp(bus->tx[bus->sync_tx].data, now);
+	bus->sync_tx = -1;
+	for (k = 0; k < bus->nsync_auth; k++) {
+		uint8_t *f = bus->tx[bus->sync_auth_tx[k]].data;
+		uint32_t first = (uint32_t)(f[VMAC_SYNC_AUTH_HEAD_LEN - 2] << 8 | f[VMAC_SYNC_AUTH_HEAD_LEN - 1]), i;
+		vmac_proto_sync_stamp(f, now);
+		for (i = 0; i < f[12]; i++)
+			if (sync_keyed(&bus->dev[first + i]))
+				vmac_proto_sync_seal(f, i, bus->dev[first + i].to_board);
+	}
+	bus->nsync_auth = 0;
+}
+
 void bus_flush(struct vmac_bus *bus)
 {
 	int64_t sent_ns;
@@ -90,11 +121,8 @@ void bus_flush(struct vmac_bus *bus)
 	int sent;
 	if (bus->ntx == 0)
 		return;
-	if (bus->sync_tx >= 0) {
-		/* As late as the host can take it: the send itself follows. */
-		vmac_proto_sync_stamp(bus->tx[bus->sync_tx].data, (uint64_t)bus_now(bus));
-		bus->sync_tx = -1;
-	}
+	if (bus->sync_tx >= 0 || bus->nsync_auth > 0)
+		sync_stamp(bus);
 	if (bus->virt) {
 		bus->link.send(bus->link.ctx, bus->tx, bus->ntx);
 		sent = bus->ntx;
@@ -163,6 +191,34 @@ static void send_discover(struct vmac_bus *bus)
 		bus->counters.discoveries++;
 }
 
+/* The sealed SYNC frames: one per chunk of offsets that holds a keyed
+ * board, its MACs left to bus_flush (sync_stamp). */
+static void send_sync_sealed(struct vmac_bus *bus)
+{
+	uint32_t first, i, count;
+	bus->sync_counter++; /* one a SYNC, whether any chunk goes: never repeated in a run */
+	for (first = 0; first < bus->nused; first += VMAC_SYNC_AUTH_MACS_MAX) {
+		struct vmac_packet *p;
+		int n;
+		count = bus->nused - first < VMAC_SYNC_AUTH_MACS_MAX ? bus->nused - first : VMAC_SYNC_AUTH_MACS_MAX;
+		for (i = 0; i < count && !sync_keyed(&bus->dev[first + i]); i++)
+			;
+		if (i == count || !(p = tx_slot(bus)))
+			continue;
+		n = vmac_proto_sync_begin_auth(p->data, sizeof(p->data), bus->sync_seq, bus->sync_counter,
+		                               (uint16_t)first, count);
+		if (n <= 0) {
+			bus->ntx--;
+			continue;
+		}
+		p->len = (size_t)n;
+		p->addr = bus->tr.group;
+		memset(p->mac, 0, sizeof(p->mac));
+		bus->sync_auth_tx[bus->nsync_auth++] = (int)(p - bus->tx);
+		bus->counters.syncs_sealed++;
+	}
+}
+
 /* SYNC to the group (docs/TIME.md): queued before this tick's CYCLIC
  * frames, its host time written by bus_flush just before the batch is
  * handed to the kernel. No allocation, no log: it runs on every tick due. */
@@ -174,10 +230,13 @@ static void send_sync(struct vmac_bus *bus)
 	m.channel = VMAC_CH_SYSTEM;
 	m.op = VMAC_SYS_SYNC;
 	m.seq = ++bus->sync_seq;
-	if (!queue_group(bus, &m))
-		return;
-	bus->sync_tx = bus->ntx - 1;
-	bus->counters.syncs++;
+	send_sync_sealed(bus);
+	/* Plain, always (one short frame): unkeyed boards sync before they
+	 * announce, so the host cannot know whether any listens. */
+	if (queue_group(bus, &m)) {
+		bus->sync_tx = bus->ntx - 1;
+		bus->counters.syncs++;
+	}
 }
 
 /* REGISTER goes out at once, whatever the slot: a board is not in the
@@ -381,7 +440,7 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 		}
 		return 0;
 	}
-	if (bus->cfg.clock_sync_ms > 0 && !bus->virt && now >= bus->next_sync_ns) {
+	if (bus->cfg.clock_sync_ms > 0 && now >= bus->next_sync_ns) {
 		int64_t period = (int64_t)bus->cfg.clock_sync_ms * 1000000;
 		send_sync(bus);
 		bus->next_sync_ns += period;
@@ -473,13 +532,15 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->chunk_tx = calloc(bus->nchunks, sizeof(*bus->chunk_tx));
 	bus->nauth_chunks = (bus->ndev + VMAC_CYCLIC_AUTH_RECORDS_MAX - 1) / VMAC_CYCLIC_AUTH_RECORDS_MAX;
 	bus->auth_chunk_tx = calloc(bus->nauth_chunks, sizeof(*bus->auth_chunk_tx));
+	bus->nsync_chunks = (bus->ndev + VMAC_SYNC_AUTH_MACS_MAX - 1) / VMAC_SYNC_AUTH_MACS_MAX;
+	bus->sync_auth_tx = calloc(bus->nsync_chunks, sizeof(*bus->sync_auth_tx));
 	bus->tx = calloc((size_t)tx_max(bus), sizeof(*bus->tx));
 	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
 	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
-	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->auth_chunk_tx || !bus->status.devices ||
-	    !bus->status.slot_load || !bus->slot_entries || !bus->sched ||
+	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->auth_chunk_tx || !bus->sync_auth_tx ||
+	    !bus->status.devices || !bus->status.slot_load || !bus->slot_entries || !bus->sched ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus) ||
 	    bus_jobs_init(bus)) {
@@ -629,6 +690,7 @@ void vmac_bus_free(struct vmac_bus *bus)
 	free(bus->tx);
 	free(bus->chunk_tx);
 	free(bus->auth_chunk_tx);
+	free(bus->sync_auth_tx);
 	vmac_bus_keys_free(bus->keys);
 	free(bus->status.devices);
 	free(bus->status.slot_load);

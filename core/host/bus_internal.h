@@ -281,9 +281,17 @@ struct vmac_bus {
 	uint64_t slots_done; /* slots handed to the scheduler so far */
 	uint16_t discover_seq;
 	int64_t next_discover_ns;
-	uint16_t sync_seq;         /* seq of the latest SYNC frame */
-	int64_t next_sync_ns;      /* when the next SYNC is due (clock_sync_ms) */
-	int sync_tx;               /* its index in tx until bus_flush stamps it; -1 none */
+	uint16_t sync_seq;    /* seq of the latest SYNC frame */
+	int64_t next_sync_ns; /* when the next SYNC is due (clock_sync_ms) */
+	int sync_tx;          /* its index in tx until bus_flush stamps it; -1 none */
+	/* Sealed SYNC (keyed boards): one frame per chunk of
+	 * VMAC_SYNC_AUTH_MACS_MAX offsets holding a keyed board, stamped and
+	 * then sealed by bus_flush; its counter, one a SYNC, never repeated in
+	 * a run. */
+	int *sync_auth_tx; /* their indices in tx until bus_flush (nsync_auth of them) */
+	int nsync_auth;
+	uint32_t nsync_chunks; /* chunks of VMAC_SYNC_AUTH_MACS_MAX offsets */
+	uint32_t sync_counter;
 	int64_t next_probation_ns; /* next look for reloads whose probation is over */
 	struct vmac_packet *tx;
 	int ntx;

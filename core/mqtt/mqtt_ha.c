@@ -291,7 +291,8 @@ static json_t *health_sensor(json_t *common, const char *uid, const char *label,
 	json_object_set_new(e, "state_topic", json_string(state_topic));
 	json_object_set_new(e, "value_template", json_string(tpl));
 	json_object_set_new(e, "entity_category", json_string("diagnostic"));
-	json_object_set_new(e, "state_class", json_string(state_class));
+	if (state_class)
+		json_object_set_new(e, "state_class", json_string(state_class));
 	/* A heartbeat comes every MQTT_HEALTH_HEARTBEAT_S: none for this long
 	 * (the publisher stopped, the connection lives on) shows unknown. */
 	json_object_set_new(e, "expire_after", json_integer(MQTT_HEALTH_EXPIRE_S));
@@ -316,6 +317,10 @@ static void add_health(struct ha *h, json_t *manifest)
 	    {"misses", "Misses", NULL, NULL, "total_increasing", 1},
 	    {"driver_late", "Late ticks", NULL, NULL, "total_increasing", 0},
 	    {"driver_memory_kb", "Driver memory", "kB", "data_size", "measurement", 0},
+	    /* The primary board's clock (docs/TIME.md): null, unknown to HA,
+	     * until it sends a TIMED reply. An enum takes no state class. */
+	    {"clock_state", "Clock", NULL, "enum", NULL, 1},
+	    {"clock_bound_us", "Clock error bound", "µs", NULL, "measurement", 0},
 	};
 	char state[400], uid[300], host_status[300], object[64];
 	json_t *none = json_object(), *common = entity(h, "_health", none), *e, *types;
@@ -324,9 +329,16 @@ static void add_health(struct ha *h, json_t *manifest)
 	for (i = 0; common && i < sizeof(fields) / sizeof(fields[0]); i++) {
 		snprintf(uid, sizeof(uid), "%s__health_%s", h->dev_id, fields[i].field);
 		snprintf(object, sizeof(object), "_health_%s", fields[i].field);
-		add(h, "sensor", object,
-		    health_sensor(common, uid, fields[i].label, state, fields[i].field, fields[i].unit, fields[i].dc,
-		                  fields[i].state_class, fields[i].enabled));
+		e = health_sensor(common, uid, fields[i].label, state, fields[i].field, fields[i].unit, fields[i].dc,
+		                  fields[i].state_class, fields[i].enabled);
+		if (e && fields[i].dc && strcmp(fields[i].dc, "enum") == 0) {
+			json_t *options = json_array();
+			int k;
+			for (k = 0; mqtt_clock_states[k]; k++)
+				json_array_append_new(options, json_string(mqtt_clock_states[k]));
+			json_object_set_new(e, "options", options);
+		}
+		add(h, "sensor", object, e);
 	}
 	json_decref(common);
 	json_decref(none);

@@ -3,8 +3,10 @@
  * them). It publishes, on the main connection:
  *
  *   PREFIX/HOST/DEVICE/_health  retained JSON {"misses", "misses_host",
- *       "served", "driver_late", "driver_memory_kb"}: the machine's primary
- *       board, from the bus's status copy
+ *       "served", "driver_late", "driver_memory_kb", "clock_state",
+ *       "clock_bound_us", "clock_on_arrival"}: the machine's primary
+ *       board, from the bus's status copy (its clock's three null until it
+ *       sends a TIMED reply, docs/TIME.md)
  *   PREFIX/HOST/_health         retained JSON {"misses", "drops",
  *       "malformed_frames", "lateness_p99_ms", "lateness_max_ms",
  *       "devices"}: the bus
@@ -92,18 +94,38 @@ static void host_health_out(struct vmac_mqtt *m, int force)
 	}
 }
 
+const char *const mqtt_clock_states[] = {"unsynced", "locking", "locked", "holdover", "lost", NULL};
+#define CLOCK_STATES 5
+
+/* The primary board's clock as the health's JSON fields (null while it
+ * has sent no TIMED reply; the bound null while the board does not know
+ * it): ,"clock_state":..,"clock_bound_us":..,"clock_on_arrival":.. */
+void mqtt_health_clock_fields(const struct vmac_board_clock_status *c, char *out, size_t outlen)
+{
+	char bound[32] = "null";
+	if (!c->known || c->state >= CLOCK_STATES) {
+		snprintf(out, outlen, ",\"clock_state\":null,\"clock_bound_us\":null,\"clock_on_arrival\":null");
+		return;
+	}
+	if (c->bound_ns != 0xFFFFFFFFu)
+		snprintf(bound, sizeof(bound), "%.1f", (double)c->bound_ns / 1000.0);
+	snprintf(out, outlen, ",\"clock_state\":\"%s\",\"clock_bound_us\":%s,\"clock_on_arrival\":%s",
+	         mqtt_clock_states[c->state], bound, c->on_arrival ? "true" : "false");
+}
+
 static void device_health_out(struct vmac_mqtt *m, struct mqtt_device *s, const struct vmac_device_status *st,
                               int force)
 {
-	char text[sizeof(s->health)], topic[300];
+	char text[sizeof(s->health)], topic[300], clock[120];
 	double now = mqtt_now_s();
 	if (!force && now < s->health_next_s)
 		return;
+	mqtt_health_clock_fields(&st->clock, clock, sizeof(clock));
 	snprintf(
 	    text, sizeof(text),
-	    "{\"misses\":%llu,\"misses_host\":%llu,\"served\":%llu,\"driver_late\":%llu,\"driver_memory_kb\":%.1f}",
+	    "{\"misses\":%llu,\"misses_host\":%llu,\"served\":%llu,\"driver_late\":%llu,\"driver_memory_kb\":%.1f%s}",
 	    (unsigned long long)st->misses, (unsigned long long)st->misses_host, (unsigned long long)st->served,
-	    (unsigned long long)st->driver_late, (double)st->driver_memory / 1024.0);
+	    (unsigned long long)st->driver_late, (double)st->driver_memory / 1024.0, clock);
 	if (!force && strcmp(text, s->health) == 0 && now < s->health_sent_s + HEALTH_HEARTBEAT_S)
 		return;
 	mqtt_topic(m, topic, sizeof(topic), "%s/_health", s->name);

@@ -95,7 +95,7 @@ struct mqtt_device {
 	int told_up; /* device_up said, device_down not since: a drop is an event once */
 	int have_state;
 	char state[MQTT_TEXT_MAX];
-	char health[200];
+	char health[300];
 	double health_sent_s, health_next_s;
 	struct mqtt_value values[MQTT_VALUES];
 	int nvalues;
@@ -366,6 +366,13 @@ void mqtt_conn_redial(struct mqtt_conn *c);
 /* mqtt_health.c: the event types a machine of this manifest publishes on
  * PREFIX/HOST/DEVICE/_event (a new JSON array of strings). */
 json_t *mqtt_health_event_types(json_t *manifest);
+/* A board's clock states by vmac_board_clock_status.state (docs/TIME.md),
+ * NULL after the last: the _health's clock_state, HA's Clock options. */
+extern const char *const mqtt_clock_states[];
+/* A board's clock as the fields that end a machine's _health JSON:
+ * ,"clock_state":S,"clock_bound_us":B,"clock_on_arrival":A (each null
+ * until it sends a TIMED reply; B null while it does not know its bound). */
+void mqtt_health_clock_fields(const struct vmac_board_clock_status *c, char *out, size_t outlen);
 
 /* mqtt_audit.c: a command that came on connection conn (MQTT_CONN_*)
  * in the audit trail: its topic, its device (NULL: none), the input it

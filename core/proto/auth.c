@@ -120,3 +120,36 @@ int vmac_proto_cyclic_open_record(const struct vmac_msg *m, uint16_t offset, con
 	record_mac(m->u.cyclic.frame, index, r, key, mac);
 	return vmac_proto_equal(mac, r + 6, VMAC_AUTH_MAC_LEN) ? 0 : VMAC_EPROTO_AUTH;
 }
+
+/* The MAC for offset of a sealed SYNC frame: its head and the offset. */
+static void sync_mac(const uint8_t *frame, unsigned offset, const uint8_t key[VMAC_KEY_LEN],
+                     uint8_t mac[VMAC_AUTH_MAC_LEN])
+{
+	uint8_t in[VMAC_SYNC_AUTH_HEAD_LEN + 2];
+	memcpy(in, frame, VMAC_SYNC_AUTH_HEAD_LEN);
+	in[VMAC_SYNC_AUTH_HEAD_LEN] = (uint8_t)(offset >> 8);
+	in[VMAC_SYNC_AUTH_HEAD_LEN + 1] = (uint8_t)offset;
+	vmac_siphash24(key, in, sizeof(in), mac);
+}
+
+void vmac_proto_sync_seal(uint8_t *frame, unsigned index, const uint8_t key[VMAC_KEY_LEN])
+{
+	unsigned first = (unsigned)((frame[VMAC_SYNC_AUTH_HEAD_LEN - 2] << 8) | frame[VMAC_SYNC_AUTH_HEAD_LEN - 1]);
+	sync_mac(frame, first + index, key, frame + VMAC_SYNC_AUTH_HEAD_LEN + (size_t)VMAC_AUTH_MAC_LEN * index);
+}
+
+int vmac_proto_sync_open(const struct vmac_msg *m, uint16_t offset, const uint8_t key[VMAC_KEY_LEN])
+{
+	static const uint8_t none[VMAC_AUTH_MAC_LEN];
+	const uint8_t *mac;
+	uint8_t want[VMAC_AUTH_MAC_LEN];
+	if (!(m->flags & VMAC_FLAG_AUTH) || m->u.sync.frame == NULL)
+		return VMAC_EPROTO_OP;
+	if (offset < m->u.sync.first || offset - m->u.sync.first >= m->u.sync.count)
+		return 1;
+	mac = m->u.sync.frame + VMAC_SYNC_AUTH_HEAD_LEN + (size_t)VMAC_AUTH_MAC_LEN * (offset - m->u.sync.first);
+	if (vmac_proto_equal(mac, none, VMAC_AUTH_MAC_LEN))
+		return 1; /* no keyed board there, as the host sees it: not for us */
+	sync_mac(m->u.sync.frame, offset, key, want);
+	return vmac_proto_equal(want, mac, VMAC_AUTH_MAC_LEN) ? 0 : VMAC_EPROTO_AUTH;
+}

@@ -43,6 +43,17 @@ void vmac_proto_cyclic_seal_record(uint8_t *frame, unsigned index, const uint8_t
  * message: 0, 1 when the frame holds no record there, VMAC_EPROTO_AUTH. */
 int vmac_proto_cyclic_open_record(const struct vmac_msg *m, uint16_t offset, const uint8_t key[VMAC_KEY_LEN]);
 
+/* A sealed SYNC (vmac_proto_sync_begin_auth, stamped): write MAC index,
+ * for the board at offset first + index, under its to_board key: the MAC
+ * of the frame's head (header, host_ns, counter, first) and that offset. */
+void vmac_proto_sync_seal(uint8_t *frame, unsigned index, const uint8_t key[VMAC_KEY_LEN]);
+
+/* Check the MAC for offset of a decoded sealed SYNC under key: 0; 1 when
+ * the frame holds no MAC for that offset (outside it, or all zeros: the
+ * host has no keyed board there); VMAC_EPROTO_AUTH when it does not
+ * verify; VMAC_EPROTO_OP when the SYNC is not sealed. O(1). */
+int vmac_proto_sync_open(const struct vmac_msg *m, uint16_t offset, const uint8_t key[VMAC_KEY_LEN]);
+
 /* Equal in constant time (a MAC compared byte by byte would say how much
  * of a guess was right). */
 int vmac_proto_equal(const uint8_t *a, const uint8_t *b, size_t n);

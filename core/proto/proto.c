@@ -62,6 +62,13 @@ static int is_cyclic(const uint8_t *buf)
 	return buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_CYCLIC;
 }
 
+/* A sealed SYNC (version 2): its len counts MACs, one per offset. */
+static int is_sync_auth(const uint8_t *buf)
+{
+	return buf[2] >= 2 && buf[10] == VMAC_CH_SYSTEM && buf[11] == VMAC_SYS_SYNC &&
+	       (buf[3] & (VMAC_FLAG_AUTH | VMAC_FLAG_REPLY)) == VMAC_FLAG_AUTH;
+}
+
 size_t vmac_proto_cyclic_head_len(const uint8_t *frame)
 {
 	return VMAC_HDR_LEN + 2 + ((frame[3] & VMAC_FLAG_AUTH) ? 4 : 0) +
@@ -329,6 +336,33 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 	return VMAC_HDR_LEN + n;
 }
 
+/* A sealed SYNC whose header was found sound: host_ns, counter, first,
+ * then len MACs (checked one by one, by each board for its own offset). */
+static int decode_sync_auth(const uint8_t *buf, size_t len, struct vmac_msg *m)
+{
+	const uint8_t *d = buf + VMAC_HDR_LEN;
+	uint8_t n = buf[12];
+	if (n < 1 || n > VMAC_SYNC_AUTH_MACS_MAX || (int)len != vmac_proto_frame_length(buf, len))
+		return VMAC_EPROTO_LENGTH;
+	if ((buf[3] & ~VMAC_FLAG_AUTH) != 0)
+		return VMAC_EPROTO_OP;
+	memset(m, 0, sizeof(*m));
+	m->version = buf[2];
+	m->flags = buf[3];
+	m->seq = get16(buf + 4);
+	m->device_id = get32(buf + 6);
+	m->channel = VMAC_CH_SYSTEM;
+	m->op = VMAC_SYS_SYNC;
+	m->u.sync.host_ns = get64(d);
+	m->counter = get32(d + VMAC_SYNC_LEN);
+	m->u.sync.first = get16(d + VMAC_SYNC_LEN + 4);
+	m->u.sync.count = n;
+	m->u.sync.frame = buf;
+	if (m->device_id != 0 || (unsigned)m->u.sync.first + n > 0xFFFF) /* 0xFFFF is VMAC_OFFSET_NONE */
+		return VMAC_EPROTO_VALUE;
+	return 0;
+}
+
 int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 {
 	const uint8_t *d = buf + VMAC_HDR_LEN;
@@ -342,6 +376,8 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	if (buf[2] < VMAC_PROTO_VERSION_MIN || buf[2] > VMAC_PROTO_VERSION)
 		return VMAC_EPROTO_VERSION;
 	n = buf[12];
+	if (is_sync_auth(buf))
+		return decode_sync_auth(buf, len, m);
 	/* len counts data bytes, or a CYCLIC frame's records; the frame has room
 	 * for them, their trailer or first offset, and nothing more */
 	if ((int)len != vmac_proto_frame_length(buf, len) ||
@@ -470,6 +506,8 @@ int vmac_proto_frame_length(const uint8_t *buf, size_t len)
 	if (buf[0] != VMAC_MAGIC0 || buf[1] != VMAC_MAGIC1)
 		return VMAC_EPROTO_MAGIC;
 	auth = (buf[3] & VMAC_FLAG_AUTH) != 0;
+	if (is_sync_auth(buf))
+		return VMAC_SYNC_AUTH_HEAD_LEN + VMAC_AUTH_MAC_LEN * buf[12];
 	if (is_cyclic(buf))
 		return (int)vmac_proto_cyclic_head_len(buf) +
 		       (auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) * buf[12];
@@ -559,6 +597,29 @@ int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct v
 void vmac_proto_sync_stamp(uint8_t *buf, uint64_t host_ns)
 {
 	put64(buf + VMAC_HDR_LEN, host_ns);
+}
+
+int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t counter, uint16_t first, unsigned count)
+{
+	size_t n = VMAC_SYNC_AUTH_HEAD_LEN + (size_t)VMAC_AUTH_MAC_LEN * count;
+	if (count < 1 || count > VMAC_SYNC_AUTH_MACS_MAX || (unsigned)first + count > 0xFFFF)
+		return VMAC_EPROTO_VALUE;
+	if (n > cap)
+		return VMAC_EPROTO_SPACE;
+	buf[0] = VMAC_MAGIC0;
+	buf[1] = VMAC_MAGIC1;
+	buf[2] = 2;
+	buf[3] = VMAC_FLAG_AUTH;
+	put16(buf + 4, seq);
+	put32(buf + 6, 0);
+	buf[10] = VMAC_CH_SYSTEM;
+	buf[11] = VMAC_SYS_SYNC;
+	buf[12] = (uint8_t)count;
+	put64(buf + VMAC_HDR_LEN, 0);
+	put32(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN, counter);
+	put16(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN + 4, first);
+	memset(buf + VMAC_SYNC_AUTH_HEAD_LEN, 0, n - VMAC_SYNC_AUTH_HEAD_LEN);
+	return (int)n;
 }
 
 const char *vmac_proto_strerror(int err)

@@ -164,8 +164,17 @@ struct vmac_discover {
  * sync sequence number. A board feeds it to its clock (firmware/clock.h)
  * with its own receive timestamp. */
 #define VMAC_SYNC_LEN 8
+/* Sealed (VMAC_FLAG_AUTH; docs/PROTOCOL.md, "Authenticated frames"): one
+ * frame for many keyed boards, as the sealed CYCLIC. After host_ns come the
+ * host's SYNC counter (u32) and the first offset (u16), then `len` MACs of
+ * 8 bytes, MAC i for the board at offset first + i (zeros: no board). */
+#define VMAC_SYNC_AUTH_HEAD_LEN (VMAC_HDR_LEN + VMAC_SYNC_LEN + 4 + 2) /* 27 */
+#define VMAC_SYNC_AUTH_MACS_MAX 100                                    /* 27 + 8 x 100 = 827 bytes */
 struct vmac_sync {
 	uint64_t host_ns;
+	uint16_t first;       /* sealed: the offset of the first MAC (the counter is msg->counter) */
+	uint8_t count;        /* sealed: the number of MACs, 1..VMAC_SYNC_AUTH_MACS_MAX; 0 unsealed */
+	const uint8_t *frame; /* sealed: the frame itself, for vmac_proto_sync_open (auth.h) */
 };
 
 /* What a board adds to its UPDATE reply to a TIMED CYCLIC (VMAC_FLAG_TIMED
@@ -196,7 +205,7 @@ struct vmac_msg {
 	uint32_t device_id; /* session id the host gave in REGISTER; 0 before */
 	uint8_t channel;
 	uint8_t op;
-	uint32_t counter;        /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC: the frame's) */
+	uint32_t counter; /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC, SYNC: the frame's) */
 	struct vmac_latch latch; /* an UPDATE reply with VMAC_FLAG_TIMED (version 2) */
 	union {
 		struct vmac_discover discover; /* DISCOVER */
@@ -267,6 +276,14 @@ int vmac_proto_cyclic_record(const struct vmac_msg *m, uint16_t offset, struct v
  * VMAC_SYNC_LEN bytes): the host stamps it at the last moment before the
  * send, after the frame was built. */
 void vmac_proto_sync_stamp(uint8_t *buf, uint64_t host_ns);
+
+/* Start a sealed SYNC frame in buf (cap bytes) for the count offsets from
+ * first, with the host's SYNC counter: host_ns 0 (vmac_proto_sync_stamp
+ * writes it) and every MAC zero (vmac_proto_sync_seal, auth.h, writes
+ * them after the stamp). Returns the frame's length or a negative
+ * enum vmac_proto_err. */
+int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t counter, uint16_t first,
+                               unsigned count);
 
 /* A short English text for a negative vmac_proto_err. Never NULL. */
 const char *vmac_proto_strerror(int err);

@@ -180,9 +180,13 @@ local function make_board(spec)
 			.. "plants/NAME.lua)")
 	end
 	if spec.params ~= nil and type(spec.params) ~= "table" then fail("board{...}: params must be a table") end
+	if spec.clock ~= nil and type(spec.clock) ~= "table" then
+		fail("board{...}: clock must be a table such as {ppm = 100, offset = 2.5, jitter = 20e-6}")
+	end
 	local w = W()
 	-- the driver: as given, else the plant's (a Lua plant may name another)
 	local _, driver = world_call("board{...}: ", w.board, w, name, plant, spec.driver, spec.major, spec.minor)
+	if spec.clock then world_call("board{...}: clock: ", w.set_clock, w, name, spec.clock) end
 	for k, v in pairs(spec.params or {}) do
 		world_call("board{...}: ", w.config, w, "driver." .. driver .. ".param." .. k, tostring(v))
 	end
@@ -199,6 +203,7 @@ end
 Board.__index = function(b, k)
 	if k == "state" then return methods.state(current.world, b.name) end
 	if k == "device" then return current.world:device(b.name) end
+	if k == "clock" then return methods.clock(current.world, b.name) end
 	return Board[k]
 end
 Board.__tostring = function(b) return "board " .. b.name end
@@ -293,6 +298,12 @@ function Board:faults(spec)
 	acted(self.name, "faults{" .. table.concat(parts, ", ") .. "}")
 end
 function Board:history() return current.world:history(self.name) end
+-- A step of the board's drift (a change of temperature), from now on.
+function Board:clock_step(ppm)
+	if type(ppm) ~= "number" then fail("b:clock_step(ppm): ppm must be a number, not " .. show(ppm)) end
+	world_call("b:clock_step: ", current.world.clock_step, current.world, self.name, ppm)
+	acted(self.name, string.format("clock_step(%s)", show(ppm)))
+end
 
 -- ---- running time ----
 

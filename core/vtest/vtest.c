@@ -569,6 +569,25 @@ static int l_driver_cost(lua_State *L)
 	return 0;
 }
 
+/* w:clock(board) -> b.clock; w:set_clock(board, spec); w:clock_step(board, ppm) (clocks_lua.c) */
+static int l_clock(lua_State *L)
+{
+	struct lworld *lw = check_world(L);
+	return vt_lua_clock(L, lw->w, check_board(L, lw, 2));
+}
+
+static int l_set_clock(lua_State *L)
+{
+	struct lworld *lw = check_world(L);
+	return vt_lua_set_clock(L, 3, lw->w, check_board(L, lw, 2));
+}
+
+static int l_clock_step(lua_State *L)
+{
+	struct lworld *lw = check_world(L);
+	return vt_lua_clock_step(L, 3, lw->w, check_board(L, lw, 2));
+}
+
 static int l_slot(lua_State *L)
 {
 	lua_pushnumber(L, vmac_config_slot_us(&check_world(L)->w->cfg) / 1e6);
@@ -638,6 +657,9 @@ static int open_world(lua_State *L)
 	                                   {"config", l_config},
 	                                   {"slot", l_slot},
 	                                   {"driver_cost", l_driver_cost},
+	                                   {"clock", l_clock},
+	                                   {"set_clock", l_set_clock},
+	                                   {"clock_step", l_clock_step},
 	                                   {NULL, NULL}};
 	static const luaL_Reg funcs[] = {{"new", l_new}, {"wall", l_wall}, {"replay", l_replay}, {NULL, NULL}};
 	luaL_newmetatable(L, WORLD_MT);

@@ -216,7 +216,10 @@ static void deliver(struct vt_world *w, struct vt_pkt *p)
 			return;
 		vmac_board_poll(&b->fw, ms);
 		memset(&r, 0, sizeof(r));
-		len = vmac_board_receive(&b->fw, p->p.data, p->p.len, ms, r.p.data, sizeof(r.p.data));
+		/* Stamped by the board's counter as its receive path would: SYNC
+		 * feeds its clock with it (clocks.h). */
+		len = vmac_board_receive_at(&b->fw, p->p.data, p->p.len, ms, vt_clock_local_ns(w, b, 1), r.p.data,
+		                            sizeof(r.p.data));
 		if (len <= 0)
 			return;
 		record_service(w, b, w->now_ns);
@@ -243,17 +246,39 @@ static int step_plants(struct vt_world *w)
 		if (b->powered && vmac_board_poll(&b->fw, ms))
 			w->moved = 1; /* the watchdog turned the outputs off */
 	}
+	vt_clock_poll(w); /* holdover and lost come with time, not only with frames */
 	return rc;
+}
+
+/* ---- the boards' timed actions (docs/TIME.md, "What comes next") ----
+ * A board that acts at host instants arms its timer for an instant of its
+ * own counter; here that is one more kind of event, at the world time its
+ * counter reaches that instant (vt_clock_world_ns). The firmware's side
+ * (the board's next deadline, running what is due) is not in
+ * firmware/board.c yet: until it is, no board has an action waiting. */
+static int64_t next_board_action(const struct vt_world *w)
+{
+	(void)w;
+	return INT64_MAX;
+}
+
+/* Every board action due by now, its replies sent as deliver() sends them. */
+static void run_board_actions(struct vt_world *w)
+{
+	(void)w;
 }
 
 int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 {
 	while (w->now_ns < until_ns) {
 		int64_t next_tick = w->bus ? vmac_bus_virtual_next_tick(w->bus) : INT64_MAX, t = next_tick;
+		int64_t next_act = next_board_action(w);
 		if (w->next_plant_ns < t)
 			t = w->next_plant_ns;
 		if (w->nq > 0 && w->q[0].at < t)
 			t = w->q[0].at;
+		if (next_act < t)
+			t = next_act;
 		if (until_ns < t)
 			t = until_ns;
 		w->now_ns = t;
@@ -268,6 +293,10 @@ int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)
 			struct vt_pkt p;
 			pop(w, &p);
 			deliver(w, &p);
+			w->moved = 1;
+		}
+		if (t >= next_act) { /* after the frames of this instant: they may have set or cancelled one */
+			run_board_actions(w);
 			w->moved = 1;
 		}
 		if (t < next_tick && (w->bus || t < w->next_plant_ns - VT_PLANT_STEP_NS))
@@ -612,6 +641,7 @@ void vt_world_free(struct vt_world *w)
 	vmac_store_close(w->store);
 	for (i = 0; i < w->nboards; i++) {
 		vmac_sim_fini(&w->boards[i]->sim);
+		vt_clock_free(w->boards[i]);
 		free(w->boards[i]);
 	}
 	free(w->q);

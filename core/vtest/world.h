@@ -21,6 +21,7 @@
 #include "../mainloop/mainloop.h"
 #include "../sim/sim.h"
 #include "../store/store.h"
+#include "clocks.h"
 
 #define VT_WIRE_NS 50000LL          /* one way, host <-> board */
 #define VT_PLANT_STEP_NS 10000000LL /* physics and board watchdog grid: vmac-board's largest physics sub-step */
@@ -56,6 +57,7 @@ struct vt_board {
 	struct vmac_addr addr; /* synthetic, 10.77.0.N:5870 */
 	int plugged;           /* 0: frames to and from it are lost (its watchdog runs on) */
 	int powered;           /* 0: the board is off: silent, outputs off */
+	struct vt_clock clock; /* its free-running counter (clocks.h) */
 	struct vt_faults faults;
 	struct vt_service hist[VT_HISTORY];
 	unsigned nhist; /* services recorded so far (the last VT_HISTORY kept) */

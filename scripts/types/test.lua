@@ -11,6 +11,24 @@
 ---@field major? integer for machines of several boards
 ---@field minor? integer
 ---@field params? table<string, vmac.Value> driver params (driver.NAME.param.KEY)
+---@field clock? vmac.test.ClockSpec the board's oscillator (default: a perfect one)
+
+---A board's oscillator (TESTING.md, "Board clocks"); every field defaults to 0.
+---@class vmac.test.ClockSpec
+---@field ppm? number the counter runs fast by this much (negative: slow), -1000..1000
+---@field offset? number seconds: counter minus host time at the test's time 0, -900..900
+---@field jitter? number seconds: mean of the receive stamp's exponential delay (20e-6: 20 us), 0..0.01
+---@field wander? number ppm/sqrt(s): the drift's random walk (0.02: a poor crystal)
+
+---A board's clock now (b.clock): what the board's disciplined clock says, and the truth.
+---@class vmac.test.Clock
+---@field state "unsynced"|"locking"|"locked"|"holdover"|"lost"
+---@field offset? number seconds: the board's estimate of its counter minus host time (nil: unsynced, lost)
+---@field bound? number seconds: its error bound now
+---@field error? number seconds: its reading of host time less the true one (less the wire's 50 us)
+---@field drift_ppm? number the drift it learnt (nil: unsynced)
+---@field true_ppm number the counter's true drift now
+---@field syncs integer SYNC samples fed to it
 
 ---A host event, as GET /api/status gives it.
 ---@class vmac.test.Event
@@ -45,6 +63,7 @@
 ---@field out table<string, boolean|number> the same as io
 ---@field var table<string, vmac.Value|nil> the driver's published variables
 ---@field plant table<string, number|boolean> the plant's true state
+---@field clock vmac.test.Clock the board's clock now
 local Board = {}
 
 ---An operator action on the plant (value default 1); fails the test when unknown or out of range.
@@ -100,6 +119,10 @@ function Board:power_on() end
 ---Wire faults on this board's frames; faults{} clears them.
 ---@param spec vmac.test.Faults
 function Board:faults(spec) end
+
+---A step of the board's drift by ppm from now on (a change of temperature).
+---@param ppm number
+function Board:clock_step(ppm) end
 
 ---The board's last services (up to 32), oldest first.
 ---@return vmac.test.Service[]

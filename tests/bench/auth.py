@@ -130,7 +130,10 @@ FRAME_LINES = (("encode", "vmac_proto_encode, UPDATE request (baseline)"),
                ("open", "vmac_proto_open, sealed UPDATE reply"),
                ("record", "vmac_proto_cyclic_put, one record"),
                ("record_seal", "cyclic_put + vmac_proto_cyclic_seal_record"),
-               ("session_keys", "vmac_proto_session_keys (once a REGISTER)"))
+               ("session_keys", "vmac_proto_session_keys (once a REGISTER)"),
+               ("sync", "plain SYNC: encode + stamp"),
+               ("sync_sealed", "sealed SYNC, 100 keyed boards: stamp + 100 MACs"),
+               ("sync_open", "a board: decode + open its MAC, sealed SYNC"))
 
 
 def report_auth(a):
@@ -147,6 +150,9 @@ def report_auth(a):
               "a keyed device's tick on eth-cyclic adds %.0f ns (its record and its reply)" % (
                   ns["encode_seal"] - ns["encode"], ns["open"], ns["record_seal"] - ns["record"],
                   f["mac_ns_per_device_tick"]))
+        print("  a SYNC with 100 keyed boards: %.0f ns, %.1f x the plain SYNC in this run (%.1f ns a keyed board): "
+              "the stamp-to-send delay it adds, the same for every board of the frame" % (
+                  ns["sync_sealed"], ns["sync_sealed"] / ns["sync"], (ns["sync_sealed"] - ns["sync"]) / 100))
     c = a.get("cpu", {})
     if c.get("skipped"):
         print("authenticated frames, host CPU: SKIPPED: %s" % c["skipped"])

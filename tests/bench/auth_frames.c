@@ -13,6 +13,13 @@
  *   record+seal   the same in a sealed frame, then
  *                 vmac_proto_cyclic_seal_record (cyclic_put, keyed board)
  *   session keys  vmac_proto_session_keys (once a REGISTER, not a tick)
+ *   sync          a plain SYNC: vmac_proto_encode and vmac_proto_sync_stamp
+ *                 (send_sync and bus_flush, once per clock_sync_ms)
+ *   sync sealed   a sealed SYNC for SYNC_BOARDS keyed boards: begin, stamp
+ *                 and a MAC per board (send_sync_sealed and sync_stamp):
+ *                 what the stamp-to-send delay grows by
+ *   sync open     a board's side: vmac_proto_decode of that sealed SYNC and
+ *                 vmac_proto_sync_open of its own MAC (O(1))
  *
  * Each figure is the median of REPEATS runs of N operations, in ns per
  * operation. --json prints one JSON object instead of the table (bench.py
@@ -29,6 +36,7 @@
 #define REPEATS 7
 #define RECORDS VMAC_CYCLIC_AUTH_RECORDS_MAX /* one full sealed chunk, as 100 boards make */
 #define SESSION 0x00030025u
+#define SYNC_BOARDS VMAC_SYNC_AUTH_MACS_MAX /* one full sealed SYNC: 100 keyed boards */
 
 static const uint8_t key[VMAC_KEY_LEN] = {0x00, 0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77,
                                           0x88, 0x99, 0xaa, 0xbb, 0xcc, 0xdd, 0xee, 0xff};
@@ -137,6 +145,49 @@ static void op_session_keys(unsigned n)
 	}
 }
 
+static void op_sync(unsigned n)
+{
+	static uint8_t frame[VMAC_FRAME_MAX];
+	struct vmac_msg m;
+	unsigned i;
+	memset(&m, 0, sizeof(m));
+	m.version = 2;
+	m.channel = VMAC_CH_SYSTEM;
+	m.op = VMAC_SYS_SYNC;
+	for (i = 0; i < n; i++) {
+		m.seq = (uint16_t)i;
+		sink += (unsigned)vmac_proto_encode(&m, frame, sizeof(frame));
+		vmac_proto_sync_stamp(frame, 5000000000ull + i);
+		sink += frame[20];
+	}
+}
+
+static uint8_t sync_frame[VMAC_PACKET_MAX];
+static int sync_len;
+
+static void op_sync_sealed(unsigned n)
+{
+	unsigned i, b;
+	for (i = 0; i < n; i++) {
+		sync_len =
+		    vmac_proto_sync_begin_auth(sync_frame, sizeof(sync_frame), (uint16_t)i, i + 1, 0, SYNC_BOARDS);
+		vmac_proto_sync_stamp(sync_frame, 5000000000ull + i);
+		for (b = 0; b < SYNC_BOARDS; b++)
+			vmac_proto_sync_seal(sync_frame, b, to_board); /* one key for all: the same work as 100 */
+		sink += sync_frame[VMAC_SYNC_AUTH_HEAD_LEN + 8 * (SYNC_BOARDS - 1)];
+	}
+}
+
+static void op_sync_open(unsigned n)
+{
+	struct vmac_msg m;
+	unsigned i;
+	for (i = 0; i < n; i++) {
+		sink += (unsigned)vmac_proto_decode(sync_frame, (size_t)sync_len, &m);
+		sink += (unsigned)vmac_proto_sync_open(&m, (uint16_t)(i % SYNC_BOARDS), to_board);
+	}
+}
+
 static int cmp_double(const void *a, const void *b)
 {
 	double x = *(const double *)a, y = *(const double *)b;
@@ -196,6 +247,9 @@ static const struct {
     {"record", "vmac_proto_cyclic_put, one CYCLIC record", op_record, 1},
     {"record_seal", "cyclic_put + vmac_proto_cyclic_seal_record, one record", op_record_seal, 1},
     {"session_keys", "vmac_proto_session_keys (once a REGISTER)", op_session_keys, 4},
+    {"sync", "plain SYNC: encode + vmac_proto_sync_stamp", op_sync, 1},
+    {"sync_sealed", "sealed SYNC, 100 keyed boards: begin, stamp, 100 MACs", op_sync_sealed, 100},
+    {"sync_open", "a board: decode + vmac_proto_sync_open, sealed SYNC", op_sync_open, 1},
 };
 #define NOPS (sizeof(ops) / sizeof(ops[0]))
 
@@ -230,5 +284,7 @@ int main(int argc, char **argv)
 		printf("%-58s %9.1f %9.2f\n", ops[i].what, ns[i], ns[i] / ns[0]);
 	printf("the MAC alone: seal %.1f ns a request, open %.1f ns a reply, %.1f ns a record\n", ns[1] - ns[0], ns[3],
 	       ns[5] - ns[4]);
+	printf("a SYNC with %d keyed boards: %.1f ns, %.1f x the plain SYNC; %.1f ns a keyed board\n", SYNC_BOARDS,
+	       ns[8], ns[8] / ns[7], (ns[8] - ns[7]) / SYNC_BOARDS);
 	return 0;
 }

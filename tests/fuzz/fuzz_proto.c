@@ -70,7 +70,8 @@ static void check_board(const struct vmac_board *b, const struct fake_io *io)
  * records read back one by one; a record out of range is refused on reading
  * and copied raw. An authenticated frame is encoded plain and given its
  * trailer (or its records their MACs) from the input: the MACs themselves
- * are the auth tests' (tests/unit/test_auth.c), not the codec's. */
+ * are the auth tests' (tests/unit/test_auth.c), not the codec's. The
+ * sealed SYNC is built in place, as CYCLIC, its MACs copied. */
 static void check_codec(const uint8_t *data, size_t size)
 {
 	struct vmac_msg msg;
@@ -102,6 +103,18 @@ static void check_codec(const uint8_t *data, size_t size)
 			if (auth)
 				memcpy(again + at + 6, data + at + 6, len - 6);
 		}
+		if (memcmp(again, data, size) != 0)
+			abort();
+		return;
+	}
+	if (auth && msg.channel == VMAC_CH_SYSTEM && msg.op == VMAC_SYS_SYNC) {
+		/* the sealed SYNC: built in place too, its MACs copied */
+		n = vmac_proto_sync_begin_auth(again, sizeof(again), msg.seq, msg.counter, msg.u.sync.first,
+		                               msg.u.sync.count);
+		if (n < 0 || (size_t)n != size)
+			abort();
+		vmac_proto_sync_stamp(again, msg.u.sync.host_ns);
+		memcpy(again + VMAC_SYNC_AUTH_HEAD_LEN, data + VMAC_SYNC_AUTH_HEAD_LEN, size - VMAC_SYNC_AUTH_HEAD_LEN);
 		if (memcmp(again, data, size) != 0)
 			abort();
 		return;

@@ -6,7 +6,8 @@ with GET /api/status, a board whose process is killed is dropped and its
 series change as Prometheus sees them, a stopped host is up == 0, and every
 PromQL expression of the example Grafana dashboard
 (docs/grafana/vmac-dashboard.json) parses and runs. Beside it: promtool
-check metrics on a scraped body, the token the route needs, the listener
+check metrics on a scraped body, the boards' clock series there exactly
+for the boards whose status has a clock, the token the route needs, the listener
 without a token (metrics_http) and the MQTT client's series. Without
 prometheus (promtool comes with it) every test here is SKIPPED (a failure
 under CI=true)."""
@@ -190,6 +191,30 @@ def dashboard_exprs(values):
     return out
 
 
+def board_clocks_agree(got, before, after):
+    """A board's clock series (vmac_board_clock_*) are there exactly for the
+    boards whose status has a clock (one sent a TIMED reply), with its state
+    1 and the four others 0; none for a board whose clock is null. A clock
+    is never unknown again once known: the status before the scrape says
+    who must have one, the status after who cannot."""
+    by_board = {}
+    for (name, labels), value in got.items():
+        if name.startswith("vmac_board_clock_") or name == "vmac_board_services_total":
+            by_board.setdefault(dict(labels)["board"], []).append((name, dict(labels), value))
+    for d in after["devices"]:
+        if d.get("clock") is None:
+            assert d["name"] not in by_board, "%s has no clock, but series %s" % (d["name"], by_board[d["name"]])
+    for d in before["devices"]:
+        if d.get("clock") is None:
+            continue
+        series = by_board.get(d["name"], [])
+        states = {lab["state"]: v for n, lab, v in series if n == "vmac_board_clock_state"}
+        assert sorted(states) == sorted(["unsynced", "locking", "locked", "holdover", "lost"]), series
+        assert sum(states.values()) == 1, "%s's clock states: %s" % (d["name"], states)
+        timing = {lab["timing"] for n, lab, v in series if n == "vmac_board_services_total"}
+        assert timing == {"timed", "arrival"}, series
+
+
 def test_metrics_of_the_kitchen_through_prometheus(t):
     tool("promtool")
     host = t.host()
@@ -269,9 +294,12 @@ def test_metrics_of_the_kitchen_through_prometheus(t):
     assert host.device("washer-1")["drops"] == one(washer_drops, "drops") + 1, "the status's drops of washer-1"
 
     # A scraped body passes promtool's own checks (format and naming lint).
+    before = host.status()
     code, ctype, body = scrape(host.http, t.token)
+    after = host.status()
     assert code == 200 and ctype == CONTENT_TYPE, "GET /metrics: %d %s" % (code, ctype)
     promtool_check(body)
+    board_clocks_agree(samples(body), before, after)
 
     # The host stops: Prometheus says so.
     host.signal(signal.SIGTERM)

@@ -387,8 +387,20 @@ def test_mqtt_ha_kitchen_configs_follow_home_assistant(t):
     hub = base.Hub(broker)
     try:
         for name in KITCHEN_NAMES:
-            hub.wait("%s/%s/_health" % (PREFIX, name), what="%s's health" % name)
+            health = json.loads(hub.wait("%s/%s/_health" % (PREFIX, name), what="%s's health" % name))
+            # The board's clock as the Clock sensors read it: null until it
+            # sends a TIMED reply (a clock known now may be newer than the health).
+            clock = host.device(name).get("clock")
+            assert {"clock_state", "clock_bound_us", "clock_on_arrival"} <= set(health), health
+            assert health["clock_state"] in ((None,) if clock is None else (
+                None, "unsynced", "locking", "locked", "holdover", "lost")), (health, clock)
         hub.config("event", "washer-1", "_event")
+        state = hub.config("sensor", "washer-1", "_health_clock_state")
+        assert (state["device_class"], state["entity_category"], state["value_template"]) == (
+            "enum", "diagnostic", "{{ value_json.clock_state }}"), state
+        assert state["options"] == ["unsynced", "locking", "locked", "holdover", "lost"], state
+        bound = hub.config("sensor", "washer-1", "_health_clock_bound_us")
+        assert (bound["unit_of_measurement"], bound["state_class"]) == ("µs", "measurement"), bound
         temp = hub.config("sensor", "washer-1", "temp_c")
         assert (temp["device_class"], temp["state_class"], temp["suggested_display_precision"]) == (
             "temperature", "measurement", 1), temp

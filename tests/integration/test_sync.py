@@ -4,12 +4,21 @@ whose simulated counters run fast and slow by 200 ppm, seconds apart, with
 20 us of receive jitter. Each board locks onto the host's clock, says so
 with its own timestamp, and holds over, then is lost, when the host stops.
 Boards that cannot use SYNC (version 1) and boards started as before (no
-clock options) are served as ever and count nothing malformed."""
+clock options) are served as ever and count nothing malformed. A keyed
+board takes only the host's sealed SYNC (its MAC judged here by libsodium,
+not the host's code), an unkeyed one only the plain SYNC, and a forged
+SYNC moves no keyed board's clock."""
 
+import os
 import re
 import signal
+import socket
+import struct
+import threading
+import time
 
-from harness import KITCHEN, KITCHEN_NAMES
+import frames
+from harness import KITCHEN, KITCHEN_NAMES, Skip, bus_socket
 
 # 1 ms slots so that a SYNC goes out every millisecond (at most one a tick),
 # the rate the clock's filter is made for; the tests' relaxed deadlines stay.
@@ -139,8 +148,10 @@ def test_version_1_and_plain_boards_are_unaffected(t):
                 int(status[-1].group(5)) > 0, \
                 "the version-1 board: %s (want unsynced, SYNC ignored)" % status[-1].group(0)
         else:
-            assert int(status[-1].group(3)) > 0 and int(status[-1].group(5)) == 0, \
-                "the plain board: %s (want SYNC accepted)" % status[-1].group(0)
+            # keyed (the harness enrolls it): it takes the host's sealed
+            # SYNC and ignores the plain one beside it, one a period
+            assert int(status[-1].group(3)) > 0 and int(status[-1].group(5)) > 0, \
+                "the keyed board: %s (want sealed SYNC accepted, plain ignored)" % status[-1].group(0)
 
 
 def test_boards_lock_onto_the_host_on_raw_ethernet(t):
@@ -162,3 +173,159 @@ def test_boards_lock_onto_the_host_on_raw_ethernet(t):
             "%s locked at %s (its counter: -1.5 s, -150 ppm)" % (name, locked.group(0))
     c = host.status()["counters"]
     assert c["syncs"] > 0 and c["malformed_frames"] == 0, "host counters: %r" % c
+
+
+SYNC_OP = 0x05
+SEALED_HEAD = frames.HDR_LEN + 8 + 4 + 2  # header, host_ns, counter, first: then 8-byte MACs
+
+
+class Listener:
+    """Every system frame of the host on the bus, from now on, kept as
+    (bytes, arrival) in a thread of its own."""
+
+    def __init__(self, bus):
+        self.sock = bus_socket(bus, 0.1)
+        self.got = []
+        self.stop = False
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self):
+        while not self.stop:
+            try:
+                data, _ = self.sock.recvfrom(2048)
+            except socket.timeout:
+                continue
+            if len(data) >= frames.HDR_LEN and data[10] == frames.SYS and not data[3] & frames.REPLY:
+                self.got.append(data)
+
+    def close(self):
+        self.stop = True
+        self.thread.join(5)
+        self.sock.close()
+
+    def syncs(self, sealed):
+        return [d for d in self.got if d[11] == SYNC_OP and bool(d[3] & frames.AUTH) == sealed]
+
+
+def sync_mac(frame, offset):
+    """The MAC a sealed SYNC carries for offset (None: not in the frame)."""
+    first, count = struct.unpack_from(">H", frame, SEALED_HEAD - 2)[0], frame[12]
+    if not first <= offset < first + count:
+        return None
+    at = SEALED_HEAD + 8 * (offset - first)
+    return frame[at:at + 8]
+
+
+def exit_clock_line(board, name):
+    board.signal(signal.SIGTERM)
+    assert board.wait_exit(30) == 0, "%s did not exit cleanly" % name
+    status = [CLOCK_STATUS.match(l.text) for l in board.find_lines(r"^%s: clock .*; sync accepted" % name)]
+    assert status and status[-1], "%s printed no clock line at exit" % name
+    return status[-1]
+
+
+def test_a_keyed_board_takes_only_the_hosts_sealed_sync(t):
+    """The host's sealed SYNC read by libsodium (PyNaCl): each carries a MAC
+    for the keyed board's offset under its session's to_board key (made from
+    its enrolled key, the nonce of the DISCOVER it answered and its device
+    id), over the frame's head and that offset, with a counter that grows;
+    its host_ns is the plain SYNC's of the same seq. The board locks on it.
+    Then SYNC frames forged by the test, plain ones half a second ahead and
+    the host's own sealed ones replayed or with their time moved, move
+    nothing: no clock line, the same offset at exit, each counted."""
+    if frames.NACL is None:
+        raise Skip("PyNaCl (Debian python3-nacl) is missing: the host's MACs are judged with libsodium")
+    host = t.host(settings=SYNC_SETTINGS)
+    heard = Listener(t.bus)  # before the board: the DISCOVER it answers
+    try:
+        board = t.board("washer", "washer-1", extra=["--clock-ppm", "100", "--clock-offset", "3.5",
+                                                     "--clock-jitter-us", str(JITTER_US)])
+        host.wait_running(["washer-1"])
+        locked, line = clock_line(board, "washer-1", "locked", 30)
+        d = host.device("washer-1")
+        offset, device_id = d["offset"], d["id"]
+        time.sleep(0.3)
+    finally:
+        heard.close()
+    with open(os.path.join(t.keys, "washer-1.key")) as f:
+        key = bytes.fromhex(f.read().strip())
+    nonces = [d[frames.HDR_LEN:frames.HDR_LEN + 8] for d in heard.got if d[11] == frames.DISCOVER and d[12] == 8]
+    sealed = [f for f in heard.syncs(True) if sync_mac(f, offset) not in (None, bytes(8))]
+    assert len(sealed) >= 100, "only %d sealed SYNC frames for the board's offset" % len(sealed)
+    to_board = None
+    for nonce in nonces:
+        k = frames.session_keys(key, nonce, device_id)[0]
+        if frames.siphash(k, sealed[-1][:SEALED_HEAD] + struct.pack(">H", offset)) == sync_mac(sealed[-1], offset):
+            to_board = k
+    assert to_board, "the last sealed SYNC's MAC at offset %d opens under no session key of the %d nonces heard" % (
+        offset, len(nonces))
+    plain = {struct.unpack_from(">H", f, 4)[0]: f[frames.HDR_LEN:frames.HDR_LEN + 8] for f in heard.syncs(False)}
+    session = [f for f in sealed if frames.siphash(to_board, f[:SEALED_HEAD] + struct.pack(">H", offset)) ==
+               sync_mac(f, offset)]
+    counters = [struct.unpack_from(">I", f, frames.HDR_LEN + 8)[0] for f in session]
+    assert len(session) >= 100 and all(b > a for a, b in zip(counters, counters[1:])), \
+        "%d sealed SYNC of the session, counters %r..." % (len(session), counters[:5])
+    paired = 0
+    for f in session[-51:-1]:  # the last one's plain twin may have come after the listener stopped
+        seq = struct.unpack_from(">H", f, 4)[0]
+        assert f[2] == 2 and f[3] == frames.AUTH and len(f) == SEALED_HEAD + 8 * f[12], "sealed SYNC %s" % f.hex()
+        if seq in plain:
+            paired += 1
+            assert plain[seq] == f[frames.HDR_LEN:frames.HDR_LEN + 8], \
+                "sealed SYNC seq %d: host_ns %s, the plain SYNC's %s" % (seq, f[13:21].hex(), plain[seq].hex())
+    assert paired >= 40, "only %d of the last 50 sealed SYNC had a plain SYNC of the same seq" % paired
+
+    # Forgeries: plain SYNC 0.5 s ahead of the host, at 1 kHz for 0.3 s
+    # (an unkeyed board would go locking on them); the host's sealed SYNC
+    # replayed, and with its host_ns moved by 10 us (the MAC now wrong).
+    mark = line.index + 1
+    group, port = t.bus.rsplit(":", 1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    forged = 300
+    try:
+        for i in range(forged):
+            host_ns = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 500000000
+            s.sendto(frames.frame(SYNC_OP, struct.pack(">Q", host_ns), channel=frames.SYS, seq=i, version=2),
+                     (group, int(port)))
+            old = session[i % len(session)]
+            s.sendto(old, (group, int(port)))
+            moved = struct.unpack_from(">Q", old, frames.HDR_LEN)[0] + 10000
+            s.sendto(old[:frames.HDR_LEN] + struct.pack(">Q", moved) + old[frames.HDR_LEN + 8:], (group, int(port)))
+            time.sleep(0.001)
+    finally:
+        s.close()
+    time.sleep(0.5)
+    moved_lines = [l.text for l in board.find_lines(r"^washer-1: clock ", since=mark)]
+    assert not [l for l in moved_lines if "locking" in l or "lost" in l], \
+        "forged SYNC moved the keyed board's clock: %r" % moved_lines
+    end = exit_clock_line(board, "washer-1")
+    assert abs(float(re.search(r"offset ([-+][0-9.]+) s", end.group(0)).group(1)) - 3.5) <= OFFSET_TOLERANCE_S, \
+        "the keyed board's clock at exit: %s (its counter is 3.5 s ahead; forged SYNC said 4.0)" % end.group(0)
+    assert int(end.group(5)) >= forged, "the board ignored %s SYNC frames, %d plain ones were forged" % (
+        end.group(5), forged)
+    counters_line = [COUNTERS.match(l.text) for l in board.find_lines(r"^washer-1: frames ok ")]
+    assert counters_line and counters_line[-1] and int(counters_line[-1].group(6)) >= 2 * forged, \
+        "the board counted %s frames failing authentication, %d sealed SYNC were replayed or moved" % (
+            counters_line[-1].group(6) if counters_line and counters_line[-1] else None, 2 * forged)
+
+
+def test_an_open_bus_syncs_keyed_and_unkeyed_boards_each_by_its_frame(t):
+    """bus_trust open, a keyed and an unkeyed board: the host sends the plain
+    SYNC and the sealed one; each board locks, the keyed one on the sealed
+    frame (ignoring the plain), the unkeyed one on the plain (ignoring the
+    sealed)."""
+    host = t.host(settings=dict(SYNC_SETTINGS, bus_trust="open"))
+    plain = t.board("lights", "plain-1", keyed=False)
+    sealed = t.board("lights", "sealed-1")
+    host.wait_running(["plain-1", "sealed-1"])
+    for name, board in (("plain-1", plain), ("sealed-1", sealed)):
+        clock_line(board, name, "locked", 30)
+    c = host.status()["counters"]
+    assert c["syncs"] > 0 and c["syncs_sealed"] > 0 and c["malformed_frames"] == 0, "host counters: %r" % c
+    for name, board in (("plain-1", plain), ("sealed-1", sealed)):
+        end = exit_clock_line(board, name)
+        assert int(end.group(3)) > 0 and int(end.group(5)) > 0, \
+            "%s: %s (want its own SYNC accepted, the other kind ignored)" % (name, end.group(0))

@@ -295,6 +295,53 @@ def test_selection_and_seed(t):
     assert traces[0] != traces[2], "--seed 7 and --seed 8 give the same trace of a lossy link"
 
 
+def test_board_clocks_lock_and_repeat_under_a_seed(t):
+    """Board clocks in virtual time (tests/vtest/cases/clocks.lua): two
+    boards at +-100 ppm and seconds apart lock onto the virtual bus's SYNC
+    within 2 s, read back their offsets and bounds, hold over, are lost and
+    lock again, track a step of drift; the same seed prints the same numbers,
+    another seed others; mistakes in the clock API fail at the test's line."""
+    runs = []
+    for i, seed in enumerate(("5", "5", "6")):
+        rc, out, err = vtest(t, "vtest-clocks-%d" % i, "--seed", seed, case("clocks"))
+        assert rc == 1, "clocks.lua --seed %s: exit %d, expected 1 (two tests fail on purpose)\n%s%s" % (
+            seed, rc, out, err)
+        runs.append(out)
+    out = runs[0]
+    for name in ("two boards at +-100 ppm, seconds apart, lock within 2 s",
+                 "without SYNC a board holds over within its bound, then is lost",
+                 "a step of drift (temperature) is tracked",
+                 "a board without a clock of its own has a perfect one; SYNC is off unless asked",
+                 "a perfect clock locks onto SYNC"):
+        assert re.search(r"ok\s+%s" % re.escape(name), out), "%r fails:\n%s" % (name, out)
+    for name, line, message in (
+            ("a clock beyond 1000 ppm", 91, "board{...}: clock: ppm must be in -1000..1000, got 5000"),
+            ("a clock step out of range", 96, "b:clock_step: a step of 200 ppm takes the drift from 900 to 1100 ppm, "
+             "beyond +-1000")):
+        assert re.search(r"FAIL\s+%s\n\s+at \S*clocks\.lua:%d\n\s+%s" % (re.escape(name), line, re.escape(message)),
+                         out), "%r: not reported at line %d with %r:\n%s" % (name, line, message, out)
+    assert "runner.lua" not in out, "a line of the runner shows:\n%s" % out
+
+    m = re.search(r"^clock locked after ([\d.]+) s$", out, re.M)
+    assert m and float(m.group(1)) <= 2.0, "the two boards did not lock within 2 s:\n%s" % out
+    for board, offset in (("lights-1", 2.5), ("lights-2", -3.25)):
+        m = re.search(r"^clock %s at lock: locked offset (-?[\d.]+) s bound ([\d.]+) us error (-?[\d.]+) us" % board,
+                      out, re.M)
+        assert m, "no clock line of %s at lock:\n%s" % (board, out)
+        got, bound, error = (float(g) for g in m.groups())
+        assert abs(got - offset) < 1e-3, "%s's offset at lock: %.9f s, set %g s" % (board, got, offset)
+        assert 0 < bound <= 10 and abs(error) <= bound, "%s at lock: bound %.3f us, error %.3f us" % (
+            board, bound, error)
+
+    def numbers(text):
+        return [ln for ln in text.splitlines() if ln.startswith("clock ")]
+    assert len(numbers(runs[0])) >= 8, "too few clock lines:\n%s" % runs[0]
+    assert numbers(runs[0]) == numbers(runs[1]), "two runs with --seed 5 differ:\n%s\n---\n%s" % (
+        "\n".join(numbers(runs[0])), "\n".join(numbers(runs[1])))
+    assert numbers(runs[0]) != numbers(runs[2]), "--seed 5 and --seed 6 print the same clocks:\n%s" % (
+        "\n".join(numbers(runs[0])))
+
+
 def test_a_driver_of_ones_own(t):
     """What docs/TESTING.md walks through: a driver and its test in a folder
     of one's own, run with --drivers."""

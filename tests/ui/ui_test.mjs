@@ -202,6 +202,23 @@ async function main() {
       }
     });
 
+    await check("a board's clock shows in its card exactly when the status has one (none while null)", async () => {
+      // The live kitchen: whatever the host says of each board's clock now.
+      const s = await status(addr, operate);
+      await page.waitForTimeout(500); // a status or two after that one
+      for (const name of ["washer-1", "dish-1", "lights-1", "dryer-1"]) {
+        const d = s.devices.find((x) => x.name === name);
+        const shown = await page.locator(`[data-device="${name}"] [data-clock="${name}"]`).count();
+        if (!d.clock && shown) throw new Error(`${name}'s clock is null, its card shows one`);
+        if (d.clock && !shown) throw new Error(`${name} has a clock (${JSON.stringify(d.clock)}), its card shows none`);
+        if (!d.clock && await page.isVisible(`[data-device="${name}"] [data-clocks]`)) {
+          throw new Error(`${name}'s card shows an empty clocks line`);
+        }
+      }
+    });
+
+    await clocks(browser, addr, operate);
+
     await check("the dryer's card, user content: title, temperature in °C, lamps, plots, programmes", async () => {
       const card = '[data-device="dryer-1"]';
       const title = await page.textContent(`${card} .title`);
@@ -372,6 +389,61 @@ async function main() {
   } finally {
     await browser.close();
   }
+}
+
+// The boards' clocks from a recorded status (the live host's, with clocks
+// put in as GET /api/status gives them once boards send TIMED replies;
+// docs/API.md), served to a page of its own in place of GET /api/live:
+// dish-1 locked, lights-1 in holdover acting on arrival with its bound
+// unknown, and a second board of lights-1 (lights-io) locking, shown by
+// name in lights-1's card; the washer's clock null: nothing in its card.
+async function clocks(browser, addr, tok) {
+  await check("a status with clocks: each board's badge, on arrival, bound and offset; none where null", async () => {
+    const rec = await status(addr, tok);
+    const dev = (name) => rec.devices.find((d) => d.name === name);
+    const clock = (state, extra) => Object.assign({ state, on_arrival: false, bound_us: 1.5, offset_s: 3.5,
+      latched_at: 12.5, services_timed: 100, services_on_arrival: 0 }, extra);
+    dev("dish-1").clock = clock("locked");
+    dev("lights-1").clock = clock("holdover", { on_arrival: true, bound_us: null, offset_s: -0.00025 });
+    dev("washer-1").clock = null;
+    rec.devices.push(Object.assign({}, dev("lights-1"), { name: "lights-io", machine: "lights-1",
+      clock: clock("locking", { bound_us: 840 }) }));
+    const cp = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+    cp.on("pageerror", (e) => { tally.failures++; console.log("FAIL the clocks page raised: " + e.message); });
+    await cp.route("**/api/live", (r) => r.fulfill({ status: 200, contentType: "text/event-stream",
+      body: "data: " + JSON.stringify(rec) + "\n\n" }));
+    try {
+      await cp.goto(`http://${addr}/#token=${tok}`);
+      const dish = '[data-device="dish-1"] [data-clock="dish-1"]';
+      await cp.waitForSelector(`${dish}[data-clock-state="locked"] .badge.clock-locked:text-is("clock locked")`,
+        { timeout: 10000 });
+      const text = (sel) => cp.textContent(sel).then((t) => t.trim());
+      if (await text(`${dish} [data-clock-bound]`) !== "±1.5 µs") throw new Error("dish-1's bound: " +
+        await text(`${dish} [data-clock-bound]`));
+      if (await text(`${dish} [data-clock-offset]`) !== "offset +3.500 s") throw new Error("dish-1's offset: " +
+        await text(`${dish} [data-clock-offset]`));
+      if (await cp.locator(`${dish} [data-clock-arrival]`).count()) throw new Error("dish-1 said on arrival");
+      if (await cp.locator(`${dish} .clock-board`).count()) throw new Error("a one-board machine names its board");
+      if (!/locked/.test(await cp.getAttribute(dish, "title") || "")) throw new Error("dish-1's clock has no title");
+      const lights = '[data-device="lights-1"]';
+      const own = `${lights} [data-clock="lights-1"][data-clock-state="holdover"]`;
+      await cp.waitForSelector(`${own} [data-clock-arrival]:text-is("on arrival")`, { timeout: 5000 });
+      if (await text(`${own} [data-clock-bound]`) !== "bound unknown") throw new Error("lights-1's unknown bound: " +
+        await text(`${own} [data-clock-bound]`));
+      if (await text(`${own} [data-clock-offset]`) !== "offset -250 µs") throw new Error("lights-1's offset: " +
+        await text(`${own} [data-clock-offset]`));
+      const io = `${lights} [data-clock="lights-io"][data-clock-state="locking"]`;
+      if (await text(`${io} .clock-board`) !== "lights-io") throw new Error("lights-io not named in lights-1's card");
+      if (await text(`${io} [data-clock-bound]`) !== "±840 µs") throw new Error("lights-io's bound: " +
+        await text(`${io} [data-clock-bound]`));
+      if (await cp.locator('[data-device="lights-io"]').count()) throw new Error("lights-io has a card of its own");
+      if (await cp.locator('[data-device="washer-1"] [data-clock]').count() ||
+          await cp.isVisible('[data-device="washer-1"] [data-clocks]')) throw new Error("washer-1 shows a null clock");
+      await cp.screenshot({ path: path.join(OUT, "3c-clocks.png"), fullPage: true });
+    } finally {
+      await cp.close();
+    }
+  });
 }
 
 // A board without a key (shed-light) waits for approval: the operate page

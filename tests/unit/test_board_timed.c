@@ -37,7 +37,7 @@ static struct {
 	struct vmac_outputs driven;
 	int writes;
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
-	uint32_t host_counter;
+	uint32_t host_counter, sync_counter;
 	uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int reply_len;
 	struct vmac_msg answer;
@@ -131,17 +131,34 @@ static int send_msg(struct vmac_msg *m)
 /* n SYNC frames, one a millisecond, exact: the host's time in each. */
 static void sync_frames(int n)
 {
-	int k;
+	uint8_t buf[VMAC_PACKET_MAX];
+	int k, len;
 	for (k = 0; k < n; k++) {
-		struct vmac_msg m = msg(2, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, 0, (uint16_t)k);
-		m.u.sync.host_ns = rig.host_ns;
-		ck_assert_int_eq(send_msg(&m), 0);
+		if (rig.board.id.keyed) { /* the sealed SYNC, its MAC at our offset: all a keyed board takes */
+			len = vmac_proto_sync_begin_auth(buf, sizeof(buf), (uint16_t)k, ++rig.sync_counter, OFFSET, 1);
+			ck_assert_int_gt(len, 0);
+			vmac_proto_sync_stamp(buf, rig.host_ns);
+			vmac_proto_sync_seal(buf, 0, rig.to_board);
+		} else {
+			struct vmac_msg m = msg(2, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, 0, (uint16_t)k);
+			m.u.sync.host_ns = rig.host_ns;
+			len = vmac_proto_encode(&m, buf, sizeof(buf));
+			ck_assert_int_gt(len, 0);
+		}
+		ck_assert_int_eq(deliver(buf, (size_t)len), 0);
 		rig.host_ns += MS;
 	}
 }
 
-/* A board (keyed or not), its clock locked (locked 0: never synced), in a
- * session at OFFSET with a watchdog of 500 ms. */
+static void expect_locked(void)
+{
+	ck_assert_msg(rig.board.clock.state == VMAC_CLOCK_LOCKED, "the clock did not lock in 1.5 s: %s",
+	              vmac_clock_state_name(rig.board.clock.state));
+}
+
+/* A board (keyed or not), its clock locked (locked 0: never synced) by
+ * plain SYNC before its session, or keyed by the sealed SYNC in it, in a
+ * session at OFFSET with a watchdog of 500 ms (keyed: 60 s). */
 static void start_skewed(int keyed, int locked, int64_t skew)
 {
 	struct vmac_board_identity id;
@@ -160,10 +177,9 @@ static void start_skewed(int keyed, int locked, int64_t skew)
 	vmac_board_init(&rig.board, &id, &hal, NULL, now_ms());
 	rig.board.acted = acted;
 	vmac_proto_session_keys(key, nonce, SESSION, rig.to_board, rig.to_host);
-	if (locked) {
+	if (locked && !keyed) {
 		sync_frames(1500);
-		ck_assert_msg(rig.board.clock.state == VMAC_CLOCK_LOCKED, "the clock did not lock in 1.5 s: %s",
-		              vmac_clock_state_name(rig.board.clock.state));
+		expect_locked();
 	}
 	m = msg(1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 1);
 	m.u.discover.has_nonce = (uint8_t)keyed;
@@ -171,12 +187,16 @@ static void start_skewed(int keyed, int locked, int64_t skew)
 	ck_assert_int_gt(send_msg(&m), 0);
 	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, SESSION, 2);
 	m.u.reg.major = 3;
-	m.u.reg.watchdog_ms = 500;
+	m.u.reg.watchdog_ms = keyed ? 60000 : 500; /* keyed: its clock locks in the session, 1.5 s */
 	ck_assert_int_gt(send_msg(&m), 0);
 	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_OFFSET, SESSION, 3);
 	m.u.offset = OFFSET;
 	ck_assert_int_gt(send_msg(&m), 0);
 	ck_assert_int_eq(rig.board.state, VMAC_BOARD_KNOWN);
+	if (locked && keyed) { /* no key to check a SYNC with before its session and offset */
+		sync_frames(1500);
+		expect_locked();
+	}
 	rig.writes = 0;
 	rig.nacts = 0;
 }
@@ -479,25 +499,22 @@ START_TEST(a_keyed_board_takes_timed_records_sealed_and_seals_its_answer)
 	ck_assert_int_eq(deliver(buf, (size_t)n), 0);
 	expect_nothing_waits("a sealed TIMED record whose out_at was changed");
 	ck_assert_int_eq(rig.writes, 0);
-	/* Its clock is locked, but fed by unsealed SYNC: it acts on arrival,
-	 * says so, and seals its answer. */
-	ck_assert_int_gt(timed(6, VMAC_CYCLIC_DUE, 0x05, 0, t + MS, t + MS), 0);
+	/* Its clock locked by the sealed SYNC: the outputs and the latch wait
+	 * for their instant, the answer sealed. */
+	ck_assert_int_eq(timed(6, VMAC_CYCLIC_DUE, 0x05, 0, t + MS, t + MS), 0);
+	ck_assert_int_eq(rig.writes, 0);
+	ck_assert_int_gt(run_due_at(t + MS), 0);
 	ck_assert_msg(rig.answer.flags == (VMAC_FLAG_REPLY | VMAC_FLAG_TIMED | VMAC_FLAG_AUTH),
 	              "a keyed board's TIMED reply has flags 0x%02x, want 0x07", rig.answer.flags);
-	expect_timed_reply(6, 0x05, VMAC_CLOCK_LOCKED | VMAC_CLOCK_ARRIVAL, "sealed, SYNC not");
-	ck_assert_msg(rig.answer.latch.latched_at != 0, "a locked clock says when, even on arrival");
+	expect_timed_reply(6, 0x05, VMAC_CLOCK_LOCKED, "sealed, at the instant");
+	ck_assert_msg(llabs(diff(rig.answer.latch.latched_at, t + MS)) <= 1000, "latched_at off the instant");
 	expect_nothing_waits("a keyed board");
 	vmac_report_init(&rep, &rig.board, &none, 0);
 	rig.board.timed.mode = VMAC_TIMED_MODE_NONE;
 	rep.timed = VMAC_TIMED_MODE_NONE;
-	timed(7, 0, 0x01, 0, t + MS, t + MS);
+	timed(7, 0, 0x01, 0, t + 2 * MS, t + 2 * MS);
 	ck_assert_int_eq(vmac_report_next(&rep, &rig.board, &none, line, sizeof(line)), 1);
-	ck_assert_str_eq(line, "motor-1: acting on arrival (clock locked, SYNC not sealed)");
-	/* Were its clock trusted (sealed SYNC), it would wait for the instant:
-	 * the same board, its key forgotten for the clock's sake only. */
-	rig.board.id.keyed = 0;
-	ck_assert_int_eq(vmac_board_clock_trusted(&rig.board), 1);
-	rig.board.id.keyed = 1;
+	ck_assert_str_eq(line, "motor-1: acting at host instants");
 }
 END_TEST
 

@@ -1,7 +1,8 @@
 /* Unit tests of what vmacd says on MQTT and reads back (core/mqtt; docs/MQTT.md,
  * "Payloads" and "Conformance: payloads and topics"): values as text, command
- * payloads untyped and typed by their declaration, and the site view's reading
- * of the native topics. White-box: core/mqtt/mqtt_internal.h. */
+ * payloads untyped and typed by their declaration, the site view's reading
+ * of the native topics, and a board's clock in a machine's health and its
+ * Home Assistant sensors. White-box: core/mqtt/mqtt_internal.h. */
 #include <check.h>
 #include <jansson.h>
 #include <math.h>
@@ -417,6 +418,71 @@ START_TEST(ui_url_from_the_setting_or_the_http_address)
 }
 END_TEST
 
+/* A machine's _health ends with its primary board's clock: null until it
+ * sends a TIMED reply (HA reads None as unknown), then its state, its
+ * bound in us (null while unknown) and whether it acted on arrival. */
+START_TEST(health_says_the_board_clock_or_null)
+{
+	struct vmac_board_clock_status c;
+	char out[160];
+	memset(&c, 0, sizeof(c));
+	c.state = 2;
+	c.bound_ns = 1500;
+	mqtt_health_clock_fields(&c, out, sizeof(out));
+	ck_assert_str_eq(out, ",\"clock_state\":null,\"clock_bound_us\":null,\"clock_on_arrival\":null");
+	c.known = 1;
+	mqtt_health_clock_fields(&c, out, sizeof(out));
+	ck_assert_str_eq(out, ",\"clock_state\":\"locked\",\"clock_bound_us\":1.5,\"clock_on_arrival\":false");
+	c.state = 3;
+	c.on_arrival = 1;
+	c.bound_ns = 0xFFFFFFFFu;
+	mqtt_health_clock_fields(&c, out, sizeof(out));
+	ck_assert_str_eq(out, ",\"clock_state\":\"holdover\",\"clock_bound_us\":null,\"clock_on_arrival\":true");
+	c.state = 9; /* not a state: said as none rather than a wrong one */
+	mqtt_health_clock_fields(&c, out, sizeof(out));
+	ck_assert_ptr_nonnull(strstr(out, "\"clock_state\":null"));
+}
+END_TEST
+
+/* Its Home Assistant sensors: the state an enum of the five states
+ * (diagnostic, no state class: HA refuses one on an enum), the bound a
+ * measurement in us, off by default. */
+START_TEST(home_assistant_has_the_clock_as_diagnostic_sensors)
+{
+	struct vmac_mqtt_settings s;
+	struct vmac_device_status st;
+	json_t *manifest = json_pack("{s:{}}", "variables"), *configs, *clock = NULL, *bound = NULL, *cfg;
+	const char *topic;
+	memset(&s, 0, sizeof(s));
+	memset(&st, 0, sizeof(st));
+	snprintf(s.host_id, sizeof(s.host_id), "kitchen");
+	snprintf(s.prefix, sizeof(s.prefix), "vmac");
+	snprintf(s.discovery_prefix, sizeof(s.discovery_prefix), "homeassistant");
+	configs = mqtt_ha_configs(&s, "washer-1", "washer", "1.2.0", manifest, &st);
+	json_object_foreach(configs, topic, cfg)
+	{
+		if (strstr(topic, "/_health_clock_state/"))
+			clock = cfg;
+		if (strstr(topic, "/_health_clock_bound_us/"))
+			bound = cfg;
+	}
+	ck_assert_ptr_nonnull(clock);
+	ck_assert_ptr_nonnull(bound);
+	ck_assert_str_eq(json_string_value(json_object_get(clock, "device_class")), "enum");
+	ck_assert_str_eq(json_string_value(json_object_get(clock, "entity_category")), "diagnostic");
+	ck_assert_str_eq(json_string_value(json_object_get(clock, "value_template")), "{{ value_json.clock_state }}");
+	ck_assert_str_eq(json_string_value(json_object_get(clock, "state_topic")), "vmac/kitchen/washer-1/_health");
+	ck_assert_ptr_null(json_object_get(clock, "state_class"));
+	ck_assert_int_eq(json_array_size(json_object_get(clock, "options")), 5);
+	ck_assert_str_eq(json_string_value(json_array_get(json_object_get(clock, "options"), 2)), "locked");
+	ck_assert_str_eq(json_string_value(json_object_get(bound, "unit_of_measurement")), "µs");
+	ck_assert_str_eq(json_string_value(json_object_get(bound, "state_class")), "measurement");
+	ck_assert(json_is_false(json_object_get(bound, "enabled_by_default")));
+	json_decref(configs);
+	json_decref(manifest);
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("mqtt");
@@ -432,6 +498,8 @@ Suite *vmac_test_suite(void)
 	suite_add_tcase(s, tc);
 	tcase_add_test(tc, ui_url_from_the_setting_or_the_http_address);
 	tcase_add_test(tc, a_machine_is_found_in_any_order);
+	tcase_add_test(tc, health_says_the_board_clock_or_null);
+	tcase_add_test(tc, home_assistant_has_the_clock_as_diagnostic_sensors);
 	tc = tcase_create("site");
 	tcase_add_test(tc, site_view_reads_host_topics_and_none);
 	suite_add_tcase(s, tc);

@@ -3,14 +3,15 @@
  * from SYNC frames with the receive times its caller passes in: the clock
  * locks onto a host whose counter differs by an offset and a drift, a SYNC
  * is never answered, never drives, never feeds the watchdog, and the boards
- * that cannot use it (version 1, no receive time, sealed) ignore it without
- * counting it malformed, as every board now ignores a system op of a later
- * protocol. The clock's filter itself is test_clock.c's. */
+ * that cannot use it (version 1, no receive time, sealed to an unkeyed
+ * board) ignore it without counting it malformed, as every board now
+ * ignores a system op of a later protocol. The clock's filter itself is test_clock.c's. */
 #include <check.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../core/proto/auth.h"
 #include "../../core/proto/proto.h"
 #include "../../firmware/board.h"
 #include "../../firmware/report.h"
@@ -226,7 +227,7 @@ START_TEST(boards_that_cannot_use_sync_ignore_it_without_counting_it_malformed)
 	struct vmac_board b;
 	struct fake_io io;
 	struct vmac_msg m = sync_msg(9, HOST_START_NS);
-	uint8_t frame[VMAC_FRAME_MAX + VMAC_AUTH_TRAILER_LEN], reply[VMAC_BOARD_REPLY_MAX];
+	uint8_t frame[VMAC_SYNC_AUTH_HEAD_LEN + VMAC_AUTH_MAC_LEN], reply[VMAC_BOARD_REPLY_MAX];
 	int len;
 
 	board_start(&b, &io, 1); /* a board of version 1 */
@@ -245,10 +246,11 @@ START_TEST(boards_that_cannot_use_sync_ignore_it_without_counting_it_malformed)
 	              (unsigned)b.counters.frames_malformed, (unsigned)b.counters.sync_ignored,
 	              vmac_clock_state_name(b.clock.state));
 
-	board_start(&b, &io, 2); /* a sealed SYNC: not defined, not obeyed */
-	len = vmac_proto_encode(&m, frame, sizeof(frame));
-	len = vmac_proto_seal(frame, (size_t)len, sizeof(frame), 1, (const uint8_t *)"0123456789abcdef", NULL, 0);
+	board_start(&b, &io, 2); /* a sealed SYNC to an unkeyed board: not its (test_sync_auth.c) */
+	len = vmac_proto_sync_begin_auth(frame, sizeof(frame), 9, 1, 0, 1);
 	ck_assert_int_gt(len, 0);
+	vmac_proto_sync_stamp(frame, m.u.sync.host_ns);
+	vmac_proto_sync_seal(frame, 0, (const uint8_t *)"0123456789abcdef");
 	ck_assert_int_eq(vmac_board_receive_at(&b, frame, (size_t)len, 0, 1000, reply, sizeof(reply)), 0);
 	ck_assert_msg(b.counters.frames_malformed == 0 && b.counters.sync_ignored == 1 &&
 	                  b.clock.state == VMAC_CLOCK_UNSYNCED,
