@@ -1,18 +1,24 @@
 /* Generic peripheral board logic: the state machine of docs/PROTOCOL.md
  * ("Board behaviour"), independent of transport and clock. */
-#include "board.h"
-
 #include <string.h>
 
-static void drive(struct vmac_board *b, const struct vmac_outputs *out)
+#include "board_internal.h"
+
+void vmac_board_drive(struct vmac_board *b, const struct vmac_outputs *out)
 {
 	b->outputs = *out;
 	b->io->write_outputs(b->io_ctx, out);
 }
 
+static void drive(struct vmac_board *b, const struct vmac_outputs *out)
+{
+	vmac_board_drive(b, out);
+}
+
 void vmac_board_safe(struct vmac_board *b)
 {
 	static const struct vmac_outputs off = {0, 0};
+	vmac_board_timed_cancel(b); /* the safe state never waits for an instant */
 	drive(b, &off);
 	b->state = VMAC_BOARD_UNKNOWN;
 	b->device_id = 0;
@@ -21,9 +27,7 @@ void vmac_board_safe(struct vmac_board *b)
 	memset(b->to_host, 0, sizeof(b->to_host));
 }
 
-/* A reply of n bytes, sealed with the session's key when the board is
- * keyed: its length, or 0 when it cannot be sent. */
-static int seal(struct vmac_board *b, uint8_t *reply, int n, size_t cap)
+int vmac_board_seal(struct vmac_board *b, uint8_t *reply, int n, size_t cap)
 {
 	if (n <= 0)
 		return 0;
@@ -79,7 +83,7 @@ static int answer(struct vmac_board *b, struct vmac_msg *r, const struct vmac_ms
 	r->flags = VMAC_FLAG_REPLY;
 	r->seq = req->seq;
 	r->channel = req->channel;
-	return seal(b, reply, vmac_proto_encode(r, reply, cap), cap);
+	return vmac_board_seal(b, reply, vmac_proto_encode(r, reply, cap), cap);
 }
 
 static int answer_error(struct vmac_board *b, const struct vmac_msg *req, uint32_t device_id, uint8_t code,
@@ -150,8 +154,10 @@ static int on_discover(struct vmac_board *b, const struct vmac_msg *req, uint8_t
 }
 
 /* v2: the record at our offset, if it is our session's. Due: answer with
- * the inputs, as to an UPDATE (its seq, our session). */
-static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint8_t *reply, size_t cap)
+ * the inputs, as to an UPDATE (its seq, our session). TIMED: timed.c
+ * schedules it once it is checked and has fed the watchdog. */
+static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t now_ms, uint64_t rx_local_ns,
+                     uint8_t *reply, size_t cap)
 {
 	struct vmac_cyclic_record rec;
 	struct vmac_msg r;
@@ -181,6 +187,8 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 	}
 	b->last_valid_ms = now_ms;
 	b->counters.frames_ok++;
+	if (req->flags & VMAC_FLAG_TIMED)
+		return vmac_board_timed_record(b, req, &rec, rx_local_ns, reply, cap);
 	drive(b, &rec.outputs);
 	if (!(rec.flags & VMAC_CYCLIC_DUE))
 		return 0;
@@ -193,7 +201,7 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 	r.op = VMAC_OP_UPDATE;
 	b->io->read_inputs(b->io_ctx, &r.u.inputs);
 	r.u.inputs.applied = b->outputs;
-	return seal(b, reply, vmac_proto_encode(&r, reply, cap), cap);
+	return vmac_board_seal(b, reply, vmac_proto_encode(&r, reply, cap), cap);
 }
 
 /* Keyed: a REGISTER opens under the keys of the session it starts (made
@@ -228,7 +236,8 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	if (req->u.reg.major != b->id.major || req->u.reg.minor != b->id.minor)
 		return answer_error(b, req, 0, VMAC_BERR_IDENTITY, reply, cap);
 	/* A new session (or the host restarted): outputs stay off until the host
-	 * sends fresh values in an UPDATE. */
+	 * sends fresh values in an UPDATE; nothing of the old one waits. */
+	vmac_board_timed_cancel(b);
 	drive(b, &off);
 	b->state = VMAC_BOARD_KNOWN;
 	b->device_id = req->device_id;
@@ -398,7 +407,7 @@ int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len
 		return 0;
 	}
 	if (req.channel == VMAC_CH_SYSTEM)
-		return req.op == VMAC_SYS_CYCLIC ? on_cyclic(b, &req, now_ms, reply, cap)
+		return req.op == VMAC_SYS_CYCLIC ? on_cyclic(b, &req, now_ms, rx_local_ns, reply, cap)
 		                                 : on_discover(b, &req, reply, cap);
 	if (req.op == VMAC_OP_REGISTER)
 		return b->id.keyed && !register_opens(b, frame, len, &req) ? 0

@@ -13,7 +13,7 @@
 #include "clock.h"
 
 #define VMAC_FIRMWARE_MAJOR 1
-#define VMAC_FIRMWARE_MINOR 0
+#define VMAC_FIRMWARE_MINOR 1 /* 1.1: TIMED CYCLIC (docs/PROTOCOL.md, "Time-triggered I/O") */
 #define VMAC_BOARD_DEFAULT_WATCHDOG_MS 500
 /* A receive time the caller does not have (vmac_board_receive): a SYNC
  * frame is then of no use to the clock, and ignored. */
@@ -54,6 +54,13 @@ struct vmac_board_counters {
 	uint32_t sync_ignored;  /* SYNC frames not fed to the clock: version 1, no receive time; unkeyed: sealed;
 	                         * keyed: unsealed, before a session and offset, or no MAC for our offset */
 	uint32_t sync_two_step; /* clock samples fed with the kernel's transmit time (prev_tx_ns), not host_ns */
+	/* TIMED CYCLIC records served (docs/TIME.md, "Time-triggered I/O"):
+	 * by the clock at the host's instants; on arrival (the clock not
+	 * usable, or no receive time); late (by the clock, but an instant
+	 * already past on arrival: acted on at once); overrun (a new record
+	 * came while an earlier one's action still waited: that one was done
+	 * at once). */
+	uint32_t timed, timed_arrival, timed_late, timed_overrun;
 };
 
 /* The two-step SYNC (docs/TIME.md, "The two-step SYNC"): a SYNC whose
@@ -73,6 +80,39 @@ struct vmac_board_sync_last {
 	uint8_t valid, deferred;
 	uint16_t seq, stream;
 	uint64_t host_ns, rx_local_ns;
+};
+
+/* One action of time-triggered I/O as the board did it, for its caller's
+ * log (vmac_board.acted): an output change or an input latch. */
+enum vmac_timed_kind { VMAC_TIMED_OUT, VMAC_TIMED_LATCH };
+enum vmac_timed_how {
+	VMAC_TIMED_AT_INSTANT, /* at the host's instant, by the clock (a timer compare) */
+	VMAC_TIMED_ON_ARRIVAL, /* the clock not usable: on the frame's arrival (the fallback) */
+	VMAC_TIMED_LATE,       /* its instant already past when the frame came: at once */
+	VMAC_TIMED_OVERRUN,    /* still waiting when the next record came: done at once, before it */
+};
+struct vmac_timed_action {
+	enum vmac_timed_kind kind;
+	enum vmac_timed_how how;
+	uint64_t local_ns;           /* the board counter's instant it was done at; 0 when the caller gave none */
+	uint64_t host_ns;            /* the host instant the frame asked for */
+	struct vmac_outputs outputs; /* driven (OUT), or driven at the latch (LATCH: the reply's `applied`) */
+};
+/* How the board last served a TIMED record (its log's "acting ..." line). */
+enum vmac_timed_mode { VMAC_TIMED_MODE_NONE, VMAC_TIMED_MODE_INSTANTS, VMAC_TIMED_MODE_ARRIVAL };
+
+/* What a TIMED CYCLIC left waiting for its instant: at most one output and
+ * one latch (no queue, no heap). local: on the board's counter. */
+struct vmac_board_timed {
+	uint8_t out_pending, latch_pending;
+	struct vmac_outputs out;
+	uint64_t out_local, out_host;
+	enum vmac_timed_how out_how;
+	uint64_t latch_local, latch_host;
+	enum vmac_timed_how latch_how;
+	uint16_t latch_seq;    /* the CYCLIC frame's: the reply's */
+	uint8_t latch_stamped; /* the caller gave a receive time: the clock can say when */
+	enum vmac_timed_mode mode;
 };
 
 struct vmac_board {
@@ -99,8 +139,13 @@ struct vmac_board {
 	struct vmac_clock clock;
 	uint64_t clock_local_ns;
 	struct vmac_board_sync_last sync_last;
+	struct vmac_board_timed timed; /* time-triggered I/O waiting (firmware/timed.c) */
 	const struct vmac_board_io *io;
 	void *io_ctx;
+	/* Optional (NULL: none; set after vmac_board_init): told of every
+	 * action of time-triggered I/O as it is done, for a log of instants. */
+	void (*acted)(void *ctx, const struct vmac_board *b, const struct vmac_timed_action *a);
+	void *acted_ctx;
 };
 
 /* Start in UNKNOWN with outputs off. */
@@ -130,9 +175,37 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
  * it in sync_ignored and leave the clock alone. An unkeyed board takes
  * only plain SYNC frames; a keyed one only a sealed SYNC whose MAC at its
  * offset opens under its session's key with a fresh counter, so it syncs
- * from its registration on (docs/TIME.md, "Trust"). */
+ * from its registration on (docs/TIME.md, "Trust"). A TIMED CYCLIC
+ * record's instants are put on the same counter, the arrival being
+ * rx_local_ns (below, "Time-triggered I/O"). */
 int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
                           uint8_t *reply, size_t cap);
+
+/* Time-triggered I/O (docs/PROTOCOL.md, "Time-triggered I/O"; the code in
+ * firmware/timed.c). A TIMED CYCLIC record of the board's session, given
+ * to vmac_board_receive_at with its receive time, feeds the watchdog on
+ * arrival; with the clock usable its outputs wait for out_at and, DUE, its
+ * latch for in_at, on the board's counter: the caller arms its timer for
+ * vmac_board_next_deadline and calls vmac_board_run_due when it fires, which
+ * does what is due and gives the TIMED reply to send. Without a usable
+ * clock (or through vmac_board_receive, no receive time) the record is
+ * served on arrival and receive_at answers at once (ARRIVAL). A SHUTDOWN,
+ * SLEEP, new REGISTER or watchdog trip cancels whatever waits. */
+
+/* The board counter's instant (ns) at which vmac_board_run_due must be
+ * called next, into *local_ns: 1, or 0 when nothing waits. */
+int vmac_board_next_deadline(const struct vmac_board *b, uint64_t *local_ns);
+
+/* Do what is due at the board counter's now_local_ns, in the order of the
+ * instants (an output and a latch at one instant: the output first, so the
+ * latch's `applied` is it). Returns the length of the TIMED reply to send
+ * (written into reply, cap bytes; VMAC_BOARD_REPLY_MAX is enough; sealed
+ * when the session is), or 0 when no latch was due. Call again while
+ * vmac_board_next_deadline says something is due. */
+int vmac_board_run_due(struct vmac_board *b, uint64_t now_local_ns, uint8_t *reply, size_t cap);
+
+/* Forget whatever waits, doing none of it (the safe state never waits). */
+void vmac_board_timed_cancel(struct vmac_board *b);
 
 /* Time passes for the clock (vmac_clock_tick at local_ns: holdover, lost):
  * call as often as its state must be current. Returns its state. */

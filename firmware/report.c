@@ -93,6 +93,7 @@ void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const s
 	r->outputs = b->outputs;
 	r->unsafe = s->episodes(s->ctx);
 	r->clock = b->clock.state;
+	r->timed = b->timed.mode;
 	r->quiet = quiet;
 }
 
@@ -118,6 +119,21 @@ int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const st
 		r->clock = b->clock.state;
 		if (!r->quiet || b->clock.state == VMAC_CLOCK_LOST) {
 			vmac_report_clock(b, 0, line, len);
+			return 1;
+		}
+	}
+	if (b->timed.mode != r->timed) {
+		r->timed = b->timed.mode;
+		if (b->timed.mode == VMAC_TIMED_MODE_INSTANTS && !r->quiet) {
+			t = start(b, line, len);
+			add(&t, "acting at host instants");
+			return 1;
+		}
+		if (b->timed.mode == VMAC_TIMED_MODE_ARRIVAL) {
+			t = start(b, line, len);
+			add(&t, "acting on arrival (clock ");
+			add(&t, vmac_clock_state_name(b->clock.state));
+			add(&t, ")");
 			return 1;
 		}
 	}
@@ -194,4 +210,22 @@ void vmac_report_counters(const struct vmac_board *b, char *line, size_t len)
 	add_unsigned(&t, b->counters.watchdog_trips);
 	add(&t, ", auth_failed ");
 	add_unsigned(&t, b->counters.auth_failed);
+}
+
+int vmac_report_timed(const struct vmac_board *b, char *line, size_t len)
+{
+	const struct vmac_board_counters *c = &b->counters;
+	struct text t;
+	if (c->timed == 0 && c->timed_arrival == 0)
+		return 0;
+	t = start(b, line, len);
+	add(&t, "timed ");
+	add_unsigned(&t, c->timed);
+	add(&t, ", on arrival ");
+	add_unsigned(&t, c->timed_arrival);
+	add(&t, ", late ");
+	add_unsigned(&t, c->timed_late);
+	add(&t, ", overrun ");
+	add_unsigned(&t, c->timed_overrun);
+	return 1;
 }

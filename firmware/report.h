@@ -21,6 +21,7 @@ struct vmac_report {
 	struct vmac_outputs outputs;
 	uint32_t unsafe;             /* the plant's unsafe episodes already named */
 	enum vmac_clock_state clock; /* the board clock's state last named */
+	enum vmac_timed_mode timed;  /* how it served TIMED records, last named */
 	int quiet;                   /* only what matters for safety: leaving a session, unsafe episodes */
 };
 
@@ -33,6 +34,10 @@ void vmac_report_init(struct vmac_report *r, const struct vmac_board *b, const s
  * changed. Call until 0. */
 int vmac_report_next(struct vmac_report *r, const struct vmac_board *b, const struct vmac_plant_safety *s, char *line,
                      size_t len);
+
+/* Among the lines of vmac_report_next, when the way the board serves TIMED
+ * records changes: "NAME: acting at host instants", or "NAME: acting on
+ * arrival (clock STATE)" (with --quiet only the second). */
 
 /* The line of a watchdog trip ("NAME: watchdog: no frame for N ms, outputs
  * off"); the caller may add the times its clock gives. */
@@ -50,5 +55,10 @@ void vmac_report_clock(const struct vmac_board *b, int with_counters, char *line
  * ignored N, watchdog trips N, auth_failed N" (auth_failed: frames of a
  * keyed board's session that did not open under its key, or replays). */
 void vmac_report_counters(const struct vmac_board *b, char *line, size_t len);
+
+/* The board's TIMED CYCLIC services, one line: "NAME: timed N, on arrival
+ * N, late N, overrun N" (firmware/board.h says what each counts); 0 and
+ * no line when it never had one. */
+int vmac_report_timed(const struct vmac_board *b, char *line, size_t len);
 
 #endif

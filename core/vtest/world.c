@@ -250,22 +250,58 @@ static int step_plants(struct vt_world *w)
 	return rc;
 }
 
-/* ---- the boards' timed actions (docs/TIME.md, "What comes next") ----
- * A board that acts at host instants arms its timer for an instant of its
- * own counter; here that is one more kind of event, at the world time its
- * counter reaches that instant (vt_clock_world_ns). The firmware's side
- * (the board's next deadline, running what is due) is not in
- * firmware/board.c yet: until it is, no board has an action waiting. */
+/* When the next action a board holds (TIMED outputs or a latch,
+ * firmware/timed.c) falls due: the world time at which that board's
+ * counter reaches its instant (vt_clock_world_ns), never before now;
+ * INT64_MAX when no board holds one. */
 static int64_t next_board_action(const struct vt_world *w)
 {
-	(void)w;
-	return INT64_MAX;
+	int64_t next = INT64_MAX;
+	int i;
+	for (i = 0; i < w->nboards; i++) {
+		struct vt_board *b = w->boards[i];
+		uint64_t local;
+		int64_t at;
+		if (!b->powered || !vmac_board_next_deadline(&b->fw, &local))
+			continue;
+		at = vt_clock_world_ns(b, local);
+		if (at < w->now_ns)
+			at = w->now_ns;
+		if (at < next)
+			next = at;
+	}
+	return next;
 }
 
-/* Every board action due by now, its replies sent as deliver() sends them. */
+/* Every board action due by now, its replies sent as deliver() sends
+ * them. The counter read now can be one ns short of the instant the world
+ * time was computed from (rounding), so the instant itself is the floor. */
 static void run_board_actions(struct vt_world *w)
 {
-	(void)w;
+	int i;
+	for (i = 0; i < w->nboards; i++) {
+		struct vt_board *b = w->boards[i];
+		uint64_t local;
+		int rounds = 0;
+		while (b->powered && rounds++ < 4 && vmac_board_next_deadline(&b->fw, &local) &&
+		       vt_clock_world_ns(b, local) <= w->now_ns) {
+			uint64_t now_local = vt_clock_local_ns(w, b, 0);
+			struct vt_pkt r;
+			int len;
+			if (now_local < local)
+				now_local = local;
+			memset(&r, 0, sizeof(r));
+			len = vmac_board_run_due(&b->fw, now_local, r.p.data, sizeof(r.p.data));
+			if (len <= 0)
+				continue;
+			record_service(w, b, w->now_ns);
+			r.to_host = 1;
+			r.board = i;
+			r.p.len = (size_t)len;
+			r.p.addr = b->addr;
+			send_frame(w, b, &r, b->faults.late_ns);
+		}
+	}
 }
 
 int vt_run(struct vt_world *w, int64_t until_ns, vt_check_fn check, void *ctx)

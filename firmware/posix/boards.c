@@ -178,7 +178,9 @@ int boards_init(struct board_set *s, const struct boards_config *cfg, uint64_t n
 	s->by_identity = malloc(slots * sizeof(*s->by_identity));
 	s->replies = malloc(BOARDS_REPLY_MAX * sizeof(*s->replies));
 	s->reply_board = malloc(BOARDS_REPLY_MAX * sizeof(*s->reply_board));
-	if (!s->boards || !s->by_offset || !s->by_session || !s->by_identity || !s->replies || !s->reply_board) {
+	s->waiting = malloc((size_t)cfg->count * sizeof(*s->waiting));
+	if (!s->boards || !s->by_offset || !s->by_session || !s->by_identity || !s->replies || !s->reply_board ||
+	    !s->waiting) {
 		snprintf(err, errlen, "out of memory for %ld boards", cfg->count);
 		boards_fini(s);
 		return -1;
@@ -257,6 +259,8 @@ void boards_fini(struct board_set *s)
 	free(s->by_identity);
 	free(s->replies);
 	free(s->reply_board);
+	free(s->waiting);
+	s->waiting = NULL;
 	s->boards = NULL;
 	s->by_offset = s->by_session = s->by_identity = s->reply_board = NULL;
 	s->replies = NULL;
@@ -328,6 +332,8 @@ void boards_print_counters(const struct board_set *s, int32_t i)
 	char line[VMAC_REPORT_LINE];
 	vmac_report_counters(&s->boards[i].board, line, sizeof(line));
 	printf("%s\n", line);
+	if (vmac_report_timed(&s->boards[i].board, line, sizeof(line)))
+		printf("%s\n", line);
 }
 
 char *boards_one_line(const char *text, char *out, size_t len)

@@ -30,6 +30,8 @@ struct posix_board {
 	uint32_t routed_device_id;       /* the session by_session points to it for; 0 none */
 	uint8_t mac[6];                  /* Ethernet: the source MAC of its replies */
 	struct oscillator *osc;          /* its counter, when the clocks are simulated (--clock-*); else NULL */
+	struct vmac_addr timed_addr;     /* the sender of its last TIMED CYCLIC: where a TIMED reply goes */
+	uint8_t waiting;                 /* in board_set.waiting */
 };
 
 /* The boards' local counters (--clock-ppm, --clock-offset, --clock-jitter-us,
@@ -87,6 +89,11 @@ struct board_set {
 	uint64_t late_replies, unroutable, unsent;
 	uint64_t last_step_ms; /* plant time */
 	int64_t clock_base_ns; /* CLOCK_MONOTONIC at start: the oscillators' true time 0 */
+	/* The boards that may have an instant waiting (instants.c): each
+	 * listed once (posix_board.waiting), dropped when found with none. */
+	int32_t *waiting;
+	int32_t nwaiting;
+	FILE *io_log; /* --io-log: every timed output change and latch, with its true instant */
 };
 
 /* Make cfg->count boards (names, identities, keys, MACs, plants) and the
@@ -149,6 +156,24 @@ void boards_print_counters(const struct board_set *s, int32_t i);
 /* An operator line 'NAME ACTION VALUE' (--commands); 'status' or 'NAME
  * status' prints the counters of every board, or of NAME. */
 void boards_command(struct board_set *s, const char *line);
+
+/* Time-triggered I/O (instants.c). Every board tells its actions to the
+ * --io-log (s->io_log, when set): call once after boards_init. */
+void boards_timed_init(struct board_set *s);
+
+/* Board i was handed a TIMED CYCLIC: if an instant of its waits now, the
+ * loop looks at it from now on. */
+void boards_timed_track(struct board_set *s, int32_t i);
+
+/* CLOCK_MONOTONIC (ns) at which the loop must wake for the earliest
+ * instant any board waits for (its counter's deadline through its
+ * oscillator), now_ns when one is due; INT64_MAX when none waits.
+ * O(boards waiting). */
+int64_t boards_next_instant(struct board_set *s, int64_t now_ns);
+
+/* Every board's due actions at now_ns (its watchdog first), the TIMED
+ * replies sent. */
+void boards_run_instants(struct board_set *s, int64_t now_ns);
 
 /* Route one batch of received frames to their boards (dispatch.c). The
  * replies collect in s->replies; boards_flush sends them. */

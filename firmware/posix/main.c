@@ -14,6 +14,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/prctl.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../../core/common/version.h"
@@ -70,6 +72,9 @@ static void usage(FILE *f)
 	           "                    mean U us (0..10000); --clock-seed N its random streams, board i\n"
 	           "                    N + i (default 1). docs/TIME.md; without any, the counter is\n"
 	           "                    CLOCK_MONOTONIC and stamps are the kernel's\n"
+	           "  --io-log FILE     write one line per output change and input latch of a TIMED\n"
+	           "                    CYCLIC frame to FILE: NAME out|latch HOW true=NS host=NS done=NS\n"
+	           "                    digital=0xNN pwm=N clock=STATE (docs/BOARD.md, \"What it prints\")\n"
 	           "  --cpu K           run on CPU K only\n"
 	           "  --late-us N       print each reply that left more than N us after its request\n"
 	           "                    came in (default 1000; 0: never)\n"
@@ -80,7 +85,8 @@ static void usage(FILE *f)
 	           "  --no-realtime     do not ask for SCHED_FIFO and locked memory (asked for by\n"
 	           "                    default; refused, one line on stderr and normal scheduling)\n"
 	           "  --help, --version this text; the version\n\n"
-	           "Prints one line per state change and output change on stdout. On SIGINT or\n"
+	           "Prints one line per state change and output change on stdout, and when a board\n"
+	           "starts acting at the host's instants or falls back to acting on arrival. On SIGINT or\n"
 	           "SIGTERM every board turns its outputs off before the process exits, and prints\n"
 	           "its frame counters (with --commands, 'status' prints them at any time).\n");
 }
@@ -207,6 +213,7 @@ static int read_commands(struct board_set *s)
 struct options {
 	struct boards_config cfg;
 	const char *bus, *iface;
+	const char *io_log;        /* --io-log FILE, or NULL */
 	struct vmac_bus_spec spec; /* from bus and iface */
 	long cpu, late_us;         /* cpu -1: any */
 	int commands, quiet, realtime;
@@ -224,7 +231,7 @@ struct runner {
 };
 
 /* The --clock-* options without a letter of their own. */
-enum { OPT_CLOCK_PPM = 0x100, OPT_CLOCK_OFFSET, OPT_CLOCK_JITTER, OPT_CLOCK_SEED };
+enum { OPT_CLOCK_PPM = 0x100, OPT_CLOCK_OFFSET, OPT_CLOCK_JITTER, OPT_CLOCK_SEED, OPT_IO_LOG };
 
 /* A --clock-* number in min..max into *out, the clocks then simulated.
  * Returns -1 to go on, or 2 with the error printed. */
@@ -300,6 +307,7 @@ static int take_option(struct options *o, int opt, const char *arg)
 		o->cfg.clock.seed = (uint64_t)number;
 		o->cfg.clock.on = 1;
 		return -1;
+	case OPT_IO_LOG: o->io_log = arg; return -1;
 	case 'h': usage(stdout); return 0;
 	case 'V': printf("vmac-board %s\n", VMAC_VERSION_STRING); return 0;
 	default: usage(stderr); return 2;
@@ -383,6 +391,7 @@ static int parse_options(int argc, char **argv, struct options *o)
 	                                     {"clock-offset", required_argument, 0, OPT_CLOCK_OFFSET},
 	                                     {"clock-jitter-us", required_argument, 0, OPT_CLOCK_JITTER},
 	                                     {"clock-seed", required_argument, 0, OPT_CLOCK_SEED},
+	                                     {"io-log", required_argument, 0, OPT_IO_LOG},
 	                                     {"version", no_argument, 0, 'V'},
 	                                     {0, 0, 0, 0}};
 	int opt, rc;
@@ -488,19 +497,32 @@ static void receive_batches(struct runner *r, int64_t t, int64_t *last_error_ns)
 	}
 }
 
-/* The loop, until a signal. Returns 0, or 1 when poll fails. */
+/* The loop, until a signal. Returns 0, or 1 when poll fails. It wakes
+ * for the housekeeping, for frames, and at the earliest instant a board
+ * waits for (to the nanosecond: ppoll, the timer slack at its least). */
 static int serve(struct runner *r)
 {
 	int64_t last_housekeep_ns, last_sync_ns, last_error_ns = 0;
 
 	last_housekeep_ns = last_sync_ns = vmac_now_ns();
 	while (!stop_signal) {
-		int64_t t = vmac_now_ns(), wait_ns = last_housekeep_ns + HOUSEKEEP_NS - t;
-		int ready = poll(r->pfds, (nfds_t)r->nfds, wait_ns <= 0 ? 0 : (int)((wait_ns + 999999) / 1000000));
+		int64_t t = vmac_now_ns(), wake_ns = last_housekeep_ns + HOUSEKEEP_NS, wait_ns;
+		int64_t instant_ns = boards_next_instant(&r->set, t);
+		struct timespec ts;
+		int ready;
+		if (instant_ns < wake_ns)
+			wake_ns = instant_ns;
+		wait_ns = wake_ns > t ? wake_ns - t : 0;
+		ts.tv_sec = (time_t)(wait_ns / 1000000000);
+		ts.tv_nsec = (long)(wait_ns % 1000000000);
+		ready = ppoll(r->pfds, (nfds_t)r->nfds, &ts, NULL);
 		if (ready < 0 && errno != EINTR) {
 			perror("vmac-board: poll");
 			return 1;
 		}
+		/* The instants first: they wait for no frame. */
+		if (instant_ns != INT64_MAX)
+			boards_run_instants(&r->set, vmac_now_ns());
 		/* Watchdogs first: frames that queued up while the process could
 		 * not run (stopped, starved) must not revive a session that has
 		 * already timed out. */
@@ -508,6 +530,8 @@ static int serve(struct runner *r)
 		if (t - last_housekeep_ns >= HOUSEKEEP_NS) {
 			boards_clock_poll(&r->set, t);
 			boards_housekeep(&r->set, (uint64_t)(t / 1000000));
+			if (r->set.io_log)
+				fflush(r->set.io_log);
 			last_housekeep_ns = t;
 			if (t - last_sync_ns >= CLOCK_SYNC_NS) {
 				vmac_transport_clock_sync(&r->transport);
@@ -559,6 +583,8 @@ static void finish(struct runner *r, long late_us)
 	if (s->unsent > 0)
 		printf("vmac-board: %" PRIu64 " replies the kernel did not take\n", s->unsent);
 	printf("vmac-board: stopped by signal %d, all outputs off\n", (int)stop_signal);
+	if (s->io_log)
+		fflush(s->io_log);
 }
 
 int main(int argc, char **argv)
@@ -581,6 +607,15 @@ int main(int argc, char **argv)
 		return rc == -2 ? 2 : 1;
 	}
 	r.set.quiet = o.quiet;
+	boards_timed_init(&r.set);
+	/* Wake for an instant when it comes, not up to 50 us after (the
+	 * default slack of a normal thread; SCHED_FIFO has none). */
+	prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+	if (o.io_log && !(r.set.io_log = fopen(o.io_log, "w"))) {
+		fprintf(stderr, "vmac-board: --io-log %s: %s\n", o.io_log, strerror(errno));
+		boards_fini(&r.set);
+		return 1;
+	}
 	r.set.late_ns = (int64_t)o.late_us * 1000;
 	r.set.transport = &r.transport;
 	r.pkts = malloc(VMAC_TRANSPORT_BATCH * sizeof(*r.pkts));
@@ -603,6 +638,8 @@ int main(int argc, char **argv)
 	if (r.transport_open)
 		vmac_transport_close(&r.transport);
 	free(r.pkts);
+	if (r.set.io_log)
+		fclose(r.set.io_log);
 	boards_fini(&r.set);
 	return rc;
 }

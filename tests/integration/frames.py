@@ -28,9 +28,10 @@ REPLY = 0x01  # flags bit 0: set on every frame a board sends
 AUTH = 0x02  # flags bit 1: an authenticated frame (a counter and a MAC follow its data)
 TRAILER = struct.Struct(">I8s")  # counter, MAC
 NONCE_LEN = 8
+TIMED = 0x04  # flags bit 2: a CYCLIC carrying host instants, and a board's answer to one
 
 SYS, DEV = 0xFF, 0x00  # the system channel and the device channel
-DISCOVER, CYCLIC, ANNOUNCE = 0x01, 0x04, 0x10  # ops of the system channel
+DISCOVER, CYCLIC, SYNC, ANNOUNCE = 0x01, 0x04, 0x05, 0x10  # ops of the system channel
 REGISTER, SHUTDOWN, UPDATE, ERROR, IDLE, SLEEP, WATCHDOG, SIZE, OFFSET, OFFSET_GET = range(10)  # device channel
 
 ETH_P_VMAC = 0x88B5  # the EtherType of raw Ethernet (protocol version 2)
@@ -91,6 +92,38 @@ def announce(driver, board, major=1, minor=0, firmware=(1, 0), caps=(8, 7, 2, 1,
     analog inputs, PWM outputs, encoders."""
     return (bytes([len(driver)]) + driver + struct.pack(">II", major, minor) + bytes([len(board)]) + board +
             bytes(firmware) + bytes(caps))
+
+
+def sync(host_ns, seq=0):
+    """A SYNC frame (version 2): the host's CLOCK_MONOTONIC in ns."""
+    return frame(SYNC, struct.pack(">Q", host_ns), channel=SYS, seq=seq, version=2)
+
+
+def cyclic(records, first=0, seq=0, out_at=None, in_at=None):
+    """A CYCLIC frame (version 2) of records for offsets first, first + 1..:
+    each (tag, flags, digital, pwm), tag 0 an empty record. With out_at
+    (and in_at, default out_at): TIMED, carrying those host instants (ns)
+    (docs/PROTOCOL.md, "Time-triggered I/O")."""
+    timed = out_at is not None
+    head = HEADER.pack(MAGIC, 2, TIMED if timed else 0, seq, 0, SYS, CYCLIC, len(records)) + u16(first)
+    if timed:
+        head += struct.pack(">QQ", out_at, out_at if in_at is None else in_at)
+    return head + b"".join(struct.pack(">HBBh", *r) for r in records)
+
+
+CYCLIC_DUE = 0x01  # a record's flag: answer this frame
+CLOCK_ARRIVAL = 0x80  # a TIMED answer's clock byte: acted on arrival, not at the instants
+CLOCK_STATES = ("unsynced", "locking", "locked", "holdover", "lost")
+Latch = collections.namedtuple("Latch", "digital analog0 analog1 encoder applied_digital applied_pwm latched_at clock "
+                                        "bound_ns offset_ns")
+LATCH = struct.Struct(">BHHiBhQBIq")  # the 33 data bytes of a TIMED answer
+
+
+def latch(data):
+    """The 33 data bytes of a TIMED answer (an UPDATE reply, flags REPLY |
+    TIMED) as a Latch: the inputs, applied, latched_at, the clock byte (its
+    state in bits 0-2, CLOCK_ARRIVAL), bound_ns and offset_ns."""
+    return Latch(*LATCH.unpack(data))
 
 
 def parse(payload):

@@ -125,10 +125,10 @@ class Link:
 def qemu_board(t, image, link, plant, name, config=()):
     """A QEMU LM3S6965 running a copy of image patched to (plant, name) and
     the config script's further options, on a tap of link; returns its
-    Proc once the firmware's banner is out. Without a --key-file in config
-    the board gets the key the test enrolls for it (t.enroll), as on a
-    host with bus_trust enrolled."""
-    if "--key-file" not in config:
+    Proc once the firmware's banner is out. Without a --key-file (or
+    --no-key) in config the board gets the key the test enrolls for it
+    (t.enroll), as on a host with bus_trust enrolled."""
+    if "--key-file" not in config and "--no-key" not in config:
         t.enroll([name])
         config = list(config) + ["--key-file", os.path.join(t.keys, name + ".key")]
     copy = os.path.join(t.logdir, "%s.elf" % name)
@@ -407,3 +407,63 @@ def test_a_qemu_board_feeds_its_clock_from_sync(t):
     two_step = int(re.search(r"two-step (\d+)", clock.text).group(1))
     assert two_step > 50, "the QEMU board took %d samples two-step: %r" % (two_step, clock.text)
     assert host.status()["counters"]["sync_stamps"] > 100, "host counters: %r" % host.status()["counters"]
+
+
+def test_a_qemu_board_serves_a_timed_cyclic_on_arrival_without_a_clock(t):
+    """Time-triggered I/O on the firmware (docs/TIME.md, "Time-triggered
+    I/O"): the test plays the host on the bridge (AF_PACKET), with no SYNC,
+    so the board's clock is unsynced; a TIMED CYCLIC whose instants lie 5 s
+    ahead is served on arrival: the TIMED answer (flags REPLY | TIMED, 46
+    bytes, ARRIVAL, unsynced, no latch time) comes at once, its applied the
+    record's outputs, and the UART says so. The timer path itself (timer 0A)
+    only acts with a usable clock, which QEMU's SysTick does not give."""
+    import socket
+    import struct
+
+    from frames import (CLOCK_ARRIVAL, CYCLIC_DUE, DEV, DISCOVER, ETH_P_VMAC, OFFSET, REGISTER, REPLY, SHUTDOWN, SYS,
+                        TIMED, UPDATE, cyclic, ethernet, frame, latch, parse, register, u16)
+
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "lights-1", config=["--no-key"])
+    s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_VMAC))
+    s.bind((link.bridge, ETH_P_VMAC))
+    me = s.getsockname()[4]
+    broadcast = b"\xff" * 6
+
+    def answer(seq, timeout_s=30):
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            assert left > 0, "no answer to seq %d from the QEMU board in %d s" % (seq, timeout_s)
+            s.settimeout(left)
+            eth = s.recv(2048)
+            got = parse(eth[14:])
+            if eth[0:6] == me and got and got[0].flags & REPLY and got[0].seq == seq:
+                return eth[6:12], got[0], got[1], eth[14:]
+
+    try:
+        s.send(ethernet(broadcast, me, frame(DISCOVER, channel=SYS, seq=7), pad=True))
+        mac, h, data, _ = answer(7)
+        major, minor = struct.unpack(">II", data[1 + data[0]:1 + data[0] + 8])
+        device_id = (3 << 16) | 1
+        s.send(ethernet(mac, me, frame(REGISTER, register(major, minor, 60000), device_id=device_id, seq=8, version=2),
+                        pad=True))
+        assert answer(8)[1].op == REGISTER
+        s.send(ethernet(mac, me, frame(OFFSET, u16(1), device_id=device_id, seq=9, version=2), pad=True))
+        assert answer(9)[2] == u16(1), "the QEMU board did not take offset 1"
+        at = time.monotonic_ns() + 5 * 10**9
+        s.send(ethernet(broadcast, me, cyclic([(0, 0, 0, 0), (3, CYCLIC_DUE, 0x05, 0)], seq=10, out_at=at), pad=True))
+        _, h, data, payload = answer(10)
+        assert time.monotonic_ns() < at, "the answer came after the instant: it waited, with no clock"
+        board.wait_line(r"^lights-1: acting on arrival \(clock unsynced\)$", 30, what="'acting on arrival'")
+        s.send(ethernet(mac, me, frame(SHUTDOWN, b"\x00", device_id=device_id, seq=11, version=2), pad=True))
+        answer(11)
+    finally:
+        s.close()
+    assert h.op == UPDATE and h.channel == DEV and h.flags == REPLY | TIMED and len(payload) >= 46, \
+        "the TIMED answer: op 0x%02x flags 0x%02x, %d bytes" % (h.op, h.flags, len(payload))
+    a = latch(data)
+    assert a.clock == CLOCK_ARRIVAL and a.latched_at == 0 and a.bound_ns == 0xFFFFFFFF, \
+        "an unsynced QEMU board's answer: %r" % (a,)
+    assert a.applied_digital == 0x05, "applied 0x%02x, want the record's 0x05" % a.applied_digital

@@ -14,7 +14,8 @@ UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto
                     test_driver:driver test_driver_text:driver test_hints:driver test_isolation:driver test_checkpoint:driver test_luaplant:sim test_luaplant_run:sim test_host:host test_audit:host \
                     test_auth:proto test_board_auth:board test_report:board \
                     test_mqtt:mqtt test_paths:common test_prom:api test_minisign:bundle \
-                    test_bundle:bundle test_bundle_folder:bundle test_clock:board test_sync:board test_sync_auth:board test_sync_twostep:board test_tx_stamp:transport
+                    test_bundle:bundle test_bundle_folder:bundle test_clock:board test_sync:board test_sync_auth:board \
+                    test_board_timed:board test_sync_twostep:board test_tx_stamp:transport
 UNIT_TESTS := $(foreach t,$(UNIT_TEST_MODULE),$(BUILD)/tests/$(firstword $(subst :, ,$(t))))
 
 # Libraries a test needs beyond its modules': libsodium is the reference

@@ -1,7 +1,9 @@
 /* The system clock (PLL, 50 MHz), the millisecond time the board logic
- * and the plant run on (SysTick), and the free-running nanosecond counter
+ * and the plant run on (SysTick), the free-running nanosecond counter
  * the board's disciplined clock runs on (SysTick's milliseconds and the
- * cycles into the current one). */
+ * cycles into the current one), and the alarm of time-triggered I/O
+ * (GPTM timer 0A, one-shot: its interrupt wakes the main loop at an
+ * instant). */
 #include "lm3s6965.h"
 #include "mcu.h"
 
@@ -43,6 +45,27 @@ void vmac_mcu_clock_init(void)
 	SYST_RVR = SYSCLK_HZ / TICK_HZ - 1;
 	SYST_CVR = 0;
 	SYST_CSR = SYST_CSR_CLKSOURCE | SYST_CSR_TICKINT | SYST_CSR_ENABLE;
+	SYSCTL_RCGC1 |= SYSCTL_RCGC1_TIMER0;
+	(void)SYSCTL_RCGC1; /* a few cycles before the timer's registers answer */
+	TIMER0_CTL = 0;
+	TIMER0_CFG = TIMER_CFG_32BIT;
+	TIMER0_TAMR = TIMER_TAMR_ONESHOT;
+	TIMER0_IMR = TIMER_INT_TATO;
+	NVIC_ISER(IRQ_TIMER0A / 32) = 1u << (IRQ_TIMER0A % 32);
+}
+
+void vmac_mcu_timer0a_handler(void)
+{
+	TIMER0_ICR = TIMER_INT_TATO; /* the wake-up was the point: the main loop acts */
+}
+
+void vmac_mcu_alarm_in(uint64_t ns)
+{
+	uint64_t cycles = ns / NS_PER_CYCLE + 1;
+	TIMER0_CTL = 0;
+	TIMER0_TAILR = cycles > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)cycles; /* 85 s at most: then it looks again */
+	TIMER0_ICR = TIMER_INT_TATO;
+	TIMER0_CTL = TIMER_CTL_TAEN;
 }
 
 uint64_t vmac_mcu_now_ms(void)

@@ -23,6 +23,7 @@
 #define SYSCTL_RCC REG32(0x400FE060u)
 #define SYSCTL_RCGC1 REG32(0x400FE104u)
 #define SYSCTL_RCGC1_UART0 (1u << 0)
+#define SYSCTL_RCGC1_TIMER0 (1u << 16)
 #define SYSCTL_RCGC2 REG32(0x400FE108u)
 #define SYSCTL_RCGC2_GPIOA (1u << 0)
 #define SYSCTL_RCGC2_EMAC0 (1u << 28)
@@ -51,6 +52,7 @@
 
 /* Interrupt numbers (vector = 16 + irq). */
 #define IRQ_UART0 5
+#define IRQ_TIMER0A 19
 #define IRQ_ETHERNET 42
 #define IRQ_COUNT 48 /* vectors 16..63; the part has 0..43 */
 
@@ -78,6 +80,20 @@
 #define UART_CTL_RXE (1u << 9)
 #define UART_INT_RX (1u << 4)
 #define UART_INT_RT (1u << 6) /* receive time-out: a few bytes wait in the FIFO */
+
+/* General-purpose timer 0 (GPTM), timer A: a 32-bit one-shot counting
+ * down at the system clock, its time-out an interrupt. */
+#define TIMER0_BASE 0x40030000u
+#define TIMER0_CFG REG32(TIMER0_BASE + 0x000u)
+#define TIMER0_TAMR REG32(TIMER0_BASE + 0x004u)
+#define TIMER0_CTL REG32(TIMER0_BASE + 0x00Cu)
+#define TIMER0_IMR REG32(TIMER0_BASE + 0x018u)
+#define TIMER0_ICR REG32(TIMER0_BASE + 0x024u)
+#define TIMER0_TAILR REG32(TIMER0_BASE + 0x028u)
+#define TIMER_CFG_32BIT 0x0u
+#define TIMER_TAMR_ONESHOT 0x1u
+#define TIMER_CTL_TAEN (1u << 0)
+#define TIMER_INT_TATO (1u << 0) /* timer A time-out */
 
 /* Ethernet MAC. */
 #define MAC_BASE 0x40048000u

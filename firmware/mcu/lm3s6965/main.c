@@ -3,7 +3,8 @@
  * MAC, its log and operator input on UART0. The loop is vmac-board's
  * (firmware/posix/) for one board: the watchdog, the plant and the log
  * every 5 ms, the watchdog again before every frame, one reply per request,
- * and the processor asleep in between. */
+ * the instants of time-triggered I/O when timer 0A says, and the processor
+ * asleep in between. */
 #include <string.h>
 
 #include "lm3s6965.h"
@@ -22,6 +23,7 @@ static const struct vmac_board_io plant_io = {vmac_plant_io_read, vmac_plant_io_
 static struct vmac_report reported;     /* what the log last said (firmware/report.c) */
 static struct vmac_plant_safety safety; /* the plant's safety monitor, as the report reads it */
 static uint64_t last_step_ms, last_housekeep_ms;
+static uint8_t timed_src[6]; /* the sender of the last TIMED CYCLIC: where TIMED replies go */
 
 static void put_name(void)
 {
@@ -76,9 +78,31 @@ static void handle_frame(const uint8_t *frame, size_t len, const uint8_t src[6],
 	static uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int n;
 	poll_watchdog(now_ms);
+	if (len >= VMAC_HDR_LEN && (frame[3] & VMAC_FLAG_TIMED) && !(frame[3] & VMAC_FLAG_REPLY))
+		memcpy(timed_src, src, sizeof(timed_src));
 	n = vmac_board_receive_at(&board, frame, len, now_ms, rx_ns, reply, sizeof(reply));
 	if (n > 0)
 		vmac_mcu_enet_send(src, reply, (size_t)n);
+}
+
+/* Time-triggered I/O: what is due done (the watchdog first: a trip cancels
+ * it) and its TIMED reply sent; the alarm armed for the next instant. */
+static void run_instants(void)
+{
+	static uint8_t reply[VMAC_BOARD_REPLY_MAX];
+	uint64_t at, now;
+	while (vmac_board_next_deadline(&board, &at)) {
+		int n;
+		now = vmac_mcu_now_ns();
+		if (at > now) {
+			vmac_mcu_alarm_in(at - now);
+			return;
+		}
+		poll_watchdog(vmac_mcu_now_ms());
+		n = vmac_board_run_due(&board, now, reply, sizeof(reply));
+		if (n > 0)
+			vmac_mcu_enet_send(timed_src, reply, (size_t)n);
+	}
 }
 
 /* A decimal number ("1", "-0.5", "3.5e1") into *value; -1 when text is not one. */
@@ -155,6 +179,10 @@ static void print_counters(void)
 	vmac_mcu_uart_puts("; stack used ");
 	vmac_mcu_uart_putu(vmac_mcu_stack_used());
 	vmac_mcu_uart_puts(" bytes\n");
+	if (vmac_report_timed(&board, line, sizeof(line))) { /* once it served a TIMED record, as vmac-board */
+		vmac_mcu_uart_puts(line);
+		vmac_mcu_uart_puts("\n");
+	}
 	if (board.clock.state != VMAC_CLOCK_UNSYNCED || board.counters.sync_ignored) {
 		vmac_report_clock(&board, 1, line, sizeof(line)); /* the clock's line, as vmac-board's */
 		vmac_mcu_uart_puts(line);
@@ -265,6 +293,7 @@ int main(void)
 		uint8_t src[6];
 		int frames, len;
 
+		run_instants();
 		now_ms = vmac_mcu_now_ms();
 		if (now_ms - last_housekeep_ms >= HOUSEKEEP_MS) {
 			housekeep(now_ms);
@@ -277,6 +306,7 @@ int main(void)
 		}
 		while (vmac_mcu_uart_getline(line, sizeof(line)) >= 0)
 			command(line);
+		run_instants(); /* a frame may have brought one: armed before the sleep */
 		vmac_mcu_uart_poll();
 		/* Sleep until the next interrupt (the millisecond tick at the
 		 * latest), unless work came in since the looks above: masked,

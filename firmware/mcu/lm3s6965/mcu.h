@@ -25,6 +25,11 @@ uint64_t vmac_mcu_now_ms(void);
  * the main loop, interrupts enabled. */
 uint64_t vmac_mcu_now_ns(void);
 void vmac_mcu_systick_handler(void);
+/* Interrupt in ns nanoseconds (timer 0A, one-shot, to the cycle), ending
+ * the main loop's sleep: the timer compare of time-triggered I/O. A new
+ * call replaces the last. */
+void vmac_mcu_alarm_in(uint64_t ns);
+void vmac_mcu_timer0a_handler(void);
 
 /* ---- uart.c: UART0, 115200 8N1 ---- */
 

@@ -1,0 +1,311 @@
+"""Boards acting at the host's instants (docs/TIME.md, "Time-triggered I/O";
+docs/PROTOCOL.md, "Time-triggered I/O"): the test plays the host over UDP
+itself (DISCOVER, REGISTER, OFFSET, TIMED CYCLIC frames), vmacd with
+clock_sync_ms 1 only sends the SYNC frames the boards' clocks lock onto
+(the boards are registered by the test before vmacd starts, so it never
+discovers them). The boards run without --clock-* options: each counter is
+CLOCK_MONOTONIC itself, so the true instant of each action is in the
+boards' own --io-log, never judged by when the test looked."""
+
+import os
+import re
+import signal
+import socket
+import statistics
+import struct
+import time
+
+from frames import (CLOCK_ARRIVAL, CLOCK_STATES, CYCLIC_DUE, DEV, DISCOVER, OFFSET, REGISTER, REPLY, SHUTDOWN, SYS,
+                    TIMED, UPDATE, cyclic, frame, latch, parse, register, u16)
+
+SYNC_SETTINGS = {"clock_sync_ms": 1, "slice_us": 200, "slices_per_slot": 5}
+WATCHDOG_MS = 60000  # the test's session outlives any stall of this shared machine
+AHEAD_NS = 50000000  # instants 50 ms after the send: the frame is there long before
+FRAMES = 30
+SETTLE = 10  # the first frames (half a second after locking) are served but not judged: the servo settles
+SPREAD_NS = 10000  # the issue's goal: two boards' true instants within 10 us
+# From the intended instant: the clocks' error, plus the path's least delay
+# (vmacd's send stamp to the kernel's receive stamp: one-way, no board can
+# tell it from an offset, docs/TIME.md "The clock model"), which both
+# boards share; 3 to 11 us measured on the shared 2-core VM.
+OFF_NS = 25000
+IO_LINE = re.compile(r"^(\S+) (out|latch) (instant|arrival|late|overrun) true=(-?\d+) host=(\d+) done=(-?\d+) "
+                     r"digital=0x([0-9a-f]{2}) pwm=(-?\d+) clock=(\w+)$")
+
+
+class Host:
+    """The test's side of the bus: one UDP socket, multicast out on loopback."""
+
+    def __init__(self, bus):
+        group, port = bus.rsplit(":", 1)
+        self.group = (group, int(port))
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        self.sock.settimeout(5)
+        self.boards = {}  # name: (address, device_id, tag)
+        self.seq = 0
+
+    def close(self):
+        self.sock.close()
+
+    def recv(self, timeout_s=30):
+        """The next (header, data, payload, address) from a board, skipping
+        what is not a reply."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            assert left > 0, "no reply from a board in %d s" % timeout_s
+            self.sock.settimeout(left)
+            payload, addr = self.sock.recvfrom(2048)
+            got = parse(payload)
+            if got and got[0].flags & REPLY:
+                return got[0], got[1], payload, addr
+
+    def discover(self, names):
+        """DISCOVER until every board of names has announced; their addresses."""
+        found = {}
+        while set(found) != set(names):
+            self.sock.sendto(frame(DISCOVER, channel=SYS, seq=1), self.group)
+            try:
+                while set(found) != set(names):
+                    h, data, _, addr = self.recv(1)
+                    if h.channel == SYS:
+                        board = data[1 + data[0] + 8 + 1:1 + data[0] + 8 + 1 + data[1 + data[0] + 8]].decode()
+                        major, minor = struct.unpack(">II", data[1 + data[0]:1 + data[0] + 8])
+                        found[board] = (addr, major, minor)
+            except (AssertionError, socket.timeout):
+                pass
+        return found
+
+    def join(self, names):
+        """Each board of names registered (version 2, a long watchdog) and
+        given its offset: slot i + 1, generation 3."""
+        for i, (name, (addr, major, minor)) in enumerate(sorted(self.discover(names).items())):
+            device_id = (3 << 16) | (i + 1)
+            self.request(addr, REGISTER, register(major, minor, WATCHDOG_MS), device_id)
+            h, data = self.request(addr, OFFSET, u16(i + 1), device_id)
+            assert struct.unpack(">H", data)[0] == i + 1, "%s echoed offset %r" % (name, data)
+            self.boards[name] = (addr, device_id, 3)
+
+    def request(self, addr, op, data, device_id):
+        self.seq += 1
+        self.sock.sendto(frame(op, data, device_id=device_id, seq=self.seq, version=2), addr)
+        while True:
+            h, got, _, _ = self.recv()
+            if h.channel == DEV and h.seq == self.seq and h.device_id == device_id:
+                assert h.op == op, "answered op 0x%02x to op 0x%02x" % (h.op, op)
+                return h, got
+
+    def timed(self, outputs, at_ns):
+        """One TIMED CYCLIC to the group: each board's record (DUE) with
+        outputs[name] = (digital, pwm), both instants at_ns; returns the seq."""
+        self.seq += 1
+        records = [(0, 0, 0, 0)] * (len(self.boards) + 1)
+        for name, (_, device_id, tag) in self.boards.items():
+            records[device_id & 0xFFFF] = (tag, CYCLIC_DUE) + outputs[name]
+        self.sock.sendto(cyclic(records, seq=self.seq, out_at=at_ns, in_at=at_ns), self.group)
+        return self.seq
+
+    def answers(self, seq):
+        """Every board's TIMED answer to frame seq: {name: Latch}."""
+        by_id = {device_id: name for name, (_, device_id, _) in self.boards.items()}
+        got = {}
+        while len(got) < len(self.boards):
+            h, data, payload, _ = self.recv()
+            if h.seq != seq or h.device_id not in by_id:
+                continue
+            assert h.op == UPDATE and h.flags == REPLY | TIMED and len(payload) == 46, \
+                "%s answered a TIMED CYCLIC with flags 0x%02x, %d bytes (want 0x05, 46)" % (
+                    by_id[h.device_id], h.flags, len(payload))
+            got[by_id[h.device_id]] = latch(data)
+        return got
+
+    def shutdown(self, name):
+        addr, device_id, _ = self.boards[name]
+        self.request(addr, SHUTDOWN, b"\x00", device_id)
+
+
+def io_log(path):
+    """The --io-log's lines, each a dict."""
+    rows = []
+    with open(path) as f:
+        for text in f:
+            m = IO_LINE.match(text.rstrip("\n"))
+            assert m, "an --io-log line not as BOARD.md says: %r" % text
+            rows.append({"board": m.group(1), "what": m.group(2), "how": m.group(3), "true": int(m.group(4)),
+                         "host": int(m.group(5)), "done": int(m.group(6)), "digital": int(m.group(7), 16),
+                         "pwm": int(m.group(8)), "clock": m.group(9)})
+    return rows
+
+
+def start_board(t, name, clock=(), count=None):
+    log = os.path.join(t.logdir, name + ".io.log")
+    return t.board("generic", name, keyed=False, count=count, extra=["--io-log", log] + list(clock)), log
+
+
+def stop(board):
+    board.signal(signal.SIGTERM)
+    assert board.wait_exit(30) == 0, "a board did not exit cleanly"
+
+
+def test_two_boards_change_their_outputs_at_one_host_instant(t):
+    """Counters CLOCK_MONOTONIC itself: the clocks see one kernel's stamps."""
+    two_boards_at_one_instant(t, {"axis-a": (), "axis-b": ()})
+
+
+def test_two_boards_of_other_oscillators_change_their_outputs_at_one_host_instant(t):
+    """Simulated oscillators 400 ppm and seconds apart, 20 us of receive
+    jitter each (their own random streams): the true instant is when each
+    counter reaches the instant's local time (the oscillator's inverse)."""
+    two_boards_at_one_instant(t, {
+        "axis-a": ("--clock-ppm", "200", "--clock-offset", "3.5", "--clock-jitter-us", "20", "--clock-seed", "1"),
+        "axis-b": ("--clock-ppm", "-200", "--clock-offset", "-2.25", "--clock-jitter-us", "20", "--clock-seed", "2")})
+
+
+def test_three_boards_of_one_process_change_their_outputs_at_one_host_instant(t):
+    """vmac-board --count 3: the loop wakes for each board's instant."""
+    two_boards_at_one_instant(t, {"axis": ()}, count=3)
+
+
+def two_boards_at_one_instant(t, clocks, count=None):
+    """clocks: {process name: its --clock-* options}; count: boards per
+    process (NAME-1..NAME-count), else one named NAME."""
+    procs = {name: start_board(t, name, clocks[name], count) for name in sorted(clocks)}
+    boards = {}  # board name: (its process, its process's io-log)
+    for name, proc in procs.items():
+        for board in (["%s-%d" % (name, i) for i in range(1, count + 1)] if count else [name]):
+            boards[board] = proc
+    names = sorted(boards)
+    host = Host(t.bus)
+    try:
+        host.join(names)
+        t.host(settings=SYNC_SETTINGS)  # SYNC only: it never sees the boards, already known
+        for name, (board, _) in boards.items():
+            board.wait_line(r"^%s: clock locked" % name, 60, what="%s's clock locked" % name)
+        instants = []
+        for k in range(FRAMES):
+            at = time.monotonic_ns() + AHEAD_NS
+            digital = 1 << (k % 7)
+            seq = host.timed({name: (digital, 10 * k) for name in names}, at)
+            answers = host.answers(seq)
+            instants.append((at, digital, answers))
+        # Outputs waiting when a SHUTDOWN comes are never driven.
+        at = time.monotonic_ns() + AHEAD_NS
+        host.timed({name: (0x7F, 1000) for name in names}, at)
+        for name in names:
+            host.shutdown(name)
+        while time.monotonic_ns() < at + 2 * AHEAD_NS:  # past the cancelled instant, with room
+            time.sleep(0.05)
+        for name, (board, _) in boards.items():
+            board.wait_line(r"^%s: acting at host instants$" % name, 10, what="'acting at host instants'")
+        for board, _ in procs.values():
+            stop(board)
+    finally:
+        host.close()
+
+    rows = {name: [r for r in io_log(path) if r["board"] == name] for name, (_, path) in boards.items()}
+    for name in names:
+        # (on arrival, a clock not usable on a busy machine: driven before the SHUTDOWN, not waiting)
+        assert not [r for r in rows[name] if r["host"] == at and r["how"] == "instant"], \
+            "%s drove outputs a SHUTDOWN had cancelled: %r" % (name, [r for r in rows[name] if r["host"] == at])
+        for r in rows[name]:
+            # at an instant, never before it (for the others, true is the frame's arrival on the board's
+            # counter, which --clock-jitter-us makes later than the kernel's stamp, maybe than done)
+            assert r["how"] != "instant" or r["done"] >= r["true"], "%s acted %d ns before its instant: %r" % (
+                name, r["true"] - r["done"], r)
+    served, spreads, offs, lates = 0, [], [], []
+    for at, digital, answers in instants[SETTLE:]:
+        outs = {}
+        for name in names:
+            a = answers[name]
+            state = CLOCK_STATES[a.clock & 7]
+            if a.clock & CLOCK_ARRIVAL:
+                continue  # this shared machine held a board's clock out of locked: said, and allowed
+            assert state in ("locked", "holdover"), "%s acted at the instant with its clock %s" % (name, state)
+            assert a.applied_digital == digital, "%s latched with 0x%02x applied, want 0x%02x" % (
+                name, a.applied_digital, digital)
+            out = [r for r in rows[name] if r["what"] == "out" and r["host"] == at]
+            latched = [r for r in rows[name] if r["what"] == "latch" and r["host"] == at]
+            assert len(latched) == 1, "%s's io-log of instant %d: %r" % (name, at, latched)
+            if latched[0]["how"] == "instant":
+                # latched_at is the clock's reading at the latch: a window closed since the frame came
+                # may have moved the line by up to its bound
+                assert abs(a.latched_at - at) <= a.bound_ns + 1000, \
+                    "%s says it latched %d ns off the instant (its bound %d ns)" % (name, a.latched_at - at, a.bound_ns)
+            else:  # late: the frame came after its instant (a stalled sender), latched on arrival
+                assert latched[0]["how"] == "late" and a.latched_at >= at, "%s latched %r, answering %r" % (
+                    name, latched[0], a)
+            assert len(out) == 1 and out[0]["digital"] == digital, "%s's io-log of instant %d: %r" % (name, at, out)
+            if out[0]["how"] == "instant":
+                outs[name] = out[0]
+        if len(outs) < len(names):
+            continue
+        served += 1
+        trues = [r["true"] for r in outs.values()]
+        spreads.append(max(trues) - min(trues))
+        offs += [tr - at for tr in trues]
+        lates += [r["done"] - r["true"] for r in outs.values()]
+    judged = FRAMES - SETTLE
+    assert served >= judged // 2, "only %d of %d frames were served at the instant by both boards" % (served, judged)
+    print("timed: %d of %d frames at the instant by both boards; spread p50 %.2f max %.2f us; off the "
+          "intended instant p50 %+.2f max |%.2f| us; wake-up after the instant p50 %.1f max %.1f us" % (
+              served, judged, statistics.median(spreads) / 1e3, max(spreads) / 1e3, statistics.median(offs) / 1e3,
+              max(abs(o) for o in offs) / 1e3, statistics.median(lates) / 1e3, max(lates) / 1e3))
+    assert max(spreads) <= SPREAD_NS, "two boards' true instants %d ns apart (goal %d)" % (max(spreads), SPREAD_NS)
+    assert max(abs(o) for o in offs) <= OFF_NS, "a board acted %d ns off the intended instant" % max(offs, key=abs)
+
+
+def test_a_board_without_a_usable_clock_acts_on_arrival_and_says_so(t):
+    board, path = start_board(t, "axis-c")
+    host = Host(t.bus)
+    try:
+        host.join(["axis-c"])
+        at = time.monotonic_ns() + 5 * 10**9  # far ahead: on arrival is long before it
+        seq = host.timed({"axis-c": (0x05, -250)}, at)
+        a = host.answers(seq)["axis-c"]
+        board.wait_line(r"^axis-c: acting on arrival \(clock unsynced\)$", 10, what="'acting on arrival'")
+        stop(board)
+    finally:
+        host.close()
+    assert a.clock == CLOCK_ARRIVAL | 0, "clock byte 0x%02x, want ARRIVAL | unsynced" % a.clock
+    assert a.latched_at == 0 and a.bound_ns == 0xFFFFFFFF and a.offset_ns == 0, \
+        "an unsynced board claims a latch time, bound or offset: %r" % (a,)
+    assert a.applied_digital == 0x05 and a.applied_pwm == -250, "applied %r, want the record's 0x05/-250" % (a,)
+    rows = io_log(path)
+    assert [(r["what"], r["how"]) for r in rows] == [("out", "arrival"), ("latch", "arrival")], rows
+    assert all(r["done"] < at for r in rows), "acted on arrival, yet at or after the instant: %r" % rows
+    counters = board.find_lines(r"^axis-c: timed \d+, on arrival 1, late 0, overrun 0$")
+    assert counters, "no timed counters line at exit"
+
+
+def test_a_board_whose_clock_is_lost_falls_back_to_arrival_and_says_so(t):
+    """The host's SYNC stops: the board holds over, still acting at the
+    instants, then is lost (its bound past 50 us, some 20 s later) and acts
+    on arrival, saying so in its answer (ARRIVAL, lost) and its log."""
+    board, path = start_board(t, "axis-d")
+    host = Host(t.bus)
+    try:
+        host.join(["axis-d"])
+        vmacd = t.host(settings=SYNC_SETTINGS)
+        board.wait_line(r"^axis-d: clock locked", 60, what="the clock locked")
+        for _ in range(FRAMES):  # until one is served at its instant (a busy machine may unlock a window)
+            at = time.monotonic_ns() + AHEAD_NS
+            locked = host.answers(host.timed({"axis-d": (0x01, 0)}, at))["axis-d"]
+            if not locked.clock & CLOCK_ARRIVAL:
+                break
+        vmacd.signal(signal.SIGTERM)
+        assert vmacd.wait_exit(30) == 0, "vmacd did not exit cleanly"
+        board.wait_line(r"^axis-d: clock lost, acting on arrival", 120, what="the clock lost")
+        late = time.monotonic_ns() + 5 * 10**9
+        lost = host.answers(host.timed({"axis-d": (0x02, 0)}, late))["axis-d"]
+        board.wait_line(r"^axis-d: acting on arrival \(clock lost\)$", 10, what="'acting on arrival (clock lost)'")
+        stop(board)
+    finally:
+        host.close()
+    assert not locked.clock & CLOCK_ARRIVAL, "acted on arrival with its clock locked: %r" % (locked,)
+    assert lost.clock == CLOCK_ARRIVAL | 4 and lost.latched_at == 0, "a lost clock's answer: %r" % (lost,)
+    assert lost.applied_digital == 0x02, "applied 0x%02x, want 0x02 driven on arrival" % lost.applied_digital
+    rows = io_log(path)
+    assert [(r["how"], r["clock"]) for r in rows if r["host"] == late] == [("arrival", "lost")] * 2, rows
+    assert all(r["done"] < late for r in rows if r["host"] == late), "acted on arrival, yet after the instant"
