@@ -26,7 +26,7 @@ $(FOBJ)/tests/fuzz/fuzz_arena.o $(FOBJ)/tests/fuzz/fuzz_hostfiles.o: $(FOBJ)/%.o
 
 # The wire codec and the board (portable C99).
 $(BUILD)/fuzz/fuzz_proto: tests/fuzz/fuzz_proto.c core/proto/proto.c core/proto/auth.c core/proto/siphash.c firmware/board.c \
-                          firmware/clock.c
+                          firmware/clock.c firmware/timed.c
 	@mkdir -p $(dir $@)
 	clang -std=c99 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all $^ -o $@
 

@@ -6,7 +6,8 @@
  *   /tmp/make_corpus tests/fuzz/corpus-proto
  * Fuzz (new finds go to the first directory, not the committed seeds):
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined tests/fuzz/fuzz_proto.c \
- *     core/proto/proto.c core/proto/auth.c core/proto/siphash.c firmware/board.c firmware/clock.c -o /tmp/fuzz_proto
+ *     core/proto/proto.c core/proto/auth.c core/proto/siphash.c firmware/board.c firmware/clock.c \
+ *     firmware/timed.c -o /tmp/fuzz_proto
  *   mkdir -p /tmp/fuzz_work && /tmp/fuzz_proto -max_total_time=30 /tmp/fuzz_work tests/fuzz/corpus-proto */
 #include <stdio.h>
 #include <stdlib.h>
