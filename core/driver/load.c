@@ -289,11 +289,12 @@ int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, co
 			d->instruction_budget = (uint64_t)x, d->budget_hooks = (uint64_t)x / HOOK_EVERY + 1;
 		else if (strcmp(k, "budget_us") == 0 && *end == 0 && x >= 0 && x <= 1e7)
 			d->budget_ns = (int64_t)x * 1000;
-		else if (strncmp(k, "param.", 6) != 0) {
-			snprintf(err, errlen,
-			         "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
-			         "instructions, budget_us, param.NAME)",
-			         limits->expect_name ? limits->expect_name : "?", k, v);
+		else if (strncmp(k, "param.", 6) != 0 && strncmp(k, "timing.", 7) != 0) {
+			snprintf(
+			    err, errlen,
+			    "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
+			    "instructions, budget_us, param.NAME, timing.pattern, timing.input_us, timing.output_us)",
+			    limits->expect_name ? limits->expect_name : "?", k, v);
 			return -EINVAL;
 		}
 	}
@@ -335,6 +336,11 @@ const char *vmac_driver_version(const struct vmac_driver *d)
 unsigned vmac_driver_level(const struct vmac_driver *d)
 {
 	return d->level;
+}
+
+void vmac_driver_timing(const struct vmac_driver *d, struct vmac_timing_want *out)
+{
+	*out = d->timing;
 }
 
 int vmac_driver_nio(const struct vmac_driver *d)

@@ -183,8 +183,11 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 		int i;
 		m->want_tick = 0;
 		fill(bus, m, j, JOB_TICK, m->tick_ns);
-		for (i = 0; i < m->nboards; i++)
-			j->in[i] = bus->dev[m->board[i]].inputs;
+		for (i = 0; i < m->nboards; i++) {
+			const struct device *b = &bus->dev[m->board[i]];
+			j->in[i] = b->inputs;
+			j->sample_s[i] = b->sample_ns ? (double)(b->sample_ns - bus->start_ns) / 1e9 : j->time_s;
+		}
 		j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, m->tick_ns);
 		m->want_checkpoint = 0;
 		hand_over(bus, m, j);
