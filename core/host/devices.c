@@ -660,6 +660,7 @@ void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level)
 	if (level == old)
 		return;
 	if (bus_timing_set(bus, m, level, err, sizeof(err)) != 0) {
+		bus_timing_set(bus, m, old, NULL, 0); /* it stays at its level, with its instants */
 		bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u refused: %s", m->driver, old, level,
 		          err);
 		return;

@@ -238,3 +238,31 @@ def test_the_host_schedules_the_instants(t):
                 d["name"], v["t"], d["clock"]["latched_at"])
     v = old["variables"]
     assert 0 <= v["lag"] < 0.05, "old-1 (plain): dev.t %.6f is %.6f s before inputs.time" % (v["t"], v["lag"])
+
+
+LEVEL_LUA = """local driver = { name = "tlevel", version = "1", io = { lamp = "do0" },
+	timing = { pattern = "offsets", input_us = 20000, output_us = 24000 } }
+local asked = false
+function driver.tick(dev, inputs)
+	if not asked then asked = true; dev:set_level(2) end
+end
+return driver
+"""
+
+
+def test_a_level_whose_period_cannot_hold_the_offsets_is_refused(t):
+    host = t.host(drivers=t.drivers(tlevel=LEVEL_LUA), settings=SETTINGS)
+    board = Board(t.bus, "lvl-1", "tlevel", 1, (1, 1))
+    try:
+        host.wait_running(["lvl-1"])
+        ev = host.wait_event("level", "lvl-1", text="refused")
+        assert "level 5 -> 2 refused: timing: input_us = 20000" in ev["text"] and "period (4000 us)" in ev["text"], \
+            "the refusal does not say why: %r" % ev["text"]
+        served = host.device("lvl-1")["served"]
+        s = host.wait_status(lambda st: host.device("lvl-1", st)["served"] >= served + 20, 30, "20 more services")
+        d = host.device("lvl-1", s)
+        assert d["level"] == LEVEL and d["timing"]["pattern"] == "offsets" and d["timing"]["timed"] is True, \
+            "after the refusal: level %r, timing %r" % (d["level"], d["timing"])
+        assert board.served and board.served[-1][0].flags & TIMED, "the board is no longer served in TIMED frames"
+    finally:
+        board.close()
