@@ -36,9 +36,10 @@ int vmac_timing_check(const struct vmac_timing_want *want, uint32_t lead_us, uin
 		return -1;
 	}
 	if (want->pattern != VMAC_TIMING_OFFSETS) {
+		int named = want->pattern == VMAC_TIMING_DEFAULT ? VMAC_TIMING_PHASE : want->pattern;
 		if (want->input_us || want->output_us) {
 			snprintf(err, errlen, "timing: input_us and output_us are for pattern offsets, not %s",
-			         vmac_timing_name(want->pattern == VMAC_TIMING_DEFAULT ? VMAC_TIMING_PHASE : want->pattern));
+			         vmac_timing_name(named));
 			return -1;
 		}
 		return 0;
