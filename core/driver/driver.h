@@ -169,6 +169,9 @@ unsigned vmac_driver_level(const struct vmac_driver *d);
  * driver.NAME.timing.* applied over it; pattern VMAC_TIMING_DEFAULT when
  * neither names one. Fixed at load: any thread. */
 void vmac_driver_timing(const struct vmac_driver *d, struct vmac_timing_want *out);
+/* What the last tick asked with dev:output_at: seconds after the planned
+ * start of the slot that carries its outputs; -1 when it asked nothing. */
+double vmac_driver_output_at(const struct vmac_driver *d);
 
 /* The manifest's board I/O, in name order (for tools that show or test a
  * machine by the driver's names; docs/TESTING.md). */

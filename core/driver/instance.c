@@ -353,6 +353,7 @@ static int tick_work(struct vmac_driver *d, void *args, char *err, size_t errlen
 {
 	struct tick_args *a = args;
 	lua_State *L = d->L;
+	d->out_at_s = -1; /* dev:output_at asks for one tick */
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_tick);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
 	fill_sample_times(d, lua_gettop(L), a->time_s);

@@ -104,6 +104,8 @@ struct vmac_driver {
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
 	unsigned level, max_level;
 	struct vmac_timing_want timing; /* the manifest's timing, the host's settings over it */
+	uint32_t slot_us, lead_us;      /* the host's slot and lead (limits; 0: not on a host) */
+	double out_at_s;                /* dev:output_at of the running tick; -1: none */
 	int jit;
 	struct io io[VMAC_DRIVER_MAX_IO];
 	int nio;

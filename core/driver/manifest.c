@@ -535,6 +535,9 @@ static int parse_timing(struct vmac_driver *d, int t, const struct vmac_driver_l
 		d->timing.input_us = d->timing.output_us = 0; /* a setting made it phase or arrival */
 	if (d->timing.pattern == VMAC_TIMING_OFFSETS && (!d->timing.input_us || !d->timing.output_us))
 		BAD("timing: pattern \"offsets\" needs input_us and output_us");
+	d->slot_us = lim->slot_us;
+	d->lead_us = lim->timed_lead_us;
+	d->out_at_s = -1;
 	if (d->timing.pattern == VMAC_TIMING_OFFSETS && lim->slot_us &&
 	    vmac_timing_check(&d->timing, lim->timed_lead_us, lim->slot_us << d->level, why, sizeof(why)) != 0)
 		BAD("%s (level %u)", why, d->level);

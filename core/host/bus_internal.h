@@ -87,6 +87,7 @@ struct job {
 	uint64_t instructions;                           /* vmac_driver_instructions after the call */
 	uint64_t call_ns;                                /* vmac_driver_call_ns after the call */
 	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
+	double out_at_s;                                 /* TICK: its dev:output_at, -1 none */
 	/* The bus thread's own notes on it. */
 	int64_t queued_ns;      /* when it was asked for (a tick: its primary's reply) */
 	int64_t seen_ns;        /* when the bus first saw it running (0: not yet) */
@@ -182,6 +183,7 @@ struct machine {
 	int64_t probation_end_ns;
 	struct vmac_bus *bus;
 	struct vmac_timing timing; /* its boards' instants (timed.c): the driver's pattern at its level */
+	int64_t out_at_ns;         /* its last tick's dev:output_at after the anchor slot's start; 0: none */
 };
 
 struct device {

@@ -253,6 +253,7 @@ static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, in
 	int i;
 	for (i = 0; i < j->nboards && i < m->nboards; i++)
 		bus->dev[m->board[i]].outputs = j->out[i];
+	m->out_at_ns = j->out_at_s > 0 ? (int64_t)(j->out_at_s * 1e9 + 0.5) : 0; /* with these outputs */
 	if (now - j->queued_ns > bus->slot_ns << m->level)
 		m->late++;
 	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in,

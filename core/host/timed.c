@@ -34,8 +34,8 @@ int bus_timing_set(struct vmac_bus *bus, struct machine *m, unsigned level, char
  * its boards' slots in this period, so that every board, whichever slot
  * carries its frame, acts at one instant, and none is asked for an
  * instant before its frame has left. */
-int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t slot, unsigned level,
-                         uint64_t *out_at, uint64_t *in_at)
+int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t slot, unsigned level, uint64_t *out_at,
+                         uint64_t *in_at)
 {
 	const struct machine *m;
 	uint64_t anchor = slot;
@@ -55,6 +55,10 @@ int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t 
 		}
 	}
 	vmac_timing_instants(&m->timing, bus->start_ns + (int64_t)anchor * bus->slot_ns, out_at, in_at);
+	/* dev:output_at: later within the period (the driver checked it at
+	 * its level; a level changed since is checked again here). */
+	if (m->out_at_ns > 0 && m->out_at_ns >= m->timing.out_ns && m->out_at_ns < bus->slot_ns << level)
+		*out_at = (uint64_t)(bus->start_ns + (int64_t)anchor * bus->slot_ns + m->out_at_ns);
 	return 1;
 }
 

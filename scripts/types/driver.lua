@@ -128,6 +128,14 @@ local Dev = {}
 ---@return string? message
 function Dev:set_level(n) end
 
+---Release the outputs this tick sets s seconds after the planned start of
+---the slot that carries them (from the pattern's output instant to the
+---period; DRIVERS.md, "timing"), for this tick only.
+---@param s number seconds
+---@return true|nil ok
+---@return string? message why not (outside the range, or the machine acts on arrival)
+function Dev:output_at(s) end
+
 ---Record an event (kind `driver`) for people; at most 10 per second.
 ---@param text string
 function Dev:event(text) end

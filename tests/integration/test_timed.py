@@ -266,3 +266,29 @@ def test_a_level_whose_period_cannot_hold_the_offsets_is_refused(t):
         assert board.served and board.served[-1][0].flags & TIMED, "the board is no longer served in TIMED frames"
     finally:
         board.close()
+
+
+LATER_LUA = """local driver = { name = "tlater", version = "1", io = { lamp = "do0" },
+	timing = { pattern = "offsets", input_us = 20000, output_us = 24000 }, variables = { ok = {} } }
+function driver.tick(dev, inputs)
+	dev.vars.ok = dev:output_at(0.028) == true
+end
+return driver
+"""
+
+
+def test_a_driver_asks_for_its_outputs_later_in_the_period(t):
+    host = t.host(drivers=t.drivers(tlater=LATER_LUA), settings=SETTINGS)
+    board = Board(t.bus, "later-1", "tlater", 1, (1, 1))
+    try:
+        host.wait_running(["later-1"])
+        s = host.wait_status(lambda st: host.device("later-1", st)["served"] >= 40, 30, "40 services")
+    finally:
+        board.close()
+    assert host.device("later-1", s)["variables"]["ok"] is True, "dev:output_at(0.028) was refused"
+    gaps = [c.out_at - c.in_at for c, _ in board.served]
+    # The services before the first tick release at the pattern's 24 ms;
+    # from the first tick's outputs on, at the 28 ms it asked for.
+    later = [g for g in gaps if g == 8000000]
+    assert len(later) >= len(gaps) - 5 and all(g in (4000000, 8000000) for g in gaps), \
+        "out_at - in_at of the frames: %r (want 8 ms after the first tick)" % sorted(set(gaps))

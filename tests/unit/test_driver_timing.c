@@ -106,8 +106,8 @@ START_TEST(a_bad_timing_is_refused_by_name)
 	           "output_us = 32000 must be at least the host's lead (timed_lead_us: 500 us) and below the period "
 	           "(32000 us) (level 5)");
 	/* The same offsets fit a level whose period holds them. */
-	vmac_driver_free(load_ok(HEAD "level = 6, timing = { pattern = 'offsets', input_us = 600, output_us = 32000 },"
-	                         TAIL));
+	vmac_driver_free(
+	    load_ok(HEAD "level = 6, timing = { pattern = 'offsets', input_us = 600, output_us = 32000 }," TAIL));
 }
 END_TEST
 
@@ -141,9 +141,10 @@ END_TEST
 
 START_TEST(dev_t_is_each_boards_inputs_instant)
 {
-	struct vmac_driver *d = load_ok(HEAD "variables = { t = {}, t1 = {}, t2 = {} },\n"
-	                                     " tick = function(dev, i) dev.vars.t = dev.t; dev.vars.t1 = dev.boards[1].t;"
-	                                     " dev.vars.t2 = dev.boards[2].t end }\n");
+	struct vmac_driver *d =
+	    load_ok(HEAD "variables = { t = {}, t1 = {}, t2 = {} },\n"
+	                 " tick = function(dev, i) dev.vars.t = dev.t; dev.vars.t1 = dev.boards[1].t;"
+	                 " dev.vars.t2 = dev.boards[2].t end }\n");
 	struct vmac_inputs in0, in1;
 	struct vmac_outputs out0, out1;
 	const struct vmac_inputs *ins[2] = {&in0, &in1};
@@ -167,6 +168,40 @@ START_TEST(dev_t_is_each_boards_inputs_instant)
 }
 END_TEST
 
+START_TEST(output_at_asks_for_one_tick_within_the_period)
+{
+	struct vmac_driver *d =
+	    load_ok(HEAD "timing = { pattern = 'offsets', input_us = 20000, output_us = 24000 },\n"
+	                 " variables = { ok = {}, why = {} },\n"
+	                 " tick = function(dev, i) local ok, why = dev:output_at(i.time < 1 and 0.028 or 0.040)\n"
+	                 "   dev.vars.ok = ok == true; dev.vars.why = why end }\n");
+	struct vmac_inputs in;
+	struct vmac_outputs out;
+	const struct vmac_inputs *ins[1] = {&in};
+	struct vmac_outputs *outs[1] = {&out};
+	char err[VMAC_DRIVER_ERR_MAX] = "";
+	memset(&in, 0, sizeof(in));
+	ck_assert_int_eq(vmac_driver_add_board(d, 0, "main"), 0);
+	ck_assert_msg(vmac_driver_tick(d, 0.5, ins, outs, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_double_eq_tol(vmac_driver_output_at(d), 0.028, 1e-12);
+	ck_assert(vmac_driver_variable(d, 0)->value.number != 0);
+	/* 40 ms is past the 32 ms period of level 5: refused, nothing asked. */
+	ck_assert_msg(vmac_driver_tick(d, 1.5, ins, outs, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_double_eq(vmac_driver_output_at(d), -1);
+	ck_assert(vmac_driver_variable(d, 0)->value.number == 0);
+	ck_assert_msg(strstr(vmac_driver_variable(d, 1)->value.str, "output_at: 0.04") != NULL, "%s",
+	              vmac_driver_variable(d, 1)->value.str);
+	vmac_driver_free(d);
+	d = load_ok(HEAD "variables = { why = {} },\n"
+	                 " tick = function(dev, i) local _, why = dev:output_at(0.0004); dev.vars.why = why end }\n");
+	ck_assert_int_eq(vmac_driver_add_board(d, 0, "main"), 0);
+	ck_assert_msg(vmac_driver_tick(d, 0.5, ins, outs, err, sizeof(err)) == 0, "tick failed: %s", err);
+	ck_assert_msg(strstr(vmac_driver_variable(d, 0)->value.str, "output_at: 0.0004") != NULL,
+	              "phase: below the lead (0.5 ms) is refused: %s", vmac_driver_variable(d, 0)->value.str);
+	vmac_driver_free(d);
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("driver_timing");
@@ -176,6 +211,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_bad_timing_is_refused_by_name);
 	tcase_add_test(tc, the_hosts_settings_override_the_manifest);
 	tcase_add_test(tc, dev_t_is_each_boards_inputs_instant);
+	tcase_add_test(tc, output_at_asks_for_one_tick_within_the_period);
 	suite_add_tcase(s, tc);
 	return s;
 }
