@@ -156,6 +156,7 @@ def test_the_host_schedules_the_instants(t):
         host.wait_status(lambda s: all(host.device(n, s)["served"] >= 100 for n in boards), 60,
                          "every board served 100 times")
         s = host.status()
+        table = host.get("/api/schedule")
     finally:
         for b in boards.values():
             b.close()
@@ -208,6 +209,24 @@ def test_the_host_schedules_the_instants(t):
     assert len(common[0]) >= 50 and common[0] == common[1], \
         "the pair's instants differ: %d and %d in common range, first differing %r" % (
             len(common[0]), len(common[1]), next(((a, b) for a, b in zip(*common) if a != b), None))
+
+    # GET /api/schedule: the block as the seed's table. Each board at its
+    # slot, latching and releasing at the instants of its frames (relative
+    # to the table's start); the pair at one instant; plain ones at none.
+    assert table["slot_us"] == SLOT_NS // 1000 and table["slots"] == 1 << LEVEL, "the table: %r" % (
+        {k: v for k, v in table.items() if k != "timeline"},)
+    entries = {e["name"]: (row, e) for row in table["timeline"] for e in row["devices"]}
+    assert set(boards) <= set(entries), "boards missing from the table: %r" % sorted(set(boards) - set(entries))
+    row, e = entries["phase-1"]
+    assert e["latch_us"] == row["offset_us"] + 500 == e["release_us"] and e["driver"] is True and \
+        e["pattern"] == "phase", "phase-1 in the table: %r at %r" % (e, row["offset_us"])
+    row, e = entries["offs-1"]
+    assert (e["latch_us"], e["release_us"]) == (row["offset_us"] + IN_US, row["offset_us"] + OUT_US), \
+        "offs-1 in the table: %r at %r" % (e, row["offset_us"])
+    assert entries["pair-a"][1]["latch_us"] == entries["pair-b"][1]["latch_us"] is not None, \
+        "the pair in the table: %r, %r" % (entries["pair-a"][1], entries["pair-b"][1])
+    assert entries["old-1"][1]["latch_us"] is None and entries["arr-1"][1]["release_us"] is None, \
+        "plain boards in the table: %r, %r" % (entries["old-1"][1], entries["arr-1"][1])
 
     # The status: the board's clock as it said, the machine's timing.
     phase, offs, old, arr = (host.device(n, s) for n in ("phase-1", "offs-1", "old-1", "arr-1"))
