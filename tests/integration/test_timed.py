@@ -12,6 +12,7 @@ into the period is in time under a 10 ms deadline). A board of firmware 1.0
 and a machine acting on arrival get plain frames. Two boards of one
 machine, in different slots, latch at one instant."""
 
+import json
 import socket
 import struct
 import threading
@@ -20,7 +21,7 @@ import time
 import frames
 from frames import (CYCLIC, DEV, DISCOVER, OFFSET, REGISTER, SHUTDOWN, SIZE, SYS, TIMED, UPDATE, WATCHDOG,
                     ANNOUNCE, announce, inputs, parse, read_cyclic, read_sync, reply, timed_inputs)
-from harness import bus_socket
+from harness import Skip, bus_socket, post
 
 SLOT_NS = 1000000  # slice_us 200 x 5
 LEAD_NS = SLOT_NS // 2  # timed_lead_us 0: half a slot
@@ -49,8 +50,11 @@ class Board:
     ANSWER_AFTER_LATCH_S after it; dropped, it announces again. Keeps every frame it was served in,
     with the SYNC stamp that led its batch."""
 
-    def __init__(self, bus, name, driver, major, firmware, minor=0):
+    def __init__(self, bus, name, driver, major, firmware, minor=0, key=None):
         self.name, self.driver, self.major, self.minor, self.firmware = name, driver, major, minor, firmware
+        self.key, self.nonce, self.to_board, self.to_host, self.tx = key, bytes(8), None, None, 0
+        self.bad = 0  # sealed frames or records of the host's that did not open
+        self.lock = threading.Lock()
         self.group = bus_socket(bus, 0.2)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
@@ -64,6 +68,13 @@ class Board:
                         threading.Thread(target=self._unicast, daemon=True)]
         for th in self.threads:
             th.start()
+
+    def _send(self, frame, to=None):
+        with self.lock:  # a sealed reply's counter only ever grows on the wire
+            if self.to_host is not None:  # keyed: every frame of the session sealed
+                self.tx += 1
+                frame = frames.seal(frame, self.tx, self.to_host)
+            self.sock.sendto(frame, to or self.host)
 
     def close(self):
         self.stop = True
@@ -87,15 +98,27 @@ class Board:
                 continue
             got = parse(data)
             if got and got[0].channel == SYS and got[0].op == DISCOVER and not self.device_id:
-                self.sock.sendto(reply(ANNOUNCE, announce(self.driver.encode(), self.name.encode(), major=self.major,
-                                                          minor=self.minor, firmware=self.firmware), channel=SYS, seq=got[0].seq,
-                                       version=2), src)
+                frame = reply(ANNOUNCE, announce(self.driver.encode(), self.name.encode(), major=self.major,
+                                                 minor=self.minor, firmware=self.firmware), channel=SYS,
+                              seq=got[0].seq, version=2)
+                if self.key is not None and len(got[1]) == frames.NONCE_LEN:
+                    self.nonce = got[1]
+                    frame = frames.seal(frame, 0, self.key, self.nonce)
+                self.sock.sendto(frame, src)
                 continue
-            c = read_cyclic(data)
+            if self.key is None:
+                c = read_cyclic(data)
+            else:
+                sealed = frames.read_cyclic_sealed(data)
+                c = sealed and sealed[0]
             if not c or self.offset is None or not c.first <= self.offset < c.first + len(c.records):
                 continue
             tag, flags, _, _ = c.records[self.offset - c.first]
             if tag != self.device_id >> 16 or not flags & 1:
+                continue
+            if self.key is not None and not frames.record_opens(sealed[1], self.offset,
+                                                                *sealed[2][self.offset - c.first], self.to_board):
+                self.bad += 1
                 continue
             self.served.append((c, last_sync))
             if c.flags & TIMED:
@@ -106,7 +129,7 @@ class Board:
                                      flags=frames.REPLY | TIMED, version=2)
             else:
                 frame = reply(UPDATE, inputs(digital=1), device_id=self.device_id, seq=c.seq, version=2)
-            self.sock.sendto(frame, self.host)
+            self._send(frame)
 
     def _unicast(self):
         while not self.stop:
@@ -121,6 +144,16 @@ class Board:
                 continue
             h, body = got
             self.host = src
+            if h.op == REGISTER and self.key is not None:
+                to_board, to_host = frames.session_keys(self.key, self.nonce, h.device_id)
+                if not frames.opens(data, to_board):
+                    self.bad += 1
+                    continue
+                with self.lock:
+                    self.to_board, self.to_host, self.tx = to_board, to_host, 0
+            elif self.key is not None and not frames.opens(data, self.to_board or bytes(16)):
+                self.bad += 1
+                continue
             if h.op == REGISTER:
                 self.device_id, self.offset = h.device_id, None
                 answer = b""
@@ -135,9 +168,11 @@ class Board:
                 answer = b""
             else:
                 continue
-            self.sock.sendto(reply(h.op, answer, device_id=h.device_id, seq=h.seq, version=2), src)
+            self._send(reply(h.op, answer, device_id=h.device_id, seq=h.seq, version=2), src)
             if h.op == SHUTDOWN:  # dropped (a reply this process was too slow for): announce again
                 self.device_id, self.offset = 0, None
+                with self.lock:
+                    self.to_board = self.to_host = None
 
 
 def test_the_host_schedules_the_instants(t):
@@ -313,3 +348,36 @@ def test_a_driver_asks_for_its_outputs_later_in_the_period(t):
     later = [g for g in gaps if g == 8000000]
     assert len(later) >= len(gaps) - 5 and all(g in (4000000, 8000000) for g in gaps), \
         "out_at - in_at of the frames: %r (want 8 ms after the first tick)" % sorted(set(gaps))
+
+
+def test_a_keyed_board_gets_its_instants_sealed_and_answers_sealed(t):
+    """A board enrolled with a key: its records come in sealed TIMED frames
+    whose MAC covers the instants (PROTOCOL.md, "Time-triggered I/O"), its
+    sealed TIMED replies fill the status's clock; an unkeyed timed board
+    beside it gets a plain TIMED frame of its own."""
+    if frames.NACL is None:
+        raise Skip("PyNaCl (Debian python3-nacl) is missing: the test's own sealed frames need libsodium's SipHash")
+    host = t.host(drivers=t.drivers(tphase=DRIVER % ("tphase", "")), settings=SETTINGS)
+    code, text = post(host, "/api/boards/sealed-1", t.token, b"{}")
+    assert code == 200, "enrolling sealed-1 answered %d: %s" % (code, text)
+    key = bytes.fromhex(json.loads(text)["key"])
+    boards = {"sealed-1": Board(t.bus, "sealed-1", "tphase", 1, (1, 1), key=key),
+              "open-1": Board(t.bus, "open-1", "tphase", 2, (1, 1))}
+    try:
+        host.wait_running(list(boards))
+        s = host.wait_status(lambda st: all(host.device(n, st)["served"] >= 50 for n in boards), 60,
+                             "both served 50 times")
+    finally:
+        for b in boards.values():
+            b.close()
+    sealed, plain = boards["sealed-1"], boards["open-1"]
+    assert sealed.bad == 0, "%d frames or records of the host did not open under sealed-1's session" % sealed.bad
+    assert sealed.served and all(c.flags == (TIMED | frames.AUTH) for c, _ in sealed.served), \
+        "sealed-1 was served in frames of flags %r" % sorted({c.flags for c, _ in sealed.served})
+    assert plain.served and all(c.flags == TIMED for c, _ in plain.served), \
+        "open-1 was served in frames of flags %r" % sorted({c.flags for c, _ in plain.served})
+    d = host.device("sealed-1", s)
+    assert d["authenticated"] is True and d["clock"] and d["clock"]["services_timed"] > 0 and \
+        d["timing"]["mismatched"] == 0, "sealed-1: authenticated %r, clock %r, timing %r" % (
+            d["authenticated"], d["clock"], d["timing"])
+    assert s["counters"]["auth_failed"] == 0, "the host refused %d sealed frames" % s["counters"]["auth_failed"]
