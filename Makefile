@@ -159,7 +159,7 @@ endef
 # `vmac test`, `vmac site`); vmac-board: the board and the transports.
 VMACD_MODULES      := $(MODULES)
 VMAC_MODULES       := $(call down_from,mqtt)
-VMAC_BOARD_MODULES := sim driver transport board proto common
+VMAC_BOARD_MODULES := sim driver transport board sched proto common
 VMACD_OBJ          := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/vmacd/*.c))
 VMAC_OBJ           := $(patsubst %.c,$(OBJ)/%.o,$(wildcard core/cli/*.c))
 VMAC_BOARD_OBJ     := $(patsubst %.c,$(OBJ)/%.o,$(wildcard firmware/posix/*.c))

@@ -44,7 +44,34 @@ static json_t *value_json(const struct vmac_value *v)
 	}
 }
 
-static json_t *device_json(const struct vmac_device_status *d)
+/* devices[].clock: null until the board's first TIMED reply. */
+static json_t *clock_json(const struct vmac_device_status *d, int64_t started_ns)
+{
+	static const char *const states[] = {"unsynced", "locking", "locked", "holdover", "lost"};
+	const struct vmac_board_clock_status *c = &d->clock;
+	if (!c->known)
+		return json_null();
+	return json_pack(
+	    "{s:s, s:b, s:o, s:f, s:o, s:I, s:I}", "state", c->state <= 4 ? states[c->state] : "?", "on_arrival",
+	    c->on_arrival, "bound_us", c->bound_ns == 0xFFFFFFFFu ? json_null() : json_real((double)c->bound_ns / 1e3),
+	    "offset_s", (double)c->offset_ns / 1e9, "latched_at",
+	    c->latched_at_ns ? json_real((double)((int64_t)c->latched_at_ns - started_ns) / 1e9) : json_null(),
+	    "services_timed", (json_int_t)c->services_timed, "services_on_arrival", (json_int_t)c->services_arrival);
+}
+
+/* devices[].timing: null without a machine. */
+static json_t *timing_json(const struct vmac_device_status *d)
+{
+	int arrival = d->timing.pattern == VMAC_TIMING_ARRIVAL;
+	if (d->timing.pattern == VMAC_TIMING_DEFAULT)
+		return json_null();
+	return json_pack("{s:s, s:o, s:o, s:b, s:I}", "pattern", vmac_timing_name(d->timing.pattern), "in_us",
+	                 arrival ? json_null() : json_integer(d->timing.in_us), "out_us",
+	                 arrival ? json_null() : json_integer(d->timing.out_us), "timed", d->timing.timed, "mismatched",
+	                 (json_int_t)d->timing_mismatch);
+}
+
+static json_t *device_json(const struct vmac_device_status *d, int64_t started_ns)
 {
 	json_t *o, *vars = json_object(), *params = json_object();
 	int i;
@@ -80,6 +107,9 @@ static json_t *device_json(const struct vmac_device_status *d)
 	json_object_set_new(o, "authenticated", json_boolean(d->authenticated));
 	json_object_set_new(o, "driver_instructions", json_integer((json_int_t)d->driver_instructions));
 	json_object_set_new(o, "driver_call_s", json_real((double)d->driver_call_ns / 1e9));
+	json_object_set_new(o, "firmware", json_sprintf("%u.%u", d->firmware_major, d->firmware_minor));
+	json_object_set_new(o, "clock", clock_json(d, started_ns));
+	json_object_set_new(o, "timing", timing_json(d));
 	return o;
 }
 
@@ -94,7 +124,7 @@ static json_t *status_json(struct vmac_http *h)
 	vmac_bus_status(h->bus, s);
 	devices = json_array();
 	for (i = 0; i < s->ndevices; i++)
-		json_array_append_new(devices, device_json(&s->devices[i]));
+		json_array_append_new(devices, device_json(&s->devices[i], s->started_ns));
 	reasons = json_object();
 	for (i = 0; i < VMAC_BAD_REASONS; i++)
 		json_object_set_new(reasons, vmac_malformed_reason_names[i],
@@ -248,9 +278,9 @@ enum MHD_Result http_devices(struct vmac_http *h, struct MHD_Connection *c, cons
 	vmac_bus_status(h->bus, s);
 	for (i = 0; i < s->ndevices; i++)
 		if (!name)
-			json_array_append_new(list, device_json(&s->devices[i]));
+			json_array_append_new(list, device_json(&s->devices[i], s->started_ns));
 		else if (!one && strcmp(s->devices[i].name, name) == 0)
-			one = device_json(&s->devices[i]);
+			one = device_json(&s->devices[i], s->started_ns);
 	pthread_mutex_unlock(&h->status_lock);
 	if (!name)
 		return http_reply(c, MHD_HTTP_OK, json_pack("{s:o}", "devices", list));

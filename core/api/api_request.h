@@ -40,6 +40,7 @@
 	X(HTTP_WHOAMI, "GET", "/api/whoami", VMAC_SCOPE_READ, NULL, http_whoami)                                       \
 	X(HTTP_STATUS, "GET", "/api/status", VMAC_SCOPE_READ, NULL, http_status)                                       \
 	X(HTTP_LIVE, "GET", "/api/live", VMAC_SCOPE_READ, NULL, http_live_stream)                                      \
+	X(HTTP_SCHEDULE, "GET", "/api/schedule", VMAC_SCOPE_READ, NULL, http_schedule)                                 \
 	X(HTTP_EVENTS, "GET", "/api/events", VMAC_SCOPE_READ, NULL, http_events_stream)                                \
 	X(HTTP_EVENT_LOG, "GET", "/api/events/log", VMAC_SCOPE_READ, NULL, http_event_log)                             \
 	X(HTTP_DEVICES, "GET", "/api/devices", VMAC_SCOPE_READ, NULL, http_devices)                                    \

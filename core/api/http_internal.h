@@ -269,6 +269,8 @@ http_handler http_ui, http_health, http_index, http_whoami;
 http_handler http_status, http_devices, http_device_input, http_device_cycle, http_console, http_live_stream;
 /* history.c */
 http_handler http_device_history;
+/* api_schedule.c */
+http_handler http_schedule;
 /* api_events.c */
 http_handler http_events_stream, http_event_log;
 /* api_recordings.c */

@@ -51,6 +51,7 @@ static const struct key keys[] = {
     {U(reply_deadline_us, 50, 10000000)},
     {U(discovery_period_ms, 10, 600000)},
     {U(clock_sync_ms, 0, 40)},
+    {U(timed_lead_us, 0, 10000000)},
     {U(watchdog_ms, 1, 60000)},
     {U(miss_limit, 1, 1000)},
     {U(sleep_s, 1, 3600)},
@@ -163,7 +164,7 @@ static int set_driver(struct vmac_config *c, const char *name, const char *value
 	if (!dot || dlen == 0 || dlen > VMAC_NAME_MAX || !dot[1] || strlen(dot + 1) >= sizeof(x->s.key)) {
 		snprintf(err, errlen,
 		         "'%s': expected driver.NAME.KEY (KEY: memory_kib, instructions, budget_us, "
-		         "param.NAME)",
+		         "param.NAME, timing.pattern, timing.input_us, timing.output_us)",
 		         name);
 		return -EINVAL;
 	}
@@ -474,6 +475,13 @@ int vmac_config_check(const struct vmac_config *c, char *err, size_t errlen)
 	    strcmp(c->deploy_require_signature, "no") != 0) {
 		snprintf(err, errlen, "deploy_require_signature '%s': expected auto, yes or no",
 		         c->deploy_require_signature);
+		return -EINVAL;
+	}
+	if (c->timed_lead_us >= vmac_config_slot_us(c)) {
+		snprintf(err, errlen,
+		         "timed_lead_us (%u) must be below a slot (%u us): a phase-aligned machine's instant is its "
+		         "slot's start plus the lead (0: half a slot)",
+		         c->timed_lead_us, vmac_config_slot_us(c));
 		return -EINVAL;
 	}
 	if ((uint64_t)c->watchdog_ms * 1000 < 2ull * vmac_config_slot_us(c)) {

@@ -37,9 +37,11 @@ struct vmac_config {
 	    reply_deadline_us; /* a reply later than this after the send is a miss (capped at the device's period) */
 	uint32_t discovery_period_ms;
 	uint32_t clock_sync_ms; /* SYNC to every board this often (docs/TIME.md); 0 = off */
-	uint32_t watchdog_ms;   /* board comm-loss period set at REGISTER */
-	uint32_t miss_limit;    /* consecutive misses that drop a device (1 = zero tolerance) */
-	uint32_t sleep_s;       /* how long a board without a driver sleeps */
+	uint32_t
+	    timed_lead_us; /* a TIMED frame's instants at least this after its slot's planned start; 0: half a slot */
+	uint32_t watchdog_ms; /* board comm-loss period set at REGISTER */
+	uint32_t miss_limit;  /* consecutive misses that drop a device (1 = zero tolerance) */
+	uint32_t sleep_s;     /* how long a board without a driver sleeps */
 	uint32_t max_devices;
 	uint32_t http_header_timeout_s;        /* a request's headers must be in within this */
 	uint32_t http_body_timeout_s;          /* and its body within this after them */

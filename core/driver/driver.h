@@ -20,6 +20,7 @@
 
 #include "../common/value.h"
 #include "../proto/proto.h"
+#include "../sched/timing.h"
 
 #define VMAC_DRIVER_ERR_MAX 512
 #define VMAC_DRIVER_MAX_BOARDS 8
@@ -70,13 +71,15 @@ int vmac_driver_programmes_read(const char *dir, struct vmac_driver_programmes *
 void vmac_driver_programmes_free(struct vmac_driver_programmes *p);
 
 struct vmac_driver_limits {
-	size_t memory_bytes;                             /* cap on the state's heap (default 4 MiB) */
-	uint64_t instructions;                           /* VM instructions per call (default 200,000) */
-	uint32_t budget_us;                              /* wall-clock microseconds per call; 0 = no wall-clock limit */
-	unsigned default_level;                          /* level when the manifest names none */
-	unsigned max_level;                              /* highest level the scheduler has */
-	int allow_jit;                                   /* honour a manifest's jit = true */
-	const char *stdlib_dir;                          /* where the driver's require() looks; NULL: no require */
+	size_t memory_bytes;    /* cap on the state's heap (default 4 MiB) */
+	uint64_t instructions;  /* VM instructions per call (default 200,000) */
+	uint32_t budget_us;     /* wall-clock microseconds per call; 0 = no wall-clock limit */
+	unsigned default_level; /* level when the manifest names none */
+	unsigned max_level;     /* highest level the scheduler has */
+	uint32_t slot_us;       /* the host's slot, for checking a manifest's timing; 0: not checked */
+	uint32_t timed_lead_us; /* the host's lead (vmac_timing_lead_us) for the same check */
+	int allow_jit;          /* honour a manifest's jit = true */
+	const char *stdlib_dir; /* where the driver's require() looks; NULL: no require */
 	const struct vmac_driver_programmes *programmes; /* what vmac.cycles() runs; NULL: it raises */
 	const char *expect_name;                         /* the driver name the board announced; NULL: any */
 	const struct vmac_driver_setting *settings;      /* overrides for this driver */
@@ -162,6 +165,13 @@ const char *vmac_driver_describe(const struct vmac_driver *d);
 const char *vmac_driver_name(const struct vmac_driver *d);
 const char *vmac_driver_version(const struct vmac_driver *d);
 unsigned vmac_driver_level(const struct vmac_driver *d);
+/* The manifest's timing (docs/DRIVERS.md, "Timing"), the host's
+ * driver.NAME.timing.* applied over it; pattern VMAC_TIMING_DEFAULT when
+ * neither names one. Fixed at load: any thread. */
+void vmac_driver_timing(const struct vmac_driver *d, struct vmac_timing_want *out);
+/* What the last tick asked with dev:output_at: seconds after the planned
+ * start of the slot that carries its outputs; -1 when it asked nothing. */
+double vmac_driver_output_at(const struct vmac_driver *d);
 
 /* The manifest's board I/O, in name order (for tools that show or test a
  * machine by the driver's names; docs/TESTING.md). */
@@ -201,6 +211,10 @@ int vmac_driver_attach(struct vmac_driver *d, double time_s, char *err, size_t e
  * driver must not be called again. */
 int vmac_driver_tick(struct vmac_driver *d, double time_s, const struct vmac_inputs *const in[],
                      struct vmac_outputs *const out[], char *err, size_t errlen);
+/* The instants (bus time, s) of the inputs the next tick gets, board i's
+ * at t[i] (docs/DRIVERS.md, dev.t); for that tick only. Without it a
+ * tick's dev.t is its own time. */
+void vmac_driver_sample_times(struct vmac_driver *d, const double *t, int n);
 
 /* Why operator input was refused: what vmac_driver_input returns (> 0),
  * with the text for people in its reply. */

@@ -319,12 +319,44 @@ struct tick_args {
 	struct vmac_outputs *const *out;
 };
 
+void vmac_driver_sample_times(struct vmac_driver *d, const double *t, int n)
+{
+	int i;
+	d->nsample = n < VMAC_DRIVER_MAX_BOARDS ? n : VMAC_DRIVER_MAX_BOARDS;
+	for (i = 0; i < d->nsample; i++)
+		d->sample_s[i] = t[i];
+}
+
+/* dev.t (the primary's inputs' instant) and dev.boards[i].t (each
+ * board's), the tick's time where none was given: [-0, +0]. */
+static void fill_sample_times(struct vmac_driver *d, int dev, double time_s)
+{
+	lua_State *L = d->L;
+	int i;
+	lua_pushnumber(L, d->nsample > 0 ? d->sample_s[0] : time_s);
+	drv_raw_setfield(L, dev, "t");
+	drv_raw_getfield(L, dev, "boards");
+	if (lua_istable(L, -1))
+		for (i = 0; i < d->nboards; i++) {
+			lua_rawgeti(L, -1, i + 1);
+			if (lua_istable(L, -1)) {
+				lua_pushnumber(L, i < d->nsample ? d->sample_s[i] : time_s);
+				drv_raw_setfield(L, lua_gettop(L) - 1, "t");
+			}
+			lua_pop(L, 1);
+		}
+	lua_pop(L, 1);
+	d->nsample = 0; /* given for one tick */
+}
+
 static int tick_work(struct vmac_driver *d, void *args, char *err, size_t errlen)
 {
 	struct tick_args *a = args;
 	lua_State *L = d->L;
+	d->out_at_s = -1; /* dev:output_at asks for one tick */
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_tick);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_dev);
+	fill_sample_times(d, lua_gettop(L), a->time_s);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, d->ref_inputs);
 	fill_inputs(d, a->time_s, a->in);
 	if (drv_guarded_call(d, 2, 0, 1, err, errlen) != 0 || read_outputs(d, a->out, err, errlen) != 0 ||

@@ -103,6 +103,9 @@ struct vmac_driver {
 	char name[VMAC_NAME_MAX + 1];
 	char version[VMAC_DRIVER_VERSION_MAX + 1];
 	unsigned level, max_level;
+	struct vmac_timing_want timing; /* the manifest's timing, the host's settings over it */
+	uint32_t slot_us, lead_us;      /* the host's slot and lead (limits; 0: not on a host) */
+	double out_at_s;                /* dev:output_at of the running tick; -1: none */
 	int jit;
 	struct io io[VMAC_DRIVER_MAX_IO];
 	int nio;
@@ -116,6 +119,8 @@ struct vmac_driver {
 	int nparams;
 	uint32_t board_minor[VMAC_DRIVER_MAX_BOARDS];
 	int nboards;
+	double sample_s[VMAC_DRIVER_MAX_BOARDS]; /* the next tick's dev.t per board (vmac_driver_sample_times) */
+	int nsample;                             /* how many of them are set: 0, the tick's time for all */
 	struct vmac_driver_host host;
 	double (*clock)(void *ctx);
 	void *clock_ctx;

@@ -32,6 +32,32 @@ static int dev_set_level(lua_State *L)
 	return 1;
 }
 
+/* dev:output_at(s) -> true | nil, message: this tick's outputs released s
+ * seconds after the planned start of the slot that carries them, at or
+ * after the pattern's own instant and within the period. */
+static int dev_output_at(lua_State *L)
+{
+	struct vmac_driver *d = drv_of(L);
+	lua_Number s = luaL_checknumber(L, 2);
+	double from = d->timing.pattern == VMAC_TIMING_OFFSETS ? d->timing.output_us / 1e6 : d->lead_us / 1e6;
+	double period = (double)((uint64_t)d->slot_us << d->level) / 1e6;
+	if (d->timing.pattern == VMAC_TIMING_ARRIVAL || d->slot_us == 0) {
+		lua_pushnil(L);
+		lua_pushliteral(L, "output_at: the machine acts on arrival (timing.pattern) or is on no bus");
+		return 2;
+	}
+	if (!(s >= from && s < period)) {
+		lua_pushnil(L);
+		lua_pushfstring(L,
+		                "output_at: %f s is not from the machine's output instant (%f s) to its period (%f s)",
+		                (double)s, from, period);
+		return 2;
+	}
+	d->out_at_s = s;
+	lua_pushboolean(L, 1);
+	return 1;
+}
+
 /* dev:event(text): at most EVENTS_PER_S per second of bus time. */
 static int dev_event(lua_State *L)
 {
@@ -108,6 +134,8 @@ static void make_dev(struct vmac_driver *d)
 	lua_setfield(L, -2, "boards");
 	lua_pushcfunction(L, dev_set_level);
 	lua_setfield(L, -2, "set_level");
+	lua_pushcfunction(L, dev_output_at);
+	lua_setfield(L, -2, "output_at");
 	lua_pushcfunction(L, dev_event);
 	lua_setfield(L, -2, "event");
 	lua_pushcfunction(L, drv_dev_checkpoint);
@@ -289,11 +317,12 @@ int vmac_driver_load_into(struct vmac_driver *d, const char *src, size_t len, co
 			d->instruction_budget = (uint64_t)x, d->budget_hooks = (uint64_t)x / HOOK_EVERY + 1;
 		else if (strcmp(k, "budget_us") == 0 && *end == 0 && x >= 0 && x <= 1e7)
 			d->budget_ns = (int64_t)x * 1000;
-		else if (strncmp(k, "param.", 6) != 0) {
-			snprintf(err, errlen,
-			         "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
-			         "instructions, budget_us, param.NAME)",
-			         limits->expect_name ? limits->expect_name : "?", k, v);
+		else if (strncmp(k, "param.", 6) != 0 && strncmp(k, "timing.", 7) != 0) {
+			snprintf(
+			    err, errlen,
+			    "host setting driver.%s.%s = '%s': unknown key or bad value (memory_kib, "
+			    "instructions, budget_us, param.NAME, timing.pattern, timing.input_us, timing.output_us)",
+			    limits->expect_name ? limits->expect_name : "?", k, v);
 			return -EINVAL;
 		}
 	}
@@ -335,6 +364,16 @@ const char *vmac_driver_version(const struct vmac_driver *d)
 unsigned vmac_driver_level(const struct vmac_driver *d)
 {
 	return d->level;
+}
+
+void vmac_driver_timing(const struct vmac_driver *d, struct vmac_timing_want *out)
+{
+	*out = d->timing;
+}
+
+double vmac_driver_output_at(const struct vmac_driver *d)
+{
+	return d->out_at_s;
 }
 
 int vmac_driver_nio(const struct vmac_driver *d)

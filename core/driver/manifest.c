@@ -469,10 +469,85 @@ static int callback_ref(struct vmac_driver *d, int t, const char *name, int requ
 	return 0;
 }
 
+/* A whole number of microseconds 0..10 s from text (a host setting). */
+static int us_of(const char *v, uint32_t *out)
+{
+	char *end;
+	double x = strtod(v, &end);
+	if (end == v || *end || x != floor(x) || x < 0 || x > 1e7)
+		return -1;
+	*out = (uint32_t)x;
+	return 0;
+}
+
+/* The manifest's timing = {pattern = , input_us = , output_us = } (at t:
+ * the manifest), the host's driver.NAME.timing.* over it, checked against
+ * the host's lead and the period of the manifest's level. */
+static int parse_timing(struct vmac_driver *d, int t, const struct vmac_driver_limits *lim, char *err, size_t errlen)
+{
+	lua_State *L = d->L;
+	char pattern[16] = "", why[300];
+	double in = 0, out = 0;
+	const char *v;
+	int i;
+	memset(&d->timing, 0, sizeof(d->timing));
+	lua_getfield(L, t, "timing");
+	if (!lua_isnil(L, -1)) {
+		int tt = lua_gettop(L);
+		if (!lua_istable(L, tt))
+			BAD("timing must be a table {pattern = , input_us = , output_us = }");
+		if (opt_string(L, tt, "pattern", pattern, sizeof(pattern)) || vmac_timing_parse(pattern) < 0)
+			BAD("timing.pattern must be \"phase\", \"offsets\" or \"arrival\"");
+		if (opt_number(L, tt, "input_us", 0, &in) || opt_number(L, tt, "output_us", 0, &out) ||
+		    in != floor(in) || out != floor(out) || in < 0 || out < 0 || in > 1e7 || out > 1e7)
+			BAD("timing.input_us and timing.output_us must be whole numbers of microseconds 0..10000000");
+		lua_pushnil(L);
+		while (lua_next(L, tt)) {
+			const char *k = lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : "?";
+			if (strcmp(k, "pattern") && strcmp(k, "input_us") && strcmp(k, "output_us"))
+				BAD("timing: unknown field '%s' (pattern, input_us, output_us)", k);
+			lua_pop(L, 1);
+		}
+		if (strcmp(pattern, "offsets") != 0 && (in != 0 || out != 0))
+			BAD("timing: input_us and output_us are for pattern \"offsets\"");
+		d->timing.pattern = vmac_timing_parse(pattern);
+		d->timing.input_us = (uint32_t)in;
+		d->timing.output_us = (uint32_t)out;
+	}
+	lua_pop(L, 1);
+	for (i = 0; i < lim->nsettings; i++) {
+		const char *k = lim->settings[i].key;
+		v = lim->settings[i].value;
+		if (strncmp(k, "timing.", 7) != 0)
+			continue;
+		if (strcmp(k, "timing.pattern") == 0     ? (d->timing.pattern = vmac_timing_parse(v)) < 0
+		    : strcmp(k, "timing.input_us") == 0  ? us_of(v, &d->timing.input_us)
+		    : strcmp(k, "timing.output_us") == 0 ? us_of(v, &d->timing.output_us)
+		                                         : -1) {
+			snprintf(err, errlen,
+			         "host setting driver.%s.%s = '%s': unknown key or bad value (timing.pattern: phase, "
+			         "offsets or arrival; timing.input_us, timing.output_us: microseconds)",
+			         d->name, k, v);
+			return -1;
+		}
+	}
+	if (d->timing.pattern != VMAC_TIMING_OFFSETS)
+		d->timing.input_us = d->timing.output_us = 0; /* a setting made it phase or arrival */
+	if (d->timing.pattern == VMAC_TIMING_OFFSETS && (!d->timing.input_us || !d->timing.output_us))
+		BAD("timing: pattern \"offsets\" needs input_us and output_us");
+	d->slot_us = lim->slot_us;
+	d->lead_us = lim->timed_lead_us;
+	d->out_at_s = -1;
+	if (d->timing.pattern == VMAC_TIMING_OFFSETS && lim->slot_us &&
+	    vmac_timing_check(&d->timing, lim->timed_lead_us, lim->slot_us << d->level, why, sizeof(why)) != 0)
+		BAD("%s (level %u)", why, d->level);
+	return 0;
+}
+
 int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *lim, char *err, size_t errlen)
 {
-	static const char *const known[] = {"name",      "version",  "level", "description", "io", "params",
-	                                    "variables", "commands", "ui",    "jit",         NULL};
+	static const char *const known[] = {"name",      "version",  "level", "description", "io",     "params",
+	                                    "variables", "commands", "ui",    "jit",         "timing", NULL};
 	lua_State *L = d->L;
 	int t = lua_gettop(L), params;
 	double level;
@@ -510,13 +585,12 @@ int drv_parse_manifest(struct vmac_driver *d, const struct vmac_driver_limits *l
 				ok = strcmp(*k, lua_tostring(L, -2)) == 0;
 		if (!ok)
 			BAD("unknown field '%s' (manifest fields: name, version, level, description, io, params, "
-			    "variables, "
-			    "commands, ui, jit; and functions)",
+			    "variables, commands, ui, jit, timing; and functions)",
 			    lua_type(L, -2) == LUA_TSTRING ? lua_tostring(L, -2) : luaL_typename(L, -2));
 		lua_pop(L, 1);
 	}
-	if (drv_parse_io(d, t, "manifest", err, errlen) || parse_variables(d, t, err, errlen) ||
-	    parse_params(d, t, lim, err, errlen))
+	if (parse_timing(d, t, lim, err, errlen) || drv_parse_io(d, t, "manifest", err, errlen) ||
+	    parse_variables(d, t, err, errlen) || parse_params(d, t, lim, err, errlen))
 		return -1;
 	params = lua_gettop(L);
 	if (check_names(d, t, params, err, errlen) || callback_ref(d, t, "tick", 1, err, errlen, &d->ref_tick) ||

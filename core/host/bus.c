@@ -42,11 +42,12 @@ double bus_time(const struct vmac_bus *bus)
 }
 
 /* Per flush at most: one request per device, a WATCHDOG beside it, a
- * DISCOVER, a SYNC and its sealed chunks, and a CYCLIC frame per chunk of
- * offsets, sealed and not. */
+ * DISCOVER, a SYNC and its sealed chunks, a CYCLIC frame per chunk of
+ * offsets, sealed and not, and a TIMED one per device due in a slot. */
 static int tx_max(const struct vmac_bus *bus)
 {
-	return 2 * (int)bus->ndev + 3 + (int)bus->nchunks + (int)bus->nauth_chunks + (int)bus->nsync_chunks;
+	return 2 * (int)bus->ndev + 3 + (int)bus->nchunks + (int)bus->nauth_chunks + (int)bus->nsync_chunks +
+	       (int)bus->cfg.slices_per_slot;
 }
 
 static struct vmac_packet *tx_slot(struct vmac_bus *bus)
@@ -82,6 +83,8 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 		d->pending_op = m->op;
 		d->tx_index = bus->ntx - 1;
 		d->sent_ns = 0; /* stamped when the batch has left */
+		d->sent_timed = 0;
+		d->in_at_ns = 0;
 	}
 }
 
@@ -281,46 +284,86 @@ static void service_registration(struct vmac_bus *bus)
 	}
 }
 
+/* A CYCLIC frame of this slot for chunk c (started on first use), its tx
+ * index or -1: sealed for a keyed board, TIMED with the instants when
+ * timed, one per chunk, kind and pair of instants (boards of older
+ * firmware and machines acting on arrival in the plain frames beside). */
+static int cyclic_frame(struct vmac_bus *bus, int keyed, uint32_t c, uint32_t per, int timed, uint64_t out_at,
+                        uint64_t in_at)
+{
+	int *tx = keyed ? &bus->auth_chunk_tx[c] : &bus->chunk_tx[c];
+	uint32_t first = c * per, count = bus->nused - first;
+	struct vmac_packet *p;
+	int i, n;
+	if (timed) {
+		for (i = 0; i < bus->ntimed_frames; i++) {
+			const struct timed_frame *f = &bus->timed_frames[i];
+			if (f->chunk == c && f->keyed == keyed && f->out_at == out_at && f->in_at == in_at)
+				return f->tx;
+		}
+		if (bus->ntimed_frames >= (int)bus->cfg.slices_per_slot)
+			return -1; /* cannot happen: one a device due at most */
+	} else if (*tx >= 0) {
+		return *tx;
+	}
+	p = tx_slot(bus);
+	if (!p)
+		return -1;
+	if (count > per)
+		count = per;
+	if (timed)
+		n = vmac_proto_cyclic_begin_timed(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count,
+		                                  keyed, bus->cyclic_counter, out_at, in_at);
+	else if (keyed)
+		n = vmac_proto_cyclic_begin_auth(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count,
+		                                 bus->cyclic_counter);
+	else
+		n = vmac_proto_cyclic_begin(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count);
+	if (n <= 0) {
+		bus->ntx--;
+		return -1;
+	}
+	p->len = (size_t)n;
+	p->addr = bus->tr.group;
+	memset(p->mac, 0, sizeof(p->mac));
+	if (timed) {
+		struct timed_frame *f = &bus->timed_frames[bus->ntimed_frames++];
+		f->chunk = c;
+		f->keyed = (uint8_t)keyed;
+		f->out_at = out_at;
+		f->in_at = in_at;
+		f->tx = (int)(p - bus->tx);
+		return f->tx;
+	}
+	*tx = (int)(p - bus->tx);
+	return *tx;
+}
+
 /* Put d's outputs, due, at its offset in this slot's CYCLIC frame of its
- * chunk (started on first use): a sealed one for an authenticated board,
- * its record carrying a MAC under its session's key, else a plain one.
- * The frame's seq is the slot's. */
-static void cyclic_put(struct vmac_bus *bus, struct device *d)
+ * chunk: a sealed one for an authenticated board, its record carrying a
+ * MAC under its session's key, else a plain one; TIMED with the instants
+ * of its machine's pattern when its board takes them (timed.c). The
+ * frame's seq is the slot's. */
+static void cyclic_put(struct vmac_bus *bus, struct device *d, uint64_t slot, unsigned level)
 {
 	uint32_t offset = bus_slot_of(bus, d), per = d->keyed ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX;
-	uint32_t c = offset / per;
-	int *tx = d->keyed ? &bus->auth_chunk_tx[c] : &bus->chunk_tx[c];
+	uint64_t out_at = 0, in_at = 0;
+	int timed = bus_service_instants(bus, d, slot, level, &out_at, &in_at);
+	int tx = cyclic_frame(bus, d->keyed, offset / per, per, timed, out_at, in_at);
 	struct vmac_packet *p;
-	if (*tx < 0) {
-		uint32_t first = c * per, count = bus->nused - first;
-		int n;
-		p = tx_slot(bus);
-		if (!p)
-			return;
-		if (count > per)
-			count = per;
-		n = d->keyed
-		        ? vmac_proto_cyclic_begin_auth(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first,
-		                                       count, bus->cyclic_counter)
-		        : vmac_proto_cyclic_begin(p->data, sizeof(p->data), bus->cyclic_seq, (uint16_t)first, count);
-		if (n <= 0) {
-			bus->ntx--;
-			return;
-		}
-		p->len = (size_t)n;
-		p->addr = bus->tr.group;
-		memset(p->mac, 0, sizeof(p->mac));
-		*tx = (int)(p - bus->tx);
-	}
-	p = &bus->tx[*tx];
+	if (tx < 0)
+		return;
+	p = &bus->tx[tx];
 	vmac_proto_cyclic_put(p->data, offset % per, (uint16_t)(d->id >> 16), VMAC_CYCLIC_DUE, &d->outputs);
 	if (d->keyed)
 		vmac_proto_cyclic_seal_record(p->data, offset % per, d->to_board);
 	d->seq = bus->cyclic_seq;
 	d->pending = 1;
-	d->tx_index = *tx;
+	d->tx_index = tx;
 	d->pending_op = VMAC_OP_UPDATE;
 	d->sent_ns = 0; /* stamped when the batch has left */
+	d->sent_timed = (uint8_t)timed;
+	d->in_at_ns = (int64_t)in_at;
 }
 
 /* The UPDATEs the schedule puts in this slot, in slice order: unicast to
@@ -331,8 +374,9 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 	uint32_t c;
 	/* Room for this slot's requests, its WATCHDOGs and its CYCLIC frames
 	 * without a flush in between (a flush would move the frames). */
-	if (bus->ntx + (int)bus->nchunks + 2 * n > tx_max(bus))
+	if (bus->ntx + (int)bus->nchunks + (int)bus->nauth_chunks + 3 * n > tx_max(bus))
 		bus_flush(bus);
+	bus->ntimed_frames = 0;
 	for (c = 0; c < bus->nchunks; c++)
 		bus->chunk_tx[c] = -1;
 	for (c = 0; c < bus->nauth_chunks; c++)
@@ -357,7 +401,7 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 			d->want_watchdog = 0;
 		}
 		if (d->cyclic) {
-			cyclic_put(bus, d);
+			cyclic_put(bus, d, slot, e->level);
 			continue;
 		}
 		memset(&m, 0, sizeof(m));
@@ -549,12 +593,14 @@ static struct vmac_bus *bus_alloc(const struct vmac_config *cfg, char *err, size
 	bus->sync_auth_tx = calloc(bus->nsync_chunks, sizeof(*bus->sync_auth_tx));
 	bus->sync_streams = calloc(1 + bus->nsync_chunks, sizeof(*bus->sync_streams));
 	bus->tx = calloc((size_t)tx_max(bus), sizeof(*bus->tx));
+	bus->timed_frames = calloc(cfg->slices_per_slot, sizeof(*bus->timed_frames));
 	bus->status.devices = calloc(bus->ndev, sizeof(*bus->status.devices));
 	bus->status.slot_load = calloc(1u << cfg->max_level, sizeof(*bus->status.slot_load));
 	bus->slot_entries = calloc(cfg->slices_per_slot, sizeof(*bus->slot_entries));
 	bus->sched = vmac_sched_new(cfg->slices_per_slot, cfg->max_level, cfg->max_devices);
-	if (!bus->dev || !bus->mach || !bus->tx || !bus->chunk_tx || !bus->auth_chunk_tx || !bus->sync_auth_tx ||
-	    !bus->sync_streams || !bus->status.devices || !bus->status.slot_load || !bus->slot_entries || !bus->sched ||
+	if (!bus->dev || !bus->mach || !bus->tx || !bus->timed_frames || !bus->chunk_tx || !bus->auth_chunk_tx ||
+	    !bus->sync_auth_tx || !bus->sync_streams || !bus->status.devices || !bus->status.slot_load ||
+	    !bus->slot_entries || !bus->sched ||
 	    vmac_ring_init(&bus->to_main, sizeof(struct vmac_bus_msg), ring_size(cfg)) ||
 	    vmac_ring_init(&bus->to_bus, sizeof(struct vmac_host_cmd), 1024) || bus_checkpoints_init(bus) ||
 	    bus_jobs_init(bus)) {
@@ -711,6 +757,7 @@ void vmac_bus_free(struct vmac_bus *bus)
 	free(bus->auth_chunk_tx);
 	free(bus->sync_auth_tx);
 	free(bus->sync_streams);
+	free(bus->timed_frames);
 	vmac_bus_keys_free(bus->keys);
 	free(bus->status.devices);
 	free(bus->status.slot_load);

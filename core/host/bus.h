@@ -127,6 +127,16 @@ struct vmac_device_status {
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs;
 	struct vmac_board_clock_status clock; /* known = 0 until its first TIMED reply */
+	/* Its machine's timing (docs/TIME.md, "The patterns"): pattern a
+	 * VMAC_TIMING_* (0: no machine), the instants' offsets from the anchor
+	 * slot's planned start; timed: its services go in TIMED frames. */
+	struct {
+		int pattern;
+		uint32_t in_us, out_us;
+		int timed;
+	} timing;
+	uint64_t timing_mismatch; /* replies of the other kind than their frame (plain to TIMED, or back) */
+	unsigned firmware_major, firmware_minor; /* as it announced */
 	/* The machine's driver (primary board only; 0 when none runs): heap
 	 * bytes and its cap, VM instructions in all calls (counted in steps of
 	 * 1,000: vmac_driver_instructions) and the budget of one call, and the

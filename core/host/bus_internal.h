@@ -10,6 +10,7 @@
 #ifndef VMAC_BUS_INTERNAL_H
 #define VMAC_BUS_INTERNAL_H
 
+#include "../sched/timing.h"
 #include "bus.h"
 
 #include <pthread.h>
@@ -74,6 +75,7 @@ struct job {
 	struct vmac_driver *drv;   /* the instance it runs on */
 	struct vmac_driver *other; /* SWAP: the new instance; ROLLBACK: the one that failed */
 	struct vmac_inputs in[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
+	double sample_s[VMAC_DRIVER_MAX_BOARDS];       /* TICK: each board's inputs' instant, bus time (dev.t) */
 	/* The worker's, written before DONE. */
 	int rc;
 	int want_level; /* dev:set_level during the call; -1: none */
@@ -85,6 +87,7 @@ struct job {
 	uint64_t instructions;                           /* vmac_driver_instructions after the call */
 	uint64_t call_ns;                                /* vmac_driver_call_ns after the call */
 	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
+	double out_at_s;                                 /* TICK: its dev:output_at, -1 none */
 	/* The bus thread's own notes on it. */
 	int64_t queued_ns;      /* when it was asked for (a tick: its primary's reply) */
 	int64_t seen_ns;        /* when the bus first saw it running (0: not yet) */
@@ -179,6 +182,8 @@ struct machine {
 	struct vmac_driver *prev;
 	int64_t probation_end_ns;
 	struct vmac_bus *bus;
+	struct vmac_timing timing; /* its boards' instants (timed.c): the driver's pattern at its level */
+	int64_t out_at_ns;         /* its last tick's dev:output_at after the anchor slot's start; 0: none */
 };
 
 struct device {
@@ -225,6 +230,30 @@ struct device {
 	uint8_t to_board[16], to_host[16];
 	uint32_t tx_counter, rx_counter; /* the last sealed by us, the last of its accepted */
 	uint64_t proved_nonce;           /* the discovery (bus->nonce_count) its announcement proved its key for */
+	/* Time-triggered I/O (timed.c; docs/TIME.md, "The patterns"). */
+	uint8_t timed_fw;   /* version 2, firmware 1.1 or later: it takes TIMED CYCLIC frames */
+	uint8_t sent_timed; /* the pending service went in a TIMED frame */
+	int64_t in_at_ns;   /* that frame's in_at (0: plain): the reply deadline runs from it */
+	int64_t sample_ns;  /* the instant of inputs: its latched_at, else the reply's receive time (0: none yet) */
+	uint64_t timed_mismatch; /* replies of the other kind than their frame: a plain one to TIMED, or back */
+	struct vmac_board_clock_status clock;
+};
+
+/* When d's reply deadline starts: when its request left, or its frame's
+ * in_at if that is later (a board answers a TIMED record only once it has
+ * latched). */
+static inline int64_t bus_deadline_from(const struct device *d)
+{
+	return d->in_at_ns > d->sent_ns ? d->in_at_ns : d->sent_ns;
+}
+
+/* A TIMED CYCLIC frame of this slot (timed.c, bus.c's cyclic_put): one per
+ * chunk, kind (sealed or not) and pair of instants. */
+struct timed_frame {
+	uint64_t out_at, in_at;
+	uint32_t chunk;
+	uint8_t keyed;
+	int tx;
 };
 
 /* A request slot (vmac_bus_request_input): FREE -> FILLING (the caller
@@ -318,6 +347,8 @@ struct vmac_bus {
 	uint32_t cyclic_counter; /* authenticated CYCLIC frames' counter */
 	int *auth_chunk_tx;      /* per VMAC_CYCLIC_AUTH_RECORDS_MAX offsets: its sealed CYCLIC frame in tx, or -1 */
 	uint32_t nauth_chunks;
+	struct timed_frame *timed_frames; /* this slot's TIMED frames: at most one per device due (slices_per_slot) */
+	int ntimed_frames;
 	int64_t auth_said_ns;
 	uint64_t auth_unsaid;
 	int realtime;
@@ -522,6 +553,19 @@ void bus_nonce_next(struct vmac_bus *bus);
 void bus_session_keys(struct vmac_bus *bus, struct device *d, const uint8_t key[16]);
 /* A frame that did not prove a key: counted, said at most every 10 s. */
 void bus_auth_failed(struct vmac_bus *bus, const struct vmac_packet *p, const char *board, const char *why);
+
+/* timed.c: the host's side of time-triggered I/O */
+/* m's timing at level (its driver's pattern resolved, its instants'
+ * offsets): 0, or -1 with err (an offset not within that level's period). */
+int bus_timing_set(struct vmac_bus *bus, struct machine *m, unsigned level, char *err, size_t errlen);
+/* The instants of d's service in slot (level: its entry's): 1 when it goes
+ * in a TIMED frame, else 0 (a board of older firmware or version 1, a
+ * machine acting on arrival, clock sync off, virtual time). */
+int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t slot, unsigned level, uint64_t *out_at,
+                         uint64_t *in_at);
+/* An UPDATE reply of d's in time (m): its inputs' instant and, TIMED, its
+ * board's clock. */
+void bus_timed_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m, int64_t rx_ns);
 
 /* status.c */
 const char *bus_state_name(enum dev_state s);

@@ -192,15 +192,16 @@ void bus_check_deadlines(struct vmac_bus *bus, int64_t now)
 			d->state = DEV_FREE; /* gone (or enrolled under another entry): no longer listed */
 			continue;
 		}
-		if (!d->pending || d->sent_ns == 0 || now - d->sent_ns <= d->reply_window_ns)
+		if (!d->pending || d->sent_ns == 0 || now - bus_deadline_from(d) <= d->reply_window_ns)
 			continue;
 		d->pending = 0;
 		d->missed_seq = d->seq;
 		if (bus->stopping)
 			continue;
-		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms (sent at %lld ns)%s",
+		snprintf(why, sizeof(why), "no reply to %s seq %u within %.3g ms (sent at %lld ns%s)%s",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)d->seq,
 		         (double)d->reply_window_ns / 1e6, (long long)d->sent_ns,
+		         d->in_at_ns > d->sent_ns ? ", the deadline from its in_at" : "",
 		         d->unsent ? "; the host's fault: the kernel refused the request" : "");
 		bus_miss(bus, d, why);
 	}
@@ -594,6 +595,12 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 	d->ann = m->u.announce;
 	d->version = m->version;
 	d->cyclic = m->version >= 2 && bus->cfg.cyclic;
+	/* TIMED CYCLIC frames from firmware 1.1 on (docs/PROTOCOL.md). */
+	d->timed_fw =
+	    d->cyclic && (d->ann.firmware_major > 1 || (d->ann.firmware_major == 1 && d->ann.firmware_minor >= 1));
+	memset(&d->clock, 0, sizeof(d->clock));
+	d->sample_ns = 0;
+	d->timed_mismatch = 0;
 	d->addr = p->addr;
 	/* Never 0: a CYCLIC record's tag is the generation, and tag 0 is empty. */
 	d->generation = (uint16_t)(d->generation + 1) ? (uint16_t)(d->generation + 1) : 1;
@@ -652,10 +659,17 @@ void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level)
 	int i, j;
 	if (level == old)
 		return;
+	if (bus_timing_set(bus, m, level, err, sizeof(err)) != 0) {
+		bus_timing_set(bus, m, old, NULL, 0); /* it stays at its level, with its instants */
+		bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u refused: %s", m->driver, old, level,
+		          err);
+		return;
+	}
 	for (i = 0; i < m->nboards; i++)
 		if (vmac_sched_set_level(bus->sched, m->board[i], level, err, sizeof(err)) != 0) {
 			for (j = 0; j < i; j++)
 				vmac_sched_set_level(bus->sched, m->board[j], old, NULL, 0);
+			bus_timing_set(bus, m, old, NULL, 0);
 			bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u refused: %s", m->driver, old,
 			          level, err);
 			return;
@@ -670,6 +684,16 @@ void bus_apply_level(struct vmac_bus *bus, struct machine *m, unsigned level)
 	}
 	bus_event(bus, &bus->dev[m->primary], "level", "%s: level %u -> %u (period %.6g ms)", m->driver, old, level,
 	          (double)(bus->slot_ns << level) / 1e6);
+}
+
+/* m's timing at its level; if it does not fit (the loader checked it at
+ * the manifest's level, so a level since changed), it acts on arrival and
+ * says so. */
+static void timing_or_arrival(struct vmac_bus *bus, struct machine *m, struct device *d)
+{
+	char err[200];
+	if (bus_timing_set(bus, m, m->level, err, sizeof(err)) != 0)
+		bus_event(bus, d, "warning", "%s: acting on arrival: %s", m->driver, err);
 }
 
 /* The main thread has loaded (or failed to load) the driver of the machine
@@ -690,6 +714,8 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 	m->drv = c->drv;
 	m->rec = c->rec;
 	m->level = vmac_driver_level(c->drv);
+	m->out_at_ns = 0;
+	timing_or_arrival(bus, m, d);
 	bus->jobs[mi].ckpt = c->ckpt;
 	bus->jobs[mi].nnamed = 0;
 	bus->jobs[mi].vars_of = NULL;

@@ -183,8 +183,11 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 		int i;
 		m->want_tick = 0;
 		fill(bus, m, j, JOB_TICK, m->tick_ns);
-		for (i = 0; i < m->nboards; i++)
-			j->in[i] = bus->dev[m->board[i]].inputs;
+		for (i = 0; i < m->nboards; i++) {
+			const struct device *b = &bus->dev[m->board[i]];
+			j->in[i] = b->inputs;
+			j->sample_s[i] = b->sample_ns ? (double)(b->sample_ns - bus->start_ns) / 1e9 : j->time_s;
+		}
 		j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, m->tick_ns);
 		m->want_checkpoint = 0;
 		hand_over(bus, m, j);
@@ -250,6 +253,7 @@ static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, in
 	int i;
 	for (i = 0; i < j->nboards && i < m->nboards; i++)
 		bus->dev[m->board[i]].outputs = j->out[i];
+	m->out_at_ns = j->out_at_s > 0 ? (int64_t)(j->out_at_s * 1e9 + 0.5) : 0; /* with these outputs */
 	if (now - j->queued_ns > bus->slot_ns << m->level)
 		m->late++;
 	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in,

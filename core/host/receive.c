@@ -77,7 +77,7 @@ static int registered(struct vmac_bus *bus, struct device *d, const struct vmac_
 	return 0;
 }
 
-static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m)
+static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m, int64_t rx_ns)
 {
 	char why[120];
 	d->consecutive_misses = 0;
@@ -118,6 +118,7 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 	case DEV_RUNNING:
 		if (m->op == VMAC_OP_UPDATE) {
 			d->inputs = m->u.inputs;
+			bus_timed_reply(bus, d, m, rx_ns);
 			if (d->mach >= 0 && bus->mach[d->mach].primary == bus_slot_of(bus, d) &&
 			    bus->mach[d->mach].attached)
 				bus_run_machine(bus, &bus->mach[d->mach]);
@@ -187,22 +188,23 @@ void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 		return;
 	}
 	d->pending = 0;
-	if (d->sent_ns != 0 && p->rx_ns - d->sent_ns > d->reply_window_ns) {
+	if (d->sent_ns != 0 && p->rx_ns - bus_deadline_from(d) > d->reply_window_ns) {
 		char why[200];
 		bus->counters.late_replies++;
 		/* The times are CLOCK_MONOTONIC, so a board on the same machine can
 		 * be lined up with them (vmac-board's late-reply lines). */
 		snprintf(why, sizeof(why),
-		         "reply to %s seq %u came %.3g ms after the request (deadline %.3g ms; sent at %lld ns, "
+		         "reply to %s seq %u came %.3g ms after the %s (deadline %.3g ms; sent at %lld ns, "
 		         "received at %lld ns)",
 		         vmac_proto_opname(VMAC_CH_DEVICE, d->pending_op), (unsigned)m.seq,
-		         (double)(p->rx_ns - d->sent_ns) / 1e6, (double)d->reply_window_ns / 1e6, (long long)d->sent_ns,
-		         (long long)p->rx_ns);
+		         (double)(p->rx_ns - bus_deadline_from(d)) / 1e6,
+		         d->in_at_ns > d->sent_ns ? "instant it was to latch at" : "request",
+		         (double)d->reply_window_ns / 1e6, (long long)d->sent_ns, (long long)p->rx_ns);
 		if (!bus->stopping)
 			bus_miss(bus, d, why);
 		return;
 	}
-	on_reply(bus, d, &m);
+	on_reply(bus, d, &m, p->rx_ns);
 }
 
 void bus_drain(struct vmac_bus *bus)

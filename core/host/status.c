@@ -67,6 +67,14 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->protocol = d->version;
 	o->cyclic = d->cyclic;
 	o->offset = i;
+	o->clock = d->clock;
+	o->timing.pattern = m && m->drv ? m->timing.pattern : 0;
+	o->timing.in_us = m ? (uint32_t)(m->timing.in_ns / 1000) : 0;
+	o->timing.out_us = m ? (uint32_t)(m->timing.out_ns / 1000) : 0;
+	o->timing.timed = m && m->drv && d->timed_fw && !bus->virt && m->timing.pattern != VMAC_TIMING_ARRIVAL;
+	o->timing_mismatch = d->timed_mismatch;
+	o->firmware_major = d->ann.firmware_major;
+	o->firmware_minor = d->ann.firmware_minor;
 	o->inputs = d->inputs;
 	o->outputs = d->state == DEV_RUNNING ? d->inputs.applied : (struct vmac_outputs){0, 0};
 	o->driver_memory = m && m->drv && m->primary == i ? m->memory : 0;

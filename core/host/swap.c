@@ -43,6 +43,7 @@ void bus_rolled_back(struct vmac_bus *bus, struct machine *m, struct job *j)
 	snprintf(why, sizeof(why), "rolled back: %s", m->rollback_why);
 	bus_rec_capture(bus, m, why);
 	m->drv = prev;
+	bus_timing_set(bus, m, m->level, NULL, 0); /* its own pattern again */
 	snprintf(text, sizeof(text), "%s: driver %s %s failed on probation and was rolled back to %s: %.400s",
 	         primary->ann.board, m->driver, vmac_driver_version(failed), vmac_driver_version(prev),
 	         m->rollback_why);
@@ -93,6 +94,7 @@ void bus_swapped(struct vmac_bus *bus, struct machine *m, struct job *j)
 	struct request *q = &bus->req[j->req];
 	struct vmac_driver *nd = j->other, *od = j->drv;
 	struct device *primary = &bus->dev[m->primary];
+	char err[200];
 	if (j->rc != 0) {
 		snprintf(q->r.reply, sizeof(q->r.reply), "the new version failed to take over %s: %s",
 		         primary->ann.board, j->err);
@@ -104,6 +106,9 @@ void bus_swapped(struct vmac_bus *bus, struct machine *m, struct job *j)
 		return;
 	}
 	m->drv = nd;
+	if (bus_timing_set(bus, m, m->level, err, sizeof(err)) != 0)
+		bus_event(bus, primary, "warning", "%s: driver %s %s acts on arrival: %s", primary->ann.board,
+		          m->driver, vmac_driver_version(nd), err);
 	bus_rec_swap(bus, m);
 	/* Said before od is handed over: the main thread may free it at once. */
 	bus_event(bus, primary, "reloaded", "%s: driver %s %s -> %s at a slot boundary (probation %.3g s)",

@@ -109,7 +109,9 @@ void bus_run_job(struct job *j)
 			in[i] = &j->in[i];
 			out[i] = &j->out[i];
 		}
+		vmac_driver_sample_times(d, j->sample_s, j->nboards);
 		j->rc = vmac_driver_tick(d, j->time_s, in, out, j->err, sizeof(j->err));
+		j->out_at_s = vmac_driver_output_at(d);
 		if (j->rc == 0 && (j->checkpoint || vmac_driver_checkpoint_asked(d)))
 			take_checkpoint(j, d);
 		break;

@@ -103,6 +103,8 @@ static void limits_for(const struct vmac_config *cfg, const char *driver, struct
 	limits->budget_us = cfg->driver_budget_us;
 	limits->default_level = cfg->default_level;
 	limits->max_level = cfg->max_level;
+	limits->slot_us = vmac_config_slot_us(cfg);
+	limits->timed_lead_us = vmac_timing_lead_us(cfg->timed_lead_us, vmac_config_slot_us(cfg));
 	limits->allow_jit = cfg->allow_jit;
 	limits->stdlib_dir = cfg->stdlib_dir;
 	limits->expect_name = driver;

@@ -59,6 +59,13 @@
 ---@field label? string
 ---@field arg? string a variable or param whose allowed values the argument must have
 
+---When a machine's inputs are latched and outputs released, by the boards'
+---clocks (DRIVERS.md, "timing"; TIME.md, "The patterns").
+---@class vmac.Timing
+---@field pattern "phase"|"offsets"|"arrival" phase (the default): both at the slot's start + the host's lead
+---@field input_us? integer offsets: inputs latched this long after the slot's planned start
+---@field output_us? integer offsets: outputs released this long after it
+
 ---What a driver file returns: the manifest and the callbacks (DRIVERS.md,
 ---"The manifest", "The callbacks"). The host refuses a driver without tick.
 ---@class vmac.Driver
@@ -72,6 +79,7 @@
 ---@field commands? table<string, vmac.CommandSpec>
 ---@field ui? table free-form hints for user interfaces (title, icon, plots)
 ---@field jit? boolean ask for the LuaJIT compiler (honoured only with allow_jit)
+---@field timing? vmac.Timing when inputs are latched and outputs released (default: phase)
 ---@field attach? fun(dev: vmac.Dev) once, before the first tick
 ---@field tick? fun(dev: vmac.Dev, inputs: vmac.Inputs) every service period (required)
 ---@field input? fun(dev: vmac.Dev, name: string, value: vmac.Value): true|nil, string? operator input; nil, message refuses it
@@ -89,6 +97,7 @@
 ---@class vmac.BoardRef
 ---@field name string
 ---@field minor integer
+---@field t number when this board's inputs in this tick were sampled (bus time, s; as dev.t)
 
 ---The last checkpoint of dev.state, as recover(dev, saved) gets it.
 ---@class vmac.Saved
@@ -109,6 +118,7 @@
 ---@field state table the driver's own; copied to migrate and kept in checkpoints
 ---@field boards vmac.BoardRef[] the boards attached, primary first
 ---@field level integer the level the machine is serviced at now
+---@field t number when the primary's inputs in this tick were sampled (bus time, s): its latch time, or the reply's arrival
 local Dev = {}
 
 ---Ask for another service level (0..max_level); the change comes at a slot
@@ -117,6 +127,14 @@ local Dev = {}
 ---@return true|nil ok
 ---@return string? message
 function Dev:set_level(n) end
+
+---Release the outputs this tick sets s seconds after the planned start of
+---the slot that carries them (from the pattern's output instant to the
+---period; DRIVERS.md, "timing"), for this tick only.
+---@param s number seconds
+---@return true|nil ok
+---@return string? message why not (outside the range, or the machine acts on arrival)
+function Dev:output_at(s) end
 
 ---Record an event (kind `driver`) for people; at most 10 per second.
 ---@param text string

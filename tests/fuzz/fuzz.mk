@@ -44,11 +44,11 @@ $(BUILD)/fuzz/fuzz_console: $(call fuzz_obj,tests/fuzz/fuzz_console.c core/api/c
 # The stdlib's and the programmes' files read and compiled once
 # (fuzz_hostfiles.c wraps vmac_read_file and luaL_loadbufferx).
 $(BUILD)/fuzz/fuzz_manifest: $(call fuzz_obj,tests/fuzz/fuzz_manifest.c tests/fuzz/fuzz_arena.c tests/fuzz/fuzz_hostfiles.c \
-                              $(driver_SRC) core/common/file.c core/api/api_request.c core/api/console.c)
+                              $(driver_SRC) core/sched/timing.c core/common/file.c core/api/api_request.c core/api/console.c)
 	$(FUZZ_LINK) -Wl,--wrap=vmac_read_file,--wrap=luaL_loadbufferx $(PKG_LIBS)
 
 # Lua values to outputs, variables and params and back (core/driver/instance.c).
-$(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c tests/fuzz/fuzz_arena.c $(driver_SRC) core/common/file.c)
+$(BUILD)/fuzz/fuzz_values: $(call fuzz_obj,tests/fuzz/fuzz_values.c tests/fuzz/fuzz_arena.c $(driver_SRC) core/sched/timing.c core/common/file.c)
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 # The HTTP API's routing, request bodies and arguments, and the console's
@@ -57,7 +57,7 @@ $(BUILD)/fuzz/fuzz_http: $(call fuzz_obj,tests/fuzz/fuzz_http.c core/api/api_req
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 # A checkpoint of dev.state offered to a driver (core/driver/checkpoint.c).
-$(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c tests/fuzz/fuzz_arena.c $(driver_SRC) core/common/file.c)
+$(BUILD)/fuzz/fuzz_checkpoint: $(call fuzz_obj,tests/fuzz/fuzz_checkpoint.c tests/fuzz/fuzz_arena.c $(driver_SRC) core/sched/timing.c core/common/file.c)
 	$(FUZZ_LINK) $(PKG_LIBS)
 
 # A bundle as a host reads an upload (core/bundle/bundle.c: libarchive,

@@ -202,3 +202,69 @@ def session_keys(key, nonce, device_id):
     tail = nonce + struct.pack(">I", device_id)
     return siphash(key, b"vmac-to-board" + tail, True), siphash(key, b"vmac-to-host" + tail, True)
 
+
+
+# Time-triggered I/O (docs/PROTOCOL.md, "Time-triggered I/O"): the host's
+# side reads TIMED CYCLIC frames and answers with TIMED replies. Kept in
+# functions of their own (the boards' side may add its own beside them).
+TIMED = 0x04  # flags bit 2
+SYNC = 0x05  # op of the system channel
+CyclicFrame = collections.namedtuple("CyclicFrame", "flags seq first out_at in_at records")
+
+
+def read_cyclic(payload):
+    """A plain or TIMED, unsealed CYCLIC frame as CyclicFrame (records: a
+    list of (tag, flags, digital, pwm), record i for offset first + i;
+    out_at and in_at None when not TIMED); None for anything else."""
+    got = parse(payload)
+    if not got or got[0].channel != SYS or got[0].op != CYCLIC or got[0].flags & AUTH:
+        return None
+    h = got[0]
+    first, = struct.unpack_from(">H", payload, HDR_LEN)
+    at = HDR_LEN + 2
+    out_at = in_at = None
+    if h.flags & TIMED:
+        out_at, in_at = struct.unpack_from(">QQ", payload, at)
+        at += 16
+    records = [struct.unpack_from(">HBBh", payload, at + 6 * i) for i in range(h.len)]
+    return CyclicFrame(h.flags, h.seq, first, out_at, in_at, records)
+
+
+def read_sync(payload):
+    """The host_ns of a SYNC frame, or None."""
+    got = parse(payload)
+    if not got or got[0].channel != SYS or got[0].op != SYNC or len(payload) < HDR_LEN + 8:
+        return None
+    return struct.unpack_from(">Q", payload, HDR_LEN)[0]
+
+
+def timed_inputs(latched_at, state=2, arrival=False, bound_ns=1500, offset_ns=3500000000, **fields):
+    """A TIMED UPDATE reply's data (33 bytes): inputs(**fields), then the
+    latch time (host ns), the clock byte, the bound and the offset."""
+    return inputs(**fields) + struct.pack(">QBIq", latched_at, state | (0x80 if arrival else 0), bound_ns,
+                                          offset_ns)
+
+
+def read_cyclic_sealed(payload):
+    """A sealed (AUTH) CYCLIC frame, plain or TIMED: (CyclicFrame whose
+    records are (tag, flags, digital, pwm), the bytes every record's MAC
+    covers first, [(record's 6 bytes, its MAC)]); None for anything else."""
+    got = parse(payload)
+    if not got or got[0].channel != SYS or got[0].op != CYCLIC or not got[0].flags & AUTH:
+        return None
+    h = got[0]
+    first, = struct.unpack_from(">H", payload, HDR_LEN)
+    at = HDR_LEN + 2 + 4  # first, counter
+    out_at = in_at = None
+    if h.flags & TIMED:
+        out_at, in_at = struct.unpack_from(">QQ", payload, at)
+        at += 16
+    raw = [(payload[at + 14 * i:at + 14 * i + 6], payload[at + 14 * i + 6:at + 14 * i + 14]) for i in range(h.len)]
+    records = [struct.unpack(">HBBh", r) for r, _ in raw]
+    return CyclicFrame(h.flags, h.seq, first, out_at, in_at, records), payload[:at], raw
+
+
+def record_opens(head, offset, record, mac, key):
+    """Whether a sealed CYCLIC record's MAC verifies under key (the
+    session's to_board): over the frame's head, the offset and the record."""
+    return siphash(key, head + struct.pack(">H", offset) + record) == mac

@@ -10,8 +10,8 @@ CHECK_LIBS = $(shell pkg-config --libs check 2>/dev/null)
 # real minisign command (SKIPPED without it).
 UNIT_TEST_MODULE := test_proto:proto test_proto_reject:proto test_proto_v2:proto test_cyclic:proto test_timed:proto \
                     test_board:board test_plant:board test_board_v2:board test_board_cyclic:board \
-                    test_sched:sched test_store:store test_recording:recorder test_transport:transport \
-                    test_driver:driver test_driver_text:driver test_hints:driver test_isolation:driver test_checkpoint:driver test_luaplant:sim test_luaplant_run:sim test_host:host test_audit:host \
+                    test_sched:sched test_timing:sched test_store:store test_recording:recorder test_transport:transport \
+                    test_driver:driver test_driver_text:driver test_driver_timing:driver test_hints:driver test_isolation:driver test_checkpoint:driver test_luaplant:sim test_luaplant_run:sim test_host:host test_audit:host \
                     test_auth:proto test_board_auth:board test_report:board \
                     test_mqtt:mqtt test_paths:common test_prom:api test_minisign:bundle \
                     test_bundle:bundle test_bundle_folder:bundle test_clock:board test_sync:board test_sync_auth:board \
