@@ -18,10 +18,8 @@ int bus_timing_set(struct vmac_bus *bus, struct machine *m, unsigned level, char
 	memset(&want, 0, sizeof(want));
 	if (m->drv)
 		vmac_driver_timing(m->drv, &want);
-	/* vmac test's virtual bus sends no SYNC: its boards act on arrival. */
-	if (vmac_timing_resolve(&want, bus->virt ? 0 : bus->cfg.clock_sync_ms,
-	                        vmac_timing_lead_us(bus->cfg.timed_lead_us, slot_us), slot_us << level, &t, err,
-	                        errlen) != 0) {
+	if (vmac_timing_resolve(&want, bus->cfg.clock_sync_ms, vmac_timing_lead_us(bus->cfg.timed_lead_us, slot_us),
+	                        slot_us << level, &t, err, errlen) != 0) {
 		m->timing = t; /* arrival */
 		return -1;
 	}
@@ -40,7 +38,7 @@ int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t 
 	const struct machine *m;
 	uint64_t anchor = slot;
 	int i;
-	if (!d->timed_fw || d->mach < 0 || bus->virt)
+	if (!d->timed_fw || d->mach < 0)
 		return 0;
 	m = &bus->mach[d->mach];
 	if (m->timing.pattern == VMAC_TIMING_ARRIVAL)

@@ -31,6 +31,16 @@ int vt_lua_clock(lua_State *L, struct vt_world *w, struct vt_board *b)
 		set_number(L, "bound", v.bound_s);
 		set_number(L, "error", v.error_s);
 	}
+	if (b->acted.count > 0) { /* its last output change of time-triggered I/O */
+		static const char *const how[] = {"instant", "arrival", "late", "overrun"};
+		lua_createtable(L, 0, 4);
+		set_number(L, "time", (double)b->acted.t_ns / 1e9);
+		set_number(L, "asked", (double)b->acted.asked_ns / 1e9);
+		lua_pushstring(L, b->acted.how >= 0 && b->acted.how < 4 ? how[b->acted.how] : "?");
+		lua_setfield(L, -2, "how");
+		set_number(L, "count", b->acted.count);
+		lua_setfield(L, -2, "output");
+	}
 	return 1;
 }
 

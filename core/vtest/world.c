@@ -429,6 +429,27 @@ static int make_sim(struct vt_world *w, const char *plant, struct vmac_sim *sim,
 	return -1;
 }
 
+/* firmware/timed.c's log of an action: an output change, as the world
+ * saw it happen (fw is a vt_board's first member). */
+static void board_acted(void *ctx, const struct vmac_board *fw, const struct vmac_timed_action *a)
+{
+	struct vt_world *w = ctx;
+	struct vt_board *b = (struct vt_board *)(void *)fw;
+	if (a->kind != VMAC_TIMED_OUT)
+		return;
+	b->acted.t_ns = w->now_ns;
+	b->acted.asked_ns = a->host_ns;
+	b->acted.how = (int)a->how;
+	b->acted.count++;
+}
+
+static void board_firmware_init(struct vt_world *w, struct vt_board *b, struct vmac_board_identity *id)
+{
+	vmac_board_init(&b->fw, id, &vmac_sim_io, &b->sim, (uint64_t)(w->now_ns / 1000000));
+	b->fw.acted = board_acted;
+	b->fw.acted_ctx = w;
+}
+
 struct vt_board *vt_board_add(struct vt_world *w, const char *name, const char *plant, const char *driver,
                               uint32_t major, uint32_t minor, char *err, size_t errlen)
 {
@@ -482,7 +503,7 @@ struct vt_board *vt_board_add(struct vt_world *w, const char *name, const char *
 	sin->sin_port = htons(5870);
 	sin->sin_addr.s_addr = htonl(0x0A4D0000u | (uint32_t)(w->nboards + 1)); /* 10.77.0.N */
 	b->addr.len = sizeof(*sin);
-	vmac_board_init(&b->fw, &id, &vmac_sim_io, &b->sim, (uint64_t)(w->now_ns / 1000000));
+	board_firmware_init(w, b, &id);
 	load_io_map(w, b, driver, primary);
 	w->boards[w->nboards++] = b;
 	return b;
@@ -501,7 +522,7 @@ void vt_board_power(struct vt_world *w, struct vt_board *b, int on)
 {
 	if (on && !b->powered) {
 		struct vmac_board_identity id = b->fw.id;
-		vmac_board_init(&b->fw, &id, b->fw.io, b->fw.io_ctx, (uint64_t)(w->now_ns / 1000000));
+		board_firmware_init(w, b, &id);
 	} else if (!on) {
 		vmac_board_safe(&b->fw);
 	}

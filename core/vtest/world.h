@@ -58,6 +58,15 @@ struct vt_board {
 	int plugged;           /* 0: frames to and from it are lost (its watchdog runs on) */
 	int powered;           /* 0: the board is off: silent, outputs off */
 	struct vt_clock clock; /* its free-running counter (clocks.h) */
+	/* Its last output change of time-triggered I/O (firmware/timed.c's
+	 * `acted`): the true (world) time it was done at, the host instant
+	 * the frame asked for, how (enum vmac_timed_how), and how many. */
+	struct vt_acted {
+		int64_t t_ns;
+		uint64_t asked_ns;
+		int how;
+		unsigned count;
+	} acted;
 	struct vt_faults faults;
 	struct vt_service hist[VT_HISTORY];
 	unsigned nhist; /* services recorded so far (the last VT_HISTORY kept) */

@@ -29,6 +29,14 @@
 ---@field drift_ppm? number the drift it learnt (nil: unsynced)
 ---@field true_ppm number the counter's true drift now
 ---@field syncs integer SYNC samples fed to it
+---@field output? vmac.test.TimedOutput its last output change of time-triggered I/O (nil: none yet)
+
+---A board's output change of time-triggered I/O (b.clock.output).
+---@class vmac.test.TimedOutput
+---@field time number virtual seconds it happened at (the truth)
+---@field asked number the host instant its frame asked for, seconds
+---@field how "instant"|"arrival"|"late"|"overrun"
+---@field count integer output changes of time-triggered I/O so far
 
 ---A host event, as GET /api/status gives it.
 ---@class vmac.test.Event

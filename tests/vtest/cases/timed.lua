@@ -1,0 +1,44 @@
+-- Time-triggered I/O in virtual time (docs/TESTING.md, "Board clocks"): the
+-- two boards of one machine, their clocks 200 ppm and seconds apart, change
+-- their outputs at one instant once their clocks lock; without clock sync
+-- they act when their frames arrive. Run with --drivers tests/vtest/drivers
+-- (tests/integration/test_vtest.py); each test prints its numbers.
+
+local function press(minor, clock)
+	return board { name = "press-" .. minor, plant = "generic", driver = "press", major = 7, minor = minor,
+		clock = clock }
+end
+
+test("two boards of one machine change their outputs at one instant", function()
+	config { clock_sync_ms = 1 }
+	local a = press(0, { ppm = 100, offset = 2.5, jitter = 20e-6, wander = 0.02 })
+	local b = press(1, { ppm = -100, offset = -3.25, jitter = 20e-6, wander = 0.02 })
+	local function timed(x) return x.clock.output and x.clock.output.how == "instant" end
+	local took = run_until(function() return timed(a) and timed(b) end, 3, "both boards acting at host instants")
+	print(string.format("timed after %.3f s", took))
+	local worst, n = 0, 0
+	local e = every(0.004, function()
+		local oa, ob = a.clock.output, b.clock.output
+		if oa.asked == ob.asked then
+			expect(oa.how == "instant" and ob.how == "instant", "both boards acted at the instant, not " ..
+				oa.how .. " and " .. ob.how)
+			worst = math.max(worst, math.abs(oa.time - ob.time))
+			expect(math.abs(oa.time - oa.asked) <= 60e-6, "press-0 acted within 60 us of its instant")
+			n = n + 1
+		end
+	end)
+	run_for(2)
+	e:stop()
+	print(string.format("timed spread: %d instants compared, worst %.3f us", n, worst * 1e6))
+	expect(n >= 100, "at least 100 instants compared, got " .. n)
+	expect(worst <= 10e-6, string.format("the boards' outputs within 10 us of each other, worst %.3f us", worst * 1e6))
+end)
+
+test("without clock sync the boards act on arrival", function()
+	local a = press(0, { ppm = 100, offset = 2.5, jitter = 20e-6 })
+	local b = press(1, { ppm = -100, offset = -3.25, jitter = 20e-6 })
+	run_until(function() return a.state == "running" and b.state == "running" end, 3, "the press running")
+	run_for(1)
+	expect(a.clock.output == nil and b.clock.output == nil, "no TIMED frame without clock sync")
+	expect_eq(a.clock.state, "unsynced", "press-0's clock without SYNC")
+end)
