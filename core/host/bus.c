@@ -400,6 +400,7 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 			d->watchdog_ms = d->want_watchdog;
 			d->want_watchdog = 0;
 		}
+		bus_release_outputs(bus, d, slot, e->level);
 		if (d->cyclic) {
 			cyclic_put(bus, d, slot, e->level);
 			continue;

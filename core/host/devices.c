@@ -715,6 +715,7 @@ void bus_on_loaded(struct vmac_bus *bus, struct device *d, const struct vmac_hos
 	m->rec = c->rec;
 	m->level = vmac_driver_level(c->drv);
 	m->out_at_ns = 0;
+	m->staged = 0;
 	timing_or_arrival(bus, m, d);
 	bus->jobs[mi].ckpt = c->ckpt;
 	bus->jobs[mi].nnamed = 0;
