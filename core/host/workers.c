@@ -455,6 +455,20 @@ static int backed_up(struct vmac_bus *bus, struct worker *w, int64_t t_ns)
 	return h != w->tail_seen && t_ns - w->push_ns[w->tail_seen & w->mask] >= after;
 }
 
+/* Where a machine without a worker goes: the first active worker that is
+ * not far behind (backed_up), else the least loaded. Machines are packed
+ * on few workers: light drivers then wake one worker a slot, not every
+ * one, and drivers that need more than one find it when their worker
+ * falls behind (bus_worker_push). */
+static int first_free(struct vmac_bus *bus, int64_t t_ns)
+{
+	int i;
+	for (i = 0; i < bus->nworkers_max; i++)
+		if (atomic_load(&bus->workers[i].state) == W_ACTIVE && !backed_up(bus, &bus->workers[i], t_ns))
+			return i;
+	return least_loaded(bus, -1);
+}
+
 /* An active worker with nothing queued, other than skip; -1: none. */
 static int idle_worker(struct vmac_bus *bus, int skip)
 {
@@ -484,7 +498,7 @@ int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 		}
 	}
 	if (m->worker < 0 || atomic_load(&bus->workers[m->worker].state) != W_ACTIVE) {
-		int b = least_loaded(bus, -1);
+		int b = first_free(bus, t_ns);
 		if (b < 0)
 			b = take_spare(bus); /* every worker given up: the spare the main thread made */
 		if (b < 0)
