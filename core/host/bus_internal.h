@@ -62,21 +62,22 @@ enum job_kind {
 enum job_state { JOB_IDLE, JOB_QUEUED, JOB_RUNNING, JOB_DONE, JOB_DROPPED, JOB_STALLED, JOB_DISPOSED };
 
 struct job {
-	/* Each side's fields of one call, first, on few cache lines: a tick
-	 * touches only these. */
-	_Atomic int state;
+	/* A tick moves two or three cache lines between the cores, each way:
+	 * the first line (what the worker reads), the results (what the bus
+	 * thread reads), and the bus thread's notes stay on lines of their own
+	 * (the job is aligned to a line: bus_jobs_init). */
+	_Alignas(64) _Atomic int state;
 	_Atomic int runner; /* the worker that took it */
 	enum job_kind kind;
-	int nboards;               /* the machine's boards, added to the driver first */
-	unsigned level;            /* the machine's level: told to the driver first */
-	int checkpoint;            /* TICK: one is due; STOP: the machine is attached */
-	int req;                   /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
-	double time_s;             /* bus time of the call */
-	struct vmac_driver *drv;   /* the instance it runs on */
-	struct vmac_driver *other; /* SWAP: the new instance; ROLLBACK: the one that failed */
+	int nboards;                                   /* the machine's boards, added to the driver first */
+	unsigned level;                                /* the machine's level: told to the driver first */
+	int checkpoint;                                /* TICK: one is due; STOP: the machine is attached */
+	double time_s;                                 /* bus time of the call */
+	struct vmac_driver *drv;                       /* the instance it runs on */
 	struct vmac_inputs in[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
 	double sample_s[VMAC_DRIVER_MAX_BOARDS];       /* TICK: each board's inputs' instant, bus time (dev.t) */
 	/* The worker's, written before DONE. */
+	_Alignas(64) struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
 	int rc;
 	int want_level; /* dev:set_level during the call; -1: none */
 	int ckpt_rc;    /* 1: ckpt_len bytes encoded; -1: refused (ckpt_err) */
@@ -84,26 +85,32 @@ struct job {
 	int vars_fresh; /* vars hold the instance's published values now */
 	int params_fresh;
 	size_t memory;
-	uint64_t instructions;                           /* vmac_driver_instructions after the call */
-	uint64_t call_ns;                                /* vmac_driver_call_ns after the call */
-	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS]; /* TICK */
-	double out_at_s;                                 /* TICK: its dev:output_at, -1 none */
-	/* The bus thread's own notes on it. */
-	int64_t queued_ns;      /* when it was asked for (a tick: its primary's reply) */
-	int64_t seen_ns;        /* when the bus first saw it running (0: not yet) */
-	int64_t limit_ns;       /* how long it may run (jobs.c, limit_of), fixed when it is handed over */
-	int pushed;             /* QUEUED and in a worker's ring */
-	int nnamed;             /* boards whose names board[] holds (they only ever grow) */
-	int64_t overdue_ns;     /* past its limit: when the bus last looked, */
-	int64_t overdue_cpu_ns; /* and its worker's CPU time then */
-	int64_t ready_ns;       /* virtual mode, a slow driver: when its results are ready */
-	uint64_t rec_n;         /* INPUT: its event in the recorder */
-	struct vmac_bus *bus;
-	int mach; /* its machine: bus->mach[mach] */
+	uint64_t instructions; /* vmac_driver_instructions after the call */
+	uint64_t call_ns;      /* vmac_driver_call_ns after the call */
+	double out_at_s;       /* TICK: its dev:output_at, -1 none */
 	/* The worker's own memory, across jobs. */
 	const struct vmac_driver *vars_of;
 	uint64_t vars_version;
 	int64_t params_ns;
+	/* The bus thread's own notes on it, and what it writes before QUEUED
+	 * that a tick does not read. */
+	_Alignas(64) int64_t queued_ns; /* when it was asked for (a tick: its primary's reply) */
+	int64_t seen_ns;                /* when the bus first saw it running (0: not yet) */
+	int64_t limit_ns;               /* how long it may run (jobs.c, limit_of), fixed when it is handed over */
+	int pushed;                     /* QUEUED and in a worker's ring */
+	int nnamed;                     /* boards whose names board[] holds (they only ever grow) */
+	int req;                        /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
+	struct vmac_driver *other;      /* SWAP: the new instance; ROLLBACK: the one that failed */
+	int64_t overdue_ns;             /* past its limit: when the bus last looked, */
+	int64_t overdue_cpu_ns;         /* and its worker's CPU time then */
+	int64_t ready_ns;               /* virtual mode, a slow driver: when its results are ready */
+	uint64_t rec_n;                 /* INPUT: its event in the recorder */
+	/* drv's budget (vmac_driver_budget_ns), read once per instance: the
+	 * instance's line holds what its worker writes at every call. */
+	const struct vmac_driver *budget_of;
+	int64_t budget_ns;
+	struct vmac_bus *bus;
+	int mach; /* its machine: bus->mach[mach] */
 	/* Rarely used: the bus thread's, written before QUEUED. */
 	uint32_t minor[VMAC_DRIVER_MAX_BOARDS];
 	char board[VMAC_DRIVER_MAX_BOARDS][VMAC_NAME_MAX + 1];
@@ -125,20 +132,32 @@ struct job {
 enum worker_state { W_FREE, W_SPARE, W_ACTIVE, W_STALLED, W_EXITED };
 
 /* A driver worker: a thread that runs the jobs the bus thread queues on
- * it (workers.c). */
+ * it (workers.c). Its queue is a ring of machine indexes with one producer
+ * (the bus thread) and one consumer (the worker), each side's index and
+ * its copy of the other's on a cache line of its own: a push or a take
+ * reads the other side's line only when its copy says the ring is full or
+ * empty. */
 struct worker {
 	_Atomic int state;
 	int index;
 	struct vmac_bus *bus;
 	pthread_t thread;
-	int efd;               /* eventfd it sleeps on when its ring is empty */
-	_Atomic int sleeping;  /* it is about to sleep or sleeps: a push must wake it */
-	struct vmac_ring jobs; /* machine indexes, bus thread -> worker */
-	struct vmac_ring out;  /* struct vmac_bus_msg, worker -> main thread (events, unloads) */
+	int efd;              /* eventfd it sleeps on when its ring is empty */
+	struct vmac_ring out; /* struct vmac_bus_msg, worker -> main thread (events, unloads) */
 	_Atomic uint64_t events_lost;
 	_Atomic int quit;
-	int nmach; /* machines it runs (bus thread) */
-	int kick;  /* the bus thread pushed: wake it at the end of this pass */
+	int *queue;       /* the ring: machine indexes, bus thread -> worker */
+	int64_t *push_ns; /* the bus thread's: when each entry was pushed */
+	uint32_t mask;    /* the ring's capacity - 1 */
+	/* The bus thread's. */
+	_Alignas(64) _Atomic uint32_t head; /* the next entry the bus writes */
+	uint32_t tail_seen;                 /* tail, as the bus thread last read it */
+	int nmach;                          /* machines it runs */
+	int kick;                           /* the bus thread pushed: wake it at the end of this pass */
+	/* The worker's. */
+	_Alignas(64) _Atomic uint32_t tail; /* the next entry it takes */
+	uint32_t head_seen;                 /* head, as it last read it */
+	_Atomic int sleeping;               /* it is about to sleep or sleeps: a push must wake it */
 };
 
 /* A machine: the boards that share a driver name and major id, run by one

@@ -18,9 +18,11 @@ int bus_jobs_init(struct vmac_bus *bus)
 {
 	uint32_t i;
 	int64_t budget = (int64_t)bus->cfg.driver_budget_us * 1000;
-	bus->jobs = calloc(bus->ndev, sizeof(*bus->jobs));
+	/* On lines of their own (struct job): no job shares one with another's. */
+	bus->jobs = aligned_alloc(_Alignof(struct job), bus->ndev * sizeof(*bus->jobs));
 	if (!bus->jobs)
 		return -1;
+	memset(bus->jobs, 0, bus->ndev * sizeof(*bus->jobs));
 	for (i = 0; i < bus->ndev; i++) {
 		bus->jobs[i].bus = bus;
 		bus->jobs[i].mach = (int)i;
@@ -67,7 +69,7 @@ void bus_answer(struct vmac_bus *bus, int i)
 	sem_post(&q->done);
 }
 
-static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, const struct job *j);
+static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, struct job *j);
 
 static void fill(struct vmac_bus *bus, struct machine *m, struct job *j, enum job_kind kind, int64_t t_ns)
 {
@@ -356,11 +358,16 @@ static const char *job_name(enum job_kind k)
  * whichever is longer; anything else, bus->job_limit_ns. A job no worker
  * has taken for ten times that (at least a second) drops its machine. */
 #define QUEUED_MAX(limit) ((limit)*10 > 1000000000 ? (limit)*10 : 1000000000)
-static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, const struct job *j)
+static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, struct job *j)
 {
-	int64_t period = bus->slot_ns << m->level, budget = vmac_driver_budget_ns(j->drv);
+	int64_t period = bus->slot_ns << m->level, budget;
 	if (j->kind != JOB_TICK)
 		return bus->job_limit_ns;
+	if (j->budget_of != j->drv) { /* reset when an instance is bound to the machine (bus_bind_driver) */
+		j->budget_of = j->drv;
+		j->budget_ns = vmac_driver_budget_ns(j->drv);
+	}
+	budget = j->budget_ns;
 	return budget > period ? budget : period;
 }
 

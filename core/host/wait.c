@@ -2,11 +2,12 @@
  * the bus socket and an eventfd the other threads write to wake it
  * (bus_wake), waited on with epoll_pwait2 and a timeout to the next tick,
  * or, on a kernel before 5.11, with the absolute periodic timerfd in the
- * set. The loop runs ticks, replies as they arrive, and the main thread's
- * commands and requests. */
+ * set. The loop runs ticks, replies as they arrive (gathered: see
+ * gather), and the main thread's commands and requests. */
 #include "bus_internal.h"
 
 #include <errno.h>
+#include <poll.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/epoll.h>
@@ -21,6 +22,32 @@ static int pwait2(int epfd, struct epoll_event *ev, int max, int64_t timeout_ns)
 {
 	struct timespec ts = {(time_t)(timeout_ns / 1000000000), (long)(timeout_ns % 1000000000)};
 	return (int)syscall(SYS_epoll_pwait2, epfd, ev, max, &ts, NULL, (size_t)0);
+}
+
+/* After a drain, the bus thread leaves the socket alone for GATHER_NS (at
+ * most an eighth of a slot, and never into the 2 x GATHER_NS before the
+ * next tick), still woken by the main thread: the replies that trickle in
+ * meanwhile (a board program answers its boards one after another) are
+ * read by one drain, not each by a wake-up of its own. Since the drivers
+ * left this thread it keeps up with every reply, and waking for each cost
+ * more than the drivers did (docs/PERFORMANCE.md, "Drivers on driver
+ * workers"); every wake-up also woke a worker. A reply's deadline is
+ * judged by its kernel time stamp, and its machine's tick job is due one
+ * period later: neither moves. */
+#define GATHER_NS 30000
+static void gather(struct vmac_bus *bus, int64_t next)
+{
+	int64_t c = bus->slot_ns / 8 < GATHER_NS ? bus->slot_ns / 8 : GATHER_NS;
+	struct pollfd p;
+	struct timespec ts;
+	if (bus->timerfd_wait || next - vmac_now_ns() <= 2 * c)
+		return;
+	p.fd = bus->wakefd;
+	p.events = POLLIN;
+	p.revents = 0;
+	ts.tv_sec = 0;
+	ts.tv_nsec = (long)c;
+	ppoll(&p, 1, &ts, NULL); /* woken: the loop reads wakefd next */
 }
 
 /* The bus thread's loop: the tick when its time has come (before anything
@@ -60,6 +87,7 @@ void bus_loop(struct vmac_bus *bus)
 				if (ev[i].events & EPOLLERR)
 					bus_sync_read_stamps(bus, 1);
 				bus_drain(bus);
+				gather(bus, next);
 			} else if (ev[i].data.fd == bus->wakefd) {
 				if (read(bus->wakefd, &count, sizeof(count)) != sizeof(count))
 					continue;

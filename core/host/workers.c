@@ -1,7 +1,9 @@
 /* Driver workers (docs/HOST.md, "Threads"): the threads that run every
  * call into a driver's state, so that the bus thread never does. Each
  * worker takes the jobs the bus thread queues on it (a ring of machine
- * indexes, one job per machine at a time: struct job in bus_internal.h),
+ * indexes, one job per machine at a time: struct job in bus_internal.h;
+ * a machine stays on its worker, so that its state stays warm there, and
+ * moves only when the worker is far behind),
  * runs them, and hands back what they gave through the job itself; its
  * drivers' events and the instances it must dispose of go to the main
  * thread through a ring of its own. A worker the bus thread gave up on (a
@@ -23,10 +25,49 @@
 
 #define WORKER_PRIORITY 40 /* SCHED_FIFO, below the bus thread's 50 */
 #define WORKER_OUT_SLOTS 256
-#define PARAMS_EVERY_NS 100000000LL
-/* A machine moves off its worker only when that many jobs wait there: a
- * move costs the next call a cold state on the other core. */
-#define MOVE_BACKLOG 4 /* params copied out at most this often after ticks */
+#define PARAMS_EVERY_NS 100000000LL /* params copied out at most this often after ticks */
+/* A machine moves off its worker only when the oldest job queued there has
+ * waited that part of a slot: a move costs the next calls a cold state on
+ * another core, and a burst of replies queues many jobs at once. */
+#define MOVE_AFTER_SLOTS(slot_ns) ((slot_ns) / 2)
+
+/* ---- a worker's queue: the bus thread pushes, the worker takes ---- */
+
+/* Bus thread. 0, or -1 when the ring is full. */
+static int queue_push(struct worker *w, int mi, int64_t t_ns)
+{
+	uint32_t h = atomic_load_explicit(&w->head, memory_order_relaxed);
+	if (h - w->tail_seen > w->mask) {
+		w->tail_seen = atomic_load_explicit(&w->tail, memory_order_acquire);
+		if (h - w->tail_seen > w->mask)
+			return -1;
+	}
+	w->queue[h & w->mask] = mi;
+	w->push_ns[h & w->mask] = t_ns;
+	atomic_store_explicit(&w->head, h + 1, memory_order_release);
+	return 0;
+}
+
+/* Worker. 1 and *mi, or 0 when the ring is empty (as last seen). */
+static int queue_take(struct worker *w, int *mi)
+{
+	uint32_t t = atomic_load_explicit(&w->tail, memory_order_relaxed);
+	if (t == w->head_seen) {
+		w->head_seen = atomic_load_explicit(&w->head, memory_order_acquire);
+		if (t == w->head_seen)
+			return 0;
+	}
+	*mi = w->queue[t & w->mask];
+	atomic_store_explicit(&w->tail, t + 1, memory_order_release);
+	return 1;
+}
+
+/* Worker, about to sleep (after a seq_cst fence): anything pushed since? */
+static int queue_pushed(struct worker *w)
+{
+	w->head_seen = atomic_load(&w->head);
+	return atomic_load_explicit(&w->tail, memory_order_relaxed) != w->head_seen;
+}
 
 /* ---- running a job (any thread but the bus thread; inline in virtual mode) ---- */
 
@@ -203,13 +244,13 @@ static void *worker_main(void *arg)
 	worker_priority(w);
 	while (!atomic_load(&w->quit)) {
 		struct job *j;
-		if (!vmac_ring_pop(&w->jobs, &mi)) {
+		if (!queue_take(w, &mi)) {
 			atomic_store(&w->sleeping, 1);
-			/* Store, then load: the bus pushes, then exchanges sleeping
+			/* Store, then load: the bus pushes, then looks at sleeping
 			 * (bus_workers_kick); the fences keep either side from
 			 * reading before its own write is seen, or a wake is lost. */
 			atomic_thread_fence(memory_order_seq_cst);
-			if (vmac_ring_peek(&w->jobs) || atomic_load(&w->quit)) {
+			if (queue_pushed(w) || atomic_load(&w->quit)) {
 				atomic_store(&w->sleeping, 0);
 				continue;
 			}
@@ -276,17 +317,22 @@ int bus_workers_init(struct vmac_bus *bus, char *err, size_t errlen)
 	int i, ring = 4;
 	bus->nworkers = bus->cfg.driver_threads ? (int)bus->cfg.driver_threads : cpus_to_use();
 	bus->nworkers_max = bus->nworkers + 8; /* room for spares and for stuck ones waiting to end */
-	bus->workers = calloc((size_t)bus->nworkers_max, sizeof(*bus->workers));
+	/* Each on lines of its own (struct worker), its sides apart. */
+	bus->workers = aligned_alloc(_Alignof(struct worker), (size_t)bus->nworkers_max * sizeof(*bus->workers));
 	if (!bus->workers)
 		goto fail;
+	memset(bus->workers, 0, (size_t)bus->nworkers_max * sizeof(*bus->workers));
 	while (ring < 4 * (int)bus->ndev)
 		ring <<= 1;
 	for (i = 0; i < bus->nworkers_max; i++) {
 		struct worker *w = &bus->workers[i];
 		w->index = i;
 		w->bus = bus;
+		w->mask = (uint32_t)ring - 1;
 		w->efd = eventfd(0, EFD_CLOEXEC);
-		if (w->efd < 0 || vmac_ring_init(&w->jobs, sizeof(int), (size_t)ring) != 0 ||
+		w->queue = calloc((size_t)ring, sizeof(*w->queue));
+		w->push_ns = calloc((size_t)ring, sizeof(*w->push_ns));
+		if (w->efd < 0 || !w->queue || !w->push_ns ||
 		    vmac_ring_init(&w->out, sizeof(struct vmac_bus_msg), WORKER_OUT_SLOTS) != 0)
 			goto fail;
 	}
@@ -358,7 +404,8 @@ void bus_workers_fini(struct vmac_bus *bus)
 			}
 		if (w->efd > 0)
 			close(w->efd);
-		vmac_ring_fini(&w->jobs);
+		free(w->queue);
+		free(w->push_ns);
 		vmac_ring_fini(&w->out);
 	}
 	free(bus->workers);
@@ -392,9 +439,36 @@ static int take_spare(struct vmac_bus *bus)
 }
 
 /* Jobs queued on w and not yet taken (stale entries included). */
-static size_t backlog(struct worker *w)
+static uint32_t backlog(struct worker *w)
 {
-	return atomic_load(&w->jobs.head) - atomic_load(&w->jobs.tail);
+	return atomic_load(&w->head) - atomic_load(&w->tail);
+}
+
+/* Has the oldest job queued on w waited past MOVE_AFTER_SLOTS at t_ns?
+ * By the bus thread's copy of w's tail, read again only when that copy
+ * says so: most pushes do not touch the worker's line. */
+static int backed_up(struct vmac_bus *bus, struct worker *w, int64_t t_ns)
+{
+	uint32_t h = atomic_load_explicit(&w->head, memory_order_relaxed);
+	int64_t after = MOVE_AFTER_SLOTS(bus->slot_ns);
+	if (h == w->tail_seen || t_ns - w->push_ns[w->tail_seen & w->mask] < after)
+		return 0;
+	w->tail_seen = atomic_load_explicit(&w->tail, memory_order_acquire);
+	return h != w->tail_seen && t_ns - w->push_ns[w->tail_seen & w->mask] >= after;
+}
+
+/* Where a machine without a worker goes: the first active worker that is
+ * not far behind (backed_up), else the least loaded. Machines are packed
+ * on few workers: light drivers then wake one worker a slot, not every
+ * one, and drivers that need more than one find it when their worker
+ * falls behind (bus_worker_push). */
+static int first_free(struct vmac_bus *bus, int64_t t_ns)
+{
+	int i;
+	for (i = 0; i < bus->nworkers_max; i++)
+		if (atomic_load(&bus->workers[i].state) == W_ACTIVE && !backed_up(bus, &bus->workers[i], t_ns))
+			return i;
+	return least_loaded(bus, -1);
 }
 
 /* An active worker with nothing queued, other than skip; -1: none. */
@@ -411,11 +485,13 @@ static int idle_worker(struct vmac_bus *bus, int skip)
 int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 {
 	int mi = (int)(m - bus->mach);
+	int64_t t_ns = bus->jobs[mi].queued_ns;
 	struct worker *w;
 	if (m->worker >= 0 && atomic_load(&bus->workers[m->worker].state) == W_ACTIVE &&
-	    backlog(&bus->workers[m->worker]) >= MOVE_BACKLOG) {
-		/* Its worker is busy and another sleeps with nothing to do: the
-		 * machine moves (a worker keeps nothing of a machine between jobs). */
+	    backed_up(bus, &bus->workers[m->worker], t_ns)) {
+		/* Its worker is far behind and another sleeps with nothing to
+		 * do: the machine moves (a worker keeps nothing of a machine
+		 * between jobs but what its core's caches hold). */
 		int b = idle_worker(bus, m->worker);
 		if (b >= 0) {
 			bus->workers[m->worker].nmach--;
@@ -424,7 +500,7 @@ int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 		}
 	}
 	if (m->worker < 0 || atomic_load(&bus->workers[m->worker].state) != W_ACTIVE) {
-		int b = least_loaded(bus, -1);
+		int b = first_free(bus, t_ns);
 		if (b < 0)
 			b = take_spare(bus); /* every worker given up: the spare the main thread made */
 		if (b < 0)
@@ -435,7 +511,7 @@ int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 		bus->workers[b].nmach++;
 	}
 	w = &bus->workers[m->worker];
-	if (vmac_ring_push(&w->jobs, &mi) != 0)
+	if (queue_push(w, mi, t_ns) != 0)
 		return -1;
 	w->kick = 1;
 	return 0;
@@ -453,7 +529,9 @@ void bus_workers_kick(struct vmac_bus *bus)
 		if (!w->kick)
 			continue;
 		w->kick = 0;
-		if (atomic_exchange(&w->sleeping, 0) && write(w->efd, &one, sizeof(one)) < 0) {
+		/* Read first: the exchange, a write, only for a worker asleep. */
+		if (atomic_load(&w->sleeping) && atomic_exchange(&w->sleeping, 0) &&
+		    write(w->efd, &one, sizeof(one)) < 0) {
 			/* the counter is full: it wakes anyway */
 		}
 	}
@@ -569,5 +647,6 @@ void bus_bind_driver(struct machine *m, struct vmac_driver *drv)
 	host.set_level = hook_set_level;
 	host.event = hook_event;
 	host.ctx = &m->bus->jobs[m - m->bus->mach];
+	m->bus->jobs[m - m->bus->mach].budget_of = NULL; /* its budget read again (jobs.c, limit_of) */
 	vmac_driver_bind(drv, &host);
 }

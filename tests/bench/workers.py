@@ -14,7 +14,9 @@ build of the code before, e.g. `git worktree add /tmp/base ec76250 && make
             base): ticks whose outputs came late (driver_late), served
             ratio, host CPU
 
-Run through bench.py (--only workers --base-bin DIR)."""
+Run through bench.py (--only workers --base-bin DIR). VMAC_BENCH_WORKERS
+(e.g. "cost") runs only the parts it names, VMAC_BENCH_ROUNDS that many
+rounds (3): the cost alone, repeated, while changing the hand-over."""
 
 import os
 import statistics
@@ -23,7 +25,8 @@ import tempfile
 from fieldbus import fieldbus_run
 from harness import Context, Skip
 
-ROUNDS = 3
+ROUNDS = int(os.environ.get("VMAC_BENCH_ROUNDS", "3"))
+PARTS = os.environ.get("VMAC_BENCH_WORKERS", "cost,burn,threads").split(",")
 
 # About 200 us of interpreted Lua per tick on this machine (the JIT is off
 # in the sandbox); the measured CPU per device per tick says what it was.
@@ -44,15 +47,21 @@ BURN_PERIOD_US = 64000
 BURN_SCHEDULE = {"slice_us": 100, "slices_per_slot": 10, "default_level": 6, "max_level": 6}
 BURN = ("burner", BURN_LUA, dict(BURN_SETTINGS, **BURN_SCHEDULE))
 LIGHT = ("benchprobe", None, BURN_SCHEDULE)
+LIGHT_OPEN = ("benchprobe", None, {"bus_trust": "open"})
 
 
 def bindir_with(base_vmacd, bindir):
-    """A folder whose vmacd is base_vmacd and whose other programs are this
-    build's: the same boards, only the host differs."""
+    """A folder whose vmacd is base_vmacd and whose vmac-board is this
+    build's: the same boards, only the host differs. Its vmac is the base's
+    when there is one beside base_vmacd: it makes the state folder (vmac
+    board enroll --local), whose database the base vmacd must be able to
+    read (a newer schema it refuses)."""
     d = tempfile.mkdtemp(prefix="vmac-bench-base-bin-")
     os.symlink(os.path.abspath(base_vmacd), os.path.join(d, "vmacd"))
-    for prog in ("vmac", "vmac-board"):
-        os.symlink(os.path.abspath(os.path.join(bindir, prog)), os.path.join(d, prog))
+    base_vmac = os.path.join(os.path.dirname(base_vmacd), "vmac")
+    os.symlink(os.path.abspath(base_vmac if os.path.exists(base_vmac) else os.path.join(bindir, "vmac")),
+               os.path.join(d, "vmac"))
+    os.symlink(os.path.abspath(os.path.join(bindir, "vmac-board")), os.path.join(d, "vmac-board"))
     return d
 
 
@@ -78,12 +87,15 @@ def workers(args):
     base = bindir_with(os.path.join(args.base_bin, "vmacd"), args.bin)
     out = {"cost": [], "burn": [], "threads": []}
     for rnd in range(ROUNDS):
-        for mode in ("eth-cyclic", "udp-cyclic"):
+        for mode in ("eth-cyclic", "udp-cyclic") if "cost" in PARTS else ():
             row = {"mode": mode}
             try:
                 for which, bindir in (("base", base), ("workers", args.bin)):
+                    # Unkeyed boards for both: the base knows no keys; this
+                    # build then needs bus_trust open (the base no such setting).
+                    drv = LIGHT_OPEN if which == "workers" else None
                     r = run_with(args, bindir, "workers-cost-%s-%s-%d" % (which, mode, rnd),
-                                 lambda c: fieldbus_run(c, mode, 100, 1000, args.seconds))
+                                 lambda c: fieldbus_run(c, mode, 100, 1000, args.seconds, drv, keyed=False))
                     row[which] = pick(r)
                     print("    round %d %-10s %-7s %.3f us per device per tick, %d misses (%d the host's)" % (
                         rnd + 1, mode, which, r["cpu_us_per_device_tick"], r["misses"], r["misses_host"]),
@@ -93,11 +105,16 @@ def workers(args):
                 continue
             row["ratio"] = row["workers"]["cpu_us_per_device_tick"] / max(1e-9, row["base"]["cpu_us_per_device_tick"])
             out["cost"].append(row)
+        if "burn" not in PARTS:
+            continue
         row = {}
         for which, bindir in (("base", base), ("workers", args.bin)):
             for load, driver in (("light", LIGHT), ("burn", BURN)):
+                if which == "workers":  # unkeyed, as in the cost part
+                    driver = driver[:2] + (dict(driver[2], bus_trust="open"),)
                 r = run_with(args, bindir, "workers-burn-%s-%s-%d" % (which, load, rnd),
-                             lambda c: fieldbus_run(c, "udp-cyclic", 100, BURN_PERIOD_US, args.seconds, driver))
+                             lambda c: fieldbus_run(c, "udp-cyclic", 100, BURN_PERIOD_US, args.seconds, driver,
+                                                    keyed=False))
                 row["%s_%s" % (which, load)] = pick(r)
                 print("    round %d burn %-7s %-5s lateness p99 %d us, max %d us, %.1f us CPU per device per tick, "
                       "%d misses" % (rnd + 1, which, load, r["lateness_us"]["p99"], r["lateness_us"]["max"],
@@ -106,7 +123,7 @@ def workers(args):
             row["%s_growth_p99" % which] = (row["%s_burn" % which]["lateness_us"]["p99"] /
                                             max(1, row["%s_light" % which]["lateness_us"]["p99"]))
         out["burn"].append(row)
-    for threads in (1, 2):
+    for threads in (1, 2) if "threads" in PARTS else ():
         drv = ("burner", BURN_LUA, dict(BURN_SETTINGS, driver_threads=threads, slice_us=100, slices_per_slot=10,
                                         default_level=4, max_level=4))
         try:
