@@ -339,6 +339,18 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 	return VMAC_HDR_LEN + n;
 }
 
+/* m cleared, and its header's fields from buf's 13 bytes. */
+static void read_header(const uint8_t *buf, struct vmac_msg *m)
+{
+	memset(m, 0, sizeof(*m));
+	m->version = buf[2];
+	m->flags = buf[3];
+	m->seq = get16(buf + 4);
+	m->device_id = get32(buf + 6);
+	m->channel = buf[10];
+	m->op = buf[11];
+}
+
 /* A sealed SYNC whose header was found sound: host_ns, counter, first,
  * then len MACs (checked one by one, by each board for its own offset). */
 static int decode_sync_auth(const uint8_t *buf, size_t len, struct vmac_msg *m)
@@ -349,13 +361,7 @@ static int decode_sync_auth(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		return VMAC_EPROTO_LENGTH;
 	if ((buf[3] & ~VMAC_FLAG_AUTH) != 0)
 		return VMAC_EPROTO_OP;
-	memset(m, 0, sizeof(*m));
-	m->version = buf[2];
-	m->flags = buf[3];
-	m->seq = get16(buf + 4);
-	m->device_id = get32(buf + 6);
-	m->channel = VMAC_CH_SYSTEM;
-	m->op = VMAC_SYS_SYNC;
+	read_header(buf, m);
 	m->u.sync.host_ns = get64(d);
 	m->u.sync.prev_tx_ns = get64(d + 8);
 	m->counter = get32(d + VMAC_SYNC_LEN);
@@ -392,13 +398,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	if (!flags_ok(buf))
 		return VMAC_EPROTO_OP;
 
-	memset(m, 0, sizeof(*m));
-	m->version = buf[2];
-	m->flags = buf[3];
-	m->seq = get16(buf + 4);
-	m->device_id = get32(buf + 6);
-	m->channel = buf[10];
-	m->op = buf[11];
+	read_header(buf, m);
 	reply = (m->flags & VMAC_FLAG_REPLY) != 0;
 
 	want = data_len_for(m->version, m->channel, m->op, reply);
