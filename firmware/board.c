@@ -284,12 +284,14 @@ static int names_last(const struct vmac_board_sync_last *last, const struct vmac
 
 /* A SYNC taken (docs/TIME.md, "The two-step SYNC"): the sample held back
  * from the last one goes to the clock first, with the transmit time this
- * one names for it (two-step), or, not named (a lost stamp, a lost frame,
- * another stream), with its own host_ns (one-step, late). This one's own
- * sample is held back in turn when it names its predecessor's time (the
- * host stamps, so the next will likely name its) and SYNC frames come
- * often enough (VMAC_BOARD_TWO_STEP_GAP_NS); else it goes now, one-step.
- * Samples reach the clock in the order of their receive times. */
+ * one names for it (two-step); not named (a lost stamp, a lost frame,
+ * another stream), it is dropped while the host names times (its own
+ * host_ns is early by the host's send path, tens of microseconds: mixed in,
+ * such samples move the clock by that much), else fed with its own host_ns
+ * (one-step). This one's own sample is held back in turn while the host
+ * names times and SYNC frames come often enough
+ * (VMAC_BOARD_TWO_STEP_GAP_NS); else it goes now, one-step. Samples reach
+ * the clock in the order of their receive times. */
 static void sync_feed(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx_local_ns)
 {
 	struct vmac_board_sync_last *last = &b->sync_last;
@@ -297,12 +299,21 @@ static void sync_feed(struct vmac_board *b, const struct vmac_msg *req, uint64_t
 	uint64_t gap = last->valid && rx_local_ns >= last->rx_local_ns ? rx_local_ns - last->rx_local_ns : UINT64_MAX;
 	int named = names_last(last, req, stream);
 	if (last->valid && last->deferred) {
-		if (named)
+		if (named) {
 			b->counters.sync_two_step++;
-		vmac_clock_feed(&b->clock, named ? req->u.sync.prev_tx_ns : last->host_ns, last->rx_local_ns);
+			vmac_clock_feed(&b->clock, req->u.sync.prev_tx_ns, last->rx_local_ns);
+		} else if (!last->two_step) {
+			vmac_clock_feed(&b->clock, last->host_ns, last->rx_local_ns);
+		}
 	}
+	if (req->u.sync.prev_tx_ns != 0)
+		last->two_step = 1;
+	if (named || req->u.sync.prev_tx_ns != 0)
+		last->unnamed = 0;
+	else if (++last->unnamed >= VMAC_BOARD_UNNAMED_MAX)
+		last->two_step = 0; /* the host stopped stamping: one-step from here */
 	last->valid = 1;
-	last->deferred = req->u.sync.prev_tx_ns != 0 && gap <= VMAC_BOARD_TWO_STEP_GAP_NS;
+	last->deferred = last->two_step && gap <= VMAC_BOARD_TWO_STEP_GAP_NS;
 	last->seq = req->seq;
 	last->stream = stream;
 	last->host_ns = req->u.sync.host_ns;

@@ -75,9 +75,12 @@ struct vmac_board_counters {
 
 /* The last SYNC taken: its seq, its stream (the sealed chunk's first
  * offset; VMAC_OFFSET_NONE for the plain SYNC), host time and receive
- * time, the interval before it, and whether its sample waits (deferred). */
+ * time, the interval before it, and whether its sample waits (deferred);
+ * whether the host names transmit times (two_step: a SYNC named its
+ * predecessor's, and fewer than VMAC_BOARD_UNNAMED_MAX since named none). */
+#define VMAC_BOARD_UNNAMED_MAX 16
 struct vmac_board_sync_last {
-	uint8_t valid, deferred;
+	uint8_t valid, deferred, two_step, unnamed;
 	uint16_t seq, stream;
 	uint64_t host_ns, rx_local_ns;
 };

@@ -4,9 +4,11 @@
  * host_ns it carries, and names that transmit time in the next SYNC: the
  * board takes the named time with the previous frame's receive time
  * (two-step) and its clock sees only the path; with prev_tx_ns 0 it takes
- * host_ns (one-step) and the 50 us with it. A lost stamp, a lost frame, an
- * implausible time and slow SYNC fall back to one-step, no sample lost or
- * paired with the wrong frame; holdover counts from the sample fed. */
+ * host_ns (one-step) and the 50 us with it. While the host names times, a
+ * sample whose time a lost stamp, a lost frame or an implausible time
+ * leaves unnamed is dropped, never fed one-step beside two-step ones nor
+ * paired with the wrong frame; slow SYNC goes one-step; holdover counts
+ * from the sample fed. */
 #include <check.h>
 #include <string.h>
 
@@ -125,17 +127,17 @@ START_TEST(two_step_leaves_the_kernels_delay_out_one_step_keeps_it)
 }
 END_TEST
 
-START_TEST(a_lost_stamp_feeds_the_waiting_sample_one_step)
+START_TEST(a_lost_stamp_drops_the_waiting_sample)
 {
 	struct vmac_board b;
 
 	board_start(&b);
 	run(&b, 1500, 1, 700, -1);
-	/* frame 699 waited, 700 named nothing: 699 one-step; 700 (naming
-	 * nothing) one-step at once; 701 names 700, but 700 did not wait, so 701
-	 * waits for 702 (one-step for 700 only) */
-	ck_assert_msg(b.counters.sync_two_step == 1496 && fed(&b) == 1499 && b.clock.counters.starts == 1,
-	              "a lost stamp: two-step %u, fed %u, starts %u; want 1496, 1499, 1",
+	/* frame 699 waited, 700 named nothing: 699 dropped (its host_ns is
+	 * early by the kernel's 50 us); 700 waits as every sample while the host
+	 * names times, and 701 names it: two-step */
+	ck_assert_msg(b.counters.sync_two_step == 1497 && fed(&b) == 1498 && b.clock.counters.starts == 1,
+	              "a lost stamp: two-step %u, fed %u, starts %u; want 1497, 1498, 1",
 	              (unsigned)b.counters.sync_two_step, (unsigned)fed(&b), (unsigned)b.clock.counters.starts);
 	ck_assert_int_eq(b.clock.state, VMAC_CLOCK_LOCKED);
 }
@@ -148,12 +150,12 @@ START_TEST(a_lost_frame_pairs_no_time_with_the_wrong_frame)
 
 	board_start(&b);
 	run(&b, 1500, 1, -1, 700);
-	/* 701 names 700's transmit time, which is not 699's: 699 one-step, 701
+	/* 701 names 700's transmit time, which is not 699's: 699 dropped, 701
 	 * waits; a wrong pairing would be a sample 1 ms early */
 	off = offset_at(&b, 1500);
-	ck_assert_msg(b.counters.sync_two_step == 1496 && fed(&b) == 1498 && b.clock.counters.starts == 1 &&
+	ck_assert_msg(b.counters.sync_two_step == 1496 && fed(&b) == 1497 && b.clock.counters.starts == 1 &&
 	                  b.clock.counters.spikes == 0,
-	              "a lost frame: two-step %u, fed %u, starts %u, spikes %u; want 1496, 1498, 1, 0",
+	              "a lost frame: two-step %u, fed %u, starts %u, spikes %u; want 1496, 1497, 1, 0",
 	              (unsigned)b.counters.sync_two_step, (unsigned)fed(&b), (unsigned)b.clock.counters.starts,
 	              (unsigned)b.clock.counters.spikes);
 	ck_assert_msg(off > (int64_t)PATH_NS - 2000 && off < (int64_t)PATH_NS + 2000,
@@ -161,7 +163,7 @@ START_TEST(a_lost_frame_pairs_no_time_with_the_wrong_frame)
 }
 END_TEST
 
-START_TEST(an_implausible_or_slow_two_step_falls_back_to_one_step)
+START_TEST(an_implausible_time_drops_its_sample_slow_sync_goes_one_step)
 {
 	struct vmac_board b;
 	int k;
@@ -173,8 +175,9 @@ START_TEST(an_implausible_or_slow_two_step_falls_back_to_one_step)
 	sync_at(&b, 3, 2, HOST_START_NS + 1000000u - 1);           /* names 2's time 1 ns before its host_ns */
 	sync_at(&b, 4, 3, tx_of(2));                               /* a good one: 3 two-step */
 	sync_at(&b, 5, 4, tx_of(3) + VMAC_BOARD_TWO_STEP_SPAN_NS); /* 10 ms after it left */
-	ck_assert_msg(b.counters.sync_two_step == 1 && fed(&b) == 4,
-	              "implausible times: two-step %u, fed %u; want 1, 4", (unsigned)b.counters.sync_two_step,
+	/* 1 one-step (nothing named yet); 2 and 4 dropped, unnamed; 3 two-step */
+	ck_assert_msg(b.counters.sync_two_step == 1 && fed(&b) == 2,
+	              "implausible times: two-step %u, fed %u; want 1, 2", (unsigned)b.counters.sync_two_step,
 	              (unsigned)fed(&b));
 
 	/* SYNC 30 ms apart: no sample waits (it would count against holdover) */
@@ -209,9 +212,9 @@ Suite *vmac_test_suite(void)
 	Suite *s = suite_create("sync_twostep");
 	TCase *tc = tcase_create("board");
 	tcase_add_test(tc, two_step_leaves_the_kernels_delay_out_one_step_keeps_it);
-	tcase_add_test(tc, a_lost_stamp_feeds_the_waiting_sample_one_step);
+	tcase_add_test(tc, a_lost_stamp_drops_the_waiting_sample);
 	tcase_add_test(tc, a_lost_frame_pairs_no_time_with_the_wrong_frame);
-	tcase_add_test(tc, an_implausible_or_slow_two_step_falls_back_to_one_step);
+	tcase_add_test(tc, an_implausible_time_drops_its_sample_slow_sync_goes_one_step);
 	tcase_add_test(tc, holdover_counts_from_the_last_sample_fed);
 	suite_add_tcase(s, tc);
 	return s;
