@@ -128,16 +128,21 @@ void bus_flush(struct vmac_bus *bus)
 {
 	int64_t sent_ns;
 	uint32_t i;
-	int sent;
+	int sent, had_sync = bus->sync_tx >= 0 || bus->nsync_auth > 0;
 	if (bus->ntx == 0)
 		return;
-	if (bus->sync_tx >= 0 || bus->nsync_auth > 0)
+	if (had_sync)
 		sync_stamp(bus);
 	if (bus->virt) {
 		bus->link.send(bus->link.ctx, bus->tx, bus->ntx);
 		sent = bus->ntx;
 	} else {
 		sent = vmac_transport_send(&bus->tr, bus->tx, bus->ntx);
+		/* A software transmit stamp is there as the send returns (the
+		 * driver stamps in its xmit): read now, it costs no wake-up of
+		 * this thread by EPOLLERR later; else it comes that way. */
+		if (had_sync)
+			bus_sync_read_stamps(bus, 0);
 	}
 	/* The deadline runs from when the request actually left the host, so a
 	 * tick the machine delayed never counts against a board. A request the
