@@ -220,6 +220,21 @@ static int decode_announce(const uint8_t *d, size_t len, struct vmac_announce *a
 	return 0;
 }
 
+/* A frame's 13 bytes of header into buf (the reader is read_header). */
+static void put_header(uint8_t *buf, uint8_t version, uint8_t flags, uint16_t seq, uint32_t device_id, uint8_t channel,
+                       uint8_t op, uint8_t len)
+{
+	buf[0] = VMAC_MAGIC0;
+	buf[1] = VMAC_MAGIC1;
+	buf[2] = version;
+	buf[3] = flags;
+	put16(buf + 4, seq);
+	put32(buf + 6, device_id);
+	buf[10] = channel;
+	buf[11] = op;
+	buf[12] = len;
+}
+
 int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 {
 	int reply = (m->flags & VMAC_FLAG_REPLY) != 0;
@@ -327,15 +342,7 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 	default: /* zero-length: REGISTER, SHUTDOWN, SLEEP, WATCHDOG acks; IDLE, SIZE, OFFSET_GET requests */ break;
 	}
 
-	buf[0] = VMAC_MAGIC0;
-	buf[1] = VMAC_MAGIC1;
-	buf[2] = version;
-	buf[3] = m->flags;
-	put16(buf + 4, m->seq);
-	put32(buf + 6, m->device_id);
-	buf[10] = m->channel;
-	buf[11] = m->op;
-	buf[12] = (uint8_t)n;
+	put_header(buf, version, m->flags, m->seq, m->device_id, m->channel, m->op, (uint8_t)n);
 	return VMAC_HDR_LEN + n;
 }
 
@@ -373,35 +380,39 @@ static int decode_sync_auth(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	return 0;
 }
 
-int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
+/* The first checks of any frame: long enough, ours, a version we speak. */
+static int check_start(const uint8_t *buf, size_t len)
 {
-	const uint8_t *d = buf + VMAC_HDR_LEN;
-	int reply, want;
-	size_t n;
-
 	if (len < VMAC_HDR_LEN)
 		return VMAC_EPROTO_SHORT;
 	if (buf[0] != VMAC_MAGIC0 || buf[1] != VMAC_MAGIC1)
 		return VMAC_EPROTO_MAGIC;
 	if (buf[2] < VMAC_PROTO_VERSION_MIN || buf[2] > VMAC_PROTO_VERSION)
 		return VMAC_EPROTO_VERSION;
-	n = buf[12];
-	if (is_sync_auth(buf))
-		return decode_sync_auth(buf, len, m);
-	/* len counts data bytes, or a CYCLIC frame's records; the frame has room
-	 * for them, their trailer or first offset, and nothing more */
+	return 0;
+}
+
+/* len counts data bytes, or a CYCLIC frame's records; the frame has room
+ * for them, their trailer or first offset, and nothing more; its flags are
+ * ones it may carry. */
+static int check_length_and_flags(const uint8_t *buf, size_t len)
+{
+	size_t n = buf[12];
 	if ((int)len != vmac_proto_frame_length(buf, len) ||
 	    (is_cyclic(buf)
 	         ? n < 1 || n > ((buf[3] & VMAC_FLAG_AUTH) ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX)
 	         : n > VMAC_DATA_MAX))
 		return VMAC_EPROTO_LENGTH;
-	if (!flags_ok(buf))
-		return VMAC_EPROTO_OP;
+	return flags_ok(buf) ? 0 : VMAC_EPROTO_OP;
+}
 
-	read_header(buf, m);
-	reply = (m->flags & VMAC_FLAG_REPLY) != 0;
-
-	want = data_len_for(m->version, m->channel, m->op, reply);
+/* The header read into m: the op valid in its direction, the channel and
+ * device id agreeing, the data as long as the op wants; an authenticated
+ * frame's counter. */
+static int check_op_and_payload(const uint8_t *buf, struct vmac_msg *m)
+{
+	size_t n = buf[12];
+	int want = data_len_for(m->version, m->channel, m->op, (m->flags & VMAC_FLAG_REPLY) != 0);
 	if (want == -1)
 		return VMAC_EPROTO_OP;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
@@ -411,20 +422,26 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	if (want == LEN_DISCOVER ? n != 0 && n != VMAC_NONCE_LEN : want >= 0 && (size_t)want != n)
 		return VMAC_EPROTO_PAYLOAD;
 	if ((m->flags & VMAC_FLAG_AUTH) && !is_cyclic(buf))
-		m->counter = get32(d + n);
+		m->counter = get32(buf + VMAC_HDR_LEN + n);
+	return 0;
+}
 
-	switch (m->channel == VMAC_CH_SYSTEM ? SYS_KEY | m->op : (reply << 8) | m->op) {
-	case SYS_KEY | VMAC_SYS_DISCOVER:
+/* A system frame's data (n bytes at d; CYCLIC: n records). */
+static int decode_system(const uint8_t *buf, size_t n, struct vmac_msg *m)
+{
+	const uint8_t *d = buf + VMAC_HDR_LEN;
+	switch (m->op) {
+	case VMAC_SYS_DISCOVER:
 		m->u.discover.has_nonce = n != 0;
 		if (n)
 			memcpy(m->u.discover.nonce, d, VMAC_NONCE_LEN);
 		break;
-	case SYS_KEY | VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
-	case SYS_KEY | VMAC_SYS_SYNC:
+	case VMAC_SYS_ANNOUNCE: return decode_announce(d, n, &m->u.announce);
+	case VMAC_SYS_SYNC:
 		m->u.sync.host_ns = get64(d);
 		m->u.sync.prev_tx_ns = get64(d + 8);
 		break;
-	case SYS_KEY | VMAC_SYS_CYCLIC:
+	case VMAC_SYS_CYCLIC:
 		/* Records are checked one by one when read (a board reads only its
 		 * own): decoding stays O(1) however many the frame carries. */
 		m->u.cyclic.first = get16(d);
@@ -441,6 +458,38 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 		if ((unsigned)m->u.cyclic.first + n > 0xFFFF) /* 0xFFFF is VMAC_OFFSET_NONE */
 			return VMAC_EPROTO_VALUE;
 		break;
+	default: break;
+	}
+	return 0;
+}
+
+/* UPDATE's and IDLE's reply: the inputs, and a TIMED reply's latch. */
+static int decode_inputs(const uint8_t *d, struct vmac_msg *m)
+{
+	struct vmac_inputs *in = &m->u.inputs;
+	in->digital = d[0];
+	in->analog[0] = get16(d + 1);
+	in->analog[1] = get16(d + 3);
+	in->encoder = (int32_t)get32(d + 5);
+	in->applied.digital = d[9];
+	in->applied.pwm = (int16_t)get16(d + 10);
+	if (in->analog[0] > VMAC_ANALOG_MAX || in->analog[1] > VMAC_ANALOG_MAX || !outputs_ok(&in->applied))
+		return VMAC_EPROTO_VALUE;
+	if (m->flags & VMAC_FLAG_TIMED) {
+		m->latch.latched_at = get64(d + 12);
+		m->latch.clock = d[20];
+		m->latch.bound_ns = get32(d + 21);
+		m->latch.offset_ns = (int64_t)get64(d + 25);
+		if (!latch_clock_ok(m->latch.clock))
+			return VMAC_EPROTO_VALUE;
+	}
+	return 0;
+}
+
+/* A device frame's data, at d (its length already checked). */
+static int decode_device(const uint8_t *d, struct vmac_msg *m)
+{
+	switch (((m->flags & VMAC_FLAG_REPLY) ? 0x100 : 0) | m->op) {
 	case VMAC_OP_OFFSET:
 	case 0x100 | VMAC_OP_OFFSET:
 	case 0x100 | VMAC_OP_OFFSET_GET: m->u.offset = get16(d); break;
@@ -474,26 +523,7 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 			return VMAC_EPROTO_VALUE;
 		break;
 	case 0x100 | VMAC_OP_UPDATE:
-	case 0x100 | VMAC_OP_IDLE: {
-		struct vmac_inputs *in = &m->u.inputs;
-		in->digital = d[0];
-		in->analog[0] = get16(d + 1);
-		in->analog[1] = get16(d + 3);
-		in->encoder = (int32_t)get32(d + 5);
-		in->applied.digital = d[9];
-		in->applied.pwm = (int16_t)get16(d + 10);
-		if (in->analog[0] > VMAC_ANALOG_MAX || in->analog[1] > VMAC_ANALOG_MAX || !outputs_ok(&in->applied))
-			return VMAC_EPROTO_VALUE;
-		if (m->flags & VMAC_FLAG_TIMED) {
-			m->latch.latched_at = get64(d + 12);
-			m->latch.clock = d[20];
-			m->latch.bound_ns = get32(d + 21);
-			m->latch.offset_ns = (int64_t)get64(d + 25);
-			if (!latch_clock_ok(m->latch.clock))
-				return VMAC_EPROTO_VALUE;
-		}
-		break;
-	}
+	case 0x100 | VMAC_OP_IDLE: return decode_inputs(d, m);
 	case 0x100 | VMAC_OP_ERROR:
 		m->u.error.code = d[0];
 		m->u.error.op = d[1];
@@ -503,6 +533,23 @@ int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	default: break;
 	}
 	return 0;
+}
+
+int vmac_proto_decode(const uint8_t *buf, size_t len, struct vmac_msg *m)
+{
+	int rc = check_start(buf, len);
+	if (rc != 0)
+		return rc;
+	if (is_sync_auth(buf))
+		return decode_sync_auth(buf, len, m);
+	rc = check_length_and_flags(buf, len);
+	if (rc != 0)
+		return rc;
+	read_header(buf, m);
+	rc = check_op_and_payload(buf, m);
+	if (rc != 0)
+		return rc;
+	return m->channel == VMAC_CH_SYSTEM ? decode_system(buf, buf[12], m) : decode_device(buf + VMAC_HDR_LEN, m);
 }
 
 int vmac_proto_frame_length(const uint8_t *buf, size_t len)
@@ -531,15 +578,8 @@ static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, 
 		return VMAC_EPROTO_VALUE;
 	if (n > cap)
 		return VMAC_EPROTO_SPACE;
-	buf[0] = VMAC_MAGIC0;
-	buf[1] = VMAC_MAGIC1;
-	buf[2] = 2;
-	buf[3] = (uint8_t)((auth ? VMAC_FLAG_AUTH : 0) | (at ? VMAC_FLAG_TIMED : 0));
-	put16(buf + 4, seq);
-	put32(buf + 6, 0);
-	buf[10] = VMAC_CH_SYSTEM;
-	buf[11] = VMAC_SYS_CYCLIC;
-	buf[12] = (uint8_t)count;
+	put_header(buf, 2, (uint8_t)((auth ? VMAC_FLAG_AUTH : 0) | (at ? VMAC_FLAG_TIMED : 0)), seq, 0, VMAC_CH_SYSTEM,
+	           VMAC_SYS_CYCLIC, (uint8_t)count);
 	put16(buf + VMAC_HDR_LEN, first);
 	if (auth)
 		put32(buf + VMAC_HDR_LEN + 2, counter);
@@ -618,15 +658,7 @@ int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t 
 		return VMAC_EPROTO_VALUE;
 	if (n > cap)
 		return VMAC_EPROTO_SPACE;
-	buf[0] = VMAC_MAGIC0;
-	buf[1] = VMAC_MAGIC1;
-	buf[2] = 2;
-	buf[3] = VMAC_FLAG_AUTH;
-	put16(buf + 4, seq);
-	put32(buf + 6, 0);
-	buf[10] = VMAC_CH_SYSTEM;
-	buf[11] = VMAC_SYS_SYNC;
-	buf[12] = (uint8_t)count;
+	put_header(buf, 2, VMAC_FLAG_AUTH, seq, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, (uint8_t)count);
 	put64(buf + VMAC_HDR_LEN, 0);
 	put64(buf + VMAC_HDR_LEN + 8, 0);
 	put32(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN, counter);
