@@ -203,13 +203,14 @@ struct machine {
 	struct vmac_bus *bus;
 	struct vmac_timing timing; /* its boards' instants (timed.c): the driver's pattern at its level */
 	int64_t out_at_ns;         /* its last tick's dev:output_at after the anchor slot's start; 0: none */
-	/* A machine of several boards: its last tick's outputs, held until the
-	 * first service of its next period (bus_release_outputs), so that every
-	 * board of one period carries the outputs of one tick. */
-	int staged;
+	/* Its last tick's outputs (staged_n boards'), held until the first
+	 * service of its next period (bus_release_outputs), so that every board
+	 * of one period carries the outputs of one tick. */
+	int staged, staged_n;
 	struct vmac_outputs staged_out[VMAC_DRIVER_MAX_BOARDS];
 	int64_t staged_out_at_ns;
 	uint64_t served_period; /* slot >> level of its last service, + 1; 0: none yet */
+	unsigned served_level;  /* the level that period was counted at */
 };
 
 struct device {
@@ -468,8 +469,8 @@ void bus_input_now(struct vmac_bus *bus, struct machine *m);
 /* Every job done: what it gave applied; every job overrun: failed. */
 void bus_collect(struct vmac_bus *bus, int64_t now);
 /* Before d is served in slot (at level): at the first service of its
- * machine in a period, a machine of several boards takes the outputs its
- * last tick left (jobs.c). */
+ * machine in a period, its boards take the outputs its last tick left
+ * (jobs.c). */
 void bus_release_outputs(struct vmac_bus *bus, struct device *d, uint64_t slot, unsigned level);
 /* m is going away: its job is given up. 1 when a worker has (or had) it,
  * with the instances *drv and *other it holds and its checkpoint buffer:

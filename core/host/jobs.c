@@ -254,16 +254,13 @@ static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, in
 	int64_t t_ns = (int64_t)(j->time_s * 1e9);
 	int64_t out_at_ns = j->out_at_s > 0 ? (int64_t)(j->out_at_s * 1e9 + 0.5) : 0; /* with these outputs */
 	int i;
-	if (m->nboards > 1) { /* one tick's outputs for every board of a period: bus_release_outputs */
-		for (i = 0; i < j->nboards && i < m->nboards; i++)
-			m->staged_out[i] = j->out[i];
-		m->staged_out_at_ns = out_at_ns;
-		m->staged = 1;
-	} else {
-		for (i = 0; i < j->nboards && i < m->nboards; i++)
-			bus->dev[m->board[i]].outputs = j->out[i];
-		m->out_at_ns = out_at_ns;
-	}
+	/* released with the machine's next period (bus_release_outputs), to
+	 * every board of it at once */
+	for (i = 0; i < j->nboards && i < m->nboards; i++)
+		m->staged_out[i] = j->out[i];
+	m->staged_n = i;
+	m->staged_out_at_ns = out_at_ns;
+	m->staged = 1;
 	if (now - j->queued_ns > bus->slot_ns << m->level)
 		m->late++;
 	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in,
@@ -284,12 +281,13 @@ void bus_release_outputs(struct vmac_bus *bus, struct device *d, uint64_t slot, 
 	if (d->mach < 0)
 		return;
 	m = &bus->mach[d->mach];
-	if (m->served_period == period)
+	if (m->served_period == period && m->served_level == level)
 		return; /* a later board of this period: the outputs its first board took */
 	m->served_period = period;
+	m->served_level = level;
 	if (!m->staged)
 		return;
-	for (i = 0; i < m->nboards; i++)
+	for (i = 0; i < m->staged_n; i++)
 		bus->dev[m->board[i]].outputs = m->staged_out[i];
 	m->out_at_ns = m->staged_out_at_ns;
 	m->staged = 0;
