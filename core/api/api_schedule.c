@@ -24,17 +24,57 @@ static unsigned anchor_of(const struct vmac_status *s, const struct vmac_device_
 	return anchor;
 }
 
+/* The seed's deadline violation vector for one service: each kind of
+ * deadline it has missed since it attached, and the last. */
+static json_t *violations_json(const struct vmac_status *s, const struct vmac_device_status *d)
+{
+	json_t *last = json_null();
+	if (d->violation)
+		last = json_pack("{s:s, s:f}", "kind", vmac_violation_name(d->violation), "ago_s",
+		                 (double)(s->time_ns - d->violation_ns) / 1e9);
+	return json_pack("{s:I, s:I, s:I, s:o}", "misses", (json_int_t)(d->misses - d->misses_host), "misses_host",
+	                 (json_int_t)d->misses_host, "driver_late", (json_int_t)d->driver_late, "last", last);
+}
+
 static json_t *entry_json(const struct vmac_status *s, const struct vmac_device_status *d, unsigned row,
                           unsigned anchor)
 {
 	json_int_t base = (json_int_t)(row - d->slot + anchor) * s->slot_us;
 	int timed = d->timing.timed;
-	return json_pack("{s:s, s:s?, s:i, s:i, s:s, s:o, s:o, s:b}", "name", d->name, "machine",
+	return json_pack("{s:s, s:s?, s:i, s:i, s:s, s:o, s:o, s:b, s:o}", "name", d->name, "machine",
 	                 d->machine[0] ? d->machine : NULL, "slice", (int)d->slice, "level", (int)d->level, "pattern",
 	                 vmac_timing_name(d->timing.pattern), "latch_us",
 	                 timed ? json_integer(base + d->timing.in_us) : json_null(), "release_us",
 	                 timed ? json_integer(base + d->timing.out_us) : json_null(), "driver",
-	                 d->machine[0] && strcmp(d->machine, d->name) == 0);
+	                 d->machine[0] && strcmp(d->machine, d->name) == 0, "violations", violations_json(s, d));
+}
+
+static int by_latest(const void *a, const void *b)
+{
+	const struct vmac_device_status *x = *(const struct vmac_device_status *const *)a;
+	const struct vmac_device_status *y = *(const struct vmac_device_status *const *)b;
+	return (x->violation_ns < y->violation_ns) - (x->violation_ns > y->violation_ns);
+}
+
+/* Every scheduled device that has violated a deadline, the latest first:
+ * the vector as one list. */
+static json_t *violated_json(const struct vmac_status *s)
+{
+	const struct vmac_device_status **v = calloc((size_t)s->ndevices + 1, sizeof(*v));
+	json_t *out = json_array();
+	int i, n = 0;
+	if (!v)
+		return out;
+	for (i = 0; i < s->ndevices; i++)
+		if (s->devices[i].scheduled && s->devices[i].violation)
+			v[n++] = &s->devices[i];
+	qsort(v, (size_t)n, sizeof(*v), by_latest);
+	for (i = 0; i < n; i++)
+		json_array_append_new(out, json_pack("{s:s, s:i, s:s, s:f}", "name", v[i]->name, "slot",
+		                                     (int)v[i]->slot, "kind", vmac_violation_name(v[i]->violation),
+		                                     "ago_s", (double)(s->time_ns - v[i]->violation_ns) / 1e9));
+	free(v);
+	return out;
 }
 
 static json_t *schedule_json(const struct vmac_status *s)
@@ -70,7 +110,8 @@ static json_t *schedule_json(const struct vmac_status *s)
 			                                          (json_int_t)r * s->slot_us, "devices", devs));
 	}
 	free(anchor);
-	return json_pack("{s:i, s:i, s:o}", "slot_us", (int)s->slot_us, "slots", (int)rows, "timeline", timeline);
+	return json_pack("{s:i, s:i, s:o, s:o}", "slot_us", (int)s->slot_us, "slots", (int)rows, "timeline", timeline,
+	                 "violated", violated_json(s));
 }
 
 /* GET /api/schedule */

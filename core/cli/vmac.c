@@ -23,6 +23,7 @@
 #include "lint.h"
 #include "recordings.h"
 #include "reload.h"
+#include "schedule.h"
 #include "site.h"
 #include "token.h"
 
@@ -333,13 +334,28 @@ static const struct vmac_cmd test_cmd = {
     .own = test_options,
     .run = test_run};
 
-static const struct vmac_cmd *const commands[] = {&status_cmd,        &vmac_lint_cmd,       &test_cmd,
-                                                  &vmac_token_cmd,    &vmac_board_cmd,      &vmac_console_cmd,
-                                                  &vmac_get_cmd,      &vmac_set_cmd,        &vmac_events_cmd,
-                                                  &vmac_logs_cmd,     &vmac_site_cmd,       &vmac_bundle_cmd,
-                                                  &vmac_reload_cmd,   &vmac_rollback_cmd,   &vmac_drivers_cmd,
-                                                  &vmac_activate_cmd, &vmac_recordings_cmd, &vmac_recording_cmd,
-                                                  &vmac_record_cmd,   &bench_cmd,           NULL};
+static const struct vmac_cmd *const commands[] = {&status_cmd,
+                                                  &vmac_lint_cmd,
+                                                  &test_cmd,
+                                                  &vmac_token_cmd,
+                                                  &vmac_board_cmd,
+                                                  &vmac_console_cmd,
+                                                  &vmac_get_cmd,
+                                                  &vmac_set_cmd,
+                                                  &vmac_events_cmd,
+                                                  &vmac_logs_cmd,
+                                                  &vmac_site_cmd,
+                                                  &vmac_bundle_cmd,
+                                                  &vmac_reload_cmd,
+                                                  &vmac_rollback_cmd,
+                                                  &vmac_drivers_cmd,
+                                                  &vmac_activate_cmd,
+                                                  &vmac_recordings_cmd,
+                                                  &vmac_recording_cmd,
+                                                  &vmac_record_cmd,
+                                                  &vmac_schedule_cmd,
+                                                  &bench_cmd,
+                                                  NULL};
 
 static const struct vmac_cmd vmac = {
     .name = "vmac", .args = "COMMAND", .about = "The command line for vmac hosts (docs/CLI.md).\n", .sub = commands};

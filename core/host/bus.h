@@ -98,6 +98,16 @@ struct vmac_board_clock_status {
 	uint64_t services_arrival; /* TIMED replies acted on arrival */
 };
 
+/* The kinds of deadline violation (docs/SCHEDULER.md, "The static time
+ * manager"). */
+enum vmac_violation {
+	VMAC_VIOLATION_NONE,
+	VMAC_VIOLATION_MISS,        /* a reply not in time: the board's or the wire's */
+	VMAC_VIOLATION_MISS_HOST,   /* a request the kernel refused to send: the host's own */
+	VMAC_VIOLATION_DRIVER_LATE, /* a tick not done by the machine's next service */
+};
+const char *vmac_violation_name(int kind);
+
 /* A device as the status shows it (copied out of the bus thread). */
 struct vmac_device_status {
 	char name[VMAC_NAME_MAX + 1];
@@ -121,8 +131,12 @@ struct vmac_device_status {
 	uint64_t misses_host; /* of misses: the host's own fault */
 	uint64_t drops;       /* times the host dropped it */
 	uint64_t driver_late; /* ticks whose outputs came after the machine's next service (primary board only) */
-	unsigned protocol;    /* the version the board speaks (1 or 2) */
-	int cyclic;           /* served by the cyclic frame, at offset (else unicast UPDATEs) */
+	/* Its last deadline violation (seed 002's vector, docs/SCHEDULER.md):
+	 * a VMAC_VIOLATION_*, 0 for none, and when, in the status's time_ns. */
+	int violation;
+	int64_t violation_ns;
+	unsigned protocol; /* the version the board speaks (1 or 2) */
+	int cyclic;        /* served by the cyclic frame, at offset (else unicast UPDATEs) */
 	unsigned offset;
 	struct vmac_inputs inputs;
 	struct vmac_outputs outputs;

@@ -186,6 +186,7 @@ struct machine {
 	int want_stop;
 	int want_checkpoint; /* a checkpoint was due and not taken: the next tick makes it */
 	uint64_t late;       /* services that found its tick not done (held outputs) */
+	int64_t late_ns;     /* bus time of the last of them (0: none) */
 	/* The instance's published values and params, as its last job left them. */
 	int nvars, nparams;
 	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];
@@ -243,6 +244,8 @@ struct device {
 	uint64_t misses, served;
 	uint64_t misses_host; /* of misses: caused by the host (its request never left) */
 	uint64_t drops;       /* times it was dropped (bus_drop: itself, or a board of its machine) */
+	int64_t violated_ns;  /* bus time of its last deadline violation (0: none), ... */
+	uint8_t violated;     /* ... and its kind, a VMAC_VIOLATION_* */
 	/* The machine it is in, or was in last (its primary's name; "" before
 	 * it first joined one): what labels its series in GET /metrics, which
 	 * must not change when it is dropped, or its counters would start a

@@ -173,9 +173,12 @@ void bus_miss(struct vmac_bus *bus, struct device *d, const char *fmt_why)
 	d->consecutive_misses++;
 	bus->counters.misses++;
 	bus_rec_miss(bus, d, fmt_why);
+	d->violated_ns = bus_now(bus);
+	d->violated = VMAC_VIOLATION_MISS;
 	if (d->unsent) {
 		d->misses_host++;
 		bus->counters.misses_host++;
+		d->violated = VMAC_VIOLATION_MISS_HOST;
 	}
 	if (d->consecutive_misses >= bus->cfg.miss_limit || d->state != DEV_RUNNING)
 		bus_drop(bus, d, VMAC_SHUT_DROPPED, "dropped", fmt_why);

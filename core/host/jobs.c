@@ -261,8 +261,10 @@ static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, in
 	m->staged_n = i;
 	m->staged_out_at_ns = out_at_ns;
 	m->staged = 1;
-	if (now - j->queued_ns > bus->slot_ns << m->level)
+	if (now - j->queued_ns > bus->slot_ns << m->level) {
 		m->late++;
+		m->late_ns = now;
+	}
 	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in,
 	             j->out); /* a failed tick too: its inputs replay the failure */
 	if (j->rc != 0) {

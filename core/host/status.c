@@ -20,6 +20,16 @@
 
 /* ---- status ---- */
 
+const char *vmac_violation_name(int kind)
+{
+	switch (kind) {
+	case VMAC_VIOLATION_MISS: return "miss";
+	case VMAC_VIOLATION_MISS_HOST: return "miss_host";
+	case VMAC_VIOLATION_DRIVER_LATE: return "driver_late";
+	default: return NULL;
+	}
+}
+
 const char *bus_state_name(enum dev_state s)
 {
 	switch (s) {
@@ -64,6 +74,12 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	o->misses_host = d->misses_host;
 	o->drops = d->drops;
 	o->driver_late = m && m->primary == i ? m->late : 0;
+	o->violation = d->violated;
+	o->violation_ns = d->violated_ns;
+	if (o->driver_late && m->late_ns > o->violation_ns) {
+		o->violation = VMAC_VIOLATION_DRIVER_LATE;
+		o->violation_ns = m->late_ns;
+	}
 	o->protocol = d->version;
 	o->cyclic = d->cyclic;
 	o->offset = i;

@@ -176,6 +176,7 @@ COMMANDS = {
     "recording get": API,
     "recording to-test": [],
     "record": API,
+    "schedule": API,
     "console": CONSOLE,
     "get": CONSOLE,
     "set": CONSOLE,
@@ -192,7 +193,8 @@ COMMANDS = {
              "--timeout", "--history"],
 }
 PARENTS = {"": ["status", "lint", "test", "token", "board", "console", "get", "set", "events", "logs", "site", "bundle",
-                "reload", "rollback", "drivers", "activate", "recordings", "recording", "record", "bench"],
+                "reload", "rollback", "drivers", "activate", "recordings", "recording", "record", "schedule",
+                "bench"],
            "token": ["create", "list", "revoke"], "board": ["enroll", "list", "remove"],
            "recording": ["get", "to-test"]}
 FLAGS = {"--json", "--quiet", "--list", "--tap", "--local", "--replace", "--force", "--follow"}  # the options that take no value
@@ -284,7 +286,7 @@ def test_cli_every_api_command_reaches_the_host_it_is_given(t):
         f.write('return { name = "counter", version = "1", io = {}, tick = function() end }\n')
     arguments = {"status": [], "events": [], "logs": [], "reload": [driver], "rollback": ["counter"],
                  "activate": ["counter", "2"], "drivers": [], "recordings": [], "recording get": ["1"],
-                 "record": ["washer-1"], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": [],
+                 "record": ["washer-1"], "schedule": [], "get": ["lights-1.tv"], "set": ["lights-1.tv:true"], "console": [],
                  "board enroll": ["lamp"], "board list": [], "board remove": ["lamp"]}
     assert sorted(arguments) == sorted(c for c, o in COMMANDS.items() if "--http" in o), (
         "a command that takes --http has no arguments here")

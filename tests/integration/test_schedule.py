@@ -2,7 +2,10 @@
 table the status shows is even and never puts two devices in one slice;
 admission control turns away a board that does not fit and disturbs no one;
 boards of one machine share a driver and are dropped together; a driver can
-change its level while running."""
+change its level while running; GET /api/schedule and vmac schedule show
+each service's deadline violation vector (seed 002)."""
+
+import signal
 
 from harness import undisturbed
 
@@ -166,3 +169,47 @@ def test_driver_changes_its_level(t):
     host.wait_status(lambda s: host.device("shift", s)["served"] > served + 20, 60,
                      "shift served at its new level", undisturbed(["shift"]))
     check_table(host.last)
+
+
+def test_schedule_shows_each_services_deadline_violations(t):
+    # miss_limit high: a board that stops answering stays in the table, its
+    # misses counted rather than dropping it.
+    host = t.host(drivers=t.drivers(probe=PROBE_LUA), settings={"miss_limit": 1000})
+    quiet = t.board("generic", "quiet", driver="probe")
+    t.board("generic", "steady", driver="probe")
+    host.wait_running(["quiet", "steady"])
+    table = host.get("/api/schedule")
+    entries = {e["name"]: e for row in table["timeline"] for e in row["devices"]}
+    assert entries["quiet"]["violations"] == {"misses": 0, "misses_host": 0, "driver_late": 0, "last": None}, (
+        "a board that has missed nothing: %r" % entries["quiet"])
+    # A stopped board cannot answer: every service of it misses its deadline.
+    quiet.signal(signal.SIGSTOP)
+    try:
+        host.wait_status(lambda s: host.device("quiet", s)["misses"] >= 3, 30, "quiet missing three replies")
+    finally:
+        quiet.signal(signal.SIGCONT)
+    s = host.wait_status(lambda s: host.device("quiet", s)["served"] > host.device("quiet", s)["misses"] + 5, 30,
+                         "quiet answering again")
+    misses = host.device("quiet", s)["misses"]
+    table = host.get("/api/schedule")
+    entries = {e["name"]: e for row in table["timeline"] for e in row["devices"]}
+    v = entries["quiet"]["violations"]
+    assert v["misses"] >= 3 and v["misses_host"] == 0 and v["driver_late"] == 0, "quiet's vector: %r" % v
+    assert v["misses"] + v["misses_host"] >= misses, "the vector (%r) counts fewer than the status's %d misses" % (
+        v, misses)
+    assert v["last"]["kind"] == "miss" and v["last"]["ago_s"] >= 0, "quiet's last violation: %r" % v["last"]
+    steady = entries["steady"]["violations"]
+    if steady["last"] is None:  # a busy machine may have made steady miss too
+        assert [x["name"] for x in table["violated"]] == ["quiet"], "violated: %r" % table["violated"]
+    by_name = {x["name"]: x for x in table["violated"]}
+    assert by_name["quiet"]["kind"] == "miss" and by_name["quiet"]["slot"] == host.device("quiet", s)["slot"], (
+        "quiet in violated: %r" % by_name["quiet"])
+    ages = [x["ago_s"] for x in table["violated"]]
+    assert ages == sorted(ages), "violated is not the latest first: %r" % table["violated"]
+
+    # vmac schedule shows the same table for people.
+    rc, out, err = t.run([t.path("vmac"), "schedule", "--http", host.http], "vmac-schedule")
+    assert rc == 0, "vmac schedule exited %d: %s" % (rc, err)
+    line = next((ln for ln in out.splitlines() if " quiet " in ln and "probe" not in ln), None)
+    assert line and int(line.split()[-3]) >= 3, "vmac schedule's line for quiet: %r in\n%s" % (line, out)
+    assert "deadline violations, the latest first:" in out and "quiet" in out.split("latest first:")[1], out
