@@ -4,6 +4,7 @@
 -- docs/TESTING.md; this file is that API's implementation.
 
 local world = require "vmac.world"
+local reports = dofile(VMAC_ROOT .. "/core/vtest/report.lua")
 
 jit.off() -- count hooks (the runaway guard) do not fire inside JIT traces
 
@@ -47,44 +48,12 @@ end
 
 -- ---- finding test files ----
 
-local function shell_quote(s)
-	return "'" .. s:gsub("'", "'\\''") .. "'"
-end
-
-local function find_tests(path)
-	local p = io.popen("find " .. shell_quote(path) .. " -name '*_test.lua' -type f 2>/dev/null | LC_ALL=C sort")
-	local files = {}
-	for line in p:lines() do files[#files + 1] = line end
-	p:close()
-	return files
-end
-
-local function is_dir(path)
-	local p = io.popen("test -d " .. shell_quote(path) .. " && echo d")
-	local r = p:read("*l")
-	p:close()
-	return r == "d"
-end
-
-local files = {}
+local files
 do
-	local roots = opts.paths
-	if #roots == 0 then roots = { VMAC_ROOT .. "/tests", VMAC_ROOT .. "/scripts" } end
-	for _, p in ipairs(roots) do
-		if is_dir(p) then
-			for _, f in ipairs(find_tests(p)) do files[#files + 1] = f end
-		else
-			local f = io.open(p, "r")
-			if not f then usage_error(p .. ": no such file or folder") end
-			f:close()
-			files[#files + 1] = p
-		end
-	end
-	-- Files under the working folder are named relative to it.
-	local cwd = os.getenv("PWD")
-	for i, f in ipairs(files) do
-		if cwd and f:sub(1, #cwd + 1) == cwd .. "/" then files[i] = f:sub(#cwd + 2) end
-	end
+	local roots = #opts.paths > 0 and opts.paths or { VMAC_ROOT .. "/tests", VMAC_ROOT .. "/scripts" }
+	local missing
+	files, missing = dofile(VMAC_ROOT .. "/core/vtest/find.lua")(roots, os.getenv("PWD"))
+	if missing then usage_error(missing .. ": no such file or folder") end
 	if #files == 0 then
 		io.stderr:write("vmac test: no *_test.lua files under ", table.concat(roots, ", "), "\n")
 		os.exit(1)
@@ -642,13 +611,7 @@ local function start_host()
 end
 
 -- Keep the frames of the test file from a traceback.
-local function test_frames(tb, file)
-	local out = {}
-	for line in tb:gmatch("[^\n]+") do
-		if line:find(file, 1, true) and not line:find("^%S") then out[#out + 1] = line:gsub("^%s+", "") end
-	end
-	return out
-end
+local test_frames = reports.test_frames
 
 local results = {}
 
@@ -732,103 +695,6 @@ if opts.trace then
 	trace_file:write("test,time_s,board,io,value\n")
 end
 
-local function fmt_value(v)
-	if v == true then return "1" elseif v == false then return "0" end
-	if type(v) == "number" then return string.format("%.4g", v) end
-	return tostring(v)
-end
-
--- A board's last services (--history) as it saw them, and in time among
--- them what the test did to it or to the host: the latest such action
--- before the first row shown too, so the cause is in view. The first
--- service after an action is marked `*`: it is the first the board's view
--- (and the driver) can show of it.
-local function services_and_actions(h, board_name, period_us)
-	local first = math.max(1, #h - opts.history + 1)
-	if #h == 0 or opts.history <= 0 then return {} end
-	local from_t = h[first].time
-	local acts, before = {}, nil
-	for _, a in ipairs(current.actions) do
-		if a.board == nil or a.board == board_name then
-			if a.time >= from_t then acts[#acts + 1] = a else before = a end
-		end
-	end
-	if before then table.insert(acts, 1, before) end
-	local lines = { string.format("  last %d services (board's view)%s:", #h - first + 1,
-		#acts > 0 and ", with the test's actions (>>; * the first service after one)" or "") }
-	local ai, pending = 1, nil
-	for i = first, #h + 1 do
-		local row = h[i]
-		-- A service at the moment of an action came before it (the action
-		-- is taken between runs of the clock).
-		while acts[ai] and (not row or acts[ai].time >= (i == first and -math.huge or h[i - 1].time)
-			and acts[ai].time < row.time) do
-			local a = acts[ai]
-			lines[#lines + 1] = string.format("    %10.4f >> %s%s", a.time, a.text,
-				row and "" or period_us and string.format("  (no service of this board since: the next within "
-					.. "its period, %g ms)", period_us / 1e3) or "  (no service of this board since)")
-			if a.time >= from_t then pending = pending or a end
-			ai = ai + 1
-		end
-		if not row then break end
-		local names = {}
-		for k in pairs(row.io) do names[#names + 1] = k end
-		table.sort(names)
-		local parts = {}
-		for _, k in ipairs(names) do parts[#parts + 1] = k .. "=" .. fmt_value(row.io[k]) end
-		local mark = ""
-		if pending then
-			mark = string.format("  (* %.1f ms after %s)", (row.time - pending.time) * 1e3, pending.text)
-		end
-		lines[#lines + 1] = string.format("    %10.4f %s %s%s", row.time, pending and "* " or "  ",
-			table.concat(parts, " "), mark)
-		pending = nil
-	end
-	return lines
-end
-
--- What a person needs to see when a test fails: the recent services of
--- each board with the test's actions among them, and the recent events.
-local function details()
-	local lines = {}
-	local w = current.world
-	if not w then return lines end
-	lines[#lines + 1] = string.format("virtual time %.6f s (tick %d)", w:now(), math.floor(w:now() / w:slot() + 0.5))
-	for _, b in ipairs(current.boards) do
-		local d = w:device(b.name)
-		lines[#lines + 1] = string.format("%s: host says %s%s", b.name, d and d.state or "absent",
-			d and d.note ~= "" and (" (" .. d.note .. ")") or "")
-		if d and next(d.vars) then
-			local names = {}
-			for k in pairs(d.vars) do names[#names + 1] = k end
-			table.sort(names)
-			-- A variable declared update = "timer:N" is the copy of its last
-			-- publication, up to N s old: say so, and how old it is.
-			local timers = w:timers(b.name)
-			local parts = {}
-			for _, k in ipairs(names) do
-				local tv, note = timers[k], ""
-				if tv then
-					note = string.format(" (timer %g s: %s)", tv.every_s, tv.published_s and string.format(
-						"published %.2f s ago", w:now() - tv.published_s) or "not published yet")
-				end
-				parts[#parts + 1] = k .. "=" .. fmt_value(d.vars[k]) .. note
-			end
-			lines[#lines + 1] = "  variables: " .. table.concat(parts, " ")
-		end
-		for _, l in ipairs(services_and_actions(w:history(b.name), b.name,
-			d and d.period_us > 0 and d.period_us or nil)) do lines[#lines + 1] = l end
-	end
-	local ev = w:events(1)
-	if #ev > 0 then
-		lines[#lines + 1] = "last events:"
-		for i = math.max(1, #ev - 7), #ev do
-			lines[#lines + 1] = string.format("  %10.4f %-14s %s", ev[i].time, ev[i].kind, ev[i].text)
-		end
-	end
-	return lines
-end
-
 local function run_test(t)
 	current = { file = t.file, settings = {}, boards = {}, always = {}, every = {}, checks = 0, costs = {},
 		actions = {}, trace_file = trace_file, trace_name = t.file .. ": " .. t.name }
@@ -880,18 +746,12 @@ local function run_test(t)
 		frames = current.world and current.world:frames() or 0 }
 	if not ok then
 		r.failure = err
-		r.details = details()
+		r.details = reports.details(current, opts.history)
 	end
 	if current.world then current.world:free() end
 	current = nil
 	collectgarbage()
 	return r
-end
-
-local function human_duration(s)
-	if s >= 3600 then return string.format("%dh%02dm", math.floor(s / 3600), math.floor(s % 3600 / 60)) end
-	if s >= 60 then return string.format("%dm%02ds", math.floor(s / 60), math.floor(s % 60)) end
-	return string.format("%.3gs", s)
 end
 
 local total = #selected + #file_errors
@@ -900,39 +760,8 @@ if opts.tap then
 	print("1.." .. total)
 end
 
-local n, failed, virtual_sum, wall_sum = 0, 0, 0, 0
-local last_file
-
-local function report(r)
-	n = n + 1
-	if r.failure then failed = failed + 1 end
-	virtual_sum, wall_sum = virtual_sum + (r.virtual or 0), wall_sum + (r.wall or 0)
-	local where_ = r.failure and (r.failure.where or r.where) or nil
-	if opts.tap then
-		print(string.format("%s %d - %s: %s", r.failure and "not ok" or "ok", n, r.file, r.name))
-		if r.failure then
-			print("  ---")
-			print("  message: " .. string.format("%q", r.failure.message):gsub("\\\n", "\\n"))
-			if where_ then print("  at: " .. where_) end
-			for _, l in ipairs(r.details or {}) do print("  # " .. l) end
-			print("  ...")
-		end
-		return
-	end
-	if r.file ~= last_file then
-		print(r.file)
-		last_file = r.file
-	end
-	if not r.failure then
-		print(string.format("  ok    %s  (%s virtual, %.2f s wall)", r.name, human_duration(r.virtual), r.wall))
-		return
-	end
-	print(string.format("  FAIL  %s", r.name))
-	if where_ then print("        at " .. where_) end
-	for l in (r.failure.message .. "\n"):gmatch("([^\n]*)\n") do print("        " .. l) end
-	for _, l in ipairs(r.failure.frames or {}) do print("        from " .. l) end
-	for _, l in ipairs(r.details or {}) do print("        " .. l) end
-end
+local reporter = reports.reporter(opts.tap)
+local report = reporter.report
 
 for _, e in ipairs(file_errors) do
 	report { file = e.file, name = e.name, failure = setmetatable({ message = e.message }, Failure), where = e.where,
@@ -948,47 +777,11 @@ end
 
 if trace_file then trace_file:close() end
 
--- ---- JUnit ----
+if junit_file then reports.junit(junit_file, results, reporter.n, reporter.failed) end
 
-local function xml(s)
-	return (tostring(s):gsub("[&<>\"]", { ["&"] = "&amp;", ["<"] = "&lt;", [">"] = "&gt;", ['"'] = "&quot;" })
-		:gsub("[%z\1-\8\11\12\14-\31]", "?"))
-end
-
-if junit_file then
-	local f = junit_file
-	local by_file, order = {}, {}
-	for _, r in ipairs(results) do
-		if not by_file[r.file] then by_file[r.file] = {}; order[#order + 1] = r.file end
-		table.insert(by_file[r.file], r)
-	end
-	f:write('<?xml version="1.0" encoding="UTF-8"?>\n')
-	f:write(string.format('<testsuites name="vmac test" tests="%d" failures="%d">\n', n, failed))
-	for _, file in ipairs(order) do
-		local rs, nf, wall = by_file[file], 0, 0
-		for _, r in ipairs(rs) do
-			if r.failure then nf = nf + 1 end
-			wall = wall + (r.wall or 0)
-		end
-		f:write(string.format('  <testsuite name="%s" tests="%d" failures="%d" time="%.3f">\n', xml(file), #rs, nf,
-			wall))
-		for _, r in ipairs(rs) do
-			f:write(string.format('    <testcase classname="%s" name="%s" time="%.3f">', xml(file), xml(r.name),
-				r.wall or 0))
-			if r.failure then
-				f:write(string.format('\n      <failure message="%s">%s</failure>\n    ', xml(r.failure.message),
-					xml(table.concat(r.details or {}, "\n"))))
-			end
-			f:write("</testcase>\n")
-		end
-		f:write("  </testsuite>\n")
-	end
-	f:write("</testsuites>\n")
-	f:close()
-end
-
+local n, failed, virtual_sum, wall_sum = reporter.n, reporter.failed, reporter.virtual, reporter.wall
 local summary = string.format("%d test%s, %d failed; %s of virtual time in %.2f s of wall time", n,
-	n == 1 and "" or "s", failed, human_duration(virtual_sum), wall_sum)
+	n == 1 and "" or "s", failed, reports.human_duration(virtual_sum), wall_sum)
 if wall_sum >= 0.01 and virtual_sum > 0 then summary = summary .. string.format(" (%.0fx real time)", virtual_sum / wall_sum) end
 if opts.tap then
 	print("# " .. summary)
