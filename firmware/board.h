@@ -133,8 +133,8 @@ struct vmac_board {
 	uint8_t has_nonce;
 	uint8_t nonce[VMAC_NONCE_LEN];
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
-	uint32_t rx_counter, rx_cyclic_counter, tx_counter;
-	uint32_t rx_sync_counter; /* the last sealed SYNC's counter fed to the clock in this session */
+	uint64_t rx_counter, rx_cyclic_counter, tx_counter; /* u64: they never wrap (PROTOCOL.md) */
+	uint64_t rx_sync_counter; /* the last sealed SYNC's counter fed to the clock in this session */
 	/* The board's clock (docs/TIME.md), on the caller's free-running
 	 * counter (ns), fed by the host's SYNC frames in any board state; its
 	 * counter at the last feed or vmac_board_clock_poll, the instant its

@@ -258,7 +258,7 @@ struct device {
 	 * and every frame of its session is sealed with these. */
 	uint8_t keyed;
 	uint8_t to_board[16], to_host[16];
-	uint32_t tx_counter, rx_counter; /* the last sealed by us, the last of its accepted */
+	uint64_t tx_counter, rx_counter; /* the last sealed by us, the last of its accepted */
 	uint64_t proved_nonce;           /* the discovery (bus->nonce_count) its announcement proved its key for */
 	/* Time-triggered I/O (timed.c; docs/TIME.md, "The patterns"). */
 	uint8_t timed_fw;   /* version 2, firmware 1.1 or later: it takes TIMED CYCLIC frames */
@@ -350,7 +350,7 @@ struct vmac_bus {
 	int *sync_auth_tx; /* their indices in tx until bus_flush (nsync_auth of them) */
 	int nsync_auth;
 	uint32_t nsync_chunks; /* chunks of VMAC_SYNC_AUTH_MACS_MAX offsets */
-	uint32_t sync_counter;
+	uint64_t sync_counter; /* sealed SYNC frames' freshness (u64: never wraps) */
 	/* The two-step SYNC (sync.c): per stream (the plain SYNC, then each
 	 * sealed chunk: 1 + nsync_chunks), its last frame sent and the kernel's
 	 * transmit time of it, named in the stream's next frame. */
@@ -374,7 +374,7 @@ struct vmac_bus {
 	uint8_t nonce_key[16];      /* makes each discovery's nonce */
 	uint8_t nonce[8];           /* the latest DISCOVER's */
 	uint64_t nonce_count;
-	uint32_t cyclic_counter; /* authenticated CYCLIC frames' counter */
+	uint64_t cyclic_counter; /* authenticated CYCLIC frames' counter */
 	int *auth_chunk_tx;      /* per VMAC_CYCLIC_AUTH_RECORDS_MAX offsets: its sealed CYCLIC frame in tx, or -1 */
 	uint32_t nauth_chunks;
 	struct timed_frame *timed_frames; /* this slot's TIMED frames: at most one per device due (slices_per_slot) */

@@ -5,10 +5,10 @@
 
 /* What a MAC is computed over, at most: a frame, its counter and the
  * DISCOVER's nonce an ANNOUNCE answers. */
-#define MAC_INPUT_MAX (VMAC_FRAME_MAX + 4 + VMAC_NONCE_LEN)
+#define MAC_INPUT_MAX (VMAC_FRAME_MAX + VMAC_AUTH_COUNTER_LEN + VMAC_NONCE_LEN)
 /* A CYCLIC record's: the frame's header, first offset and counter, the
  * record's offset and its 6 bytes. */
-#define RECORD_INPUT_MAX (VMAC_HDR_LEN + 2 + 4 + VMAC_CYCLIC_TIMING_LEN + 2 + 6)
+#define RECORD_INPUT_MAX (VMAC_HDR_LEN + 2 + VMAC_AUTH_COUNTER_LEN + VMAC_CYCLIC_TIMING_LEN + 2 + 6)
 
 static const char to_board_label[] = "vmac-to-board";
 static const char to_host_label[] = "vmac-to-host";
@@ -59,18 +59,17 @@ static int mac_of(const uint8_t *body, size_t len, const uint8_t *extra, size_t 
 	return 0;
 }
 
-int vmac_proto_seal(uint8_t *frame, size_t len, size_t cap, uint32_t counter, const uint8_t key[VMAC_KEY_LEN],
+int vmac_proto_seal(uint8_t *frame, size_t len, size_t cap, uint64_t counter, const uint8_t key[VMAC_KEY_LEN],
                     const uint8_t *extra, size_t extralen)
 {
 	uint8_t *t = frame + len;
+	int i;
 	if (len < VMAC_HDR_LEN || len + VMAC_AUTH_TRAILER_LEN > cap)
 		return VMAC_EPROTO_SPACE;
 	frame[3] |= VMAC_FLAG_AUTH;
-	t[0] = (uint8_t)(counter >> 24);
-	t[1] = (uint8_t)(counter >> 16);
-	t[2] = (uint8_t)(counter >> 8);
-	t[3] = (uint8_t)counter;
-	if (mac_of(frame, len + 4, extra, extralen, key, t + 4) != 0)
+	for (i = 0; i < VMAC_AUTH_COUNTER_LEN; i++) /* big-endian, as every field */
+		t[i] = (uint8_t)(counter >> (8 * (VMAC_AUTH_COUNTER_LEN - 1 - i)));
+	if (mac_of(frame, len + VMAC_AUTH_COUNTER_LEN, extra, extralen, key, t + VMAC_AUTH_COUNTER_LEN) != 0)
 		return VMAC_EPROTO_SPACE;
 	return (int)(len + VMAC_AUTH_TRAILER_LEN);
 }

@@ -26,7 +26,7 @@ void vmac_proto_session_keys(const uint8_t key[VMAC_KEY_LEN], const uint8_t nonc
  * counter and the MAC under key of the frame, the counter and `extra`
  * (extralen bytes not sent: an ANNOUNCE's is the DISCOVER's nonce). Returns
  * the new length, or VMAC_EPROTO_SPACE when cap has no room. */
-int vmac_proto_seal(uint8_t *frame, size_t len, size_t cap, uint32_t counter, const uint8_t key[VMAC_KEY_LEN],
+int vmac_proto_seal(uint8_t *frame, size_t len, size_t cap, uint64_t counter, const uint8_t key[VMAC_KEY_LEN],
                     const uint8_t *extra, size_t extralen);
 
 /* Check the MAC of a received, decoded frame of len bytes (trailer

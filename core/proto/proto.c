@@ -71,7 +71,7 @@ static int is_sync_auth(const uint8_t *buf)
 
 size_t vmac_proto_cyclic_head_len(const uint8_t *frame)
 {
-	return VMAC_HDR_LEN + 2 + ((frame[3] & VMAC_FLAG_AUTH) ? 4 : 0) +
+	return VMAC_HDR_LEN + 2 + ((frame[3] & VMAC_FLAG_AUTH) ? VMAC_AUTH_COUNTER_LEN : 0) +
 	       ((frame[3] & VMAC_FLAG_TIMED) ? VMAC_CYCLIC_TIMING_LEN : 0);
 }
 
@@ -371,8 +371,8 @@ static int decode_sync_auth(const uint8_t *buf, size_t len, struct vmac_msg *m)
 	read_header(buf, m);
 	m->u.sync.host_ns = get64(d);
 	m->u.sync.prev_tx_ns = get64(d + 8);
-	m->counter = get32(d + VMAC_SYNC_LEN);
-	m->u.sync.first = get16(d + VMAC_SYNC_LEN + 4);
+	m->counter = get64(d + VMAC_SYNC_LEN);
+	m->u.sync.first = get16(d + VMAC_SYNC_LEN + VMAC_AUTH_COUNTER_LEN);
 	m->u.sync.count = n;
 	m->u.sync.frame = buf;
 	if (m->device_id != 0 || (unsigned)m->u.sync.first + n > 0xFFFF) /* 0xFFFF is VMAC_OFFSET_NONE */
@@ -422,7 +422,7 @@ static int check_op_and_payload(const uint8_t *buf, struct vmac_msg *m)
 	if (want == LEN_DISCOVER ? n != 0 && n != VMAC_NONCE_LEN : want >= 0 && (size_t)want != n)
 		return VMAC_EPROTO_PAYLOAD;
 	if ((m->flags & VMAC_FLAG_AUTH) && !is_cyclic(buf))
-		m->counter = get32(buf + VMAC_HDR_LEN + n);
+		m->counter = get64(buf + VMAC_HDR_LEN + n);
 	return 0;
 }
 
@@ -449,7 +449,7 @@ static int decode_system(const uint8_t *buf, size_t n, struct vmac_msg *m)
 		m->u.cyclic.frame = buf;
 		m->u.cyclic.records = buf + vmac_proto_cyclic_head_len(buf);
 		if (m->flags & VMAC_FLAG_AUTH)
-			m->counter = get32(d + 2);
+			m->counter = get64(d + 2);
 		if (m->flags & VMAC_FLAG_TIMED) {
 			const uint8_t *t = m->u.cyclic.records - VMAC_CYCLIC_TIMING_LEN;
 			m->u.cyclic.out_at = get64(t);
@@ -569,9 +569,9 @@ int vmac_proto_frame_length(const uint8_t *buf, size_t len)
 }
 
 static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
-                        uint32_t counter, const uint64_t *at)
+                        uint64_t counter, const uint64_t *at)
 {
-	size_t head = VMAC_HDR_LEN + 2 + (auth ? 4 : 0) + (at ? VMAC_CYCLIC_TIMING_LEN : 0);
+	size_t head = VMAC_HDR_LEN + 2 + (auth ? VMAC_AUTH_COUNTER_LEN : 0) + (at ? VMAC_CYCLIC_TIMING_LEN : 0);
 	size_t n = head + (size_t)(auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN) * count;
 	if (count < 1 || count > (auth ? VMAC_CYCLIC_AUTH_RECORDS_MAX : VMAC_CYCLIC_RECORDS_MAX) ||
 	    (unsigned)first + count > 0xFFFF)
@@ -582,7 +582,7 @@ static int cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, 
 	           VMAC_SYS_CYCLIC, (uint8_t)count);
 	put16(buf + VMAC_HDR_LEN, first);
 	if (auth)
-		put32(buf + VMAC_HDR_LEN + 2, counter);
+		put64(buf + VMAC_HDR_LEN + 2, counter);
 	if (at) {
 		put64(buf + head - VMAC_CYCLIC_TIMING_LEN, at[0]);
 		put64(buf + head - 8, at[1]);
@@ -597,13 +597,13 @@ int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t fir
 }
 
 int vmac_proto_cyclic_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count,
-                                 uint32_t counter)
+                                 uint64_t counter)
 {
 	return cyclic_begin(buf, cap, seq, first, count, 1, counter, NULL);
 }
 
 int vmac_proto_cyclic_begin_timed(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
-                                  uint32_t counter, uint64_t out_at, uint64_t in_at)
+                                  uint64_t counter, uint64_t out_at, uint64_t in_at)
 {
 	uint64_t at[2] = {out_at, in_at};
 	return cyclic_begin(buf, cap, seq, first, count, auth != 0, counter, at);
@@ -651,7 +651,7 @@ void vmac_proto_sync_set_prev(uint8_t *buf, uint64_t prev_tx_ns)
 	put64(buf + VMAC_HDR_LEN + 8, prev_tx_ns);
 }
 
-int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t counter, uint16_t first, unsigned count)
+int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint64_t counter, uint16_t first, unsigned count)
 {
 	size_t n = VMAC_SYNC_AUTH_HEAD_LEN + (size_t)VMAC_AUTH_MAC_LEN * count;
 	if (count < 1 || count > VMAC_SYNC_AUTH_MACS_MAX || (unsigned)first + count > 0xFFFF)
@@ -661,8 +661,8 @@ int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t 
 	put_header(buf, 2, VMAC_FLAG_AUTH, seq, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, (uint8_t)count);
 	put64(buf + VMAC_HDR_LEN, 0);
 	put64(buf + VMAC_HDR_LEN + 8, 0);
-	put32(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN, counter);
-	put16(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN + 4, first);
+	put64(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN, counter);
+	put16(buf + VMAC_HDR_LEN + VMAC_SYNC_LEN + VMAC_AUTH_COUNTER_LEN, first);
 	memset(buf + VMAC_SYNC_AUTH_HEAD_LEN, 0, n - VMAC_SYNC_AUTH_HEAD_LEN);
 	return (int)n;
 }

@@ -24,14 +24,16 @@
 
 /* Authenticated frames (docs/PROTOCOL.md, "Authenticated frames"; the
  * keyed functions are in auth.h). A frame with VMAC_FLAG_AUTH carries,
- * after its data, a trailer: a freshness counter (u32) and an 8-byte MAC.
+ * after its data, a trailer: a freshness counter (u64: it never wraps) and
+ * an 8-byte MAC.
  * A CYCLIC frame with it carries the counter after its first offset and a
  * MAC in each record instead. DISCOVER may carry the host's nonce. */
 #define VMAC_AUTH_MAC_LEN 8
-#define VMAC_AUTH_TRAILER_LEN (4 + VMAC_AUTH_MAC_LEN)
+#define VMAC_AUTH_COUNTER_LEN 8
+#define VMAC_AUTH_TRAILER_LEN (VMAC_AUTH_COUNTER_LEN + VMAC_AUTH_MAC_LEN)
 #define VMAC_NONCE_LEN 8
 #define VMAC_CYCLIC_AUTH_RECORD_LEN (6 + VMAC_AUTH_MAC_LEN)
-#define VMAC_CYCLIC_AUTH_RECORDS_MAX 100 /* 19 + 14 x 100 = 1,419 bytes: one Ethernet payload */
+#define VMAC_CYCLIC_AUTH_RECORDS_MAX 100 /* 23 + 14 x 100 = 1,423 bytes (TIMED: 1,439): one Ethernet payload */
 
 /* Version 2: the cyclic frame (docs/PROTOCOL.md, "Version 2"). One CYCLIC
  * frame carries fixed-size records at the offsets the host gave each board
@@ -168,10 +170,10 @@ struct vmac_discover {
 #define VMAC_SYNC_LEN 16
 /* Sealed (VMAC_FLAG_AUTH; docs/PROTOCOL.md, "Authenticated frames"): one
  * frame for many keyed boards, as the sealed CYCLIC. After host_ns and
- * prev_tx_ns come the host's SYNC counter (u32) and the first offset (u16), then `len` MACs of
+ * prev_tx_ns come the host's SYNC counter (u64) and the first offset (u16), then `len` MACs of
  * 8 bytes, MAC i for the board at offset first + i (zeros: no board). */
-#define VMAC_SYNC_AUTH_HEAD_LEN (VMAC_HDR_LEN + VMAC_SYNC_LEN + 4 + 2) /* 35 */
-#define VMAC_SYNC_AUTH_MACS_MAX 100                                    /* 35 + 8 x 100 = 835 bytes */
+#define VMAC_SYNC_AUTH_HEAD_LEN (VMAC_HDR_LEN + VMAC_SYNC_LEN + VMAC_AUTH_COUNTER_LEN + 2) /* 39 */
+#define VMAC_SYNC_AUTH_MACS_MAX 100 /* 39 + 8 x 100 = 839 bytes */
 struct vmac_sync {
 	uint64_t host_ns;
 	uint64_t prev_tx_ns;  /* the previous SYNC's of this stream, as the kernel stamped its send; 0 unknown */
@@ -208,7 +210,7 @@ struct vmac_msg {
 	uint32_t device_id; /* session id the host gave in REGISTER; 0 before */
 	uint8_t channel;
 	uint8_t op;
-	uint32_t counter; /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC, SYNC: the frame's) */
+	uint64_t counter; /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC, SYNC: the frame's) */
 	struct vmac_latch latch; /* an UPDATE reply with VMAC_FLAG_TIMED (version 2) */
 	union {
 		struct vmac_discover discover; /* DISCOVER */
@@ -250,12 +252,12 @@ int vmac_proto_cyclic_begin(uint8_t *buf, size_t cap, uint16_t seq, uint16_t fir
 /* The same, authenticated: the frame carries counter, and each record a
  * MAC (vmac_proto_cyclic_seal_record, auth.h, after vmac_proto_cyclic_put). */
 int vmac_proto_cyclic_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count,
-                                 uint32_t counter);
+                                 uint64_t counter);
 
 /* The same, TIMED (auth as above when auth is nonzero): the frame carries
  * the host instants out_at and in_at before its records. */
 int vmac_proto_cyclic_begin_timed(uint8_t *buf, size_t cap, uint16_t seq, uint16_t first, unsigned count, int auth,
-                                  uint32_t counter, uint64_t out_at, uint64_t in_at);
+                                  uint64_t counter, uint64_t out_at, uint64_t in_at);
 
 /* How many bytes of a CYCLIC frame come before its first record (header,
  * first, and the counter and the timing when it has them). */
@@ -289,7 +291,7 @@ void vmac_proto_sync_set_prev(uint8_t *buf, uint64_t prev_tx_ns);
  * writes it) and every MAC zero (vmac_proto_sync_seal, auth.h, writes
  * them after the stamp). Returns the frame's length or a negative
  * enum vmac_proto_err. */
-int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint32_t counter, uint16_t first,
+int vmac_proto_sync_begin_auth(uint8_t *buf, size_t cap, uint16_t seq, uint64_t counter, uint16_t first,
                                unsigned count);
 
 /* A short English text for a negative vmac_proto_err. Never NULL. */

@@ -43,7 +43,7 @@ static const struct vmac_board_io io = {read_inputs, write_outputs};
 
 static struct vmac_board board;
 static uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
-static uint32_t host_counter;
+static uint64_t host_counter;
 static uint8_t frames[RUNS][64];
 static int lens[RUNS];
 static uint8_t reply[VMAC_BOARD_REPLY_MAX];

@@ -26,7 +26,7 @@ HEADER = struct.Struct(">2sBBHIBBB")  # magic, version, flags, seq, device_id, c
 HDR_LEN = HEADER.size  # 13
 REPLY = 0x01  # flags bit 0: set on every frame a board sends
 AUTH = 0x02  # flags bit 1: an authenticated frame (a counter and a MAC follow its data)
-TRAILER = struct.Struct(">I8s")  # counter, MAC
+TRAILER = struct.Struct(">Q8s")  # counter (u64), MAC
 NONCE_LEN = 8
 TIMED = 0x04  # flags bit 2: a CYCLIC carrying host instants, and a board's answer to one
 
@@ -181,7 +181,7 @@ def seal(whole, counter, key, extra=b""):
     """whole (a frame) authenticated: the AUTH flag set, counter and the MAC
     of every byte so far and extra (an ANNOUNCE's: the DISCOVER's nonce)
     appended."""
-    flagged = whole[:3] + bytes([whole[3] | AUTH]) + whole[4:] + struct.pack(">I", counter)
+    flagged = whole[:3] + bytes([whole[3] | AUTH]) + whole[4:] + struct.pack(">Q", counter)
     return flagged + siphash(key, flagged + extra)
 
 
@@ -189,6 +189,14 @@ def opens(whole, key, extra=b""):
     """Whether the authenticated frame whole verifies under key."""
     return (len(whole) >= HDR_LEN + TRAILER.size and whole[3] & AUTH and
             siphash(key, whole[:-8] + extra) == whole[-8:])
+
+
+# A sealed SYNC's bytes before its MACs: header, host_ns, prev_tx_ns, counter
+# (u64), first (docs/PROTOCOL.md, "The sealed SYNC").
+SYNC_SEALED_HEAD = HDR_LEN + 8 + 8 + 8 + 2
+# A sealed CYCLIC's bytes before its records when not TIMED: header, first,
+# counter (u64).
+CYCLIC_SEALED_HEAD = HDR_LEN + 2 + 8
 
 
 def counter_of(whole):
@@ -254,7 +262,7 @@ def read_cyclic_sealed(payload):
         return None
     h = got[0]
     first, = struct.unpack_from(">H", payload, HDR_LEN)
-    at = HDR_LEN + 2 + 4  # first, counter
+    at = CYCLIC_SEALED_HEAD
     out_at = in_at = None
     if h.flags & TIMED:
         out_at, in_at = struct.unpack_from(">QQ", payload, at)

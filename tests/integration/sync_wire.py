@@ -16,7 +16,7 @@ from harness import bus_socket
 SYNC_OP = 0x05
 ETH_P_ALL = 0x0003
 PLAIN_LEN = frames.HDR_LEN + 16  # header, host_ns, prev_tx_ns
-SEALED_HEAD = frames.HDR_LEN + 8 + 8 + 4 + 2  # header, host_ns, prev_tx_ns, counter, first: then 8-byte MACs
+SEALED_HEAD = frames.SYNC_SEALED_HEAD
 
 
 class Capture:

@@ -144,7 +144,7 @@ def test_a_keyed_board_answers_only_a_discover_with_a_nonce_sealed_with_its_key(
     h, _ = parse(announce)
     assert h.flags & AUTH and len(announce) == 13 + h.len + TRAILER, "the ANNOUNCE is not sealed: flags 0x%02x, " \
         "%d bytes for len %d" % (h.flags, len(announce), h.len)
-    counter = struct.unpack_from(">I", announce, 13 + h.len)[0]
+    counter = struct.unpack_from(">Q", announce, 13 + h.len)[0]
     assert counter == 0, "the ANNOUNCE's counter is %d, expected 0" % counter
     assert opens(announce, KEY, nonce), \
         "the ANNOUNCE's MAC is not SipHash-2-4 under the key file's key over the frame and the nonce"
@@ -153,7 +153,7 @@ def test_a_keyed_board_answers_only_a_discover_with_a_nonce_sealed_with_its_key(
     # no session, both counted.
     peer.sock.sendto(frame(REGISTER, register(0x1234, 0, 500), device_id=0x00010001, seq=9), address)
     forged = frame(REGISTER, register(0x1234, 0, 500), device_id=0x00010001, seq=10, flags=AUTH)
-    peer.sock.sendto(forged + struct.pack(">I", 1) + bytes(8), address)
+    peer.sock.sendto(forged + struct.pack(">Q", 1) + bytes(8), address)
     got = peer.replies(1.0)
     assert not got, "a keyed board answered a REGISTER it cannot open: %r" % (got,)
     mark = board.mark()

@@ -180,7 +180,7 @@ def test_boards_lock_onto_the_host_on_raw_ethernet(t):
 
 
 SYNC_OP = 0x05
-SEALED_HEAD = frames.HDR_LEN + 8 + 8 + 4 + 2  # header, host_ns, prev_tx_ns, counter, first: then 8-byte MACs
+SEALED_HEAD = frames.SYNC_SEALED_HEAD
 
 
 class Listener:
@@ -267,7 +267,7 @@ def test_a_keyed_board_takes_only_the_hosts_sealed_sync(t):
     plain = {struct.unpack_from(">H", f, 4)[0]: f[frames.HDR_LEN:frames.HDR_LEN + 8] for f in heard.syncs(False)}
     session = [f for f in sealed if frames.siphash(to_board, f[:SEALED_HEAD] + struct.pack(">H", offset)) ==
                sync_mac(f, offset)]
-    counters = [struct.unpack_from(">I", f, frames.HDR_LEN + 16)[0] for f in session]
+    counters = [struct.unpack_from(">Q", f, frames.HDR_LEN + 16)[0] for f in session]
     assert len(session) >= 100 and all(b > a for a, b in zip(counters, counters[1:])), \
         "%d sealed SYNC of the session, counters %r..." % (len(session), counters[:5])
     paired = 0

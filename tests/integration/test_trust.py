@@ -261,7 +261,7 @@ def test_a_forged_or_replayed_host_frame_moves_no_output(t):
             if not got or got[0].channel != SYS or got[0].op != frames.CYCLIC or not got[0].flags & frames.AUTH:
                 continue
             first = struct.unpack_from(">H", data, frames.HDR_LEN)[0]
-            at = frames.HDR_LEN + 6 + 14 * (offset - first)
+            at = frames.CYCLIC_SEALED_HEAD + 14 * (offset - first)
             if first <= offset < first + got[0].len and data[at:at + 2] != b"\0\0":
                 captured.append(data)
     finally:

@@ -192,7 +192,7 @@ START_TEST(each_cyclic_record_opens_for_its_board_alone)
 	struct vmac_cyclic_record rec;
 	struct vmac_msg m;
 	int n = vmac_proto_cyclic_begin_auth(buf, sizeof(buf), 0x0102, 10, 2, 1234);
-	ck_assert_int_eq(n, VMAC_HDR_LEN + 2 + 4 + 2 * VMAC_CYCLIC_AUTH_RECORD_LEN);
+	ck_assert_int_eq(n, VMAC_HDR_LEN + 2 + 8 + 2 * VMAC_CYCLIC_AUTH_RECORD_LEN);
 	vmac_proto_cyclic_put(buf, 0, 3, VMAC_CYCLIC_DUE, &out);
 	vmac_proto_cyclic_seal_record(buf, 0, key_a);
 	vmac_proto_cyclic_put(buf, 1, 4, 0, &out);

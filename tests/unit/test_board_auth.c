@@ -37,7 +37,7 @@ static const struct vmac_board_io hal = {read_inputs, write_outputs};
 static struct {
 	struct vmac_board board;
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
-	uint32_t host_counter;
+	uint64_t host_counter;
 	uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int reply_len;
 	struct vmac_msg answer;
@@ -69,7 +69,7 @@ static int send_bytes(const uint8_t *frame, size_t len, uint64_t now_ms)
 }
 
 /* m from the host, sealed under k with counter (0: not sealed). */
-static int send_sealed(struct vmac_msg *m, const uint8_t *k, uint32_t counter, uint64_t now_ms)
+static int send_sealed(struct vmac_msg *m, const uint8_t *k, uint64_t counter, uint64_t now_ms)
 {
 	uint8_t buf[VMAC_PACKET_MAX];
 	int n = vmac_proto_encode(m, buf, sizeof(buf));
@@ -99,7 +99,7 @@ static void session(void)
 	ck_assert_int_eq(vmac_proto_open(rig.reply, (size_t)rig.reply_len, rig.to_host, NULL, 0), 0);
 }
 
-static int update(uint8_t digital, const uint8_t *k, uint32_t counter, uint64_t now_ms)
+static int update(uint8_t digital, const uint8_t *k, uint64_t counter, uint64_t now_ms)
 {
 	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION, 2);
 	m.u.outputs.digital = digital;
@@ -196,6 +196,44 @@ START_TEST(a_cyclic_record_is_obeyed_only_sealed_for_this_session_and_fresh)
 }
 END_TEST
 
+/* A cyclic record for this board (offset 0x25) in a frame sealed with
+ * counter: the length of the board's answer. */
+static int cyclic_sealed(uint8_t digital, uint64_t counter, uint64_t now_ms)
+{
+	uint8_t buf[VMAC_PACKET_MAX];
+	struct vmac_outputs out = {digital, 0};
+	int n = vmac_proto_cyclic_begin_auth(buf, sizeof(buf), 9, 0x25, 1, counter);
+	vmac_proto_cyclic_put(buf, 0, (uint16_t)(SESSION >> 16), VMAC_CYCLIC_DUE, &out);
+	vmac_proto_cyclic_seal_record(buf, 0, rig.to_board);
+	return send_bytes(buf, (size_t)n, now_ms);
+}
+
+/* The counters are 64 bits on the wire: past 2^32 (49.7 days of frames at
+ * 1 kHz) a session goes on, and a frame of 2^32 before is still a replay,
+ * not taken as new by a counter that wrapped. */
+START_TEST(counters_go_on_past_two_to_the_32)
+{
+	const uint64_t wrap = (uint64_t)1 << 32;
+	struct vmac_msg m = request(VMAC_CH_DEVICE, VMAC_OP_OFFSET, SESSION, 3);
+	start(1);
+	session();
+	m.version = 2;
+	m.u.offset = 0x25;
+	ck_assert_int_gt(send_sealed(&m, rig.to_board, ++rig.host_counter, 20), 0);
+	ck_assert_int_gt(update(0x01, rig.to_board, wrap - 1, 30), 0);
+	ck_assert_msg(update(0x02, rig.to_board, wrap + 1, 40) > 0 && driven.digital == 0x02,
+	              "an UPDATE with counter 2^32 + 1 after 2^32 - 1 was not obeyed");
+	ck_assert_msg(update(0x04, rig.to_board, 5, 50) == 0 && driven.digital == 0x02,
+	              "an UPDATE with counter 5 obeyed after 2^32 + 1 (a counter that wrapped)");
+	ck_assert_msg(cyclic_sealed(0x03, wrap - 1, 60) > 0 && driven.digital == 0x03,
+	              "a sealed CYCLIC with counter 2^32 - 1 was not obeyed");
+	ck_assert_msg(cyclic_sealed(0x05, wrap + 2, 70) > 0 && driven.digital == 0x05,
+	              "a sealed CYCLIC with counter 2^32 + 2 after 2^32 - 1 was not obeyed");
+	ck_assert_msg(cyclic_sealed(0x06, 2, 80) == 0 && driven.digital == 0x05,
+	              "a sealed CYCLIC with counter 2 obeyed after 2^32 + 2 (a counter that wrapped)");
+}
+END_TEST
+
 START_TEST(an_unkeyed_board_ignores_sealed_frames)
 {
 	start(0);
@@ -228,6 +266,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, forged_replayed_and_unsealed_frames_are_not_obeyed);
 	tcase_add_test(tc, a_register_of_another_discovery_starts_nothing);
 	tcase_add_test(tc, a_cyclic_record_is_obeyed_only_sealed_for_this_session_and_fresh);
+	tcase_add_test(tc, counters_go_on_past_two_to_the_32);
 	tcase_add_test(tc, an_unkeyed_board_ignores_sealed_frames);
 	tcase_add_test(tc, shutdown_is_acknowledged_sealed_then_the_session_is_gone);
 	suite_add_tcase(s, tc);

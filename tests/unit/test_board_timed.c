@@ -37,7 +37,7 @@ static struct {
 	struct vmac_outputs driven;
 	int writes;
 	uint8_t to_board[VMAC_KEY_LEN], to_host[VMAC_KEY_LEN];
-	uint32_t host_counter, sync_counter;
+	uint64_t host_counter, sync_counter;
 	uint8_t reply[VMAC_BOARD_REPLY_MAX];
 	int reply_len;
 	struct vmac_msg answer;

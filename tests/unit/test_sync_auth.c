@@ -34,15 +34,15 @@ static const uint8_t doc_frame[] = {
     0x56, 0x4D, 0x02, 0x02, 0x01, 0x02, 0x00, 0x00, 0x00, 0x00, 0xFF, 0x05, 0x02, /* header: AUTH, 2 MACs */
     0x00, 0x00, 0x12, 0x34, 0x56, 0x78, 0x9A, 0xBC,                               /* host_ns */
     0x00, 0x00, 0x12, 0x34, 0x56, 0x77, 0x9A, 0xC5,                               /* prev_tx_ns */
-    0x00, 0x00, 0x00, 0x09,                                                       /* counter */
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x09,                               /* counter */
     0x00, 0x00,                                                                   /* first */
     0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,                               /* offset 0: no board */
-    0xFC, 0x4E, 0xEE, 0x28, 0xA8, 0xE8, 0x33, 0x54,                               /* offset 1's MAC */
+    0x0C, 0x35, 0x75, 0xDE, 0xC9, 0xBF, 0x00, 0x11,                               /* offset 1's MAC */
 };
 
 /* A sealed SYNC for offsets first..first+count-1 at host_ns with counter,
  * MAC'd for offset `keyed_at` under k (no MAC when keyed_at is outside). */
-static int sealed_sync(uint8_t *buf, size_t cap, uint16_t seq, uint64_t host_ns, uint32_t counter, uint16_t first,
+static int sealed_sync(uint8_t *buf, size_t cap, uint16_t seq, uint64_t host_ns, uint64_t counter, uint16_t first,
                        unsigned count, unsigned keyed_at, const uint8_t *k)
 {
 	int n = vmac_proto_sync_begin_auth(buf, cap, seq, counter, first, count);
@@ -76,8 +76,8 @@ START_TEST(sealed_sync_has_pinned_wire_bytes_and_round_trips)
 	ck_assert_int_eq(vmac_proto_sync_open(&m, 1, key), VMAC_EPROTO_AUTH);
 	ck_assert_int_eq(vmac_proto_sync_open(&m, 0, doc_key), 1); /* zeros: no board there */
 	ck_assert_int_eq(vmac_proto_sync_open(&m, 2, doc_key), 1); /* outside the frame */
-	/* the largest: 100 MACs, 835 bytes, one Ethernet payload */
-	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, VMAC_SYNC_AUTH_MACS_MAX), 835);
+	/* the largest: 100 MACs, 839 bytes, one Ethernet payload */
+	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, VMAC_SYNC_AUTH_MACS_MAX), 839);
 	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, VMAC_SYNC_AUTH_MACS_MAX + 1),
 	                 VMAC_EPROTO_VALUE);
 	ck_assert_int_eq(vmac_proto_sync_begin_auth(buf, sizeof(buf), 1, 1, 0, 0), VMAC_EPROTO_VALUE);
@@ -105,8 +105,8 @@ START_TEST(sealed_sync_is_refused_at_a_wrong_length_count_or_flag)
 	buf[9] = 1;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_VALUE, "sealed SYNC with a device id");
 	buf[9] = 0;
-	buf[33] = 0xFF; /* first 0xFFFF: its second MAC past the last offset */
-	buf[34] = 0xFF;
+	buf[37] = 0xFF; /* first 0xFFFF: its second MAC past the last offset */
+	buf[38] = 0xFF;
 	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_VALUE, "sealed SYNC past offset 0xFFFE");
 }
 END_TEST
