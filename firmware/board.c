@@ -187,8 +187,15 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 	}
 	b->last_valid_ms = now_ms;
 	b->counters.frames_ok++;
-	if (req->flags & VMAC_FLAG_TIMED)
-		return vmac_board_timed_record(b, req, &rec, rx_local_ns, reply, cap);
+	if (req->flags & VMAC_FLAG_TIMED) {
+		struct vmac_board_service s;
+		s.outputs = rec.outputs;
+		s.out_at = req->u.cyclic.out_at;
+		s.in_at = req->u.cyclic.in_at;
+		s.seq = req->seq;
+		s.due = (rec.flags & VMAC_CYCLIC_DUE) != 0;
+		return vmac_board_timed_service(b, &s, rx_local_ns, reply, cap);
+	}
 	drive(b, &rec.outputs);
 	if (!(rec.flags & VMAC_CYCLIC_DUE))
 		return 0;
@@ -202,6 +209,21 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 	b->io->read_inputs(b->io_ctx, &r.u.inputs);
 	r.u.inputs.applied = b->outputs;
 	return vmac_board_seal(b, reply, vmac_proto_encode(&r, reply, cap), cap);
+}
+
+/* v2, unicast: a TIMED UPDATE of our session, checked (and, keyed,
+ * opened) and its watchdog fed; served as a DUE record of a TIMED CYCLIC
+ * is (timed.c): every UPDATE is answered, with the TIMED reply. */
+static int on_timed_update(struct vmac_board *b, const struct vmac_msg *req, uint64_t rx_local_ns, uint8_t *reply,
+                           size_t cap)
+{
+	struct vmac_board_service s;
+	s.outputs = req->u.outputs;
+	s.out_at = req->out_at;
+	s.in_at = req->in_at;
+	s.seq = req->seq;
+	s.due = 1;
+	return vmac_board_timed_service(b, &s, rx_local_ns, reply, cap);
 }
 
 /* Keyed: a REGISTER opens under the keys of the session it starts (made
@@ -437,7 +459,11 @@ int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len
 	b->counters.frames_ok++;
 	id = b->device_id;
 	switch (req.op) {
-	case VMAC_OP_UPDATE: drive(b, &req.u.outputs); return answer_inputs(b, &req, reply, cap);
+	case VMAC_OP_UPDATE:
+		if (req.flags & VMAC_FLAG_TIMED)
+			return on_timed_update(b, &req, rx_local_ns, reply, cap);
+		drive(b, &req.u.outputs);
+		return answer_inputs(b, &req, reply, cap);
 	case VMAC_OP_IDLE: return answer_inputs(b, &req, reply, cap);
 	case VMAC_OP_SHUTDOWN: {
 		/* The acknowledgement is sealed with the session's key before

@@ -13,7 +13,7 @@
 #include "clock.h"
 
 #define VMAC_FIRMWARE_MAJOR 1
-#define VMAC_FIRMWARE_MINOR 1 /* 1.1: TIMED CYCLIC (docs/PROTOCOL.md, "Time-triggered I/O") */
+#define VMAC_FIRMWARE_MINOR 2 /* 1.1: TIMED CYCLIC; 1.2: TIMED UPDATE (docs/PROTOCOL.md, "Time-triggered I/O") */
 #define VMAC_BOARD_DEFAULT_WATCHDOG_MS 500
 /* A receive time the caller does not have (vmac_board_receive): a SYNC
  * frame is then of no use to the clock, and ignored. */
@@ -54,7 +54,7 @@ struct vmac_board_counters {
 	uint32_t sync_ignored;  /* SYNC frames not fed to the clock: version 1, no receive time; unkeyed: sealed;
 	                         * keyed: unsealed, before a session and offset, or no MAC for our offset */
 	uint32_t sync_two_step; /* clock samples fed with the kernel's transmit time (prev_tx_ns), not host_ns */
-	/* TIMED CYCLIC records served (docs/TIME.md, "Time-triggered I/O"):
+	/* TIMED CYCLIC records and TIMED UPDATEs served (docs/TIME.md, "Time-triggered I/O"):
 	 * by the clock at the host's instants; on arrival (the clock not
 	 * usable, or no receive time); late (by the clock, but an instant
 	 * already past on arrival: acted on at once); overrun (a new record
@@ -179,21 +179,20 @@ int vmac_board_receive(struct vmac_board *b, const uint8_t *frame, size_t len, u
  * only plain SYNC frames; a keyed one only a sealed SYNC whose MAC at its
  * offset opens under its session's key with a fresh counter, so it syncs
  * from its registration on (docs/TIME.md, "Trust"). A TIMED CYCLIC
- * record's instants are put on the same counter, the arrival being
+ * record's or TIMED UPDATE's instants are put on the same counter, the arrival being
  * rx_local_ns (below, "Time-triggered I/O"). */
 int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len, uint64_t now_ms, uint64_t rx_local_ns,
                           uint8_t *reply, size_t cap);
 
 /* Time-triggered I/O (docs/PROTOCOL.md, "Time-triggered I/O"; the code in
- * firmware/timed.c). A TIMED CYCLIC record of the board's session, given
- * to vmac_board_receive_at with its receive time, feeds the watchdog on
- * arrival; with the clock usable its outputs wait for out_at and, DUE, its
- * latch for in_at, on the board's counter: the caller arms its timer for
- * vmac_board_next_deadline and calls vmac_board_run_due when it fires, which
- * does what is due and gives the TIMED reply to send. Without a usable
- * clock (or through vmac_board_receive, no receive time) the record is
- * served on arrival and receive_at answers at once (ARRIVAL). A SHUTDOWN,
- * SLEEP, new REGISTER or watchdog trip cancels whatever waits. */
+ * firmware/timed.c). A TIMED CYCLIC record or a TIMED UPDATE (unicast) of
+ * the board's session, given to vmac_board_receive_at with its receive
+ * time, feeds the watchdog on arrival; with the clock usable its outputs
+ * wait for out_at and, DUE (every UPDATE is), its latch for in_at, on the board's counter: the caller arms its timer
+ * for vmac_board_next_deadline and calls vmac_board_run_due when it fires, which does what is due and gives the TIMED
+ * reply to send. Without a usable clock (or through vmac_board_receive, no receive time) the record is served on
+ * arrival and receive_at answers at once (ARRIVAL). A SHUTDOWN, SLEEP, new REGISTER or watchdog trip cancels whatever
+ * waits. */
 
 /* The board counter's instant (ns) at which vmac_board_run_due must be
  * called next, into *local_ns: 1, or 0 when nothing waits. */

@@ -1,6 +1,6 @@
 /* Time-triggered I/O on the board (docs/TIME.md, "Time-triggered I/O";
- * docs/PROTOCOL.md, "Time-triggered I/O"): a TIMED CYCLIC record's outputs
- * and input latch scheduled at the host's instants on the board's own
+ * docs/PROTOCOL.md, "Time-triggered I/O"): a TIMED CYCLIC record's or a
+ * TIMED UPDATE's outputs and input latch scheduled at the host's instants on the board's own
  * counter through its disciplined clock, done when the caller's timer says
  * (vmac_board_run_due), or on arrival when the clock cannot be trusted, and
  * the TIMED reply that tells the host when the inputs were latched and how
@@ -150,11 +150,11 @@ static enum vmac_timed_how when(const struct vmac_board *b, uint64_t host_ns, ui
 	return VMAC_TIMED_LATE;
 }
 
-int vmac_board_timed_record(struct vmac_board *b, const struct vmac_msg *req, const struct vmac_cyclic_record *rec,
-                            uint64_t rx_local_ns, uint8_t *reply, size_t cap)
+int vmac_board_timed_service(struct vmac_board *b, const struct vmac_board_service *s, uint64_t rx_local_ns,
+                             uint8_t *reply, size_t cap)
 {
 	struct vmac_board_timed *t = &b->timed;
-	int stamped = rx_local_ns != VMAC_BOARD_NO_STAMP, due = (rec->flags & VMAC_CYCLIC_DUE) != 0;
+	int stamped = rx_local_ns != VMAC_BOARD_NO_STAMP, due = s->due != 0;
 	uint64_t now = stamped ? rx_local_ns : 0; /* unstamped: 0, due at any time the caller names */
 
 	int usable = 0, n;
@@ -164,13 +164,13 @@ int vmac_board_timed_record(struct vmac_board *b, const struct vmac_msg *req, co
 	}
 	n = overrun(b, now, due, stamped, reply, cap);
 	t->mode = usable ? VMAC_TIMED_MODE_INSTANTS : VMAC_TIMED_MODE_ARRIVAL;
-	t->out = rec->outputs;
-	t->out_host = req->u.cyclic.out_at;
+	t->out = s->outputs;
+	t->out_host = s->out_at;
 	t->out_pending = 1;
 	if (due) { /* else an earlier latch still waiting keeps its place */
 		t->latch_pending = 1;
-		t->latch_host = req->u.cyclic.in_at;
-		t->latch_seq = req->seq;
+		t->latch_host = s->in_at;
+		t->latch_seq = s->seq;
 		t->latch_stamped = (uint8_t)stamped;
 	}
 	if (!usable) {

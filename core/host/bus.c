@@ -88,11 +88,11 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 	}
 }
 
-/* A keyed board that holds a session (and, v2 cyclic, its offset: its
- * slot): the sealed SYNC carries a MAC for it. */
-static int sync_keyed(const struct device *d)
+/* A keyed board that holds a session and an offset (its slot: v2 cyclic,
+ * or reading TIMED UPDATEs): the sealed SYNC carries a MAC for it. */
+static int sync_keyed(const struct vmac_bus *bus, const struct device *d)
 {
-	return d->keyed && d->cyclic &&
+	return d->keyed && bus_holds_offset(bus, d) &&
 	       (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP);
 }
 
@@ -118,7 +118,7 @@ static void sync_stamp(struct vmac_bus *bus)
 		vmac_proto_sync_stamp(f, now);
 		bus_sync_sent(bus, 1 + first / VMAC_SYNC_AUTH_MACS_MAX, (uint16_t)(f[4] << 8 | f[5]), (int64_t)now);
 		for (i = 0; i < f[12]; i++)
-			if (sync_keyed(&bus->dev[first + i]))
+			if (sync_keyed(bus, &bus->dev[first + i]))
 				vmac_proto_sync_seal(f, i, bus->dev[first + i].to_board);
 	}
 	bus->nsync_auth = 0;
@@ -216,7 +216,7 @@ static void send_sync_sealed(struct vmac_bus *bus)
 		struct vmac_packet *p;
 		int n;
 		count = bus->nused - first < VMAC_SYNC_AUTH_MACS_MAX ? bus->nused - first : VMAC_SYNC_AUTH_MACS_MAX;
-		for (i = 0; i < count && !sync_keyed(&bus->dev[first + i]); i++)
+		for (i = 0; i < count && !sync_keyed(bus, &bus->dev[first + i]); i++)
 			;
 		if (i == count || !(p = tx_slot(bus)))
 			continue;
@@ -372,7 +372,8 @@ static void cyclic_put(struct vmac_bus *bus, struct device *d, uint64_t slot, un
 }
 
 /* The UPDATEs the schedule puts in this slot, in slice order: unicast to
- * version-1 boards, in the slot's CYCLIC frames for the others. */
+ * version-1 boards (and, cyclic off, to every board), in the slot's
+ * CYCLIC frames for the others. */
 static void service_slot(struct vmac_bus *bus, uint64_t slot)
 {
 	int i, n = vmac_sched_slot(bus->sched, slot, bus->slot_entries, (int)bus->cfg.slices_per_slot);
@@ -410,10 +411,7 @@ static void service_slot(struct vmac_bus *bus, uint64_t slot)
 			cyclic_put(bus, d, slot, e->level);
 			continue;
 		}
-		memset(&m, 0, sizeof(m));
-		m.op = VMAC_OP_UPDATE;
-		m.u.outputs = d->outputs;
-		bus_queue(bus, d, &m, 1);
+		bus_unicast_update(bus, d, slot, e->level);
 	}
 }
 

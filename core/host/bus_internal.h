@@ -261,7 +261,8 @@ struct device {
 	uint64_t tx_counter, rx_counter; /* the last sealed by us, the last of its accepted */
 	uint64_t proved_nonce;           /* the discovery (bus->nonce_count) its announcement proved its key for */
 	/* Time-triggered I/O (timed.c; docs/TIME.md, "The patterns"). */
-	uint8_t timed_fw;   /* version 2, firmware 1.1 or later: it takes TIMED CYCLIC frames */
+	uint8_t timed_fw;   /* version 2 and it reads the TIMED form of its service: firmware 1.1 or later
+	                     * a TIMED CYCLIC, 1.2 or later (served by unicast) a TIMED UPDATE */
 	uint8_t sent_timed; /* the pending service went in a TIMED frame */
 	int64_t in_at_ns;   /* that frame's in_at (0: plain): the reply deadline runs from it */
 	int64_t sample_ns;  /* the instant of inputs: its latched_at, else the reply's receive time (0: none yet) */
@@ -500,6 +501,16 @@ void bus_run_job(struct job *j);
 /* CPU time worker w has used (ns), -1 when it cannot be read. */
 int64_t bus_worker_cpu_ns(struct vmac_bus *bus, int w);
 
+/* Whether d is given an offset while it registers (SIZE, OFFSET): served
+ * by the cyclic frame, or a keyed board that reads TIMED UPDATEs while
+ * the host sends SYNC, whose offset places its MAC in the sealed SYNC (a
+ * keyed board syncs from nothing else; docs/PROTOCOL.md, "The TIMED
+ * UPDATE"). */
+static inline int bus_holds_offset(const struct vmac_bus *bus, const struct device *d)
+{
+	return d->cyclic || (d->keyed && d->timed_fw && bus->cfg.clock_sync_ms > 0);
+}
+
 /* devices.c */
 void bus_unload(struct vmac_bus *bus, struct vmac_driver *drv);
 void bus_unload_buffer(struct vmac_bus *bus, void *buf);
@@ -593,10 +604,15 @@ void bus_auth_failed(struct vmac_bus *bus, const struct vmac_packet *p, const ch
  * offsets): 0, or -1 with err (an offset not within that level's period). */
 int bus_timing_set(struct vmac_bus *bus, struct machine *m, unsigned level, char *err, size_t errlen);
 /* The instants of d's service in slot (level: its entry's): 1 when it goes
- * in a TIMED frame, else 0 (a board of older firmware or version 1, a
- * machine acting on arrival, clock sync off, virtual time). */
+ * in a TIMED frame (a TIMED CYCLIC, or served by unicast a TIMED UPDATE),
+ * else 0 (a board of older firmware or version 1, a machine acting on
+ * arrival, clock sync off, virtual time). */
 int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t slot, unsigned level, uint64_t *out_at,
                          uint64_t *in_at);
+/* d's outputs in a unicast UPDATE queued (bus.c's service_slot, for a
+ * board not served by the cyclic frame): TIMED with its instants when its
+ * board reads them, its reply deadline then from in_at. */
+void bus_unicast_update(struct vmac_bus *bus, struct device *d, uint64_t slot, unsigned level);
 /* An UPDATE reply of d's in time (m): its inputs' instant and, TIMED, its
  * board's clock. */
 void bus_timed_reply(struct vmac_bus *bus, struct device *d, const struct vmac_msg *m, int64_t rx_ns);

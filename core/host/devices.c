@@ -598,9 +598,10 @@ void bus_on_announce(struct vmac_bus *bus, const struct vmac_msg *m, const struc
 	d->ann = m->u.announce;
 	d->version = m->version;
 	d->cyclic = m->version >= 2 && bus->cfg.cyclic;
-	/* TIMED CYCLIC frames from firmware 1.1 on (docs/PROTOCOL.md). */
-	d->timed_fw =
-	    d->cyclic && (d->ann.firmware_major > 1 || (d->ann.firmware_major == 1 && d->ann.firmware_minor >= 1));
+	/* TIMED CYCLIC frames from firmware 1.1 on, TIMED UPDATEs (a board of
+	 * version 2 served by unicast) from 1.2 (docs/PROTOCOL.md). */
+	d->timed_fw = m->version >= 2 && (d->ann.firmware_major > 1 ||
+	                                  (d->ann.firmware_major == 1 && d->ann.firmware_minor >= (d->cyclic ? 1 : 2)));
 	memset(&d->clock, 0, sizeof(d->clock));
 	d->sample_ns = 0;
 	d->timed_mismatch = 0;

@@ -53,8 +53,8 @@ static int registered(struct vmac_bus *bus, struct device *d, const struct vmac_
 	char why[120];
 	if (m->op != step_op[d->reg_step])
 		return 0;
-	if (!d->cyclic || d->reg_step == REG_OFFSET) {
-		if (d->cyclic && m->u.offset != bus_slot_of(bus, d)) {
+	if (!bus_holds_offset(bus, d) || d->reg_step == REG_OFFSET) {
+		if (bus_holds_offset(bus, d) && m->u.offset != bus_slot_of(bus, d)) {
 			bus->counters.malformed_frames++;
 			bus->counters.malformed_by_reason[VMAC_BAD_OFFSET]++;
 			snprintf(why, sizeof(why), "board confirmed offset %u, but was given %u", (unsigned)m->u.offset,

@@ -1,7 +1,8 @@
 /* The host's side of time-triggered I/O (docs/TIME.md, "The patterns";
  * docs/PROTOCOL.md, "Time-triggered I/O"): a machine's timing resolved
  * from its driver's pattern and its level, the instants of a service
- * (which bus.c's cyclic_put writes into a TIMED CYCLIC frame), and a
+ * (which bus.c writes into a TIMED CYCLIC frame, cyclic_put, or a TIMED
+ * UPDATE, bus_unicast_update, for the boards that read them), and a
  * reply's latch time and board clock taken in. Bus thread; the two
  * per-service functions allocate nothing, log nothing, never block. */
 #include "bus_internal.h"
@@ -58,6 +59,30 @@ int bus_service_instants(struct vmac_bus *bus, const struct device *d, uint64_t 
 	if (m->out_at_ns > 0 && m->out_at_ns >= m->timing.out_ns && m->out_at_ns < bus->slot_ns << level)
 		*out_at = (uint64_t)(bus->start_ns + (int64_t)anchor * bus->slot_ns + m->out_at_ns);
 	return 1;
+}
+
+/* d's outputs in a unicast UPDATE: TIMED with the instants of its
+ * machine's pattern when its board reads them (version 2, firmware 1.2:
+ * bus_service_instants), the reply deadline then from in_at as for a
+ * TIMED CYCLIC. */
+void bus_unicast_update(struct vmac_bus *bus, struct device *d, uint64_t slot, unsigned level)
+{
+	struct vmac_msg m;
+	uint64_t out_at = 0, in_at = 0;
+	int timed = bus_service_instants(bus, d, slot, level, &out_at, &in_at);
+	memset(&m, 0, sizeof(m));
+	m.op = VMAC_OP_UPDATE;
+	m.u.outputs = d->outputs;
+	if (timed) {
+		m.flags = VMAC_FLAG_TIMED;
+		m.out_at = out_at;
+		m.in_at = in_at;
+	}
+	bus_queue(bus, d, &m, 1);
+	if (timed && d->pending && d->pending_op == VMAC_OP_UPDATE) { /* queued: its deadline from in_at */
+		d->sent_timed = 1;
+		d->in_at_ns = (int64_t)in_at;
+	}
 }
 
 /* A latch time is the inputs' instant if it is plausible: not after the

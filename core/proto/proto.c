@@ -75,8 +75,8 @@ size_t vmac_proto_cyclic_head_len(const uint8_t *frame)
 	       ((frame[3] & VMAC_FLAG_TIMED) ? VMAC_CYCLIC_TIMING_LEN : 0);
 }
 
-/* Which flags a frame may carry: TIMED only on a version-2 CYCLIC and an
- * UPDATE reply of version 2. */
+/* Which flags a frame may carry: TIMED only on a version-2 CYCLIC and a
+ * version-2 UPDATE, request or reply. */
 static int flags_ok(const uint8_t *buf)
 {
 	uint8_t f = buf[3];
@@ -85,8 +85,7 @@ static int flags_ok(const uint8_t *buf)
 	if (!(f & VMAC_FLAG_TIMED))
 		return 1;
 	return buf[2] >= 2 &&
-	       (is_cyclic(buf) ? !(f & VMAC_FLAG_REPLY)
-	                       : (f & VMAC_FLAG_REPLY) && buf[10] == VMAC_CH_DEVICE && buf[11] == VMAC_OP_UPDATE);
+	       (is_cyclic(buf) ? !(f & VMAC_FLAG_REPLY) : buf[10] == VMAC_CH_DEVICE && buf[11] == VMAC_OP_UPDATE);
 }
 
 static int latch_clock_ok(uint8_t clock)
@@ -246,14 +245,13 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 	if (version < VMAC_PROTO_VERSION_MIN || version > VMAC_PROTO_VERSION)
 		return VMAC_EPROTO_VERSION;
 	/* CYCLIC is built in place (vmac_proto_cyclic_begin), never from a msg;
-	 * TIMED only on a version-2 UPDATE reply (sealing comes after). */
+	 * TIMED only on a version-2 UPDATE, request or reply (sealing comes after). */
 	if (want == -1 || want == LEN_CYCLIC || (m->flags & ~(VMAC_FLAG_REPLY | VMAC_FLAG_TIMED)) != 0)
 		return VMAC_EPROTO_OP;
-	if ((m->flags & VMAC_FLAG_TIMED) &&
-	    (version < 2 || m->channel != VMAC_CH_DEVICE || !reply || m->op != VMAC_OP_UPDATE))
+	if ((m->flags & VMAC_FLAG_TIMED) && (version < 2 || m->channel != VMAC_CH_DEVICE || m->op != VMAC_OP_UPDATE))
 		return VMAC_EPROTO_OP;
 	if (m->flags & VMAC_FLAG_TIMED)
-		want = VMAC_TIMED_REPLY_LEN;
+		want = reply ? VMAC_TIMED_REPLY_LEN : VMAC_TIMED_UPDATE_LEN;
 	if (cap < VMAC_HDR_LEN)
 		return VMAC_EPROTO_SPACE;
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
@@ -291,6 +289,11 @@ int vmac_proto_encode(const struct vmac_msg *m, uint8_t *buf, size_t cap)
 	case VMAC_OP_UPDATE:
 		if (!outputs_ok(&m->u.outputs))
 			return VMAC_EPROTO_VALUE;
+		if (m->flags & VMAC_FLAG_TIMED) { /* the instants first, as a TIMED CYCLIC's before its records */
+			put64(d, m->out_at);
+			put64(d + 8, m->in_at);
+			d += 16;
+		}
 		d[0] = m->u.outputs.digital;
 		put16(d + 1, (uint16_t)m->u.outputs.pwm);
 		break;
@@ -418,7 +421,7 @@ static int check_op_and_payload(const uint8_t *buf, struct vmac_msg *m)
 	if ((m->channel == VMAC_CH_SYSTEM) != (m->device_id == 0))
 		return VMAC_EPROTO_VALUE;
 	if (m->flags & VMAC_FLAG_TIMED && !is_cyclic(buf))
-		want = VMAC_TIMED_REPLY_LEN;
+		want = (m->flags & VMAC_FLAG_REPLY) ? VMAC_TIMED_REPLY_LEN : VMAC_TIMED_UPDATE_LEN;
 	if (want == LEN_DISCOVER ? n != 0 && n != VMAC_NONCE_LEN : want >= 0 && (size_t)want != n)
 		return VMAC_EPROTO_PAYLOAD;
 	if ((m->flags & VMAC_FLAG_AUTH) && !is_cyclic(buf))
@@ -507,6 +510,11 @@ static int decode_device(const uint8_t *d, struct vmac_msg *m)
 		break;
 	case VMAC_OP_SHUTDOWN: m->u.shutdown_reason = d[0]; break;
 	case VMAC_OP_UPDATE:
+		if (m->flags & VMAC_FLAG_TIMED) {
+			m->out_at = get64(d);
+			m->in_at = get64(d + 8);
+			d += 16;
+		}
 		m->u.outputs.digital = d[0];
 		m->u.outputs.pwm = (int16_t)get16(d + 1);
 		if (!outputs_ok(&m->u.outputs))

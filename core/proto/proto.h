@@ -19,8 +19,8 @@
 #define VMAC_FLAG_REPLY 0x01 /* set on every frame a board sends */
 #define VMAC_FLAG_AUTH 0x02  /* the frame is authenticated: a trailer (or CYCLIC's record MACs) follows */
 #define VMAC_FLAG_TIMED                                                                                                \
-	0x04 /* v2: a CYCLIC carries the host instants its records act at; an UPDATE                                   \
-	      * reply to it, the latch time and the board's clock (docs/TIME.md) */
+	0x04 /* v2: a CYCLIC or an UPDATE request carries the host instants its outputs and latch act at; an           \
+	      * UPDATE reply to it, the latch time and the board's clock (docs/TIME.md) */
 
 /* Authenticated frames (docs/PROTOCOL.md, "Authenticated frames"; the
  * keyed functions are in auth.h). A frame with VMAC_FLAG_AUTH carries,
@@ -189,6 +189,10 @@ struct vmac_sync {
 #define VMAC_CLOCK_STATE_MASK 0x07 /* the clock byte's state: enum vmac_clock_state (firmware/clock.h) */
 #define VMAC_LATCH_STATE_MAX 4     /* unsynced 0, locking 1, locked 2, holdover 3, lost 4 */
 #define VMAC_CLOCK_ARRIVAL 0x80    /* the clock byte: this service was acted on arrival, not at the instants */
+/* A TIMED UPDATE request (version 2, unicast: a board not served by the
+ * cyclic frame): out_at u64 and in_at u64 before the 3 bytes of outputs,
+ * as a TIMED CYCLIC carries them before its records. */
+#define VMAC_TIMED_UPDATE_LEN 19
 struct vmac_latch {
 	uint64_t latched_at; /* host ns at which the inputs were latched, by the board's clock; 0: it cannot tell */
 	uint8_t clock;       /* state (VMAC_CLOCK_STATE_MASK) | VMAC_CLOCK_ARRIVAL */
@@ -212,6 +216,8 @@ struct vmac_msg {
 	uint8_t op;
 	uint64_t counter; /* decode, VMAC_FLAG_AUTH: the trailer's freshness counter (CYCLIC, SYNC: the frame's) */
 	struct vmac_latch latch; /* an UPDATE reply with VMAC_FLAG_TIMED (version 2) */
+	uint64_t out_at, in_at;  /* an UPDATE request with VMAC_FLAG_TIMED: the host instants of its
+	                          * outputs and its latch (CLOCK_MONOTONIC ns); 0 when not TIMED */
 	union {
 		struct vmac_discover discover; /* DISCOVER */
 		struct vmac_announce announce; /* ANNOUNCE */

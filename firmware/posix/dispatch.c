@@ -29,8 +29,9 @@ static void deliver(struct board_set *s, int32_t i, const struct vmac_packet *in
 	int len;
 
 	boards_poll_one(s, i, now_ms);
-	if (in->data[10] == VMAC_CH_SYSTEM && in->data[11] == VMAC_SYS_CYCLIC && (in->data[3] & VMAC_FLAG_TIMED)) {
-		/* Its instants are on the board's counter: the arrival on it too. */
+	if (in->data[3] & VMAC_FLAG_TIMED) {
+		/* A TIMED CYCLIC or TIMED UPDATE (no reply gets here): its
+		 * instants are on the board's counter, the arrival on it too. */
 		pb->timed_addr = in->addr;
 		len = vmac_board_receive_at(&pb->board, in->data, in->len, now_ms, boards_local_ns(s, i, in->rx_ns, 1),
 		                            out->data, sizeof(out->data));

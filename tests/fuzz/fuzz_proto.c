@@ -70,8 +70,10 @@ static void check_board(const struct vmac_board *b, const struct fake_io *io)
  * records read back one by one; a record out of range is refused on reading
  * and copied raw. An authenticated frame is encoded plain and given its
  * trailer (or its records their MACs) from the input: the MACs themselves
- * are the auth tests' (tests/unit/test_auth.c), not the codec's. The
- * sealed SYNC is built in place, as CYCLIC, its MACs copied. */
+ * are the auth tests' (tests/unit/test_auth.c), not the codec's. A TIMED
+ * CYCLIC is begun with its instants; a TIMED UPDATE request or reply
+ * re-encodes from the message, its instants or latch in it. The sealed
+ * SYNC is built in place, as CYCLIC, its MACs copied. */
 static void check_codec(const uint8_t *data, size_t size)
 {
 	struct vmac_msg msg;
@@ -84,10 +86,15 @@ static void check_codec(const uint8_t *data, size_t size)
 	if (msg.channel == VMAC_CH_SYSTEM && msg.op == VMAC_SYS_CYCLIC) {
 		size_t len = auth ? VMAC_CYCLIC_AUTH_RECORD_LEN : VMAC_CYCLIC_RECORD_LEN;
 		unsigned i;
-		n = auth ? vmac_proto_cyclic_begin_auth(again, sizeof(again), msg.seq, msg.u.cyclic.first,
-		                                        msg.u.cyclic.count, msg.counter)
-		         : vmac_proto_cyclic_begin(again, sizeof(again), msg.seq, msg.u.cyclic.first,
-		                                   msg.u.cyclic.count);
+		if (msg.flags & VMAC_FLAG_TIMED) /* its instants before the records */
+			n = vmac_proto_cyclic_begin_timed(again, sizeof(again), msg.seq, msg.u.cyclic.first,
+			                                  msg.u.cyclic.count, auth, msg.counter, msg.u.cyclic.out_at,
+			                                  msg.u.cyclic.in_at);
+		else
+			n = auth ? vmac_proto_cyclic_begin_auth(again, sizeof(again), msg.seq, msg.u.cyclic.first,
+			                                        msg.u.cyclic.count, msg.counter)
+			         : vmac_proto_cyclic_begin(again, sizeof(again), msg.seq, msg.u.cyclic.first,
+			                                   msg.u.cyclic.count);
 		if (n < 0 || (size_t)n != size)
 			abort();
 		for (i = 0; i < msg.u.cyclic.count; i++) {
@@ -125,11 +132,14 @@ static void check_codec(const uint8_t *data, size_t size)
 	if (n < 0 || (size_t)n + (auth ? VMAC_AUTH_TRAILER_LEN : 0) != size)
 		abort();
 	if (auth) {
+		uint64_t counter = 0;
+		int i;
 		again[3] |= VMAC_FLAG_AUTH;
 		memcpy(again + n, data + n, VMAC_AUTH_TRAILER_LEN);
-		if (msg.counter !=
-		    ((uint32_t)data[n] << 24 | (uint32_t)data[n + 1] << 16 | (uint32_t)data[n + 2] << 8 | data[n + 3]))
-			abort(); /* the counter decoded is the trailer's */
+		for (i = 0; i < VMAC_AUTH_COUNTER_LEN; i++)
+			counter = counter << 8 | data[n + i];
+		if (msg.counter != counter)
+			abort(); /* the counter decoded is the trailer's, all 64 bits */
 	}
 	if (memcmp(again, data, size) != 0)
 		abort();

@@ -208,6 +208,54 @@ int main(int argc, char **argv)
 		write_file("sync_sealed", frame, (size_t)n);
 	}
 
+	/* Time-triggered I/O (docs/PROTOCOL.md, "Time-triggered I/O"): a TIMED
+	 * CYCLIC with a DUE record at the v2 session's offset, a TIMED UPDATE
+	 * (unicast), the TIMED reply; a session registers, takes its offset,
+	 * is served by both while SYNC frames come, then goes quiet with an
+	 * output still waiting (the watchdog cancels it). */
+	{
+		uint8_t frame[VMAC_PACKET_MAX];
+		struct vmac_outputs out = {0x15, 300};
+		struct vmac_msg offset = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_OFFSET, SESSION_V2, 12), timed;
+		int n = vmac_proto_cyclic_begin_timed(frame, sizeof(frame), 20, 0, 8, 0, 0, 5001000000ull,
+		                                      5001500000ull),
+		    k;
+		vmac_proto_cyclic_put(frame, SESSION_V2 & 0xFFFF, SESSION_V2 >> 16, VMAC_CYCLIC_DUE, &out);
+		write_file("timed_cyclic", frame, (size_t)n);
+		timed = msg(2, VMAC_FLAG_TIMED, VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION_V2, 21);
+		timed.u.outputs = out;
+		timed.out_at = 5002000000ull;
+		timed.in_at = 5002500000ull;
+		seed("timed_update", &timed);
+		m = msg(2, VMAC_FLAG_REPLY | VMAC_FLAG_TIMED, VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION_V2, 21);
+		m.u.inputs.applied = out;
+		m.latch.latched_at = 5002500000ull;
+		m.latch.clock = 2;
+		m.latch.bound_ns = 1500;
+		m.latch.offset_ns = -2250000000LL;
+		seed("timed_reply", &m);
+		offset.u.offset = SESSION_V2 & 0xFFFF;
+		memset(&s, 0, sizeof(s));
+		append(&s, 0, &reg);
+		append(&s, 1, &offset);
+		m = msg(2, 0, VMAC_CH_SYSTEM, VMAC_SYS_SYNC, 0, 1);
+		for (k = 0; k < 20; k++) {
+			m.seq = (uint16_t)(k + 1);
+			m.u.sync.host_ns = 5000000000ull + (uint64_t)k * FUZZ_STEP_MS * 1000000u;
+			append(&s, 1, &m);
+		}
+		append(&s, 1, &timed);
+		s.bytes[s.len++] = 1;
+		s.bytes[s.len++] = (uint8_t)n;
+		memcpy(s.bytes + s.len, frame, (size_t)n);
+		s.len += (size_t)n;
+		timed.seq = 22;
+		timed.out_at += 100000000ull;
+		append(&s, 1, &timed);
+		append(&s, 255, &m);
+		write_file("session_timed", s.bytes, s.len);
+	}
+
 	/* Register, drive, sleep a second, wake and rediscover. */
 	memset(&s, 0, sizeof(s));
 	append(&s, 0, &reg);

@@ -50,8 +50,9 @@ class Board:
     ANSWER_AFTER_LATCH_S after it; dropped, it announces again. Keeps every frame it was served in,
     with the SYNC stamp that led its batch."""
 
-    def __init__(self, bus, name, driver, major, firmware, minor=0, key=None):
+    def __init__(self, bus, name, driver, major, firmware, minor=0, key=None, version=2):
         self.name, self.driver, self.major, self.minor, self.firmware = name, driver, major, minor, firmware
+        self.version = version  # the protocol it announces and answers in
         self.key, self.nonce, self.to_board, self.to_host, self.tx = key, bytes(8), None, None, 0
         self.bad = 0  # sealed frames or records of the host's that did not open
         self.lock = threading.Lock()
@@ -63,6 +64,7 @@ class Board:
         self.offset = None
         self.host = None
         self.served = []  # (CyclicFrame, the SYNC stamp before it or None)
+        self.updates = []  # unicast UPDATEs: (Header, out_at, in_at), the instants None when plain
         self.stop = False
         self.threads = [threading.Thread(target=self._group, daemon=True),
                         threading.Thread(target=self._unicast, daemon=True)]
@@ -100,7 +102,7 @@ class Board:
             if got and got[0].channel == SYS and got[0].op == DISCOVER and not self.device_id:
                 frame = reply(ANNOUNCE, announce(self.driver.encode(), self.name.encode(), major=self.major,
                                                  minor=self.minor, firmware=self.firmware), channel=SYS,
-                              seq=got[0].seq, version=2)
+                              seq=got[0].seq, version=self.version)
                 if self.key is not None and len(got[1]) == frames.NONCE_LEN:
                     self.nonce = got[1]
                     frame = frames.seal(frame, 0, self.key, self.nonce)
@@ -166,13 +168,35 @@ class Board:
                 answer = body
             elif h.op in (WATCHDOG, SHUTDOWN):
                 answer = b""
+            elif h.op == UPDATE:
+                self._update(h, body, src)
+                continue
             else:
                 continue
-            self._send(reply(h.op, answer, device_id=h.device_id, seq=h.seq, version=2), src)
+            self._send(reply(h.op, answer, device_id=h.device_id, seq=h.seq, version=self.version), src)
             if h.op == SHUTDOWN:  # dropped (a reply this process was too slow for): announce again
                 self.device_id, self.offset = 0, None
                 with self.lock:
                     self.to_board = self.to_host = None
+
+
+    def _update(self, h, body, src):
+        """A unicast UPDATE kept and answered: a TIMED one (its instants
+        before the outputs) with a TIMED reply latched at in_at, sent
+        ANSWER_AFTER_LATCH_S after it, as to a TIMED record."""
+        if not h.flags & TIMED:
+            self.updates.append((h, None, None))
+            self._send(reply(UPDATE, inputs(digital=1), device_id=h.device_id, seq=h.seq, version=self.version), src)
+            return
+        out_at, in_at = struct.unpack_from(">QQ", body) if len(body) == 19 else (None, None)
+        self.updates.append((h, out_at, in_at))
+        if in_at is None:
+            return  # not as PROTOCOL.md says: no answer, the host counts a miss
+        wait = (in_at / 1e9 + ANSWER_AFTER_LATCH_S) - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        self._send(frames.frame(UPDATE, timed_inputs(in_at, digital=1), device_id=h.device_id, seq=h.seq,
+                                flags=frames.REPLY | TIMED, version=2), src)
 
 
 def test_the_host_schedules_the_instants(t):
@@ -381,3 +405,60 @@ def test_a_keyed_board_gets_its_instants_sealed_and_answers_sealed(t):
         d["timing"]["mismatched"] == 0, "sealed-1: authenticated %r, clock %r, timing %r" % (
             d["authenticated"], d["clock"], d["timing"])
     assert s["counters"]["auth_failed"] == 0, "the host refused %d sealed frames" % s["counters"]["auth_failed"]
+
+
+def test_boards_served_by_unicast_get_timed_updates_from_firmware_1_2(t):
+    """cyclic off: a board of protocol 2 and firmware 1.2 gets its outputs
+    in TIMED UPDATEs (docs/PROTOCOL.md, "The TIMED UPDATE"): the instants of
+    its driver's offsets on the host's grid, the reply deadline from in_at
+    (it answers 22 ms after its UPDATE, under a 10 ms deadline), its TIMED
+    replies filling the status's clock. Boards of firmware 1.1 and 1.0, of
+    protocol 1, and a machine acting on arrival get plain UPDATEs."""
+    offsets = "timing = { pattern = \"offsets\", input_us = %d, output_us = %d }," % (IN_US, OUT_US)
+    drivers = t.drivers(toffs=DRIVER % ("toffs", offsets), tarr=DRIVER % ("tarr", ""))
+    host = t.host(drivers=drivers, settings=dict(SETTINGS, cyclic="false"))
+    boards = {"new-1": Board(t.bus, "new-1", "toffs", 1, (1, 2)),
+              "fw11-1": Board(t.bus, "fw11-1", "toffs", 2, (1, 1)),
+              "fw10-1": Board(t.bus, "fw10-1", "toffs", 3, (1, 0)),
+              "v1-1": Board(t.bus, "v1-1", "toffs", 4, (1, 2), version=1),
+              "arr-1": Board(t.bus, "arr-1", "tarr", 1, (1, 2))}
+    try:
+        host.wait_running(list(boards))
+        s = host.wait_status(lambda st: all(host.device(n, st)["served"] >= 60 for n in boards), 60,
+                             "every board served 60 times")
+    finally:
+        for b in boards.values():
+            b.close()
+
+    new = boards["new-1"]
+    assert new.updates and not new.served, "new-1: %d UPDATEs, %d cyclic records" % (len(new.updates),
+                                                                                      len(new.served))
+    period_ns = SLOT_NS << LEVEL
+    first_in = new.updates[0][2]
+    for h, out_at, in_at in new.updates:
+        assert h.version == 2 and h.flags == TIMED and h.len == 19 and in_at is not None, \
+            "new-1 got an UPDATE of version %d, flags 0x%02x, len %d (want 2, 0x04, 19)" % (h.version, h.flags, h.len)
+        assert out_at - in_at == (OUT_US - IN_US) * 1000, "new-1: out_at %d ns after in_at, want %d" % (
+            out_at - in_at, (OUT_US - IN_US) * 1000)
+        assert (in_at - first_in) % period_ns == 0, "new-1: in_at %d off the %d ns grid of its first, %d" % (
+            in_at, period_ns, first_in)
+    for name, version in (("fw11-1", 2), ("fw10-1", 2), ("v1-1", 1), ("arr-1", 2)):
+        kinds = {(h.version, h.flags, h.len) for h, _, _ in boards[name].updates}
+        assert kinds == {(version, 0, 3)}, "%s was served UPDATEs of (version, flags, len) %r, want only %r" % (
+            name, sorted(kinds), (version, 0, 3))
+
+    d = host.device("new-1", s)
+    clock = d["clock"]
+    assert d["service"] == "unicast" and d["timing"]["timed"] is True and d["timing"]["mismatched"] == 0, \
+        "new-1: service %s, timing %r" % (d["service"], d["timing"])
+    assert clock and clock["state"] == "locked" and clock["on_arrival"] is False and clock["services_timed"] >= 20, \
+        "new-1's clock: %r" % (clock,)
+    # The deadline from in_at: 22 ms after the UPDATE left, under 10 ms (a
+    # rare miss of a busy machine aside).
+    assert d["misses"] * 20 <= d["served"], "new-1 missed %d of %d" % (d["misses"], d["served"])
+    for name in ("fw11-1", "fw10-1", "v1-1", "arr-1"):
+        o = host.device(name, s)
+        assert o["timing"]["timed"] is False and o["clock"] is None and o["misses"] * 20 <= o["served"], \
+            "%s beside it: timing %r, clock %r, misses %d of %d" % (name, o["timing"], o["clock"], o["misses"],
+                                                                    o["served"])
+    assert host.device("v1-1", s)["protocol"] == 1, "v1-1 is not served in protocol 1"

@@ -321,9 +321,44 @@ def test_vmacd_and_two_boards_of_one_machine_act_at_one_instant(t):
     jitter; it sends its sealed SYNC and the machine's records in sealed
     TIMED frames of the phase-aligned pattern; both boards drive every
     change at the same instant, by their own --io-log."""
+    press_at_one_instant(t, SYNC_SETTINGS, "vmacd and a press of two boards")
+
+
+def test_vmacd_and_two_boards_served_by_unicast_act_at_one_instant_beside_a_version_1_board(t):
+    """The same press with cyclic off: vmacd serves each board by a sealed
+    TIMED UPDATE (docs/PROTOCOL.md, "The TIMED UPDATE"), the boards, given
+    an offset for their MAC in the sealed SYNC, act at its instants; a
+    board of protocol 1 beside them keeps its plain UPDATEs (it can never
+    read a TIMED form) and is served without a miss."""
+    old_log = os.path.join(t.logdir, "old-1.io.log")
+    old = t.board("generic", "old-1", extra=["--protocol", "1", "--io-log", old_log])
+    status = press_at_one_instant(t, dict(SYNC_SETTINGS, cyclic="false"), "vmacd and a press of two boards by unicast",
+                                  ["old-1"])
+    devices = {d["name"]: d for d in status["devices"]}
+    for name in ("press-0", "press-1"):
+        assert devices[name]["service"] == "unicast", "%s is served by %s, not by unicast" % (
+            name, devices[name]["service"])
+    o = devices["old-1"]
+    assert o["state"] == "running" and o["protocol"] == 1 and o["timing"]["timed"] is False and o["clock"] is None, \
+        "the version-1 board: state %s, protocol %s, timing %r, clock %r" % (
+            o["state"], o["protocol"], o["timing"], o["clock"])
+    assert o["misses"] == 0 and o["drops"] == 0 and o["served"] >= 100, \
+        "the version-1 board beside the timed press: misses %d, drops %d, served %d" % (
+            o["misses"], o["drops"], o["served"])
+    stop(old)
+    assert io_log(old_log) == [], "the version-1 board acted on a TIMED service"
+
+
+def press_at_one_instant(t, settings, what, others=()):
+    """vmacd with settings runs the press of two keyed boards on simulated
+    oscillators 300 ppm and 4 s apart with 20 us of receive jitter; every
+    change both boards drove at the instant (from half a second after
+    both did) within SPREAD_NS of each other, with the same outputs, by
+    their --io-log. others: boards of the test's already started, running
+    too. Returns vmacd's status, taken before the boards stop."""
     with open(PRESS) as f:
         drivers = t.drivers(press=f.read())
-    host = t.host(drivers=drivers, settings=SYNC_SETTINGS)
+    host = t.host(drivers=drivers, settings=settings)
     logs, procs = {}, {}
     for minor, clock in ((0, ("--clock-ppm", "150", "--clock-offset", "2", "--clock-jitter-us", "20",
                               "--clock-seed", "3")),
@@ -333,7 +368,7 @@ def test_vmacd_and_two_boards_of_one_machine_act_at_one_instant(t):
         logs[name] = os.path.join(t.logdir, name + ".io.log")
         procs[name] = t.board("generic", name, driver="press", major=7, minor=minor,
                               extra=["--io-log", logs[name]] + list(clock))
-    host.wait_running(sorted(procs))
+    host.wait_running(sorted(procs) + list(others))
     for name, board in procs.items():
         board.wait_line(r"^%s: acting at host instants$" % name, 60, what="%s acting at host instants" % name)
     # Two seconds of changes (a 16 ms period: some 125 each), counted by
@@ -357,8 +392,9 @@ def test_vmacd_and_two_boards_of_one_machine_act_at_one_instant(t):
     for h in both:
         assert rows["press-0"][h]["digital"] == rows["press-1"][h]["digital"], \
             "the two clamps drove different outputs at instant %d: %r %r" % (h, rows["press-0"][h], rows["press-1"][h])
-    print("vmacd and a press of two boards: %d instants, spread p50 %.2f p99 %.2f max %.2f us" % (
-        len(spreads), spreads[len(spreads) // 2] / 1e3, spreads[len(spreads) * 99 // 100] / 1e3, spreads[-1] / 1e3))
+    print("%s: %d instants, spread p50 %.2f p99 %.2f max %.2f us" % (
+        what, len(spreads), spreads[len(spreads) // 2] / 1e3, spreads[len(spreads) * 99 // 100] / 1e3,
+        spreads[-1] / 1e3))
     assert spreads[-1] <= SPREAD_NS, "the two boards of one machine drove %d ns apart (goal %d)" % (
         spreads[-1], SPREAD_NS)
     devices = {d["name"]: d for d in status["devices"]}
@@ -366,3 +402,4 @@ def test_vmacd_and_two_boards_of_one_machine_act_at_one_instant(t):
         c, timing = devices[name]["clock"], devices[name]["timing"]
         assert c and c["state"] in ("locked", "holdover") and timing["pattern"] == "phase" and timing["timed"], \
             "the status of %s: clock %r, timing %r" % (name, c, timing)
+    return status

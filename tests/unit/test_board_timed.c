@@ -6,9 +6,11 @@
  * once; a clock not usable acts on arrival and says ARRIVAL; a record that
  * finds an earlier one waiting drives that one at once; SHUTDOWN, SLEEP, a
  * new REGISTER and a watchdog trip cancel what waits; a keyed board takes
- * it sealed only and seals its answer. The board's counter here runs 3.5 s
- * ahead of host time, exactly, and the clock is locked by SYNC frames
- * through vmac_board_receive_at, as vmac-board feeds it. */
+ * it sealed only and seals its answer. A TIMED UPDATE (unicast) is
+ * served by the same machinery; a board of version 1 counts it malformed.
+ * The board's counter here runs 3.5 s ahead of host time, exactly, and the
+ * clock is locked by SYNC frames through vmac_board_receive_at, as
+ * vmac-board feeds it. */
 #include <check.h>
 #include <stdlib.h>
 #include <string.h>
@@ -545,7 +547,116 @@ START_TEST(outputs_waiting_when_the_clock_is_lost_are_still_driven_at_their_inst
 }
 END_TEST
 
-START_TEST(the_board_announces_firmware_1_1_and_says_when_it_acts_at_instants)
+/* A TIMED UPDATE (unicast) of the session: sealed on a keyed board. */
+static int timed_update(uint16_t seq, uint8_t digital, int16_t pwm, uint64_t out_at, uint64_t in_at)
+{
+	struct vmac_msg m = msg(2, VMAC_FLAG_TIMED, VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION, seq);
+	m.u.outputs.digital = digital;
+	m.u.outputs.pwm = pwm;
+	m.out_at = out_at;
+	m.in_at = in_at;
+	return send_msg(&m);
+}
+
+/* The unicast form is served by the same machinery as a DUE record: at
+ * the instants, its answer the TIMED reply; it forces a waiting TIMED
+ * CYCLIC's outputs as another record would, and a SHUTDOWN cancels it. */
+START_TEST(a_timed_update_drives_at_out_at_and_latches_at_in_at)
+{
+	uint64_t t;
+	start(0, 1);
+	t = rig.host_ns;
+	ck_assert_msg(timed_update(0x1234, 0x05, -250, t + 2 * MS, t + 3 * MS) == 0,
+	              "a TIMED UPDATE answered on arrival; its latch is 3 ms ahead");
+	ck_assert_msg(rig.writes == 0, "a TIMED UPDATE drove on arrival; out_at is 2 ms ahead");
+	ck_assert_msg(rig.board.last_valid_ms == t / MS && rig.board.counters.timed == 1,
+	              "a TIMED UPDATE did not feed the watchdog or was not counted timed");
+	ck_assert_int_eq(run_due_at(t + 2 * MS - 1000), 0);
+	ck_assert_msg(rig.writes == 0, "drove 1 us before out_at");
+	ck_assert_int_eq(run_due_at(t + 2 * MS), 0);
+	ck_assert_msg(rig.driven.digital == 0x05 && rig.driven.pwm == -250, "a TIMED UPDATE not driven at out_at");
+	ck_assert_int_gt(run_due_at(t + 3 * MS), 0);
+	expect_timed_reply(0x1234, 0x05, VMAC_CLOCK_LOCKED, "a TIMED UPDATE's latch at in_at");
+	ck_assert_msg(llabs(diff(rig.answer.latch.latched_at, t + 3 * MS)) <= 1000, "latched_at %lld ns off in_at",
+	              (long long)diff(rig.answer.latch.latched_at, t + 3 * MS));
+	ck_assert_msg(rig.acts[0].how == VMAC_TIMED_AT_INSTANT && rig.acts[1].how == VMAC_TIMED_AT_INSTANT,
+	              "a TIMED UPDATE's actions not at their instants");
+	/* A TIMED CYCLIC's outputs waiting when a TIMED UPDATE comes: driven
+	 * at once, then the UPDATE's wait for theirs. */
+	t = rig.host_ns;
+	timed(2, 0, 0x01, 0, t + 5 * MS, t + 5 * MS);
+	ck_assert_int_eq(timed_update(3, 0x02, 0, t + 6 * MS, t + 6 * MS), 0);
+	ck_assert_msg(rig.driven.digital == 0x01 && rig.board.counters.timed_overrun == 1,
+	              "the waiting CYCLIC outputs were not forced by the TIMED UPDATE");
+	/* SHUTDOWN cancels what the UPDATE left waiting. */
+	send_msg(&(struct vmac_msg){.version = 2, .seq = 4, .device_id = SESSION, .op = VMAC_OP_SHUTDOWN});
+	expect_nothing_waits("SHUTDOWN after a TIMED UPDATE");
+	ck_assert_int_eq(run_due_at(t + 7 * MS), 0);
+	ck_assert_msg(rig.driven.digital == 0, "a TIMED UPDATE's outputs were driven after SHUTDOWN");
+}
+END_TEST
+
+START_TEST(a_timed_update_without_a_usable_clock_acts_on_arrival_and_says_so)
+{
+	uint64_t t;
+	start(0, 0);
+	t = rig.host_ns;
+	ck_assert_int_gt(timed_update(9, 0x03, 0, t + 10 * MS, t + 10 * MS), 0);
+	expect_timed_reply(9, 0x03, VMAC_CLOCK_UNSYNCED | VMAC_CLOCK_ARRIVAL, "a TIMED UPDATE, clock unsynced");
+	ck_assert_msg(rig.driven.digital == 0x03 && rig.board.counters.timed_arrival == 1,
+	              "a TIMED UPDATE not served on arrival");
+	expect_nothing_waits("a TIMED UPDATE on arrival");
+}
+END_TEST
+
+START_TEST(a_keyed_board_takes_a_timed_update_sealed_only)
+{
+	struct vmac_msg m = msg(2, VMAC_FLAG_TIMED, VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION, 5);
+	uint8_t buf[VMAC_PACKET_MAX];
+	uint64_t t;
+	int n;
+	start(1, 1);
+	t = rig.host_ns;
+	m.u.outputs.digital = 0x05;
+	m.out_at = m.in_at = t + MS;
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
+	ck_assert_int_eq(deliver(buf, (size_t)n), 0);
+	expect_nothing_waits("an unsealed TIMED UPDATE to a keyed board");
+	n = vmac_proto_seal(buf, (size_t)n, sizeof(buf), ++rig.host_counter, rig.to_board, NULL, 0);
+	buf[VMAC_HDR_LEN + 7] ^= 1; /* out_at's last byte, after the seal */
+	ck_assert_int_eq(deliver(buf, (size_t)n), 0);
+	expect_nothing_waits("a sealed TIMED UPDATE whose out_at was changed");
+	ck_assert_msg(rig.writes == 0 && rig.board.counters.auth_failed == 2, "auth_failed %u, want 2",
+	              rig.board.counters.auth_failed);
+	ck_assert_int_eq(timed_update(6, 0x05, 0, t + MS, t + MS), 0);
+	ck_assert_int_gt(run_due_at(t + MS), 0);
+	ck_assert_msg(rig.answer.flags == (VMAC_FLAG_REPLY | VMAC_FLAG_TIMED | VMAC_FLAG_AUTH),
+	              "a keyed board's answer to a TIMED UPDATE has flags 0x%02x, want 0x07", rig.answer.flags);
+	expect_timed_reply(6, 0x05, VMAC_CLOCK_LOCKED, "a sealed TIMED UPDATE at its instant");
+}
+END_TEST
+
+/* A board of version 1 never reads one: it is malformed to it, nothing is
+ * driven and nothing answered. */
+START_TEST(a_version_1_board_counts_a_timed_update_malformed)
+{
+	struct vmac_msg m = msg(2, VMAC_FLAG_TIMED, VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION, 5);
+	uint8_t buf[VMAC_PACKET_MAX];
+	uint32_t bad;
+	int n;
+	start(0, 1);
+	rig.board.id.protocol = 1;
+	bad = rig.board.counters.frames_malformed;
+	m.u.outputs.digital = 0x05;
+	m.out_at = m.in_at = rig.host_ns;
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
+	ck_assert_msg(deliver(buf, (size_t)n) == 0 && rig.writes == 0, "a version-1 board obeyed a TIMED UPDATE");
+	ck_assert_msg(rig.board.counters.frames_malformed == bad + 1, "a version-1 board did not count it malformed");
+	expect_nothing_waits("a version-1 board");
+}
+END_TEST
+
+START_TEST(the_board_announces_firmware_1_2_and_says_when_it_acts_at_instants)
 {
 	struct vmac_report rep;
 	char line[VMAC_REPORT_LINE];
@@ -561,9 +672,9 @@ START_TEST(the_board_announces_firmware_1_1_and_says_when_it_acts_at_instants)
 	m = msg(1, 0, VMAC_CH_SYSTEM, VMAC_SYS_DISCOVER, 0, 1);
 	n = vmac_proto_encode(&m, buf, sizeof(buf));
 	ck_assert_int_gt(deliver(buf, (size_t)n), 0);
-	ck_assert_msg(rig.answer.u.announce.firmware_major == 1 && rig.answer.u.announce.firmware_minor == 1,
-	              "announces firmware %u.%u, want 1.1 (takes TIMED)", rig.answer.u.announce.firmware_major,
-	              rig.answer.u.announce.firmware_minor);
+	ck_assert_msg(rig.answer.u.announce.firmware_major == 1 && rig.answer.u.announce.firmware_minor == 2,
+	              "announces firmware %u.%u, want 1.2 (takes TIMED CYCLIC and TIMED UPDATE)",
+	              rig.answer.u.announce.firmware_major, rig.answer.u.announce.firmware_minor);
 }
 END_TEST
 
@@ -580,7 +691,11 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, shutdown_sleep_register_and_the_watchdog_cancel_what_waits);
 	tcase_add_test(tc, a_keyed_board_takes_timed_records_sealed_and_seals_its_answer);
 	tcase_add_test(tc, outputs_waiting_when_the_clock_is_lost_are_still_driven_at_their_instant);
-	tcase_add_test(tc, the_board_announces_firmware_1_1_and_says_when_it_acts_at_instants);
+	tcase_add_test(tc, a_timed_update_drives_at_out_at_and_latches_at_in_at);
+	tcase_add_test(tc, a_timed_update_without_a_usable_clock_acts_on_arrival_and_says_so);
+	tcase_add_test(tc, a_keyed_board_takes_a_timed_update_sealed_only);
+	tcase_add_test(tc, a_version_1_board_counts_a_timed_update_malformed);
+	tcase_add_test(tc, the_board_announces_firmware_1_2_and_says_when_it_acts_at_instants);
 	suite_add_tcase(s, tc);
 	return s;
 }

@@ -1,8 +1,8 @@
 /* Unit tests for time-triggered I/O in the wire codec (core/proto): the
  * TIMED CYCLIC frame (vmac_proto_cyclic_begin_timed, its instants and
- * records, plain and sealed) and the TIMED UPDATE reply (the latch time and
- * the board's clock). docs/PROTOCOL.md, "Time-triggered I/O", is the
- * contract checked; the board's side is in test_board_timed.c. */
+ * records, plain and sealed), the TIMED UPDATE request (unicast, plain and
+ * sealed) and the TIMED UPDATE reply (the latch time and the board's clock). docs/PROTOCOL.md, "Time-triggered I/O", is
+ * the contract checked; the board's side is in test_board_timed.c. */
 #include <check.h>
 #include <stdio.h>
 #include <string.h>
@@ -145,9 +145,13 @@ START_TEST(timed_flag_is_refused_where_it_means_nothing)
 	m.channel = VMAC_CH_DEVICE;
 	m.op = VMAC_OP_IDLE;
 	expect_encode_err(&m, VMAC_EPROTO_OP, "a TIMED IDLE reply");
-	m.op = VMAC_OP_UPDATE;
 	m.flags = VMAC_FLAG_TIMED;
-	expect_encode_err(&m, VMAC_EPROTO_OP, "a TIMED UPDATE request");
+	expect_encode_err(&m, VMAC_EPROTO_OP, "a TIMED IDLE request");
+	m.op = VMAC_OP_SHUTDOWN;
+	expect_encode_err(&m, VMAC_EPROTO_OP, "a TIMED SHUTDOWN request");
+	m.op = VMAC_OP_UPDATE;
+	m.version = 1;
+	expect_encode_err(&m, VMAC_EPROTO_OP, "a TIMED UPDATE request of version 1");
 	m.flags = VMAC_FLAG_REPLY | VMAC_FLAG_TIMED;
 	m.version = 1;
 	expect_encode_err(&m, VMAC_EPROTO_OP, "a TIMED reply of version 1");
@@ -176,6 +180,137 @@ START_TEST(timed_flag_is_refused_where_it_means_nothing)
 }
 END_TEST
 
+/* The TIMED UPDATE of PROTOCOL.md's example: seq 0x1234, device
+ * 0x00010002, outputs 0x05/-250, both instants at 10.0005 s. */
+static struct vmac_msg timed_update(void)
+{
+	struct vmac_msg m;
+	memset(&m, 0, sizeof(m));
+	m.version = 2;
+	m.flags = VMAC_FLAG_TIMED;
+	m.seq = 0x1234;
+	m.device_id = 0x00010002;
+	m.channel = VMAC_CH_DEVICE;
+	m.op = VMAC_OP_UPDATE;
+	m.out_at = T_AT;
+	m.in_at = T_AT;
+	m.u.outputs.digital = 0x05;
+	m.u.outputs.pwm = -250;
+	return m;
+}
+
+START_TEST(timed_update_example_of_protocol_md_has_pinned_bytes)
+{
+	static const uint8_t want[] = {
+	    0x56, 0x4D, 0x02, 0x04, 0x12, 0x34, 0x00, 0x01, 0x00, 0x02, 0x00, 0x02, 0x13, /* flags TIMED, len 19 */
+	    0x00, 0x00, 0x00, 0x02, 0x54, 0x13, 0x85, 0x20,                               /* out_at */
+	    0x00, 0x00, 0x00, 0x02, 0x54, 0x13, 0x85, 0x20,                               /* in_at */
+	    0x05, 0xFF, 0x06,                                                             /* outputs 0x05, -250 */
+	};
+	static const uint8_t reply[] = {
+	    0x56, 0x4D, 0x02, 0x05, 0x12, 0x34, 0x00, 0x01, 0x00, 0x02, 0x00, 0x02, 0x21, /* REPLY|TIMED, len 33 */
+	    0x01, 0x00, 0x64, 0x00, 0x00, 0x00, 0x00, 0x00, 0x07, 0x05, 0xFF, 0x06,       /* inputs */
+	    0x00, 0x00, 0x00, 0x02, 0x54, 0x13, 0x85, 0x20,                               /* latched_at */
+	    0x02,                                                                         /* clock: locked */
+	    0x00, 0x00, 0x05, 0xDC,                                                       /* bound 1500 ns */
+	    0x00, 0x00, 0x00, 0x00, 0xD0, 0x9D, 0xC3, 0x00,                               /* offset 3.5 s */
+	};
+	struct vmac_msg m = timed_update(), back, r;
+	uint8_t buf[VMAC_FRAME_MAX];
+	int n = vmac_proto_encode(&m, buf, sizeof(buf));
+
+	expect_bytes(buf, n, want, (int)sizeof(want), "TIMED UPDATE example of PROTOCOL.md");
+	ck_assert_msg(vmac_proto_frame_length(buf, (size_t)n) == 32, "frame_length of a TIMED UPDATE: %d, want 32",
+	              vmac_proto_frame_length(buf, (size_t)n));
+	ck_assert_msg(decode_exact(buf, (size_t)n, &back) == 0, "the TIMED UPDATE example does not decode");
+	ck_assert_msg(back.flags == VMAC_FLAG_TIMED && back.out_at == T_AT && back.in_at == T_AT &&
+	                  back.u.outputs.digital == 0x05 && back.u.outputs.pwm == -250,
+	              "the TIMED UPDATE decodes to flags 0x%02x, instants %llu and %llu, outputs 0x%02x/%d", back.flags,
+	              (unsigned long long)back.out_at, (unsigned long long)back.in_at, back.u.outputs.digital,
+	              back.u.outputs.pwm);
+	m.out_at = 1;
+	m.in_at = 0xFFFFFFFFFFFFFFFFULL;
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
+	ck_assert_msg(n == 32 && decode_exact(buf, (size_t)n, &back) == 0 && back.out_at == 1 &&
+	                  back.in_at == 0xFFFFFFFFFFFFFFFFULL,
+	              "a TIMED UPDATE's instants do not round-trip as two distinct u64");
+
+	/* its answer: the TIMED reply, the same 46 bytes as to a TIMED CYCLIC */
+	memset(&r, 0, sizeof(r));
+	r.version = 2;
+	r.flags = VMAC_FLAG_REPLY | VMAC_FLAG_TIMED;
+	r.seq = 0x1234;
+	r.device_id = 0x00010002;
+	r.channel = VMAC_CH_DEVICE;
+	r.op = VMAC_OP_UPDATE;
+	r.u.inputs.digital = 0x01;
+	r.u.inputs.analog[0] = 100;
+	r.u.inputs.encoder = 7;
+	r.u.inputs.applied.digital = 0x05;
+	r.u.inputs.applied.pwm = -250;
+	r.latch.latched_at = T_AT;
+	r.latch.clock = 2;
+	r.latch.bound_ns = 1500;
+	r.latch.offset_ns = 3500000000LL;
+	n = vmac_proto_encode(&r, buf, sizeof(buf));
+	expect_bytes(buf, n, reply, (int)sizeof(reply), "the answer to the TIMED UPDATE example of PROTOCOL.md");
+}
+END_TEST
+
+/* A sealed TIMED UPDATE is any sealed request: its trailer's MAC covers
+ * the header, the instants and the outputs; moving an instant fails it. */
+START_TEST(sealed_timed_update_mac_covers_the_instants)
+{
+	static const uint8_t key[VMAC_KEY_LEN] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16};
+	struct vmac_msg m = timed_update(), back;
+	uint8_t buf[VMAC_FRAME_MAX + VMAC_AUTH_TRAILER_LEN];
+	int n = vmac_proto_encode(&m, buf, sizeof(buf)), rc;
+
+	n = vmac_proto_seal(buf, (size_t)n, sizeof(buf), 7, key, NULL, 0);
+	ck_assert_msg(n == 48, "a sealed TIMED UPDATE is %d bytes, want 48", n);
+	ck_assert_msg(buf[3] == (VMAC_FLAG_AUTH | VMAC_FLAG_TIMED), "sealed flags 0x%02x, want 0x06", buf[3]);
+	ck_assert_msg(decode_exact(buf, (size_t)n, &back) == 0 && back.counter == 7 && back.out_at == T_AT &&
+	                  back.in_at == T_AT && back.u.outputs.pwm == -250,
+	              "the sealed TIMED UPDATE does not decode with its counter, instants and outputs");
+	rc = vmac_proto_open(buf, (size_t)n, key, NULL, 0);
+	ck_assert_msg(rc == 0, "the sealed TIMED UPDATE does not open under its key: %s", errname(rc));
+	buf[VMAC_HDR_LEN + 8 + 7] ^= 0x01; /* in_at's last byte */
+	rc = vmac_proto_open(buf, (size_t)n, key, NULL, 0);
+	ck_assert_msg(rc == VMAC_EPROTO_AUTH, "a TIMED UPDATE whose in_at was moved by 1 ns opened: %s, want AUTH",
+	              errname(rc));
+}
+END_TEST
+
+START_TEST(timed_update_of_another_length_or_version_is_malformed)
+{
+	struct vmac_msg m = timed_update();
+	uint8_t buf[VMAC_FRAME_MAX];
+	int n;
+
+	/* a plain UPDATE (3 bytes) with the TIMED bit set */
+	m.flags = 0;
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
+	buf[3] |= VMAC_FLAG_TIMED;
+	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_PAYLOAD, "a TIMED UPDATE of 3 data bytes");
+	/* a TIMED UPDATE in version 1 */
+	m = timed_update();
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
+	buf[2] = 1;
+	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_OP, "a TIMED UPDATE of version 1");
+	/* outputs out of range after the instants */
+	buf[2] = 2;
+	buf[VMAC_HDR_LEN + 16] = 0x80;
+	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_VALUE, "a TIMED UPDATE driving output 7");
+	m.u.outputs.pwm = 1001;
+	expect_encode_err(&m, VMAC_EPROTO_VALUE, "a TIMED UPDATE of pwm 1001");
+	/* the TIMED bit on a reply to it, but 19 bytes: a request's length */
+	m = timed_update();
+	n = vmac_proto_encode(&m, buf, sizeof(buf));
+	buf[3] |= VMAC_FLAG_REPLY;
+	expect_decode_err(buf, (size_t)n, VMAC_EPROTO_PAYLOAD, "a TIMED UPDATE reply of 19 bytes");
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("timed");
@@ -185,6 +320,9 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, sealed_timed_record_mac_covers_the_instants);
 	tcase_add_test(tc, timed_reply_example_of_protocol_md_round_trips);
 	tcase_add_test(tc, timed_flag_is_refused_where_it_means_nothing);
+	tcase_add_test(tc, timed_update_example_of_protocol_md_has_pinned_bytes);
+	tcase_add_test(tc, sealed_timed_update_mac_covers_the_instants);
+	tcase_add_test(tc, timed_update_of_another_length_or_version_is_malformed);
 	suite_add_tcase(s, tc);
 	return s;
 }
