@@ -86,6 +86,30 @@ START_TEST(sealed_timed_record_mac_covers_the_instants)
 }
 END_TEST
 
+/* The TIMED reply of PROTOCOL.md's examples: inputs, latched at T_AT by a
+ * locked clock of bound 1.5 us, 3.5 s ahead of host time. */
+static struct vmac_msg timed_reply(uint16_t seq, uint32_t device_id)
+{
+	struct vmac_msg m;
+	memset(&m, 0, sizeof(m));
+	m.version = 2;
+	m.flags = VMAC_FLAG_REPLY | VMAC_FLAG_TIMED;
+	m.seq = seq;
+	m.device_id = device_id;
+	m.channel = VMAC_CH_DEVICE;
+	m.op = VMAC_OP_UPDATE;
+	m.u.inputs.digital = 0x01;
+	m.u.inputs.analog[0] = 100;
+	m.u.inputs.encoder = 7;
+	m.u.inputs.applied.digital = 0x05;
+	m.u.inputs.applied.pwm = -250;
+	m.latch.latched_at = T_AT;
+	m.latch.clock = 2;
+	m.latch.bound_ns = 1500;
+	m.latch.offset_ns = 3500000000LL;
+	return m;
+}
+
 START_TEST(timed_reply_example_of_protocol_md_round_trips)
 {
 	static const uint8_t want[] = {
@@ -100,22 +124,7 @@ START_TEST(timed_reply_example_of_protocol_md_round_trips)
 	uint8_t buf[VMAC_FRAME_MAX];
 	int n;
 
-	memset(&m, 0, sizeof(m));
-	m.version = 2;
-	m.flags = VMAC_FLAG_REPLY | VMAC_FLAG_TIMED;
-	m.seq = 0x0102;
-	m.device_id = 0x00030001;
-	m.channel = VMAC_CH_DEVICE;
-	m.op = VMAC_OP_UPDATE;
-	m.u.inputs.digital = 0x01;
-	m.u.inputs.analog[0] = 100;
-	m.u.inputs.encoder = 7;
-	m.u.inputs.applied.digital = 0x05;
-	m.u.inputs.applied.pwm = -250;
-	m.latch.latched_at = T_AT;
-	m.latch.clock = 2;
-	m.latch.bound_ns = 1500;
-	m.latch.offset_ns = 3500000000LL;
+	m = timed_reply(0x0102, 0x00030001);
 	n = vmac_proto_encode(&m, buf, sizeof(buf));
 	expect_bytes(buf, n, want, (int)sizeof(want), "TIMED UPDATE reply example of PROTOCOL.md");
 	ck_assert_msg(n == 46, "a TIMED reply is %d bytes, want 46 (Ethernet's least payload)", n);
@@ -236,22 +245,7 @@ START_TEST(timed_update_example_of_protocol_md_has_pinned_bytes)
 	              "a TIMED UPDATE's instants do not round-trip as two distinct u64");
 
 	/* its answer: the TIMED reply, the same 46 bytes as to a TIMED CYCLIC */
-	memset(&r, 0, sizeof(r));
-	r.version = 2;
-	r.flags = VMAC_FLAG_REPLY | VMAC_FLAG_TIMED;
-	r.seq = 0x1234;
-	r.device_id = 0x00010002;
-	r.channel = VMAC_CH_DEVICE;
-	r.op = VMAC_OP_UPDATE;
-	r.u.inputs.digital = 0x01;
-	r.u.inputs.analog[0] = 100;
-	r.u.inputs.encoder = 7;
-	r.u.inputs.applied.digital = 0x05;
-	r.u.inputs.applied.pwm = -250;
-	r.latch.latched_at = T_AT;
-	r.latch.clock = 2;
-	r.latch.bound_ns = 1500;
-	r.latch.offset_ns = 3500000000LL;
+	r = timed_reply(0x1234, 0x00010002);
 	n = vmac_proto_encode(&r, buf, sizeof(buf));
 	expect_bytes(buf, n, reply, (int)sizeof(reply), "the answer to the TIMED UPDATE example of PROTOCOL.md");
 }
