@@ -25,7 +25,7 @@ static unsigned anchor_of(const struct vmac_status *s, const struct vmac_device_
 }
 
 /* The seed's deadline violation vector for one service: each kind of
- * deadline it has missed since it attached, and the last. */
+ * deadline it has missed (as the status counts them), and the last. */
 static json_t *violations_json(const struct vmac_status *s, const struct vmac_device_status *d)
 {
 	json_t *last = json_null();

@@ -336,6 +336,29 @@ async function main() {
       await page.screenshot({ path: path.join(OUT, "6b-recording.png"), fullPage: true });
       await page.click('nav a[data-page="system"]');
       await page.waitForSelector("#system-facts div", { timeout: 5000 });
+      // The time manager (GET /api/schedule): a line per board still served,
+      // each with its deadline violation vector in numbers, and either the
+      // violations or "No deadline violated".
+      await page.waitForSelector('#schedule-rows tr[data-board="lights-1"]', { timeout: 5000 });
+      const sched = await page.evaluate(() => ({
+        rows: [...document.querySelectorAll("#schedule-rows tr")].map((r) => ({
+          device: r.dataset.board,
+          vector: ["misses", "misses-host", "driver-late"].map((k) => r.querySelector("[data-" + k + "]").textContent),
+        })),
+        violations: document.querySelectorAll("#violations li").length,
+        empty: !document.querySelector("#violations-empty").hidden,
+      }));
+      const shown = sched.rows.map((r) => r.device).sort();
+      for (const name of ["dish-1", "dryer-1", "lights-1"]) {
+        if (!shown.includes(name)) throw new Error(`the time manager lacks ${name}: ${JSON.stringify(shown)}`);
+      }
+      if (shown.includes("washer-1")) throw new Error("the time manager still lists washer-1, which was dropped");
+      for (const r of sched.rows) {
+        if (!r.vector.every((x) => /^\d+$/.test(x))) throw new Error(`${r.device}'s vector: ${r.vector}`);
+      }
+      if (sched.empty === sched.violations > 0) {
+        throw new Error(`${sched.violations} violations listed, and "No deadline violated" ${sched.empty ? "shown" : "hidden"}`);
+      }
       await page.screenshot({ path: path.join(OUT, "7-system.png"), fullPage: true });
     });
 

@@ -5,7 +5,8 @@
 // GET /api/live, the latest of it every quarter second. A board's key the
 // host makes (Boards) is shown once in the page and kept nowhere. Beside
 // it: events.js (the Events page), clock.js (the boards' clocks in a card)
-// and boards.js (the Boards page), loaded before it.
+// boards.js (the Boards page) and schedule.js (the System page's time
+// manager), loaded before it.
 "use strict";
 
 const PLOT_SECONDS = 300;      // plots show the last five minutes
@@ -37,6 +38,8 @@ const state = {
   boardsSeen: "",     // what of the status GET /api/boards answers from, when the Boards page last read it
   boardsLoading: null, // the GET /api/boards under way, and whether another is wanted after it
   boardsAgain: false,
+  scheduleAt: 0,      // when the System page last had GET /api/schedule's answer (schedule.js)
+  scheduleBusy: false,
 };
 
 const $ = (sel, root) => (root || document).querySelector(sel);
@@ -568,6 +571,7 @@ function drawSystem(s) {
     } else rows.push([k, v]);
   }
   $("#counters").replaceChildren(...rows.map(([k, v]) => el("tr", {}, el("td", {}, k), el("td", {}, v))));
+  loadSchedule(); // schedule.js
 }
 
 // ---- site: every host on the broker (GET /api/site), read only ----
