@@ -408,8 +408,10 @@ def test_a_qemu_board_feeds_its_clock_from_sync(t):
 
 
 CLOCK_LINE = r"^lights-1: clock (\w+), offset ([-+][0-9.]+) s, drift [-+][0-9.]+ ppm, bound ([0-9.]+) us; sync"
-RATE_SPAN_S = 10  # the counter's rate judged over this long
-RATE_PPM = 50  # allowed: a crystal's error and then some; before the fix QEMU lost 2,000 to 4,000 ppm
+# How long the counter's rate is judged, the board's clock line read once
+# a second; VMAC_QEMU_CLOCK_S makes it longer for docs/TIME.md's figures.
+RATE_SPAN_S = float(os.environ.get("VMAC_QEMU_CLOCK_S", "10"))
+RATE_PPM = 50  # allowed: a crystal's error and then some; before the fix QEMU lost 4,000 to 18,000 ppm
 
 
 def clock_status(board):
@@ -421,26 +423,44 @@ def clock_status(board):
     return line, m.group(1), float(m.group(2)), float(m.group(3))
 
 
+def counter_rate(board, span_s):
+    """The board's clock line once a second for span_s: the counter's rate
+    against host time in ppm (the slope of the offsets it prints, by least
+    squares over the harness's reading times) and a summary of the rest."""
+    rows = [clock_status(board)]
+    while rows[-1][0].time_s - rows[0][0].time_s < span_s:
+        time.sleep(1.0)
+        rows.append(clock_status(board))
+    n = len(rows)
+    xs = [r[0].time_s - rows[0][0].time_s for r in rows]
+    ys = [r[2] - rows[0][2] for r in rows]
+    mx, my = sum(xs) / n, sum(ys) / n
+    ppm = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sum((x - mx) ** 2 for x in xs) * 1e6
+    bounds = sorted(r[3] for r in rows)
+    summary = "counter %+.1f ppm over %.0f s, offsets within %.0f us, bound p50 %.1f p90 %.1f us, locked at %d " \
+        "of %d looks" % (ppm, xs[-1], (max(ys) - min(ys)) * 1e6, bounds[n // 2], bounds[n * 9 // 10],
+                         sum(1 for r in rows if r[1] == "locked"), n)
+    return ppm, summary, rows[-1][0]
+
+
 def test_a_qemu_boards_clock_locks_and_it_acts_at_the_instants(t):
-    """The firmware's clock on QEMU (docs/TIME.md, "The wiring"): its
-    counter, SysTick counting its 24 bits free-running, runs at the host's
-    rate (the offset the board prints moves by less than RATE_PPM; counted
-    by SysTick interrupts it lost whole milliseconds whenever QEMU was held
-    off the CPU); with vmacd's SYNC (clock_sync_ms 1) the clock locks, the
-    board says it acts at host instants (by timer 0A's one-shot), and every
-    TIMED reply the host reads while the board says locked has the ARRIVAL
-    bit clear, for some TIMED services in a row. Locking is asserted to
-    happen, not to last: on this shared VM QEMU's path from the tap to the
-    firmware varies by tens of microseconds at times, past the clock's 20
-    us bound for leaving locked (docs/TIME.md gives how often)."""
+    """The firmware's clock on QEMU (docs/TIME.md, "The wiring"): with
+    vmacd's SYNC (clock_sync_ms 1) the clock locks, the board says it acts
+    at host instants (by timer 0A's one-shot), and every TIMED reply the
+    host reads while the board says locked has the ARRIVAL bit clear,
+    until 20 services at the instants; its counter, SysTick counting its 24
+    bits free-running, keeps host time (the offset the board prints moves
+    by less than RATE_PPM; counted by SysTick interrupts it lost whole
+    milliseconds whenever QEMU was held off the CPU). Locking is asserted
+    to happen, not to last: on this shared VM QEMU's path from the tap to
+    the firmware moves by several microseconds from one window to the
+    next, at times past the clock's 20 us bound for leaving locked."""
     image = firmware_image(t)
     link = Link(t)
     board = qemu_board(t, image, link, "lights", "lights-1")
     settings = dict(RELAXED, clock_sync_ms=1, slice_us=200, slices_per_slot=5)
     host = t.host(bus="eth:" + link.bridge, settings=settings)
     host.wait_running(["lights-1"], timeout_s=30)
-    board.wait_line(r"^lights-1: clock locking, offset ", 30, what="the clock's first SYNC")
-    first = clock_status(board)
     board.wait_line(r"^lights-1: clock locked, offset ", 60, what="the clock locked")
     board.wait_line(r"^lights-1: acting at host instants$", 30, what="acting at host instants")
     seen = {"locked": 0, "timed": None}
@@ -461,18 +481,11 @@ def test_a_qemu_boards_clock_locks_and_it_acts_at_the_instants(t):
     s = host.wait_status(enough, 120, "3 looks at a locked clock and 20 services at the instants",
                          locked_is_at_instants)
     c = host.device("lights-1", s)["clock"]
-    # the counter's rate: its offset from host time, now and RATE_SPAN_S after the first
-    last = clock_status(board)
-    while last[0].time_s - first[0].time_s < RATE_SPAN_S:
-        time.sleep(0.5)
-        last = clock_status(board)
-    ppm = (last[2] - first[2]) / (last[0].time_s - first[0].time_s) * 1e6
-    timed = board.find_lines(r"^lights-1: timed \d+, on arrival \d+", since=last[0].index - 3)[-1]
-    print("QEMU board: counter %+.1f ppm over %.1f s; host: clock %s, services at the instants %d, on arrival "
-          "%d; board: %s" % (ppm, last[0].time_s - first[0].time_s, c["state"], c["services_timed"],
-                             c["services_on_arrival"], timed.text), file=sys.stderr, flush=True)
-    assert abs(ppm) < RATE_PPM, "the QEMU board's counter ran %+.1f ppm off host time (offset %+.6f s, then " \
-        "%+.6f s)" % (ppm, first[2], last[2])
+    ppm, summary, last = counter_rate(board, RATE_SPAN_S)
+    timed = board.find_lines(r"^lights-1: timed \d+, on arrival \d+", since=last.index - 3)[-1]
+    print("QEMU board: %s; host: services at the instants %d, on arrival %d; board: %s" % (
+        summary, c["services_timed"], c["services_on_arrival"], timed.text), file=sys.stderr, flush=True)
+    assert abs(ppm) < RATE_PPM, "the QEMU board's counter ran %+.1f ppm off host time: %s" % (ppm, summary)
     assert int(re.search(r"timed (\d+)", timed.text).group(1)) >= 20, "the board's counters: %r" % timed.text
 
 

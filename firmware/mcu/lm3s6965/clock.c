@@ -13,12 +13,29 @@
 #define TURN_CYCLES (SYST_MAX + 1u)            /* SysTick's period: RVR + 1 cycles */
 #define CYCLES_PER_MS (SYSCLK_HZ / 1000u)
 #define WAKE_HZ 1000u
+#define LAST_VALUE_SPINS 100000u /* reads of SysTick's last value of a turn (1) before taking it */
 
 /* The cycles since start-up at the start of the turn seen last, and how
  * far into it that look was: the main loop and the SysTick interrupt both
  * look (lm3s_irq_save between them). */
 static uint64_t turn_start;
 static uint32_t seen_into;
+
+/* SysTick's value, never the last of a turn (1) for longer than it
+ * lasts on the part, one cycle: QEMU shows 1 from a turn's end until it
+ * runs that turn's timer callback, which its main loop may do late (seen:
+ * 6,007 reads of 1 in a row on the loaded VM); time would stand still
+ * meanwhile, and a frame stamped then would look early, which the clock's
+ * minimum filter cannot tell from a fast path. Read again until it moves
+ * on (bounded: never a hang). */
+static uint32_t systick_value(void)
+{
+	uint32_t cvr = SYST_CVR;
+	uint32_t spins;
+	for (spins = 0; cvr == 1 && spins < LAST_VALUE_SPINS; spins++)
+		cvr = SYST_CVR;
+	return cvr;
+}
 
 /* Cycles into the current turn from SysTick's value: it counts RVR, ...,
  * 1, 0 and reloads, COUNTFLAG rising as it reaches 0, so a turn begins at
@@ -41,9 +58,9 @@ static uint64_t cycles_now(void)
 	uint32_t flagged = 0, before, after;
 	uint64_t cycles;
 	do {
-		before = into_turn(SYST_CVR);
+		before = into_turn(systick_value());
 		flagged |= SYST_CSR & SYST_CSR_COUNTFLAG;
-		after = into_turn(SYST_CVR);
+		after = into_turn(systick_value());
 	} while (after < before);
 	if (flagged || after < seen_into)
 		turn_start += TURN_CYCLES;
