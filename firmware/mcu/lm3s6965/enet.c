@@ -1,11 +1,12 @@
 /* The LM3S6965's Ethernet MAC: vmac frames (EtherType 0x88B5) in and out
  * through its FIFOs, each received frame stamped by the receive interrupt
- * (the board's clock takes SYNC by these stamps). Receive: each frame comes out of the FIFO as 32-bit
- * words, the first holding the frame length in its low half (counting the
- * two length bytes and the 4-byte FCS), then the frame from its destination
- * address on, then the FCS. Send: the first word holds the payload length
- * (the frame less its 14-byte header) and the first two destination bytes;
- * the MAC pads to 60 bytes and adds the FCS itself. */
+ * (the board's clock takes SYNC by these stamps). Receive: each frame
+ * comes out of the FIFO as 32-bit words, the first holding the frame
+ * length in its low half (counting the two length bytes and the 4-byte
+ * FCS), then the frame from its destination address on, then the FCS.
+ * Send: the first word holds the payload length (the frame less its
+ * 14-byte header) and the first two destination bytes; the MAC pads to 60
+ * bytes and adds the FCS itself. */
 #include <string.h>
 
 #include "lm3s6965.h"
