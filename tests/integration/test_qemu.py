@@ -377,14 +377,12 @@ def test_a_keyed_qemu_board_never_attaches_to_a_host_without_its_key(t):
 
 def test_a_qemu_board_feeds_its_clock_from_sync(t):
     """SYNC from vmacd (clock_sync_ms 1, 1 ms slots) reaches the firmware's
-    clock, stamped on SysTick's nanoseconds (docs/TIME.md, "The wiring"):
-    the board says its clock is locking, its status counts SYNC frames
-    accepted (most of them two-step: the host's bridge to the taps gives
-    transmit stamps) and nothing malformed, and the board is served as
-    ever. Not
-    that it locks: QEMU's SysTick loses milliseconds when QEMU is held off
-    the CPU (about 2,000 ppm, in bursts, on the shared VM), beyond the
-    clock's 1,000 ppm clamp."""
+    clock, stamped on SysTick's free-running count by the receive interrupt
+    (docs/TIME.md, "The wiring"): the board says its clock is locking, its
+    status counts SYNC frames accepted (most of them two-step: the host's
+    bridge to the taps gives transmit stamps) and nothing malformed, and
+    the board is served as ever. That it locks and then acts at the
+    instants: the test after this one."""
     image = firmware_image(t)
     link = Link(t)
     board = qemu_board(t, image, link, "lights", "lights-1")
@@ -409,14 +407,96 @@ def test_a_qemu_board_feeds_its_clock_from_sync(t):
     assert host.status()["counters"]["sync_stamps"] > 100, "host counters: %r" % host.status()["counters"]
 
 
+CLOCK_LINE = r"^lights-1: clock (\w+), offset ([-+][0-9.]+) s, drift [-+][0-9.]+ ppm, bound ([0-9.]+) us; sync"
+# How long the counter's rate is judged, the board's clock line read once
+# a second; VMAC_QEMU_CLOCK_S makes it longer for docs/TIME.md's figures.
+RATE_SPAN_S = float(os.environ.get("VMAC_QEMU_CLOCK_S", "10"))
+RATE_PPM = 50  # allowed: a crystal's error and then some; before the fix QEMU lost 4,000 to 18,000 ppm
+
+
+def clock_status(board):
+    """The board's clock line of a fresh 'status': (line, state, offset s, bound us)."""
+    mark = board.mark()
+    board.send("status")
+    line = board.wait_line(CLOCK_LINE, 30, since=mark, what="the clock's line with an offset")
+    m = re.search(CLOCK_LINE, line.text)
+    return line, m.group(1), float(m.group(2)), float(m.group(3))
+
+
+def counter_rate(board, span_s):
+    """The board's clock line once a second for span_s: the counter's rate
+    against host time in ppm (the slope of the offsets it prints, by least
+    squares over the harness's reading times) and a summary of the rest."""
+    rows = [clock_status(board)]
+    while rows[-1][0].time_s - rows[0][0].time_s < span_s:
+        time.sleep(1.0)
+        rows.append(clock_status(board))
+    n = len(rows)
+    xs = [r[0].time_s - rows[0][0].time_s for r in rows]
+    ys = [r[2] - rows[0][2] for r in rows]
+    mx, my = sum(xs) / n, sum(ys) / n
+    ppm = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sum((x - mx) ** 2 for x in xs) * 1e6
+    bounds = sorted(r[3] for r in rows)
+    summary = "counter %+.1f ppm over %.0f s, offsets within %.0f us, bound p50 %.1f p90 %.1f us, locked at %d " \
+        "of %d looks" % (ppm, xs[-1], (max(ys) - min(ys)) * 1e6, bounds[n // 2], bounds[n * 9 // 10],
+                         sum(1 for r in rows if r[1] == "locked"), n)
+    return ppm, summary, rows[-1][0]
+
+
+def test_a_qemu_boards_clock_locks_and_it_acts_at_the_instants(t):
+    """The firmware's clock on QEMU (docs/TIME.md, "The wiring"): with
+    vmacd's SYNC (clock_sync_ms 1) the clock locks, the board says it acts
+    at host instants (by timer 0A's one-shot), and every TIMED reply the
+    host reads while the board says locked has the ARRIVAL bit clear,
+    until 20 services at the instants; its counter, SysTick counting its 24
+    bits free-running, keeps host time (the offset the board prints moves
+    by less than RATE_PPM; counted by SysTick interrupts it lost whole
+    milliseconds whenever QEMU was held off the CPU). Locking is asserted
+    to happen, not to last: on this shared VM QEMU's path from the tap to
+    the firmware moves by several microseconds from one window to the
+    next, at times past the clock's 20 us bound for leaving locked."""
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "lights-1")
+    settings = dict(RELAXED, clock_sync_ms=1, slice_us=200, slices_per_slot=5)
+    host = t.host(bus="eth:" + link.bridge, settings=settings)
+    host.wait_running(["lights-1"], timeout_s=30)
+    board.wait_line(r"^lights-1: clock locked, offset ", 60, what="the clock locked")
+    board.wait_line(r"^lights-1: acting at host instants$", 30, what="acting at host instants")
+    seen = {"locked": 0, "timed": None}
+
+    def locked_is_at_instants(s):
+        c = host.device("lights-1", s)["clock"]
+        assert c is not None, "the host has no TIMED reply of the QEMU board: %r" % host.device("lights-1", s)
+        if c["state"] == "locked":
+            assert c["on_arrival"] is False, "a TIMED reply says locked and acted on arrival: %r" % c
+            seen["locked"] += 1
+
+    def enough(s):
+        c = host.device("lights-1", s)["clock"]
+        if seen["timed"] is None:
+            seen["timed"] = c["services_timed"]
+        return seen["locked"] >= 3 and c["services_timed"] >= seen["timed"] + 20
+
+    s = host.wait_status(enough, 120, "3 looks at a locked clock and 20 services at the instants",
+                         locked_is_at_instants)
+    c = host.device("lights-1", s)["clock"]
+    ppm, summary, last = counter_rate(board, RATE_SPAN_S)
+    timed = board.find_lines(r"^lights-1: timed \d+, on arrival \d+", since=last.index - 3)[-1]
+    print("QEMU board: %s; host: services at the instants %d, on arrival %d; board: %s" % (
+        summary, c["services_timed"], c["services_on_arrival"], timed.text), file=sys.stderr, flush=True)
+    assert abs(ppm) < RATE_PPM, "the QEMU board's counter ran %+.1f ppm off host time: %s" % (ppm, summary)
+    assert int(re.search(r"timed (\d+)", timed.text).group(1)) >= 20, "the board's counters: %r" % timed.text
+
+
 def test_a_qemu_board_serves_a_timed_cyclic_on_arrival_without_a_clock(t):
     """Time-triggered I/O on the firmware (docs/TIME.md, "Time-triggered
     I/O"): the test plays the host on the bridge (AF_PACKET), with no SYNC,
     so the board's clock is unsynced; a TIMED CYCLIC whose instants lie 5 s
     ahead is served on arrival: the TIMED answer (flags REPLY | TIMED, 46
     bytes, ARRIVAL, unsynced, no latch time) comes at once, its applied the
-    record's outputs, and the UART says so. The timer path itself (timer 0A)
-    only acts with a usable clock, which QEMU's SysTick does not give."""
+    record's outputs, and the UART says so. With a clock, the timer path
+    (timer 0A): test_a_qemu_boards_clock_locks_and_it_acts_at_the_instants."""
     import socket
     import struct
 

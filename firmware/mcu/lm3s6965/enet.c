@@ -1,10 +1,12 @@
 /* The LM3S6965's Ethernet MAC: vmac frames (EtherType 0x88B5) in and out
- * through its FIFOs. Receive: each frame comes out of the FIFO as 32-bit
- * words, the first holding the frame length in its low half (counting the
- * two length bytes and the 4-byte FCS), then the frame from its destination
- * address on, then the FCS. Send: the first word holds the payload length
- * (the frame less its 14-byte header) and the first two destination bytes;
- * the MAC pads to 60 bytes and adds the FCS itself. */
+ * through its FIFOs, each received frame stamped by the receive interrupt
+ * (the board's clock takes SYNC by these stamps). Receive: each frame
+ * comes out of the FIFO as 32-bit words, the first holding the frame
+ * length in its low half (counting the two length bytes and the 4-byte
+ * FCS), then the frame from its destination address on, then the FCS.
+ * Send: the first word holds the payload length (the frame less its
+ * 14-byte header) and the first two destination bytes; the MAC pads to 60
+ * bytes and adds the FCS itself. */
 #include <string.h>
 
 #include "lm3s6965.h"
@@ -12,12 +14,18 @@
 
 #define RX_FRAME_MAX 1518 /* 14 header + 1500 payload + 4 FCS */
 #define TX_PAYLOAD_MAX 1500
+#define STAMPS 32 /* a power of two; frames beyond it are stamped as they leave */
 
 static uint8_t our_mac[6];
 static struct vmac_mcu_enet_counters counters;
 /* One frame as the FIFO words carry it: 2 length bytes, header, payload,
  * FCS; word-aligned so that words go in and out whole. */
 static uint32_t frame_words[(2 + RX_FRAME_MAX + 3) / 4];
+/* When each frame in the receive FIFO came, oldest first: stamp_head is
+ * advanced by the interrupt (or by the main loop, interrupts off), and
+ * stamp_tail by the main loop as it takes a frame out. */
+static volatile uint64_t stamps[STAMPS];
+static volatile uint32_t stamp_head, stamp_tail;
 
 void vmac_mcu_enet_init(const uint8_t mac[6])
 {
@@ -38,12 +46,31 @@ void vmac_mcu_enet_init(const uint8_t mac[6])
 	NVIC_ISER(IRQ_ETHERNET / 32) = 1u << (IRQ_ETHERNET % 32);
 }
 
+/* The frames in the FIFO that have no stamp yet get now; interrupts off.
+ * Frames that came together share the time of the look after the last of
+ * them: late, never early, which the clock's minimum filter is for. */
+static void stamp_new_frames(void)
+{
+	uint32_t in_fifo = MAC_NP & 0x3F;
+	uint64_t now;
+	if (in_fifo > STAMPS)
+		in_fifo = STAMPS; /* a 2 KiB FIFO of 60-byte frames: 31 at most */
+	if (stamp_head - stamp_tail > in_fifo)
+		stamp_tail = stamp_head - in_fifo; /* never more stamps than frames */
+	if (stamp_head - stamp_tail == in_fifo)
+		return;
+	now = vmac_mcu_now_ns();
+	while (stamp_head - stamp_tail < in_fifo)
+		stamps[stamp_head++ % STAMPS] = now;
+}
+
 void vmac_mcu_enet_handler(void)
 {
 	uint32_t ris = MAC_RIS;
 	if (ris & MAC_INT_FOV)
 		counters.overruns++;
 	MAC_IACK = ris;
+	stamp_new_frames();
 }
 
 int vmac_mcu_enet_pending(void)
@@ -56,15 +83,22 @@ static int is_broadcast(const uint8_t *mac)
 	return (mac[0] & mac[1] & mac[2] & mac[3] & mac[4] & mac[5]) == 0xFF;
 }
 
-int vmac_mcu_enet_receive(const uint8_t **payload, uint8_t src[6])
+int vmac_mcu_enet_receive(const uint8_t **payload, uint8_t src[6], uint64_t *rx_ns)
 {
 	const uint8_t *bytes = (const uint8_t *)frame_words;
-	uint32_t first, total, words, i;
+	uint32_t first, total, words, i, primask;
 	size_t len;
 	int declared;
 
-	if (!vmac_mcu_enet_pending())
+	/* The stamp and the frame leave together, the interrupt kept out:
+	 * it counts the stamps against the frames in the FIFO. */
+	primask = lm3s_irq_save();
+	if (!vmac_mcu_enet_pending()) {
+		lm3s_irq_restore(primask);
 		return -1;
+	}
+	stamp_new_frames(); /* one the interrupt has not seen yet */
+	*rx_ns = stamps[stamp_tail++ % STAMPS];
 	first = MAC_DATA;
 	total = first & 0xFFFF; /* 2 length bytes + frame + 4 FCS */
 	words = (total + 3) / 4;
@@ -75,6 +109,7 @@ int vmac_mcu_enet_receive(const uint8_t **payload, uint8_t src[6])
 		if (i < sizeof(frame_words) / 4)
 			frame_words[i] = w;
 	}
+	lm3s_irq_restore(primask);
 	counters.received++;
 	if (total > sizeof(frame_words) || total < 2 + VMAC_MCU_ETH_HLEN + 4) {
 		counters.oversize++;

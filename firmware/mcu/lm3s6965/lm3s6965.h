@@ -1,6 +1,6 @@
 /* The registers of the TI Stellaris LM3S6965 (Cortex-M3) that this firmware
- * uses: system control, SysTick and the NVIC, UART0, the Ethernet MAC. Only
- * the HAL files of firmware/mcu/lm3s6965/ include it. Names follow the data
+ * uses: system control, SysTick and the NVIC, timers 0 and 1, UART0, the
+ * Ethernet MAC. Only the HAL files of firmware/mcu/lm3s6965/ include it. Names follow the data
  * sheet (DS-LM3S6965), addresses are those of the part and of QEMU's
  * lm3s6965evb machine alike. */
 #ifndef VMAC_LM3S6965_H
@@ -24,6 +24,7 @@
 #define SYSCTL_RCGC1 REG32(0x400FE104u)
 #define SYSCTL_RCGC1_UART0 (1u << 0)
 #define SYSCTL_RCGC1_TIMER0 (1u << 16)
+#define SYSCTL_RCGC1_TIMER1 (1u << 17)
 #define SYSCTL_RCGC2 REG32(0x400FE108u)
 #define SYSCTL_RCGC2_GPIOA (1u << 0)
 #define SYSCTL_RCGC2_EMAC0 (1u << 28)
@@ -45,7 +46,9 @@
 #define SYST_CVR REG32(0xE000E018u)
 #define SYST_CSR_ENABLE (1u << 0)
 #define SYST_CSR_TICKINT (1u << 1)
-#define SYST_CSR_CLKSOURCE (1u << 2) /* the processor clock (QEMU has no reference clock) */
+#define SYST_CSR_CLKSOURCE (1u << 2)  /* the processor clock (QEMU has no reference clock) */
+#define SYST_CSR_COUNTFLAG (1u << 16) /* counted to 0 since the last read of SYST_CSR (the read clears it) */
+#define SYST_MAX 0x00FFFFFFu          /* SYST_RVR's and SYST_CVR's 24 bits */
 #define NVIC_ISER(n) REG32(0xE000E100u + 4u * (n))
 #define SCB_AIRCR REG32(0xE000ED0Cu)
 #define SCB_AIRCR_RESET (0x05FA0000u | (1u << 2)) /* VECTKEY | SYSRESETREQ */
@@ -53,6 +56,7 @@
 /* Interrupt numbers (vector = 16 + irq). */
 #define IRQ_UART0 5
 #define IRQ_TIMER0A 19
+#define IRQ_TIMER1A 21
 #define IRQ_ETHERNET 42
 #define IRQ_COUNT 48 /* vectors 16..63; the part has 0..43 */
 
@@ -81,8 +85,9 @@
 #define UART_INT_RX (1u << 4)
 #define UART_INT_RT (1u << 6) /* receive time-out: a few bytes wait in the FIFO */
 
-/* General-purpose timer 0 (GPTM), timer A: a 32-bit one-shot counting
- * down at the system clock, its time-out an interrupt. */
+/* General-purpose timers (GPTM) 0 and 1, timer A of each: 32 bits
+ * counting down at the system clock, the time-out an interrupt; timer 0 a
+ * one-shot (the alarm), timer 1 periodic (the main loop's wake-up). */
 #define TIMER0_BASE 0x40030000u
 #define TIMER0_CFG REG32(TIMER0_BASE + 0x000u)
 #define TIMER0_TAMR REG32(TIMER0_BASE + 0x004u)
@@ -90,8 +95,16 @@
 #define TIMER0_IMR REG32(TIMER0_BASE + 0x018u)
 #define TIMER0_ICR REG32(TIMER0_BASE + 0x024u)
 #define TIMER0_TAILR REG32(TIMER0_BASE + 0x028u)
+#define TIMER1_BASE 0x40031000u
+#define TIMER1_CFG REG32(TIMER1_BASE + 0x000u)
+#define TIMER1_TAMR REG32(TIMER1_BASE + 0x004u)
+#define TIMER1_CTL REG32(TIMER1_BASE + 0x00Cu)
+#define TIMER1_IMR REG32(TIMER1_BASE + 0x018u)
+#define TIMER1_ICR REG32(TIMER1_BASE + 0x024u)
+#define TIMER1_TAILR REG32(TIMER1_BASE + 0x028u)
 #define TIMER_CFG_32BIT 0x0u
 #define TIMER_TAMR_ONESHOT 0x1u
+#define TIMER_TAMR_PERIODIC 0x2u
 #define TIMER_CTL_TAEN (1u << 0)
 #define TIMER_INT_TATO (1u << 0) /* timer A time-out */
 
@@ -132,6 +145,19 @@
 static inline void lm3s_irq_disable(void)
 {
 	__asm__ volatile("cpsid i" ::: "memory");
+}
+
+/* Interrupts off, returning whether they were (PRIMASK) for lm3s_irq_restore. */
+static inline uint32_t lm3s_irq_save(void)
+{
+	uint32_t primask;
+	__asm__ volatile("mrs %0, primask\n\tcpsid i" : "=r"(primask)::"memory");
+	return primask;
+}
+
+static inline void lm3s_irq_restore(uint32_t primask)
+{
+	__asm__ volatile("msr primask, %0" ::"r"(primask) : "memory");
 }
 
 static inline void lm3s_irq_enable(void)

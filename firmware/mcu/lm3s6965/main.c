@@ -68,9 +68,8 @@ static void housekeep(uint64_t now_ms)
 	report();
 }
 
-/* One received vmac frame, stamped rx_ns when it left the FIFO (not at the
- * interrupt: a SYNC read late is only late, which the clock's minimum
- * filter is for): the watchdog first (a frame that waited while
+/* One received vmac frame, stamped rx_ns by the receive interrupt (enet.c):
+ * the watchdog first (a frame that waited while
  * the board could not run never revives a session already timed out),
  * then the board, then its reply, if any, back to the sender. */
 static void handle_frame(const uint8_t *frame, size_t len, const uint8_t src[6], uint64_t now_ms, uint64_t rx_ns)
@@ -291,6 +290,7 @@ int main(void)
 	for (;;) {
 		const uint8_t *frame;
 		uint8_t src[6];
+		uint64_t rx_ns;
 		int frames, len;
 
 		run_instants();
@@ -299,17 +299,17 @@ int main(void)
 			housekeep(now_ms);
 			last_housekeep_ms = now_ms;
 		}
-		for (frames = 0; frames < FRAMES_PER_TURN && (len = vmac_mcu_enet_receive(&frame, src)) >= 0;
+		for (frames = 0; frames < FRAMES_PER_TURN && (len = vmac_mcu_enet_receive(&frame, src, &rx_ns)) >= 0;
 		     frames++) {
 			if (len > 0)
-				handle_frame(frame, (size_t)len, src, vmac_mcu_now_ms(), vmac_mcu_now_ns());
+				handle_frame(frame, (size_t)len, src, vmac_mcu_now_ms(), rx_ns);
 		}
 		while (vmac_mcu_uart_getline(line, sizeof(line)) >= 0)
 			command(line);
 		run_instants(); /* a frame may have brought one: armed before the sleep */
 		vmac_mcu_uart_poll();
-		/* Sleep until the next interrupt (the millisecond tick at the
-		 * latest), unless work came in since the looks above: masked,
+		/* Sleep until the next interrupt (timer 1's millisecond wake-up
+		 * at the latest), unless work came in since the looks above: masked,
 		 * an interrupt still ends the sleep, and is taken after it. */
 		lm3s_irq_disable();
 		if (!vmac_mcu_enet_pending() && !vmac_mcu_uart_pending())

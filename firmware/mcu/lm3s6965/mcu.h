@@ -15,16 +15,17 @@
 
 /* ---- clock.c ---- */
 
-/* The PLL to 50 MHz and SysTick to interrupt every millisecond. */
+/* The PLL to 50 MHz, SysTick free-running (the time below), timer 1 to
+ * wake the main loop every millisecond, timer 0 ready as the alarm. */
 void vmac_mcu_clock_init(void);
-/* Milliseconds since power-on; call at least every 49 days (it extends the
- * 32-bit tick count the interrupt keeps). */
+/* Milliseconds since power-on (vmac_mcu_now_ns's, whole). */
 uint64_t vmac_mcu_now_ms(void);
 /* Nanoseconds since power-on, to the processor's cycle (20 ns): the
- * counter the board's clock (firmware/clock.h) is disciplined on. Call from
- * the main loop, interrupts enabled. */
+ * counter the board's clock (firmware/clock.h) is disciplined on. From
+ * the main loop or an interrupt. */
 uint64_t vmac_mcu_now_ns(void);
 void vmac_mcu_systick_handler(void);
+void vmac_mcu_timer1a_handler(void);
 /* Interrupt in ns nanoseconds (timer 0A, one-shot, to the cycle), ending
  * the main loop's sleep: the timer compare of time-triggered I/O. A new
  * call replaces the last. */
@@ -70,9 +71,10 @@ void vmac_mcu_enet_init(const uint8_t mac[6]);
  * (counted in not_ours). Returns the vmac payload's length (the Ethernet
  * padding trimmed by the length its header declares), *payload pointing at
  * it in the driver's one frame buffer (valid until the next receive or
- * send) and the sender in src; 0 for a frame dropped; -1 when the FIFO is
- * empty. */
-int vmac_mcu_enet_receive(const uint8_t **payload, uint8_t src[6]);
+ * send), the sender in src and in *rx_ns when it came (vmac_mcu_now_ns
+ * as the receive interrupt saw it, or as this call did when the interrupt
+ * had not run yet); 0 for a frame dropped; -1 when the FIFO is empty. */
+int vmac_mcu_enet_receive(const uint8_t **payload, uint8_t src[6], uint64_t *rx_ns);
 /* Whether frames wait in the receive FIFO. */
 int vmac_mcu_enet_pending(void);
 /* Send payload (1..1500 bytes) to dst from our address, EtherType 0x88B5. */

@@ -42,6 +42,7 @@ __attribute__((section(".vectors"), used)) const union vector vmac_mcu_vectors[V
     [15] = {.handler = vmac_mcu_systick_handler},
     [16 + IRQ_UART0] = {.handler = vmac_mcu_uart_handler},
     [16 + IRQ_TIMER0A] = {.handler = vmac_mcu_timer0a_handler},
+    [16 + IRQ_TIMER1A] = {.handler = vmac_mcu_timer1a_handler},
     [16 + IRQ_ETHERNET] = {.handler = vmac_mcu_enet_handler},
 };
 
