@@ -267,6 +267,8 @@ START_TEST(an_unknown_key_is_named_as_minisign_names_it)
 {
 	struct vmac_minisign_result r;
 	char err[512] = "", id[17], cmd[512], said[512] = "";
+	const char *at;
+	unsigned long long minisign_id, our_id;
 	FILE *p;
 	if (!have_minisign())
 		return;
@@ -286,7 +288,13 @@ START_TEST(an_unknown_key_is_named_as_minisign_names_it)
 	ck_assert_msg(p != NULL, "popen failed");
 	ck_assert_uint_gt(fread(said, 1, sizeof(said) - 1, p), 0);
 	ck_assert_int_ne(pclose(p), 0);
-	ck_assert_msg(strstr(said, id) != NULL, "minisign printed another id than %s: %s", id, said);
+	/* The same number: minisign 0.11 prints it without leading zeros
+	 * ("%" PRIX64), 0.12 and vmac with them ("%016" PRIX64), so an id
+	 * whose first digit is 0 (one key in 16) reads shorter there. */
+	ck_assert_msg((at = strstr(said, "key id in washer.vmb.minisig is ")) != NULL &&
+	                  sscanf(at + strlen("key id in washer.vmb.minisig is "), "%llX", &minisign_id) == 1 &&
+	                  sscanf(id, "%llX", &our_id) == 1 && minisign_id == our_id,
+	              "minisign printed another id than %s: %s", id, said);
 }
 END_TEST
 
