@@ -37,7 +37,7 @@ DEBS += $(PACKAGE_DEBS)
 # programmes, luacheck's settings (vmac lint), vmac test's runner and the
 # shipped driver tests it runs when given none.
 INSTALL_DATA := $(sort $(wildcard stdlib/*.lua scripts/drivers/*.lua scripts/cycles/*/*.lua tests/drivers/*_test.lua)) \
-                scripts/luacheckrc core/vtest/runner.lua core/vtest/report.lua core/vtest/find.lua
+                scripts/luacheckrc $(sort $(wildcard core/vtest/*.lua))
 # The LuaLS annotations (scripts/types/) go to DATADIR/types, the folder a
 # user's .luarc.json names (docs/DRIVERS.md, "Checking a driver").
 INSTALL_TYPES := $(sort $(wildcard scripts/types/*.lua scripts/types/*/*.lua))

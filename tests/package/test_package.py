@@ -344,8 +344,8 @@ def check_purged(files):
 
 def expected_install(prefix):
     """Every file make install should put under DESTDIR for PREFIX /usr."""
-    data = ["scripts/luacheckrc", "core/vtest/runner.lua"]
-    for pattern in ("stdlib/*.lua", "scripts/drivers/*.lua", "scripts/cycles/*/*.lua", "tests/drivers/*_test.lua"):
+    data = ["scripts/luacheckrc"]
+    for pattern in ("core/vtest/*.lua", "stdlib/*.lua", "scripts/drivers/*.lua", "scripts/cycles/*/*.lua", "tests/drivers/*_test.lua"):
         data += [os.path.relpath(p, ROOT) for p in glob.glob(os.path.join(ROOT, pattern))]
     docs = [os.path.basename(p) for p in glob.glob(os.path.join(ROOT, "docs", "*.md"))] + ["README.md"]
     files = ["bin/vmacd", "bin/vmac", "bin/vmac-board", "lib/systemd/system/vmacd.service", "lib/sysusers.d/vmac.conf",
