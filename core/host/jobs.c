@@ -251,7 +251,7 @@ static void copy_in(struct machine *m, const struct job *j)
 
 static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
 {
-	int64_t t_ns = (int64_t)(j->time_s * 1e9);
+	int64_t t_ns = (int64_t)(j->time_s * 1e9 + 0.5); /* the nearest: a replay's t / 1e9 is time_s again */
 	int64_t out_at_ns = j->out_at_s > 0 ? (int64_t)(j->out_at_s * 1e9 + 0.5) : 0; /* with these outputs */
 	int i;
 	/* released with the machine's next period (bus_release_outputs), to
@@ -265,8 +265,8 @@ static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, in
 		m->late++;
 		m->late_ns = now;
 	}
-	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in,
-	             j->out); /* a failed tick too: its inputs replay the failure */
+	bus_rec_tick(bus, m, t_ns, j->nboards < m->nboards ? j->nboards : m->nboards, j->in, j->out,
+	             j->sample_s); /* a failed tick too: its inputs replay the failure */
 	if (j->rc != 0) {
 		bus_driver_failed(bus, m, "", j->err);
 		return;

@@ -50,15 +50,20 @@ void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 	}
 }
 
+/* sample_s: each board's dev.t as the driver got it (bus time, s), kept
+ * in ns as its tick's t is (the nearest: a replay's at / 1e9 is that
+ * double again). */
 void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t, int n, const struct vmac_inputs *in,
-                  const struct vmac_outputs *out)
+                  const struct vmac_outputs *out, const double *sample_s)
 {
 	int i;
 	(void)bus;
 	if (!m->rec)
 		return;
-	for (i = 0; i < n; i++)
-		vmac_rec_tick(m->rec, t, i, i == n - 1, &in[i], &out[i]);
+	for (i = 0; i < n; i++) {
+		double s = sample_s[i] * 1e9;
+		vmac_rec_tick(m->rec, t, i, i == n - 1, &in[i], &out[i], (int64_t)(s >= 0 ? s + 0.5 : s - 0.5));
+	}
 }
 
 void bus_rec_state(struct vmac_bus *bus, struct machine *m, int64_t now, const uint8_t *data, size_t len)

@@ -60,6 +60,8 @@ void vmac_recorder_free(struct vmac_recorder *r)
 /* Two records to a cache line; the ring is 64-byte aligned and holds whole
  * stages. */
 _Static_assert(sizeof(struct vmac_rec_tick) == 32, "a tick record is 32 bytes");
+_Static_assert(offsetof(struct vmac_rec_tick, at) == 24 && offsetof(struct vmac_rec_tick, out_digital) == 30,
+               "a tick record's latch instant and outputs fill the bytes after its inputs");
 
 /* A record goes to the stage, in the recorder, which the bus thread touches
  * every tick anyway; every VMAC_REC_STAGE records the stage goes to the ring
@@ -68,18 +70,19 @@ _Static_assert(sizeof(struct vmac_rec_tick) == 32, "a tick record is 32 bytes");
  * ring's line was last written recorder_s ago, and every machine's ring is
  * on its own pages (docs/PERFORMANCE.md, "The flight recorder"). */
 void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
-                   const struct vmac_outputs *out)
+                   const struct vmac_outputs *out, int64_t at_ns)
 {
 	uint32_t slot = r->ticks_next, k = slot % VMAC_REC_STAGE;
 	struct vmac_rec_tick *t = &r->stage[k];
 	if (++r->ticks_next == r->ticks_cap)
 		r->ticks_next = 0;
-	memset(t, 0, sizeof(*t));
-	t->t_ns = t_ns;
-	t->board = (uint8_t)board;
-	t->last = (uint8_t)last;
+	t->t_ns = t_ns; /* every byte of the record written: no clearing first */
 	t->in = *in;
-	t->out = *out;
+	t->at = vmac_rec_at_encode(at_ns, t_ns);
+	t->out_pwm = out->pwm;
+	t->out_digital = out->digital;
+	t->board = (uint8_t)board & 0x7f;
+	t->last = last != 0;
 	r->ticks_written++;
 	if (k == VMAC_REC_STAGE - 1) {
 		struct vmac_rec_tick *dst = &r->ticks[slot - k];

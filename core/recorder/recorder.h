@@ -35,13 +35,47 @@ enum vmac_rec_kind {
 	VMAC_REC_SWAP,       /* a hot reload: another version took over (name: its version) */
 };
 
+/* One board's part of one tick, 32 bytes (two to a cache line): the
+ * outputs' fields flattened so that the latch instant fits beside them. */
 struct vmac_rec_tick {
 	int64_t t_ns; /* bus time of the tick (the driver's inputs.time * 1e9) */
-	uint8_t board;
-	uint8_t last; /* the last board of its tick */
 	struct vmac_inputs in;
-	struct vmac_outputs out; /* what the driver returned for the board */
+	int32_t at;          /* the inputs' instant (dev.boards[i].t), vmac_rec_at_encode */
+	int16_t out_pwm;     /* what the driver returned for the board: */
+	uint8_t out_digital; /* its outputs (vmac_rec_tick_out) */
+	uint8_t board : 7;
+	uint8_t last : 1; /* the last board of its tick */
 };
+
+/* The inputs' instant of a tick record, relative to its tick: ns after the
+ * tick times 2 (even) while within 2^30 ns (1.07 s) of it, else us times 2
+ * plus 1 (odd, within 2^30 us: 17.9 minutes); VMAC_REC_AT_FAR beyond.
+ * 0: at the tick's own time (dev.t was inputs.time). */
+#define VMAC_REC_AT_FAR INT32_MIN
+#define VMAC_REC_AT_NS_MAX ((int64_t)1 << 30)
+
+static inline int32_t vmac_rec_at_encode(int64_t at_ns, int64_t t_ns)
+{
+	int64_t d = at_ns - t_ns, us;
+	if (d > -VMAC_REC_AT_NS_MAX && d < VMAC_REC_AT_NS_MAX)
+		return (int32_t)(d * 2);
+	us = (d >= 0 ? d + 500 : d - 500) / 1000;
+	return us > -VMAC_REC_AT_NS_MAX && us < VMAC_REC_AT_NS_MAX ? (int32_t)(us * 2 + 1) : VMAC_REC_AT_FAR;
+}
+
+/* The bus time (ns) a record's `at` says, t_ns for VMAC_REC_AT_FAR. */
+static inline int64_t vmac_rec_at_ns(const struct vmac_rec_tick *t)
+{
+	if (t->at == VMAC_REC_AT_FAR)
+		return t->t_ns;
+	return t->at & 1 ? t->t_ns + ((int64_t)t->at - 1) / 2 * 1000 : t->t_ns + t->at / 2;
+}
+
+static inline struct vmac_outputs vmac_rec_tick_out(const struct vmac_rec_tick *t)
+{
+	struct vmac_outputs o = {t->out_digital, t->out_pwm};
+	return o;
+}
 
 struct vmac_rec_event {
 	int64_t t_ns;
@@ -99,9 +133,11 @@ struct vmac_recorder {
 struct vmac_recorder *vmac_recorder_new(double seconds, double period_s);
 void vmac_recorder_free(struct vmac_recorder *r);
 
-/* Bus thread, no allocation. */
+/* Bus thread, no allocation: board's inputs (sampled at bus time at_ns:
+ * dev.boards[board].t; t_ns when they have no instant of their own) and
+ * outputs at the tick at t_ns. */
 void vmac_rec_tick(struct vmac_recorder *r, int64_t t_ns, int board, int last, const struct vmac_inputs *in,
-                   const struct vmac_outputs *out);
+                   const struct vmac_outputs *out, int64_t at_ns);
 /* Bus thread, after a checkpoint of the machine's dev.state (data, len bytes)
  * at bus time t_ns: kept when half the ring's span has passed since the
  * newest kept (or none is), or state_wanted is set, and it fits; no

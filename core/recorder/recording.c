@@ -79,11 +79,17 @@ static json_t *value_json(const struct vmac_value *v)
 	}
 }
 
+/* A board of a tick line; "at" (the inputs' instant, bus time ns) only
+ * when it is not the tick's own time. */
 static json_t *tick_board_json(const struct vmac_rec_tick *t)
 {
 	json_t *in = json_pack("[iiiiii]", (int)t->in.digital, (int)t->in.analog[0], (int)t->in.analog[1],
 	                       (int)t->in.encoder, (int)t->in.applied.digital, (int)t->in.applied.pwm);
-	return json_pack("{s:i,s:o,s:[ii]}", "b", (int)t->board, "in", in, "out", (int)t->out.digital, (int)t->out.pwm);
+	json_t *b =
+	    json_pack("{s:i,s:o,s:[ii]}", "b", (int)t->board, "in", in, "out", (int)t->out_digital, (int)t->out_pwm);
+	if (b && t->at != 0 && t->at != VMAC_REC_AT_FAR)
+		json_object_set_new(b, "at", json_integer(vmac_rec_at_ns(t)));
+	return b;
 }
 
 static json_t *event_json(const struct vmac_rec_event *e)
@@ -296,7 +302,7 @@ static void copy_str(char *dst, size_t cap, json_t *j)
 static int read_tick(json_t *arr, struct vmac_recording_line *l)
 {
 	size_t i;
-	json_t *b;
+	json_t *b, *at;
 	if (!json_is_array(arr) || json_array_size(arr) == 0 || json_array_size(arr) > VMAC_REC_BOARDS)
 		return -1;
 	json_array_foreach(arr, i, b)
@@ -314,6 +320,12 @@ static int read_tick(json_t *arr, struct vmac_recording_line *l)
 		l->in[i].applied.pwm = (int16_t)in[5];
 		l->out[i].digital = (uint8_t)out[0];
 		l->out[i].pwm = (int16_t)out[1];
+		if ((at = json_object_get(b, "at")) != NULL) { /* optional: the tick's time when absent */
+			if (!json_is_integer(at))
+				return -1;
+			l->at_ns[i] = json_integer_value(at);
+			l->has_at |= 1u << i;
+		}
 	}
 	l->nboards = (int)json_array_size(arr);
 	return 0;

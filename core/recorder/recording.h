@@ -25,7 +25,9 @@ struct vmac_recording_line {
 	int nboards; /* ticks */
 	struct vmac_inputs in[VMAC_REC_BOARDS];
 	struct vmac_outputs out[VMAC_REC_BOARDS];
-	struct vmac_rec_event ev; /* events */
+	unsigned has_at;                /* bit i: board i's line has its "at" */
+	int64_t at_ns[VMAC_REC_BOARDS]; /* its inputs' instant, bus time (dev.boards[i].t x 1e9) */
+	struct vmac_rec_event ev;       /* events */
 };
 
 struct vmac_recording {

@@ -1,7 +1,7 @@
 /* Replay of a flight recording (docs/RECORDING.md, "Replay"): the
- * recorded inputs, operator input and timing fed to a driver (the version
- * recorded, or another one) on the virtual clock, tick by tick, through
- * the same driver API the host calls; the first output that differs from
+ * recorded inputs, their instants (dev.t), operator input and timing fed
+ * to a driver (the version recorded, or another one) on the virtual clock,
+ * tick by tick, through the same driver API the host calls; the first output that differs from
  * the recording, or a failure, is reported with its tick, its inputs and
  * both outputs. No bus, no boards: the recording is the world. */
 #include "replay.h"
@@ -247,11 +247,17 @@ static int replay_tick(struct replay *p, size_t i, double t)
 	struct vmac_outputs out[VMAC_DRIVER_MAX_BOARDS], *outp[VMAC_DRIVER_MAX_BOARDS];
 	const char *failure = NULL;
 	int recorded_fail = recorded_failure(&p->rec, i, &failure), b;
+	double at[VMAC_DRIVER_MAX_BOARDS];
 	memset(out, 0, sizeof(out));
 	for (b = 0; b < p->rec.nboards; b++) {
 		in[b] = &l->in[b < l->nboards ? b : 0];
 		outp[b] = &out[b];
+		/* dev.boards[b].t as recorded; a board without "at" (and every
+		 * board of a recording from before latch times) at the tick's time */
+		at[b] = b < l->nboards && (l->has_at >> b & 1) ? (double)l->at_ns[b] / 1e9 : t;
 	}
+	if (l->has_at)
+		vmac_driver_sample_times(p->d, at, p->rec.nboards);
 	p->ticks++;
 	if (vmac_driver_tick(p->d, t, in, outp, p->err, sizeof(p->err)) != 0) {
 		say(&p->r, "  FAILS at tick %zu (%.6f s)%s: %s\n", p->ticks, t,

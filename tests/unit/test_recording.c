@@ -4,8 +4,11 @@
  * value type, and the header's fields; a recording that lost its first ticks
  * says so; every truncation, every flipped byte and a file that is no
  * recording are refused with the reason; a recording without the driver's
- * source reads back without one. */
+ * source reads back without one; each board's latch instant (`at`) reads
+ * back as recorded, and a tick line without one, or with keys this reader
+ * does not know, reads as before. */
 #include <check.h>
+#include <sodium.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -60,7 +63,8 @@ static struct vmac_recorder *recorded(uint32_t nticks)
 	for (i = 0; i < nticks; i++) {
 		struct vmac_inputs in = inputs_of(i);
 		struct vmac_outputs out = outputs_of(i);
-		vmac_rec_tick(r, (int64_t)(i + 1) * PERIOD_NS, 0, 1, &in, &out);
+		int64_t t = (int64_t)(i + 1) * PERIOD_NS;
+		vmac_rec_tick(r, t, 0, 1, &in, &out, t);
 	}
 	return r;
 }
@@ -165,7 +169,7 @@ START_TEST(a_wrapped_recording_carries_the_oldest_state_its_ring_covers)
 		struct vmac_inputs in = inputs_of(i);
 		struct vmac_outputs out = outputs_of(i);
 		int64_t t = (int64_t)(i + 1) * PERIOD_NS;
-		vmac_rec_tick(r, t, 0, 1, &in, &out);
+		vmac_rec_tick(r, t, 0, 1, &in, &out, t);
 		if (i == 100)
 			vmac_rec_state(r, t, a, sizeof(a));
 		if (i == 110) /* 1 s later: within half the span of a, not kept */
@@ -333,7 +337,7 @@ START_TEST(everything_recorded_reads_back_as_it_was)
 			in[b].applied.pwm = b ? -1000 : 1000;
 			out[b].digital = (uint8_t)(0x40 >> b);
 			out[b].pwm = (int16_t)(b ? -i : i * 100);
-			vmac_rec_tick(r, t, b, b == 1, &in[b], &out[b]);
+			vmac_rec_tick(r, t, b, b == 1, &in[b], &out[b], t);
 		}
 		e = vmac_rec_event(r, t + 50000000, VMAC_REC_INPUT);
 		snprintf(e->name, sizeof(e->name), "input_%d", i);
@@ -582,6 +586,146 @@ START_TEST(a_machine_or_driver_that_is_no_name_is_refused)
 }
 END_TEST
 
+/* The latch instants a tick record keeps in its 32 bits (recorder.h,
+ * vmac_rec_at_encode): to the nanosecond within 2^30 ns of the tick, to
+ * the microsecond beyond, none past 2^30 us; 0 (the tick's own time) and
+ * none are left out of the file. */
+static const struct {
+	int64_t d;    /* at - t, ns */
+	int64_t want; /* what reads back, at - t, ns */
+	int in_file;  /* the file has "at" */
+} latch_cases[] = {
+    {0, 0, 0},
+    {-1, -1, 1},
+    {-137003, -137003, 1},                                     /* a reply 137 us before the tick */
+    {-200000000, -200000000, 1},                               /* a period of 200 ms before */
+    {1, 1, 1},                                                 /* a latch a clock's error after the tick */
+    {-(((int64_t)1 << 30) - 1), -(((int64_t)1 << 30) - 1), 1}, /* the last to the ns */
+    {((int64_t)1 << 30) - 1, ((int64_t)1 << 30) - 1, 1},
+    {-((int64_t)1 << 30), -1073742000, 1}, /* the first to the us (1073741.824 us) */
+    {-4000000400LL, -4000000000LL, 1},     /* a 4 s period: to the us */
+    {1500000600LL, 1500001000LL, 1},
+    {-1073741823000LL, -1073741823000LL, 1}, /* the last the us reach */
+    {-1073741824000LL, 0, 0},                /* beyond 17.9 minutes: none */
+    {INT64_MIN / 2, 0, 0},
+};
+#define NLATCH (sizeof(latch_cases) / sizeof(latch_cases[0]))
+
+START_TEST(each_boards_latch_instant_reads_back_as_recorded)
+{
+	struct vmac_recorder *r = recorded(0);
+	struct vmac_recording rec;
+	size_t len, l, k = 0;
+	char *text;
+	uint32_t i;
+
+	r->nboards = 2;
+	snprintf(r->boards[1].name, sizeof(r->boards[1].name), "w-2");
+	for (i = 0; i < NLATCH; i++) {
+		struct vmac_inputs in = inputs_of(i);
+		struct vmac_outputs out = outputs_of(i);
+		int64_t t = 3600 * NS_PER_S + (int64_t)(i + 1) * PERIOD_NS + 123456789; /* an hour in, odd ns */
+		vmac_rec_tick(r, t, 0, 0, &in, &out, t + latch_cases[i].d);
+		vmac_rec_tick(r, t, 1, 1, &in, &out, t - 5000); /* board 1 replied 5 us before the tick */
+	}
+	for (i = 0; i < NLATCH; i++) {
+		const struct vmac_rec_tick *t = vmac_rec_tick_at(r, 2 * i);
+		ck_assert_msg(vmac_rec_at_ns(t) - t->t_ns == latch_cases[i].want,
+		              "a latch %lld ns from its tick is kept as %lld ns, not %lld", (long long)latch_cases[i].d,
+		              (long long)(vmac_rec_at_ns(t) - t->t_ns), (long long)latch_cases[i].want);
+		ck_assert_msg(t->board == 0 && !t->last && vmac_rec_tick_out(t).pwm == outputs_of(i).pwm &&
+		                  vmac_rec_tick_out(t).digital == outputs_of(i).digital &&
+		                  t->in.encoder == inputs_of(i).encoder,
+		              "tick %u: the record's board, last, inputs or outputs changed beside its latch", i);
+		t = vmac_rec_tick_at(r, 2 * i + 1);
+		ck_assert_msg(t->board == 1 && t->last && vmac_rec_at_ns(t) == t->t_ns - 5000,
+		              "tick %u: board 1's record is not the last, at 5 us before", i);
+	}
+	text = round_trip(r, NULL, &rec, &len);
+	ck_assert_uint_eq(rec.nticks, NLATCH);
+	for (l = 0; l < rec.nlines; l++) {
+		const struct vmac_recording_line *line = &rec.lines[l];
+		if (!line->is_tick)
+			continue;
+		ck_assert_msg(line->nboards == 2 && (line->has_at & 2) && line->at_ns[1] == line->t_ns - 5000,
+		              "tick line %zu: board 1's at is not 5 us before its tick", k);
+		ck_assert_msg(!!(line->has_at & 1) == latch_cases[k].in_file,
+		              "tick line %zu (a latch %lld ns from the tick): its at is %s the file", k,
+		              (long long)latch_cases[k].d, latch_cases[k].in_file ? "not in" : "in");
+		ck_assert_msg(!(line->has_at & 1) || line->at_ns[0] - line->t_ns == latch_cases[k].want,
+		              "tick line %zu: at reads back %lld ns from the tick, not %lld", k,
+		              (long long)(line->at_ns[0] - line->t_ns), (long long)latch_cases[k].want);
+		ck_assert_msg(line->out[0].pwm == outputs_of((uint32_t)k).pwm &&
+		                  line->in[1].encoder == inputs_of((uint32_t)k).encoder,
+		              "tick line %zu: the inputs or outputs beside at changed", k);
+		k++;
+	}
+	ck_assert_msg(strstr(text, "\"at\":3600223456789") == NULL && strstr(text, "\"at\":3600223451789") != NULL,
+	              "the first tick's board 0 (at its tick's time) has an at, or board 1's is not 5 us before");
+	vmac_recording_free(&rec);
+	free(text);
+	vmac_recorder_free(r);
+}
+END_TEST
+
+/* body (the header and record lines) with its end line: the count and the
+ * hash a writer gives. malloc'd. */
+static char *with_end(const char *body, int lines)
+{
+	unsigned char hash[crypto_generichash_BYTES];
+	char hex[2 * crypto_generichash_BYTES + 1];
+	size_t n = strlen(body) + 256;
+	char *text = malloc(n);
+	ck_assert_ptr_nonnull(text);
+	crypto_generichash(hash, sizeof(hash), (const unsigned char *)body, strlen(body), NULL, 0);
+	sodium_bin2hex(hex, sizeof(hex), hash, sizeof(hash));
+	snprintf(text, n, "%s{\"end\":{\"lines\":%d,\"blake2b\":\"%s\"}}\n", body, lines, hex);
+	return text;
+}
+
+#define LATCH_HEADER                                                                                                   \
+	"{\"format\":\"vmac-recording\",\"version\":1,\"machine\":\"p-1\",\"driver\":\"press\",\"attach_t\":0,"        \
+	"\"complete\":true,\"boards\":[{\"name\":\"p-1\",\"minor\":0},{\"name\":\"p-2\",\"minor\":1}],"                \
+	"\"later\":{\"x\":1}}\n"
+#define LATCH_IN "\"in\":[1,2,3,4,5,6],\"out\":[0,0]"
+
+/* Recordings from before latch times (no at) and from a later writer
+ * (keys this one does not know, in the header, a line and a board) read;
+ * an at that is not an integer is damage. */
+START_TEST(a_tick_without_at_or_with_unknown_keys_reads_and_a_bad_at_is_refused)
+{
+	static const char *const good =
+	    LATCH_HEADER "{\"t\":16000000,\"tick\":[{\"b\":0," LATCH_IN "},{\"b\":1," LATCH_IN "}]}\n"
+	                 "{\"t\":32000000,\"tick\":[{\"b\":0," LATCH_IN ",\"at\":31999000,\"how\":\"instant\"},"
+	                 "{\"b\":1," LATCH_IN ",\"at\":31999001}],\"why\":[1,2]}\n";
+	static const char *const bad[] = {"\"at\":\"soon\"", "\"at\":3.5e7", "\"at\":null", "\"at\":[1]"};
+	struct vmac_recording rec;
+	char err[256] = "", body[1024], *text = with_end(good, 2);
+	size_t i;
+
+	ck_assert_msg(vmac_recording_read(text, strlen(text), &rec, err, sizeof(err)) == 0,
+	              "a recording with unknown keys and ticks without at was refused: %s", err);
+	ck_assert_msg(rec.nticks == 2 && rec.lines[0].has_at == 0, "a tick without at read one");
+	ck_assert_msg(rec.lines[1].has_at == 3 && rec.lines[1].at_ns[0] == 31999000 &&
+	                  rec.lines[1].at_ns[1] == 31999001,
+	              "the second tick's at did not read back: %u %lld %lld", rec.lines[1].has_at,
+	              (long long)rec.lines[1].at_ns[0], (long long)rec.lines[1].at_ns[1]);
+	vmac_recording_free(&rec);
+	free(text);
+	for (i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+		snprintf(body, sizeof(body), LATCH_HEADER "{\"t\":16000000,\"tick\":[{\"b\":0," LATCH_IN ",%s}]}\n",
+		         bad[i]);
+		text = with_end(body, 1);
+		err[0] = 0;
+		ck_assert_msg(vmac_recording_read(text, strlen(text), &rec, err, sizeof(err)) == -1,
+		              "a tick whose board has %s was read", bad[i]);
+		ck_assert_msg(strstr(err, "line 2 is not a tick") != NULL, "the refusal of %s does not say where: %s",
+		              bad[i], err);
+		free(text);
+	}
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("recording");
@@ -598,6 +742,8 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_file_that_is_no_recording_or_of_another_format_is_refused);
 	tcase_add_test(tc, a_recording_without_the_source_reads_without_one);
 	tcase_add_test(tc, a_machine_or_driver_that_is_no_name_is_refused);
+	tcase_add_test(tc, each_boards_latch_instant_reads_back_as_recorded);
+	tcase_add_test(tc, a_tick_without_at_or_with_unknown_keys_reads_and_a_bad_at_is_refused);
 	suite_add_tcase(s, tc);
 	return s;
 }
