@@ -251,13 +251,17 @@ static void send_sync(struct vmac_bus *bus)
 	m.seq = ++bus->sync_seq;
 	m.u.sync.prev_tx_ns = bus_sync_prev(bus, 0, m.seq);
 	send_sync_sealed(bus);
-	/* Plain, always (one short frame): unkeyed boards sync before they
-	 * announce, so the host cannot know whether any listens. */
-	if ((p = queue_group(bus, &m))) {
+	/* Plain, on an open bus only: unkeyed boards sync before they
+	 * announce, so the host cannot know whether any listens. On an
+	 * enrolled bus no board it serves takes one (a keyed board takes the
+	 * sealed SYNC only, an unkeyed one is never served): it would cost a
+	 * datagram and a transmit stamp a tick for nobody. */
+	if (vmac_config_trust_open(&bus->cfg) && (p = queue_group(bus, &m))) {
 		p->tx_cookie = bus_sync_cookie(0, m.seq);
 		bus->sync_tx = bus->ntx - 1;
-		bus->counters.syncs++;
 	}
+	if (bus->sync_tx >= 0 || bus->nsync_auth > 0)
+		bus->counters.syncs++;
 }
 
 /* REGISTER goes out at once, whatever the slot: a board is not in the

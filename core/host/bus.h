@@ -165,7 +165,7 @@ struct vmac_bus_counters {
 	uint64_t malformed_by_reason[16];
 	uint64_t late_replies; /* right sequence, but after the deadline (a miss) */
 	uint64_t misses, drops, discoveries, announces;
-	uint64_t syncs;        /* SYNC frames sent (clock_sync_ms) */
+	uint64_t syncs;        /* times the host sent its clock (clock_sync_ms): a plain SYNC, sealed ones, or both */
 	uint64_t syncs_sealed; /* sealed SYNC frames sent (one per chunk of offsets holding a keyed board) */
 	uint64_t sync_stamps;  /* the kernel's transmit stamps of SYNC frames, each named in the next (two-step) */
 	uint64_t misses_host;  /* of misses: the host's own (a request the kernel refused to send) */

@@ -19,6 +19,9 @@ from frames import (CLOCK_ARRIVAL, CLOCK_STATES, CYCLIC_DUE, DEV, DISCOVER, OFFS
                     TIMED, UPDATE, cyclic, frame, latch, parse, register, u16)
 
 SYNC_SETTINGS = {"clock_sync_ms": 1, "slice_us": 200, "slices_per_slot": 5}
+# vmacd as the SYNC source of unkeyed boards the test serves: only an open
+# bus carries the plain SYNC (docs/PROTOCOL.md, "The sealed SYNC").
+SYNC_SOURCE = dict(SYNC_SETTINGS, bus_trust="open")
 WATCHDOG_MS = 60000  # the test's session outlives any stall of this shared machine
 AHEAD_NS = 50000000  # instants 50 ms after the send: the frame is there long before
 FRAMES = 30
@@ -180,7 +183,7 @@ def two_boards_at_one_instant(t, clocks, count=None):
     host = Host(t.bus)
     try:
         host.join(names)
-        t.host(settings=SYNC_SETTINGS)  # SYNC only: it never sees the boards, already known
+        t.host(settings=SYNC_SOURCE)  # SYNC only: it never sees the boards, already known
         for name, (board, _) in boards.items():
             board.wait_line(r"^%s: clock locked" % name, 60, what="%s's clock locked" % name)
         instants = []
@@ -287,7 +290,7 @@ def test_a_board_whose_clock_is_lost_falls_back_to_arrival_and_says_so(t):
     host = Host(t.bus)
     try:
         host.join(["axis-d"])
-        vmacd = t.host(settings=SYNC_SETTINGS)
+        vmacd = t.host(settings=SYNC_SOURCE)
         board.wait_line(r"^axis-d: clock locked", 60, what="the clock locked")
         for _ in range(FRAMES):  # until one is served at its instant (a busy machine may unlock a window)
             at = time.monotonic_ns() + AHEAD_NS
