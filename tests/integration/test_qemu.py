@@ -375,6 +375,18 @@ def test_a_keyed_qemu_board_never_attaches_to_a_host_without_its_key(t):
     assert not board.find_lines(r"^klights-1: state known"), "the keyed board took a session"
 
 
+def synced_qemu_board(t):
+    """A keyed QEMU lights board, lights-1, running under vmacd with
+    clock_sync_ms 1 on raw Ethernet: (board, host)."""
+    image = firmware_image(t)
+    link = Link(t)
+    board = qemu_board(t, image, link, "lights", "lights-1")
+    settings = dict(RELAXED, clock_sync_ms=1, slice_us=200, slices_per_slot=5)
+    host = t.host(bus="eth:" + link.bridge, settings=settings)
+    host.wait_running(["lights-1"], timeout_s=30)
+    return board, host
+
+
 def test_a_qemu_board_feeds_its_clock_from_sync(t):
     """SYNC from vmacd (clock_sync_ms 1, 1 ms slots) reaches the firmware's
     clock, stamped on SysTick's free-running count by the receive interrupt
@@ -383,12 +395,7 @@ def test_a_qemu_board_feeds_its_clock_from_sync(t):
     bridge to the taps gives transmit stamps) and nothing malformed, and
     the board is served as ever. That it locks and then acts at the
     instants: the test after this one."""
-    image = firmware_image(t)
-    link = Link(t)
-    board = qemu_board(t, image, link, "lights", "lights-1")
-    settings = dict(RELAXED, clock_sync_ms=1, slice_us=200, slices_per_slot=5)
-    host = t.host(bus="eth:" + link.bridge, settings=settings)
-    host.wait_running(["lights-1"], timeout_s=30)
+    board, host = synced_qemu_board(t)
     board.wait_line(r"^lights-1: clock locking, offset [-+][0-9.]+ s, drift ", 30, what="the clock's first SYNC")
     served = host.device("lights-1")["served"]
     host.wait_status(lambda s: host.device("lights-1", s)["served"] > served + 20, 30, "20 more periods",
@@ -455,12 +462,7 @@ def test_a_qemu_boards_clock_locks_and_it_acts_at_the_instants(t):
     to happen, not to last: on this shared VM QEMU's path from the tap to
     the firmware moves by several microseconds from one window to the
     next, at times past the clock's 20 us bound for leaving locked."""
-    image = firmware_image(t)
-    link = Link(t)
-    board = qemu_board(t, image, link, "lights", "lights-1")
-    settings = dict(RELAXED, clock_sync_ms=1, slice_us=200, slices_per_slot=5)
-    host = t.host(bus="eth:" + link.bridge, settings=settings)
-    host.wait_running(["lights-1"], timeout_s=30)
+    board, host = synced_qemu_board(t)
     board.wait_line(r"^lights-1: clock locked, offset ", 60, what="the clock locked")
     board.wait_line(r"^lights-1: acting at host instants$", 30, what="acting at host instants")
     seen = {"locked": 0, "timed": None}
