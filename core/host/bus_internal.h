@@ -543,6 +543,7 @@ void bus_end_probations(struct vmac_bus *bus, int64_t now);
 
 /* record.c: the flight recorder's bus side (no allocation) */
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns);
+void bus_rec_join(struct vmac_bus *bus, struct machine *m);
 void bus_rec_tick(struct vmac_bus *bus, struct machine *m, int64_t t_ns, int n, const struct vmac_inputs *in,
                   const struct vmac_outputs *out, const double *sample_s);
 /* realtime.c, at the bus thread's start. */

@@ -297,6 +297,7 @@ static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
 	}
 	d->scheduled = 1;
 	m->board[m->nboards++] = bus_slot_of(bus, d);
+	bus_rec_join(bus, m);
 	d->state = DEV_REGISTERING;
 	d->reg_step = REG_REGISTER;
 	d->register_sent = 0;

@@ -32,6 +32,23 @@ static void describe(struct vmac_bus *bus, struct machine *m)
 	}
 }
 
+/* A board joined m after its recorder was described: named in the
+ * recording's header too, at the index its ticks carry it at, or a
+ * recording whose ticks grew a board would not read back ("a tick of
+ * another machine"). A machine never loses one board alone (its boards
+ * are dropped together), so the list only grows. */
+void bus_rec_join(struct vmac_bus *bus, struct machine *m)
+{
+	struct vmac_recorder *r = m->rec;
+	const struct device *b;
+	if (!r || r->nboards >= VMAC_REC_BOARDS || r->nboards >= m->nboards)
+		return;
+	b = &bus->dev[m->board[r->nboards]];
+	snprintf(r->boards[r->nboards].name, sizeof(r->boards[r->nboards].name), "%s", b->ann.board);
+	r->boards[r->nboards].minor = b->ann.minor;
+	r->nboards++;
+}
+
 void bus_rec_attach(struct vmac_bus *bus, struct machine *m, int64_t t_ns)
 {
 	struct vmac_rec_event *e;

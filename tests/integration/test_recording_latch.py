@@ -22,7 +22,8 @@ from test_recording import http_post, vmac
 # A machine of two boards whose outputs say how long before the tick each
 # board's inputs were sampled: pwm the lag in microseconds, do0 the parity
 # of the lag in nanoseconds (so a replay that is off by 1 ns differs), do1
-# that dev.t is the primary's dev.boards[1].t.
+# that dev.t is the primary's dev.boards[1].t. A tick before the second
+# board has joined sets the first board's outputs only.
 LATCHPROBE = """local driver = {
 	name = "latchprobe", version = "1",
 	io = { lag_a = { "pwm", board = 0 }, odd_a = { "do0", board = 0 }, same = { "do1", board = 0 },
@@ -34,7 +35,9 @@ local function lag(time, t)
 end
 function driver.tick(dev, inputs)
 	dev.out.lag_a, dev.out.odd_a = lag(inputs.time, dev.t)
-	dev.out.lag_b, dev.out.odd_b = lag(inputs.time, dev.boards[2].t)
+	if dev.boards[2] then -- the machine begins with its first board alone
+		dev.out.lag_b, dev.out.odd_b = lag(inputs.time, dev.boards[2].t)
+	end
 	dev.out.same = dev.t == dev.boards[1].t
 end
 return driver
