@@ -304,6 +304,21 @@ def test_every_module_has_its_place(t=None):
     assert not failures, failures_message("modules and their places in the docs", failures)
 
 
+def test_no_merge_left_half_done(t=None):
+    """No file the project wrote holds a merge's conflict markers (one was
+    committed in README.md once, and every other check passed it)."""
+    marker = re.compile(r"^(<{7} |={7}$|>{7} )", re.M)
+    failures = []
+    for rel in TEXT_FILES:
+        try:
+            text = read(rel)
+        except (OSError, UnicodeDecodeError):
+            continue
+        for m in marker.finditer(text):
+            failures.append("%s:%d: %s" % (rel, line_of(text, m.start()), m.group(0).strip()))
+    assert not failures, failures_message("conflict markers left by a merge", failures)
+
+
 def run_standalone(names):
     """Run every test_* function of a module's globals names, without a
     host or run.py (the checks of files: this one, test_types.py); exit 1
