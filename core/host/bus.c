@@ -50,7 +50,7 @@ static int tx_max(const struct vmac_bus *bus)
 	       (int)bus->cfg.slices_per_slot;
 }
 
-static struct vmac_packet *tx_slot(struct vmac_bus *bus)
+struct vmac_packet *bus_tx_slot(struct vmac_bus *bus)
 {
 	if (bus->ntx >= tx_max(bus))
 		bus_flush(bus);           /* cannot happen: see the size in vmac_bus_new */
@@ -61,7 +61,7 @@ static struct vmac_packet *tx_slot(struct vmac_bus *bus)
 /* Queue a request for d. expect_reply: the deadline applies to it. */
 void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int expect_reply)
 {
-	struct vmac_packet *p = tx_slot(bus);
+	struct vmac_packet *p = bus_tx_slot(bus);
 	int n;
 	if (!p)
 		return;
@@ -88,42 +88,6 @@ void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int e
 	}
 }
 
-/* A keyed board that holds a session and an offset (its slot: v2 cyclic,
- * or reading TIMED UPDATEs): the sealed SYNC carries a MAC for it. */
-static int sync_keyed(const struct vmac_bus *bus, const struct device *d)
-{
-	return d->keyed && bus_holds_offset(bus, d) &&
-	       (d->state == DEV_REGISTERING || d->state == DEV_RUNNING || d->state == DEV_TO_SLEEP);
-}
-
-/* The SYNC frames of this batch get the host's time as late as the host
- * can take it, the send itself follows; the sealed ones are sealed after
- * the stamp (their MACs cover it), one SipHash per keyed board: a delay
- * common to every board of the frame (docs/TIME.md, "Trust"), and which
- * the next frame's prev_tx_ns, the kernel's stamp of this one, leaves out
- * (sync.c). */
-static void sync_stamp(struct vmac_bus *bus)
-{
-	uint64_t now = (uint64_t)bus_now(bus);
-	int k;
-	if (bus->sync_tx >= 0) {
-		uint8_t *f = bus->tx[bus->sync_tx].data;
-		vmac_proto_sync_stamp(f, now);
-		bus_sync_sent(bus, 0, (uint16_t)(f[4] << 8 | f[5]), (int64_t)now);
-	}
-	bus->sync_tx = -1;
-	for (k = 0; k < bus->nsync_auth; k++) {
-		uint8_t *f = bus->tx[bus->sync_auth_tx[k]].data;
-		uint32_t first = (uint32_t)(f[VMAC_SYNC_AUTH_HEAD_LEN - 2] << 8 | f[VMAC_SYNC_AUTH_HEAD_LEN - 1]), i;
-		vmac_proto_sync_stamp(f, now);
-		bus_sync_sent(bus, 1 + first / VMAC_SYNC_AUTH_MACS_MAX, (uint16_t)(f[4] << 8 | f[5]), (int64_t)now);
-		for (i = 0; i < f[12]; i++)
-			if (sync_keyed(bus, &bus->dev[first + i]))
-				vmac_proto_sync_seal(f, i, bus->dev[first + i].to_board);
-	}
-	bus->nsync_auth = 0;
-}
-
 void bus_flush(struct vmac_bus *bus)
 {
 	int64_t sent_ns;
@@ -132,7 +96,7 @@ void bus_flush(struct vmac_bus *bus)
 	if (bus->ntx == 0)
 		return;
 	if (had_sync)
-		sync_stamp(bus);
+		bus_sync_stamp(bus);
 	if (bus->virt) {
 		bus->link.send(bus->link.ctx, bus->tx, bus->ntx);
 		sent = bus->ntx;
@@ -172,9 +136,9 @@ void bus_send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason, i
 /* A system frame to every board (the discovery group; broadcast on raw
  * Ethernet, from the interface's own MAC) queued: its slot, or NULL when
  * there is none or it did not encode. */
-static struct vmac_packet *queue_group(struct vmac_bus *bus, const struct vmac_msg *m)
+struct vmac_packet *bus_queue_group(struct vmac_bus *bus, const struct vmac_msg *m)
 {
-	struct vmac_packet *p = tx_slot(bus);
+	struct vmac_packet *p = bus_tx_slot(bus);
 	int n;
 	if (!p)
 		return NULL;
@@ -202,66 +166,8 @@ static void send_discover(struct vmac_bus *bus)
 	bus_nonce_next(bus);
 	m.u.discover.has_nonce = 1;
 	memcpy(m.u.discover.nonce, bus->nonce, sizeof(m.u.discover.nonce));
-	if (queue_group(bus, &m))
+	if (bus_queue_group(bus, &m))
 		bus->counters.discoveries++;
-}
-
-/* The sealed SYNC frames: one per chunk of offsets that holds a keyed
- * board, its MACs left to bus_flush (sync_stamp). */
-static void send_sync_sealed(struct vmac_bus *bus)
-{
-	uint32_t first, i, count;
-	bus->sync_counter++; /* one a SYNC, whether any chunk goes: never repeated in a run */
-	for (first = 0; first < bus->nused; first += VMAC_SYNC_AUTH_MACS_MAX) {
-		struct vmac_packet *p;
-		int n;
-		count = bus->nused - first < VMAC_SYNC_AUTH_MACS_MAX ? bus->nused - first : VMAC_SYNC_AUTH_MACS_MAX;
-		for (i = 0; i < count && !sync_keyed(bus, &bus->dev[first + i]); i++)
-			;
-		if (i == count || !(p = tx_slot(bus)))
-			continue;
-		n = vmac_proto_sync_begin_auth(p->data, sizeof(p->data), bus->sync_seq, bus->sync_counter,
-		                               (uint16_t)first, count);
-		if (n <= 0) {
-			bus->ntx--;
-			continue;
-		}
-		p->len = (size_t)n;
-		p->addr = bus->tr.group;
-		memset(p->mac, 0, sizeof(p->mac));
-		p->tx_cookie = bus_sync_cookie(1 + first / VMAC_SYNC_AUTH_MACS_MAX, bus->sync_seq);
-		vmac_proto_sync_set_prev(p->data,
-		                         bus_sync_prev(bus, 1 + first / VMAC_SYNC_AUTH_MACS_MAX, bus->sync_seq));
-		bus->sync_auth_tx[bus->nsync_auth++] = (int)(p - bus->tx);
-		bus->counters.syncs_sealed++;
-	}
-}
-
-/* SYNC to the group (docs/TIME.md): queued before this tick's CYCLIC
- * frames, its host time written by bus_flush just before the batch is
- * handed to the kernel. No allocation, no log: it runs on every tick due. */
-static void send_sync(struct vmac_bus *bus)
-{
-	struct vmac_packet *p;
-	struct vmac_msg m;
-	memset(&m, 0, sizeof(m));
-	m.version = 2;
-	m.channel = VMAC_CH_SYSTEM;
-	m.op = VMAC_SYS_SYNC;
-	m.seq = ++bus->sync_seq;
-	m.u.sync.prev_tx_ns = bus_sync_prev(bus, 0, m.seq);
-	send_sync_sealed(bus);
-	/* Plain, on an open bus only: unkeyed boards sync before they
-	 * announce, so the host cannot know whether any listens. On an
-	 * enrolled bus no board it serves takes one (a keyed board takes the
-	 * sealed SYNC only, an unkeyed one is never served): it would cost a
-	 * datagram and a transmit stamp a tick for nobody. */
-	if (vmac_config_trust_open(&bus->cfg) && (p = queue_group(bus, &m))) {
-		p->tx_cookie = bus_sync_cookie(0, m.seq);
-		bus->sync_tx = bus->ntx - 1;
-	}
-	if (bus->sync_tx >= 0 || bus->nsync_auth > 0)
-		bus->counters.syncs++;
 }
 
 /* REGISTER goes out at once, whatever the slot: a board is not in the
@@ -315,7 +221,7 @@ static int cyclic_frame(struct vmac_bus *bus, int keyed, uint32_t c, uint32_t pe
 	} else if (*tx >= 0) {
 		return *tx;
 	}
-	p = tx_slot(bus);
+	p = bus_tx_slot(bus);
 	if (!p)
 		return -1;
 	if (count > per)
@@ -507,7 +413,7 @@ int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations)
 	}
 	if (bus->cfg.clock_sync_ms > 0 && now >= bus->next_sync_ns) {
 		int64_t period = (int64_t)bus->cfg.clock_sync_ms * 1000000;
-		send_sync(bus);
+		bus_send_sync(bus);
 		bus->next_sync_ns += period;
 		if (bus->next_sync_ns <= now) /* late ticks: on from now, no burst */
 			bus->next_sync_ns = now + period;

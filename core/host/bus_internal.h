@@ -417,26 +417,30 @@ struct vmac_bus {
 /* bus.c */
 int64_t bus_now(const struct vmac_bus *bus);
 double bus_time(const struct vmac_bus *bus);
+/* A packet of this flush's batch to fill (bus_flush first when full). */
+struct vmac_packet *bus_tx_slot(struct vmac_bus *bus);
+/* A system frame to every board (the discovery group; broadcast on raw
+ * Ethernet) queued: its packet, or NULL when it did not encode. */
+struct vmac_packet *bus_queue_group(struct vmac_bus *bus, const struct vmac_msg *m);
 void bus_queue(struct vmac_bus *bus, struct device *d, struct vmac_msg *m, int expect_reply);
 void bus_flush(struct vmac_bus *bus);
 void bus_send_shutdown(struct vmac_bus *bus, struct device *d, uint8_t reason, int expect_reply);
 void bus_begin_stop(struct vmac_bus *bus, int64_t now);
 int bus_tick(struct vmac_bus *bus, int64_t now, uint64_t expirations);
 
-/* sync.c: the two-step SYNC. Stream 0 is the plain SYNC, 1 + c the
+/* sync.c: the SYNC frames and the two-step. Stream 0 is the plain SYNC, 1 + c the
  * sealed chunk c (offsets from c x VMAC_SYNC_AUTH_MACS_MAX). */
 struct sync_stream {
 	uint16_t seq;    /* its last SYNC frame stamped (host_ns) */
 	uint8_t stamped; /* tx_ns is that frame's transmit time, from the kernel */
 	int64_t host_ns, tx_ns;
 };
-/* The cookie a stream's frame of seq asks the transport's stamp with. */
-int32_t bus_sync_cookie(uint32_t stream, uint16_t seq);
-/* prev_tx_ns for the stream's frame of seq: the transmit time of its frame
- * of seq - 1 when the kernel gave it, else 0. */
-uint64_t bus_sync_prev(const struct vmac_bus *bus, uint32_t stream, uint16_t seq);
-/* The stream's frame of seq stamped host_ns, about to go. */
-void bus_sync_sent(struct vmac_bus *bus, uint32_t stream, uint16_t seq, int64_t host_ns);
+/* This tick's SYNC frames queued (the tick they fall due in), before its
+ * CYCLIC frames. */
+void bus_send_sync(struct vmac_bus *bus);
+/* The queued SYNC frames stamped with the host's time, then sealed: the
+ * last thing before the batch goes to the kernel (bus_flush). */
+void bus_sync_stamp(struct vmac_bus *bus);
 /* The transmit stamps waiting on the socket, read (never blocking) and
  * kept for the next frames; all: whatever waits in the error queue, even
  * with no SYNC awaiting its stamp (epoll said EPOLLERR). */
