@@ -49,6 +49,7 @@ PERIOD_NS = 16000000
 # instant (its counter is CLOCK_MONOTONIC itself) within the clock's error,
 # a microsecond or less once locked (TIME.md).
 LATCH_SLACK_NS = 5000
+LATCH_BEHIND_NS = 1000000000  # the host's bound on a plausible latch (core/host/timed.c)
 IO_LATCH = re.compile(r"^\S+ latch (\S+) true=(-?\d+) host=\d+ ")
 
 
@@ -203,13 +204,16 @@ def test_vmacd_records_the_instants_its_timed_boards_latched_at(t):
     period_ns = round(header["period_s"] * 1e9)
     last = ticks[-int(1e9 // period_ns):]  # the last second
     assert len(last) >= 30, "only %d ticks in the recording's last second" % len(last)
-    # The tick runs on the primary's reply: its latch is less than a period
-    # before; the other board's reply may come after that, and the tick then
-    # has its inputs of the period before (DRIVERS.md, dev.boards[i].t).
+    # The tick runs on the primary's reply, after its latch; the other
+    # board's reply may come after that, and the tick then has its inputs
+    # of the period before (DRIVERS.md, dev.boards[i].t). How long after is
+    # the machine's load (a bus thread or a worker held off the CPU), so
+    # the bound is the host's own: a latch more than LATCH_BEHIND_NS before
+    # its reply is not believed (core/host/timed.c).
     for tick in last:
         ats = [b.get("at") for b in tick["tick"]]
         assert len(ats) == 2 and None not in ats, "a tick of the last second without each board's at: %r" % tick
-        assert 0 < tick["t"] - ats[0] < period_ns and 0 < tick["t"] - ats[1] < 2 * period_ns, \
+        assert all(0 < tick["t"] - at < LATCH_BEHIND_NS for at in ats), \
             "tick at %d: the boards' inputs were latched %d and %d ns before it" % (tick["t"], tick["t"] - ats[0],
                                                                                   tick["t"] - ats[1])
     # Bus time is CLOCK_MONOTONIC less the host's start: one offset takes
@@ -217,10 +221,10 @@ def test_vmacd_records_the_instants_its_timed_boards_latched_at(t):
     # latched at (its in_at, or later when the frame came late). The host takes
     # the reply's receive time instead when a reply gives it no plausible
     # latch (TIME.md, "dev.t"): then the at is that receive time, after the
-    # board's latch by less than a period.
+    # board's latch (by less than a period on a quiet machine).
     def kind(name, h):
         i = bisect.bisect_right(latched[name], (h + LATCH_SLACK_NS, "~")) - 1
-        if i < 0 or h - latched[name][i][0] >= period_ns:
+        if i < 0 or h - latched[name][i][0] >= LATCH_BEHIND_NS:
             return None
         return latched[name][i][1] if h - latched[name][i][0] <= LATCH_SLACK_NS else "received"
 
