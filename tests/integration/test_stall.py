@@ -26,7 +26,7 @@ local driver = { name = "%(name)s", version = "%(version)s", level = 0,
 local s = string.rep("a", 60000)
 local function stall()
 	local n = 0
-	for _ = 1, 3000 do
+	for _ = 1, %(rounds)d do
 		if string.find(s, "a.b") then n = n + 1 end
 	end
 	return n
@@ -49,9 +49,9 @@ return driver
 """
 
 
-def staller(name, where, version="1"):
+def staller(name, where, version="1", rounds=3000):
     return STALLER % {
-        "name": name, "where": where, "version": version,
+        "name": name, "where": where, "version": version, "rounds": rounds,
         "tick": "stall()" if where == "tick" else "1",
         "input": "dev:event('stalling') stall()" if where == "input" else "",
         "migrate": "stall()" if where == "migrate" else "",
@@ -170,9 +170,14 @@ def test_a_worker_stalled_by_a_dropped_machine_is_given_up_too(t):
     """The board of a machine whose input is stalling its (only) worker
     goes away: the machine is dropped at once, and the call it left behind
     still holds the worker past its limit, so the worker is given up and a
-    machine that attaches afterwards runs on the spare."""
-    st = dict(settings("inputter"), driver_threads=1)
-    host = t.host(drivers=t.drivers(inputter=staller("inputter", "input"), counter=COUNTER), settings=st)
+    machine that attaches afterwards runs on the spare. The board must go
+    before the call's limit: driver_budget_us 100 ms makes it 5 s (50
+    budgets), and the call runs for some 20 s of CPU, so that a loaded
+    machine's slow kill does not let the bus judge the call stalled first
+    (a driver_error, no orphan), nor the call end before its limit."""
+    st = dict(settings("inputter"), driver_threads=1, driver_budget_us=100000)
+    host = t.host(drivers=t.drivers(inputter=staller("inputter", "input", rounds=20000), counter=COUNTER),
+                  settings=st)
     board = t.board("generic", "in-1", driver="inputter")
     host.wait_running(["in-1"])
     answers = {}
@@ -190,7 +195,7 @@ def test_a_worker_stalled_by_a_dropped_machine_is_given_up_too(t):
     assert not op.is_alive(), "the operator's input was never answered"
     code, text = answers["go"]
     assert code in (404, 502), "the input to a dropped machine was answered %d %s" % (code, text[:200])
-    e = host.wait_event("warning", None, "kept its worker past its limit", timeout_s=10)
+    e = host.wait_event("warning", None, "kept its worker past its limit", timeout_s=30)
     assert "inputter" in e["text"], "the warning does not name the driver: %r" % e["text"]
     t.board("generic", "c-1", driver="counter")
     host.wait_status(lambda s: ((host.device("c-1", s) or {}).get("variables", {}).get("n") or 0) > 20, 10,
