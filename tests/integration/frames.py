@@ -13,7 +13,8 @@ and opens() with the MAC of libsodium's SipHash-2-4 through PyNaCl
 (python3-nacl), the other side's reading of the specification, not ours;
 session_keys() the keys of a session.
 
-Used by test_malformed.py, test_eth.py, test_trust.py and eth_peer.py here,
+Used by test_malformed.py, test_eth.py, test_trust.py, fake_board.py (the
+tests' own board on the UDP bus) and eth_peer.py here,
 and by tests/soak/soak.py (which puts this folder on sys.path, as for
 harness)."""
 

@@ -13,15 +13,11 @@ and a machine acting on arrival get plain frames. Two boards of one
 machine, in different slots, latch at one instant."""
 
 import json
-import socket
-import struct
-import threading
-import time
 
 import frames
-from frames import (CYCLIC, DEV, DISCOVER, OFFSET, REGISTER, SHUTDOWN, SIZE, SYS, TIMED, UPDATE, WATCHDOG,
-                    ANNOUNCE, announce, inputs, parse, read_cyclic, read_sync, reply, timed_inputs)
-from harness import Skip, bus_socket, post
+from fake_board import FakeBoard
+from frames import TIMED
+from harness import Skip, post
 
 SLOT_NS = 1000000  # slice_us 200 x 5
 LEAD_NS = SLOT_NS // 2  # timed_lead_us 0: half a slot
@@ -43,160 +39,13 @@ return driver
 """
 
 
-class Board:
-    """A version-2 board of the test's own: registers, takes its offset,
-    answers its due records, TIMED ones with a TIMED reply latched (by the
-    host's clock: CLOCK_MONOTONIC, this machine's) at in_at, sent
-    ANSWER_AFTER_LATCH_S after it; dropped, it announces again. Keeps every frame it was served in,
-    with the SYNC stamp that led its batch."""
-
-    def __init__(self, bus, name, driver, major, firmware, minor=0, key=None, version=2):
-        self.name, self.driver, self.major, self.minor, self.firmware = name, driver, major, minor, firmware
-        self.version = version  # the protocol it announces and answers in
-        self.key, self.nonce, self.to_board, self.to_host, self.tx = key, bytes(8), None, None, 0
-        self.bad = 0  # sealed frames or records of the host's that did not open
-        self.lock = threading.Lock()
-        self.group = bus_socket(bus, 0.2)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.2)
-        self.device_id = 0
-        self.offset = None
-        self.host = None
-        self.served = []  # (CyclicFrame, the SYNC stamp before it or None)
-        self.updates = []  # unicast UPDATEs: (Header, out_at, in_at), the instants None when plain
-        self.stop = False
-        self.threads = [threading.Thread(target=self._group, daemon=True),
-                        threading.Thread(target=self._unicast, daemon=True)]
-        for th in self.threads:
-            th.start()
-
-    def _send(self, frame, to=None):
-        with self.lock:  # a sealed reply's counter only ever grows on the wire
-            if self.to_host is not None:  # keyed: every frame of the session sealed
-                self.tx += 1
-                frame = frames.seal(frame, self.tx, self.to_host)
-            self.sock.sendto(frame, to or self.host)
-
-    def close(self):
-        self.stop = True
-        for th in self.threads:
-            th.join(5)
-        self.group.close()
-        self.sock.close()
-
-    def _group(self):
-        last_sync = None
-        while not self.stop:
-            try:
-                data, src = self.group.recvfrom(2048)
-            except socket.timeout:
-                continue
-            except OSError:
-                return
-            sync = read_sync(data)
-            if sync is not None:
-                last_sync = sync
-                continue
-            got = parse(data)
-            if got and got[0].channel == SYS and got[0].op == DISCOVER and not self.device_id:
-                frame = reply(ANNOUNCE, announce(self.driver.encode(), self.name.encode(), major=self.major,
-                                                 minor=self.minor, firmware=self.firmware), channel=SYS,
-                              seq=got[0].seq, version=self.version)
-                if self.key is not None and len(got[1]) == frames.NONCE_LEN:
-                    self.nonce = got[1]
-                    frame = frames.seal(frame, 0, self.key, self.nonce)
-                self.sock.sendto(frame, src)
-                continue
-            if self.key is None:
-                c = read_cyclic(data)
-            else:
-                sealed = frames.read_cyclic_sealed(data)
-                c = sealed and sealed[0]
-            if not c or self.offset is None or not c.first <= self.offset < c.first + len(c.records):
-                continue
-            tag, flags, _, _ = c.records[self.offset - c.first]
-            if tag != self.device_id >> 16 or not flags & 1:
-                continue
-            if self.key is not None and not frames.record_opens(sealed[1], self.offset,
-                                                                *sealed[2][self.offset - c.first], self.to_board):
-                self.bad += 1
-                continue
-            self.served.append((c, last_sync))
-            if c.flags & TIMED:
-                wait = (c.in_at / 1e9 + ANSWER_AFTER_LATCH_S) - time.monotonic()
-                if wait > 0:
-                    time.sleep(wait)
-                frame = frames.frame(UPDATE, timed_inputs(c.in_at, digital=1), device_id=self.device_id, seq=c.seq,
-                                     flags=frames.REPLY | TIMED, version=2)
-            else:
-                frame = reply(UPDATE, inputs(digital=1), device_id=self.device_id, seq=c.seq, version=2)
-            self._send(frame)
-
-    def _unicast(self):
-        while not self.stop:
-            try:
-                data, src = self.sock.recvfrom(2048)
-            except socket.timeout:
-                continue
-            except OSError:
-                return
-            got = parse(data)
-            if not got or got[0].channel != DEV:
-                continue
-            h, body = got
-            self.host = src
-            if h.op == REGISTER and self.key is not None:
-                to_board, to_host = frames.session_keys(self.key, self.nonce, h.device_id)
-                if not frames.opens(data, to_board):
-                    self.bad += 1
-                    continue
-                with self.lock:
-                    self.to_board, self.to_host, self.tx = to_board, to_host, 0
-            elif self.key is not None and not frames.opens(data, self.to_board or bytes(16)):
-                self.bad += 1
-                continue
-            if h.op == REGISTER:
-                self.device_id, self.offset = h.device_id, None
-                answer = b""
-            elif h.device_id != self.device_id:
-                continue
-            elif h.op == SIZE:
-                answer = bytes([6])
-            elif h.op == OFFSET:
-                self.offset = struct.unpack(">H", body)[0]
-                answer = body
-            elif h.op in (WATCHDOG, SHUTDOWN):
-                answer = b""
-            elif h.op == UPDATE:
-                self._update(h, body, src)
-                continue
-            else:
-                continue
-            self._send(reply(h.op, answer, device_id=h.device_id, seq=h.seq, version=self.version), src)
-            if h.op == SHUTDOWN:  # dropped (a reply this process was too slow for): announce again
-                self.device_id, self.offset = 0, None
-                with self.lock:
-                    self.to_board = self.to_host = None
-
-
-    def _update(self, h, body, src):
-        """A unicast UPDATE kept and answered: a TIMED one (its instants
-        before the outputs) with a TIMED reply latched at in_at, sent
-        ANSWER_AFTER_LATCH_S after it, as to a TIMED record."""
-        if not h.flags & TIMED:
-            self.updates.append((h, None, None))
-            self._send(reply(UPDATE, inputs(digital=1), device_id=h.device_id, seq=h.seq, version=self.version), src)
-            return
-        out_at, in_at = struct.unpack_from(">QQ", body) if len(body) == 19 else (None, None)
-        self.updates.append((h, out_at, in_at))
-        if in_at is None:
-            return  # not as PROTOCOL.md says: no answer, the host counts a miss
-        wait = (in_at / 1e9 + ANSWER_AFTER_LATCH_S) - time.monotonic()
-        if wait > 0:
-            time.sleep(wait)
-        self._send(frames.frame(UPDATE, timed_inputs(in_at, digital=1), device_id=h.device_id, seq=h.seq,
-                                flags=frames.REPLY | TIMED, version=2), src)
+def our_board(t, name, driver, major, firmware, **fields):
+    """A FakeBoard of protocol 2 (unless fields say otherwise) whose inputs
+    read digital 1 and whose TIMED replies leave ANSWER_AFTER_LATCH_S
+    after their latch."""
+    fields.setdefault("version", 2)
+    return FakeBoard(t.bus, name, driver, major, firmware=firmware, digital_in=1,
+                     answer_after_latch_s=ANSWER_AFTER_LATCH_S, **fields)
 
 
 def test_the_host_schedules_the_instants(t):
@@ -204,12 +53,12 @@ def test_the_host_schedules_the_instants(t):
     drivers = t.drivers(tphase=DRIVER % ("tphase", ""), toffs=DRIVER % ("toffs", offsets),
                         tarr=DRIVER % ("tarr", ""), tpair=DRIVER % ("tpair", ""))
     host = t.host(drivers=drivers, settings=SETTINGS)
-    boards = {"phase-1": Board(t.bus, "phase-1", "tphase", 1, (1, 1)),
-              "offs-1": Board(t.bus, "offs-1", "toffs", 1, (1, 1)),
-              "old-1": Board(t.bus, "old-1", "toffs", 2, (1, 0)),
-              "arr-1": Board(t.bus, "arr-1", "tarr", 1, (1, 1)),
-              "pair-a": Board(t.bus, "pair-a", "tpair", 1, (1, 1)),
-              "pair-b": Board(t.bus, "pair-b", "tpair", 1, (1, 1), minor=1)}
+    boards = {"phase-1": our_board(t, "phase-1", "tphase", 1, (1, 1)),
+              "offs-1": our_board(t, "offs-1", "toffs", 1, (1, 1)),
+              "old-1": our_board(t, "old-1", "toffs", 2, (1, 0)),
+              "arr-1": our_board(t, "arr-1", "tarr", 1, (1, 1)),
+              "pair-a": our_board(t, "pair-a", "tpair", 1, (1, 1)),
+              "pair-b": our_board(t, "pair-b", "tpair", 1, (1, 1), minor=1)}
     try:
         host.wait_running(list(boards))
         host.wait_status(lambda s: all(host.device(n, s)["served"] >= 100 for n in boards), 60,
@@ -332,7 +181,7 @@ return driver
 
 def test_a_level_whose_period_cannot_hold_the_offsets_is_refused(t):
     host = t.host(drivers=t.drivers(tlevel=LEVEL_LUA), settings=SETTINGS)
-    board = Board(t.bus, "lvl-1", "tlevel", 1, (1, 1))
+    board = our_board(t, "lvl-1", "tlevel", 1, (1, 1))
     try:
         host.wait_running(["lvl-1"])
         ev = host.wait_event("level", "lvl-1", text="refused")
@@ -359,7 +208,7 @@ return driver
 
 def test_a_driver_asks_for_its_outputs_later_in_the_period(t):
     host = t.host(drivers=t.drivers(tlater=LATER_LUA), settings=SETTINGS)
-    board = Board(t.bus, "later-1", "tlater", 1, (1, 1))
+    board = our_board(t, "later-1", "tlater", 1, (1, 1))
     try:
         host.wait_running(["later-1"])
         s = host.wait_status(lambda st: host.device("later-1", st)["served"] >= 40, 30, "40 services")
@@ -385,8 +234,8 @@ def test_a_keyed_board_gets_its_instants_sealed_and_answers_sealed(t):
     code, text = post(host, "/api/boards/sealed-1", t.token, b"{}")
     assert code == 200, "enrolling sealed-1 answered %d: %s" % (code, text)
     key = bytes.fromhex(json.loads(text)["key"])
-    boards = {"sealed-1": Board(t.bus, "sealed-1", "tphase", 1, (1, 1), key=key),
-              "open-1": Board(t.bus, "open-1", "tphase", 2, (1, 1))}
+    boards = {"sealed-1": our_board(t, "sealed-1", "tphase", 1, (1, 1), key=key),
+              "open-1": our_board(t, "open-1", "tphase", 2, (1, 1))}
     try:
         host.wait_running(list(boards))
         s = host.wait_status(lambda st: all(host.device(n, st)["served"] >= 50 for n in boards), 60,
@@ -417,11 +266,11 @@ def test_boards_served_by_unicast_get_timed_updates_from_firmware_1_2(t):
     offsets = "timing = { pattern = \"offsets\", input_us = %d, output_us = %d }," % (IN_US, OUT_US)
     drivers = t.drivers(toffs=DRIVER % ("toffs", offsets), tarr=DRIVER % ("tarr", ""))
     host = t.host(drivers=drivers, settings=dict(SETTINGS, cyclic="false"))
-    boards = {"new-1": Board(t.bus, "new-1", "toffs", 1, (1, 2)),
-              "fw11-1": Board(t.bus, "fw11-1", "toffs", 2, (1, 1)),
-              "fw10-1": Board(t.bus, "fw10-1", "toffs", 3, (1, 0)),
-              "v1-1": Board(t.bus, "v1-1", "toffs", 4, (1, 2), version=1),
-              "arr-1": Board(t.bus, "arr-1", "tarr", 1, (1, 2))}
+    boards = {"new-1": our_board(t, "new-1", "toffs", 1, (1, 2)),
+              "fw11-1": our_board(t, "fw11-1", "toffs", 2, (1, 1)),
+              "fw10-1": our_board(t, "fw10-1", "toffs", 3, (1, 0)),
+              "v1-1": our_board(t, "v1-1", "toffs", 4, (1, 2), version=1),
+              "arr-1": our_board(t, "arr-1", "tarr", 1, (1, 2))}
     try:
         host.wait_running(list(boards))
         s = host.wait_status(lambda st: all(host.device(n, st)["served"] >= 60 for n in boards), 60,

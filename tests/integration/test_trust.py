@@ -14,12 +14,11 @@ import os
 import re
 import socket
 import struct
-import threading
 import time
 
 import frames
-from frames import (ANNOUNCE, DEV, DISCOVER, IDLE, REGISTER, SHUTDOWN, SYS, UPDATE, WATCHDOG, announce, inputs,
-                    opens, parse, reply, seal, session_keys)
+from fake_board import FakeBoard
+from frames import SYS, UPDATE, parse, seal
 from harness import Skip, bus_socket, post, undisturbed
 
 FORGED = 20  # forged or replayed frames sent in each attempt
@@ -35,109 +34,9 @@ def address(text):
     return host, int(port)
 
 
-class Peer:
-    """A board of the test's own on the UDP bus, speaking protocol version 1
-    (unicast UPDATEs), keyed with key (or not, key None; or announcing
-    sealed with key while claiming to be someone else). It answers as a
-    keyed board must, and counts what it received that did not open under
-    its session's key, and every REGISTER (a spoofer must never get one)."""
-
-    def __init__(self, bus, name, driver, major, key=None, minor=0):
-        self.name, self.driver, self.major, self.minor, self.key = name, driver, major, minor, key
-        self.group = bus_socket(bus, 0.2)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.2)
-        self.nonce = None
-        self.device_id = 0
-        self.to_board = self.to_host = None
-        self.tx = 0
-        self.rx = 0
-        self.registers = 0
-        self.updates = 0
-        self.bad = 0
-        self.sent_replies = []  # (frame, host address) of every reply sent: for replays
-        self.stop = False
-        self.threads = [threading.Thread(target=self._discover, daemon=True),
-                        threading.Thread(target=self._serve, daemon=True)]
-        for th in self.threads:
-            th.start()
-
-    def close(self):
-        self.stop = True
-        for th in self.threads:
-            th.join(5)
-        self.group.close()
-        self.sock.close()
-
-    def _send(self, frame, to):
-        if self.key is not None and self.to_host is not None:
-            self.tx += 1
-            frame = seal(frame, self.tx, self.to_host)
-        self.sent_replies.append((frame, to))
-        self.sock.sendto(frame, to)
-
-    def _discover(self):
-        while not self.stop:
-            try:
-                data, src = self.group.recvfrom(2048)
-            except socket.timeout:
-                continue
-            except OSError:
-                return
-            got = parse(data)
-            if not got or got[0].channel != SYS or got[0].op != DISCOVER or self.device_id:
-                continue
-            h, nonce = got
-            frame = reply(ANNOUNCE, announce(self.driver.encode(), self.name.encode(), major=self.major,
-                                             minor=self.minor), channel=SYS, seq=h.seq)
-            if self.key is not None and len(nonce) == frames.NONCE_LEN:
-                self.nonce = nonce
-                frame = seal(frame, 0, self.key, nonce)
-            self.sock.sendto(frame, src)
-
-    def _serve(self):
-        while not self.stop:
-            try:
-                data, src = self.sock.recvfrom(2048)
-            except socket.timeout:
-                continue
-            except OSError:
-                return
-            got = parse(data)
-            if not got or got[0].channel != DEV:
-                continue
-            h, body = got
-            if h.op == REGISTER:
-                self.registers += 1
-                if self.key is None:
-                    self.device_id = h.device_id
-                else:
-                    to_board, to_host = session_keys(self.key, self.nonce or bytes(8), h.device_id)
-                    if not opens(data, to_board):
-                        self.bad += 1
-                        continue
-                    self.to_board, self.to_host, self.tx = to_board, to_host, 0
-                    self.rx = frames.counter_of(data)
-                    self.device_id = h.device_id
-                self._send(reply(REGISTER, device_id=h.device_id, seq=h.seq), src)
-                continue
-            if h.device_id != self.device_id:
-                continue
-            if self.key is not None:
-                if not opens(data, self.to_board) or frames.counter_of(data) <= self.rx:
-                    self.bad += 1
-                    continue
-                self.rx = frames.counter_of(data)
-            if h.op in (UPDATE, IDLE):
-                self.updates += 1
-                self._send(reply(h.op, inputs(), device_id=h.device_id, seq=h.seq), src)
-            elif h.op == WATCHDOG:
-                self._send(reply(h.op, device_id=h.device_id, seq=h.seq), src)
-            elif h.op == SHUTDOWN:
-                self._send(reply(h.op, device_id=h.device_id, seq=h.seq), src)
-                self.device_id = 0
-                self.to_board = self.to_host = None
+def services(board):
+    """The UPDATEs and IDLEs a FakeBoard obeyed."""
+    return len(board.updates) + board.idles
 
 
 def enroll_api(host, token, board, key=None):
@@ -162,14 +61,14 @@ def test_a_keyed_board_of_our_own_attaches_with_every_frame_sealed(t):
     assert code == 200, "enrolling peer-1 over the API answered %d: %s" % (code, text)
     import json
     key = bytes.fromhex(json.loads(text)["key"])
-    peer = Peer(t.bus, "peer-1", "lights", 4242, key)
+    peer = FakeBoard(t.bus, "peer-1", "lights", 4242, key=key)
     try:
         s = host.wait_running(["peer-1"])
         assert host.device("peer-1", s)["authenticated"] is True, "peer-1 runs but is not marked authenticated"
         deadline = time.monotonic() + 10
-        while peer.updates < 20 and time.monotonic() < deadline:
+        while services(peer) < 20 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert peer.updates >= 20, "only %d UPDATEs opened under the session's key in 10 s" % peer.updates
+        assert services(peer) >= 20, "only %d UPDATEs opened under the session's key in 10 s" % services(peer)
         assert peer.bad == 0, "%d frames from the host did not open under the session's keys" % peer.bad
         # The board's replies, replayed: refused by their counters.
         before = host.status()["counters"]["auth_failed"]
@@ -195,9 +94,9 @@ def test_a_spoofing_board_takes_over_nothing(t):
     s = host.wait_running(["washer-1"])
     washer = host.device("washer-1", s)
     before = s["counters"]
-    spoofers = [Peer(t.bus, "washer-1", "washer", washer["major"]),
-                Peer(t.bus, "washer-1", "washer", washer["major"], key=os.urandom(16)),
-                Peer(t.bus, "evil", "washer", washer["major"], key=os.urandom(16))]
+    spoofers = [FakeBoard(t.bus, "washer-1", "washer", washer["major"]),
+                FakeBoard(t.bus, "washer-1", "washer", washer["major"], key=os.urandom(16)),
+                FakeBoard(t.bus, "evil", "washer", washer["major"], key=os.urandom(16))]
     try:
         host.wait_status(lambda st: st["counters"]["discoveries"] >= before["discoveries"] + 5, 30,
                          "five discoveries", invariant=undisturbed(["washer-1"]))
