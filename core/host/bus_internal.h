@@ -187,6 +187,9 @@ struct machine {
 	int want_checkpoint; /* a checkpoint was due and not taken: the next tick makes it */
 	uint64_t late;       /* services that found its tick not done (held outputs) */
 	int64_t late_ns;     /* bus time of the last of them (0: none) */
+	int tick_open;       /* a tick asked for (bus_run_machine) and not yet collected, */
+	int tick_held;       /* and already counted in late, */
+	uint64_t tick_asked; /* asked for in the slot of this tick index */
 	/* The instance's published values and params, as its last job left them. */
 	int nvars, nparams;
 	struct vmac_variable vars[VMAC_DRIVER_MAX_VARS];

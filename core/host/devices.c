@@ -651,6 +651,9 @@ void bus_run_machine(struct vmac_bus *bus, struct machine *m)
 {
 	m->want_tick = 1;
 	m->tick_ns = bus_now(bus);
+	m->tick_open = 1;
+	m->tick_held = 0;
+	m->tick_asked = bus->tick_index;
 	bus_dispatch(bus, m);
 }
 

@@ -293,7 +293,7 @@ static int l_device(lua_State *L)
 		lua_pushnil(L);
 		return 1;
 	}
-	lua_createtable(L, 0, 12);
+	lua_createtable(L, 0, 14);
 	lua_pushstring(L, d->state);
 	lua_setfield(L, -2, "state");
 	lua_pushstring(L, d->driver);
@@ -310,6 +310,10 @@ static int l_device(lua_State *L)
 	lua_setfield(L, -2, "period_us");
 	lua_pushnumber(L, (double)d->misses);
 	lua_setfield(L, -2, "misses");
+	lua_pushnumber(L, (double)d->misses_host);
+	lua_setfield(L, -2, "misses_host");
+	lua_pushnumber(L, (double)d->driver_late);
+	lua_setfield(L, -2, "driver_late");
 	lua_pushnumber(L, (double)d->served);
 	lua_setfield(L, -2, "served");
 	lua_pushnumber(L, (double)d->driver_memory);

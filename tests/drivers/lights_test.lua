@@ -75,6 +75,21 @@ test("a slow lights driver within its period still switches, one period later", 
 	l:set("toggle1")
 	run_until(function() return l.out.kitchen end, 0.2, "the kitchen light on")
 	expect_eq(l.state, "running", "the lights' state")
+	expect_eq(l.device.driver_late, 0, "ticks counted late (every output was ready by the next service)")
+end)
+
+test("a lights driver past its period but within its budget is counted late, not failed", function()
+	config { ["driver.lights.budget_us"] = 50000 } -- its limit: 50 ms, past the 16 ms period
+	driver_cost("lights", 0.020) -- every tick's outputs ready a period and 4 ms after its reply
+	local l = lights()
+	l:set("toggle1")
+	run_until(function() return l.out.kitchen end, 0.5, "the kitchen light on, late")
+	run_for(0.5)
+	expect_eq(l.state, "running", "the lights' state")
+	-- Every service finds the tick asked for a period before still running
+	-- (each waits for the one before it): some 31 in 0.5 s.
+	local late = l.device.driver_late
+	expect(late >= 25, "ticks counted late in 0.5 s of 20 ms ticks every 16 ms: " .. tostring(late))
 end)
 
 test("a lights driver slower than its period is failed by the host, and the board goes safe", function()
