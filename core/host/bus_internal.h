@@ -325,6 +325,7 @@ struct vmac_bus {
 	int epfd;         /* the bus thread's wait (bus.c, bus_loop): the socket, wakefd (and tfd) */
 	int wakefd;       /* eventfd: the main thread has commands or requests (bus_wake) */
 	int timerfd_wait; /* no epoll_pwait2 on this kernel: ticks from tfd */
+	int64_t held_ns;  /* the first push not yet woken for (bus_worker_push; wait.c's hold), or 0 */
 	pthread_t thread;
 	int tfd;
 	int cpu_awake_fd;          /* /dev/cpu_dma_latency held at 0 (cpu_awake), or -1 */
@@ -462,7 +463,8 @@ void bus_commands(struct vmac_bus *bus);
 void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p);
 /* wait.c: the bus thread's wait and loop. bus_wake: what to_bus and the
  * requests hold is there (any thread). bus_drain (receive.c): every reply
- * waiting on the socket. */
+ * waiting on the socket; the workers it pushed to are woken by the caller
+ * (bus_workers_kick). */
 int bus_wait_init(struct vmac_bus *bus, char *err, size_t errlen);
 void bus_wait_fini(struct vmac_bus *bus);
 void bus_loop(struct vmac_bus *bus);

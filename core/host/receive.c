@@ -221,5 +221,4 @@ void bus_drain(struct vmac_bus *bus)
 		if (n < RX_BATCH)
 			break;
 	}
-	bus_workers_kick(bus); /* the ticks the replies asked for start now */
 }

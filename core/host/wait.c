@@ -50,6 +50,30 @@ static void gather(struct vmac_bus *bus, int64_t next)
 	ppoll(&p, 1, &ts, NULL); /* woken: the loop reads wakefd next */
 }
 
+/* The jobs a drain queued (bus_worker_push noted when, in held_ns) wake
+ * their workers when the replies pause: at
+ * the first look after a gather that finds nothing more on the socket,
+ * after HOLD_SLOTS of a slot at most, and at the next tick (bus_collect).
+ * A board program answers a slot's boards in a burst; a worker woken
+ * after each gathered drain woke some five times a slot, each wake-up on
+ * the driver's core costing more than the light drivers' ticks it ran
+ * (docs/PERFORMANCE.md, "Drivers on driver workers"). A tick's job is due
+ * at its machine's next service, a period (at least a slot) after the
+ * reply: it still has three quarters of a slot. Drains from the tick and
+ * the main thread's commands wake at once. Returns the wait's timeout. */
+#define HOLD_SLOTS(slot_ns) ((slot_ns) / 4)
+static int64_t hold(struct vmac_bus *bus, int64_t now, int64_t next)
+{
+	int64_t c = bus->slot_ns / 8 < GATHER_NS ? bus->slot_ns / 8 : GATHER_NS;
+	if (!bus->held_ns)
+		return next - now;
+	if (bus->timerfd_wait || now - bus->held_ns >= HOLD_SLOTS(bus->slot_ns) || next - now <= 2 * c) {
+		bus_workers_kick(bus);
+		return next - now;
+	}
+	return 0; /* a look: nothing there, and the kick goes (bus_loop) */
+}
+
 /* The bus thread's loop: the tick when its time has come (before anything
  * else that is ready: a flood on the socket must not starve the schedule),
  * replies as they arrive, and the main thread's commands and requests when
@@ -65,13 +89,19 @@ void bus_loop(struct vmac_bus *bus)
 	uint64_t count;
 	int n, i;
 	for (;;) {
-		int64_t now = vmac_now_ns(), next = bus->start_ns + (int64_t)(bus->tick_index + 1) * bus->slot_ns;
+		int64_t now = vmac_now_ns(), next = bus->start_ns + (int64_t)(bus->tick_index + 1) * bus->slot_ns,
+		        wait_ns;
 		if (!bus->timerfd_wait && now >= next) {
 			if (bus_tick(bus, now, (uint64_t)((now - bus->start_ns) / bus->slot_ns) - bus->tick_index))
 				return;
 			continue;
 		}
-		n = bus->timerfd_wait ? epoll_wait(bus->epfd, ev, 4, -1) : pwait2(bus->epfd, ev, 4, next - now);
+		wait_ns = hold(bus, now, next);
+		n = bus->timerfd_wait ? epoll_wait(bus->epfd, ev, 4, -1) : pwait2(bus->epfd, ev, 4, wait_ns);
+		if (n == 0 && bus->held_ns) {
+			bus_workers_kick(bus); /* the replies have paused */
+			continue;
+		}
 		if (n < 0)
 			continue; /* EINTR */
 		for (i = 0; i < n; i++)

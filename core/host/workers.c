@@ -514,6 +514,8 @@ int bus_worker_push(struct vmac_bus *bus, struct machine *m)
 	if (queue_push(w, mi, t_ns) != 0)
 		return -1;
 	w->kick = 1;
+	if (!bus->held_ns)
+		bus->held_ns = t_ns > 0 ? t_ns : 1; /* until bus_workers_kick: wait.c holds it a while */
 	return 0;
 }
 
@@ -521,6 +523,7 @@ void bus_workers_kick(struct vmac_bus *bus)
 {
 	uint64_t one = 1;
 	int i;
+	bus->held_ns = 0;
 	if (bus->virt)
 		return;
 	atomic_thread_fence(memory_order_seq_cst); /* the pushes before the looks at sleeping (worker_main) */
