@@ -76,7 +76,7 @@ def run_with(args, bindir, name, fn):
 
 def pick(r):
     return {k: r[k] for k in ("cpu_us_per_device_tick", "misses", "misses_host", "drops", "lateness_us",
-                              "served_ratio")}
+                              "served_ratio", "driver_late", "ticks", "boards")}
 
 
 def workers(args):
@@ -97,9 +97,10 @@ def workers(args):
                     r = run_with(args, bindir, "workers-cost-%s-%s-%d" % (which, mode, rnd),
                                  lambda c: fieldbus_run(c, mode, 100, 1000, args.seconds, drv, keyed=False))
                     row[which] = pick(r)
-                    print("    round %d %-10s %-7s %.3f us per device per tick, %d misses (%d the host's)" % (
-                        rnd + 1, mode, which, r["cpu_us_per_device_tick"], r["misses"], r["misses_host"]),
-                        flush=True)
+                    print("    round %d %-10s %-7s %.3f us per device per tick, %d misses (%d the host's), "
+                          "%d of %d ticks driver_late" % (
+                              rnd + 1, mode, which, r["cpu_us_per_device_tick"], r["misses"], r["misses_host"],
+                              r["driver_late"], r["ticks"] * r["boards"]), flush=True)
             except Skip as e:
                 print("    %s: SKIPPED: %s" % (mode, e), flush=True)
                 continue
