@@ -490,6 +490,11 @@ void bus_release_outputs(struct vmac_bus *bus, struct device *d, uint64_t slot, 
  * those are the worker's to dispose of; 0: everything of m is the
  * caller's. */
 int bus_job_release(struct vmac_bus *bus, struct machine *m, struct vmac_driver **drv, struct vmac_driver **other);
+/* m's last tick, done but not yet collected when its next reply comes
+ * (its worker finished after the tick that would have collected it), is
+ * collected now: the reply's tick then starts at once, not at the next
+ * tick, a slot late, and so every tick after it. */
+void bus_collect_done_tick(struct vmac_bus *bus, struct machine *m);
 /* Answer request slot i (rc and reply already in it). */
 void bus_answer(struct vmac_bus *bus, int i);
 /* The machine's job is free, and nothing is queued for it. */

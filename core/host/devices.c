@@ -654,7 +654,9 @@ void bus_run_machine(struct vmac_bus *bus, struct machine *m)
 	m->tick_open = 1;
 	m->tick_held = 0;
 	m->tick_asked = bus->tick_index;
-	bus_dispatch(bus, m);
+	bus_collect_done_tick(bus, m);
+	if (m->used)
+		bus_dispatch(bus, m);
 }
 
 /* dev:set_level(level) asked for during m's last job: the schedule changes
