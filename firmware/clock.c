@@ -119,6 +119,7 @@ static void start(struct vmac_clock *c, uint64_t host_ns, uint64_t local_ns)
 	c->has_anchor = 0;
 	c->offset_mean_ns = c->offset_dev_ns = c->last_offset_ns = 0;
 	c->good_windows = c->spike_run = 0;
+	c->past_n = 0;
 	c->last_update_local = c->last_accept_local = local_ns;
 	c->reject_run = 0;
 	window_reset(c);
@@ -145,19 +146,27 @@ static uint64_t growth_ns(const struct vmac_clock *c, uint64_t since)
 }
 
 /* The bound right after an update, then growing with the time since:
- * docs/TIME.md, "The error bound". */
+ * docs/TIME.md, "The error bound". The line's error is what the servo's
+ * offsets say on average, within their spread (not each window's, which
+ * the servo takes only 1/16 of); a last offset further out than two
+ * spreads, or an early spike (or a second late one in a row), is more than
+ * noise and counts as it is; then how far the line sits above the lowest
+ * offsets seen (the filter's bias: the least path is the truest). */
 static uint64_t bound_at(const struct vmac_clock *c, uint64_t local_ns)
 {
 	uint64_t since = elapsed(local_ns, c->last_update_local);
-	uint64_t offset = magnitude(c->offset_mean_ns), last = magnitude(c->last_offset_ns), bound;
+	uint64_t dev = magnitude(c->offset_dev_ns), last = magnitude(c->last_offset_ns);
+	uint64_t phase = magnitude(c->offset_mean_ns) + dev;
+	int64_t depth = c->offset_mean_ns - c->floor_ns;
 	if (!c->servo) /* acquisition: the phase within a window's jitter, the frequency anything allowed */
 		return add_sat(magnitude(c->jitter_ns),
 		               (uint64_t)scale_q32((int64_t)(since > FAR_NS ? FAR_NS : since), MAX_Q32));
-	if (c->spike_run && magnitude(c->spike_ns) > last) /* not steered by, but not blind to, a spike */
-		last = magnitude(c->spike_ns);
-	bound = (offset > last ? offset : last) + 2 * magnitude(c->offset_dev_ns) + VMAC_CLOCK_BOUND_FLOOR_NS;
-	bound += magnitude(c->jitter_ns) / VMAC_CLOCK_WINDOW;
-	return add_sat(bound, growth_ns(c, since));
+	if (last > phase + dev)
+		phase = last - dev;
+	if ((c->spike_ns < 0 ? c->spike_run > 0 : c->spike_run > 1) && magnitude(c->spike_ns) > phase)
+		phase = magnitude(c->spike_ns); /* not steered by, but not blind to, a spike */
+	phase += VMAC_CLOCK_BOUND_FLOOR_NS + (depth > 0 ? (uint64_t)depth : 0);
+	return add_sat(phase, growth_ns(c, since));
 }
 
 /* A window whose offset strays from the mean by more than the spread and
@@ -193,6 +202,7 @@ static void acquire(struct vmac_clock *c)
 			/* its uncertainty: two minima, each within about jitter / WINDOW */
 			c->freq_dev_q32 = 2 * (c->jitter_ns / VMAC_CLOCK_WINDOW) * ONE_Q32 / dl;
 			c->offset_dev_ns = c->jitter_ns / DEV_START_DIV; /* the spread not yet seen: the jitter's */
+			c->floor_ns = 0;
 			rebase(c, c->window_min_local, c->window_min_host);
 			return;
 		}
@@ -206,15 +216,44 @@ static void acquire(struct vmac_clock *c)
 	rebase(c, c->window_min_local, c->window_min_host);
 }
 
-/* The PI servo, at a window's close: the window's offset (its minimum's
- * lateness) into the frequency, the line rebased at now so that the
- * correction is a slew, never a step. */
-static void servo(struct vmac_clock *c, uint64_t now_local)
+/* The window's offset for the servo: the least of its own minimum's
+ * (offset, at now_local) and the last VMAC_CLOCK_PAST_WINDOWS windows'
+ * minima as the line now in force sees them, each counted
+ * VMAC_CLOCK_PAST_PPM later per ms of its age, so that a drift's trend is
+ * not hidden behind an old minimum (NTP's clock filter ages its samples
+ * the same way). A window whose every frame queued moves it not at all.
+ * Within +-VMAC_CLOCK_STEP_NS when offset is. */
+static int64_t past_least(const struct vmac_clock *c, int64_t offset, uint64_t now_local)
 {
-	int64_t offset = c->window_min_ns;
+	uint32_t i;
+	for (i = 0; i < c->past_n; i++) {
+		int64_t late = diff_ns(model_host(c, c->past_local[i]), c->past_host[i]) +
+		               (int64_t)(elapsed(now_local, c->past_local[i]) / 1000000u * VMAC_CLOCK_PAST_PPM);
+		if (late < offset && late >= -(int64_t)VMAC_CLOCK_STEP_NS) /* the servo's offsets stay within a step */
+			offset = late;
+	}
+	return offset;
+}
+
+/* The window's minimum joins the past ones, the oldest out. */
+static void past_push(struct vmac_clock *c)
+{
+	c->past_local[c->past_next] = c->window_min_local;
+	c->past_host[c->past_next] = c->window_min_host;
+	c->past_next = (c->past_next + 1) % VMAC_CLOCK_PAST_WINDOWS;
+	if (c->past_n < VMAC_CLOCK_PAST_WINDOWS)
+		c->past_n++;
+}
+
+/* The PI servo, at a window's close: the window's offset (past_least())
+ * into the frequency, the line rebased at now so that the
+ * correction is a slew, never a step. */
+static void servo(struct vmac_clock *c, int64_t offset, uint64_t now_local)
+{
 	int64_t interval = diff_ns(now_local, c->last_update_local);
 	int64_t p_interval;
 	uint64_t host_now = model_host(c, now_local);
+	past_push(c);
 	if (interval < MIN_INTERVAL_NS)
 		interval = MIN_INTERVAL_NS;
 	p_interval = interval > (int64_t)VMAC_CLOCK_WINDOW_MAX_NS ? (int64_t)VMAC_CLOCK_WINDOW_MAX_NS : interval;
@@ -226,6 +265,9 @@ static void servo(struct vmac_clock *c, uint64_t now_local)
 	rebase(c, now_local, host_now);
 	ewma(&c->offset_dev_ns, (int64_t)magnitude(offset - c->offset_mean_ns));
 	ewma(&c->offset_mean_ns, offset);
+	c->floor_ns += (c->offset_mean_ns - c->floor_ns) / VMAC_CLOCK_FLOOR_AVG;
+	if (offset < c->floor_ns)
+		c->floor_ns = offset;
 	c->freq_mean_q32 += (c->drift_q32 - c->freq_mean_q32) / VMAC_CLOCK_FREQ_AVG;
 	ewma(&c->freq_dev_q32, (int64_t)magnitude(c->drift_q32 - c->freq_mean_q32));
 	c->last_offset_ns = offset;
@@ -247,7 +289,7 @@ static void close_window(struct vmac_clock *c, uint64_t now_local)
 		return;
 	}
 	if (c->servo)
-		servo(c, now_local);
+		servo(c, past_least(c, c->window_min_ns, c->window_min_local), now_local);
 	else
 		acquire(c);
 	c->last_update_local = now_local;
@@ -280,6 +322,7 @@ enum vmac_clock_state vmac_clock_tick(struct vmac_clock *c, uint64_t local_ns)
 		rebase(c, local_ns, model_host(c, local_ns)); /* continuous: on from here at the mean frequency */
 		c->drift_q32 = c->freq_mean_q32;
 		c->slew_q32 = c->slew_len_ns = 0;
+		c->past_n = 0; /* minima from before the gap: not compared across it */
 	}
 	if (bound_at(c, local_ns) > VMAC_CLOCK_LOST_NS)
 		lose(c);

@@ -5,10 +5,10 @@
  * first-sample step and two-point frequency estimate, then a
  * proportional-integral loop) fed by a minimum filter over windows of
  * samples: a frame can only be late, never early, so the earliest arrival
- * of a window is its truest sample. A gate throws out frames far later
- * than the jitter seen so far, NTP's popcorn spike suppressor a window
- * whose frames all queued, and a bound on the error grows while no sample
- * comes. Portable C99: no heap, no OS header, no floating point (64-bit
+ * of a window (and of the few windows before, aged) is its truest sample.
+ * A gate throws out frames far later than the jitter seen so far, NTP's
+ * popcorn spike suppressor a window whose frames all queued, and a bound
+ * on the error grows while no sample comes. Portable C99: no heap, no OS header, no floating point (64-bit
  * integers, frequencies in 2^-32 ns per ns), the caller passes every time
  * in; the same code runs on the Cortex-M3 and in vmac-board.
  *
@@ -23,10 +23,13 @@
 /* The filter and the servo (docs/TIME.md, "The filter" says why each). */
 #define VMAC_CLOCK_WINDOW 16                 /* samples per minimum-filter window */
 #define VMAC_CLOCK_WINDOW_MAX_NS 100000000u  /* a window spans at most 100 ms, however few its samples */
+#define VMAC_CLOCK_PAST_WINDOWS 3            /* the servo's offset: the least of the window's minimum and 3 before... */
+#define VMAC_CLOCK_PAST_PPM 50               /* ...each counted 50 ppm (50 ns per ms) later for its age */
 #define VMAC_CLOCK_FREQ_EST_NS 250000000u    /* first frequency: two window minima at least 250 ms apart */
 #define VMAC_CLOCK_KP_SHIFT 4                /* P: 1/16 of the offset corrected per window */
 #define VMAC_CLOCK_KI_SHIFT 9                /* I: 1/512 of it into the frequency per window */
 #define VMAC_CLOCK_FREQ_AVG 32               /* holdover runs on the integral's mean over 32 windows */
+#define VMAC_CLOCK_FLOOR_AVG 32              /* the offsets' floor relaxes to their mean over 32 windows */
 #define VMAC_CLOCK_SPIKE_K 4                 /* a window offset beyond 4 x the spread... */
 #define VMAC_CLOCK_SPIKE_FLOOR_NS 2000       /* ...+ 2 us + the bound's growth is a spike: skipped... */
 #define VMAC_CLOCK_SPIKE_RUN 4               /* ...unless 4 come in a row (then it is real) */
@@ -84,14 +87,20 @@ struct vmac_clock {
 	int64_t window_min_ns;
 	uint64_t window_min_local, window_min_host, window_start_local;
 	int64_t window_sum_ns; /* the window's latenesses summed: its mean, less its minimum, is its jitter */
+	/* The last past_n windows' minima (servo only; past_next the slot for
+	 * the next): a window's offset is the least of them and its own, as
+	 * the line now in force sees them. */
+	uint64_t past_local[VMAC_CLOCK_PAST_WINDOWS], past_host[VMAC_CLOCK_PAST_WINDOWS];
+	uint32_t past_n, past_next;
 	/* The frequency estimate's first point (a window minimum). */
 	int has_anchor;
 	uint64_t anchor_local, anchor_host;
 	/* What the bound is made of (docs/TIME.md, "The error bound"). */
-	int64_t offset_mean_ns; /* EWMA of the windows' offsets (their minima's lateness) */
+	int64_t offset_mean_ns; /* EWMA of the windows' offsets (the servo's input: past_least() in clock.c) */
 	int64_t offset_dev_ns;  /* EWMA of their distance from that mean */
 	int64_t last_offset_ns; /* the last window's */
-	int64_t jitter_ns;      /* EWMA of how much later than the window's offset a sample comes */
+	int64_t floor_ns;       /* the offsets' floor: their least, relaxing to their mean (the bias) */
+	int64_t jitter_ns;      /* EWMA of how much later than the window's minimum a sample comes */
 	int64_t freq_mean_q32;  /* EWMA of the integral, over about VMAC_CLOCK_FREQ_AVG windows: holdover's frequency */
 	int64_t freq_dev_q32;   /* EWMA of the integral's distance from that mean */
 	uint64_t last_update_local; /* the last window's close: the bound grows from there */
@@ -137,9 +146,10 @@ int vmac_clock_to_host(const struct vmac_clock *c, uint64_t local_ns, uint64_t *
 int vmac_clock_to_local(const struct vmac_clock *c, uint64_t host_ns, uint64_t *local_ns);
 
 /* The estimated bound on |to_host(local_ns) - host time| at local_ns
- * (ns): the offset's mean and spread at the last update, the filter's bias
- * (jitter / VMAC_CLOCK_WINDOW), then the frequency's uncertainty and the
- * assumed wander times the time since. UINT64_MAX when unsynced or lost. */
+ * (ns): the offsets' mean and spread at the last update (or the last
+ * offset, or a spike, when further out), the filter's bias (the mean above
+ * the offsets' floor), then the frequency's uncertainty and the assumed
+ * wander times the time since. UINT64_MAX when unsynced or lost. */
 uint64_t vmac_clock_bound_ns(const struct vmac_clock *c, uint64_t local_ns);
 
 /* When to act on what a frame asks for at host instant host_ns, the frame

@@ -282,7 +282,7 @@ START_TEST(ten_seconds_without_samples_are_held_within_the_bound)
 		              "board %+.0f ppm: samples back, %s with error %.0f ns", boards[i].ppm,
 		              vmac_clock_state_name(w.state), w.max_error_ns);
 	}
-	/* docs/TIME.md: 2.2 us on average; on the last integral instead of its mean, 4.1 */
+	/* docs/TIME.md: 1.3 us on average; on the last integral instead of its mean, 2.7 */
 	ck_assert_msg(held_sum_ns / n <= 3000, "10 s of holdover: %.0f ns of error on average, more than 3 us",
 	              held_sum_ns / n);
 }
