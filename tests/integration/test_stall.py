@@ -171,7 +171,7 @@ def test_a_worker_stalled_by_a_dropped_machine_is_given_up_too(t):
     goes away: the machine is dropped at once, and the call it left behind
     still holds the worker past its limit, so the worker is given up and a
     machine that attaches afterwards runs on the spare. The board must go
-    before the call's limit: driver_budget_us 100 ms makes it 5 s (50
+    before the call's limit: driver_budget_us 100 ms makes it 7.5 s (75
     budgets), and the call runs for some 20 s of CPU, so that a loaded
     machine's slow kill does not let the bus judge the call stalled first
     (a driver_error, no orphan), nor the call end before its limit."""
