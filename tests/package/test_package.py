@@ -46,8 +46,10 @@ sys.dont_write_bytecode = True
 import harness  # noqa: E402
 
 # Each part's bound, not a measure: make deb takes about 30 s of it on two
-# idle cores, and over 3 minutes in make test, built beside the ASan build.
-TIME_LIMIT_S = 480
+# idle cores, and 6 to 7 minutes in make test on a slow day of the shared VM
+# (353 and 412 s on 2026-11-27, the whole test 479.5 s), built beside the
+# ASan build: a bound against a hang, with room for that.
+TIME_LIMIT_S = 900
 SCORE_MAX = 4.0  # systemd-analyze security's exposure: "OK" or better
 PACKAGE_DIRS = ("/usr/share/vmac", "/usr/share/doc/vmac", "/etc/vmac")  # the package's own folders
 STATE_DIR = "/var/lib/vmac"
@@ -149,7 +151,7 @@ def test_the_debian_package(t, build):
     if installed():
         purge("installed before this test")
     t0 = time.monotonic()
-    sh(["make", "--no-print-directory", "-C", ROOT, "deb", "BUILD=" + build], "make deb", timeout_s=420)
+    sh(["make", "--no-print-directory", "-C", ROOT, "deb", "BUILD=" + build], "make deb", timeout_s=TIME_LIMIT_S - 60)
     debs = glob.glob(os.path.join(build, "deb", "vmac_*.deb"))
     assert len(debs) == 1, "make deb made %s, not one vmac_VERSION_ARCH.deb in %s/deb" % (debs, build)
     print("test_package: make deb took %.0f s: %s" % (time.monotonic() - t0, debs[0]), flush=True)
