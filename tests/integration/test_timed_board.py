@@ -193,8 +193,10 @@ def two_boards_at_one_instant(t, clocks, count=None):
             seq = host.timed({name: (digital, 10 * k) for name in names}, at)
             answers = host.answers(seq)
             instants.append((at, digital, answers))
-        # Outputs waiting when a SHUTDOWN comes are never driven.
-        at = time.monotonic_ns() + AHEAD_NS
+        # Outputs waiting when a SHUTDOWN comes are never driven (an instant
+        # a second ahead: the SHUTDOWNs are sent right after, but a loaded
+        # machine once held this script past 50 ms between the two).
+        at = time.monotonic_ns() + 20 * AHEAD_NS
         host.timed({name: (0x7F, 1000) for name in names}, at)
         for name in names:
             host.shutdown(name)
