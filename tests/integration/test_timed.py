@@ -103,20 +103,22 @@ def test_the_host_schedules_the_instants(t):
     # Two boards of one machine act at one instant, whichever slots carry
     # their frames: the latest of the two slots in the period, plus the
     # lead, and never before either frame's own slot began.
+    # Compared period by period (the frame's seq over the period's slots):
+    # a period one board was not served in (a frame this loaded machine
+    # did not deliver to the test in time) has no instant to compare.
     ins = {}
     for name in ("pair-a", "pair-b"):
-        ins[name] = sorted(c.in_at for c, _ in boards[name].served)
+        ins[name] = {c.seq >> LEVEL: c.in_at for c, _ in boards[name].served}
         for c, _ in boards[name].served:
             assert c.in_at - LEAD_NS >= grid + c.seq * SLOT_NS, "%s: in_at %d before its own slot %d began" % (
                 name, c.in_at, c.seq)
     slots = [host.device(n, s)["slot"] for n in ("pair-a", "pair-b")]
     assert slots[0] != slots[1], "the even table put both boards of the pair in slot %d: nothing to show" % slots[0]
-    lo = max(ins["pair-a"][0], ins["pair-b"][0])
-    hi = min(ins["pair-a"][-1], ins["pair-b"][-1])
-    common = [[x for x in ins[n] if lo <= x <= hi] for n in ("pair-a", "pair-b")]
-    assert len(common[0]) >= 50 and common[0] == common[1], \
-        "the pair's instants differ: %d and %d in common range, first differing %r" % (
-            len(common[0]), len(common[1]), next(((a, b) for a, b in zip(*common) if a != b), None))
+    both = sorted(set(ins["pair-a"]) & set(ins["pair-b"]))
+    differ = [(p, ins["pair-a"][p], ins["pair-b"][p]) for p in both if ins["pair-a"][p] != ins["pair-b"][p]]
+    assert len(both) >= 50 and not differ, \
+        "the pair's instants differ in %d of the %d periods both were served in (%d and %d served), first %r" % (
+            len(differ), len(both), len(ins["pair-a"]), len(ins["pair-b"]), differ[:1])
 
     # GET /api/schedule: the block as the seed's table. Each board at its
     # slot, latching and releasing at the instants of its frames (relative
