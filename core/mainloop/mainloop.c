@@ -22,6 +22,12 @@
  * a time were most of its work. vmacd services every 50 ms at least; the
  * host's own writes (the API's) are looked at the next service. */
 #define STORE_LOOK_NS 20000000LL
+/* A service takes the bus thread's messages for this long at most, then
+ * does the rest (keys, outbox, workers, checkpoints, events) and says
+ * there is more: machines whose drivers fail as they load, again and
+ * again, keep the ring full, and each load or recording can take tens of
+ * milliseconds, so draining it first could hold the rest off for good. */
+#define SERVICE_MSGS_NS 20000000LL
 
 struct vmac_mainloop {
 	const struct vmac_config *cfg;
@@ -480,12 +486,13 @@ static void take_outbox(struct vmac_mainloop *l)
 	l->outbox_failing = n < 0;
 }
 
-void vmac_mainloop_service(struct vmac_mainloop *l)
+int vmac_mainloop_service(struct vmac_mainloop *l)
 {
 	struct vmac_bus_msg m;
 	uint64_t writes;
-	int64_t now;
-	while (vmac_bus_poll_msg(l->bus, &m)) {
+	int64_t now, begun = l->hooks.bus_ns(l->hooks.ctx);
+	int more = 0;
+	while (!more && vmac_bus_poll_msg(l->bus, &m)) {
 		switch (m.kind) {
 		case VMAC_MSG_EVENT: on_event(l, &m); break;
 		case VMAC_MSG_LOAD: load_driver(l, &m); break;
@@ -504,6 +511,7 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 		 * wraps over the ones not yet copied. */
 		if (vmac_event_log_next_seq(l->log) - l->stored_seq > VMAC_EVENT_LOG_SIZE / 2)
 			store_events(l);
+		more = l->hooks.bus_ns(l->hooks.ctx) - begun >= SERVICE_MSGS_NS;
 	}
 	vmac_bus_workers_service(l->bus);
 	now = l->hooks.bus_ns(l->hooks.ctx);
@@ -519,6 +527,7 @@ void vmac_mainloop_service(struct vmac_mainloop *l)
 	vmac_audit_flush(l->log); /* a window of refusals that has ended says what it left unsaid */
 	store_checkpoints(l);
 	store_events(l);
+	return more;
 }
 
 struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vmac_bus *bus, struct vmac_store *store,

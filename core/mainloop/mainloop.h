@@ -37,10 +37,12 @@ struct vmac_mainloop;
 struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vmac_bus *bus, struct vmac_store *store,
                                         struct vmac_event_log *log, const struct vmac_mainloop_hooks *hooks, char *err,
                                         size_t errlen);
-/* Everything the bus thread has handed over, answered; then checkpoints
- * and events into the store. On every wake-up, and once more after the bus
- * thread has ended. */
-void vmac_mainloop_service(struct vmac_mainloop *l);
+/* What the bus thread has handed over, answered (for 20 ms at most); then
+ * the store's board keys and audit outbox looked at, checkpoints and
+ * events into the store. On every wake-up, and after the bus thread has
+ * ended. 1 when messages were left for the next call (call again soon,
+ * after anything else waiting), else 0. */
+int vmac_mainloop_service(struct vmac_mainloop *l);
 /* The store's board keys to the bus now, if they changed (every
  * vmac_mainloop_service looks too). */
 void vmac_mainloop_sync_keys(struct vmac_mainloop *l);

@@ -93,20 +93,26 @@ static void stopped(void *ctx)
 	ev_break(h->loop, EVBREAK_ALL);
 }
 
+/* A service that left messages comes again once the loop has seen to
+ * whatever else waits (a stop signal among them). */
+static void service(struct host *h)
+{
+	if (vmac_mainloop_service(h->main))
+		ev_async_send(h->loop, &h->wake_w);
+}
+
 static void on_wake(struct ev_loop *loop, ev_async *w, int revents)
 {
-	struct host *h = w->data;
 	(void)loop;
 	(void)revents;
-	vmac_mainloop_service(h->main);
+	service(w->data);
 }
 
 static void on_timer(struct ev_loop *loop, ev_timer *w, int revents)
 {
-	struct host *h = w->data;
 	(void)loop;
 	(void)revents;
-	vmac_mainloop_service(h->main);
+	service(w->data);
 }
 
 static void on_signal(struct ev_loop *loop, ev_signal *w, int revents)
@@ -319,7 +325,8 @@ static void shut_down(struct host *h)
 {
 	vmac_mqtt_stop(h->mqtt); /* devices and host offline, while the broker can still be told */
 	vmac_bus_join(h->bus);
-	vmac_mainloop_service(h->main); /* the last events */
+	while (vmac_mainloop_service(h->main)) /* the last events */
+		;
 	vmac_http_stop(h->http);
 	vmac_site_free(h->site); /* after the server: a request may have been reading it */
 	vmac_mainloop_free(h->main);

@@ -252,6 +252,33 @@ def test_a_board_without_a_key_waits_for_approval_then_runs_once_enrolled(t):
     host.wait_event("dropped", "lamp", text="key was removed", after_seq=seq)
 
 
+SLOW_LOAD_LUA = """local x = 0
+for i = 1, %d do x = x + i %% 7 end -- a file that takes a while to load, every time
+return { name = "slowload", version = "1", io = { lamp = "do0" }, tick = function() end }
+"""
+SLOW_BOARDS = 8
+
+
+def test_a_key_enrolled_while_many_drivers_load_is_taken_before_they_end(t):
+    """The host's main thread loads drivers and looks at the store's keys:
+    while boards keep it loading (here 8 machines whose driver file takes
+    a good part of a second to run, each a load of its own), a key enrolled
+    with vmac board enroll --local is still taken between two loads, not
+    after the last (enroll() waits for the host to hold it)."""
+    host = t.host(drivers=t.drivers(slowload=SLOW_LOAD_LUA % 60000000),
+                  settings={"driver.slowload.budget_us": 200000, "driver.slowload.instructions": 100000000})
+    t.board("generic", "slow", driver="slowload", count=SLOW_BOARDS)
+    names = ["slow-%d" % i for i in range(1, SLOW_BOARDS + 1)]
+    host.wait_status(lambda st: any(host.device(n, st) for n in names), 30, "a slow board attaching")
+    t.enroll(["late-1"])
+    s = host.status()
+    attaching = [n for n in names if (host.device(n, s) or {"state": "attaching"})["state"] == "attaching"]
+    assert len(attaching) >= 3, (
+        "the key was taken only once the loads had (nearly) ended: %d of %d boards still attaching (%s)" % (
+            len(attaching), SLOW_BOARDS, ", ".join(attaching)))
+    host.wait_running(names, 120)
+
+
 def test_bad_enrollments_are_refused_with_a_reason(t):
     host = t.host()
     read = t.make_token("read")
