@@ -167,7 +167,8 @@ def test_make_run_starts_four_machines(t):
     the dryer from examples/kitchen with its Lua plant; the help names it;
     a line typed for dryer-1 reaches its board; TERM stops everything with
     every board safe. Its own bus, port and state folder; the demo's
-    settings otherwise (10 ms deadline, two misses drop a machine), so a
+    settings otherwise (10 ms deadline, two misses drop a machine, clock
+    sync on, so every board has a clock in the status), so a
     board this shared machine holds off may drop and come back: judged is
     that all four come to run together."""
     state = os.path.join(t.logdir, "kitchen")
@@ -210,6 +211,12 @@ def test_make_run_starts_four_machines(t):
                        "dryer-1": "dryer"}, "the kitchen's drivers: %s" % drivers
     assert all(running[n].get("authenticated") for n in kitchen_names), "a board of the kitchen is not sealed: %s" % {
         n: running[n].get("authenticated") for n in kitchen_names}
+    # The demo runs clock sync: every board is served in TIMED frames and
+    # its TIMED replies give it a clock in the status (locked or not: on
+    # this loaded machine a board may still act on arrival now and then).
+    clocked = wait(lambda ds: all((ds.get(n) or {}).get("clock") for n in kitchen_names), "every board's clock")
+    assert all(clocked[n]["timing"]["timed"] for n in kitchen_names), "a board of the demo is not timed: %s" % {
+        n: clocked[n]["timing"] for n in kitchen_names}
 
     kitchen.send("dryer-1 start 1")
     wait(lambda ds: ds.get("dryer-1", {}).get("variables", {}).get("state") == "running",
