@@ -627,11 +627,12 @@ class Context:
             assert p.returncode == 0, "vmac board enroll failed (exit %d): %s" % (p.returncode, p.stderr)
         # A running host has them before the boards announce (one of another
         # state folder takes them within 50 ms: its status needs a token of
-        # its own store).
+        # its own store). Its main thread looks between two loads of drivers
+        # (a second or more each under ASan, for the escape corpus's).
         held = len([f for f in os.listdir(self.keys) if f.endswith(".key")])
         for h in self.procs:
             if isinstance(h, Host) and h.http and h.alive() and h.state == self.logdir:
-                h.wait_status(lambda st: st.get("board_keys", 0) >= held, 10, "the host holding %d board keys" % held)
+                h.wait_status(lambda st: st.get("board_keys", 0) >= held, 30, "the host holding %d board keys" % held)
 
     def make_token(self, scope):
         """A new token of scope in this test's state folder (vmac token create)."""
