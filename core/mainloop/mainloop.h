@@ -40,8 +40,8 @@ struct vmac_mainloop *vmac_mainloop_new(const struct vmac_config *cfg, struct vm
 /* What the bus thread has handed over, answered (for 20 ms at most); then
  * the store's board keys and audit outbox looked at, checkpoints and
  * events into the store. On every wake-up, and after the bus thread has
- * ended. 1 when messages were left for the next call (call again soon,
- * after anything else waiting), else 0. */
+ * ended. 1 when its 20 ms ran out before the ring was seen empty (call
+ * again soon, after anything else waiting), else 0. */
 int vmac_mainloop_service(struct vmac_mainloop *l);
 /* The store's board keys to the bus now, if they changed (every
  * vmac_mainloop_service looks too). */

@@ -21,7 +21,7 @@ import random
 import statistics
 import subprocess
 
-ROUNDS = int(os.environ.get("VMAC_BENCH_SYNC_ROUNDS", "8"))
+ROUNDS = max(1, int(os.environ.get("VMAC_BENCH_SYNC_ROUNDS", "8")))
 COST_SETTINGS = {"driver_threads": 1, "miss_limit": 1000}
 
 
