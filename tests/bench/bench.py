@@ -123,14 +123,14 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def thread_seconds(pid, name):
+def thread_seconds(pid, names):
     """On-CPU seconds (schedstat, in nanoseconds) of a process's threads
-    called name (e.g. vmac-bus)."""
+    whose name is one of names (e.g. ("vmac-bus",))."""
     total = 0
     for tid in os.listdir("/proc/%d/task" % pid):
         try:
             with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
-                if f.read().strip() != name:
+                if f.read().strip() not in names:
                     continue
             with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
                 total += int(f.read().split()[0])
@@ -217,9 +217,9 @@ def run_host(ctx, boards, period_us, seconds, deadline_us=None, extra=None):
     that window."""
     host, names = start_kitchen(ctx, boards, period_us, deadline_us or period_us, extra)
     before = host.status()
-    cpu0, bus0 = cpu_seconds(host.pid), thread_seconds(host.pid, "vmac-bus")
+    cpu0, bus0 = cpu_seconds(host.pid), thread_seconds(host.pid, ("vmac-bus",))
     time.sleep(seconds)  # the measurement window itself, not a synchronisation
-    cpu1, bus1 = cpu_seconds(host.pid), thread_seconds(host.pid, "vmac-bus")
+    cpu1, bus1 = cpu_seconds(host.pid), thread_seconds(host.pid, ("vmac-bus",))
     after = host.status()
     ticks = after["tick"]["count"] - before["tick"]["count"]
     running = sum(1 for d in after["devices"] if d["state"] == "running")

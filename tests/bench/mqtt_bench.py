@@ -43,7 +43,7 @@ import statistics
 import threading
 import time
 
-from bench import ROOT, board_wrapper, cpu_seconds, schedule_for, with_ctx
+from bench import ROOT, board_wrapper, cpu_seconds, schedule_for, thread_seconds, with_ctx
 from fieldbus import MAX_DEVICES_DEFAULT, attempt, fresh_status, note_others, others_running, run_seconds, wait_attached
 from harness import Skip
 
@@ -108,17 +108,7 @@ class Subscriber:
 def mqtt_thread_seconds(pid):
     """On-CPU seconds (schedstat) of the MQTT threads: the publisher
     (vmac-mqtt) and the connection's network thread (vmac-mqtt-net)."""
-    total = 0
-    for tid in os.listdir("/proc/%d/task" % pid):
-        try:
-            with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
-                if f.read().strip() not in ("vmac-mqtt", "vmac-mqtt-net", "vmac-mqtt-spb"):
-                    continue
-            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
-                total += int(f.read().split()[0])
-        except OSError:  # a thread that ended meanwhile
-            pass
-    return total / 1e9
+    return thread_seconds(pid, ("vmac-mqtt", "vmac-mqtt-net", "vmac-mqtt-spb"))
 
 
 def window(ctx, mqtt_on, seconds):
