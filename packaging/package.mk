@@ -121,7 +121,12 @@ deb:
 # installed before is purged first (docs/SERVICE.md, "Testing the package").
 # Then the same package under a real systemd: a Debian root (debootstrap,
 # kept in $(BUILD)/boot-root) booted with systemd-nspawn (tests/package/boot.py).
-test-package:
-	@VMAC_SKIP_FILE=$(SKIPPED) python3 tests/package/test_package.py --build $(BUILD)
+# The root is made while make deb builds (boot.py --prepare, for the
+# libraries the programs of $(BUILD)/bin link: the package's own).
+test-package: $(BINS)
+	@python3 tests/package/boot.py --prepare --root $(BUILD)/boot-root --bins "$(BINS)" \
+		> $(BUILD)/boot-prepare.log 2>&1 & prep=$$!; \
+	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/package/test_package.py --build $(BUILD); rc=$$?; \
+	wait $$prep; cat $(BUILD)/boot-prepare.log; exit $$rc
 	@VMAC_SKIP_FILE=$(SKIPPED) python3 tests/package/boot.py --root $(BUILD)/boot-root \
 		--deb $$(ls $(BUILD)/deb/vmac_[0-9]*.deb)

@@ -16,6 +16,11 @@ systemd-nspawn, systemd as its PID 1, on a network of its own. In it:
 
     tests/package/boot.py --deb build/deb/vmac_VERSION_ARCH.deb --root build/boot-root
 
+With --prepare --bins "BIN ..." instead of --deb it only makes the root,
+for the libraries those programs link (dpkg-shlibdeps: the package's own
+shlibs:Depends, as the same programs built by make deb link the same
+ones), so that make test-package makes it while make deb builds.
+
 Prints one line per step and exits 0, or 1 naming what broke. Without root,
 debootstrap or systemd-nspawn it says SKIPPED (appended to $VMAC_SKIP_FILE)
 and exits 0, or 1 with CI=true."""
@@ -54,22 +59,37 @@ def skip(reason):
     sys.exit(1 if os.environ.get("CI") == "true" else 0)
 
 
+def names_of(field):
+    """Package names of a Depends field (first of alternatives, no versions)."""
+    names = set()
+    for part in re.split(r"[,\n]", field):
+        first = part.split("|")[0].strip()
+        name = re.sub(r"\s*\(.*\)", "", first).strip()
+        if name:
+            names.add(name)
+    return names
+
+
 def depends(deb):
     """The package's dependencies by name (first of alternatives, no versions)."""
     out = subprocess.run(["dpkg-deb", "-f", deb, "Depends", "Pre-Depends"], capture_output=True, text=True,
                          check=True).stdout
-    names = set()
-    for field in re.split(r"[,\n]", out):
-        field = field.split(":", 1)[-1] if field.startswith(("Depends:", "Pre-Depends:")) else field
-        first = field.split("|")[0].strip()
-        name = re.sub(r"\s*\(.*\)", "", first).strip()
-        if name:
-            names.add(name)
-    return sorted(names)
+    return sorted(names_of(re.sub(r"^(Pre-)?Depends:", "", out, flags=re.M)))
 
 
-def make_root(root, deb):
-    include = sorted(set(BASE) | set(depends(deb)))
+def depends_of_bins(bins):
+    """The package names programs bins need, by dpkg-shlibdeps (run where
+    debian/control is)."""
+    src = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
+    p = subprocess.run(["dpkg-shlibdeps", "-O"] + [os.path.abspath(b) for b in bins], cwd=src,
+                       capture_output=True, text=True)
+    if p.returncode != 0:
+        raise Failed("dpkg-shlibdeps failed (exit %d): %s" % (p.returncode, p.stderr[-800:]))
+    return sorted(names_of(p.stdout.strip().partition("=")[2]))
+
+
+def make_root(root, packages):
+    include = sorted(set(BASE) | set(packages))
     marker = os.path.join(root, ".vmac-boot-root")
     want = "\n".join(include) + "\n"
     if os.path.exists(marker) and open(marker).read() == want:
@@ -202,7 +222,7 @@ def board_running(m, token, name):
 
 def run(args):
     deb = os.path.abspath(args.deb)
-    make_root(args.root, deb)
+    make_root(args.root, depends(deb))
     shutil.copy(deb, os.path.join(args.root, "root", "vmac.deb"))
     m = Machine(args.root, os.path.join(args.logdir, "boot-console.log"))
     try:
@@ -287,13 +307,29 @@ def run(args):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--deb", required=True, help="the package to install")
+    ap.add_argument("--deb", help="the package to install")
+    ap.add_argument("--prepare", action="store_true", help="only make the root, for --bins (no --deb)")
+    ap.add_argument("--bins", default="", help="with --prepare: the programs (space-separated) whose libraries it needs")
     ap.add_argument("--root", required=True, help="folder for the Debian root (kept between runs)")
     ap.add_argument("--logdir", default=None, help="where the machine's console log goes (default: --root's parent)")
     ap.add_argument("--max-exposure", type=float, default=4.0, help="systemd-analyze security's highest allowed")
     args = ap.parse_args()
     args.root = os.path.abspath(args.root)
     args.logdir = args.logdir or os.path.dirname(args.root)
+    if args.prepare:
+        # Ahead of the test: what it cannot do here, the test itself says.
+        if os.geteuid() != 0 or not shutil.which("debootstrap") or not shutil.which("dpkg-shlibdeps"):
+            return
+        t0 = time.monotonic()
+        try:
+            make_root(args.root, depends_of_bins(args.bins.split()))
+        except Failed as e:  # the test makes it again, and says so
+            print("boot: preparing the root failed: %s" % e, flush=True)
+            return
+        step("the root prepared in %.0f s" % (time.monotonic() - t0))
+        return
+    if not args.deb:
+        ap.error("--deb is required (or --prepare)")
     if os.geteuid() != 0:
         skip("booting a Debian root needs root (systemd-nspawn)")
     for tool in ("debootstrap", "systemd-nspawn", "nsenter", "dpkg-deb"):
