@@ -515,7 +515,9 @@ async function enrollment(browser, page, addr, tokens) {
     await dp.goto(`http://${addr}/#token=${tokens.deploy}`);
     await dp.click('nav a[data-page="boards"]');
     await dp.click(`#boards-waiting [data-enroll="${SHED}"]`, { timeout: 10000 });
-    key = (await (await dp.waitForSelector("#board-key [data-key]", { timeout: 5000 })).textContent()).trim();
+    // The host stores the key before it answers (a commit to a disk the
+    // other suites share): seconds on a loaded machine.
+    key = (await (await dp.waitForSelector("#board-key [data-key]", { timeout: 20000 })).textContent()).trim();
     if (!/^[0-9a-f]{32}$/.test(key)) throw new Error(`the key shown is not 32 hex digits: ${JSON.stringify(key)}`);
     fingerprint = await dp.getAttribute("#board-key [data-fingerprint]", "data-fingerprint");
     const listed = (await boardsOf(addr, tokens.deploy)).enrolled.find((k) => k.board === SHED);
@@ -524,7 +526,7 @@ async function enrollment(browser, page, addr, tokens) {
       throw new Error(`the page shows fingerprint ${fingerprint}, the host lists ${listed.fingerprint}`);
     }
     await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"] [data-fingerprint="${fingerprint}"]`,
-      { timeout: 5000 });
+      { timeout: 20000 });
     const kept = await dp.evaluate(() => JSON.stringify(Object.assign({}, localStorage, sessionStorage)));
     if (kept.includes(key)) throw new Error("the page stored the key");
     await dp.screenshot({ path: path.join(OUT, "13-enrolled-key.png"), fullPage: true });
