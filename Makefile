@@ -287,15 +287,13 @@ timed-%:
 # tests, plain and under ASan, mostly wait on real time (plant physics,
 # watchdogs, restarts): over three minutes each, a core's worth of CPU
 # for both. So the last step runs both passes at once, beside what needs
-# the CPU (the ASan unit tests, the package's build and test, the web UI
-# in chromium) and the soak, which waits too. -j6: one job a suite, and
-# one for the ASan pass's second half. The ASan tree is built beside the
-# plain one, before: built in the last step it made the ASan pass the
-# step's longest (some 300 of its 780 s, the machine's cores all taken).
+# the CPU (the ASan build and its unit tests, the package's build and
+# test, the web UI in chromium) and the soak, which waits too. -j6: one
+# job a suite, and one for the ASan pass's second half.
 test: deps
 	@mkdir -p $(BUILD) && rm -f $(SKIPPED) $(TIMES)
 	@$(call timed,format-check)
-	@$(call timed,test-build asan-build,-j2)
+	@$(call timed,test-build,-j2)
 	@$(call timed,test-unit test-lua test-drivers test-fuzz,-j2)
 	@$(call timed,test-integration test-asan test-package test-soak test-ui,-j6 VMAC_SCHED_PROPERTY_RUNS=10000)
 	@rm -f $(TIMES).each; echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
