@@ -105,10 +105,11 @@ struct job {
 	int64_t overdue_cpu_ns;         /* and its worker's CPU time then */
 	int64_t ready_ns;               /* virtual mode, a slow driver: when its results are ready */
 	uint64_t rec_n;                 /* INPUT: its event in the recorder */
-	/* drv's budget (vmac_driver_budget_ns), read once per instance: the
-	 * instance's line holds what its worker writes at every call. */
+	/* A tick of drv stalls after stall_ns (its budget and half: jobs.c,
+	 * STALL_AFTER), read once per instance: the instance's line holds
+	 * what its worker writes at every call. */
 	const struct vmac_driver *budget_of;
-	int64_t budget_ns;
+	int64_t stall_ns;
 	struct vmac_bus *bus;
 	int mach; /* its machine: bus->mach[mach] */
 	/* Rarely used: the bus thread's, written before QUEUED. */

@@ -14,6 +14,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* A call is judged stalled half as long again after its budget: the
+ * driver's own check fails a busy call at 1.25 budgets (core/driver/
+ * protect.c, held_off), and its error, which names the driver's line,
+ * comes first. */
+#define STALL_AFTER(budget_ns) ((budget_ns) + (budget_ns) / 2)
+
 int bus_jobs_init(struct vmac_bus *bus)
 {
 	uint32_t i;
@@ -31,10 +37,8 @@ int bus_jobs_init(struct vmac_bus *bus)
 		atomic_init(&bus->jobs[i].runner, -1);
 	}
 	/* attach, input, a hot reload's take-over: a few calls each, at most
-	 * VMAC_DRIVER_LOAD_FACTOR budgets, and never less than 100 ms; half as
-	 * much again, for the driver's own check fails a busy call at 1.25
-	 * times its budget (core/driver/protect.c, held_off) and comes first. */
-	bus->job_limit_ns = budget * VMAC_DRIVER_LOAD_FACTOR * 3 / 2;
+	 * VMAC_DRIVER_LOAD_FACTOR budgets, and never less than 100 ms. */
+	bus->job_limit_ns = STALL_AFTER(budget * VMAC_DRIVER_LOAD_FACTOR);
 	if (bus->job_limit_ns < 100000000)
 		bus->job_limit_ns = 100000000;
 	return 0;
@@ -381,15 +385,14 @@ static const char *job_name(enum job_kind k)
 #define QUEUED_MAX(limit) ((limit)*10 > 1000000000 ? (limit)*10 : 1000000000)
 static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, struct job *j)
 {
-	int64_t period = bus->slot_ns << m->level, budget;
+	int64_t period = bus->slot_ns << m->level;
 	if (j->kind != JOB_TICK)
 		return bus->job_limit_ns;
 	if (j->budget_of != j->drv) { /* reset when an instance is bound to the machine (bus_bind_driver) */
 		j->budget_of = j->drv;
-		j->budget_ns = vmac_driver_budget_ns(j->drv);
+		j->stall_ns = STALL_AFTER(vmac_driver_budget_ns(j->drv));
 	}
-	budget = j->budget_ns + j->budget_ns / 2; /* the driver's own check fails a busy call at 1.25 budgets */
-	return budget > period ? budget : period;
+	return j->stall_ns > period ? j->stall_ns : period;
 }
 
 /* j has run past its limit, and its worker was on a CPU for it: the driver
