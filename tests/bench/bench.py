@@ -123,15 +123,16 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def thread_seconds(pid, names):
+def thread_seconds(pid, names=None):
     """On-CPU seconds (schedstat, in nanoseconds) of a process's threads
-    whose name is one of names (e.g. ("vmac-bus",))."""
+    whose name is one of names (e.g. ("vmac-bus",)), or of all of them."""
     total = 0
     for tid in os.listdir("/proc/%d/task" % pid):
         try:
-            with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
-                if f.read().strip() not in names:
-                    continue
+            if names is not None:
+                with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
+                    if f.read().strip() not in names:
+                        continue
             with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
                 total += int(f.read().split()[0])
         except OSError:  # a thread that ended meanwhile

@@ -14,7 +14,7 @@ import sys
 import time
 
 from bench import (BENCH_LUA, PRIORITY, ROOT, THESIS_TABLE3, bare, board_wrapper, cpu_awake, cpu_seconds, cyclictest,  # noqa: F401
-                   fresh, schedule_for, with_ctx)
+                   fresh, schedule_for, thread_seconds, with_ctx)
 from harness import Context, Skip  # noqa: E402,F401
 
 # ---------------------------------------------------------------------------
@@ -51,14 +51,7 @@ def run_seconds(pid):
     """Seconds on a CPU of every thread of a process, from the nanoseconds of
     /proc/PID/task/*/schedstat: a cross-check of utime+stime, which /proc
     gives only in clock ticks (10 ms: 3% of a 10 s window at 3% CPU)."""
-    total = 0
-    for tid in os.listdir("/proc/%d/task" % pid):
-        try:
-            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
-                total += int(f.read().split()[0])
-        except OSError:  # a thread that ended meanwhile
-            pass
-    return total / 1e9
+    return thread_seconds(pid)
 
 
 def fieldbus_kitchen(ctx, mode, boards, period_us, driver=None, keyed=True, board_extra=()):
