@@ -293,20 +293,24 @@ async function main() {
     await check("a page opened while it washes draws the drum plot from before it was opened", async () => {
       // The page's own data: points older than the page itself can only
       // come from the host's history (GET /api/devices/NAME/history).
+      // When it was opened, by the wall clock the page's Date.now() reads
+      // too (performance.timeOrigin is the browser's monotonic clock moved
+      // to the wall clock once, and goes wrong when the wall clock steps).
+      const opened = Date.now() / 1000;
       const fresh = await browser.newPage({ viewport: { width: 1280, height: 900 } });
       try {
         await fresh.goto(`http://${addr}/#token=${read}`);
         const plot = '[data-device="washer-1"] canvas[data-plot^="drum_rpm"]';
-        const got = await fresh.waitForFunction((sel) => {
+        const got = await fresh.waitForFunction(([sel, opened]) => {
           const c = document.querySelector(sel);
-          const opened = performance.timeOrigin / 1000;
           return c && Number(c.dataset.first) < opened - 2 && Number(c.dataset.points) > 8 &&
             { first: Number(c.dataset.first), opened, points: Number(c.dataset.points) };
-        }, plot, { timeout: 10000 }).catch(async () => {
+        }, [plot, opened], { timeout: 10000 }).catch(async () => {
           const c = await fresh.$eval(plot, (e) => ({ ...e.dataset })).catch(() => "no plot");
-          throw new Error("the fresh page's drum plot has no points from before it was opened: " + JSON.stringify(c));
+          throw new Error(`the fresh page's drum plot (opened at ${opened}) has no points from before it was opened: ` +
+            JSON.stringify(c));
         });
-        const { first, opened, points } = await got.jsonValue();
+        const { first, points } = await got.jsonValue();
         console.log(`  the fresh page's drum plot: ${points} points, the oldest ${(opened - first).toFixed(1)} s before it was opened`);
         await fresh.screenshot({ path: path.join(OUT, "4b-fresh-page-history.png"), fullPage: true });
       } finally {
