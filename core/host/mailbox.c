@@ -234,14 +234,14 @@ static int bus_request(struct vmac_bus *bus, enum bus_request_kind kind, struct 
 	atomic_store(&bus->req_queued, 1);
 	if (!bus->virt)
 		bus_wake(bus);
-	clock_gettime(CLOCK_REALTIME, &until);
+	clock_gettime(CLOCK_MONOTONIC, &until); /* a wall clock set meanwhile (NTP at boot) changes nothing */
 	until.tv_sec += timeout_ms / 1000;
 	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
 	if (until.tv_nsec >= 1000000000L) {
 		until.tv_sec++;
 		until.tv_nsec -= 1000000000L;
 	}
-	while ((rc = sem_timedwait(&q->done, &until)) != 0 && errno == EINTR)
+	while ((rc = sem_clockwait(&q->done, CLOCK_MONOTONIC, &until)) != 0 && errno == EINTR)
 		;
 	if (rc != 0) {
 		expect = REQ_QUEUED;

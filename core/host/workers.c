@@ -368,7 +368,7 @@ static int stop_workers(struct vmac_bus *bus)
 			/* the counter is full: it wakes anyway */
 		}
 	}
-	clock_gettime(CLOCK_REALTIME, &until);
+	clock_gettime(CLOCK_MONOTONIC, &until); /* a wall clock set meanwhile changes nothing */
 	until.tv_nsec += 200000000L;
 	if (until.tv_nsec >= 1000000000L) {
 		until.tv_sec++;
@@ -378,7 +378,7 @@ static int stop_workers(struct vmac_bus *bus)
 		struct worker *w = &bus->workers[i];
 		if (atomic_load(&w->state) == W_FREE)
 			continue;
-		if (pthread_timedjoin_np(w->thread, NULL, &until) != 0) {
+		if (pthread_clockjoin_np(w->thread, NULL, CLOCK_MONOTONIC, &until) != 0) {
 			pthread_detach(w->thread);
 			all = 0;
 		}
