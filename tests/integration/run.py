@@ -139,24 +139,26 @@ def run_worker(name, path, bindir, limit_s, keep):
     t0 = time.monotonic()
     outcome, reason = run_one(name, fn, bindir, limit_s, keep)
     took = time.monotonic() - t0
-    print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": took, "cpu": cpu_seconds()}),
-          flush=True)
+    cpu, sys_cpu = cpu_seconds()
+    print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": took, "cpu": cpu,
+                      "sys": sys_cpu}), flush=True)
     return 0
 
 
 def cpu_seconds():
-    """CPU seconds (user and system) of this worker and of every program
-    its test started (each reaped by the test's cleanup): on the 2-core
-    machine make test runs on, the suite's CPU is what the tests beside a
-    test wait for."""
+    """CPU seconds (user and system), and of them the system's, of this
+    worker and of every program its test started (each reaped by the test's
+    cleanup): on the 2-core machine make test runs on, the suite's CPU is
+    what the tests beside a test wait for."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+    sys_cpu = own.ru_stime + children.ru_stime
+    return own.ru_utime + children.ru_utime + sys_cpu, sys_cpu
 
 
 BUILD_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "build"))
 PLAIN_TIMES_FILE = os.path.join(BUILD_DIR, "integration-times.json")
 UNKNOWN_S = 5.0  # where a test with no time yet goes in the order: about the median
-LONGEST = 15     # the longest tests the summary lists
+LONGEST = 15     # the longest tests the summary lists, and the most CPU-hungry
 
 
 def times_file(bindir):
@@ -204,23 +206,31 @@ def expected_times(tests, own, plain):
     return expected
 
 
-def longest_report(took, cpu, wall_s, jobs):
+def longest_report(took, cpu, sys_cpu, wall_s, jobs):
     """The summary's lines on the longest tests: the LONGEST slowest with
     the CPU each used, and the sum of every test's time and CPU against
-    the run's own time (what -j bought, and what the machine had to give)."""
+    the run's own time (what -j bought, and what the machine had to give);
+    then the LONGEST that used the most CPU, with the system's part of it
+    (what to make cheaper when the suite waits for the CPU)."""
     if not took:
         return []
-    lines = ["the %d longest of %d tests (%.0f s of tests and %.0f s of CPU in %.0f s at -j %d):" % (
-        min(LONGEST, len(took)), len(took), sum(took.values()), sum(cpu.values()), wall_s, jobs)]
+    lines = ["the %d longest of %d tests (%.0f s of tests and %.0f s of CPU, %.0f s of it the system's, "
+             "in %.0f s at -j %d):" % (min(LONGEST, len(took)), len(took), sum(took.values()), sum(cpu.values()),
+                                       sum(sys_cpu.values()), wall_s, jobs)]
     for name, seconds in sorted(took.items(), key=lambda kv: (-kv[1], kv[0]))[:LONGEST]:
         lines.append("  %6.1f s  %6s s CPU  %s" % (seconds, "%.1f" % cpu[name] if name in cpu else "?", name))
+    if cpu:
+        lines.append("the %d that used the most CPU:" % min(LONGEST, len(cpu)))
+        for name, seconds in sorted(cpu.items(), key=lambda kv: (-kv[1], kv[0]))[:LONGEST]:
+            lines.append("  %6.1f s CPU (%5.1f s system)  %s" % (seconds, sys_cpu.get(name, 0.0), name))
     return lines
 
 
 def run_all(tests, args, bindir, expected):
     """Run tests in worker processes, args.jobs at a time, the longest
     expected first, the serial ones alone at the end; yields (name, outcome,
-    reason, seconds, CPU seconds or None) as each ends."""
+    reason, seconds, CPU seconds or None, system CPU seconds or None) as
+    each ends."""
     parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -expected.get(n, UNKNOWN_S))
     serial = [t[0] for t in tests if t[2]]
     path_of = {t[0]: t[3] for t in tests}
@@ -243,10 +253,10 @@ def run_all(tests, args, bindir, expected):
         out = raw.decode(errors="replace")
         try:
             r = json.loads(out.strip().splitlines()[-1])
-            return name, r["outcome"], r["reason"], r["took"], r.get("cpu")
+            return name, r["outcome"], r["reason"], r["took"], r.get("cpu"), r.get("sys")
         except (ValueError, IndexError, KeyError):
             return name, "fail", "its worker ended (exit %s) without a result: %s" % (p.returncode, out[-500:]), (
-                time.monotonic() - t0), None
+                time.monotonic() - t0), None, None
 
     try:
         for batch, width in ((parallel, max(1, args.jobs)), (serial, 1)):
@@ -317,11 +327,11 @@ def main():
     own_file = times_file(bindir)
     times = load_times(own_file)
     expected = expected_times(tests, times, load_times(PLAIN_TIMES_FILE) if own_file != PLAIN_TIMES_FILE else {})
-    took_s, cpu_s = {}, {}  # every test that ran: seconds, and CPU seconds where its worker said
-    for name, outcome, reason, took, cpu in run_all(tests, args, bindir, expected):
+    took_s, cpu_s, sys_s = {}, {}, {}  # every test that ran: seconds, and CPU seconds where its worker said
+    for name, outcome, reason, took, cpu, sys_cpu in run_all(tests, args, bindir, expected):
         took_s[name] = took
         if cpu is not None:
-            cpu_s[name] = cpu
+            cpu_s[name], sys_s[name] = cpu, sys_cpu or 0.0
         if outcome == "skip" and ci:
             outcome, reason = "fail", "could not run, and CI=true makes that a failure: %s" % reason
         if outcome == "pass":
@@ -345,7 +355,7 @@ def main():
             with open(skip_file, "a") as f:
                 for name, reason in skips:
                     f.write("integration test %s (%s): %s\n" % (name, args.bin, reason))
-    for line in longest_report(took_s, cpu_s, wall_s, max(1, args.jobs)):
+    for line in longest_report(took_s, cpu_s, sys_s, wall_s, max(1, args.jobs)):
         print(line, flush=True)
     print("%d passed, %d failed, %d skipped%s" % (passed, failed, len(skips), ", %d left to the plain pass" % len(
         plain_only) if plain_only else ""), flush=True)
