@@ -7,12 +7,14 @@ export const args = Object.fromEntries(process.argv.slice(2).reduce((acc, a, i, 
 // failures: how many checks (and page errors) failed so far.
 export const tally = { failures: 0 };
 
+// fn's truthy value, asked every 100 ms for ms (by the monotonic clock: a
+// wall clock set meanwhile neither ends the wait early nor makes it last).
 export async function until(fn, ms, what) {
-  const end = Date.now() + ms;
+  const end = performance.now() + ms;
   for (;;) {
     const v = await fn();
     if (v) return v;
-    if (Date.now() > end) throw new Error(`${what}: not within ${ms} ms`);
+    if (performance.now() > end) throw new Error(`${what}: not within ${ms} ms`);
     await new Promise((r) => setTimeout(r, 100));
   }
 }
