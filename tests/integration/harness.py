@@ -431,6 +431,19 @@ def bus_socket(bus, timeout_s):
     return s
 
 
+def sender_socket(bus):
+    """A UDP socket that speaks on the test's bus (GROUP:PORT) as a host
+    does: bound to an ephemeral port on loopback, its multicast out on
+    loopback (its own copies looped back too). Returns it and the group's
+    (address, port) to send discovery and CYCLIC frames to."""
+    group, port = bus.rsplit(":", 1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    return s, (group, int(port))
+
+
 def undisturbed(names):
     """An invariant for wait_status: every device of names is running, and
     none of its misses is the host's own (misses_host: a request the host

@@ -15,7 +15,7 @@ import time
 
 import frames
 from frames import AUTH, DISCOVER, REGISTER, SYS, frame, opens, parse, register
-from harness import Skip
+from harness import Skip, sender_socket
 
 EXIT_S = 30
 KEY_HEX = "00112233445566778899AABBCCDDeeff"
@@ -102,13 +102,8 @@ class Peer:
     frame: discovery to the group, requests to a board's own address."""
 
     def __init__(self, t):
-        group, port = t.bus.rsplit(":", 1)
-        self.group = (group, int(port))
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock, self.group = sender_socket(t.bus)
         t.cleanups.append(self.sock.close)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-        self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
 
     def replies(self, wait_s):
         """Every (frame, address) that came within wait_s."""

@@ -20,7 +20,7 @@ import threading
 import time
 
 import frames
-from harness import KITCHEN, KITCHEN_NAMES, Skip, bus_socket
+from harness import KITCHEN, KITCHEN_NAMES, Skip, bus_socket, sender_socket
 from sync_wire import Capture, lateness, streams
 
 # 1 ms slots so that a SYNC goes out every millisecond (at most one a tick),
@@ -279,20 +279,17 @@ def test_a_keyed_board_takes_only_the_hosts_sealed_sync(t):
     # (an unkeyed board would go locking on them); the host's sealed SYNC
     # replayed, and with its host_ns moved by 10 us (the MAC now wrong).
     mark = line.index + 1
-    group, port = t.bus.rsplit(":", 1)
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    s, group = sender_socket(t.bus)
     forged = 300
     try:
         for i in range(forged):
             host_ns = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 500000000
             s.sendto(frames.frame(SYNC_OP, struct.pack(">QQ", host_ns, 0), channel=frames.SYS, seq=i, version=2),
-                     (group, int(port)))
+                     group)
             old = session[i % len(session)]
-            s.sendto(old, (group, int(port)))
+            s.sendto(old, group)
             moved = struct.unpack_from(">Q", old, frames.HDR_LEN)[0] + 10000
-            s.sendto(old[:frames.HDR_LEN] + struct.pack(">Q", moved) + old[frames.HDR_LEN + 8:], (group, int(port)))
+            s.sendto(old[:frames.HDR_LEN] + struct.pack(">Q", moved) + old[frames.HDR_LEN + 8:], group)
             time.sleep(0.001)
     finally:
         s.close()

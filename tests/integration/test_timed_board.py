@@ -17,6 +17,7 @@ import time
 
 from frames import (CLOCK_ARRIVAL, CLOCK_STATES, CYCLIC_DUE, DEV, DISCOVER, OFFSET, REGISTER, REPLY, SHUTDOWN, SYS,
                     TIMED, UPDATE, cyclic, frame, latch, parse, register, u16)
+from harness import sender_socket
 
 SYNC_SETTINGS = {"clock_sync_ms": 1, "slice_us": 200, "slices_per_slot": 5}
 # vmacd as the SYNC source of unkeyed boards the test serves: only an open
@@ -40,11 +41,7 @@ class Host:
     """The test's side of the bus: one UDP socket, multicast out on loopback."""
 
     def __init__(self, bus):
-        group, port = bus.rsplit(":", 1)
-        self.group = (group, int(port))
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        self.sock, self.group = sender_socket(bus)
         self.sock.settimeout(5)
         self.boards = {}  # name: (address, device_id, tag)
         self.seq = 0

@@ -19,7 +19,7 @@ import time
 import frames
 from fake_board import FakeBoard
 from frames import SYS, UPDATE, parse, seal
-from harness import Skip, bus_socket, post, undisturbed
+from harness import Skip, bus_socket, post, sender_socket, undisturbed
 
 FORGED = 20  # forged or replayed frames sent in each attempt
 
@@ -170,17 +170,14 @@ def test_a_forged_or_replayed_host_frame_moves_no_output(t):
     assert code == 200, "all_off answered %d: %s" % (code, text)
     host.wait_status(lambda s: not any(host.device("lights-1", s)["outputs"]["digital"]), 10, "every light off")
     to, device_id = lights_record(t, host)
-    group, port = t.bus.rsplit(":", 1)
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    s, group = sender_socket(t.bus)
     try:
         on = struct.pack(">Bh", 0x7F, 1000)  # every output the lights board has, valid: only the MAC is wrong
         for i in range(FORGED):
             update = frames.frame(UPDATE, on, device_id=device_id, seq=1000 + i)
             s.sendto(update, to)  # unsealed
             s.sendto(seal(update, 1 << 30, os.urandom(16)), to)  # sealed with a key not the session's
-            s.sendto(captured[i], (group, int(port)))  # an old CYCLIC frame of the host's, light on
+            s.sendto(captured[i], group)  # an old CYCLIC frame of the host's, light on
         # The board's replies carry what it drives: judged over the next services.
         for _ in range(20):
             st = host.status()
