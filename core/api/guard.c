@@ -8,7 +8,10 @@
  * - a connection must deliver a request's headers within
  *   http_header_timeout_s and its body within http_body_timeout_s (a
  *   slow client is cut off by a reaper thread that shuts its socket down;
- *   libmicrohttpd's own timeout is reset by every byte);
+ *   libmicrohttpd's own timeout is reset by every byte); a kept-alive
+ *   connection's next request is timed from its first line, and one idle
+ *   (or trickling that line) is closed after HTTP_IDLE_TIMEOUT_S without
+ *   an event: browsers and Prometheus keep connections between requests;
  * - libmicrohttpd bounds connections per address (http_connections_per_address).
  * Each lock-out is said in the audit trail with the request that caused it
  * (its type "lockout", audit.c), each batch of cut-off connections is an
@@ -232,6 +235,27 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	pthread_mutex_unlock(&h->guard.lock);
 }
 
+/* libmicrohttpd's URI log callback: a request's first line is in. On a
+ * kept-alive connection the next request's header deadline starts here;
+ * a new connection's started when it was accepted. NULL: no request
+ * context yet (on_request makes its own). */
+void *http_guard_request_line(void *cls, const char *uri, struct MHD_Connection *c)
+{
+	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+	struct guard_conn *slot = ci ? ci->socket_context : NULL;
+	struct vmac_http *h = cls;
+	(void)uri;
+	if (!slot)
+		return NULL;
+	pthread_mutex_lock(&h->guard.lock);
+	if (slot->phase == GUARD_IDLE) {
+		slot->phase = GUARD_HEADERS;
+		slot->since = http_mono_s();
+	}
+	pthread_mutex_unlock(&h->guard.lock);
+	return NULL;
+}
+
 /* Every REAP_EVERY_MS: a connection past its phase's deadline is cut off
  * (its socket shut down: libmicrohttpd's thread then sees the end and
  * closes it). */
@@ -247,13 +271,17 @@ static void *reaper(void *arg)
 		double now = http_mono_s();
 		for (i = 0; i < GUARD_CONNS; i++) {
 			struct guard_conn *k = &g->conns[i];
-			double limit = k->phase == GUARD_HEADERS ? g->header_timeout_s : g->body_timeout_s;
+			double limit = k->phase == GUARD_HEADERS ? g->header_timeout_s
+			               : k->phase == GUARD_BODY  ? g->body_timeout_s
+			                                         : HTTP_IDLE_TIMEOUT_S;
 			if (k->fd < 0 || k->phase == GUARD_ANSWERING || now - k->since < limit)
 				continue;
 			shutdown(k->fd, SHUT_RDWR);
+			if (k->phase != GUARD_IDLE) {
+				g->cut_unsaid++;
+				snprintf(last, sizeof(last), "%s", k->addr);
+			}
 			k->phase = GUARD_ANSWERING; /* once */
-			g->cut_unsaid++;
-			snprintf(last, sizeof(last), "%s", k->addr);
 		}
 		if (g->cut_unsaid && now - g->cut_said_at >= CUT_SAID_EVERY_S) {
 			char text[240];

@@ -103,7 +103,7 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
 	struct conn *k = *con_cls;
 	(void)why;
 	http_count_answer(cls, c);
-	http_guard_phase(c, cls, GUARD_HEADERS); /* a kept-alive connection's next request: its deadline */
+	http_guard_phase(c, cls, GUARD_IDLE); /* kept alive: the next request's deadline starts at its first line */
 	if (k) {
 		free(k->body);
 		free(k);
@@ -331,16 +331,17 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	}
 	/* A thread per connection: an operator input waits for the bus thread
 	 * without holding up other clients. */
-	h->daemon = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION |
-	                                 MHD_USE_ERROR_LOG | (h->tls_cert ? MHD_USE_TLS : 0),
-	                             0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
-	                             MHD_OPTION_NOTIFY_CONNECTION, http_guard_notify, h, MHD_OPTION_SOCK_ADDR,
-	                             (struct sockaddr *)&sin, MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)30,
-	                             MHD_OPTION_CONNECTION_LIMIT, (unsigned)HTTP_CONNECTIONS_MAX,
-	                             MHD_OPTION_PER_IP_CONNECTION_LIMIT, (unsigned)cfg->http_connections_per_address,
-	                             /* the certificate and key, or nothing */
-	                             h->tls_cert ? MHD_OPTION_HTTPS_MEM_CERT : MHD_OPTION_END, h->tls_cert,
-	                             MHD_OPTION_HTTPS_MEM_KEY, h->tls_key, MHD_OPTION_END);
+	h->daemon = MHD_start_daemon(
+	    MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION | MHD_USE_ERROR_LOG |
+	        (h->tls_cert ? MHD_USE_TLS : 0),
+	    0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_NOTIFY_CONNECTION,
+	    http_guard_notify, h, MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin, MHD_OPTION_CONNECTION_TIMEOUT,
+	    (unsigned)HTTP_IDLE_TIMEOUT_S, MHD_OPTION_URI_LOG_CALLBACK, http_guard_request_line, h,
+	    MHD_OPTION_CONNECTION_LIMIT, (unsigned)HTTP_CONNECTIONS_MAX, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
+	    (unsigned)cfg->http_connections_per_address,
+	    /* the certificate and key, or nothing */
+	    h->tls_cert ? MHD_OPTION_HTTPS_MEM_CERT : MHD_OPTION_END, h->tls_cert, MHD_OPTION_HTTPS_MEM_KEY, h->tls_key,
+	    MHD_OPTION_END);
 	if (!h->daemon) {
 		snprintf(err, errlen, "cannot listen on %s (address in use, not an address of this machine%s)", listen,
 		         h->tls_cert ? ", or a certificate and key that do not go together" : "");

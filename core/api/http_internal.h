@@ -54,9 +54,14 @@ struct guard_fail {
 	int said; /* its lock-out is in the events */
 };
 
-/* Where a connection is: receiving a request's headers, its body, or
- * answering (a stream may answer for hours). */
-enum guard_phase { GUARD_HEADERS, GUARD_BODY, GUARD_ANSWERING };
+/* Where a connection is: receiving a request's headers, its body,
+ * answering (a stream may answer for hours), or kept alive between two
+ * requests (idle: nothing of the next request's first line yet). */
+enum guard_phase { GUARD_HEADERS, GUARD_BODY, GUARD_ANSWERING, GUARD_IDLE };
+/* A kept-alive connection idle this long is closed, quietly: an idle
+ * client is not an attack (libmicrohttpd's own timeout, reset by every
+ * byte, is the same). */
+#define HTTP_IDLE_TIMEOUT_S 30
 
 struct guard_conn {
 	int fd; /* -1: unused */
@@ -231,6 +236,7 @@ void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_contex
                        enum MHD_ConnectionNotificationCode code);
 /* The connection of c is now in phase (its deadline counts from now). */
 void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_phase phase);
+void *http_guard_request_line(void *cls, const char *uri, struct MHD_Connection *c);
 /* The reaper thread: 0, or a negative errno. */
 int http_guard_start(struct vmac_http *h);
 void http_guard_stop(struct vmac_http *h);

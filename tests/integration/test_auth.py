@@ -3,6 +3,7 @@ the health check needs a token of the store; tokens are made, listed and
 revoked with vmac token, host running or not; failed attempts are limited
 per client address."""
 
+import http.client
 import json
 import os
 import re
@@ -189,6 +190,37 @@ def test_slow_clients_cannot_take_the_api_away(t):
     n = int(cut["text"].split()[0])
     assert 0 < n <= 64 + 1, "%s (at most 64 from one address are let in)" % cut["text"]
     assert "127.0.0.2" in cut["text"], "the event does not say where from: %r" % cut["text"]
+
+
+def test_a_kept_alive_client_waits_unharmed_but_a_slow_next_request_is_cut(t):
+    """A client that keeps its connection between requests (a browser,
+    Prometheus between scrapes) is idle, not slow: it is neither cut off
+    nor reported at http_header_timeout_s, and its next request on the same
+    connection is answered. The next request's headers are timed from its
+    first line: trickled on a kept-alive connection, they are cut off and
+    said, as on a new one (docs/API.md, "Abuse")."""
+    host = t.host(settings={"http_header_timeout_s": 1})
+    addr, port = host.http.rsplit(":", 1)
+    kept = http.client.HTTPConnection(addr, int(port), timeout=10)
+    t.cleanups.append(kept.close)
+    for i in range(2):
+        kept.request("GET", "/api/health")
+        answer = kept.getresponse()
+        answer.read()
+        assert answer.status == 200, "request %d on the kept-alive connection: HTTP %d" % (i + 1, answer.status)
+        if i == 0:
+            time.sleep(2.5)  # idle for more than twice the header timeout: what is under test
+    host.status()  # the events so far
+    cut = [e for e in host.events.values() if "cut off" in e["text"]]
+    assert not cut, "an idle kept-alive connection was reported: %r" % cut
+
+    slow = socket.create_connection((addr, int(port)), timeout=5)
+    t.cleanups.append(slow.close)
+    slow.sendall(b"GET /api/health HTTP/1.1\r\nHost: x\r\n\r\n")
+    assert slow.recv(4096).startswith(b"HTTP/1.1 200"), "the first request on the slow connection was not answered"
+    slow.sendall(b"GET /api/health HTTP/1.1\r\n")
+    event = host.wait_event("http", text="connections cut off", timeout_s=20)
+    assert event["text"].startswith("1 connections cut off"), "expected the slow connection alone: %r" % event["text"]
 
 
 def test_a_state_folder_that_cannot_be_made_stops_the_host(t):
