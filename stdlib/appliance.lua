@@ -188,6 +188,9 @@ local function where(self)
 end
 
 local function age_text(age_s)
+	if age_s == math.huge then -- no age, or the host's clock now before the checkpoint's
+		return "checkpoint of unknown age"
+	end
 	return string.format("checkpoint %.0f s old", age_s)
 end
 

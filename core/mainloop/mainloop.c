@@ -2,6 +2,7 @@
 #include "mainloop.h"
 
 #include <errno.h>
+#include <math.h>
 #include <sodium.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -151,7 +152,13 @@ static void store_checkpoints(struct vmac_mainloop *l)
 }
 
 /* The checkpoint of machine `device`, if the store has one of this driver,
- * offered to its freshly loaded instance (for recover, after attach). */
+ * offered to its freshly loaded instance (for recover, after attach). Its
+ * age is by the wall clock (the host may have rebooted); a checkpoint more
+ * than CLOCK_BACK_S in the future was taken before the clock was set back
+ * (a box without a battery-backed clock, set by NTP after the crash): of
+ * unknown age, it is offered as infinitely old, so a driver does not
+ * resume an hour-old programme as a fresh one. */
+#define CLOCK_BACK_S 1.0
 static void offer_checkpoint(struct vmac_mainloop *l, struct vmac_driver *drv, const char *device)
 {
 	struct vmac_checkpoint_info info;
@@ -168,8 +175,10 @@ static void offer_checkpoint(struct vmac_mainloop *l, struct vmac_driver *drv, c
 	if (strcmp(driver, vmac_driver_name(drv)) == 0) {
 		info.time = time;
 		info.age_s = wall_s(l) - time;
-		if (info.age_s < 0)
-			info.age_s = 0; /* the clock was set back */
+		if (info.age_s < -CLOCK_BACK_S)
+			info.age_s = HUGE_VAL; /* the wall clock was set back since: its age unknown, as too old */
+		else if (info.age_s < 0)
+			info.age_s = 0;
 		info.version = version;
 		info.restarted = time < (double)l->started_ns / 1e9;
 		if (vmac_driver_offer_checkpoint(drv, data, len, &info, err, sizeof(err)) != 0) {

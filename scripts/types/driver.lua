@@ -102,7 +102,7 @@
 ---The last checkpoint of dev.state, as recover(dev, saved) gets it.
 ---@class vmac.Saved
 ---@field state table a plain-data copy of dev.state at the checkpoint
----@field age_s number seconds from the checkpoint to now (wall clock)
+---@field age_s number seconds from the checkpoint to now (wall clock); math.huge when the clock was set back since
 ---@field version string the driver version that wrote it
 ---@field time number when it was written (Unix time, seconds)
 ---@field restarted boolean true after a host restart; false when the machine came back after a drop

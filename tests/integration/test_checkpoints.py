@@ -1,6 +1,7 @@
 """Checkpoints that cannot be used after a host crash (docs/DRIVERS.md
-"Recovery after a restart"): one older than recover_max_age_s makes the
-washer drain and unlock, saying why; a damaged one is refused with the
+"Recovery after a restart"): one older than recover_max_age_s, or of an
+unknown age (the clock set back since), makes the washer drain and unlock,
+saying why; a damaged one is refused with the
 reason and the washer starts afresh, its door still held over the water.
 The kill to outputs-off time is checked only loosely here (test_recovery.py's
 50 crashes check it tightly)."""
@@ -65,6 +66,35 @@ def test_a_checkpoint_too_old_drains_the_washer(t):
                      and not washer(host, s)["inputs"]["digital"][DOOR_LOCKED_BIT], QUICK_RELEASE_S + 10,
                      "the door unlocked after the cancel", guard)
     assert_safe_board(board, "after the old checkpoint")
+
+
+def test_a_checkpoint_from_before_the_clock_was_set_back_drains_the_washer(t):
+    """The host's wall clock set back while it was down (a box without a
+    battery-backed clock, its time set by NTP after boot): the checkpoint's
+    time is then in the future and its age unknown. The washer takes it as
+    too old, well within recover_max_age_s (600) as it would look, and
+    cancels, saying why (docs/DRIVERS.md, "Recovery after a restart")."""
+    host = recovery_host(t)
+    board = washer_board(t, SHORT_LOCK_RELEASE_S)
+    host.wait_running(["washer-1"])
+    wash_with_water(host, board, door_guard(host))
+    crash(t, host, board, "killed mid-wash", late_s=LATE_S)
+    # An hour ahead of the clock: as if the clock had been set back an hour.
+    con = sqlite3.connect(os.path.join(t.logdir, "vmac.db"), timeout=10)
+    try:
+        with con:
+            moved = con.execute("UPDATE checkpoints SET time = ? WHERE machine = 'washer-1'",
+                                (time.time() + 3600,)).rowcount
+    finally:
+        con.close()
+    assert moved == 1, "no checkpoint of washer-1 in the store after the crash"
+    host = recovery_host(t)
+    guard = door_guard(host)
+    why = host.wait_event("driver", "washer-1", "checkpoint of unknown age", timeout_s=RESTART_S, invariant=guard)
+    assert "more than 600 s: cancelling quick" in why["text"], "the event does not say why: %r" % why["text"]
+    host.wait_status(lambda s: var(host, s, "state") == "cancelling", 10, "the programme cancelling", guard)
+    host.wait_status(lambda s: washer(host, s)["outputs"]["digital"][LOCK_BIT], 10,
+                     "the cancelling washer holding the door locked over the water", guard)
 
 
 def checkpoint_row(t):
