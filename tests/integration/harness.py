@@ -444,6 +444,14 @@ def sender_socket(bus):
     return s, (group, int(port))
 
 
+def misread(counters):
+    """The host's malformed-frame counts (status counters) that say a frame
+    was read wrong: every reason but stale_seq, a reply to an earlier
+    request, which is a board process late on a loaded machine (its
+    frame well formed). {reason: count} of those above 0."""
+    return {k: n for k, n in counters["malformed_by_reason"].items() if n and k != "stale_seq"}
+
+
 def undisturbed(names):
     """An invariant for wait_status: every device of names is running, and
     none of its misses is the host's own (misses_host: a request the host

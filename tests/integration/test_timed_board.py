@@ -376,21 +376,25 @@ def press_at_one_instant(t, settings, what, others=()):
     host.wait_running(sorted(procs) + list(others))
     for name, board in procs.items():
         board.wait_line(r"^%s: acting at host instants$" % name, 60, what="%s acting at host instants" % name)
-    # Two seconds of changes (a 16 ms period: some 125 each), counted by
-    # the boards' own logs, not by when the test looks.
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        rows = {name: [r for r in io_log(path) if r["what"] == "out" and r["how"] == "instant"]
+    def instants():
+        """Each board's changes driven at the instant, by host instant, from
+        its own log; and the host instants both drove at, but the first 25
+        (the first half second: the servo settles)."""
+        rows = {name: {r["host"]: r for r in io_log(path) if r["what"] == "out" and r["how"] == "instant"}
                 for name, path in logs.items()}
-        if all(len(r) >= 150 for r in rows.values()):
-            break
+        return rows, sorted(set(rows["press-0"]) & set(rows["press-1"]))[25:]
+
+    # Changes (a 16 ms period) until 100 instants both boards drove at:
+    # about two seconds, longer on a loaded machine, where a board's frame
+    # may come too late for an instant (it then acts on arrival, or not).
+    # Counted by the boards' own logs, not by when the test looks.
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(instants()[1]) < 100:
         time.sleep(0.2)
     status = host.status()
     for board in procs.values():
         stop(board)
-    rows = {name: {r["host"]: r for r in io_log(path) if r["what"] == "out" and r["how"] == "instant"}
-            for name, path in logs.items()}
-    both = sorted(set(rows["press-0"]) & set(rows["press-1"]))[25:]  # the first half second: the servo settles
+    rows, both = instants()
     assert len(both) >= 100, "only %d instants at which both boards drove at the instant: %r" % (
         len(both), {name: len(r) for name, r in rows.items()})
     spreads = sorted(abs(rows["press-0"][h]["true"] - rows["press-1"][h]["true"]) for h in both)
