@@ -272,7 +272,12 @@ void boards_track(struct board_set *s, int32_t i)
 	struct posix_board *pb = &s->boards[i];
 	const struct vmac_board *b = &pb->board;
 	uint16_t offset = b->state == VMAC_BOARD_KNOWN ? b->offset : VMAC_OFFSET_NONE;
+	int known = b->state == VMAC_BOARD_KNOWN;
 
+	if (known != pb->counted_known) {
+		s->known += known ? 1 : -1;
+		pb->counted_known = known;
+	}
 	if (offset != pb->routed_offset) {
 		/* Another board may have been given the old offset since (a new
 		 * host, a new session): then the entry is its, not ours. */

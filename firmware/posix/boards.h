@@ -28,6 +28,7 @@ struct posix_board {
 	struct vmac_report report;       /* what its log last said (firmware/report.c) */
 	uint16_t routed_offset;          /* the by_offset entry held for it; VMAC_OFFSET_NONE */
 	uint32_t routed_device_id;       /* the session by_session points to it for; 0 none */
+	int counted_known;               /* counted in board_set.known */
 	uint8_t mac[6];                  /* Ethernet: the source MAC of its replies */
 	struct oscillator *osc;          /* its counter, when the clocks are simulated (--clock-*); else NULL */
 	struct vmac_addr timed_addr;     /* the sender of its last TIMED CYCLIC: where a TIMED reply goes */
@@ -78,6 +79,7 @@ struct board_set {
 	int32_t *by_session;  /* [65536], UDP: device_id & 0xFFFF -> the board last registered with it */
 	int32_t *by_identity; /* UDP: open-addressed (major, minor) -> board, for REGISTER */
 	uint32_t identity_mask;
+	int32_t known; /* boards in a session (VMAC_BOARD_KNOWN), kept by boards_track: the housekeeping's pace */
 
 	struct vmac_transport *transport;
 	struct vmac_packet *replies; /* [BOARDS_REPLY_MAX]: rx_ns holds the request's receive time */

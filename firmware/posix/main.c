@@ -23,9 +23,15 @@
 #include "realtime.h"
 
 /* The watchdogs, the plants and the printed lines are looked at this often
- * (and no more often, however many frames arrive): resolution enough for
- * watchdogs of tens of ms and for the physics. */
+ * (and no more often, however many frames arrive) while any board is in a
+ * session: resolution enough for watchdogs of tens of ms and for the
+ * physics. While none is, no watchdog is armed and every output is off:
+ * the plants (in steps of at most 10 ms however long the turn) and the
+ * lines are looked at every HOUSEKEEP_IDLE_NS, so that a process of idle
+ * or sleeping boards does not wake 200 times a second. A registration
+ * brings the 5 ms pace back at once (the wait is computed every turn). */
 #define HOUSEKEEP_NS 5000000
+#define HOUSEKEEP_IDLE_NS 50000000
 #define CLOCK_SYNC_NS 1000000000 /* resample realtime - monotonic for the kernel's stamps */
 #define DEFAULT_BUS "239.255.86.77:5870"
 #define DEFAULT_LATE_US 1000
@@ -506,7 +512,8 @@ static int serve(struct runner *r)
 
 	last_housekeep_ns = last_sync_ns = vmac_now_ns();
 	while (!stop_signal) {
-		int64_t t = vmac_now_ns(), wake_ns = last_housekeep_ns + HOUSEKEEP_NS, wait_ns;
+		int64_t pace_ns = r->set.known ? HOUSEKEEP_NS : HOUSEKEEP_IDLE_NS;
+		int64_t t = vmac_now_ns(), wake_ns = last_housekeep_ns + pace_ns, wait_ns;
 		int64_t instant_ns = boards_next_instant(&r->set, t);
 		struct timespec ts;
 		int ready;
@@ -527,7 +534,7 @@ static int serve(struct runner *r)
 		 * not run (stopped, starved) must not revive a session that has
 		 * already timed out. */
 		t = vmac_now_ns();
-		if (t - last_housekeep_ns >= HOUSEKEEP_NS) {
+		if (t - last_housekeep_ns >= pace_ns) {
 			boards_clock_poll(&r->set, t);
 			boards_housekeep(&r->set, (uint64_t)(t / 1000000));
 			if (r->set.io_log)
