@@ -411,6 +411,14 @@ def takes_about(seconds):
     return mark
 
 
+def helper_env():
+    """The environment of the harness's own runs of vmac (enrolling keys,
+    making tokens) around what a test is about: under the ASan build, no
+    leak scan at their exit, about half of such a short run's CPU (the
+    commands' own tests scan theirs)."""
+    return dict(os.environ, ASAN_OPTIONS="detect_leaks=0")
+
+
 def sanitized(program):
     """Whether program was built with AddressSanitizer (make test's second
     pass): its memory figures then include the sanitizer's own."""
@@ -521,6 +529,7 @@ class Context:
         self.cleanups = []  # callables run after every process is killed (namespaces, links)
         self.counter = 0
         self.token = None  # made by the first host(): scope deploy, in this test's state folder
+        self.enrolled = {}  # state folder: the names enroll() put there
 
     def path(self, program):
         return os.path.join(self.bindir, program)
@@ -591,7 +600,7 @@ class Context:
             "--plant", plant]) + ["--name", name, "--bus", bus or self.bus,
                                   "--late-us", str(TIMING["reply_deadline_us"] // 4)]
         if keyed:
-            self.enroll([name] if not count else ["%s-%d" % (name, i) for i in range(1, count + 1)])
+            self.enroll([name] if not count else ["%s-%d" % (name, i) for i in range(1, count + 1)], again=False)
             argv += ["--key-dir", self.keys]
         argv += list(extra)
         if driver:
@@ -631,21 +640,28 @@ class Context:
         """This test's board keys: KEYS/NAME.key, made by enroll."""
         return os.path.join(self.logdir, "keys")
 
-    def enroll(self, names):
+    def enroll(self, names, again=True):
         """Enroll boards names in this test's state folder and in that of
         every host of this test started with its own (vmac board enroll
         --local: host running or not), each key in self.keys/NAME.key, made
         the first time; returns once every running host of the test's state
-        folder holds them (its status's board_keys)."""
+        folder holds them (its status's board_keys). again False: a name
+        this context enrolled in a folder already is not enrolled there
+        again (board() starting the boards of a test that enrolled them
+        all at once)."""
         states = [self.logdir]
         for h in self.procs:
             if isinstance(h, Host) and h.state not in states:
                 states.append(h.state)
         for state in states:
+            todo = [n for n in names if again or n not in self.enrolled.get(state, ())]
+            if not todo:
+                continue
             p = subprocess.run([self.path("vmac"), "board", "enroll", "--local", "--state", state, "--key-dir",
-                                self.keys, "--replace", "--quiet"] + list(names), capture_output=True, text=True,
-                               timeout=60)
+                                self.keys, "--replace", "--quiet"] + todo, capture_output=True, text=True,
+                               timeout=60, env=helper_env())
             assert p.returncode == 0, "vmac board enroll failed (exit %d): %s" % (p.returncode, p.stderr)
+            self.enrolled.setdefault(state, set()).update(todo)
         # A running host has them before the boards announce (one of another
         # state folder takes them within 50 ms: its status needs a token of
         # its own store). Its main thread looks between two loads of drivers
@@ -658,7 +674,7 @@ class Context:
     def make_token(self, scope):
         """A new token of scope in this test's state folder (vmac token create)."""
         p = subprocess.run([self.path("vmac"), "token", "create", "--state", self.logdir, "--scope", scope],
-                           capture_output=True, text=True, timeout=30)
+                           capture_output=True, text=True, timeout=30, env=helper_env())
         assert p.returncode == 0, "vmac token create failed (exit %d): %s" % (p.returncode, p.stderr)
         return p.stdout.strip()
 
