@@ -9,9 +9,11 @@
  *   http_header_timeout_s and its body within http_body_timeout_s (a
  *   slow client is cut off by a reaper thread that shuts its socket down;
  *   libmicrohttpd's own timeout is reset by every byte); a kept-alive
- *   connection's next request is timed from its first line, and one idle
- *   (or trickling that line) is closed after HTTP_IDLE_TIMEOUT_S without
- *   an event: browsers and Prometheus keep connections between requests;
+ *   connection's next request is timed from its first byte (the kernel's
+ *   count of bytes received: libmicrohttpd tells only when the first line
+ *   is whole), and
+ *   one that sent nothing is closed after HTTP_IDLE_TIMEOUT_S without an
+ *   event: browsers and Prometheus keep connections between requests;
  * - libmicrohttpd bounds connections per address (http_connections_per_address).
  * Each lock-out is said in the audit trail with the request that caused it
  * (its type "lockout", audit.c), each batch of cut-off connections is an
@@ -20,6 +22,8 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <linux/tcp.h>
+#include <netinet/in.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/socket.h>
@@ -196,6 +200,17 @@ enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, c
 
 /* ---- the deadlines of a request ---- */
 
+/* Bytes the kernel has received on fd, 0 when it cannot tell. */
+static uint64_t bytes_received(int fd)
+{
+	struct tcp_info ti;
+	socklen_t len = sizeof(ti);
+	memset(&ti, 0, sizeof(ti));
+	if (getsockopt(fd, IPPROTO_TCP, TCP_INFO, &ti, &len) != 0)
+		return 0;
+	return ti.tcpi_bytes_received;
+}
+
 void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_context,
                        enum MHD_ConnectionNotificationCode code)
 {
@@ -232,6 +247,8 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	pthread_mutex_lock(&h->guard.lock);
 	slot->phase = phase;
 	slot->since = http_mono_s();
+	if (phase == GUARD_IDLE && slot->fd >= 0)
+		slot->idle_bytes = bytes_received(slot->fd);
 	pthread_mutex_unlock(&h->guard.lock);
 }
 
@@ -256,6 +273,19 @@ void *http_guard_request_line(void *cls, const char *uri, struct MHD_Connection 
 	return NULL;
 }
 
+/* An idle kept-alive connection that has received bytes since it went
+ * idle is sending its next request's first line (libmicrohttpd says
+ * nothing until the line is whole): its header deadline runs from when
+ * the reaper saw them (at most REAP_EVERY_MS late), so a trickled line is
+ * cut off and said as a slow new connection is. Under g->lock. */
+static void idle_or_trickling(struct guard_conn *k, double now)
+{
+	if (bytes_received(k->fd) > k->idle_bytes) {
+		k->phase = GUARD_HEADERS;
+		k->since = now;
+	}
+}
+
 /* Every REAP_EVERY_MS: a connection past its phase's deadline is cut off
  * (its socket shut down: libmicrohttpd's thread then sees the end and
  * closes it). */
@@ -271,9 +301,12 @@ static void *reaper(void *arg)
 		double now = http_mono_s();
 		for (i = 0; i < GUARD_CONNS; i++) {
 			struct guard_conn *k = &g->conns[i];
-			double limit = k->phase == GUARD_HEADERS ? g->header_timeout_s
-			               : k->phase == GUARD_BODY  ? g->body_timeout_s
-			                                         : HTTP_IDLE_TIMEOUT_S;
+			double limit;
+			if (k->fd >= 0 && k->phase == GUARD_IDLE)
+				idle_or_trickling(k, now);
+			limit = k->phase == GUARD_HEADERS ? g->header_timeout_s
+			        : k->phase == GUARD_BODY  ? g->body_timeout_s
+			                                  : HTTP_IDLE_TIMEOUT_S;
 			if (k->fd < 0 || k->phase == GUARD_ANSWERING || now - k->since < limit)
 				continue;
 			shutdown(k->fd, SHUT_RDWR);

@@ -180,7 +180,8 @@ static void offer_checkpoint(struct vmac_mainloop *l, struct vmac_driver *drv, c
 		else if (info.age_s < 0)
 			info.age_s = 0;
 		info.version = version;
-		info.restarted = time < (double)l->started_ns / 1e9;
+		/* a checkpoint from before the clock was set back is from before a restart too */
+		info.restarted = time < (double)l->started_ns / 1e9 || info.age_s == HUGE_VAL;
 		if (vmac_driver_offer_checkpoint(drv, data, len, &info, err, sizeof(err)) != 0) {
 			snprintf(text, sizeof(text), "%s: checkpoint not offered: %s", device, err);
 			say(l, "warning", device, text);
