@@ -247,7 +247,11 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	pthread_mutex_lock(&h->guard.lock);
 	slot->phase = phase;
 	slot->since = http_mono_s();
-	if (phase == GUARD_IDLE && slot->fd >= 0)
+	/* What the kernel has received once a request is in: the baseline its
+	 * connection's next bytes are told by when it goes idle (taken here,
+	 * not when the answer is done, by which time a quick client may have
+	 * sent more). */
+	if (phase == GUARD_ANSWERING && slot->fd >= 0)
 		slot->idle_bytes = bytes_received(slot->fd);
 	pthread_mutex_unlock(&h->guard.lock);
 }

@@ -67,7 +67,7 @@ struct guard_conn {
 	int fd; /* -1: unused */
 	double since;
 	enum guard_phase phase;
-	uint64_t idle_bytes; /* GUARD_IDLE: bytes the kernel had received when it went idle */
+	uint64_t idle_bytes; /* bytes the kernel had received when its last request was in (GUARD_IDLE's baseline) */
 	char addr[48];
 };
 
