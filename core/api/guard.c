@@ -10,10 +10,10 @@
  *   slow client is cut off by a reaper thread that shuts its socket down;
  *   libmicrohttpd's own timeout is reset by every byte); a kept-alive
  *   connection's next request is timed from its first byte (the kernel's
- *   count of bytes received: libmicrohttpd tells only when the first line
- *   is whole), and
- *   one that sent nothing is closed after HTTP_IDLE_TIMEOUT_S without an
- *   event: browsers and Prometheus keep connections between requests;
+ *   count of bytes received: libmicrohttpd says nothing before the
+ *   headers are whole), and one that sent nothing is closed after
+ *   HTTP_IDLE_TIMEOUT_S without an event: browsers and Prometheus keep
+ *   connections between requests;
  * - libmicrohttpd bounds connections per address (http_connections_per_address).
  * Each lock-out is said in the audit trail with the request that caused it
  * (its type "lockout", audit.c), each batch of cut-off connections is an
@@ -256,32 +256,11 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	pthread_mutex_unlock(&h->guard.lock);
 }
 
-/* libmicrohttpd's URI log callback: a request's first line is in. On a
- * kept-alive connection the next request's header deadline starts here;
- * a new connection's started when it was accepted. NULL: no request
- * context yet (on_request makes its own). */
-void *http_guard_request_line(void *cls, const char *uri, struct MHD_Connection *c)
-{
-	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
-	struct guard_conn *slot = ci ? ci->socket_context : NULL;
-	struct vmac_http *h = cls;
-	(void)uri;
-	if (!slot)
-		return NULL;
-	pthread_mutex_lock(&h->guard.lock);
-	if (slot->phase == GUARD_IDLE) {
-		slot->phase = GUARD_HEADERS;
-		slot->since = http_mono_s();
-	}
-	pthread_mutex_unlock(&h->guard.lock);
-	return NULL;
-}
-
-/* An idle kept-alive connection that has received bytes since it went
- * idle is sending its next request's first line (libmicrohttpd says
- * nothing until the line is whole): its header deadline runs from when
- * the reaper saw them (at most REAP_EVERY_MS late), so a trickled line is
- * cut off and said as a slow new connection is. Under g->lock. */
+/* An idle kept-alive connection that has received bytes since its last
+ * request was in is sending its next request (libmicrohttpd says nothing
+ * before the headers are whole): its header deadline runs from when the
+ * reaper saw them (at most REAP_EVERY_MS late), so trickled headers are
+ * cut off and said as a slow new connection's are. Under g->lock. */
 static void idle_or_trickling(struct guard_conn *k, double now)
 {
 	if (bytes_received(k->fd) > k->idle_bytes) {

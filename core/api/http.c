@@ -103,7 +103,7 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
 	struct conn *k = *con_cls;
 	(void)why;
 	http_count_answer(cls, c);
-	http_guard_phase(c, cls, GUARD_IDLE); /* kept alive: the next request's deadline starts at its first line */
+	http_guard_phase(c, cls, GUARD_IDLE); /* kept alive: the next request's deadline starts at its first byte */
 	if (k) {
 		free(k->body);
 		free(k);
@@ -336,9 +336,8 @@ struct vmac_http *vmac_http_start(const char *listen, struct vmac_bus *bus, stru
 	        (h->tls_cert ? MHD_USE_TLS : 0),
 	    0, NULL, NULL, on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_NOTIFY_CONNECTION,
 	    http_guard_notify, h, MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&sin, MHD_OPTION_CONNECTION_TIMEOUT,
-	    (unsigned)HTTP_IDLE_TIMEOUT_S, MHD_OPTION_URI_LOG_CALLBACK, http_guard_request_line, h,
-	    MHD_OPTION_CONNECTION_LIMIT, (unsigned)HTTP_CONNECTIONS_MAX, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
-	    (unsigned)cfg->http_connections_per_address,
+	    (unsigned)HTTP_IDLE_TIMEOUT_S, MHD_OPTION_CONNECTION_LIMIT, (unsigned)HTTP_CONNECTIONS_MAX,
+	    MHD_OPTION_PER_IP_CONNECTION_LIMIT, (unsigned)cfg->http_connections_per_address,
 	    /* the certificate and key, or nothing */
 	    h->tls_cert ? MHD_OPTION_HTTPS_MEM_CERT : MHD_OPTION_END, h->tls_cert, MHD_OPTION_HTTPS_MEM_KEY, h->tls_key,
 	    MHD_OPTION_END);

@@ -56,7 +56,8 @@ struct guard_fail {
 
 /* Where a connection is: receiving a request's headers, its body,
  * answering (a stream may answer for hours), or kept alive between two
- * requests (idle: nothing of the next request's first line yet). */
+ * requests (idle: no byte of the next request yet, GUARD_HEADERS from
+ * the first). */
 enum guard_phase { GUARD_HEADERS, GUARD_BODY, GUARD_ANSWERING, GUARD_IDLE };
 /* A kept-alive connection idle this long is closed, quietly: an idle
  * client is not an attack (libmicrohttpd's own timeout, reset by every
@@ -237,7 +238,6 @@ void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_contex
                        enum MHD_ConnectionNotificationCode code);
 /* The connection of c is now in phase (its deadline counts from now). */
 void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_phase phase);
-void *http_guard_request_line(void *cls, const char *uri, struct MHD_Connection *c);
 /* The reaper thread: 0, or a negative errno. */
 int http_guard_start(struct vmac_http *h);
 void http_guard_stop(struct vmac_http *h);
