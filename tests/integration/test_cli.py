@@ -7,6 +7,8 @@ import re
 import socket
 import subprocess
 
+from harness import NO_LEAK_SCAN
+
 EXIT_S = 30  # a refused flag should end the program at once; this is the bound
 SANITIZER_MARKS = ("AddressSanitizer", "LeakSanitizer", "runtime error:")
 
@@ -205,11 +207,9 @@ def names_option(text, option):
     return re.search(r"(?<![\w-])%s(?![\w-])" % re.escape(option), text) is not None
 
 
-# For the sweeps below, which run vmac hundreds of times on the paths each
-# command's first run took already: the sanitizer pass's leak scan at exit
-# (about half of such a short run's CPU under ASan) is left to the first
-# run; AddressSanitizer's checks stay on in every run.
-NO_LEAK_SCAN = {"ASAN_OPTIONS": "detect_leaks=0"}
+# The sweeps below run vmac hundreds of times on the paths each command's
+# first run took already: the sanitizer pass's leak scan at exit is left
+# to that first run (harness.NO_LEAK_SCAN).
 
 
 def vmac_run(t, words, env=None, stdin=None, leak_scan=True):
