@@ -173,15 +173,12 @@ static void offer_checkpoint(struct vmac_mainloop *l, struct vmac_driver *drv, c
 	if (rc != 1)
 		return;
 	if (strcmp(driver, vmac_driver_name(drv)) == 0) {
+		double age_s = wall_s(l) - time;
+		int set_back = age_s < -CLOCK_BACK_S; /* the wall clock was set back since: its age unknown */
 		info.time = time;
-		info.age_s = wall_s(l) - time;
-		if (info.age_s < -CLOCK_BACK_S)
-			info.age_s = HUGE_VAL; /* the wall clock was set back since: its age unknown, as too old */
-		else if (info.age_s < 0)
-			info.age_s = 0;
+		info.age_s = set_back ? HUGE_VAL : age_s < 0 ? 0 : age_s;
 		info.version = version;
-		/* a checkpoint from before the clock was set back is from before a restart too */
-		info.restarted = time < (double)l->started_ns / 1e9 || info.age_s == HUGE_VAL;
+		info.restarted = set_back || time < (double)l->started_ns / 1e9; /* set back: a restart since too */
 		if (vmac_driver_offer_checkpoint(drv, data, len, &info, err, sizeof(err)) != 0) {
 			snprintf(text, sizeof(text), "%s: checkpoint not offered: %s", device, err);
 			say(l, "warning", device, text);
