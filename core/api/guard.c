@@ -8,12 +8,13 @@
  * - a connection must deliver a request's headers within
  *   http_header_timeout_s and its body within http_body_timeout_s (a
  *   slow client is cut off by a reaper thread that shuts its socket down;
- *   libmicrohttpd's own timeout is reset by every byte); a kept-alive
- *   connection's next request is timed from its first byte (the kernel's
- *   count of bytes received: libmicrohttpd says nothing before the
- *   headers are whole), and one that sent nothing is closed after
- *   HTTP_IDLE_TIMEOUT_S without an event: browsers and Prometheus keep
- *   connections between requests;
+ *   libmicrohttpd's own timeout is reset by every byte); a request is
+ *   timed from its first byte (the kernel's count of bytes received:
+ *   libmicrohttpd says nothing before the headers are whole), and a
+ *   connection that sent nothing, new or kept alive, is closed after
+ *   HTTP_IDLE_TIMEOUT_S without an event: browsers open connections
+ *   ahead of their requests, and they and Prometheus keep connections
+ *   between requests;
  * - libmicrohttpd bounds connections per address (http_connections_per_address).
  * Each lock-out is said in the audit trail with the request that caused it
  * (its type "lockout", audit.c), each batch of cut-off connections is an
@@ -227,7 +228,9 @@ void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_contex
 			slot = &g->conns[i];
 			slot->fd = fd->connect_fd;
 			slot->since = http_mono_s();
-			slot->phase = GUARD_HEADERS;
+			/* Idle until its first byte: a browser opens connections ahead of its requests. */
+			slot->phase = GUARD_IDLE;
+			slot->idle_bytes = 0;
 			http_client_address(c, slot->addr, sizeof(slot->addr));
 			*socket_context = slot;
 		}
@@ -256,11 +259,11 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	pthread_mutex_unlock(&h->guard.lock);
 }
 
-/* An idle kept-alive connection that has received bytes since its last
- * request was in is sending its next request (libmicrohttpd says nothing
+/* An idle connection that has received bytes since its last request was
+ * in (or, new, at all) is sending its next request (libmicrohttpd says nothing
  * before the headers are whole): its header deadline runs from when the
  * reaper saw them (at most REAP_EVERY_MS late), so trickled headers are
- * cut off and said as a slow new connection's are. Under g->lock. */
+ * cut off and said. Under g->lock. */
 static void idle_or_trickling(struct guard_conn *k, double now)
 {
 	if (bytes_received(k->fd) > k->idle_bytes) {

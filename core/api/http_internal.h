@@ -55,11 +55,11 @@ struct guard_fail {
 };
 
 /* Where a connection is: receiving a request's headers, its body,
- * answering (a stream may answer for hours), or kept alive between two
- * requests (idle: no byte of the next request yet, GUARD_HEADERS from
- * the first). */
+ * answering (a stream may answer for hours), or idle: new or kept alive
+ * between two requests, no byte of the next request yet (GUARD_HEADERS
+ * from the first). */
 enum guard_phase { GUARD_HEADERS, GUARD_BODY, GUARD_ANSWERING, GUARD_IDLE };
-/* A kept-alive connection idle this long is closed, quietly: an idle
+/* A connection idle this long is closed, quietly: an idle
  * client is not an attack (libmicrohttpd's own timeout, reset by every
  * byte, is the same). */
 #define HTTP_IDLE_TIMEOUT_S 30
@@ -68,7 +68,8 @@ struct guard_conn {
 	int fd; /* -1: unused */
 	double since;
 	enum guard_phase phase;
-	uint64_t idle_bytes; /* bytes the kernel had received when its last request was in (GUARD_IDLE's baseline) */
+	uint64_t idle_bytes; /* bytes the kernel had received when its last request was in, 0 when none was
+	                        (GUARD_IDLE's baseline) */
 	char addr[48];
 };
 

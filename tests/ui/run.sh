@@ -53,6 +53,7 @@ if ! why=$("$here/../npm_ci.sh" "$here" 20 2>&1 >/dev/null); then
 	cannot_run "$why"
 fi
 echo "== the web UI in headless chromium (screenshots in $out)"
+rm -f "$out"/*.log # each program's log is appended to as it runs: this run's only
 failed=0
 node "$here/ui_test.mjs" --bin "$bin" --out "$out" || failed=1
 echo "== the Site page: two hosts on one MQTT broker (tests/ui/site_test.mjs)"

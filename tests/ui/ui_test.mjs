@@ -415,6 +415,11 @@ async function main() {
     });
 
     await enrollment(browser, page, addr, { operate, deploy });
+
+    await check("the browser's connections were never taken for slow clients (opened ahead, kept alive)", async () => {
+      const cut = host.lines.filter((l) => /connections cut off/.test(l));
+      if (cut.length) throw new Error("the host said: " + cut.join(" | "));
+    });
   } finally {
     await browser.close();
   }
@@ -452,7 +457,7 @@ async function clocks(browser, addr, tok) {
       await cp.goto(`http://${addr}/#token=${tok}`);
       const dish = '[data-device="dish-1"] [data-clock="dish-1"]';
       await cp.waitForSelector(`${dish}[data-clock-state="locked"] .badge.clock-locked:text-is("clock locked")`,
-        { timeout: 10000 });
+        { timeout: 20000 }).catch(async (e) => { throw new Error(e.message + "; the page shows: " + await shows(cp)); });
       const text = (sel) => cp.textContent(sel).then((t) => t.trim());
       if (await text(`${dish} [data-clock-bound]`) !== "±1.5 µs") throw new Error("dish-1's bound: " +
         await text(`${dish} [data-clock-bound]`));
@@ -480,6 +485,19 @@ async function clocks(browser, addr, tok) {
       await cp.close();
     }
   });
+}
+
+// What a page shows, for a failure's message: its connection, whether it
+// asks to sign in, and each card with its state and clocks line.
+function shows(p) {
+  return p.evaluate(() => {
+    const q = (sel) => document.querySelector(sel);
+    const cards = [...document.querySelectorAll(".card")].map((c) => c.dataset.device + " (" +
+      (c.querySelector(".badge") || {}).textContent + ", clocks: " +
+      ((c.querySelector("[data-clocks]") || {}).textContent || "none") + ")");
+    return `connection ${q("#conn").textContent}, sign-in ${q("#signin").hidden ? "hidden" : "shown: " +
+      q("#signin-error").textContent}, ${cards.length} cards: ${cards.join("; ")}`;
+  }).catch((e) => "(the page cannot be read: " + e.message + ")");
 }
 
 // A board without a key (shed-light) waits for approval: the operate page
