@@ -12,7 +12,7 @@ import os from "node:os";
 import path from "node:path";
 import readline from "node:readline";
 import { chromium } from "playwright-core";
-import { args, check, tally, until } from "./common.mjs";
+import { LOADED, args, check, tally, until } from "./common.mjs";
 
 const BIN = path.resolve(args.bin || "build/bin");
 const OUT = path.resolve(args.out || "build/ui");
@@ -106,10 +106,12 @@ async function main() {
       await page.goto(`http://${addrA}/#token=${operate}`);
       await page.click('nav a[data-page="site"]');
       for (const [host, device] of [["site-a", "lights-a"], ["site-b", "lights-b"]]) {
-        await page.waitForSelector(`${row(host, device)} .badge.online`, { timeout: 30000 });
-        await page.waitForSelector(`${row(host, device)} [data-name="kitchen"]:has-text("off")`, { timeout: 10000 });
+        await page.waitForSelector(`${row(host, device)} .badge.online`, { timeout: 30000 * LOADED });
+        await page.waitForSelector(`${row(host, device)} [data-name="kitchen"]:has-text("off")`,
+          { timeout: 10000 * LOADED });
       }
-      await page.waitForSelector('#page-site [data-host="site-a"] h3:has-text("this host")', { timeout: 5000 });
+      await page.waitForSelector('#page-site [data-host="site-a"] h3:has-text("this host")',
+        { timeout: 5000 * LOADED });
       await page.screenshot({ path: path.join(OUT, "9-site.png"), fullPage: true });
     });
 
@@ -123,9 +125,9 @@ async function main() {
     await check("host B killed shows offline on A's Site page once the broker gives up on it", async () => {
       const t0 = performance.now();
       hostB.kill("SIGKILL");
-      await page.waitForSelector('#page-site [data-host="site-b"] h3 .badge.offline', { timeout: 30000 });
-      await page.waitForSelector(`${row("site-b", "lights-b")} .badge.offline`, { timeout: 2000 });
-      await page.waitForSelector(`${row("site-a", "lights-a")} .badge.online`, { timeout: 2000 });
+      await page.waitForSelector('#page-site [data-host="site-b"] h3 .badge.offline', { timeout: 30000 * LOADED });
+      await page.waitForSelector(`${row("site-b", "lights-b")} .badge.offline`, { timeout: 2000 * LOADED });
+      await page.waitForSelector(`${row("site-a", "lights-a")} .badge.online`, { timeout: 2000 * LOADED });
       console.log(`  (B shown offline ${Math.round(performance.now() - t0)} ms after the kill)`);
       await page.screenshot({ path: path.join(OUT, "10-site-b-offline.png"), fullPage: true });
     });

@@ -16,7 +16,7 @@ import os from "node:os";
 import path from "node:path";
 import readline from "node:readline";
 import { chromium } from "playwright-core";
-import { args, check, tally, until } from "./common.mjs";
+import { LOADED, args, check, tally, until } from "./common.mjs";
 
 const BIN = path.resolve(args.bin || "build/bin");
 const OUT = path.resolve(args.out || "build/ui");
@@ -115,7 +115,7 @@ async function main() {
       const cp = await browser.newPage();
       await cp.route("**/api/live", (r) => r.abort()); // the status never comes
       await cp.goto(`http://${addr}/#token=${operate}`);
-      await cp.waitForSelector("#conn.down", { timeout: 10000 });
+      await cp.waitForSelector("#conn.down", { timeout: 10000 * LOADED });
       const empty = await cp.textContent("#empty");
       if (!/connecting/i.test(empty) || /no devices/i.test(empty)) throw new Error(`the page says: ${empty}`);
       await cp.close();
@@ -124,12 +124,12 @@ async function main() {
     await check("four cards appear, and the token leaves the address bar", async () => {
       await page.goto(`http://${addr}/#token=${operate}`);
       for (const name of ["washer-1", "dish-1", "lights-1", "dryer-1"]) {
-        await page.waitForSelector(`[data-device="${name}"] [data-var]`, { timeout: 30000 });
+        await page.waitForSelector(`[data-device="${name}"] [data-var]`, { timeout: 30000 * LOADED });
       }
       // A machine dropped and attached again (a slow start) leaves its old
       // card fading out for half a second: count the cards that stay.
       await page.waitForFunction(() => document.querySelectorAll(".card:not(.leaving)").length === 4 &&
-        !document.querySelector(".card.leaving"), null, { timeout: 10000 }).catch(() => {});
+        !document.querySelector(".card.leaving"), null, { timeout: 10000 * LOADED }).catch(() => {});
       const cards = await page.locator(".card:not(.leaving)").count();
       if (cards !== 4) throw new Error(`${cards} cards`);
       if (page.url().includes("token")) throw new Error("the token is still in the address bar: " + page.url());
@@ -138,8 +138,8 @@ async function main() {
 
     await check("an idle machine offers Start and its programme, not Pause, Resume or Cancel", async () => {
       const card = '[data-device="dish-1"]';
-      await page.waitForSelector(`${card} [data-command="start"]:visible`, { timeout: 5000 });
-      await page.waitForSelector(`${card} [data-param-select="program"]:visible`, { timeout: 5000 });
+      await page.waitForSelector(`${card} [data-command="start"]:visible`, { timeout: 5000 * LOADED });
+      await page.waitForSelector(`${card} [data-param-select="program"]:visible`, { timeout: 5000 * LOADED });
       for (const name of ["pause", "resume", "cancel"]) {
         if (await page.isVisible(`${card} [data-command="${name}"]`)) throw new Error(`${name} offered on an idle dishwasher`);
       }
@@ -147,10 +147,10 @@ async function main() {
 
     await check("an unlabelled variable has a readable name and an on/off lamp", async () => {
       const card = '[data-device="washer-1"]';
-      await page.waitForSelector(`${card} .vars .label:text-is("Running")`, { timeout: 5000 });
-      await page.waitForSelector(`${card} [data-var="running"].onoff:text-is("off")`, { timeout: 5000 });
+      await page.waitForSelector(`${card} .vars .label:text-is("Running")`, { timeout: 5000 * LOADED });
+      await page.waitForSelector(`${card} [data-var="running"].onoff:text-is("off")`, { timeout: 5000 * LOADED });
       if (await page.locator(`${card} .vars .label:text-is("running")`).count()) throw new Error("a raw name shown");
-      await page.waitForSelector('[data-device="lights-1"] [data-var="kitchen"].onoff', { timeout: 5000 });
+      await page.waitForSelector('[data-device="lights-1"] [data-var="kitchen"].onoff', { timeout: 5000 * LOADED });
     });
 
     await check("a flat zero is drawn on a 0..1 axis, not -1..1", async () => {
@@ -158,7 +158,7 @@ async function main() {
       await page.waitForFunction((sel) => {
         const c = document.querySelector(sel);
         return c && Number(c.dataset.points) > 0 && c.dataset.lo !== undefined;
-      }, plot, { timeout: 10000 });
+      }, plot, { timeout: 10000 * LOADED });
       const [lo, hi] = await page.$eval(plot, (c) => [Number(c.dataset.lo), Number(c.dataset.hi)]);
       if (lo !== 0 || hi !== 1) throw new Error(`the idle drum's axis is ${lo}..${hi}`);
     });
@@ -173,7 +173,7 @@ async function main() {
       if (await page.locator("#messages .toast").count() !== 2) throw new Error("dismiss left the message");
       await page.screenshot({ path: path.join(OUT, "1b-messages.png") });
       await page.click('nav a[data-page="system"]');
-      await page.waitForSelector("#messages .toast", { state: "detached", timeout: 2000 });
+      await page.waitForSelector("#messages .toast", { state: "detached", timeout: 2000 * LOADED });
       await page.click('nav a[data-page="devices"]');
     });
 
@@ -185,10 +185,10 @@ async function main() {
       if (!other) throw new Error("the dishwasher has one programme only");
       await page.selectOption(`${card} [data-param-select="program"]`, other);
       boards["dish-1"].kill("SIGKILL");
-      await page.waitForSelector(card, { state: "detached", timeout: 5000 });
+      await page.waitForSelector(card, { state: "detached", timeout: 5000 * LOADED });
       boards["dish-1"] = start("dish-1b", [path.join(BIN, "vmac-board"), "--plant", "dishwasher", "--name", "dish-1",
         "--bus", BUS, "--key-file", path.join(KEYS, "dish-1.key"), "--commands"], true);
-      await page.waitForSelector(`${card}:not(.leaving) [data-param-select="program"]`, { timeout: 30000 });
+      await page.waitForSelector(`${card}:not(.leaving) [data-param-select="program"]`, { timeout: 30000 * LOADED });
       await page.waitForTimeout(1000); // a few statuses, each with the host's own param
       const now = await page.inputValue(`${card}:not(.leaving) [data-param-select="program"]`);
       if (now !== other) throw new Error(`chose ${other}, the card shows ${now} after its machine came back`);
@@ -198,7 +198,7 @@ async function main() {
 
     await check("the kitchen's boards proved their keys: their cards say sealed", async () => {
       for (const name of ["washer-1", "dish-1", "lights-1", "dryer-1"]) {
-        await page.waitForSelector(`[data-device="${name}"] [data-sealed]:not([hidden])`, { timeout: 5000 });
+        await page.waitForSelector(`[data-device="${name}"] [data-sealed]:not([hidden])`, { timeout: 5000 * LOADED });
       }
     });
 
@@ -223,9 +223,9 @@ async function main() {
       const card = '[data-device="dryer-1"]';
       const title = await page.textContent(`${card} .title`);
       if (title !== "Dryer") throw new Error("the dryer's card is titled " + title);
-      await page.waitForSelector(`${card} [data-var="temp_c"]:text("°C")`, { timeout: 5000 });
+      await page.waitForSelector(`${card} [data-var="temp_c"]:text("°C")`, { timeout: 5000 * LOADED });
       for (const name of ["heater", "drum", "door_open"]) {
-        await page.waitForSelector(`${card} [data-var="${name}"].onoff`, { timeout: 5000 });
+        await page.waitForSelector(`${card} [data-var="${name}"].onoff`, { timeout: 5000 * LOADED });
       }
       for (const plot of ["temp_c,target_c", "heater,drum"]) {
         if (!await page.locator(`${card} canvas[data-plot="${plot}"]`).count()) throw new Error("no plot of " + plot);
@@ -238,8 +238,8 @@ async function main() {
       const card = '[data-device="dryer-1"]';
       await page.selectOption(`${card} [data-param-select="program"]`, "delicate");
       await page.click(`${card} [data-command="start"]`);
-      await page.waitForSelector(`${card} [data-var="step"]:text("warm up")`, { timeout: 10000 });
-      await page.waitForSelector(`${card} [data-var="heater"].onoff:text("on")`, { timeout: 20000 });
+      await page.waitForSelector(`${card} [data-var="step"]:text("warm up")`, { timeout: 10000 * LOADED });
+      await page.waitForSelector(`${card} [data-var="heater"].onoff:text("on")`, { timeout: 20000 * LOADED });
       await until(async () => {
         const v = (await status(addr, operate)).devices.find((d) => d.name === "dryer-1").variables;
         return v.temp_c > 22;
@@ -252,13 +252,14 @@ async function main() {
       await page.click('[data-device="lights-1"] [data-input="kitchen"]');
       await until(async () => deviceOut(await status(addr, operate), "lights-1", 0) === true, 5000,
         "lights-1 output 0 on");
-      await page.waitForSelector('[data-device="lights-1"] [data-var="kitchen"]:text("on")', { timeout: 5000 });
+      await page.waitForSelector('[data-device="lights-1"] [data-var="kitchen"]:text("on")',
+        { timeout: 5000 * LOADED });
       await page.screenshot({ path: path.join(OUT, "2-kitchen-light-on.png") });
     });
 
     await check("the wall switch pressed on the board shows on the page", async () => {
       boards["lights-1"].stdin.write("lights-1 toggle2 1\n");
-      await page.waitForSelector('[data-device="lights-1"] [data-var="dining"]:text("on")', { timeout: 5000 });
+      await page.waitForSelector('[data-device="lights-1"] [data-var="dining"]:text("on")', { timeout: 5000 * LOADED });
       await page.screenshot({ path: path.join(OUT, "3-dining-switch.png") });
     });
 
@@ -266,11 +267,11 @@ async function main() {
       const card = '[data-device="washer-1"]';
       await page.selectOption(`${card} [data-param-select="program"]`, "quick");
       await page.click(`${card} [data-command="start"]`);
-      await page.waitForSelector(`${card} [data-var="step"]`, { timeout: 10000 });
+      await page.waitForSelector(`${card} [data-var="step"]`, { timeout: 10000 * LOADED });
       await page.waitForFunction((sel) => {
         const c = document.querySelector(sel);
         return c && Number(c.dataset.points) > 20;
-      }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 });
+      }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 * LOADED });
       await until(async () => {
         const v = (await status(addr, operate)).devices.find((d) => d.name === "washer-1").variables;
         return v.step === "wash";
@@ -278,7 +279,7 @@ async function main() {
       await page.waitForFunction((sel) => {
         const c = document.querySelector(sel);
         return c && Math.abs(Number(c.dataset.last)) > 10;
-      }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 });
+      }, `${card} canvas[data-plot^="drum_rpm"]`, { timeout: 20000 * LOADED });
       const step = await page.textContent(`${card} [data-var="step"]`);
       if (step !== "wash") throw new Error("the page shows step " + step);
       // Running: Pause and Cancel, no Start, no Resume.
@@ -305,7 +306,7 @@ async function main() {
           const c = document.querySelector(sel);
           return c && Number(c.dataset.first) < opened - 2 && Number(c.dataset.points) > 8 &&
             { first: Number(c.dataset.first), opened, points: Number(c.dataset.points) };
-        }, [plot, opened], { timeout: 10000 }).catch(async () => {
+        }, [plot, opened], { timeout: 10000 * LOADED }).catch(async () => {
           const c = await fresh.$eval(plot, (e) => ({ ...e.dataset })).catch(() => "no plot");
           throw new Error(`the fresh page's drum plot (opened at ${opened}) has no points from before it was opened: ` +
             JSON.stringify(c));
@@ -323,29 +324,30 @@ async function main() {
     await check("stopping the washer board removes its card and says why", async () => {
       const t0 = performance.now();
       boards["washer-1"].kill("SIGKILL");
-      await page.waitForSelector('[data-device="washer-1"]', { state: "detached", timeout: 15000 });
+      await page.waitForSelector('[data-device="washer-1"]', { state: "detached", timeout: 15000 * LOADED });
       console.log(`  (the card went ${Math.round(performance.now() - t0)} ms after the kill)`);
-      await page.waitForSelector(".toast", { timeout: 5000 });
+      await page.waitForSelector(".toast", { timeout: 5000 * LOADED });
       await page.screenshot({ path: path.join(OUT, "5-washer-gone.png") });
     });
 
     await check("the events and system pages", async () => {
       await page.click('nav a[data-page="events"]');
-      await page.waitForSelector('#event-rows tr:has(td.kind:text("dropped"))', { timeout: 5000 });
+      await page.waitForSelector('#event-rows tr:has(td.kind:text("dropped"))', { timeout: 5000 * LOADED });
       await page.screenshot({ path: path.join(OUT, "6-events.png"), fullPage: true });
       // The drop made a flight recording (docs/RECORDING.md): its event plots the last seconds.
-      await page.click('#event-rows tr:has(td.kind:text("recording")) button.show-recording', { timeout: 5000 });
+      await page.click('#event-rows tr:has(td.kind:text("recording")) button.show-recording',
+        { timeout: 5000 * LOADED });
       await page.waitForFunction(() => {
         const c = document.querySelector("canvas.recording-plot");
         return c && Number(c.dataset.points) > 10 && Number(c.dataset.marks) >= 1;
-      }, null, { timeout: 5000 });
+      }, null, { timeout: 5000 * LOADED });
       await page.screenshot({ path: path.join(OUT, "6b-recording.png"), fullPage: true });
       await page.click('nav a[data-page="system"]');
-      await page.waitForSelector("#system-facts div", { timeout: 5000 });
+      await page.waitForSelector("#system-facts div", { timeout: 5000 * LOADED });
       // The time manager (GET /api/schedule): a line per board still served,
       // each with its deadline violation vector in numbers, and either the
       // violations or "No deadline violated".
-      await page.waitForSelector('#schedule-rows tr[data-board="lights-1"]', { timeout: 5000 });
+      await page.waitForSelector('#schedule-rows tr[data-board="lights-1"]', { timeout: 5000 * LOADED });
       const sched = await page.evaluate(() => ({
         rows: [...document.querySelectorAll("#schedule-rows tr")].map((r) => ({
           device: r.dataset.board,
@@ -372,7 +374,7 @@ async function main() {
       // docs/API.md "Audit trail": the click on the kitchen light above.
       await page.click('nav a[data-page="events"]');
       const row = '#event-rows tr.audit:has(.audit-what:text("lights-1.kitchen:true"))';
-      await page.waitForSelector(row, { timeout: 5000 });
+      await page.waitForSelector(row, { timeout: 5000 * LOADED });
       const who = await page.textContent(`${row} .audit-who`);
       if (!/^token [0-9a-f]{16} "ui-operate" \(operate\)$/.test(who)) throw new Error("who: " + who);
       const result = await page.textContent(`${row} .audit-result.ok`);
@@ -394,7 +396,7 @@ async function main() {
     await check("a read-only token sees no controls and changes nothing", async () => {
       const ro = await browser.newPage({ viewport: { width: 412, height: 915 } }); // a phone
       await ro.goto(`http://${addr}/#token=${read}`);
-      await ro.waitForSelector('[data-device="lights-1"] [data-var="kitchen"]', { timeout: 10000 });
+      await ro.waitForSelector('[data-device="lights-1"] [data-var="kitchen"]', { timeout: 10000 * LOADED });
       const controls = await ro.locator("[data-input], [data-command], [data-param], [data-set], [data-keep]").count();
       if (controls !== 0) throw new Error(`${controls} controls shown to a read token`);
       await ro.screenshot({ path: path.join(OUT, "8-read-only-phone.png"), fullPage: true });
@@ -404,7 +406,7 @@ async function main() {
     await check("a wrong token is asked to sign in", async () => {
       const bad = await browser.newPage();
       await bad.goto(`http://${addr}/#token=vmac_0000000000000000_${"0".repeat(64)}`);
-      await bad.waitForSelector("#signin:not([hidden]) #signin-error:text('not valid')", { timeout: 10000 });
+      await bad.waitForSelector("#signin:not([hidden]) #signin-error:text('not valid')", { timeout: 10000 * LOADED });
       await bad.close();
     });
 
@@ -457,7 +459,8 @@ async function clocks(browser, addr, tok) {
       await cp.goto(`http://${addr}/#token=${tok}`);
       const dish = '[data-device="dish-1"] [data-clock="dish-1"]';
       await cp.waitForSelector(`${dish}[data-clock-state="locked"] .badge.clock-locked:text-is("clock locked")`,
-        { timeout: 20000 }).catch(async (e) => { throw new Error(e.message + "; the page shows: " + await shows(cp)); });
+        { timeout: 10000 * LOADED })
+        .catch(async (e) => { throw new Error(e.message + "; the page shows: " + await shows(cp)); });
       const text = (sel) => cp.textContent(sel).then((t) => t.trim());
       if (await text(`${dish} [data-clock-bound]`) !== "±1.5 µs") throw new Error("dish-1's bound: " +
         await text(`${dish} [data-clock-bound]`));
@@ -468,7 +471,7 @@ async function clocks(browser, addr, tok) {
       if (!/locked/.test(await cp.getAttribute(dish, "title") || "")) throw new Error("dish-1's clock has no title");
       const lights = '[data-device="lights-1"]';
       const own = `${lights} [data-clock="lights-1"][data-clock-state="holdover"]`;
-      await cp.waitForSelector(`${own} [data-clock-arrival]:text-is("on arrival")`, { timeout: 5000 });
+      await cp.waitForSelector(`${own} [data-clock-arrival]:text-is("on arrival")`, { timeout: 5000 * LOADED });
       if (await text(`${own} [data-clock-bound]`) !== "bound unknown") throw new Error("lights-1's unknown bound: " +
         await text(`${own} [data-clock-bound]`));
       if (await text(`${own} [data-clock-offset]`) !== "offset -250 µs") throw new Error("lights-1's offset: " +
@@ -512,21 +515,22 @@ async function enrollment(browser, page, addr, tokens) {
 
   await check("a board without a key shows as waiting, and the Boards page lists it", async () => {
     await page.click('nav a[data-page="devices"]');
-    await page.waitForSelector(`.card.waiting[data-device="${SHED}"] .badge.waiting`, { timeout: 10000 });
+    await page.waitForSelector(`.card.waiting[data-device="${SHED}"] .badge.waiting`, { timeout: 10000 * LOADED });
     const vars = await page.locator(`[data-device="${SHED}"] [data-var]`).count();
     if (vars !== 0) throw new Error(`a waiting board's card shows ${vars} variables: it has no driver`);
-    await page.waitForSelector("#boards-count:not([hidden]):text('1')", { timeout: 5000 });
+    await page.waitForSelector("#boards-count:not([hidden]):text('1')", { timeout: 5000 * LOADED });
     await page.screenshot({ path: path.join(OUT, "11-waiting-card.png"), fullPage: true });
     await page.click('nav a[data-page="boards"]');
-    await page.waitForSelector(`#boards-waiting tr[data-board="${SHED}"] [data-enroll="${SHED}"]`, { timeout: 5000 });
+    await page.waitForSelector(`#boards-waiting tr[data-board="${SHED}"] [data-enroll="${SHED}"]`,
+      { timeout: 5000 * LOADED });
     for (const name of ["dish-1", "lights-1"]) {
-      await page.waitForSelector(`#boards-enrolled tr[data-board="${name}"] .badge.sealed`, { timeout: 5000 });
+      await page.waitForSelector(`#boards-enrolled tr[data-board="${name}"] .badge.sealed`, { timeout: 5000 * LOADED });
     }
   });
 
   await check("Enroll with an operate token says plainly that it needs a deploy token", async () => {
     await page.click(`[data-enroll="${SHED}"]`);
-    await page.waitForSelector("#boards-error:has-text('needs a deploy token')", { timeout: 5000 });
+    await page.waitForSelector("#boards-error:has-text('needs a deploy token')", { timeout: 5000 * LOADED });
     if (await page.locator("#board-key [data-key]").count() !== 0) throw new Error("a key shown after a 403");
     const b = await boardsOf(addr, tokens.deploy);
     if (b.enrolled.some((k) => k.board === SHED)) throw new Error(`${SHED} enrolled by an operate token`);
@@ -536,10 +540,10 @@ async function enrollment(browser, page, addr, tokens) {
   await check("Enroll with a deploy token shows the key once, with the fingerprint the host lists", async () => {
     await dp.goto(`http://${addr}/#token=${tokens.deploy}`);
     await dp.click('nav a[data-page="boards"]');
-    await dp.click(`#boards-waiting [data-enroll="${SHED}"]`, { timeout: 10000 });
+    await dp.click(`#boards-waiting [data-enroll="${SHED}"]`, { timeout: 10000 * LOADED });
     // The host stores the key before it answers (a commit to a disk the
     // other suites share): seconds on a loaded machine.
-    key = (await (await dp.waitForSelector("#board-key [data-key]", { timeout: 20000 })).textContent()).trim();
+    key = (await (await dp.waitForSelector("#board-key [data-key]", { timeout: 20000 * LOADED })).textContent()).trim();
     if (!/^[0-9a-f]{32}$/.test(key)) throw new Error(`the key shown is not 32 hex digits: ${JSON.stringify(key)}`);
     fingerprint = await dp.getAttribute("#board-key [data-fingerprint]", "data-fingerprint");
     const listed = (await boardsOf(addr, tokens.deploy)).enrolled.find((k) => k.board === SHED);
@@ -548,7 +552,7 @@ async function enrollment(browser, page, addr, tokens) {
       throw new Error(`the page shows fingerprint ${fingerprint}, the host lists ${listed.fingerprint}`);
     }
     await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"] [data-fingerprint="${fingerprint}"]`,
-      { timeout: 20000 });
+      { timeout: 20000 * LOADED });
     const kept = await dp.evaluate(() => JSON.stringify(Object.assign({}, localStorage, sessionStorage)));
     if (kept.includes(key)) throw new Error("the page stored the key");
     await dp.screenshot({ path: path.join(OUT, "13-enrolled-key.png"), fullPage: true });
@@ -563,21 +567,22 @@ async function enrollment(browser, page, addr, tokens) {
       "--key-file", file]);
     await page.click('nav a[data-page="devices"]');
     await page.waitForSelector(`.card:not(.waiting)[data-device="${SHED}"] [data-sealed]:not([hidden])`,
-      { timeout: 15000 });
-    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"] .badge.running`, { timeout: 10000 });
+      { timeout: 15000 * LOADED });
+    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"] .badge.running`, { timeout: 10000 * LOADED });
     await dp.click("#board-key [data-key-done]");
-    await dp.waitForSelector("#board-key", { state: "hidden", timeout: 2000 });
+    await dp.waitForSelector("#board-key", { state: "hidden", timeout: 2000 * LOADED });
     if (await dp.locator("#board-key *").count() !== 0) throw new Error("the key is still in the page after Done");
   });
 
   await check("Remove (confirmed) takes the key away: gone from the list, the board waits again", async () => {
     dp.once("dialog", (d) => d.accept());
     await dp.click(`#boards-enrolled [data-remove="${SHED}"]`);
-    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"]`, { state: "detached", timeout: 5000 });
+    await dp.waitForSelector(`#boards-enrolled tr[data-board="${SHED}"]`,
+      { state: "detached", timeout: 5000 * LOADED });
     const b = await boardsOf(addr, tokens.deploy);
     if (b.enrolled.some((k) => k.board === SHED)) throw new Error(`GET /api/boards still lists ${SHED} enrolled`);
-    await dp.waitForSelector(`#boards-waiting tr[data-board="${SHED}"]`, { timeout: 10000 });
-    await page.waitForSelector(`.card.waiting[data-device="${SHED}"]`, { timeout: 10000 });
+    await dp.waitForSelector(`#boards-waiting tr[data-board="${SHED}"]`, { timeout: 10000 * LOADED });
+    await page.waitForSelector(`.card.waiting[data-device="${SHED}"]`, { timeout: 10000 * LOADED });
     await dp.screenshot({ path: path.join(OUT, "14-removed.png"), fullPage: true });
   });
   await dp.close();
