@@ -272,16 +272,22 @@ test-asan: asan-build
 # (suites run at once) took and, for a step of several, each of its suites
 # (the longest is the one the step waited for), printed at the end with
 # what was skipped (if anything): what did not run did not pass.
-# timed-SUITE makes SUITE and notes its time in $(TIMES).each.
+# timed-SUITE makes SUITE and notes its time in $(TIMES).each, with the
+# CPU time (user and system) of the processes it waited for (the shell's
+# times, into a file: in a pipe it would be a subshell's): the last step
+# is bound by the CPU, so less CPU is what shortens it.
 TIMES ?= $(BUILD)/times
 timed = t0=$$(date +%s); rm -f $(abspath $(TIMES)).each; \
 	$(MAKE) --no-print-directory SKIPPED=$(abspath $(SKIPPED)) $(2) $(addprefix timed-,$(1)) || exit 1; \
-	echo "$(1): $$(( $$(date +%s) - t0 )) s$(if $(word 2,$(1)), ($$(paste -sd, $(abspath $(TIMES)).each | sed 's/,/, /g')))" \
+	echo "$(1): $$(( $$(date +%s) - t0 )) s$(if $(word 2,$(1)), ($$(paste -sd, $(abspath $(TIMES)).each | sed 's/,/, /g')),$$(sed -n 's/.* s\( using .*\)/\1/p' $(abspath $(TIMES)).each))" \
 		>> $(abspath $(TIMES))
 
 timed-%:
 	@t0=$$(date +%s); $(MAKE) --no-print-directory $* || exit 1; \
-	echo "$* $$(( $$(date +%s) - t0 )) s" >> $(abspath $(TIMES)).each
+	times > $(abspath $(TIMES)).$*; \
+	cpu=$$(awk 'NR == 2 { for (i = 1; i <= 2; i++) { split($$i, t, "m"); n += t[1] * 60 + t[2] } \
+		printf "%.0f", n }' $(abspath $(TIMES)).$*); rm -f $(abspath $(TIMES)).$*; \
+	echo "$* $$(( $$(date +%s) - t0 )) s using $$cpu CPU s" >> $(abspath $(TIMES)).each
 
 # The steps of make test, the suites of a step at once. The integration
 # tests, plain and under ASan, mostly wait on real time (plant physics,
