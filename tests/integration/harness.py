@@ -7,6 +7,8 @@ condition in GET /api/status), never on elapsed time; timeouts only bound how
 long an event may take to come, and are generous because the suite also runs
 under AddressSanitizer on a small shared machine."""
 
+import http.client
+import io
 import json
 import os
 import random
@@ -198,6 +200,7 @@ class Host(Proc):
         self.complete_to = None  # every event up to this seq is in self.events
         self.last = None
         self.http = None
+        self._conns = threading.local()  # each thread's kept-alive connection to the API (_kept_get)
 
     def ready(self):
         """Wait for the status server to be up; sets self.http (ADDR:PORT) and self.scheme (http or https)."""
@@ -206,13 +209,43 @@ class Host(Proc):
         self.scheme, self.http = m.group(1), m.group(2)
 
     def get(self, path, token=None):
-        """GET path with the context's token (or token); the parsed JSON."""
-        req = urllib.request.Request("http://%s%s" % (self.http, path))
+        """GET path with the context's token (or token); the parsed JSON. An
+        error status raises urllib.error.HTTPError, as urlopen does."""
         token = self.ctx.token if token is None else token
-        if token:
-            req.add_header("Authorization", "Bearer " + token)
-        with urllib.request.urlopen(req, timeout=10) as r:
-            return json.loads(r.read())
+        headers = {"Authorization": "Bearer " + token} if token else {}
+        answer, body = self._kept_get(path, headers)
+        if answer.status >= 400:
+            raise urllib.error.HTTPError("http://%s%s" % (self.http, path), answer.status, answer.reason,
+                                         answer.headers, io.BytesIO(body))
+        return json.loads(body)
+
+    def _kept_get(self, path, headers):
+        """GET path on this thread's connection to the host, kept alive from
+        one poll to the next as a browser's: a new connection per poll cost
+        the host a thread and, under ASan, three times the CPU of the answer
+        (docs/TESTING.md, "What make test costs"). A connection the host
+        closed meanwhile (idle for 30 s) is made again once."""
+        kept = self._conns.__dict__
+        for again in (False, True):
+            if kept.get("addr") != self.http:  # none yet, or a host started again elsewhere
+                if kept.get("conn"):
+                    kept["conn"].close()
+                addr, port = self.http.rsplit(":", 1)
+                kept.update(addr=self.http, conn=http.client.HTTPConnection(addr, int(port), timeout=10))
+            try:
+                kept["conn"].request("GET", path, headers=headers)
+                answer = kept["conn"].getresponse()
+                body = answer.read()
+            except (OSError, http.client.HTTPException):
+                kept["conn"].close()
+                kept.update(addr=None, conn=None)
+                if again:
+                    raise
+                continue
+            if answer.will_close:
+                kept["conn"].close()
+                kept.update(addr=None, conn=None)
+            return answer, body
 
     def status(self):
         s = self.get("/api/status")
