@@ -438,6 +438,14 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 		         primary->ann.board, m->driver, version);
 		bus_post_code(bus, VMAC_EVENT_ROLLED_BACK, m, version, tag, "rolled_back", text);
 	}
+	/* The instances the job holds went with it: its worker may dispose of
+	 * them (and clear the job's fields) at any moment now, so the machine
+	 * lets go of them here rather than have bus_free_machine read the job
+	 * for them after that, and unload them a second time. */
+	if (m->drv == jdrv || m->drv == jother)
+		m->drv = NULL;
+	if (m->prev == jdrv || m->prev == jother)
+		m->prev = NULL;
 	if (w >= 0)
 		bus_worker_retire(bus, w);
 	if (bus->stopping) /* its boards were told to go safe already */
@@ -461,6 +469,7 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 {
 	int64_t cpu;
+	int w;
 	if (j->seen_ns == 0) { /* it began since the last look: counted from now (a slot late at most) */
 		j->seen_ns = now;
 		j->overdue_ns = 0;
@@ -468,7 +477,10 @@ static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 	}
 	if (now - j->seen_ns <= j->limit_ns)
 		return 0;
-	cpu = bus_worker_cpu_ns(bus, atomic_load(&j->runner));
+	w = atomic_load(&j->runner);
+	if (w < 0) /* taken, its worker not said yet (held off the CPU between the two): not its driver's time */
+		return now - j->seen_ns > 10 * j->limit_ns;
+	cpu = bus_worker_cpu_ns(bus, w);
 	if (now - j->seen_ns > 10 * j->limit_ns || cpu < 0)
 		return 1;
 	if (j->overdue_ns && now > j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns)
