@@ -196,6 +196,7 @@ static int on_cyclic(struct vmac_board *b, const struct vmac_msg *req, uint64_t 
 		s.due = (rec.flags & VMAC_CYCLIC_DUE) != 0;
 		return vmac_board_timed_service(b, &s, rx_local_ns, reply, cap);
 	}
+	vmac_board_timed_superseded(b);
 	drive(b, &rec.outputs);
 	if (!(rec.flags & VMAC_CYCLIC_DUE))
 		return 0;
@@ -462,6 +463,7 @@ int vmac_board_receive_at(struct vmac_board *b, const uint8_t *frame, size_t len
 	case VMAC_OP_UPDATE:
 		if (req.flags & VMAC_FLAG_TIMED)
 			return on_timed_update(b, &req, rx_local_ns, reply, cap);
+		vmac_board_timed_superseded(b);
 		drive(b, &req.u.outputs);
 		return answer_inputs(b, &req, reply, cap);
 	case VMAC_OP_IDLE: return answer_inputs(b, &req, reply, cap);

@@ -23,6 +23,12 @@ struct vmac_board_service {
 	uint8_t due;            /* answer it (a DUE record; every UPDATE) */
 };
 
+/* Plain outputs of the board's session are about to be driven on
+ * arrival: TIMED outputs still waiting for their instant are older, and
+ * are dropped (the newest outputs win); a waiting latch keeps its instant
+ * (timed.c). */
+void vmac_board_timed_superseded(struct vmac_board *b);
+
 /* A timed service of the board's session, checked and its watchdog fed
  * (board.c): schedule it, or act on arrival (timed.c). rx_local_ns is the
  * frame's receive time on the board's counter, or VMAC_BOARD_NO_STAMP.

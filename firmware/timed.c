@@ -115,6 +115,11 @@ void vmac_board_timed_cancel(struct vmac_board *b)
 	b->timed.latch_pending = 0;
 }
 
+void vmac_board_timed_superseded(struct vmac_board *b)
+{
+	b->timed.out_pending = 0;
+}
+
 /* A record came while an earlier one's action still waited: the earlier
  * output is driven now, and, when the new record is due (it needs the one
  * latch), the earlier latch is done now too, in the order of their

@@ -94,7 +94,7 @@ void bus_timed_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 {
 	struct vmac_board_clock_status *c = &d->clock;
 	int timed = (m->flags & VMAC_FLAG_TIMED) != 0;
-	int64_t at = (int64_t)m->latch.latched_at;
+	uint64_t at = m->latch.latched_at; /* any 64 bits a board (or a forger on an open bus) sent */
 	(void)bus;
 	d->sample_ns = rx_ns;
 	if (timed != d->sent_timed)
@@ -111,6 +111,9 @@ void bus_timed_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 		c->services_arrival++;
 	else
 		c->services_timed++;
-	if (at != 0 && at <= rx_ns + LATCH_AHEAD_NS && rx_ns - at < LATCH_BEHIND_NS)
-		d->sample_ns = at;
+	/* Compared unsigned (rx_ns is positive): a time of 2^63 or more is
+	 * never taken for one long ago. */
+	if (at != 0 && at <= (uint64_t)rx_ns + LATCH_AHEAD_NS &&
+	    (at >= (uint64_t)rx_ns || (uint64_t)rx_ns - at < LATCH_BEHIND_NS))
+		d->sample_ns = (int64_t)at;
 }

@@ -438,6 +438,42 @@ START_TEST(a_record_finding_outputs_waiting_drives_them_at_once)
 }
 END_TEST
 
+/* Plain outputs (a plain UPDATE, a plain CYCLIC record: a machine
+ * switched to acting on arrival) driven while TIMED outputs wait are the
+ * newer: the waiting ones are never driven after them. A waiting latch
+ * keeps its instant and its answer. */
+START_TEST(plain_outputs_supersede_timed_outputs_still_waiting)
+{
+	uint8_t buf[VMAC_CYCLIC_FRAME_MAX];
+	struct vmac_outputs off = {0};
+	struct vmac_msg m;
+	uint64_t t;
+	int n;
+	start(0, 1);
+	t = rig.host_ns;
+	timed(1, VMAC_CYCLIC_DUE, 0x05, 0, t + 5 * MS, t + 5 * MS);
+	rig.host_ns = t + MS;
+	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_UPDATE, SESSION, 2);
+	m.u.outputs.digital = 0x00;
+	ck_assert_int_gt(send_msg(&m), 0);
+	ck_assert_int_gt(run_due_at(t + 5 * MS), 0);
+	expect_timed_reply(1, 0x00, VMAC_CLOCK_LOCKED, "the latch a plain UPDATE found waiting");
+	ck_assert_msg(rig.driven.digital == 0x00, "the older TIMED outputs 0x%02x driven after a plain UPDATE's 0x00",
+	              rig.driven.digital);
+	t = rig.host_ns;
+	timed(3, 0, 0x06, 0, t + 5 * MS, t + 5 * MS);
+	n = vmac_proto_cyclic_begin(buf, sizeof(buf), 4, OFFSET, 1);
+	ck_assert_int_gt(n, 0);
+	vmac_proto_cyclic_put(buf, 0, TAG, 0, &off);
+	rig.host_ns = t + MS;
+	ck_assert_int_eq(deliver(buf, (size_t)n), 0);
+	expect_nothing_waits("after a plain CYCLIC record");
+	ck_assert_int_eq(run_due_at(t + 5 * MS), 0);
+	ck_assert_msg(rig.driven.digital == 0x00, "the older TIMED outputs 0x%02x driven after a plain CYCLIC's 0x00",
+	              rig.driven.digital);
+}
+END_TEST
+
 /* What waits is cancelled by each of these, and never driven afterwards. */
 static void expect_cancelled_by(uint8_t op, const char *what)
 {
@@ -688,6 +724,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_clock_not_usable_acts_on_arrival_and_says_so);
 	tcase_add_test(tc, without_a_receive_time_a_record_is_served_on_arrival);
 	tcase_add_test(tc, a_record_finding_outputs_waiting_drives_them_at_once);
+	tcase_add_test(tc, plain_outputs_supersede_timed_outputs_still_waiting);
 	tcase_add_test(tc, shutdown_sleep_register_and_the_watchdog_cancel_what_waits);
 	tcase_add_test(tc, a_keyed_board_takes_timed_records_sealed_and_seals_its_answer);
 	tcase_add_test(tc, outputs_waiting_when_the_clock_is_lost_are_still_driven_at_their_instant);

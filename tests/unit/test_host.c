@@ -471,6 +471,34 @@ START_TEST(board_key_table_finds_every_name_and_only_those)
 }
 END_TEST
 
+/* A TIMED reply's latch time becomes the inputs' instant only when it is
+ * plausible; any 64 bits a forger on an open bus sends are not (2^63 and
+ * above once wrapped into a time long before the reply, passing the check). */
+START_TEST(a_timed_reply_latch_time_is_taken_only_when_plausible)
+{
+	static struct device d;
+	struct vmac_msg m;
+	const int64_t rx = 5000000000LL;
+	const uint64_t odd[] = {0x8000000000000001ULL, UINT64_MAX, (uint64_t)rx + 2000000,
+	                        (uint64_t)rx - 2000000000ULL};
+	size_t i;
+	memset(&m, 0, sizeof(m));
+	m.flags = VMAC_FLAG_REPLY | VMAC_FLAG_TIMED;
+	d.sent_timed = 1;
+	m.latch.latched_at = (uint64_t)rx - 300000;
+	bus_timed_reply(NULL, &d, &m, rx);
+	ck_assert_msg(d.sample_ns == rx - 300000, "a latch 300 us before the reply not taken: %lld",
+	              (long long)d.sample_ns);
+	for (i = 0; i < sizeof(odd) / sizeof(odd[0]); i++) {
+		m.latch.latched_at = odd[i];
+		bus_timed_reply(NULL, &d, &m, rx);
+		ck_assert_msg(d.sample_ns == rx,
+		              "latched_at 0x%016llx taken as the inputs' instant (%lld), not the reply's",
+		              (unsigned long long)odd[i], (long long)d.sample_ns);
+	}
+}
+END_TEST
+
 Suite *vmac_test_suite(void)
 {
 	Suite *s = suite_create("host");
@@ -489,6 +517,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, input_requests_time_out_and_run_out_without_a_bus_thread);
 	tcase_add_test(tc, the_bus_answers_with_codes);
 	tcase_add_test(tc, board_key_table_finds_every_name_and_only_those);
+	tcase_add_test(tc, a_timed_reply_latch_time_is_taken_only_when_plausible);
 	suite_add_tcase(s, tc);
 	return s;
 }
