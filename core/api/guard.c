@@ -13,8 +13,9 @@
  *   libmicrohttpd says nothing before the headers are whole), and a
  *   connection that sent nothing, new or kept alive, is closed after
  *   HTTP_IDLE_TIMEOUT_S without an event: browsers open connections
- *   ahead of their requests, and they and Prometheus keep connections
- *   between requests;
+ *   ahead of their requests (over TLS, with the handshake done: bytes the
+ *   server answered are no request's), and they and Prometheus keep
+ *   connections between requests;
  * - libmicrohttpd bounds connections per address (http_connections_per_address).
  * Each lock-out is said in the audit trail with the request that caused it
  * (its type "lockout", audit.c), each batch of cut-off connections is an
@@ -201,14 +202,17 @@ enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, c
 
 /* ---- the deadlines of a request ---- */
 
-/* Bytes the kernel has received on fd, 0 when it cannot tell. */
-static uint64_t bytes_received(int fd)
+/* Bytes the kernel has received on fd, 0 when it cannot tell; and, in
+ * *sent when not NULL, the bytes it has sent. */
+static uint64_t bytes_received(int fd, uint64_t *sent)
 {
 	struct tcp_info ti;
 	socklen_t len = sizeof(ti);
 	memset(&ti, 0, sizeof(ti));
 	if (getsockopt(fd, IPPROTO_TCP, TCP_INFO, &ti, &len) != 0)
-		return 0;
+		memset(&ti, 0, sizeof(ti));
+	if (sent)
+		*sent = ti.tcpi_bytes_sent;
 	return ti.tcpi_bytes_received;
 }
 
@@ -227,10 +231,10 @@ void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_contex
 		if (i < GUARD_CONNS && fd) {
 			slot = &g->conns[i];
 			slot->fd = fd->connect_fd;
-			slot->since = http_mono_s();
+			slot->since = slot->idle_since = http_mono_s();
 			/* Idle until its first byte: a browser opens connections ahead of its requests. */
 			slot->phase = GUARD_IDLE;
-			slot->idle_bytes = 0;
+			slot->idle_bytes = slot->idle_sent = 0;
 			http_client_address(c, slot->addr, sizeof(slot->addr));
 			*socket_context = slot;
 		}
@@ -255,18 +259,33 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	 * not when the answer is done, by which time a quick client may have
 	 * sent more). */
 	if (phase == GUARD_ANSWERING && slot->fd >= 0)
-		slot->idle_bytes = bytes_received(slot->fd);
+		slot->idle_bytes = bytes_received(slot->fd, NULL);
+	if (phase == GUARD_IDLE && slot->fd >= 0) {
+		bytes_received(slot->fd, &slot->idle_sent);
+		slot->idle_since = slot->since;
+	}
 	pthread_mutex_unlock(&h->guard.lock);
 }
 
 /* An idle connection that has received bytes since its last request was
- * in (or, new, at all) is sending its next request (libmicrohttpd says nothing
- * before the headers are whole): its header deadline runs from when the
- * reaper saw them (at most REAP_EVERY_MS late), so trickled headers are
- * cut off and said. Under g->lock. */
+ * in (or, new, at all) is sending its next request (libmicrohttpd says
+ * nothing before the headers are whole): its header deadline runs from
+ * when the reaper saw them (at most REAP_EVERY_MS late), so trickled
+ * headers are cut off and said. Unless the server has sent bytes since
+ * it went idle: then what came was a TLS handshake (or a key update) the
+ * server answered, never part of a request, whose headers the server
+ * answers only once whole; the connection is idle still, from when it
+ * was first (so at most HTTP_IDLE_TIMEOUT_S in all), with new baselines.
+ * Under g->lock. */
 static void idle_or_trickling(struct guard_conn *k, double now)
 {
-	if (bytes_received(k->fd) > k->idle_bytes) {
+	uint64_t sent, received = bytes_received(k->fd, &sent);
+	if (sent > k->idle_sent) {
+		k->idle_bytes = received;
+		k->idle_sent = sent;
+		k->phase = GUARD_IDLE;
+		k->since = k->idle_since;
+	} else if (k->phase == GUARD_IDLE && received > k->idle_bytes) {
 		k->phase = GUARD_HEADERS;
 		k->since = now;
 	}
@@ -288,8 +307,8 @@ static void *reaper(void *arg)
 		for (i = 0; i < GUARD_CONNS; i++) {
 			struct guard_conn *k = &g->conns[i];
 			double limit;
-			if (k->fd >= 0 && k->phase == GUARD_IDLE)
-				idle_or_trickling(k, now);
+			if (k->fd >= 0 && (k->phase == GUARD_IDLE || k->phase == GUARD_HEADERS))
+				idle_or_trickling(k, now); /* GUARD_HEADERS: only ever entered from GUARD_IDLE, here */
 			limit = k->phase == GUARD_HEADERS ? g->header_timeout_s
 			        : k->phase == GUARD_BODY  ? g->body_timeout_s
 			                                  : HTTP_IDLE_TIMEOUT_S;

@@ -65,11 +65,13 @@ enum guard_phase { GUARD_HEADERS, GUARD_BODY, GUARD_ANSWERING, GUARD_IDLE };
 #define HTTP_IDLE_TIMEOUT_S 30
 
 struct guard_conn {
-	int fd; /* -1: unused */
-	double since;
+	int fd;            /* -1: unused */
+	double since;      /* when its phase began */
+	double idle_since; /* when it was last idle (new, or its last answer done) */
 	enum guard_phase phase;
 	uint64_t idle_bytes; /* bytes the kernel had received when its last request was in, 0 when none was
 	                        (GUARD_IDLE's baseline) */
+	uint64_t idle_sent;  /* bytes the kernel had sent when it went idle */
 	char addr[48];
 };
 

@@ -3,10 +3,13 @@ HTTPS only; vmac's commands reach it with https:// and the CA in
 $VMAC_CACERT, and refuse a certificate they cannot verify; a half or broken
 TLS configuration stops the host at start with a clear error."""
 
+import http.client
 import json
 import os
+import socket
 import ssl
 import subprocess
+import time
 import urllib.request
 
 
@@ -59,3 +62,53 @@ def test_a_broken_tls_configuration_stops_the_host(t):
         rc, out, err = t.run([vmacd, "--http", "127.0.0.1:0", "--state", t.logdir, "--set", "realtime=false"] + extra,
                              "vmacd-tls")
         assert rc != 0 and want in err, "vmacd %s: exit %s, stderr %r (wanted %r)" % (" ".join(extra), rc, err, want)
+
+
+def test_a_browsers_tls_connections_are_idle_not_slow(t):
+    """A browser opens an HTTPS connection ahead of its request (TCP and
+    the TLS handshake, no request yet), and keeps one between requests:
+    neither is cut off or reported at http_header_timeout_s, and each is
+    answered when its request comes. A request's headers are still timed
+    from their first byte: trickled over TLS, they are cut off and said
+    (docs/API.md, "Abuse")."""
+    cert, key = make_cert(t)
+    host = t.host(settings={"tls_cert": cert, "tls_key": key, "http_header_timeout_s": 1})
+    addr, port = host.http.rsplit(":", 1)
+    ctx = ssl.create_default_context(cafile=cert)
+
+    def connect():
+        s = ctx.wrap_socket(socket.create_connection((addr, int(port)), timeout=10), server_hostname=addr)
+        t.cleanups.append(s.close)
+        return s
+
+    def health(s):
+        """GET /api/health on s: its status, the whole answer read."""
+        s.sendall(b"GET /api/health HTTP/1.1\r\nHost: x\r\n\r\n")
+        answer = http.client.HTTPResponse(s)
+        answer.begin()
+        answer.read()
+        return answer.status
+
+    ahead, kept = connect(), connect()  # the handshake done, nothing asked yet
+    assert health(kept) == 200, "the first request on the kept-alive connection"
+    time.sleep(2.5)  # idle for more than twice the header timeout: what is under test
+    for name, s in (("opened ahead", ahead), ("kept alive", kept)):
+        try:
+            code = health(s)
+        except (OSError, http.client.HTTPException) as e:
+            code = repr(e)
+        assert code == 200, "the HTTPS connection %s, after 2.5 s idle: %r" % (name, code)
+
+    # A slowloris over TLS: a header line now and then, never the end.
+    slow = connect()
+    slow.sendall(b"GET /api/health HTTP/1.1\r\n")
+    started = time.monotonic()
+    while time.monotonic() - started < 30 and not any("connections cut off" in line.text
+                                                      for line in host.lines["stderr"]):
+        try:
+            slow.sendall(b"X-Slow: 1\r\n")
+        except OSError:
+            pass  # cut off: the line says so
+        time.sleep(0.5)  # the attacker's pace, not a synchronisation
+    cut = host.wait_line(r"connections cut off", 10, stream="stderr", what="the slow HTTPS request cut off")
+    assert "] 1 connections cut off" in cut.text, "more cut off than the one slow request: %r" % cut.text
