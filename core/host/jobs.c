@@ -380,14 +380,17 @@ static const char *job_name(enum job_kind k)
 }
 
 /* How long j may run: a tick, its machine's period or 1.5 times its
- * driver's budget, whichever is longer; anything else, bus->job_limit_ns. A job no worker
+ * driver's budget, whichever is longer; anything else, 75 of its driver's
+ * budgets or bus->job_limit_ns, whichever is longer. A job no worker
  * has taken for ten times that (at least a second) drops its machine. */
 #define QUEUED_MAX(limit) ((limit)*10 > 1000000000 ? (limit)*10 : 1000000000)
 static int64_t limit_of(const struct vmac_bus *bus, const struct machine *m, struct job *j)
 {
 	int64_t period = bus->slot_ns << m->level;
-	if (j->kind != JOB_TICK)
-		return bus->job_limit_ns;
+	if (j->kind != JOB_TICK) { /* its driver's own budget (driver.NAME.budget_us) when that is the longer */
+		int64_t own = m->drv ? STALL_AFTER(vmac_driver_budget_ns(m->drv) * VMAC_DRIVER_LOAD_FACTOR) : 0;
+		return own > bus->job_limit_ns ? own : bus->job_limit_ns;
+	}
 	if (j->budget_of != j->drv) { /* reset when an instance is bound to the machine (bus_bind_driver) */
 		j->budget_of = j->drv;
 		j->stall_ns = STALL_AFTER(vmac_driver_budget_ns(j->drv));

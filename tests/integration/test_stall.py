@@ -127,6 +127,20 @@ def test_a_stall_in_input_answers_the_operator_and_drops_only_its_machine(t):
     quiet(host.status())
 
 
+def test_an_input_within_its_drivers_own_budget_is_not_judged_stalled(t):
+    """A driver given a longer budget of its own (driver.NAME.budget_us)
+    has it for an input too: the bus's limit for anything but a tick is
+    75 of the driver's own budgets, not of driver_budget_us (HOST.md,
+    "Threads and time"). An input of some 0.3 s, with 5 s of budget."""
+    own = dict(settings("slowin"), **{"driver.slowin.budget_us": 5000000})
+    host = t.host(drivers=t.drivers(slowin=staller("slowin", "input", rounds=300)), settings=own)
+    t.board("generic", "in-1", driver="slowin")
+    host.wait_running(["in-1"])
+    code, text = post(host, "/api/devices/in-1/input", t.token, json.dumps({"name": "go", "value": True}).encode())
+    assert code == 200, "an input within its driver's own budget was answered %d %s" % (code, text[:300])
+    assert host.device("in-1", host.status())["state"] == "running", "the machine did not go on after its input"
+
+
 def test_a_stall_in_a_reloads_migrate_is_refused_and_drops_only_its_machine(t):
     host = t.host(drivers=t.drivers(migrator=staller("migrator", "none")), settings=settings("migrator"))
     neighbours(t, host)
