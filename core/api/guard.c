@@ -96,6 +96,7 @@ static int failed(struct vmac_http *h, const char *key, double now, double *wait
 		say = !g->full_said;
 		g->full_said = 1;
 	} else {
+		g->full_said = 0;                /* the table has room again: a next time it is full is said again */
 		locked = f->fails >= FAIL_LIMIT; /* this one is answered 401 when it is the tenth */
 		if (!locked)
 			f->fails++;

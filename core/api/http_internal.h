@@ -20,7 +20,8 @@
  * the client's address for a request without a token of the right shape)
  * in FAIL_WINDOW_S; past that, that key's failing requests get 429 until
  * the window ends. A token has 256 random bits: the lock-out only slows a
- * guesser down and keeps it from costing the store a check per request. */
+ * guesser down (a token of the right shape is still checked against the
+ * store first, so that a valid one always gets in). */
 #define FAIL_LIMIT 10
 
 #define FAIL_WINDOW_S 60.0
