@@ -25,6 +25,9 @@
 
 #define WORKER_PRIORITY 40 /* SCHED_FIFO, below the bus thread's 50 */
 #define WORKER_OUT_SLOTS 256
+/* Workers given up (a driver's call still holds each) that the host
+ * makes room for, beside its own and the spare. */
+#define WORKERS_STUCK_MAX 64
 #define PARAMS_EVERY_NS 100000000LL /* params copied out at most this often after ticks */
 /* A machine moves off its worker only when the oldest job queued there has
  * waited that part of a slot: a move costs the next calls a cold state on
@@ -312,11 +315,36 @@ static int cpus_to_use(void)
 	return n > 0 ? n : 1;
 }
 
+/* A slot's eventfd and rings, made when it is first used (main thread,
+ * before its thread starts); a slot used before keeps them. */
+static int equip(struct worker *w)
+{
+	if (w->queue)
+		return 0;
+	w->efd = eventfd(0, EFD_CLOEXEC);
+	w->queue = calloc((size_t)w->mask + 1, sizeof(*w->queue));
+	w->push_ns = calloc((size_t)w->mask + 1, sizeof(*w->push_ns));
+	if (w->efd >= 0 && w->queue && w->push_ns &&
+	    vmac_ring_init(&w->out, sizeof(struct vmac_bus_msg), WORKER_OUT_SLOTS) == 0)
+		return 0;
+	if (w->efd >= 0)
+		close(w->efd);
+	w->efd = -1;
+	free(w->queue);
+	free(w->push_ns);
+	w->queue = NULL;
+	w->push_ns = NULL;
+	return -1;
+}
+
 int bus_workers_init(struct vmac_bus *bus, char *err, size_t errlen)
 {
 	int i, ring = 4;
 	bus->nworkers = bus->cfg.driver_threads ? (int)bus->cfg.driver_threads : cpus_to_use();
-	bus->nworkers_max = bus->nworkers + 8; /* room for spares and for stuck ones waiting to end */
+	/* Room for the spare and for workers given up while a driver's call
+	 * holds them, until the call returns (a stall of many machines at
+	 * once: DRIVERS.md, "Isolation"). Slots are equipped when used. */
+	bus->nworkers_max = bus->nworkers + 1 + WORKERS_STUCK_MAX;
 	/* Each on lines of its own (struct worker), its sides apart. */
 	bus->workers = aligned_alloc(_Alignof(struct worker), (size_t)bus->nworkers_max * sizeof(*bus->workers));
 	if (!bus->workers)
@@ -329,13 +357,11 @@ int bus_workers_init(struct vmac_bus *bus, char *err, size_t errlen)
 		w->index = i;
 		w->bus = bus;
 		w->mask = (uint32_t)ring - 1;
-		w->efd = eventfd(0, EFD_CLOEXEC);
-		w->queue = calloc((size_t)ring, sizeof(*w->queue));
-		w->push_ns = calloc((size_t)ring, sizeof(*w->push_ns));
-		if (w->efd < 0 || !w->queue || !w->push_ns ||
-		    vmac_ring_init(&w->out, sizeof(struct vmac_bus_msg), WORKER_OUT_SLOTS) != 0)
-			goto fail;
+		w->efd = -1;
 	}
+	for (i = 0; i <= bus->nworkers; i++) /* the active ones and the spare */
+		if (equip(&bus->workers[i]) != 0)
+			goto fail;
 	return 0;
 fail:
 	snprintf(err, errlen, "cannot set up the driver workers: %s", strerror(errno ? errno : ENOMEM));
@@ -402,7 +428,7 @@ void bus_workers_fini(struct vmac_bus *bus)
 				vmac_recorder_free(m.rec);
 				free(m.buf);
 			}
-		if (w->efd > 0)
+		if (w->efd >= 0)
 			close(w->efd);
 		free(w->queue);
 		free(w->push_ns);
@@ -592,7 +618,7 @@ void vmac_bus_workers_service(struct vmac_bus *bus)
 		if (st == W_FREE && free_one < 0)
 			free_one = i;
 	}
-	if (spares == 0 && free_one >= 0)
+	if (spares == 0 && free_one >= 0 && equip(&bus->workers[free_one]) == 0)
 		start_worker(&bus->workers[free_one], W_SPARE);
 }
 

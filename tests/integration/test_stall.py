@@ -103,6 +103,28 @@ def test_a_stalled_tick_fails_its_driver_and_no_one_else_notices(t):
     assert rc == 0, "vmacd exited with %r when stopped: %s" % (rc, host.text()[-600:])
 
 
+def test_many_machines_stalling_at_once_leave_the_neighbours_running(t):
+    """Ten machines whose drivers stall their ticks all at once, on a host
+    with one driver worker: each stuck worker is given up and a new one
+    takes the rest, more than the host had room for before (eight), and
+    the lights, the washer beside them never notice (DRIVERS.md,
+    "Isolation")."""
+    names = ["st%d" % i for i in range(10)]
+    drivers = {n: staller(n, "tick", rounds=1500) for n in names}
+    host = t.host(drivers=t.drivers(**drivers), settings=dict(settings(*names), driver_threads=1))
+    neighbours(t, host)
+    quiet = undisturbed(NEIGHBOURS)
+    for n in names:
+        t.board("generic", n + "-1", driver=n)
+    host.wait_status(lambda s: len(host.find_events("dropped", text="its driver stalled")) == len(names), 60,
+                     "all ten stalled machines dropped", quiet)
+    short = host.find_events("dropped", text="short of workers")
+    assert not short, "machines dropped for want of a worker: %r" % [e["text"] for e in short]
+    served = {n: host.device(n)["served"] for n in NEIGHBOURS}
+    host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 20 for n in NEIGHBOURS), 30,
+                     "the neighbours served on", quiet)
+
+
 def test_a_stall_in_detach_does_not_hold_up_the_stop(t):
     host = t.host(drivers=t.drivers(stopper=staller("stopper", "detach")), settings=settings("stopper"))
     neighbours(t, host)
