@@ -463,6 +463,7 @@ static void *bus_main(void *arg)
 	bus->next_discover_ns = bus->start_ns;
 	bus->next_sync_ns = bus->start_ns;
 	bus_loop(bus);
+	atomic_store(&bus->ended, 1); /* a request's waiter gives up at once (mailbox.c) */
 	return NULL;
 }
 

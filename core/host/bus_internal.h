@@ -397,6 +397,7 @@ struct vmac_bus {
 	struct vmac_ring checkpoints; /* struct vmac_bus_checkpoint + checkpoint_kib KiB each, to the main thread */
 	struct request req[VMAC_BUS_REQUESTS];
 	_Atomic int req_queued; /* requests QUEUED since the bus thread last looked */
+	_Atomic int ended;      /* the bus thread has returned: no request is taken any more */
 	void (*wakeup)(void *);
 	void *wakeup_ctx;
 	pthread_mutex_t status_lock;

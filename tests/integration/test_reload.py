@@ -8,6 +8,7 @@ machine misses nothing."""
 import json
 import os
 import re
+import signal
 import shutil
 import threading
 import time
@@ -446,3 +447,28 @@ def test_dot_names_are_no_drivers(t):
     versions = host.get("/api/drivers")
     assert not any(d.get("name", "").startswith(".") for d in versions.get("drivers", [])), (
         "a dot name was stored: %r" % versions)
+
+
+def test_a_stop_during_a_deploy_does_not_wait_for_the_bus_thread(t):
+    """SIGTERM while a deploy is under way: the bus thread ends, and the
+    deploy's requests left (here lamp-1's going back, lamp-2 having
+    refused the new version) are answered at once "the host is stopping",
+    not after each waited SWAP_TIMEOUT_MS for a bus thread that is gone."""
+    host = paused_host(t, 1000)
+    t.board("lights", "lamp-2", driver="counter", major=77)
+    host.wait_running(["lamp-2"])
+    refuses = counter("2.0.0").replace("function driver.migrate(dev, old)",
+                                       "function driver.migrate(dev, old)\n\tif dev.name == 'lamp-2' then "
+                                       "error('lamp-2 will not') end")
+    answer = []
+    mark = host.mark("stderr")
+    caller = threading.Thread(target=lambda: answer.append(
+        call(host, "POST", "/api/drivers/counter?probation=0", t.token, refuses.encode())), daemon=True)
+    caller.start()
+    host.wait_line(r"deploy of counter paused", 30, since=mark, stream="stderr", what="the deploy's test pause")
+    host.signal(signal.SIGTERM)
+    rc = host.wait_exit(30)
+    assert rc == 0, "vmacd exited with %r when stopped during a deploy" % rc
+    text = host.text()
+    assert "did not take the request within" not in text, (
+        "a request of the deploy waited out its time for a bus thread that had ended: %s" % text[-800:])
