@@ -121,6 +121,8 @@ void bus_publish(struct vmac_bus *bus, int64_t now)
 	s->board_keys = bus_keys_count(bus);
 	s->lateness = bus->lateness;
 	s->counters = bus->counters;
+	for (i = 0; bus->workers && i < (uint32_t)bus->nworkers_max; i++) /* what a driver's worker lost (workers.c) */
+		s->counters.events_lost += atomic_load_explicit(&bus->workers[i].events_lost, memory_order_relaxed);
 	s->slices_per_slot = bus->cfg.slices_per_slot;
 	s->slots_per_block = 1u << bus->cfg.max_level;
 	s->slot_us = (unsigned)(bus->slot_ns / 1000);
