@@ -344,6 +344,19 @@ def paused_host(t, pause_ms=PAUSE_MS):
         del os.environ["VMAC_TEST_DEPLOY_PAUSE_MS"]
 
 
+def deploy_paused(t, host, driver, text):
+    """POST text as a new version of driver in the background, and wait
+    until the host says the deploy is paused between its steps. Returns
+    the calling thread and the list its answer goes in."""
+    answer = []
+    mark = host.mark("stderr")
+    caller = threading.Thread(target=lambda: answer.append(
+        call(host, "POST", "/api/drivers/%s?probation=0" % driver, t.token, text.encode())), daemon=True)
+    caller.start()
+    host.wait_line(r"deploy of %s paused" % driver, 30, since=mark, stream="stderr", what="the deploy's test pause")
+    return caller, answer
+
+
 def attach_during(t, host, method, path, data=None):
     """Call method path in the background; once the host says it is paused
     between the deploy's steps, start a new machine (lamp-2, major 77) of
@@ -400,12 +413,7 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
     # A deploy of another driver, paused between its steps (it holds the lock).
     with open(os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "drivers", "lights.lua")) as f:
         lights = re.sub(r'version = "[^"]+"', 'version = "9.9.9"', f.read(), count=1)  # a new version: no no-op
-    answer = []
-    mark = host.mark("stderr")
-    caller = threading.Thread(target=lambda: answer.append(
-        call(host, "POST", "/api/drivers/lights?probation=0", t.token, lights.encode())), daemon=True)
-    caller.start()
-    host.wait_line(r"deploy of lights paused", 30, since=mark, stream="stderr", what="the deploy's test pause")
+    caller, answer = deploy_paused(t, host, "lights", lights)
 
     # 2.0.0 fails on lamp-1 meanwhile: the bus rolls it back at once.
     code, body = call(host, "POST", "/api/devices/lamp-1/input", t.token,
@@ -460,12 +468,7 @@ def test_a_stop_during_a_deploy_does_not_wait_for_the_bus_thread(t):
     refuses = counter("2.0.0").replace("function driver.migrate(dev, old)",
                                        "function driver.migrate(dev, old)\n\tif dev.name == 'lamp-2' then "
                                        "error('lamp-2 will not') end")
-    answer = []
-    mark = host.mark("stderr")
-    caller = threading.Thread(target=lambda: answer.append(
-        call(host, "POST", "/api/drivers/counter?probation=0", t.token, refuses.encode())), daemon=True)
-    caller.start()
-    host.wait_line(r"deploy of counter paused", 30, since=mark, stream="stderr", what="the deploy's test pause")
+    deploy_paused(t, host, "counter", refuses)
     host.signal(signal.SIGTERM)
     rc = host.wait_exit(30)
     assert rc == 0, "vmacd exited with %r when stopped during a deploy" % rc
