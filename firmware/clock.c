@@ -397,7 +397,12 @@ int vmac_clock_to_local(const struct vmac_clock *c, uint64_t host_ns, uint64_t *
 		dl = invert(dh, c->drift_q32 + c->slew_q32);
 	else
 		dl = c->slew_len_ns + invert(dh - knee, c->drift_q32);
-	*local_ns = c->local_ref + (uint64_t)dl;
+	if (dl < 0 && (uint64_t)0 - (uint64_t)dl > c->local_ref)
+		*local_ns = 0; /* before the counter's start: long past, not its far future */
+	else if (dl > 0 && (uint64_t)dl > UINT64_MAX - c->local_ref)
+		*local_ns = UINT64_MAX;
+	else
+		*local_ns = c->local_ref + (uint64_t)dl;
 	return 0;
 }
 

@@ -142,7 +142,8 @@ int vmac_clock_to_host(const struct vmac_clock *c, uint64_t local_ns, uint64_t *
 
 /* The local counter at host time host_ns, into *local_ns (a timer compare
  * for "act at host instant T"): 0, or -1 when unsynced or lost. The line
- * now in force, extrapolated. */
+ * now in force, extrapolated; an instant before the counter's start gives
+ * 0 (long past), never a wrapped far future. */
 int vmac_clock_to_local(const struct vmac_clock *c, uint64_t host_ns, uint64_t *local_ns);
 
 /* The estimated bound on |to_host(local_ns) - host time| at local_ns

@@ -213,6 +213,29 @@ START_TEST(host_and_local_time_are_each_others_inverse)
 }
 END_TEST
 
+/* A board whose counter (7 s) is far behind the host's time (3 days): a
+ * host instant from before the counter's start is long past, never the
+ * counter's far future (its difference wrapping round). */
+START_TEST(an_instant_before_the_counters_start_is_past)
+{
+	struct vmac_clock c;
+	const uint64_t behind = 3 * 86400 * SECOND_NS - 7 * SECOND_NS;
+	uint64_t k, h = 0, local = 0;
+	vmac_clock_init(&c);
+	for (k = 0; k < 3000; k++) {
+		h = 3 * 86400 * SECOND_NS + k * PERIOD_NS;
+		vmac_clock_feed(&c, h, h - behind);
+	}
+	ck_assert_msg(vmac_clock_usable(&c), "exact samples did not lock in 3 s: %s", vmac_clock_state_name(c.state));
+	ck_assert_int_eq(vmac_clock_to_local(&c, h - 30 * SECOND_NS, &local), 0);
+	ck_assert_msg(local == 0, "30 s before a counter at %.1f s: local %llu, not 0 (the start, long past)",
+	              (double)(h - behind) / 1e9, (unsigned long long)local);
+	ck_assert_msg(vmac_clock_act_at(&c, h - 30 * SECOND_NS, h - behind, &local) == 1 && local == h - behind,
+	              "an instant from before the counter's start is not acted on at once: local %llu",
+	              (unsigned long long)local);
+}
+END_TEST
+
 /* Drifts -200..+200 ppm, offsets -9..+9 s, a seed each. */
 static const struct {
 	double ppm, offset_s;
@@ -548,6 +571,7 @@ Suite *vmac_test_suite(void)
 	tcase_set_timeout(tc, 60);
 	tcase_add_test(tc, a_clock_says_nothing_until_its_first_sample_and_acts_on_arrival);
 	tcase_add_test(tc, host_and_local_time_are_each_others_inverse);
+	tcase_add_test(tc, an_instant_before_the_counters_start_is_past);
 	tcase_add_test(tc, every_board_locks_within_a_second_and_stays_within_10_us);
 	tcase_add_test(tc, ten_seconds_without_samples_are_held_within_the_bound);
 	tcase_add_test(tc, past_its_bound_limit_a_board_is_lost_acts_on_arrival_and_starts_over);
