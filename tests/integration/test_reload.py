@@ -350,8 +350,14 @@ def deploy_paused(t, host, driver, text):
     the calling thread and the list its answer goes in."""
     answer = []
     mark = host.mark("stderr")
-    caller = threading.Thread(target=lambda: answer.append(
-        call(host, "POST", "/api/drivers/%s?probation=0" % driver, t.token, text.encode())), daemon=True)
+
+    def deploy():
+        try:
+            answer.append(call(host, "POST", "/api/drivers/%s?probation=0" % driver, t.token, text.encode()))
+        except OSError as e:  # the host stopped meanwhile (a test that stops it): no answer
+            answer.append((None, repr(e)))
+
+    caller = threading.Thread(target=deploy, daemon=True)
     caller.start()
     host.wait_line(r"deploy of %s paused" % driver, 30, since=mark, stream="stderr", what="the deploy's test pause")
     return caller, answer
