@@ -31,6 +31,8 @@
 #include <sys/socket.h>
 #include <time.h>
 
+#include "../common/monotime.h"
+
 #define REAP_EVERY_MS 500
 #define CUT_SAID_EVERY_S 10.0
 
@@ -336,10 +338,7 @@ static void *reaper(void *arg)
 			vmac_event_log_add(h->log, "http", "", text);
 			pthread_mutex_lock(&g->lock);
 		}
-		clock_gettime(CLOCK_MONOTONIC, &until);
-		until.tv_nsec += REAP_EVERY_MS * 1000000L;
-		until.tv_sec += until.tv_nsec / 1000000000L;
-		until.tv_nsec %= 1000000000L;
+		until = vmac_mono_after_ns(REAP_EVERY_MS * 1000000LL);
 		pthread_cond_timedwait(&g->wake, &g->lock, &until);
 	}
 	pthread_mutex_unlock(&g->lock);

@@ -5,6 +5,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "../common/monotime.h"
+
 void vmac_event_log_init(struct vmac_event_log *log)
 {
 	pthread_condattr_t attr;
@@ -110,13 +112,7 @@ int vmac_event_log_since(struct vmac_event_log *log, uint64_t after, struct vmac
 	struct timespec until;
 	uint64_t first, s;
 	int n = 0;
-	clock_gettime(CLOCK_MONOTONIC, &until);
-	until.tv_sec += timeout_ms / 1000;
-	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
-	if (until.tv_nsec >= 1000000000L) {
-		until.tv_sec++;
-		until.tv_nsec -= 1000000000L;
-	}
+	until = vmac_mono_after_ns((int64_t)timeout_ms * 1000000);
 	pthread_mutex_lock(&log->lock);
 	while (log->next_seq <= after + 1 && timeout_ms > 0)
 		if (pthread_cond_timedwait(&log->grew, &log->lock, &until) != 0)

@@ -21,7 +21,10 @@
 #include <unistd.h>
 
 #include "../common/errors.h"
+#include "../common/monotime.h"
 #include "../sched/sched.h"
+
+#define REQUEST_SLICE_MS 50 /* a waiter for the bus thread looks this often whether it has ended */
 
 int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, const struct vmac_value *value,
                    char *reply, size_t replylen);
@@ -213,8 +216,7 @@ static int bus_request(struct vmac_bus *bus, enum bus_request_kind kind, struct 
                        int timeout_ms)
 {
 	struct request *q = NULL;
-	struct timespec until, slice;
-	int i, expect, rc;
+	int i, expect, rc, waited, slice;
 	if (atomic_load(&bus->ended)) {
 		snprintf(req->reply, sizeof(req->reply), "the host is stopping");
 		return -VMAC_EBUSY;
@@ -238,29 +240,18 @@ static int bus_request(struct vmac_bus *bus, enum bus_request_kind kind, struct 
 	atomic_store(&bus->req_queued, 1);
 	if (!bus->virt)
 		bus_wake(bus);
-	clock_gettime(CLOCK_MONOTONIC, &until); /* a wall clock set meanwhile (NTP at boot) changes nothing */
-	until.tv_sec += timeout_ms / 1000;
-	until.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
-	if (until.tv_nsec >= 1000000000L) {
-		until.tv_sec++;
-		until.tv_nsec -= 1000000000L;
-	}
 	/* In slices of 50 ms: a bus thread that ends meanwhile (the host
 	 * stopping) takes no more requests, and its waiter need not wait out
 	 * the whole time (a deploy stopped by SIGTERM has many to make). */
-	do {
-		clock_gettime(CLOCK_MONOTONIC, &slice);
-		slice.tv_nsec += 50000000L;
-		if (slice.tv_nsec >= 1000000000L) {
-			slice.tv_sec++;
-			slice.tv_nsec -= 1000000000L;
-		}
-		if (slice.tv_sec > until.tv_sec || (slice.tv_sec == until.tv_sec && slice.tv_nsec > until.tv_nsec))
-			slice = until;
-		while ((rc = sem_clockwait(&q->done, CLOCK_MONOTONIC, &slice)) != 0 && errno == EINTR)
+	for (waited = 0;; waited += slice) {
+		struct timespec until;
+		slice = timeout_ms - waited < REQUEST_SLICE_MS ? timeout_ms - waited : REQUEST_SLICE_MS;
+		until = vmac_mono_after_ns((int64_t)slice * 1000000);
+		while ((rc = sem_clockwait(&q->done, CLOCK_MONOTONIC, &until)) != 0 && errno == EINTR)
 			;
-	} while (rc != 0 && !atomic_load(&bus->ended) &&
-	         (slice.tv_sec != until.tv_sec || slice.tv_nsec != until.tv_nsec));
+		if (rc == 0 || atomic_load(&bus->ended) || waited + slice >= timeout_ms)
+			break;
+	}
 	if (rc != 0) {
 		expect = REQ_QUEUED;
 		if (atomic_compare_exchange_strong(&q->state, &expect, REQ_ABANDONED)) {

@@ -23,6 +23,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../common/monotime.h"
+
 #define WORKER_PRIORITY 40 /* SCHED_FIFO, below the bus thread's 50 */
 #define WORKER_OUT_SLOTS 256
 /* Workers given up (a driver's call still holds each) that the host
@@ -394,12 +396,7 @@ static int stop_workers(struct vmac_bus *bus)
 			/* the counter is full: it wakes anyway */
 		}
 	}
-	clock_gettime(CLOCK_MONOTONIC, &until); /* a wall clock set meanwhile changes nothing */
-	until.tv_nsec += 200000000L;
-	if (until.tv_nsec >= 1000000000L) {
-		until.tv_sec++;
-		until.tv_nsec -= 1000000000L;
-	}
+	until = vmac_mono_after_ns(200000000);
 	for (i = 0; i < bus->nworkers_max; i++) {
 		struct worker *w = &bus->workers[i];
 		if (atomic_load(&w->state) == W_FREE)

@@ -17,6 +17,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../common/monotime.h"
 #include "site.h"
 
 static const struct mqtt_profile *const profiles[] = {&mqtt_native_profile,    &mqtt_ha_profile,   &mqtt_health_profile,
@@ -341,13 +342,7 @@ static void *publisher(void *arg)
 		left = next_poll - mqtt_now_s();
 		if (left <= 0)
 			continue;
-		clock_gettime(CLOCK_MONOTONIC, &until);
-		until.tv_sec += (time_t)left;
-		until.tv_nsec += (long)((left - (double)(time_t)left) * 1e9);
-		if (until.tv_nsec >= 1000000000L) {
-			until.tv_sec++;
-			until.tv_nsec -= 1000000000L;
-		}
+		until = vmac_mono_after_ns((int64_t)(left * 1e9));
 		pthread_mutex_lock(&m->lock);
 		if (m->nqueue == 0 && !atomic_load(&m->conns[MQTT_CONN_MAIN].need_births) &&
 		    !atomic_load(&m->conns[MQTT_CONN_SPARKPLUG].need_births) && !atomic_load(&m->stopping))
