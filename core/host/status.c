@@ -121,8 +121,6 @@ void bus_publish(struct vmac_bus *bus, int64_t now)
 	s->board_keys = bus_keys_count(bus);
 	s->lateness = bus->lateness;
 	s->counters = bus->counters;
-	for (i = 0; bus->workers && i < (uint32_t)bus->nworkers_max; i++) /* what a driver's worker lost (workers.c) */
-		s->counters.events_lost += atomic_load_explicit(&bus->workers[i].events_lost, memory_order_relaxed);
 	s->slices_per_slot = bus->cfg.slices_per_slot;
 	s->slots_per_block = 1u << bus->cfg.max_level;
 	s->slot_us = (unsigned)(bus->slot_ns / 1000);
@@ -167,6 +165,7 @@ const struct vmac_variable *vmac_bus_device_var(struct vmac_bus *bus, const char
 
 void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out)
 {
+	int i;
 	struct vmac_device_status *devices = out->devices;
 	uint16_t *load = out->slot_load;
 	pthread_mutex_lock(&bus->status_lock);
@@ -177,4 +176,8 @@ void vmac_bus_status(struct vmac_bus *bus, struct vmac_status *out)
 	memcpy(load, bus->status.slot_load, (size_t)bus->status.slots_per_block * sizeof(*load));
 	pthread_mutex_unlock(&bus->status_lock);
 	memcpy(out->host_addr, bus->host_addr, sizeof(out->host_addr));
+	/* What a driver's worker lost (workers.c), added by the reader: not
+	 * the bus thread's work. The workers' table lives as long as the bus. */
+	for (i = 0; bus->workers && i < bus->nworkers_max; i++)
+		out->counters.events_lost += atomic_load_explicit(&bus->workers[i].events_lost, memory_order_relaxed);
 }
