@@ -225,26 +225,22 @@ class Host(Proc):
         the host a thread and, under ASan, three times the CPU of the answer
         (docs/TESTING.md, "What make test costs"). A connection the host
         closed meanwhile (idle for 30 s) is made again once."""
-        kept = self._conns.__dict__
+        addr, port = self.http.rsplit(":", 1)
+        conn = getattr(self._conns, "conn", None)
+        if conn is None or (conn.host, conn.port) != (addr, int(port)):  # none yet, or a host started again
+            conn = self._conns.conn = http.client.HTTPConnection(addr, int(port), timeout=10)
         for again in (False, True):
-            if kept.get("addr") != self.http:  # none yet, or a host started again elsewhere
-                if kept.get("conn"):
-                    kept["conn"].close()
-                addr, port = self.http.rsplit(":", 1)
-                kept.update(addr=self.http, conn=http.client.HTTPConnection(addr, int(port), timeout=10))
             try:
-                kept["conn"].request("GET", path, headers=headers)
-                answer = kept["conn"].getresponse()
+                conn.request("GET", path, headers=headers)
+                answer = conn.getresponse()
                 body = answer.read()
             except (OSError, http.client.HTTPException):
-                kept["conn"].close()
-                kept.update(addr=None, conn=None)
+                conn.close()  # the next request connects anew
                 if again:
                     raise
                 continue
             if answer.will_close:
-                kept["conn"].close()
-                kept.update(addr=None, conn=None)
+                conn.close()
             return answer, body
 
     def status(self):
