@@ -27,6 +27,7 @@ class Capture:
     def __init__(self, bus):
         self.got = []
         self.stop = False
+        self.heard = threading.Condition()
         if bus.startswith("eth:"):
             # ETH_P_ALL: only such a socket is given the frames sent out
             self.sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
@@ -51,7 +52,18 @@ class Capture:
                 data = data[14:]
             if len(data) >= frames.HDR_LEN and data[10] == frames.SYS and data[11] == SYNC_OP:
                 n = SEALED_HEAD + 8 * data[12] if data[3] & frames.AUTH else PLAIN_LEN
-                self.got.append(data[:n])
+                with self.heard:
+                    self.got.append(data[:n])
+                    if len(self.got) % 100 == 0:  # a waiter's look costs a pass over them all
+                        self.heard.notify_all()
+
+    def wait(self, predicate, timeout_s, what):
+        """Until predicate(frames heard so far) holds, looked at every 100
+        frames, or AssertionError naming what after timeout_s."""
+        with self.heard:
+            if not self.heard.wait_for(lambda: predicate(self.got), timeout_s):
+                raise AssertionError("%s not heard within %d s (%d SYNC frames heard)" % (
+                    what, timeout_s, len(self.got)))
 
     def close(self):
         self.stop = True
