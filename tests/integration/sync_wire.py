@@ -20,13 +20,15 @@ SEALED_HEAD = frames.SYNC_SEALED_HEAD
 
 
 class Capture:
-    """Every SYNC frame the host sends from now on, in a thread of its own:
-    on UDP the group's (bus "GROUP:PORT"), on raw Ethernet (bus
-    "eth:IFACE", IFACE in this namespace) the interface's outgoing ones."""
+    """Every SYNC frame the host sends from now on (every system frame it
+    sends, with everything=True), in a thread of its own: on UDP the
+    group's (bus "GROUP:PORT"), on raw Ethernet (bus "eth:IFACE", IFACE in
+    this namespace) the interface's outgoing ones."""
 
-    def __init__(self, bus):
+    def __init__(self, bus, everything=False):
         self.got = []
         self.stop = False
+        self.everything = everything
         self.heard = threading.Condition()
         if bus.startswith("eth:"):
             # ETH_P_ALL: only such a socket is given the frames sent out
@@ -50,20 +52,28 @@ class Capture:
                 if data[12:14] != struct.pack(">H", frames.ETH_P_VMAC):
                     continue
                 data = data[14:]
-            if len(data) >= frames.HDR_LEN and data[10] == frames.SYS and data[11] == SYNC_OP:
-                n = SEALED_HEAD + 8 * data[12] if data[3] & frames.AUTH else PLAIN_LEN
-                with self.heard:
-                    self.got.append(data[:n])
-                    if len(self.got) % 100 == 0:  # a waiter's look costs a pass over them all
-                        self.heard.notify_all()
+            if len(data) < frames.HDR_LEN or data[10] != frames.SYS or data[3] & frames.REPLY:
+                continue
+            if data[11] == SYNC_OP:
+                data = data[:SEALED_HEAD + 8 * data[12] if data[3] & frames.AUTH else PLAIN_LEN]
+            elif not self.everything:
+                continue
+            with self.heard:
+                self.got.append(data)
+                if len(self.got) % 100 == 0:  # a waiter's look costs a pass over them all
+                    self.heard.notify_all()
 
     def wait(self, predicate, timeout_s, what):
         """Until predicate(frames heard so far) holds, looked at every 100
         frames, or AssertionError naming what after timeout_s."""
         with self.heard:
             if not self.heard.wait_for(lambda: predicate(self.got), timeout_s):
-                raise AssertionError("%s not heard within %d s (%d SYNC frames heard)" % (
-                    what, timeout_s, len(self.got)))
+                raise AssertionError("%s not heard within %d s (%d frames heard)" % (what, timeout_s, len(self.got)))
+
+    def syncs(self, sealed, got=None):
+        """The sealed SYNC frames heard (or of got), or the plain ones."""
+        return [d for d in (self.got if got is None else got)
+                if d[11] == SYNC_OP and bool(d[3] & frames.AUTH) == sealed]
 
     def close(self):
         self.stop = True

@@ -14,13 +14,11 @@ Ethernet and on UDP, and boards take it."""
 import os
 import re
 import signal
-import socket
 import struct
-import threading
 import time
 
 import frames
-from harness import KITCHEN, KITCHEN_NAMES, Skip, bus_socket, misread, sender_socket
+from harness import KITCHEN, KITCHEN_NAMES, Skip, misread, sender_socket
 from sync_wire import Capture, lateness, streams
 
 # 1 ms slots so that a SYNC goes out every millisecond (at most one a tick),
@@ -183,35 +181,6 @@ SYNC_OP = 0x05
 SEALED_HEAD = frames.SYNC_SEALED_HEAD
 
 
-class Listener:
-    """Every system frame of the host on the bus, from now on, kept as
-    (bytes, arrival) in a thread of its own."""
-
-    def __init__(self, bus):
-        self.sock = bus_socket(bus, 0.1)
-        self.got = []
-        self.stop = False
-        self.thread = threading.Thread(target=self.run, daemon=True)
-        self.thread.start()
-
-    def run(self):
-        while not self.stop:
-            try:
-                data, _ = self.sock.recvfrom(2048)
-            except socket.timeout:
-                continue
-            if len(data) >= frames.HDR_LEN and data[10] == frames.SYS and not data[3] & frames.REPLY:
-                self.got.append(data)
-
-    def close(self):
-        self.stop = True
-        self.thread.join(5)
-        self.sock.close()
-
-    def syncs(self, sealed):
-        return [d for d in self.got if d[11] == SYNC_OP and bool(d[3] & frames.AUTH) == sealed]
-
-
 def sync_mac(frame, offset):
     """The MAC a sealed SYNC carries for offset (None: not in the frame)."""
     first, count = struct.unpack_from(">H", frame, SEALED_HEAD - 2)[0], frame[12]
@@ -242,7 +211,7 @@ def test_a_keyed_board_takes_only_the_hosts_sealed_sync(t):
     if frames.NACL is None:
         raise Skip("PyNaCl (Debian python3-nacl) is missing: the host's MACs are judged with libsodium")
     host = t.host(settings=SYNC_SETTINGS)
-    heard = Listener(t.bus)  # before the board: the DISCOVER it answers
+    heard = Capture(t.bus, everything=True)  # before the board: the DISCOVER it answers
     try:
         board = t.board("washer", "washer-1", extra=["--clock-ppm", "100", "--clock-offset", "3.5",
                                                      "--clock-jitter-us", str(JITTER_US)])
@@ -250,7 +219,8 @@ def test_a_keyed_board_takes_only_the_hosts_sealed_sync(t):
         locked, line = clock_line(board, "washer-1", "locked", 30)
         d = host.device("washer-1")
         offset, device_id = d["offset"], d["id"]
-        time.sleep(0.3)
+        heard.wait(lambda got: len([f for f in heard.syncs(True, got) if sync_mac(f, offset) not in (None, bytes(8))])
+                   >= 150, 60, "150 sealed SYNC for the board's offset")
     finally:
         heard.close()
     with open(os.path.join(t.keys, "washer-1.key")) as f:
@@ -324,7 +294,7 @@ def test_an_open_bus_syncs_keyed_and_unkeyed_boards_each_by_its_frame(t):
     host.wait_running(["plain-1", "sealed-1"])
     for name, board in (("plain-1", plain), ("sealed-1", sealed)):
         clock_line(board, name, "locked", 30)
-    heard = Listener(t.bus)
+    heard = Capture(t.bus, everything=True)
     try:
         since = host.status()["counters"]["syncs"]
         host.wait_status(lambda st: st["counters"]["syncs"] > since + 200, 30, "200 more SYNC instants")
