@@ -262,6 +262,7 @@ static int on_register(struct vmac_board *b, const struct vmac_msg *req, uint64_
 	 * sends fresh values in an UPDATE; nothing of the old one waits. */
 	vmac_board_timed_cancel(b);
 	drive(b, &off);
+	vmac_clock_doubt(&b->clock); /* its host may keep another time base */
 	b->state = VMAC_BOARD_KNOWN;
 	b->device_id = req->device_id;
 	b->watchdog_ms = req->u.reg.watchdog_ms;

@@ -122,12 +122,14 @@ static void start(struct vmac_clock *c, uint64_t host_ns, uint64_t local_ns)
 	c->past_n = 0;
 	c->last_update_local = c->last_accept_local = local_ns;
 	c->reject_run = 0;
+	c->doubted = 0;
 	window_reset(c);
 }
 
 static void lose(struct vmac_clock *c)
 {
 	c->state = VMAC_CLOCK_LOST;
+	c->doubted = 0;
 	c->counters.lost++;
 	c->reject_run = 0;
 	window_reset(c);
@@ -329,10 +331,40 @@ enum vmac_clock_state vmac_clock_tick(struct vmac_clock *c, uint64_t local_ns)
 	return c->state;
 }
 
+static int64_t gate_ns(const struct vmac_clock *c)
+{
+	return VMAC_CLOCK_GATE_K * c->jitter_ns + VMAC_CLOCK_GATE_FLOOR_NS;
+}
+
 static int gate_rejects(const struct vmac_clock *c, int64_t lateness)
 {
-	int64_t gate = VMAC_CLOCK_GATE_K * c->jitter_ns + VMAC_CLOCK_GATE_FLOOR_NS;
-	return vmac_clock_usable(c) && lateness - c->offset_mean_ns > gate;
+	return (vmac_clock_usable(c) || c->doubted) && lateness - c->offset_mean_ns > gate_ns(c);
+}
+
+void vmac_clock_doubt(struct vmac_clock *c)
+{
+	if (!vmac_clock_usable(c))
+		return;
+	c->resume = c->state;
+	c->doubted = 1;
+	c->state = VMAC_CLOCK_LOCKING;
+}
+
+/* The first sample after vmac_clock_doubt() (vmac_clock_doubt() says
+ * what each verdict does); the sample's lateness to go on with. */
+static int64_t settle_doubt(struct vmac_clock *c, int64_t lateness, uint64_t host_ns, uint64_t local_ns)
+{
+	int64_t d = lateness - c->offset_mean_ns;
+	uint64_t early = bound_at(c, local_ns) + (uint64_t)gate_ns(c);
+	if (d > (int64_t)VMAC_CLOCK_STEP_NS || (d < 0 && magnitude(d) > early)) {
+		start(c, host_ns, local_ns); /* another time base: the line through this sample */
+		return diff_ns(model_host(c, local_ns), host_ns);
+	}
+	if (d <= gate_ns(c)) {
+		c->state = c->resume;
+		c->doubted = 0;
+	}
+	return lateness;
 }
 
 int vmac_clock_feed(struct vmac_clock *c, uint64_t host_ns, uint64_t local_ns)
@@ -344,6 +376,8 @@ int vmac_clock_feed(struct vmac_clock *c, uint64_t host_ns, uint64_t local_ns)
 	else if (c->window_n > 0 && elapsed(local_ns, c->window_start_local) >= VMAC_CLOCK_WINDOW_MAX_NS)
 		close_window(c, c->last_accept_local); /* a window never spans a gap: it ends with its last sample */
 	lateness = diff_ns(model_host(c, local_ns), host_ns);
+	if (c->doubted)
+		lateness = settle_doubt(c, lateness, host_ns, local_ns);
 	if (gate_rejects(c, lateness)) {
 		c->counters.rejected++;
 		if (c->reject_run++ == 0)

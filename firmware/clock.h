@@ -105,10 +105,12 @@ struct vmac_clock {
 	int64_t freq_dev_q32;   /* EWMA of the integral's distance from that mean */
 	uint64_t last_update_local; /* the last window's close: the bound grows from there */
 	uint64_t last_accept_local, reject_since_local;
-	uint32_t reject_run;   /* samples rejected in a row */
-	uint32_t good_windows; /* windows of the servo in a row with the bound within VMAC_CLOCK_LOCK_NS */
-	uint32_t spike_run;    /* windows skipped in a row as spikes */
-	int64_t spike_ns;      /* the last one's offset: the bound counts it while spike_run > 0 */
+	uint32_t reject_run;          /* samples rejected in a row */
+	uint32_t good_windows;        /* windows of the servo in a row with the bound within VMAC_CLOCK_LOCK_NS */
+	uint32_t spike_run;           /* windows skipped in a row as spikes */
+	int64_t spike_ns;             /* the last one's offset: the bound counts it while spike_run > 0 */
+	int doubted;                  /* a new session: LOCKING until a sample says whose line this is */
+	enum vmac_clock_state resume; /* the usable state it was in, back if the sample agrees */
 	struct vmac_clock_counters counters;
 };
 
@@ -132,6 +134,17 @@ int vmac_clock_feed(struct vmac_clock *c, uint64_t host_ns, uint64_t local_ns);
  * often as the state must be current (every loop, before acting);
  * feeding calls it first. docs/TIME.md, "The states". */
 enum vmac_clock_state vmac_clock_tick(struct vmac_clock *c, uint64_t local_ns);
+
+/* A new session began: its host may keep another time base (another
+ * machine, or one rebooted), so a usable clock is not trusted for it
+ * until a sample of its SYNC says which. Until then LOCKING (act on
+ * arrival). A sample that agrees with the line (within the gate, early by
+ * no more than the bound allows) puts the clock back as it was; one
+ * further (earlier than that, or later than a step) starts acquisition
+ * over from it; one late within a step is rejected as a queued frame.
+ * A clock not usable is left as it is: its windows judge the samples.
+ * docs/TIME.md, "A new session". */
+void vmac_clock_doubt(struct vmac_clock *c);
 
 /* 1 when the board acts at host instants (LOCKED, HOLDOVER), else 0. */
 int vmac_clock_usable(const struct vmac_clock *c);

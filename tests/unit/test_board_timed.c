@@ -159,8 +159,9 @@ static void expect_locked(void)
 }
 
 /* A board (keyed or not), its clock locked (locked 0: never synced) by
- * plain SYNC before its session, or keyed by the sealed SYNC in it, in a
- * session at OFFSET with a watchdog of 500 ms (keyed: 60 s). */
+ * plain SYNC before its session and trusted again by one in it, or keyed
+ * by the sealed SYNC in it, in a session at OFFSET with a watchdog of
+ * 500 ms (keyed: 60 s). */
 static void start_skewed(int keyed, int locked, int64_t skew)
 {
 	struct vmac_board_identity id;
@@ -197,6 +198,9 @@ static void start_skewed(int keyed, int locked, int64_t skew)
 	ck_assert_int_eq(rig.board.state, VMAC_BOARD_KNOWN);
 	if (locked && keyed) { /* no key to check a SYNC with before its session and offset */
 		sync_frames(1500);
+		expect_locked();
+	} else if (locked) { /* the new session's first SYNC: the same line, trusted again */
+		sync_frames(1);
 		expect_locked();
 	}
 	rig.writes = 0;
@@ -384,6 +388,31 @@ START_TEST(a_clock_not_usable_acts_on_arrival_and_says_so)
 	ck_assert_int_eq(vmac_report_next(&rep, &rig.board, &none, line, sizeof(line)), 1);
 	ck_assert_str_eq(line, "motor-1: acting on arrival (clock locking)");
 	ck_assert_int_eq(vmac_report_next(&rep, &rig.board, &none, line, sizeof(line)), 0);
+}
+END_TEST
+
+/* A new REGISTER (a host restarted, or another one): the clock, locked on
+ * the old session's line, is not used until the new session's first SYNC
+ * says it is the same line (docs/TIME.md, "A new session"). */
+START_TEST(a_new_session_acts_on_arrival_until_its_first_sync)
+{
+	struct vmac_msg m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_REGISTER, SESSION, 4);
+	uint64_t t;
+	start(0, 1);
+	m.u.reg.major = 3;
+	m.u.reg.watchdog_ms = 500;
+	ck_assert_int_gt(send_msg(&m), 0);
+	m = msg(2, 0, VMAC_CH_DEVICE, VMAC_OP_OFFSET, SESSION, 5);
+	m.u.offset = OFFSET;
+	ck_assert_int_gt(send_msg(&m), 0);
+	t = rig.host_ns;
+	ck_assert_int_gt(timed(11, VMAC_CYCLIC_DUE, 0x03, 0, t + 10 * MS, t + 10 * MS), 0);
+	expect_timed_reply(11, 0x03, VMAC_CLOCK_LOCKING | VMAC_CLOCK_ARRIVAL, "a new session before its SYNC");
+	sync_frames(1);
+	t = rig.host_ns;
+	ck_assert_msg(timed(12, VMAC_CYCLIC_DUE, 0x06, 0, t + 10 * MS, t + 10 * MS) == 0,
+	              "after the new session's first SYNC, agreeing, a record 10 ms ahead was served on arrival");
+	ck_assert_msg(llabs(diff(deadline(), local(t + 10 * MS))) <= 2, "the record does not wait for its instant");
 }
 END_TEST
 
@@ -722,6 +751,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, a_latch_before_the_outputs_reports_the_outputs_then_driven);
 	tcase_add_test(tc, an_instant_already_past_is_acted_on_at_once);
 	tcase_add_test(tc, a_clock_not_usable_acts_on_arrival_and_says_so);
+	tcase_add_test(tc, a_new_session_acts_on_arrival_until_its_first_sync);
 	tcase_add_test(tc, without_a_receive_time_a_record_is_served_on_arrival);
 	tcase_add_test(tc, a_record_finding_outputs_waiting_drives_them_at_once);
 	tcase_add_test(tc, plain_outputs_supersede_timed_outputs_still_waiting);

@@ -454,6 +454,50 @@ START_TEST(a_host_clock_stepping_a_second_makes_the_board_start_over)
 }
 END_TEST
 
+/* A new session (vmac_clock_doubt): not usable until a sample says whose
+ * line it is. The same host's agrees: back to LOCKED at once, nothing
+ * relearnt; a queued first frame is rejected and the doubt stays; another
+ * host's, 2 s ahead, starts acquisition over, and the board acts on
+ * arrival until it is locked on that host's line. */
+START_TEST(a_new_session_trusts_the_clock_again_only_when_its_sync_agrees)
+{
+	struct board_sim b;
+	struct watch w;
+	uint64_t t = T0_NS + 2 * SECOND_NS, k, host, local;
+	board_start(&b, &osc_a, 80, 1.5, 45);
+	lock(&b, "a board");
+	run(&b, T0_NS + LOCK_DEADLINE_NS, t, 1, 0, &w);
+	vmac_clock_doubt(&b.clock);
+	ck_assert_msg(!vmac_clock_usable(&b.clock) && b.clock.state == VMAC_CLOCK_LOCKING,
+	              "a new session's clock before its first SYNC: %s, usable %d",
+	              vmac_clock_state_name(b.clock.state), vmac_clock_usable(&b.clock));
+	ck_assert_int_eq(vmac_clock_feed(&b.clock, t, oscillator_local_ns(b.osc, t + 500000)), VMAC_CLOCK_REJECTED);
+	ck_assert_msg(!vmac_clock_usable(&b.clock), "a first SYNC 500 us late (queued) made the clock usable: %s",
+	              vmac_clock_state_name(b.clock.state));
+	run(&b, t + PERIOD_NS, t + 10 * PERIOD_NS, 1, 0, &w);
+	ck_assert_msg(w.not_usable == 0 && b.clock.state == VMAC_CLOCK_LOCKED && b.clock.counters.starts == 1,
+	              "the same host's next SYNC: %u probes not usable, %s, %u starts (want 0, locked, 1)",
+	              w.not_usable, vmac_clock_state_name(b.clock.state), b.clock.counters.starts);
+	vmac_clock_doubt(&b.clock); /* another host, its time base 2 s ahead */
+	for (t += 10 * PERIOD_NS, k = 0; k < 2000; k++, t += PERIOD_NS) {
+		local = oscillator_local_ns(b.osc, t + oscillator_rx_delay_ns(b.osc));
+		vmac_clock_feed(&b.clock, t + 2 * SECOND_NS, local);
+		if (k < 100)
+			ck_assert_msg(!vmac_clock_usable(&b.clock) && b.clock.counters.starts == 2,
+			              "%llu ms into another host's session: %s, %u starts (want locking, 2)",
+			              (unsigned long long)k, vmac_clock_state_name(b.clock.state),
+			              b.clock.counters.starts);
+	}
+	ck_assert_msg(b.clock.state == VMAC_CLOCK_LOCKED, "not locked on the other host 2 s on: %s",
+	              vmac_clock_state_name(b.clock.state));
+	local = oscillator_local_ns(b.osc, t);
+	ck_assert_int_eq(vmac_clock_to_host(&b.clock, local, &host), 0);
+	ck_assert_msg(llabs((long long)(host - (t + 2 * SECOND_NS))) < (long long)GOAL_NS,
+	              "on the other host's line within %.0f ns: off by %lld ns", GOAL_NS,
+	              (long long)(host - (t + 2 * SECOND_NS)));
+}
+END_TEST
+
 /* Two boards of one machine, each told to act at host instant T: the
  * true instants their timers fire (to_local(T) on their own counters). */
 START_TEST(two_boards_act_on_one_host_instant_within_a_few_us)
@@ -579,6 +623,7 @@ Suite *vmac_test_suite(void)
 	tcase_add_test(tc, frames_held_1_ms_in_a_queue_are_rejected);
 	tcase_add_test(tc, every_sample_rejected_for_250_ms_is_lost_and_starts_over);
 	tcase_add_test(tc, a_host_clock_stepping_a_second_makes_the_board_start_over);
+	tcase_add_test(tc, a_new_session_trusts_the_clock_again_only_when_its_sync_agrees);
 	tcase_add_test(tc, two_boards_act_on_one_host_instant_within_a_few_us);
 	tcase_add_test(tc, any_seed_locks_and_keeps_its_bound);
 	suite_add_tcase(s, tc);
