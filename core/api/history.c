@@ -28,6 +28,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../common/monotime.h"
 #include "../loader/loader.h"
 
 struct history_machine {
@@ -159,7 +160,7 @@ static void *sampler(void *arg)
 {
 	struct vmac_http *h = arg;
 	struct http_history *hist = &h->history;
-	struct timespec next;
+	struct timespec next, now;
 	clock_gettime(CLOCK_MONOTONIC, &next);
 	pthread_mutex_lock(&hist->lock);
 	while (!hist->stop) {
@@ -173,6 +174,9 @@ static void *sampler(void *arg)
 		next.tv_nsec += HISTORY_PERIOD_MS * 1000000L;
 		next.tv_sec += next.tv_nsec / 1000000000L;
 		next.tv_nsec %= 1000000000L;
+		now = vmac_mono_after_ns(0);
+		if (next.tv_sec < now.tv_sec || (next.tv_sec == now.tv_sec && next.tv_nsec <= now.tv_nsec))
+			next = vmac_mono_after_ns(HISTORY_PERIOD_MS * 1000000L); /* held up: no burst of samples */
 		while (!hist->stop && pthread_cond_timedwait(&hist->wake, &hist->lock, &next) != ETIMEDOUT)
 			;
 	}
