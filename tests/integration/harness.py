@@ -40,6 +40,13 @@ TIMING = {
 }
 
 POLL_S = 0.05  # between two looks at a condition that has not come yet
+# Every wait below (wait_line, wait_exit, wait_status, wait_event) gives
+# what it waits for LOADED times the timeout its test names: the timeouts
+# bound waits for what the programs do, and make test runs both
+# integration passes, the package's build and the browser at once on two
+# cores. A wait that is met returns at once; only a failure takes longer.
+# What a test judges in time it judges by the programs' own timestamps.
+LOADED = float(os.environ.get("VMAC_TEST_LOADED", "3"))
 SANITIZER_MARKS = ("AddressSanitizer", "LeakSanitizer", "UndefinedBehaviorSanitizer", "runtime error:")
 
 
@@ -110,7 +117,7 @@ class Proc:
         """The first line of stream at index >= since that matches the regex
         pattern; AssertionError when none comes within timeout_s."""
         regex = re.compile(pattern)
-        deadline = time.monotonic() + timeout_s
+        deadline = time.monotonic() + timeout_s * LOADED
         with self.cond:
             while True:
                 for line in self.lines[stream][since:]:
@@ -123,7 +130,7 @@ class Proc:
             tail = "; ".join(l.text for l in self.lines[stream][since:][-6:])
         raise AssertionError(
             "%s: no %s line %s within %.0f s (last lines: %s)"
-            % (self.name, stream, what or repr(pattern), timeout_s, tail or "none")
+            % (self.name, stream, what or repr(pattern), timeout_s * LOADED, tail or "none")
         )
 
     def find_lines(self, pattern, since=0, stream="stdout"):
@@ -150,9 +157,9 @@ class Proc:
         """The exit code (negative: killed by that signal); AssertionError when
         the program is still running after timeout_s."""
         try:
-            rc = self.popen.wait(timeout_s)
+            rc = self.popen.wait(timeout_s * LOADED)
         except subprocess.TimeoutExpired:
-            raise AssertionError("%s did not exit within %.0f s" % (self.name, timeout_s))
+            raise AssertionError("%s did not exit within %.0f s" % (self.name, timeout_s * LOADED))
         for r in self.readers:
             r.join(5)
         return rc
@@ -286,7 +293,7 @@ class Host(Proc):
         """Poll the status until predicate(status) is true, returning that
         status. invariant(status), when given, is checked on every poll and
         may raise AssertionError: something that must hold all the while."""
-        deadline = time.monotonic() + timeout_s
+        deadline = time.monotonic() + timeout_s * LOADED
         while True:
             if not self.alive():
                 raise AssertionError("vmacd exited (code %s) while waiting for %s" % (self.popen.poll(), what))
@@ -296,7 +303,8 @@ class Host(Proc):
             if predicate(s):
                 return s
             if time.monotonic() > deadline:
-                raise AssertionError("%s not seen within %.0f s; devices: %s" % (what, timeout_s, describe(s)))
+                raise AssertionError("%s not seen within %.0f s; devices: %s" % (what, timeout_s * LOADED,
+                                                                                   describe(s)))
             time.sleep(POLL_S)
 
     def wait_running(self, names, timeout_s=30, invariant=None):
