@@ -7,10 +7,9 @@ import re
 import socket
 import subprocess
 
-from harness import NO_LEAK_SCAN
+from harness import NO_LEAK_SCAN, SANITIZER_MARKS
 
 EXIT_S = 30  # a refused flag should end the program at once; this is the bound
-SANITIZER_MARKS = ("AddressSanitizer", "LeakSanitizer", "runtime error:")
 
 
 class Refusals:
