@@ -205,18 +205,23 @@ enum vmac_scope http_authorized(struct vmac_http *h, struct MHD_Connection *c, c
 
 /* ---- the deadlines of a request ---- */
 
-/* Bytes the kernel has received on fd, 0 when it cannot tell; and, in
- * *sent when not NULL, the bytes it has sent. */
-static uint64_t bytes_received(int fd, uint64_t *sent)
+/* The bytes the kernel has received and sent on a connection. */
+struct tcp_bytes {
+	uint64_t received, sent;
+};
+
+/* fd's counts, both 0 when the kernel cannot tell. */
+static struct tcp_bytes tcp_bytes(int fd)
 {
 	struct tcp_info ti;
 	socklen_t len = sizeof(ti);
+	struct tcp_bytes n = {0, 0};
 	memset(&ti, 0, sizeof(ti));
-	if (getsockopt(fd, IPPROTO_TCP, TCP_INFO, &ti, &len) != 0)
-		memset(&ti, 0, sizeof(ti));
-	if (sent)
-		*sent = ti.tcpi_bytes_sent;
-	return ti.tcpi_bytes_received;
+	if (getsockopt(fd, IPPROTO_TCP, TCP_INFO, &ti, &len) == 0) {
+		n.received = ti.tcpi_bytes_received;
+		n.sent = ti.tcpi_bytes_sent;
+	}
+	return n;
 }
 
 void http_guard_notify(void *cls, struct MHD_Connection *c, void **socket_context,
@@ -262,9 +267,9 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
 	 * not when the answer is done, by which time a quick client may have
 	 * sent more). */
 	if (phase == GUARD_ANSWERING && slot->fd >= 0)
-		slot->idle_bytes = bytes_received(slot->fd, NULL);
+		slot->idle_bytes = tcp_bytes(slot->fd).received;
 	if (phase == GUARD_IDLE && slot->fd >= 0) {
-		bytes_received(slot->fd, &slot->idle_sent);
+		slot->idle_sent = tcp_bytes(slot->fd).sent;
 		slot->idle_since = slot->since;
 	}
 	pthread_mutex_unlock(&h->guard.lock);
@@ -282,13 +287,13 @@ void http_guard_phase(struct MHD_Connection *c, struct vmac_http *h, enum guard_
  * Under g->lock. */
 static void idle_or_trickling(struct guard_conn *k, double now)
 {
-	uint64_t sent, received = bytes_received(k->fd, &sent);
-	if (sent > k->idle_sent) {
-		k->idle_bytes = received;
-		k->idle_sent = sent;
+	struct tcp_bytes n = tcp_bytes(k->fd);
+	if (n.sent > k->idle_sent) {
+		k->idle_bytes = n.received;
+		k->idle_sent = n.sent;
 		k->phase = GUARD_IDLE;
 		k->since = k->idle_since;
-	} else if (k->phase == GUARD_IDLE && received > k->idle_bytes) {
+	} else if (k->phase == GUARD_IDLE && n.received > k->idle_bytes) {
 		k->phase = GUARD_HEADERS;
 		k->since = now;
 	}
