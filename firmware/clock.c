@@ -348,6 +348,7 @@ void vmac_clock_doubt(struct vmac_clock *c)
 	c->resume = c->state;
 	c->doubted = 1;
 	c->state = VMAC_CLOCK_LOCKING;
+	c->good_windows = 0; /* only the doubt's settling makes it usable again */
 }
 
 /* The first sample after vmac_clock_doubt() (vmac_clock_doubt() says
