@@ -239,7 +239,8 @@ def test_a_stopped_qemu_board_is_dropped_and_comes_back(t):
         served = host.device("plights-1")["served"]
         host.wait_status(lambda s: host.device("plights-1", s)["served"] > served + 25, 30,
                          "the POSIX board served on while the QEMU one is stopped", undisturbed(["plights-1"]))
-        assert host.device("plights-1")["misses"] == 0, "the POSIX board missed while its neighbour was stopped"
+        assert host.device("plights-1")["misses_host"] == 0, \
+            "the host missed the POSIX board's service while its neighbour was stopped"
     finally:
         board.signal(signal.SIGCONT)
     host.wait_event("attached", "qlights-1", after_seq=dropped["seq"], timeout_s=60,
