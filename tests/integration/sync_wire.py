@@ -11,7 +11,7 @@ import struct
 import threading
 
 import frames
-from harness import bus_socket
+from harness import LOADED, bus_socket
 
 SYNC_OP = 0x05
 ETH_P_ALL = 0x0003
@@ -65,10 +65,12 @@ class Capture:
 
     def wait(self, predicate, timeout_s, what):
         """Until predicate(frames heard so far) holds, looked at every 100
-        frames, or AssertionError naming what after timeout_s."""
+        frames, or AssertionError naming what after timeout_s (times the
+        harness's LOADED, as its own waits)."""
         with self.heard:
-            if not self.heard.wait_for(lambda: predicate(self.got), timeout_s):
-                raise AssertionError("%s not heard within %d s (%d frames heard)" % (what, timeout_s, len(self.got)))
+            if not self.heard.wait_for(lambda: predicate(self.got), timeout_s * LOADED):
+                raise AssertionError("%s not heard within %d s (%d frames heard)" % (what, timeout_s * LOADED,
+                                                                                   len(self.got)))
 
     def syncs(self, sealed, got=None):
         """The sealed SYNC frames heard (or of got), or the plain ones."""
