@@ -20,7 +20,7 @@ import signal
 import time
 
 import test_mqtt as base
-from harness import KITCHEN_NAMES, plain_pass_only, undisturbed
+from harness import KITCHEN_NAMES, LOADED, plain_pass_only, undisturbed
 
 DISCOVERY, PREFIX, HOST_ID = base.DISCOVERY, base.PREFIX, base.HOST_ID
 
@@ -412,7 +412,7 @@ def test_mqtt_ha_kitchen_configs_follow_home_assistant(t):
         # The broker hands a new subscriber its retained messages in the
         # order of its own tables, not by topic: the health topics waited
         # for above may come before some configs.
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 10 * LOADED
         while len(check_all(hub)) <= 40 and time.monotonic() < deadline:
             time.sleep(0.1)
         configs = check_all(hub)

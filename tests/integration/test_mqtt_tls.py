@@ -19,7 +19,7 @@ import signal
 import subprocess
 import time
 
-from harness import KITCHEN_NAMES, undisturbed
+from harness import KITCHEN_NAMES, LOADED, undisturbed
 from test_mqtt import Broker, Hub, paho
 from test_sparkplug import BOOLEAN, command
 
@@ -109,7 +109,7 @@ def connect_result(broker, cafile=None, user=None, password=None):
         c.connect("127.0.0.1", broker.port, keepalive=10)
     except Exception as e:  # TLS refused in the handshake
         return "%s: %s" % (type(e).__name__, e)
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 10 * LOADED
     while not got and time.monotonic() < deadline:
         if c.loop(0.2) != 0 and not got:
             break

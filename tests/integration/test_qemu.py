@@ -158,16 +158,20 @@ def test_a_qemu_washer_is_discovered_and_served(t):
         d["service"], d["protocol"])
     assert d["address"] == board.find_lines(BANNER)[0].text.split()[-1], "the host knows it at another MAC"
     board.wait_line(r"^washer-1: state known device 0x%08x " % d["id"], 30, what="the board's session")
-    # 10 s at the driver's own period: running throughout, no miss the host
-    # caused (undisturbed); a late reply of QEMU's is the machine's, not the
-    # firmware's, and counts only as a period not served.
-    period_us, served, t0 = d["period_us"], d["served"], time.monotonic()
-    s = host.wait_status(lambda s: time.monotonic() - t0 >= 10, 30, "10 s of service", undisturbed(["washer-1"]))
+    # 10 s of the host's own clock (uptime_s) at the driver's own period:
+    # running throughout, no miss the host caused (undisturbed), a service
+    # every period; a late reply of QEMU's is the machine's, not the
+    # firmware's, and counts only as a period not served: most are.
+    period_us, served, misses, up0 = d["period_us"], d["served"], d["misses"], s["uptime_s"]
+    s = host.wait_status(lambda s: s["uptime_s"] - up0 >= 10, 30, "10 s of service", undisturbed(["washer-1"]))
     d = host.device("washer-1", s)
     assert d["period_us"] == period_us, "the period changed from %d to %d us" % (period_us, d["period_us"])
-    expected = 10e6 / period_us
-    assert d["served"] - served >= 0.8 * expected, "served %d times in 10 s at a period of %d us (expected %d; " \
-        "%d misses)" % (d["served"] - served, period_us, expected, d["misses"])
+    span_s = s["uptime_s"] - up0
+    expected = span_s * 1e6 / period_us
+    tried, answered = d["served"] - served + d["misses"] - misses, d["served"] - served
+    assert tried >= 0.8 * expected and answered * 2 >= tried, \
+        "in %.1f s at a period of %d us (%d periods): served %d, missed %d" % (
+            span_s, period_us, expected, answered, tried - answered)
     # The washer's sensors as the plant has them at rest: door closed, tub empty, 20 C.
     assert d["inputs"]["digital"][0] and d["inputs"]["digital"][2], "door closed and tub empty not read: %r" % (
         d["inputs"],)

@@ -15,7 +15,7 @@ import time
 import urllib.error
 import urllib.request
 
-from harness import fetch_recording, plain_pass_only, recording_id, undisturbed
+from harness import LOADED, fetch_recording, plain_pass_only, recording_id, undisturbed
 
 # A driver for a lights board that counts its ticks in dev.state, holds its
 # relay from dev.state, and says which version runs. VERSION and the body of
@@ -434,7 +434,7 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
 
     caller.join(60)
     assert answer and answer[0][0] == 200, "deploying lights: %r" % answer
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 10 * LOADED
     while time.monotonic() < deadline:
         code, body = call(host, "GET", "/api/drivers/counter", t.token)
         if body["active"] == body["versions"][0]["id"]:

@@ -14,6 +14,7 @@ import random
 import signal
 import time
 
+from harness import LOADED
 from test_mqtt import Broker, Hub
 
 KEEPALIVE_S = 5  # mqtt_keepalive_s: the smallest the settings take
@@ -70,6 +71,7 @@ def device_of(site, host_id, device):
 def wait_site(fetch, predicate, timeout_s, what):
     """fetch() until predicate(view) holds (an AssertionError inside counts as
     not yet); the view, or an AssertionError saying what was last seen."""
+    timeout_s *= LOADED  # as the harness's own waits
     deadline, last, why = time.monotonic() + timeout_s, None, None
     while True:
         try:

@@ -19,7 +19,7 @@ import time
 import frames
 from fake_board import FakeBoard
 from frames import SYS, UPDATE, parse, seal
-from harness import Skip, bus_socket, post, sender_socket, undisturbed
+from harness import LOADED, Skip, bus_socket, post, sender_socket, undisturbed
 
 FORGED = 20  # forged or replayed frames sent in each attempt
 
@@ -65,10 +65,11 @@ def test_a_keyed_board_of_our_own_attaches_with_every_frame_sealed(t):
     try:
         s = host.wait_running(["peer-1"])
         assert host.device("peer-1", s)["authenticated"] is True, "peer-1 runs but is not marked authenticated"
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 10 * LOADED
         while services(peer) < 20 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert services(peer) >= 20, "only %d UPDATEs opened under the session's key in 10 s" % services(peer)
+        assert services(peer) >= 20, "only %d UPDATEs opened under the session's key in %d s" % (
+            services(peer), 10 * LOADED)
         assert peer.bad == 0, "%d frames from the host did not open under the session's keys" % peer.bad
         # The board's replies, replayed: refused by their counters.
         before = host.status()["counters"]["auth_failed"]
