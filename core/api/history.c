@@ -160,8 +160,7 @@ static void *sampler(void *arg)
 {
 	struct vmac_http *h = arg;
 	struct http_history *hist = &h->history;
-	struct timespec next, now;
-	clock_gettime(CLOCK_MONOTONIC, &next);
+	struct timespec next;
 	pthread_mutex_lock(&hist->lock);
 	while (!hist->stop) {
 		pthread_mutex_unlock(&hist->lock);
@@ -171,12 +170,8 @@ static void *sampler(void *arg)
 		pthread_mutex_lock(&hist->lock);
 		sample(hist, &h->status, wall_s());
 		pthread_mutex_unlock(&h->status_lock);
-		next.tv_nsec += HISTORY_PERIOD_MS * 1000000L;
-		next.tv_sec += next.tv_nsec / 1000000000L;
-		next.tv_nsec %= 1000000000L;
-		now = vmac_mono_after_ns(0);
-		if (next.tv_sec < now.tv_sec || (next.tv_sec == now.tv_sec && next.tv_nsec <= now.tv_nsec))
-			next = vmac_mono_after_ns(HISTORY_PERIOD_MS * 1000000L); /* held up: no burst of samples */
+		/* A period from this sample: one held up skips, never bursts. */
+		next = vmac_mono_after_ns(HISTORY_PERIOD_MS * 1000000L);
 		while (!hist->stop && pthread_cond_timedwait(&hist->wake, &hist->lock, &next) != ETIMEDOUT)
 			;
 	}
