@@ -423,6 +423,22 @@ def describe(status):
     ) or "none"
 
 
+def until(look, timeout_s, what, poll_s=POLL_S):
+    """Call look() every poll_s until it returns something true, and return
+    that; after LOADED times timeout_s (as the harness's own waits), an
+    AssertionError saying what was awaited: what is a text, or a function
+    called then for one (the last state seen, say). For what the Host's
+    waits do not ask: the store, a broker, a board's counters, a peer."""
+    deadline = time.monotonic() + timeout_s * LOADED
+    while True:
+        got = look()
+        if got:
+            return got
+        if time.monotonic() > deadline:
+            raise AssertionError("%s: not within %.0f s" % (what() if callable(what) else what, timeout_s * LOADED))
+        time.sleep(poll_s)
+
+
 def plain_pass_only(why):
     """Marks a test that judges a whole programme in real time (minutes of
     a plant's physics): make test runs it in the plain pass, and the

@@ -26,7 +26,7 @@ import urllib.request
 import test_mqtt as mq
 import test_mqtt_ha as ha
 import test_sparkplug as spb
-from harness import LOADED, fill_state, small_state
+from harness import LOADED, fill_state, small_state, until
 from test_reload import counter
 
 # docs/API.md "Audit trail": the format a program reads.
@@ -196,14 +196,13 @@ def test_every_kind_of_request_is_one_audit_event_with_its_token(t):
     assert {a["type"] for a in audits} >= {"input", "param", "cycle", "console", "record", "reload", "rollback",
                                            "activate", "board", "token", "lockout", "auth"}, \
         sorted({a["type"] for a in audits})
-    deadline = time.monotonic() + 10 * LOADED
-    while True:  # the main loop copies them into the store
+
+    def missing():  # the main loop copies them into the store
         logged = {e["seq"] for e in host.get("/api/events/log?after=0&limit=1000")["events"] if e["kind"] == "audit"}
-        missing = {a["seq"] for a in audits} - logged
-        if not missing:
-            break
-        assert time.monotonic() < deadline, "audit events missing from the store's log: %s" % sorted(missing)
-        time.sleep(0.1)
+        return {a["seq"] for a in audits} - logged
+
+    until(lambda: not missing(), 10, lambda: "every audit event in the store's log (missing: %s)" % sorted(missing()),
+          poll_s=0.1)
 
 
 def test_mqtt_commands_are_audited_and_every_audit_event_goes_to_the_broker(t):
@@ -375,10 +374,14 @@ def test_a_full_store_fails_no_request_and_loses_no_audit_event(t):
 
     first = host.last_event_seq()
     seqs = []
-    deadline = time.monotonic() + 60  # the WAL's room left before the disk: fills within a few writes
-    while not host.find_events("warning", text="events are not being stored", after_seq=first):
-        assert time.monotonic() < deadline, "the store never said it could not store events"
-        seqs += inputs(1)
+
+    def warned():  # the WAL's room left before the disk fills within a few writes
+        if host.find_events("warning", text="events are not being stored", after_seq=first):
+            return True
+        seqs.extend(inputs(1))
+        return False
+
+    until(warned, 60, "the store saying it could not store events", poll_s=0)
     seqs += inputs(10)  # with the store failing all the while
     warned = host.find_events("warning", text="events are not being stored", after_seq=first)
     assert len(warned) == 1 and "full" in warned[0]["text"], "the failure said %d times: %s" % (
@@ -389,14 +392,12 @@ def test_a_full_store_fails_no_request_and_loses_no_audit_event(t):
 
     subprocess.run(["nsenter", "-t", str(host.popen.pid), "-m", "rm", "-f", os.path.join(state, "fill")],
                    capture_output=True, timeout=30)
-    deadline = time.monotonic() + 30
-    while True:
-        stored = {e["seq"] for e in host.get("/api/events/log?after=%d&limit=1000" % first)["events"]}
-        if set(seqs) <= stored:
-            break
-        assert time.monotonic() < deadline, "audit events not stored once there was space: %s" % sorted(
-            set(seqs) - stored)
-        time.sleep(0.2)
+
+    def unstored():
+        return set(seqs) - {e["seq"] for e in host.get("/api/events/log?after=%d&limit=1000" % first)["events"]}
+
+    until(lambda: not unstored(), 30, lambda: "every audit event stored once there was space (not: %s)" % sorted(
+        unstored()), poll_s=0.2)
     assert host.alive(), "vmacd died on a full disk"
 
 

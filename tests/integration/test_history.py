@@ -6,7 +6,7 @@ token."""
 
 import time
 
-from harness import LOADED, http_code
+from harness import http_code, until
 
 SAMPLES_MAX = 240  # docs/API.md: 120 s at one sample every 0.5 s
 
@@ -16,15 +16,14 @@ def history(host, name, token=None):
 
 
 def wait_samples(host, name, count, timeout_s=20):
-    deadline = time.monotonic() + timeout_s
-    while True:
+    def look():
         if http_code(host, "/api/devices/%s/history" % name, host.ctx.token) == 200:
             h = history(host, name)
             if len(h["t"]) >= count:
                 return h
-        assert time.monotonic() < deadline, "%s's history did not reach %d samples in %d s" % (name, count,
-                                                                                                timeout_s)
-        time.sleep(0.25)
+        return None
+
+    return until(look, timeout_s, "%s's history at %d samples" % (name, count), poll_s=0.25)
 
 
 def test_a_running_machine_has_the_history_of_its_plots(t):
@@ -49,13 +48,15 @@ def test_a_running_machine_has_the_history_of_its_plots(t):
     # The lights may have attached after the washer's fourth sample, and
     # a sample taken before their driver first published is None: wait for
     # one that is not.
-    deadline = time.monotonic() + 20
-    while True:
-        lights = wait_samples(host, "lights-1", 1)
-        if any(v is not None for v in lights["series"].get("kitchen", [])):
-            break
-        assert time.monotonic() < deadline, "no sample of the lights' kitchen in 20 s: %r" % lights["series"]
-        time.sleep(0.25)  # a sample every 0.5 s
+    seen = [None]
+
+    def kitchen_sampled():
+        seen[0] = wait_samples(host, "lights-1", 1)
+        return any(v is not None for v in seen[0]["series"].get("kitchen", []))
+
+    until(kitchen_sampled, 20, lambda: "a sample of the lights' kitchen: %r" % seen[0]["series"],
+          poll_s=0.25)  # a sample every 0.5 s
+    lights = seen[0]
     assert sorted(lights["series"]) == ["dining", "disposal", "kitchen", "tv"], (
         "booleans are kept as 0 and 1: %r" % lights["series"])
     assert all(v is None or v in (0, 1) for v in lights["series"]["kitchen"]), lights["series"]["kitchen"]
@@ -69,10 +70,8 @@ def test_a_machine_gone_has_no_history(t):
     board.kill()
     host.wait_status(lambda s: host.device("dish-1", s) is None or host.device("dish-1", s)["state"] != "running",
                      30, "dish-1 dropped")
-    deadline = time.monotonic() + 5 * LOADED
-    while http_code(host, "/api/devices/dish-1/history", t.token) != 404:
-        assert time.monotonic() < deadline, "dish-1's history is still there: %r" % history(host, "dish-1")
-        time.sleep(0.2)
+    until(lambda: http_code(host, "/api/devices/dish-1/history", t.token) == 404, 5,
+          lambda: "dish-1's history gone (still there: %r)" % history(host, "dish-1"), poll_s=0.2)
     assert http_code(host, "/api/devices/nothing-here/history", t.token) == 404
 
 

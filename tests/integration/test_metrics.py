@@ -25,7 +25,7 @@ import urllib.error
 import urllib.parse
 import urllib.request
 
-from harness import KITCHEN_NAMES, Skip
+from harness import KITCHEN_NAMES, Skip, until
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DASHBOARD = os.path.join(ROOT, "docs", "grafana", "vmac-dashboard.json")
@@ -107,18 +107,21 @@ class Prometheus:
                     "    static_configs:\n      - targets: ['%s']\n" % (token_file, host.http))
         self.proc = t.start([exe, "--config.file=" + config, "--storage.tsdb.path=" + os.path.join(folder, "data"),
                              "--web.listen-address=127.0.0.1:%d" % self.port, "--log.level=warn"], "prometheus")
-        deadline = time.monotonic() + 30
-        while True:
+
+        def ready():
             try:
                 with urllib.request.urlopen("http://127.0.0.1:%d/-/ready" % self.port, timeout=5) as r:
                     if r.status == 200:
-                        return
+                        return True
             except (OSError, urllib.error.URLError):
                 pass
-            if not self.proc.alive() or time.monotonic() > deadline:
-                raise AssertionError("prometheus did not become ready on port %d: %s" % (
+            if not self.proc.alive():
+                raise AssertionError("prometheus exited before it became ready on port %d: %s" % (
                     self.port, self.proc.text()[-500:]))
-            time.sleep(0.05)
+            return False
+
+        until(ready, 30, lambda: "prometheus ready on port %d (its output: %s)" % (self.port, self.proc.text()[-500:]),
+              poll_s=0.05)
 
     def query(self, expr):
         """The answer of /api/v1/query for expr: (status, result, error)."""
@@ -139,14 +142,13 @@ class Prometheus:
 
     def wait(self, expr, predicate, what, timeout_s=WAIT_S):
         """Ask expr until predicate(vector) holds; returns that vector."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            v = self.vector(expr)
-            if predicate(v):
-                return v
-            if time.monotonic() > deadline:
-                raise AssertionError("Prometheus: %s not seen within %d s (%s = %s)" % (what, timeout_s, expr, v))
-            time.sleep(POLL_S)
+        last = [None]
+
+        def look():
+            last[0] = self.vector(expr)
+            return [last[0]] if predicate(last[0]) else None  # in a list: an empty vector may be what is awaited
+
+        return until(look, timeout_s, lambda: "Prometheus: %s (%s = %s)" % (what, expr, last[0]), poll_s=POLL_S)[0]
 
     def fresh(self, expr, after_s, what):
         """expr's vector once every sample in it was scraped after the Unix
@@ -342,25 +344,31 @@ def test_metrics_listener_without_a_token_and_mqtt_series(t):
     addr = "127.0.0.1:%s" % re.search(r":(\d+)/metrics", line.text).group(1)
     t.board("lights", "lights-1")
     host.wait_running(["lights-1"])
-    deadline = time.monotonic() + WAIT_S
-    while True:
+    conn = frozenset({("connection", "main")})
+    last = {}
+
+    def connected():
         code, ctype, body = scrape(addr)
         assert code == 200 and ctype == CONTENT_TYPE, "GET /metrics on metrics_http: %d %s" % (code, ctype)
-        m = samples(body)
-        conn = frozenset({("connection", "main")})
+        m = last["m"] = samples(body)
         if m.get(("vmac_mqtt_connected", conn)) == 1 and m.get(("vmac_mqtt_messages_published_total", conn), 0) > 0 \
                 and m.get(("vmac_device_state", frozenset({("machine", "lights-1"), ("board", "lights-1"),
                                                             ("driver", "lights"), ("state", "running")}))) == 1:
-            break
-        assert time.monotonic() < deadline, "MQTT connected and publishing, lights-1 running: not in %s" % {
-            k: v for k, v in m.items() if k[0].startswith("vmac_mqtt") or k[0] == "vmac_device_state"}
-        time.sleep(POLL_S)
+            return body
+        return None
+
+    body = until(connected, WAIT_S, lambda: "MQTT connected and publishing, lights-1 running (last seen: %s)" % {
+        k: v for k, v in last["m"].items() if k[0].startswith("vmac_mqtt") or k[0] == "vmac_device_state"},
+        poll_s=POLL_S)
     promtool_check(body)
     assert scrape(addr, path="/api/status")[0] == 404, "metrics_http serves more than /metrics"
     assert scrape(addr, method="POST")[0] == 405, "metrics_http takes a POST"
     assert scrape(host.http)[0] == 401, "GET /metrics on the API without a token (metrics_http is another address)"
     broker.kill()
-    deadline = time.monotonic() + WAIT_S
-    while samples(scrape(addr)[2]).get(("vmac_mqtt_connected", frozenset({("connection", "main")}))) != 0:
-        assert time.monotonic() < deadline, "vmac_mqtt_connected still 1 after the broker was killed"
-        time.sleep(POLL_S)
+
+    def disconnected():
+        last["connected"] = samples(scrape(addr)[2]).get(("vmac_mqtt_connected", conn))
+        return last["connected"] == 0
+
+    until(disconnected, WAIT_S, lambda: "vmac_mqtt_connected 0 after the broker was killed (still %s)" % (
+        last["connected"]), poll_s=POLL_S)

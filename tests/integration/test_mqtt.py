@@ -18,7 +18,7 @@ import sys
 import threading
 import time
 
-from harness import KITCHEN_NAMES, Skip, undisturbed
+from harness import KITCHEN_NAMES, LOADED, Skip, undisturbed, until
 
 HOST_ID = "test"
 PREFIX = "vmac/" + HOST_ID
@@ -72,15 +72,19 @@ class Broker:
 
     def start(self):
         self.proc = self.t.start([mosquitto_path(), "-c", self.conf], "mosquitto")
-        deadline = time.monotonic() + 20
-        while True:
+
+        def listening():
             try:
                 socket.create_connection(("127.0.0.1", self.port), 1).close()
-                return
+                return True
             except OSError:
-                if not self.proc.alive() or time.monotonic() > deadline:
-                    raise AssertionError("mosquitto did not start on port %d: %s" % (self.port, self.proc.text()))
-                time.sleep(0.05)
+                if not self.proc.alive():
+                    raise AssertionError("mosquitto exited before it listened on port %d: %s" % (
+                        self.port, self.proc.text()))
+                return False
+
+        until(listening, 20, lambda: "mosquitto listening on port %d (its output: %s)" % (self.port, self.proc.text()),
+              poll_s=0.05)
 
     def kill(self):
         self.proc.kill()
@@ -126,8 +130,9 @@ class Hub:
 
     def wait(self, topic, predicate=lambda p: True, timeout_s=30, what=None, since=None):
         """The latest payload of topic once predicate(payload) holds (with
-        since: only messages from log index since on)."""
-        deadline = time.monotonic() + timeout_s
+        since: only messages from log index since on). Waits LOADED times
+        timeout_s, as the harness's waits."""
+        deadline = time.monotonic() + timeout_s * LOADED
         with self.cond:
             while True:
                 if since is None:
@@ -141,7 +146,7 @@ class Hub:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     raise AssertionError("no %s on %s within %.0f s (latest: %r)" % (
-                        what or "matching message", topic, timeout_s, self.latest.get(topic)))
+                        what or "matching message", topic, timeout_s * LOADED, self.latest.get(topic)))
                 self.cond.wait(min(left, 0.5))
 
     def config(self, component, device, obj, timeout_s=30):

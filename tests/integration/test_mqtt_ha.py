@@ -17,10 +17,9 @@ import math
 import os
 import re
 import signal
-import time
 
 import test_mqtt as base
-from harness import KITCHEN_NAMES, LOADED, plain_pass_only, undisturbed
+from harness import KITCHEN_NAMES, plain_pass_only, undisturbed, until
 
 DISCOVERY, PREFIX, HOST_ID = base.DISCOVERY, base.PREFIX, base.HOST_ID
 
@@ -412,11 +411,8 @@ def test_mqtt_ha_kitchen_configs_follow_home_assistant(t):
         # The broker hands a new subscriber its retained messages in the
         # order of its own tables, not by topic: the health topics waited
         # for above may come before some configs.
-        deadline = time.monotonic() + 10 * LOADED
-        while len(check_all(hub)) <= 40 and time.monotonic() < deadline:
-            time.sleep(0.1)
-        configs = check_all(hub)
-        assert len(configs) > 40, "only %d configs: %s" % (len(configs), sorted(configs))
+        until(lambda: len(check_all(hub)) > 40, 10, lambda: "more than 40 configs (%d: %s)" % (
+            len(check_all(hub)), sorted(check_all(hub))), poll_s=0.1)
         undisturbed(KITCHEN_NAMES)(host.last)
     finally:
         hub.close()
@@ -462,17 +458,18 @@ def retained_configs(broker, want, what):
     subscriber's retained messages, and what came on those topics since
     (a config published later, or cleared with an empty payload)."""
     late = base.Hub(broker, "late")
-    try:
-        deadline = time.monotonic() + 30
-        while True:
-            with late.cond:
-                got = {tp: p for tp, (p, retained) in late.latest.items()
+    seen = [{}]
+
+    def look():
+        with late.cond:
+            seen[0] = {tp: p for tp, (p, retained) in late.latest.items()
                        if p and tp.startswith(DISCOVERY + "/") and tp.endswith("/config")}
-            if want(got):
-                check_all(late)
-                return got
-            assert time.monotonic() < deadline, "%s: not within 30 s; retained configs: %s" % (what, sorted(got))
-            time.sleep(0.1)  # between two looks at what the late subscriber got
+        return want(seen[0])
+
+    try:
+        until(look, 30, lambda: "%s; retained configs: %s" % (what, sorted(seen[0])), poll_s=0.1)
+        check_all(late)
+        return seen[0]
     finally:
         late.close()
 

@@ -38,7 +38,7 @@ import urllib.request
 
 import test_mqtt as mqtt
 import test_mqtt_ha as ha
-from harness import POLL_S, Proc, plain_pass_only
+from harness import LOADED, Proc, plain_pass_only, until
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PAGE = os.path.join(ROOT, "docs", "NEW_MACHINE.md")
@@ -130,16 +130,14 @@ class Live:
 
     def wait(self, predicate, what, timeout_s=60):
         """The dryer's status once predicate(device) holds."""
-        deadline = time.monotonic() + timeout_s
-        last = None
-        while True:
-            last = self.dryer()
-            if last is not None and predicate(last):
-                return last
-            if time.monotonic() > deadline:
-                raise AssertionError("%s not seen within %.0f s; the dryer: %s" % (
-                    what, timeout_s, json.dumps(last)[:600] if last else "not on the host"))
-            time.sleep(POLL_S)
+        last = [None]
+
+        def look():
+            last[0] = self.dryer()
+            return last[0] if last[0] is not None and predicate(last[0]) else None
+
+        return until(look, timeout_s, lambda: "%s (the dryer: %s)" % (
+            what, json.dumps(last[0])[:600] if last[0] else "not on the host"))
 
     def board_lines(self):
         try:
@@ -152,16 +150,14 @@ class Live:
         """The index of the first line of the board's log at or after since
         that matches pattern."""
         regex = re.compile(pattern)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            lines = self.board_lines()
-            for i in range(since, len(lines)):
-                if regex.search(lines[i]):
-                    return i
-            if time.monotonic() > deadline:
-                raise AssertionError("dryer-1.log: no line %s within %.0f s (last lines: %s)" % (
-                    what, timeout_s, " | ".join(lines[-6:]) or "none"))
-            time.sleep(POLL_S)
+        lines = [[]]
+
+        def look():
+            lines[0] = self.board_lines()
+            return next(([i] for i in range(since, len(lines[0])) if regex.search(lines[0][i])), None)
+
+        return until(look, timeout_s, lambda: "dryer-1.log: a line %s (last lines: %s)" % (
+            what, " | ".join(lines[0][-6:]) or "none"))[0]
 
 
 def var(device, name):
@@ -192,7 +188,7 @@ def check_home_assistant(hub):
                 r"homeassistant/%s/[^/]+_dryer-1/%s/config" % (component, obj), tp) and hub.latest[tp][0]]
         return topics
 
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 60 * LOADED  # a wait on a condition variable: until does not fit
     want = [("sensor", "temp_c"), ("binary_sensor", "heater"), ("binary_sensor", "drum"),
             ("binary_sensor", "door_open"), ("binary_sensor", "running"), ("select", "program"),
             ("button", "start"), ("button", "cancel"), ("sensor", "state"), ("sensor", "target_c")]

@@ -15,7 +15,7 @@ import time
 import urllib.error
 import urllib.request
 
-from harness import LOADED, fetch_recording, plain_pass_only, recording_id, undisturbed
+from harness import fetch_recording, plain_pass_only, recording_id, undisturbed, until
 
 # A driver for a lights board that counts its ticks in dev.state, holds its
 # relay from dev.state, and says which version runs. VERSION and the body of
@@ -434,14 +434,15 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
 
     caller.join(60)
     assert answer and answer[0][0] == 200, "deploying lights: %r" % answer
-    deadline = time.monotonic() + 10 * LOADED
-    while time.monotonic() < deadline:
-        code, body = call(host, "GET", "/api/drivers/counter", t.token)
-        if body["active"] == body["versions"][0]["id"]:
-            break
-        time.sleep(0.05)
-    assert [v["state"] for v in body["versions"]] == ["active", "rolled_back"], \
-        "the store does not record the rollback once the deploy is over: %r" % body
+    seen = [None]
+
+    def settled():
+        seen[0] = call(host, "GET", "/api/drivers/counter", t.token)[1]
+        return seen[0]["active"] == seen[0]["versions"][0]["id"]
+
+    until(settled, 10, lambda: "the first version active again: %r" % seen[0])
+    assert [v["state"] for v in seen[0]["versions"]] == ["active", "rolled_back"], \
+        "the store does not record the rollback once the deploy is over: %r" % seen[0]
     assert host.device("lamp-1", host.status())["driver_version"] == "1.0.0", "lamp-1 is not back on 1.0.0"
 
 

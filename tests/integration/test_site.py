@@ -14,7 +14,7 @@ import random
 import signal
 import time
 
-from harness import LOADED
+from harness import until
 from test_mqtt import Broker, Hub
 
 KEEPALIVE_S = 5  # mqtt_keepalive_s: the smallest the settings take
@@ -71,19 +71,18 @@ def device_of(site, host_id, device):
 def wait_site(fetch, predicate, timeout_s, what):
     """fetch() until predicate(view) holds (an AssertionError inside counts as
     not yet); the view, or an AssertionError saying what was last seen."""
-    timeout_s *= LOADED  # as the harness's own waits
-    deadline, last, why = time.monotonic() + timeout_s, None, None
-    while True:
+    seen = {"view": None, "why": None}
+
+    def look():
         try:
-            last = fetch()
-            if predicate(last):
-                return last
+            seen["view"] = fetch()
+            return seen["view"] if predicate(seen["view"]) else None
         except AssertionError as e:
-            why = e
-        if time.monotonic() > deadline:
-            raise AssertionError("%s: not within %.0f s (%s); last view: %s" % (what, timeout_s, why,
-                                                                                json.dumps(last)[:3000]))
-        time.sleep(0.2)
+            seen["why"] = e
+            return None
+
+    return until(look, timeout_s, lambda: "%s (%s); last view: %s" % (what, seen["why"], json.dumps(
+        seen["view"])[:3000]), poll_s=0.2)
 
 
 LIGHTS = {"kitchen", "dining", "tv", "disposal"}

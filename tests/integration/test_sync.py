@@ -18,7 +18,7 @@ import struct
 import time
 
 import frames
-from harness import KITCHEN, KITCHEN_NAMES, LOADED, Skip, misread, sender_socket
+from harness import KITCHEN, KITCHEN_NAMES, Skip, misread, sender_socket, until
 from sync_wire import Capture, lateness, streams
 
 # 1 ms slots so that a SYNC goes out every millisecond (at most one a tick),
@@ -267,18 +267,18 @@ def test_a_keyed_board_takes_only_the_hosts_sealed_sync(t):
         s.close()
     # Every forged frame counted (the board's own counters, asked for), so
     # that each was read before the offsets are judged.
-    deadline = time.monotonic() + 30 * LOADED
-    while True:
+    seen = {}
+
+    def counted():
         at = board.mark()
         board.send("washer-1 status")
-        clock = CLOCK_STATUS.match(board.wait_line(r"^washer-1: clock .*; sync accepted", 10, since=at).text)
-        counters = COUNTERS.match(board.wait_line(r"^washer-1: frames ok ", 10, since=at).text)
-        if int(clock.group(5)) >= forged and int(counters.group(6)) >= 2 * forged:
-            break
-        assert time.monotonic() < deadline, \
-            "the board counted %s plain SYNC ignored (%d forged) and %s failing authentication (%d replayed or " \
-            "moved)" % (clock.group(5), forged, counters.group(6), 2 * forged)
-        time.sleep(0.2)
+        seen["clock"] = CLOCK_STATUS.match(board.wait_line(r"^washer-1: clock .*; sync accepted", 10, since=at).text)
+        seen["counters"] = COUNTERS.match(board.wait_line(r"^washer-1: frames ok ", 10, since=at).text)
+        return int(seen["clock"].group(5)) >= forged and int(seen["counters"].group(6)) >= 2 * forged
+
+    until(counted, 30, lambda: "every forgery counted: the board counted %s plain SYNC ignored (%d forged) and %s "
+          "failing authentication (%d replayed or moved)" % (seen["clock"].group(5), forged,
+                                                            seen["counters"].group(6), 2 * forged), poll_s=0.2)
     # A forged SYNC taken would move the offset by 0.5 s: every offset the
     # board states stays its counter's. (A state line alone may be load:
     # a board held off the CPU misses the host's SYNC and locks again.)

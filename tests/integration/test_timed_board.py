@@ -17,7 +17,7 @@ import time
 
 from frames import (CLOCK_ARRIVAL, CLOCK_STATES, CYCLIC_DUE, DEV, DISCOVER, OFFSET, REGISTER, REPLY, SHUTDOWN, SYS,
                     TIMED, UPDATE, cyclic, frame, latch, parse, register, u16)
-from harness import sender_socket
+from harness import LOADED, sender_socket
 
 SYNC_SETTINGS = {"clock_sync_ms": 1, "slice_us": 200, "slices_per_slot": 5}
 # vmacd as the SYNC source of unkeyed boards the test serves: only an open
@@ -49,9 +49,13 @@ class Host:
     def close(self):
         self.sock.close()
 
-    def recv(self, timeout_s=30):
+    def recv(self, timeout_s=30, loaded=True):
         """The next (header, data, payload, address) from a board, skipping
-        what is not a reply."""
+        what is not a reply; within LOADED times timeout_s, as the harness's
+        waits (it blocks in recvfrom: until does not fit), or with loaded
+        false, timeout_s as it is (discover's window between two DISCOVERs)."""
+        if loaded:
+            timeout_s *= LOADED
         deadline = time.monotonic() + timeout_s
         while True:
             left = deadline - time.monotonic()
@@ -69,7 +73,7 @@ class Host:
             self.sock.sendto(frame(DISCOVER, channel=SYS, seq=1), self.group)
             try:
                 while set(found) != set(names):
-                    h, data, _, addr = self.recv(1)
+                    h, data, _, addr = self.recv(1, loaded=False)
                     if h.channel == SYS:
                         board = data[1 + data[0] + 8 + 1:1 + data[0] + 8 + 1 + data[1 + data[0] + 8]].decode()
                         major, minor = struct.unpack(">II", data[1 + data[0]:1 + data[0] + 8])
@@ -390,7 +394,7 @@ def press_at_one_instant(t, settings, what, others=()):
     # about two seconds, longer on a loaded machine, where a board's frame
     # may come too late for an instant (it then acts on arrival, or not).
     # Counted by the boards' own logs, not by when the test looks.
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 60 * LOADED  # then the assertions below say what came: until does not fit
     while time.monotonic() < deadline and len(instants()[1]) < 100:
         time.sleep(0.2)
     status = host.status()

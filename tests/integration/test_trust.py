@@ -19,7 +19,7 @@ import time
 import frames
 from fake_board import FakeBoard
 from frames import SYS, UPDATE, parse, seal
-from harness import LOADED, Skip, bus_socket, post, sender_socket, undisturbed
+from harness import LOADED, Skip, bus_socket, post, sender_socket, undisturbed, until
 
 FORGED = 20  # forged or replayed frames sent in each attempt
 
@@ -65,11 +65,8 @@ def test_a_keyed_board_of_our_own_attaches_with_every_frame_sealed(t):
     try:
         s = host.wait_running(["peer-1"])
         assert host.device("peer-1", s)["authenticated"] is True, "peer-1 runs but is not marked authenticated"
-        deadline = time.monotonic() + 10 * LOADED
-        while services(peer) < 20 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert services(peer) >= 20, "only %d UPDATEs opened under the session's key in %d s" % (
-            services(peer), 10 * LOADED)
+        until(lambda: services(peer) >= 20, 10,
+              lambda: "20 UPDATEs opened under the session's key (only %d)" % services(peer))
         assert peer.bad == 0, "%d frames from the host did not open under the session's keys" % peer.bad
         # The board's replies, replayed: refused by their counters.
         before = host.status()["counters"]["auth_failed"]
@@ -151,7 +148,7 @@ def test_a_forged_or_replayed_host_frame_moves_no_output(t):
     grp = bus_socket(t.bus, 0.2)
     captured = []
     try:
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + 30 * LOADED  # a capture, not a wait: until does not fit
         while len(captured) < FORGED and time.monotonic() < deadline:
             try:
                 data, _ = grp.recvfrom(2048)
@@ -166,7 +163,8 @@ def test_a_forged_or_replayed_host_frame_moves_no_output(t):
                 captured.append(data)
     finally:
         grp.close()
-    assert len(captured) >= FORGED, "only %d sealed CYCLIC frames with the board's record in 30 s" % len(captured)
+    assert len(captured) >= FORGED, "only %d sealed CYCLIC frames with the board's record in %d s" % (
+        len(captured), 30 * LOADED)
     code, text = post(host, "/api/devices/lights-1/input", token, json_bytes({"name": "all_off"}))
     assert code == 200, "all_off answered %d: %s" % (code, text)
     host.wait_status(lambda s: not any(host.device("lights-1", s)["outputs"]["digital"]), 10, "every light off")
