@@ -450,6 +450,7 @@ def device_topic(node):
 
 
 NODES = [HOST_ID] + ["%s_%s" % (HOST_ID, name) for name in KITCHEN_NAMES]  # the host's HA device, its machines'
+LIGHTS = ("kitchen", "dining", "tv", "disposal")  # the lights' relays, each a switch in HA
 
 
 def retained_configs(broker, want, what):
@@ -567,13 +568,15 @@ def test_mqtt_ha_discovery_mode_moved_both_ways(t):
     t.kitchen(host)
     hub = base.Hub(broker)
     try:
-        # Settled: the lights' kitchen is configured as a text until its first
-        # value says it is a switch (test_mqtt.py), so the set of configs
-        # is the kitchen's once that guess is gone.
-        guess = "%s/text/%s_lights-1/kitchen/config" % (DISCOVERY, HOST_ID)
-        switch = "%s/switch/%s_lights-1/kitchen/config" % (DISCOVERY, HOST_ID)
-        singles = ours(retained_configs(broker, lambda c: len(ours(c, False)) > 40 and switch in c and guess not in c,
-                                        "the single component configs"), False)
+        # Settled: each of the lights is configured as a text until its
+        # first value says it is a switch (test_mqtt.py), one after another,
+        # so the set of configs is the kitchen's once every light is a
+        # switch and no guess is left.
+        switches = {"%s/switch/%s_lights-1/%s/config" % (DISCOVERY, HOST_ID, light) for light in LIGHTS}
+        singles = ours(retained_configs(
+            broker, lambda c: len(ours(c, False)) > 40 and switches <= set(c) and not any(
+                "/text/" in tp for tp in ours(c, False)), "the single component configs, every light a switch"),
+            False)
         host.signal(signal.SIGTERM)
         assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
         host = moved(t, broker, hub, "device", singles, True)
