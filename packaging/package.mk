@@ -27,9 +27,9 @@ TMPFILESDIR ?= $(PREFIX)/lib/tmpfiles.d
 
 # make deps: help2man makes the man pages from the programs' --help;
 # debhelper and dpkg-dev build the package, lintian checks it; the package
-# test reads man pages (man-db) and the unit (systemd-analyze, from systemd); debootstrap and
+# test reads man pages (man-db) and the unit (systemd-analyze, from systemd); mmdebstrap and
 # systemd-nspawn (systemd-container) boot a Debian root for it to run under systemd (boot.py).
-PACKAGE_DEBS := help2man debhelper dpkg-dev lintian man-db systemd debootstrap systemd-container
+PACKAGE_DEBS := help2man debhelper dpkg-dev lintian man-db systemd mmdebstrap systemd-container
 DEBS += $(PACKAGE_DEBS)
 
 # What the programs read at run time, by path from the root they find
@@ -119,7 +119,7 @@ deb:
 
 # Installs and purges the vmac package on this machine (root): a vmac
 # installed before is purged first (docs/SERVICE.md, "Testing the package").
-# Then the same package under a real systemd: a Debian root (debootstrap,
+# Then the same package under a real systemd: a Debian root (mmdebstrap,
 # kept in $(BUILD)/boot-root) booted with systemd-nspawn (tests/package/boot.py).
 # The root is made while make deb builds (boot.py --prepare, for the
 # libraries the programs of $(BUILD)/bin link: the package's own).

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The Debian package under a real systemd (docs/SERVICE.md, "Tested in a
-booted Debian"): a Debian 12 root made with debootstrap (kept in --root,
+booted Debian"): a Debian 12 root made with mmdebstrap (kept in --root,
 made again when the package's dependencies change) is booted with
 systemd-nspawn, systemd as its PID 1, on a network of its own. In it:
 
@@ -22,7 +22,7 @@ shlibs:Depends, as the same programs built by make deb link the same
 ones), so that make test-package makes it while make deb builds.
 
 Prints one line per step and exits 0, or 1 naming what broke. Without root,
-debootstrap or systemd-nspawn it says SKIPPED (appended to $VMAC_SKIP_FILE)
+mmdebstrap or systemd-nspawn it says SKIPPED (appended to $VMAC_SKIP_FILE)
 and exits 0, or 1 with CI=true."""
 
 import argparse
@@ -96,11 +96,11 @@ def make_root(root, packages):
         step("the Debian root in %s is ready" % root)
         return
     shutil.rmtree(root, ignore_errors=True)
-    step("debootstrap bookworm into %s with %s (about a minute)" % (root, ", ".join(include)))
-    p = subprocess.run(["debootstrap", "--variant=minbase", "--include=" + ",".join(include), "bookworm", root,
+    step("mmdebstrap bookworm into %s with %s (under a minute)" % (root, ", ".join(include)))
+    p = subprocess.run(["mmdebstrap", "--variant=minbase", "--include=" + ",".join(include), "bookworm", root,
                         MIRROR], capture_output=True, text=True, timeout=900)
     if p.returncode != 0:
-        raise Failed("debootstrap failed (exit %d): %s" % (p.returncode, p.stdout[-1500:] + p.stderr[-1500:]))
+        raise Failed("mmdebstrap failed (exit %d): %s" % (p.returncode, p.stdout[-1500:] + p.stderr[-1500:]))
     with open(marker, "w") as f:
         f.write(want)
 
@@ -318,7 +318,7 @@ def main():
     args.logdir = args.logdir or os.path.dirname(args.root)
     if args.prepare:
         # Ahead of the test: what it cannot do here, the test itself says.
-        if os.geteuid() != 0 or not shutil.which("debootstrap") or not shutil.which("dpkg-shlibdeps"):
+        if os.geteuid() != 0 or not shutil.which("mmdebstrap") or not shutil.which("dpkg-shlibdeps"):
             return
         t0 = time.monotonic()
         try:
@@ -332,9 +332,9 @@ def main():
         ap.error("--deb is required (or --prepare)")
     if os.geteuid() != 0:
         skip("booting a Debian root needs root (systemd-nspawn)")
-    for tool in ("debootstrap", "systemd-nspawn", "nsenter", "dpkg-deb"):
+    for tool in ("mmdebstrap", "systemd-nspawn", "nsenter", "dpkg-deb"):
         if not shutil.which(tool):
-            skip("%s is missing (Debian's debootstrap, systemd-container, util-linux, dpkg)" % tool)
+            skip("%s is missing (Debian's mmdebstrap, systemd-container, util-linux, dpkg)" % tool)
     t0 = time.monotonic()
     try:
         run(args)
