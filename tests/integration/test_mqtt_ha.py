@@ -17,6 +17,7 @@ import math
 import os
 import re
 import signal
+import time
 
 import test_mqtt as base
 from harness import KITCHEN_NAMES, plain_pass_only, undisturbed, until
@@ -450,25 +451,31 @@ def device_topic(node):
 
 
 NODES = [HOST_ID] + ["%s_%s" % (HOST_ID, name) for name in KITCHEN_NAMES]  # the host's HA device, its machines'
-LIGHTS = ("kitchen", "dining", "tv", "disposal")  # the lights' relays, each a switch in HA
 
 
-def retained_configs(broker, want, what):
+def retained_configs(broker, want, what, steady_s=0.0):
     """The discovery configs the broker holds ({topic: payload}), once
     want(configs) holds, as an HA that starts now reads them: a new
     subscriber's retained messages, and what came on those topics since
-    (a config published later, or cleared with an empty payload)."""
+    (a config published later, or cleared with an empty payload). With
+    steady_s, once they have also stayed the same that long: a host
+    publishes a machine's configs as one batch, and a look in the middle of
+    one sees part of it. what: a text, or what(configs) gives one."""
     late = base.Hub(broker, "late")
     seen = [{}]
+    same_since = [None, time.monotonic()]  # the view, and since when it has not changed
 
     def look():
         with late.cond:
             seen[0] = {tp: p for tp, (p, retained) in late.latest.items()
                        if p and tp.startswith(DISCOVERY + "/") and tp.endswith("/config")}
-        return want(seen[0])
+        if seen[0] != same_since[0]:
+            same_since[:] = [seen[0], time.monotonic()]
+        return want(seen[0]) and time.monotonic() - same_since[1] >= steady_s
 
     try:
-        until(look, 30, lambda: "%s; retained configs: %s" % (what, sorted(seen[0])), poll_s=0.1)
+        until(look, 30, lambda: "%s; retained configs: %s" % (what(seen[0]) if callable(what) else what,
+                                                               sorted(seen[0])), poll_s=0.1)
         check_all(late)
         return seen[0]
     finally:
@@ -568,15 +575,13 @@ def test_mqtt_ha_discovery_mode_moved_both_ways(t):
     t.kitchen(host)
     hub = base.Hub(broker)
     try:
-        # Settled: each of the lights is configured as a text until its
-        # first value says it is a switch (test_mqtt.py), one after another,
-        # so the set of configs is the kitchen's once every light is a
-        # switch and no guess is left.
-        switches = {"%s/switch/%s_lights-1/%s/config" % (DISCOVERY, HOST_ID, light) for light in LIGHTS}
+        # Settled: configs of every node (the host and each machine), the
+        # same for a second. (A look in the middle of a machine's batch took
+        # part of its configs as the whole, or none: more than 40 were the
+        # host's, the washer's and the lights'.)
         singles = ours(retained_configs(
-            broker, lambda c: len(ours(c, False)) > 40 and switches <= set(c) and not any(
-                "/text/" in tp for tp in ours(c, False)), "the single component configs, every light a switch"),
-            False)
+            broker, lambda c: all(ours({tp for tp in c if "/%s/" % node in tp}, False) for node in NODES),
+            "the single component configs of every node", steady_s=1.0), False)
         host.signal(signal.SIGTERM)
         assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
         host = moved(t, broker, hub, "device", singles, True)
@@ -586,6 +591,8 @@ def test_mqtt_ha_discovery_mode_moved_both_ways(t):
         assert host.wait_exit(20) == 0, "vmacd did not stop cleanly"
         moved(t, broker, hub, "component", ours(retained, True), False)
         retained_configs(broker, lambda c: not ours(c, True) and ours(c, False) == singles,
-                         "the single component configs alone, as before")
+                         lambda c: "the single component configs alone, as before (device ones: %s; "
+                         "missing: %s; new: %s)" % (sorted(ours(c, True)), sorted(singles - ours(c, False)),
+                                                     sorted(ours(c, False) - singles)))
     finally:
         hub.close()
