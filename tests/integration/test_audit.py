@@ -375,13 +375,13 @@ def test_a_full_store_fails_no_request_and_loses_no_audit_event(t):
     first = host.last_event_seq()
     seqs = []
 
-    def warned():  # the WAL's room left before the disk fills within a few writes
+    def said_full():  # the WAL's room left before the disk fills within a few writes
         if host.find_events("warning", text="events are not being stored", after_seq=first):
             return True
         seqs.extend(inputs(1))
         return False
 
-    until(warned, 60, "the store saying it could not store events", poll_s=0)
+    until(said_full, 60, "the store saying it could not store events", poll_s=0)
     seqs += inputs(10)  # with the store failing all the while
     warned = host.find_events("warning", text="events are not being stored", after_seq=first)
     assert len(warned) == 1 and "full" in warned[0]["text"], "the failure said %d times: %s" % (

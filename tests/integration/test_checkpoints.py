@@ -134,7 +134,6 @@ def test_a_damaged_checkpoint_is_refused_cleanly(t):
     if level_l(host, s) > DOOR_LEVEL_L:
         host.wait_status(lambda s: washer(host, s)["outputs"]["digital"][LOCK_BIT], 5,
                          "the fresh washer holding the door locked over %.1f l" % level_l(host, s), guard)
-    # And its next checkpoint replaces the damaged one.
 
     def replaced():
         if checkpoint_row(t)[2] != damaged:
@@ -142,6 +141,7 @@ def test_a_damaged_checkpoint_is_refused_cleanly(t):
         host.wait_status(lambda s: True, 1, "a status", guard)
         return False
 
+    # And its next checkpoint replaces the damaged one.
     until(replaced, 10, "the damaged checkpoint replaced", poll_s=0.1)
     assert host.alive(), "vmacd died after the damaged checkpoint"
     assert_safe_board(board, "after the damaged checkpoint")
