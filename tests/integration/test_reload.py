@@ -192,10 +192,17 @@ def test_a_version_failing_on_probation_goes_back(t):
                          "the relay on again after the rollback")
     undisturbed(["lights-1"])(s)
     assert not host.find_events("dropped", "lamp-1", after_seq=seq), "lamp-1 was dropped"
-    code, body = call(host, "GET", "/api/drivers/counter", t.token)
-    assert body["active"] == body["versions"][0]["id"] and \
-        [v["state"] for v in body["versions"]] == ["active", "rolled_back"], \
-        "the store does not say the version was rolled back to the folder's: %r" % body
+    # The event is said before the store records the rollback (a write
+    # that waits for the disk): asked until it is there.
+    seen = [None]
+
+    def recorded():
+        seen[0] = call(host, "GET", "/api/drivers/counter", t.token)[1]
+        return seen[0]["active"] == seen[0]["versions"][0]["id"]
+
+    until(recorded, 10, lambda: "the folder's version active again: %r" % seen[0])
+    assert [v["state"] for v in seen[0]["versions"]] == ["active", "rolled_back"], \
+        "the store does not say the version was rolled back to the folder's: %r" % seen[0]
     # Its recording names the version that failed and when it took over,
     # and replays from there to the same failure.
     rec = host.wait_event("recording", "lamp-1", after_seq=seq, timeout_s=30)

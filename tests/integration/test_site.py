@@ -14,7 +14,7 @@ import random
 import signal
 import time
 
-from harness import until
+from harness import LOADED, until
 from test_mqtt import Broker, Hub
 
 KEEPALIVE_S = 5  # mqtt_keepalive_s: the smallest the settings take
@@ -48,7 +48,10 @@ def two_hosts(t, broker):
 
 def vmac_site(t, broker, *args, expect_rc=0):
     """vmac site --mqtt URL ARGS: its stdout (JSON parsed with --json)."""
-    rc, out, err = t.run([t.path("vmac"), "site", "--mqtt", broker.url, "--wait", "1"] + list(args), "vmac-site", 30)
+    # --wait bounds the retained messages' arrival: LOADED seconds, as the
+    # harness's waits (a view cut short by a stalled broker is partial).
+    rc, out, err = t.run([t.path("vmac"), "site", "--mqtt", broker.url, "--wait", "%g" % LOADED] + list(args),
+                         "vmac-site", 30)
     assert rc == expect_rc, "vmac site %s: exit %d, expected %d; stderr: %s; stdout: %s" % (
         " ".join(args), rc, expect_rc, err, out)
     return json.loads(out) if "--json" in args else out
