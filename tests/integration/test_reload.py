@@ -62,6 +62,19 @@ def counter(version, boom=""):
     return COUNTER % {"version": version, "boom": boom}
 
 
+def first_version_active(t, host):
+    """GET /api/drivers/counter once its first version (the folder's) is the
+    active one again, as the store records a rollback: the answer."""
+    seen = [None]
+
+    def active():
+        seen[0] = call(host, "GET", "/api/drivers/counter", t.token)[1]
+        return seen[0]["active"] == seen[0]["versions"][0]["id"]
+
+    until(active, 10, lambda: "the first version active again: %r" % seen[0])
+    return seen[0]
+
+
 def call(host, method, path, token, data=None, content_type="text/x-lua"):
     """(HTTP status, parsed JSON answer)."""
     req = urllib.request.Request("http://%s%s" % (host.http, path), data=data, method=method)
@@ -194,15 +207,9 @@ def test_a_version_failing_on_probation_goes_back(t):
     assert not host.find_events("dropped", "lamp-1", after_seq=seq), "lamp-1 was dropped"
     # The event is said before the store records the rollback (a write
     # that waits for the disk): asked until it is there.
-    seen = [None]
-
-    def recorded():
-        seen[0] = call(host, "GET", "/api/drivers/counter", t.token)[1]
-        return seen[0]["active"] == seen[0]["versions"][0]["id"]
-
-    until(recorded, 10, lambda: "the folder's version active again: %r" % seen[0])
-    assert [v["state"] for v in seen[0]["versions"]] == ["active", "rolled_back"], \
-        "the store does not say the version was rolled back to the folder's: %r" % seen[0]
+    body = first_version_active(t, host)
+    assert [v["state"] for v in body["versions"]] == ["active", "rolled_back"], \
+        "the store does not say the version was rolled back to the folder's: %r" % body
     # Its recording names the version that failed and when it took over,
     # and replays from there to the same failure.
     rec = host.wait_event("recording", "lamp-1", after_seq=seq, timeout_s=30)
@@ -441,15 +448,9 @@ def test_a_probation_rollback_waits_for_a_deploy_under_way(t):
 
     caller.join(60)
     assert answer and answer[0][0] == 200, "deploying lights: %r" % answer
-    seen = [None]
-
-    def settled():
-        seen[0] = call(host, "GET", "/api/drivers/counter", t.token)[1]
-        return seen[0]["active"] == seen[0]["versions"][0]["id"]
-
-    until(settled, 10, lambda: "the first version active again: %r" % seen[0])
-    assert [v["state"] for v in seen[0]["versions"]] == ["active", "rolled_back"], \
-        "the store does not record the rollback once the deploy is over: %r" % seen[0]
+    body = first_version_active(t, host)
+    assert [v["state"] for v in body["versions"]] == ["active", "rolled_back"], \
+        "the store does not record the rollback once the deploy is over: %r" % body
     assert host.device("lamp-1", host.status())["driver_version"] == "1.0.0", "lamp-1 is not back on 1.0.0"
 
 
