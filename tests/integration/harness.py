@@ -452,6 +452,19 @@ def plain_pass_only(why):
     return mark
 
 
+def plain_pass_too(why):
+    """Marks a test whose run on the plain build judges what the sanitizer
+    pass cannot: the memory or the timing of the program as shipped, or
+    the full count of trials where the sanitizer pass runs fewer. make
+    test runs every other integration test once, under the sanitizers
+    (run.py --plain-pass leaves them out of the plain pass); these in both
+    passes. why says what the plain run judges."""
+    def mark(fn):
+        fn.plain_pass_too = why
+        return fn
+    return mark
+
+
 def takes_about(seconds):
     """Marks a test that takes about seconds (the plain pass, on the 2-core
     machine make test runs on). run.py starts the longest tests first by

@@ -10,7 +10,9 @@ start, and each has its own bus, ports and state folder), each in a worker
 process of its own; a test file that must have the machine to itself says
 SERIAL = True and its tests run one at a time after the others. Against a
 sanitized build (make test-asan's second pass) the tests marked
-harness.plain_pass_only are not run and are listed as PLAIN. The longest
+harness.plain_pass_only are not run and are listed as PLAIN; with
+--plain-pass (make test's plain pass) only those and the tests marked
+harness.plain_pass_too run, the rest once in the sanitizer pass. The longest
 start first, by how long each passed in the last run of the same build
 that timed it (integration-times.json beside the --bin folder when that is
 inside build/: build/ for build/bin, build/asan/ for build/asan/bin; every
@@ -290,6 +292,9 @@ def main():
     ap.add_argument("--bin", required=True, help="folder with vmacd, vmac-board and vmac")
     ap.add_argument("--filter", action="append", default=[],
                     help="run only tests whose name contains this text (given again: any of them)")
+    ap.add_argument("--plain-pass", action="store_true",
+                    help="make test's plain pass: only the tests marked plain_pass_only or plain_pass_too "
+                         "(the others run once, under the sanitizers)")
     ap.add_argument("--keep", action="store_true", help="keep the logs of passed tests too")
     ap.add_argument("--time-limit", type=float, default=300, help="seconds one test may take (default 300)")
     ap.add_argument("-j", "--jobs", type=int, default=int(os.environ.get("VMAC_TEST_JOBS", "4")),
@@ -317,6 +322,19 @@ def main():
         tests = [t for t in tests if t not in plain_only]
         for name, fn, _, _ in plain_only:
             print("PLAIN %s: run by the plain pass only (%s)" % (name, fn.plain_pass_only), flush=True)
+
+    # make test runs every other test once, in the sanitizer pass.
+    if args.plain_pass:
+        if harness.sanitized(os.path.join(bindir, "vmacd")):
+            print("run.py: --plain-pass is for the plain build, and %s is sanitized" % bindir, file=sys.stderr)
+            return 2
+        left = [t for t in tests if not getattr(t[1], "plain_pass_only", None)
+                and not getattr(t[1], "plain_pass_too", None)]
+        tests = [t for t in tests if t not in left]
+        print("ASAN %d tests: run by the sanitizer pass only (make test-asan)" % len(left), flush=True)
+        if not tests:
+            print("run.py: no test of the plain pass matches %r" % args.filter, file=sys.stderr)
+            return 2
 
     signal.signal(signal.SIGTERM, on_terminate)
     ci = os.environ.get("CI") == "true"

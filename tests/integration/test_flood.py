@@ -10,7 +10,7 @@ import random
 import socket
 
 from frames import ANNOUNCE, DISCOVER, SYS, announce, parse, reply
-from harness import KITCHEN_NAMES, bus_socket, sanitized, undisturbed
+from harness import KITCHEN_NAMES, bus_socket, plain_pass_too, sanitized, undisturbed
 
 TOTAL = 10000
 OPEN_TOTAL = 3000  # the open bus's flood: enough for the limiter, a third of the time
@@ -25,10 +25,12 @@ def rss_kib(pid):
     raise AssertionError("no VmRSS for pid %d" % pid)
 
 
+@plain_pass_too("vmacd's memory under the flood (RSS says nothing under ASan)")
 def test_a_flood_of_fake_boards_is_bounded(t):
     flood(t, TOTAL, trust_open=False)
 
 
+@plain_pass_too("vmacd's memory under the flood (RSS says nothing under ASan)")
 def test_a_flood_of_fake_boards_is_bounded_on_an_open_bus(t):
     flood(t, OPEN_TOTAL, trust_open=True)
 

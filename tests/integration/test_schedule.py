@@ -7,7 +7,7 @@ each service's deadline violation vector (seed 002)."""
 
 import signal
 
-from harness import undisturbed
+from harness import plain_pass_too, undisturbed
 
 # A driver that drives nothing and reports how many boards it sees.
 PROBE_LUA = """-- probe: no outputs; publishes the number of boards and its level
@@ -215,6 +215,7 @@ def test_schedule_shows_each_services_deadline_violations(t):
     assert "deadline violations, the latest first:" in out and "quiet" in out.split("latest first:")[1], out
 
 
+@plain_pass_too("the shipped vmacd's ticks in time at 1 kHz")
 def test_a_light_driver_at_one_khz_has_its_outputs_in_time(t):
     """Five boards every 1 ms slot, each its own machine of the light probe
     driver: a tick's outputs go with the machine's next service. A worker

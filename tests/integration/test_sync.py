@@ -18,7 +18,7 @@ import struct
 import time
 
 import frames
-from harness import KITCHEN, KITCHEN_NAMES, Skip, misread, sender_socket, until
+from harness import KITCHEN, KITCHEN_NAMES, Skip, misread, plain_pass_too, sender_socket, until
 from sync_wire import Capture, lateness, streams
 
 # 1 ms slots so that a SYNC goes out every millisecond (at most one a tick),
@@ -58,6 +58,7 @@ def latest_state(board, name):
     return lines[-1].text.split()[2].rstrip(",;") if lines else None
 
 
+@plain_pass_too("the clocks' lock on the shipped vmacd's SYNC")
 def test_boards_lock_onto_the_host_and_are_lost_when_it_stops(t):
     host = t.host(settings=SYNC_SETTINGS)
     boards = {}
