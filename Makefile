@@ -193,8 +193,10 @@ run: deps
 	@$(MAKE) --no-print-directory all
 	@exec ./scripts/run-kitchen.sh $(BUILD)/bin
 
+# Check's timeout, 4 s a test, is a guard against a hang: five times that,
+# for the sanitizer build on a loaded machine (make test).
 test-unit: $(UNIT_TESTS)
-	@for t in $(UNIT_TESTS); do echo "== $$t"; VMAC_SKIP_FILE=$(SKIPPED) CK_FORK=yes $$t || exit 1; done
+	@for t in $(UNIT_TESTS); do echo "== $$t"; VMAC_SKIP_FILE=$(SKIPPED) CK_FORK=yes CK_TIMEOUT_MULTIPLIER=5 $$t || exit 1; done
 
 # The stdlib's own tests, in the driver sandbox itself (tests/lua/run.c), and
 # luacheck with the sandbox's globals over every shipped script and the
@@ -242,9 +244,8 @@ test-ui: $(BINS)
 tahu-deps:
 	@tests/npm_ci.sh tests/mqtt/tahu 12 || echo "tahu-deps: Eclipse Tahu's codec not installed: test_sparkplug.py will not run"
 
-# TEST_JOBS: tests at a time (run.py -j; default 4, or $VMAC_TEST_JOBS).
 test-integration: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS) tahu-deps
-	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/integration/run.py --bin $(BUILD)/bin $(if $(TEST_JOBS),-j $(TEST_JOBS))
+	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/integration/run.py --bin $(BUILD)/bin
 
 # make test's plain pass: the integration tests whose run on the plain
 # build judges what the sanitizer pass cannot (its memory, its timing,
@@ -259,8 +260,7 @@ test-integration-plain: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS) 
 # and UndefinedBehaviorSanitizer, any report fatal. asan-build builds that
 # tree quietly (its log in build/asan-build.log), so make test can build it
 # beside the plain unit tests and the fuzzers; then its unit and driver
-# tests (a minute of CPU) beside its own integration tests, ASAN_TEST_JOBS
-# at a time (default as TEST_JOBS).
+# tests (a minute of CPU) beside its own integration tests.
 ASAN := BUILD=build/asan CFLAGS="-O1 -g -fno-omit-frame-pointer -DVMAC_CHECK_THREADS" SAN="-fsanitize=address,undefined -fno-sanitize-recover=all"
 test-build: $(BINS) $(UNIT_TESTS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS)
 
@@ -275,7 +275,7 @@ test-asan-unit: asan-build
 	@$(MAKE) --no-print-directory $(ASAN) test-drivers
 
 test-asan-integration: asan-build
-	@$(MAKE) --no-print-directory $(ASAN) test-integration $(if $(ASAN_TEST_JOBS),TEST_JOBS=$(ASAN_TEST_JOBS))
+	@$(MAKE) --no-print-directory $(ASAN) test-integration
 
 # The whole second pass: the build, then its unit and driver tests beside
 # its integration tests (one after the other without make -j).
@@ -308,17 +308,18 @@ timed-%:
 # the last step runs them (under ASan, and the plain pass's few) beside
 # what needs the CPU (the ASan unit tests, the package's build and test,
 # the web UI in chromium) and the soak, which waits too. -j6: one job a
-# suite, and one for the ASan pass's second half; its integration tests
-# six at a time, which keep the CPU busy once the other suites are done.
-# The ASan build is made the step before, beside the plain unit tests and
-# the fuzzers (which fuzz for a fixed time): in the last step it held up
-# the ASan pass, the longest suite, for minutes.
+# suite, and one for the ASan pass's second half. The ASan build is made
+# the step before, beside the plain unit tests and the fuzzers (which
+# fuzz for a fixed time): in the last step it held up the ASan pass, the
+# longest suite, for minutes. (The ASan integration tests six at a time
+# instead of four starved the rest: the ASan unit tests ran out of
+# Check's time, the web UI's took twice as long.)
 test: deps
 	@mkdir -p $(BUILD) && rm -f $(SKIPPED) $(TIMES)
 	@$(call timed,format-check)
 	@$(call timed,test-build,-j2)
 	@$(call timed,test-unit test-lua test-drivers test-fuzz asan-build,-j3)
-	@$(call timed,test-integration-plain test-asan test-package test-soak test-ui,-j6 VMAC_SCHED_PROPERTY_RUNS=10000 ASAN_TEST_JOBS=6)
+	@$(call timed,test-integration-plain test-asan test-package test-soak test-ui,-j6 VMAC_SCHED_PROPERTY_RUNS=10000)
 	@rm -f $(TIMES).each; echo "== how long each suite took"; sed 's/^/  /' $(TIMES)
 	@if [ -s $(SKIPPED) ]; then \
 		echo "################################################################################"; \
