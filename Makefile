@@ -251,8 +251,8 @@ test-integration: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS) tahu-d
 # build judges what the sanitizer pass cannot (its memory, its timing,
 # the full count of trials) or that the sanitizer pass leaves out
 # (harness.plain_pass_too and plain_pass_only). Every other one runs once,
-# under the sanitizers: both passes of all of them were ~350 CPU s more
-# of make test's last step, which the CPU bounds (docs/TESTING.md).
+# under the sanitizers, which check all a plain run does: make test's last
+# step is bound by the CPU (docs/TESTING.md, "What make test costs").
 test-integration-plain: $(BINS) $(BUILD)/tests/store_crash $(FIRMWARE_IF_TOOLS) tahu-deps
 	VMAC_SKIP_FILE=$(SKIPPED) python3 tests/integration/run.py --bin $(BUILD)/bin --plain-pass
 
@@ -310,10 +310,9 @@ timed-%:
 # the web UI in chromium) and the soak, which waits too. -j6: one job a
 # suite, and one for the ASan pass's second half. The ASan build is made
 # the step before, beside the plain unit tests and the fuzzers (which
-# fuzz for a fixed time): in the last step it held up the ASan pass, the
-# longest suite, for minutes. (The ASan integration tests six at a time
-# instead of four starved the rest: the ASan unit tests ran out of
-# Check's time, the web UI's took twice as long.)
+# fuzz for a fixed time), so that the ASan pass, the longest suite, starts
+# its tests with the step. Its integration tests run four at a time, as
+# run.py's default: more starve the other suites of the step.
 test: deps
 	@mkdir -p $(BUILD) && rm -f $(SKIPPED) $(TIMES)
 	@$(call timed,format-check)

@@ -314,27 +314,25 @@ def main():
     if not tests:
         print("run.py: no test matches %r" % args.filter, file=sys.stderr)
         return 2
-    # The sanitizer pass leaves the tests marked plain_pass_only to the
-    # plain pass that make test runs first (harness.plain_pass_only).
-    plain_only = []
-    if harness.sanitized(os.path.join(bindir, "vmacd")):
-        plain_only = [t for t in tests if getattr(t[1], "plain_pass_only", None)]
+    # Which tests this pass runs: the sanitizer pass leaves those marked
+    # harness.plain_pass_only to the plain pass, and make test's plain pass
+    # (--plain-pass) runs only those and the ones marked plain_pass_too.
+    sanitized = harness.sanitized(os.path.join(bindir, "vmacd"))
+    if sanitized and args.plain_pass:
+        print("run.py: --plain-pass is for the plain build, and %s is sanitized" % bindir, file=sys.stderr)
+        return 2
+    plain_only = [t for t in tests if getattr(t[1], "plain_pass_only", None)]
+    if sanitized:
         tests = [t for t in tests if t not in plain_only]
         for name, fn, _, _ in plain_only:
             print("PLAIN %s: run by the plain pass only (%s)" % (name, fn.plain_pass_only), flush=True)
-
-    # make test runs every other test once, in the sanitizer pass.
-    if args.plain_pass:
-        if harness.sanitized(os.path.join(bindir, "vmacd")):
-            print("run.py: --plain-pass is for the plain build, and %s is sanitized" % bindir, file=sys.stderr)
-            return 2
-        left = [t for t in tests if not getattr(t[1], "plain_pass_only", None)
-                and not getattr(t[1], "plain_pass_too", None)]
-        tests = [t for t in tests if t not in left]
-        print("ASAN %d tests: run by the sanitizer pass only (make test-asan)" % len(left), flush=True)
-        if not tests:
-            print("run.py: no test of the plain pass matches %r" % args.filter, file=sys.stderr)
-            return 2
+    elif args.plain_pass:
+        kept = [t for t in tests if t in plain_only or getattr(t[1], "plain_pass_too", None)]
+        print("ASAN %d tests: run by the sanitizer pass only (make test-asan)" % (len(tests) - len(kept)), flush=True)
+        tests, plain_only = kept, []
+    if not tests:
+        print("run.py: no test of this pass matches %r" % args.filter, file=sys.stderr)
+        return 2
 
     signal.signal(signal.SIGTERM, on_terminate)
     ci = os.environ.get("CI") == "true"
