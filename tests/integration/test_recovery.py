@@ -24,7 +24,7 @@ import statistics
 import sys
 import time
 
-from harness import plain_pass_too, sanitized, takes_about, watchdog_trip
+from harness import Trip, plain_pass_too, sanitized, takes_about, watchdog_trip
 from test_kitchen_cycles import DOOR_LEVEL_L, DOOR_LOCKED_BIT, LOCK_BIT, WASHER_STEPS, door_guard
 
 TRIALS = 50
@@ -37,6 +37,7 @@ SHORT_LOCK_RELEASE_S = 8    # enough for the 2 s an old checkpoint waits, and qu
 # washer's idle level: longer than 3 periods, so it is what the boards get.
 WATCHDOG_MS = 700
 WATCHDOG_S = WATCHDOG_MS / 1000.0
+TRIP_LINE = r"^washer-1: watchdog: no frame for \d+ ms, outputs off"
 # The crash trials' valves. At 1 l/s the water a valve adds between the
 # checkpoint and the watchdog (at most checkpoint_s + the watchdog) is about
 # the 2 l the washer accepts when it resumes: a killed fill resumes, and the
@@ -125,11 +126,32 @@ def last_outputs(board, before=None):
     return lines[-1].text.split("outputs ", 1)[1] if lines else "digital=0x00 pwm=0"
 
 
+def early_trip(host, board, mark, when):
+    """Fails when the board's watchdog tripped in its session with the
+    running host, before line mark (the kill's): the host stopped serving
+    it. Says what the host's status says of its bus and of the board."""
+    known = board.find_lines(r"^washer-1: state known ")
+    since = known[-1].index if known else 0
+    trips = [line for line in board.find_lines(TRIP_LINE, since=since) if line.index < mark]
+    if not trips:
+        return
+    trip = Trip(trips[-1])
+    s = host.status()
+    washer = next((d for d in s["devices"] if d["name"] == "washer-1"), {})
+    raise AssertionError(
+        "%s: washer-1's watchdog tripped before the kill, the host running: no frame for %d ms (last at %d ms, "
+        "off at %d ms, the board's clock; the kill at %d ms). The host's status: tick %s; washer-1 %s" % (
+            when, trip.off_ms - trip.last_frame_ms, trip.last_frame_ms, trip.off_ms, time.monotonic() * 1000,
+            s.get("tick"), {k: washer.get(k) for k in ("state", "level", "slot", "period_us", "misses", "misses_host",
+                                                        "note")}))
+
+
 def crash(t, host, board, when, late_s=WATCHDOG_LATE_S):
     """SIGKILL vmacd; the board's watchdog must turn every output off within
     its period of the kill, by the board's own clock. Returns the seconds
     from the kill to the outputs going off."""
     mark = board.mark()
+    early_trip(host, board, mark, when)
     killed_at = time.monotonic()
     host.signal(signal.SIGKILL)
     rc = host.wait_exit(10)
