@@ -7,8 +7,9 @@ processes on its own bus, and kills whatever a test started however it ends.
 
 Tests run N at a time (default 4: they mostly wait on the programs they
 start, and each has its own bus, ports and state folder), each in a worker
-process of its own; a test file that must have the machine to itself says
-SERIAL = True and its tests run one at a time after the others. Against a
+process of its own, forked from the runner; a test file that must have the
+machine to itself says SERIAL = True and its tests run one at a time after
+the others. Against a
 sanitized build (make test-asan's second pass) the tests marked
 harness.plain_pass_only are not run and are listed as PLAIN; with
 --plain-pass (make test's plain pass) only those and the tests marked
@@ -44,7 +45,6 @@ import resource
 import shutil
 import signal
 import sys
-import subprocess
 import tempfile
 import time
 import traceback
@@ -68,13 +68,12 @@ def on_terminate(signum, frame):
     raise KeyboardInterrupt("runner got signal %d" % signum)
 
 
-def collect(name_filter, paths=None):
-    """(name, function, serial, path) of every test of the files paths
-    (default: every test_*.py here) whose name holds one of the texts of
-    name_filter (none: every test), in file order then definition order;
-    serial: its file says SERIAL = True."""
+def collect(name_filter):
+    """(name, function, serial) of every test of the test_*.py files here
+    whose name holds one of the texts of name_filter (none: every test), in
+    file order then definition order; serial: its file says SERIAL = True."""
     tests = []
-    for path in paths or sorted(glob.glob(os.path.join(HERE, "test_*.py"))):
+    for path in sorted(glob.glob(os.path.join(HERE, "test_*.py"))):
         module_name = os.path.splitext(os.path.basename(path))[0]
         spec = importlib.util.spec_from_file_location(module_name, path)
         module = importlib.util.module_from_spec(spec)
@@ -85,7 +84,7 @@ def collect(name_filter, paths=None):
             if name.startswith("test_") and callable(fn) and getattr(fn, "__module__", None) == module_name
         ]
         serial = bool(getattr(module, "SERIAL", False))
-        tests += [(name, fn, serial, path) for _, name, fn in sorted(found)]
+        tests += [(name, fn, serial) for _, name, fn in sorted(found)]
     return [t for t in tests if not name_filter or any(f in t[0] for f in name_filter)]
 
 
@@ -130,21 +129,34 @@ def run_one(name, fn, bindir, limit_s, keep):
     return "pass", ""
 
 
-def run_worker(name, path, bindir, limit_s, keep):
-    """Worker mode: run the one test named exactly name, of the file path,
-    and print its result as one JSON line (the parent prints the report).
-    Only that file is loaded (and what it imports): loading every test file
-    took a quarter of a CPU second, in each of the 187 workers of a pass."""
-    signal.signal(signal.SIGALRM, on_alarm)
-    signal.signal(signal.SIGTERM, on_terminate)
-    fn = next(f for n, f, _, _ in collect([name], [path]) if n == name)
-    t0 = time.monotonic()
-    outcome, reason = run_one(name, fn, bindir, limit_s, keep)
-    took = time.monotonic() - t0
-    cpu, sys_cpu = cpu_seconds()
-    print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": took, "cpu": cpu,
-                      "sys": sys_cpu}), flush=True)
-    return 0
+def run_forked(name, fn, bindir, limit_s, keep, out_fd):
+    """In a child forked from the runner: run the one test fn, in a session
+    of its own (the runner kills the whole group if it is interrupted), and
+    write its result to out_fd as one JSON line (the runner prints the
+    report); never returns. Forked, not started afresh: the runner has
+    Python, the harness and every test file loaded already, where a new
+    interpreter took 0.2 CPU s to get there, in each of a pass's 240
+    tests."""
+    code = 1
+    try:
+        os.setsid()
+        os.dup2(out_fd, 1)
+        os.close(out_fd)
+        signal.signal(signal.SIGALRM, on_alarm)
+        signal.signal(signal.SIGTERM, on_terminate)
+        t0 = time.monotonic()
+        outcome, reason = run_one(name, fn, bindir, limit_s, keep)
+        took = time.monotonic() - t0
+        cpu, sys_cpu = cpu_seconds()
+        print(json.dumps({"name": name, "outcome": outcome, "reason": reason, "took": took, "cpu": cpu,
+                          "sys": sys_cpu}), flush=True)
+        code = 0
+    except KeyboardInterrupt:  # the runner interrupted: what the test started is killed by now
+        pass
+    except BaseException:  # the runner reports a worker without a result, after this
+        traceback.print_exc()
+    finally:
+        os._exit(code)
 
 
 def cpu_seconds():
@@ -200,7 +212,7 @@ def expected_times(tests, own, plain):
     """{test name: seconds expected} for the order: the time of the last run
     of this build, else of the plain build, else harness.takes_about's."""
     expected = {}
-    for name, fn, _, _ in tests:
+    for name, fn, _ in tests:
         for source in (own.get(name), plain.get(name), getattr(fn, "takes_about", None)):
             if source is not None:
                 expected[name] = float(source)
@@ -235,30 +247,36 @@ def run_all(tests, args, bindir, expected):
     each ends."""
     parallel = sorted((t[0] for t in tests if not t[2]), key=lambda n: -expected.get(n, UNKNOWN_S))
     serial = [t[0] for t in tests if t[2]]
-    path_of = {t[0]: t[3] for t in tests}
-    running = {}  # Popen -> [name, start, output so far]
+    running = {}  # pid -> [name, start, its pipe, output so far]
     sel = selectors.DefaultSelector()
+    fn_of = {t[0]: t[1] for t in tests}
 
     def start(name):
-        argv = [sys.executable, os.path.abspath(__file__), "--bin", bindir, "--worker", name, "--file",
-                path_of[name], "--time-limit", str(args.time_limit)] + (["--keep"] if args.keep else [])
-        p = subprocess.Popen(argv, stdout=subprocess.PIPE, start_new_session=True)
-        os.set_blocking(p.stdout.fileno(), False)
-        running[p] = [name, time.monotonic(), b""]
-        sel.register(p.stdout, selectors.EVENT_READ, p)
+        sys.stdout.flush()  # nothing buffered goes twice
+        sys.stderr.flush()
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(r)
+            run_forked(name, fn_of[name], bindir, args.time_limit, args.keep, w)
+        os.close(w)
+        pipe = os.fdopen(r, "rb", buffering=0)
+        os.set_blocking(r, False)
+        running[pid] = [name, time.monotonic(), pipe, b""]
+        sel.register(pipe, selectors.EVENT_READ, pid)
 
-    def finish(p):
-        name, t0, raw = running.pop(p)
-        sel.unregister(p.stdout)
-        p.stdout.close()
-        p.wait()
+    def finish(pid):
+        name, t0, pipe, raw = running.pop(pid)
+        sel.unregister(pipe)
+        pipe.close()
+        _, status = os.waitpid(pid, 0)
         out = raw.decode(errors="replace")
         try:
             r = json.loads(out.strip().splitlines()[-1])
             return name, r["outcome"], r["reason"], r["took"], r.get("cpu"), r.get("sys")
         except (ValueError, IndexError, KeyError):
-            return name, "fail", "its worker ended (exit %s) without a result: %s" % (p.returncode, out[-500:]), (
-                time.monotonic() - t0), None, None
+            return name, "fail", "its worker ended (%s) without a result: %s" % (
+                os.waitstatus_to_exitcode(status), out[-500:]), time.monotonic() - t0, None, None
 
     try:
         for batch, width in ((parallel, max(1, args.jobs)), (serial, 1)):
@@ -269,22 +287,22 @@ def run_all(tests, args, bindir, expected):
                 done = None
                 while done is None:  # a worker is done when its output ends
                     for key, _ in sel.select():
-                        p = key.data
-                        chunk = p.stdout.read()
+                        pid = key.data
+                        chunk = running[pid][2].read()
                         if chunk is None:  # nothing to read after all
                             continue
                         if chunk:
-                            running[p][2] += chunk
+                            running[pid][3] += chunk
                         elif done is None:
-                            done = p
+                            done = pid
                 yield finish(done)
     finally:
-        for p in list(running):  # interrupted: every worker and what it started goes
+        for pid in list(running):  # interrupted: every worker and what it started goes
             try:
-                os.killpg(p.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-            p.wait()
+                os.killpg(pid, signal.SIGTERM)
+            except ProcessLookupError:  # not yet in a session of its own
+                os.kill(pid, signal.SIGTERM)
+            os.waitpid(pid, 0)
 
 
 def main():
@@ -299,13 +317,9 @@ def main():
     ap.add_argument("--time-limit", type=float, default=300, help="seconds one test may take (default 300)")
     ap.add_argument("-j", "--jobs", type=int, default=int(os.environ.get("VMAC_TEST_JOBS", "4")),
                     help="tests run at a time (default 4, or $VMAC_TEST_JOBS)")
-    ap.add_argument("--worker", metavar="NAME", help=argparse.SUPPRESS)
-    ap.add_argument("--file", metavar="PATH", help=argparse.SUPPRESS)  # the worker's test file
     args = ap.parse_args()
 
     bindir = os.path.abspath(args.bin)
-    if args.worker:
-        return run_worker(args.worker, args.file, bindir, args.time_limit, args.keep)
     for program in ("vmacd", "vmac-board", "vmac"):
         if not os.access(os.path.join(bindir, program), os.X_OK):
             print("run.py: no executable %s in %s (build first: make all)" % (program, bindir), file=sys.stderr)
@@ -324,7 +338,7 @@ def main():
     plain_only = [t for t in tests if getattr(t[1], "plain_pass_only", None)]
     if sanitized:
         tests = [t for t in tests if t not in plain_only]
-        for name, fn, _, _ in plain_only:
+        for name, fn, _ in plain_only:
             print("PLAIN %s: run by the plain pass only (%s)" % (name, fn.plain_pass_only), flush=True)
     elif args.plain_pass:
         kept = [t for t in tests if t in plain_only or getattr(t[1], "plain_pass_too", None)]
