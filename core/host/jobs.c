@@ -465,10 +465,13 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 	}
 }
 
-/* Past its limit, is its worker on a CPU for it? 1 when it is (the
- * worker's CPU time moved by at least half the time since the last look),
- * or past ten limits whatever the reason; 0 while the machine kept the
- * worker waiting (not the driver's fault). */
+/* Past its limit, is its worker on a CPU for it? Judged over windows of a
+ * quarter of the limit, as the driver's own budget judges its call: 1 when
+ * the worker's CPU time moved by at least half of such a window, or past
+ * ten limits whatever the reason; 0 while the window is not over, or the
+ * machine kept the worker waiting through it (not the driver's fault: a
+ * worker that is back on a CPU gets the window for its own budget check,
+ * which would have ended the call by now had it run). */
 static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 {
 	int64_t cpu;
@@ -486,7 +489,9 @@ static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 	cpu = bus_worker_cpu_ns(bus, w);
 	if (now - j->seen_ns > 10 * j->limit_ns || cpu < 0)
 		return 1;
-	if (j->overdue_ns && now > j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns)
+	if (j->overdue_ns && now - j->overdue_ns < j->limit_ns / 4)
+		return 0;
+	if (j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns)
 		return 1;
 	j->overdue_ns = now;
 	j->overdue_cpu_ns = cpu;
