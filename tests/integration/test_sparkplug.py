@@ -561,9 +561,15 @@ def test_sparkplug_seq_wraps_from_255_to_0(t):
         until(three_hundred, 120, lambda: "300 messages of the node (it sent only %d: %s)" % (
             len(sent[0]), sorted({(k, d) for k, d, p, r, q in sent[0]})), poll_s=0.2)
         # A Rebirth while DDATA flows (tck-id-operational-behavior-data-
-        # commands-rebirth-action-1 and -2): after the NCMD, at most the DDATA
-        # of the status copy being sent when it came (one per machine), then
-        # the NBIRTH and every DBIRTH with no DDATA among them.
+        # commands-rebirth-action-1 and -2): no DDATA the node made after it
+        # took the NCMD comes before its NBIRTH, then the NBIRTH and every
+        # DBIRTH with no DDATA among them. Judged by the host's own clock:
+        # the payload timestamp of each DDATA (when its status copy was
+        # read) against the time of the host's event for the Rebirth. A
+        # DDATA seen here after the NCMD may have left the host before the
+        # NCMD reached it: the broker hands the two connections their
+        # messages in its own order.
+        seen = host.last_event_seq()
         mark = sp.mark()
         sp.publish(NODE % "NCMD", command([("Node Control/Rebirth", BOOLEAN, True)]))
         _, i = sp.wait(NODE % "NBIRTH", since=mark, what="NBIRTH after a Rebirth amid DDATA")
@@ -571,14 +577,19 @@ def test_sparkplug_seq_wraps_from_255_to_0(t):
         for name in devices:
             _, end = sp.wait(NODE % "DBIRTH" + "/" + name, since=i, what="DBIRTH of %s after the Rebirth" % name)
             i = max(i, end)
+        took_ms = int(host.wait_event("mqtt", text="Rebirth asked for: NBIRTH", after_seq=seen)["time"] * 1000)
         with sp.cond:
-            after = [tp.split("/") for tp, _, _, _ in sp.log[mark:i] if tp.startswith("spBv1.0/")]
-        ncmd = next(k for k, parts in enumerate(after) if parts[2] == "NCMD")
-        nbirth = next(k for k, parts in enumerate(after) if parts[2] == "NBIRTH")
-        before_birth = [parts[2] + "/" + parts[-1] for parts in after[ncmd + 1:nbirth]]
-        assert all(k.startswith("DDATA/") for k in before_birth) and len(before_birth) == len(set(before_birth)), \
-            "after the NCMD and before the NBIRTH, more than one status copy's DDATA: %s" % before_birth
-        births = [parts[2] for parts in after[nbirth + 1:]]
+            after = [(tp.split("/"), data) for tp, data, _, _ in sp.log[mark:i] if tp.startswith("spBv1.0/")]
+        ncmd = next(k for k, (parts, _) in enumerate(after) if parts[2] == "NCMD")
+        nbirth = next(k for k, (parts, _) in enumerate(after) if parts[2] == "NBIRTH")
+        before_birth = [(parts[2] + "/" + parts[-1], decode(data).get("timestamp")) for parts, data in
+                        after[ncmd + 1:nbirth]]
+        assert all(k.startswith("DDATA/") for k, _ in before_birth), \
+            "after the NCMD and before the NBIRTH, not only DDATA: %s" % before_birth
+        late = [(k, ts) for k, ts in before_birth if ts is None or ts > took_ms]
+        assert not late, "DDATA made after the host took the Rebirth (its event at %d ms) came before the " \
+            "NBIRTH: %s" % (took_ms, late)
+        births = [parts[2] for parts, _ in after[nbirth + 1:]]
         assert births == ["DBIRTH"] * len(devices), "between the NBIRTH and the last DBIRTH: %s" % births
         messages = sp.node_messages()
         check_session(messages)
