@@ -64,6 +64,9 @@ def on_alarm(signum, frame):
     raise TestTimeout("the test did not finish within its time limit")
 
 
+STOPS = {signal.SIGTERM, signal.SIGINT}  # what interrupts the runner and its workers
+
+
 def on_terminate(signum, frame):
     raise KeyboardInterrupt("runner got signal %d" % signum)
 
@@ -144,6 +147,7 @@ def run_forked(name, fn, bindir, limit_s, keep, out_fd):
         os.close(out_fd)
         signal.signal(signal.SIGALRM, on_alarm)
         signal.signal(signal.SIGTERM, on_terminate)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)  # blocked by the runner across the fork
         t0 = time.monotonic()
         outcome, reason = run_one(name, fn, bindir, limit_s, keep)
         took = time.monotonic() - t0
@@ -255,10 +259,14 @@ def run_all(tests, args, bindir, expected):
         sys.stdout.flush()  # nothing buffered goes twice
         sys.stderr.flush()
         r, w = os.pipe()
+        # No signal between the fork and the child's own handlers: the
+        # runner's would have the child kill its siblings.
+        signal.pthread_sigmask(signal.SIG_BLOCK, STOPS)
         pid = os.fork()
         if pid == 0:
             os.close(r)
             run_forked(name, fn_of[name], bindir, args.time_limit, args.keep, w)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)
         os.close(w)
         pipe = os.fdopen(r, "rb", buffering=0)
         os.set_blocking(r, False)
