@@ -241,18 +241,11 @@ def test_a_worker_stalled_by_a_dropped_machine_is_given_up_too(t):
 
 
 # A tick of library calls of a few milliseconds each (backtracking over
-# 1.2 KB, as tests/escape/pattern_loop.lua), each of which looks at the
-# clock first, as the cost model has costly calls do: its budget (20 ms)
-# ends it after about 25 ms on a CPU.
-SLOW_TICKER = """local driver = { name = "slowtick", version = "1", level = 6, io = { lamp = "do0" } }
-local s = string.rep("a", 1200)
-function driver.tick(dev, inputs)
-	for _ = 1, 1000000 do
-		s:find("a*b")
-	end
-end
-return driver
-"""
+# 1.2 KB), each of which looks at the clock first, as the cost model has
+# costly calls do: given a budget of 20 ms, it is ended after about 25 ms
+# on a CPU.
+PATTERN_LOOP = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "escape",
+                            "pattern_loop.lua")
 
 # Holds CPU 0 at SCHED_FIFO 45 (above the workers, below the bus thread)
 # for 100 ms of every 110, until it is killed.
@@ -278,15 +271,18 @@ def test_a_worker_held_off_its_cpu_past_the_limit_is_judged_by_its_own_budget(t)
     ms) by other work is not the driver's stall: the bus judges it over a
     window of a quarter of the limit (HOST.md, "Threads and time"), in
     which the driver's own budget ends the call that runs on ("time budget
-    exceeded"). The worker is pinned to CPU 0, which a real-time busy loop
+    exceeded"). The driver is tests/escape/pattern_loop.lua with a budget
+    of 20 ms; its worker is pinned to CPU 0, which a real-time busy loop
     holds for 100 ms of every 110: a tick starts in a gap, runs a few
     milliseconds of its 25, waits 100 ms, and runs again."""
     if os.cpu_count() < 2 or os.geteuid() != 0:
         raise Skip("needs two CPUs (CPU 0 is held, the bus thread runs on another) and root (SCHED_FIFO)")
-    host = t.host(drivers=t.drivers(slowtick=SLOW_TICKER),
-                  settings={"slice_us": 200, "slices_per_slot": 5, "reply_deadline_us": 20000, "sleep_s": 1,
-                            "driver_threads": 1, "driver.slowtick.budget_us": 20000,
-                            "driver.slowtick.instructions": 1000000000})
+    with open(PATTERN_LOOP) as f:
+        looper = f.read()
+    host = t.host(drivers=t.drivers(pattern_loop=looper),
+                  settings={"slice_us": 200, "slices_per_slot": 5, "default_level": 6, "reply_deadline_us": 20000,
+                            "sleep_s": 1, "driver_threads": 1, "driver.pattern_loop.budget_us": 20000,
+                            "driver.pattern_loop.instructions": 1000000000})
     tasks = "/proc/%d/task" % host.popen.pid
     workers = [int(tid) for tid in os.listdir(tasks) if thread_name(os.path.join(tasks, tid)).startswith("vmac-worker")]
     assert workers, "no vmac-worker thread in vmacd"
@@ -294,7 +290,7 @@ def test_a_worker_held_off_its_cpu_past_the_limit_is_judged_by_its_own_budget(t)
         os.sched_setaffinity(tid, {0})
     holder = t.start([sys.executable, "-c", HOLDER], "holder")
     holder.wait_line(r"^holding$", 10, what="the holder on CPU 0")
-    t.board("generic", "slow-1", driver="slowtick")
+    t.board("generic", "slow-1", driver="pattern_loop")
     errors = lambda: host.find_events("driver_error", "slow-1")  # noqa: E731
     host.wait_status(lambda s: len(errors()) >= 3, 30, "three failed ticks of slow-1")
     assert holder.alive(), "the holder ended: %s" % holder.text()
