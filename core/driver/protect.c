@@ -89,7 +89,7 @@ static int64_t thread_cpu_ns(void)
  * has not: the deadline moves on by a quarter of the call's budget at a
  * time (so a call that runs on is over at 1.25 budgets), and the
  * call is over only once its thread was on a CPU for at least half of
- * such a quarter (the bus's judgement of a stall is the same, jobs.c).
+ * such a quarter (the bus too judges a stall by the CPU time, jobs.c).
  * One system call when a deadline passes, none in a call within it. */
 static int held_off(struct vmac_driver *d, int64_t now)
 {

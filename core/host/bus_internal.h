@@ -101,7 +101,7 @@ struct job {
 	int nnamed;                     /* boards whose names board[] holds (they only ever grow) */
 	int req;                        /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
 	struct vmac_driver *other;      /* SWAP: the new instance; ROLLBACK: the one that failed */
-	int64_t overdue_ns;             /* past its limit: when the window being judged began, */
+	int64_t overdue_ns;             /* past its limit: when the bus first looked, */
 	int64_t overdue_cpu_ns;         /* and its worker's CPU time then */
 	int64_t ready_ns;               /* virtual mode, a slow driver: when its results are ready */
 	uint64_t rec_n;                 /* INPUT: its event in the recorder */

@@ -465,13 +465,13 @@ static void stalled(struct vmac_bus *bus, struct machine *m, struct job *j, int6
 	}
 }
 
-/* Past its limit, is its worker on a CPU for it? Judged over windows of a
- * quarter of the limit, as the driver's own budget judges its call: 1 when
- * the worker's CPU time moved by at least half of such a window, or past
- * ten limits whatever the reason; 0 while the window is not over, or the
- * machine kept the worker waiting through it (not the driver's fault: a
- * worker that is back on a CPU gets the window for its own budget check,
- * which would have ended the call by now had it run). */
+/* Past its limit, has its worker been on a CPU for it? 1 once the
+ * worker's CPU time since the first look past the limit reaches a quarter
+ * of the limit, or past ten limits whatever the reason; 0 before. Time
+ * the machine kept the worker off its CPUs is not the driver's: a worker
+ * back on a CPU gets its own budget check first, which ends a call that
+ * runs on (the budget, too, does not count the time its thread was held
+ * off: core/driver/protect.c). */
 static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 {
 	int64_t cpu;
@@ -489,13 +489,12 @@ static int overran(struct vmac_bus *bus, struct job *j, int64_t now)
 	cpu = bus_worker_cpu_ns(bus, w);
 	if (now - j->seen_ns > 10 * j->limit_ns || cpu < 0)
 		return 1;
-	if (j->overdue_ns && now - j->overdue_ns < j->limit_ns / 4)
+	if (!j->overdue_ns) {
+		j->overdue_ns = now;
+		j->overdue_cpu_ns = cpu;
 		return 0;
-	if (j->overdue_ns && (cpu - j->overdue_cpu_ns) * 2 >= now - j->overdue_ns)
-		return 1;
-	j->overdue_ns = now;
-	j->overdue_cpu_ns = cpu;
-	return 0;
+	}
+	return cpu - j->overdue_cpu_ns >= j->limit_ns / 4;
 }
 
 /* A job given up when its machine went away (DROPPED) still holds its

@@ -10,6 +10,7 @@ wall-clock budget, so that nothing but the bus's judgement stops it)."""
 
 import json
 import os
+import re
 import signal
 import sys
 import threading
@@ -248,16 +249,17 @@ PATTERN_LOOP = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__fi
                             "pattern_loop.lua")
 
 # Holds CPU 0 at SCHED_FIFO 45 (above the workers, below the bus thread)
-# for 100 ms of every 110, until it is killed.
-HOLDER = """import os, time
+# for argv[1] ms, lets it go for argv[2] ms, and again, until it is killed.
+HOLDER = """import os, sys, time
 os.sched_setaffinity(0, {0})
 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(45))
+hold, gap = float(sys.argv[1]) / 1000, float(sys.argv[2]) / 1000
 print("holding", flush=True)
 while True:
-    until = time.monotonic() + 0.1
+    until = time.monotonic() + hold
     while time.monotonic() < until:
         pass
-    time.sleep(0.01)
+    time.sleep(gap)
 """
 
 
@@ -266,35 +268,60 @@ def thread_name(task):
         return f.read().strip()
 
 
-def test_a_worker_held_off_its_cpu_past_the_limit_is_judged_by_its_own_budget(t):
-    """A tick held off the CPU past its limit (the machine's period, 64
-    ms) by other work is not the driver's stall: the bus judges it over a
-    window of a quarter of the limit (HOST.md, "Threads and time"), in
-    which the driver's own budget ends the call that runs on ("time budget
-    exceeded"). The driver is tests/escape/pattern_loop.lua with a budget
-    of 20 ms; its worker is pinned to CPU 0, which a real-time busy loop
-    holds for 100 ms of every 110: a tick starts in a gap, runs a few
-    milliseconds of its 25, waits 100 ms, and runs again."""
-    if os.cpu_count() < 2 or os.geteuid() != 0:
-        raise Skip("needs two CPUs (CPU 0 is held, the bus thread runs on another) and root (SCHED_FIFO)")
-    with open(PATTERN_LOOP) as f:
-        looper = f.read()
-    host = t.host(drivers=t.drivers(pattern_loop=looper),
-                  settings={"slice_us": 200, "slices_per_slot": 5, "default_level": 6, "reply_deadline_us": 20000,
-                            "sleep_s": 1, "driver_threads": 1, "driver.pattern_loop.budget_us": 20000,
-                            "driver.pattern_loop.instructions": 1000000000})
+def held_worker(t, name, source, budget_us, level, hold_ms, gap_ms):
+    """A host with one driver worker, pinned to CPU 0, that the HOLDER
+    holds hold_ms of every hold_ms + gap_ms, and a board named NAME-1 of
+    driver name (source, its budget budget_us, no instruction budget) at
+    level (1 ms slots): [host, holder, board]."""
+    host = t.host(drivers=t.drivers(**{name: source}),
+                  settings={"slice_us": 200, "slices_per_slot": 5, "default_level": level,
+                            "reply_deadline_us": 20000, "sleep_s": 1, "driver_threads": 1,
+                            "driver.%s.budget_us" % name: budget_us, "driver.%s.instructions" % name: 1000000000})
     tasks = "/proc/%d/task" % host.popen.pid
     workers = [int(tid) for tid in os.listdir(tasks) if thread_name(os.path.join(tasks, tid)).startswith("vmac-worker")]
     assert workers, "no vmac-worker thread in vmacd"
     for tid in workers:
         os.sched_setaffinity(tid, {0})
-    holder = t.start([sys.executable, "-c", HOLDER], "holder")
+    holder = t.start([sys.executable, "-c", HOLDER, str(hold_ms), str(gap_ms)], "holder")
     holder.wait_line(r"^holding$", 10, what="the holder on CPU 0")
-    t.board("generic", "slow-1", driver="pattern_loop")
-    errors = lambda: host.find_events("driver_error", "slow-1")  # noqa: E731
-    host.wait_status(lambda s: len(errors()) >= 3, 30, "three failed ticks of slow-1")
+    return [host, holder, t.board("generic", name + "-1", driver=name)]
+
+
+def test_a_held_worker_is_judged_by_the_cpu_it_had(t):
+    """The bus charges a driver only the CPU its worker had past the limit
+    (HOST.md, "Threads and time"). The worker is pinned to CPU 0, which a
+    real-time busy loop holds; one test, as two would hold CPU 0 at once.
+    1. Held off: tests/escape/pattern_loop.lua, budget 20 ms, period 128
+       ms, CPU 0 held 150 ms of every 165. A tick starts in a gap, runs
+       at most 15 ms of its 25, is held past its limit, and runs again:
+       its own budget ends it ("time budget exceeded") within a gap or
+       two, before its worker has had the quarter of the limit (32 ms) of
+       CPU the bus would fail it for ("stalled").
+    2. Stuck: a tick inside library calls with no budget, period 256 ms,
+       CPU 0 held 10 ms of every 13. Its worker has under half of any
+       stretch of time, and the bus still fails it once it had a quarter
+       of the limit (64 ms) of CPU, well before ten limits, the bound for
+       a worker that never runs."""
+    if os.cpu_count() < 2 or os.geteuid() != 0:
+        raise Skip("needs two CPUs (CPU 0 is held, the bus thread runs on another) and root (SCHED_FIFO)")
+    with open(PATTERN_LOOP) as f:
+        procs = held_worker(t, "pattern_loop", f.read(), 20000, 7, 150, 15)
+    host, holder = procs[:2]
+    errors = lambda: host.find_events("driver_error", "pattern_loop-1")  # noqa: E731
+    host.wait_status(lambda s: len(errors()) >= 3, 30, "three failed ticks of pattern_loop-1")
     assert holder.alive(), "the holder ended: %s" % holder.text()
     texts = [e["text"] for e in errors()]
     stalled = [x for x in texts if "stalled" in x]
     assert not stalled, "a tick held off its CPU was judged stalled: %s" % stalled
     assert all("time budget exceeded" in x for x in texts), "failed otherwise than by its budget: %s" % texts
+    for p in procs:
+        p.kill()
+
+    host, holder, _ = held_worker(t, "stuck", staller("stuck", "tick").replace("level = 0", "level = 8"), 0, 8, 10, 3)
+    e = host.wait_event("driver_error", "stuck-1", "stalled", timeout_s=30)
+    assert holder.alive(), "the holder ended: %s" % holder.text()
+    m = re.search(r"tick still running after ([\d.e+]+) ms \(its limit ([\d.e+]+) ms\)", e["text"])  # %.3g
+    assert m, "the stall does not say how long the tick ran: %r" % e["text"]
+    after_ms, limit_ms = float(m.group(1)), float(m.group(2))
+    assert after_ms < 10 * limit_ms, "a tick stuck on a CPU was judged only after %.0f ms (its limit %.0f ms)" % (
+        after_ms, limit_ms)
