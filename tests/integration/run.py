@@ -65,6 +65,7 @@ def on_alarm(signum, frame):
 
 
 STOPS = {signal.SIGTERM, signal.SIGINT}  # what interrupts the runner and its workers
+STOP_S = 30  # an interrupted worker's time to clean up before it is killed
 
 
 def on_terminate(signum, frame):
@@ -134,8 +135,8 @@ def run_one(name, fn, bindir, limit_s, keep):
 
 def run_forked(name, fn, bindir, limit_s, keep, out_fd):
     """In a child forked from the runner: run the one test fn, in a session
-    of its own (the runner kills the whole group if it is interrupted), and
-    write its result to out_fd as one JSON line (the runner prints the
+    of its own (an interrupted runner sends it SIGTERM, whose handler ends
+    the test: its cleanup kills what it started), and write its result to out_fd as one JSON line (the runner prints the
     report); never returns. Forked, not started afresh: the runner has
     Python, the harness and every test file loaded already, where a new
     interpreter took 0.2 CPU s to get there, in each of a pass's 240
@@ -266,12 +267,12 @@ def run_all(tests, args, bindir, expected):
         if pid == 0:
             os.close(r)
             run_forked(name, fn_of[name], bindir, args.time_limit, args.keep, w)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)
         os.close(w)
         pipe = os.fdopen(r, "rb", buffering=0)
         os.set_blocking(r, False)
         running[pid] = [name, time.monotonic(), pipe, b""]
         sel.register(pipe, selectors.EVENT_READ, pid)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)  # the worker is in running: an interrupt reaches it
 
     def finish(pid):
         name, t0, pipe, raw = running.pop(pid)
@@ -305,12 +306,26 @@ def run_all(tests, args, bindir, expected):
                             done = pid
                 yield finish(done)
     finally:
-        for pid in list(running):  # interrupted: every worker and what it started goes
+        # Interrupted: every worker is told to stop. Its handler has its
+        # test's cleanup kill the programs the test started (each in a
+        # session of its own); one that has not ended after that long is
+        # killed.
+        for pid in list(running):
             try:
                 os.killpg(pid, signal.SIGTERM)
             except ProcessLookupError:  # not yet in a session of its own
                 os.kill(pid, signal.SIGTERM)
-            os.waitpid(pid, 0)
+        deadline = time.monotonic() + STOP_S
+        for pid in list(running):
+            while os.waitpid(pid, os.WNOHANG)[0] == 0:
+                if time.monotonic() > deadline:
+                    try:
+                        os.killpg(pid, signal.SIGKILL)
+                    except ProcessLookupError:
+                        os.kill(pid, signal.SIGKILL)
+                    os.waitpid(pid, 0)
+                    break
+                time.sleep(0.05)
 
 
 def main():
