@@ -12,12 +12,20 @@ def params(host, name, status=None):
     return (host.device(name, status) or {}).get("params", {})
 
 
+def running_params(host, name, timeout_s=30):
+    """The params of machine name once it runs and its driver's attach has
+    returned: the status carries what the machine's last job left, and
+    none before its first (a loaded machine's worker takes a while)."""
+    host.wait_running([name], timeout_s=timeout_s)
+    s = host.wait_status(lambda s: params(host, name, s), timeout_s, "%s's params in the status" % name)
+    return params(host, name, s)
+
+
 def test_a_persisted_param_survives_a_restart(t):
     host = t.host()
     t.board("washer", "washer-1")
-    s = host.wait_running(["washer-1"])
-    assert params(host, "washer-1", s).get("program") == "normal", "the default programme: %r" % (
-        params(host, "washer-1", s),)
+    p = running_params(host, "washer-1")
+    assert p.get("program") == "normal", "the default programme: %r" % (p,)
     vmac = t.path("vmac")
     env = dict(os.environ, VMAC_HTTP=host.http, VMAC_TOKEN=t.make_token("operate"))
 
@@ -43,8 +51,7 @@ def test_a_persisted_param_survives_a_restart(t):
     # programme is back, the value set without persistence is not.
     host.kill()
     host = t.host()
-    s = host.wait_running(["washer-1"], timeout_s=60)
-    p = params(host, "washer-1", s)
+    p = running_params(host, "washer-1", timeout_s=60)
     assert p.get("program") == "quick", "the persisted programme was not restored: %r" % p
     assert p.get("door_level_l") == 5 and p.get("time_scale") == 1, \
         "values set without persistence came back: %r" % p
