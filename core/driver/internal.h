@@ -83,7 +83,8 @@ struct vmac_driver {
 	uint64_t instruction_budget;    /* per call, as configured (budget_hooks is set from it); fixed at load */
 	int64_t budget_ns, deadline_ns; /* wall-clock budget per call; 0 = none */
 	int64_t call_budget_ns;         /* this call's: budget_ns times its factor */
-	int64_t grace_cpu_ns, grace_ns; /* past deadline_ns: the thread's CPU time and the time then (0: not yet) */
+	int64_t grace_cpu_ns;           /* the thread's CPU time at the first look past deadline_ns */
+	int grace_counting;             /* grace_cpu_ns is set: this call was looked at past its deadline */
 	int overrun;                    /* budget exceeded: keep raising until the call unwinds */
 	char overrun_msg[96];
 	int in_driver;              /* driver code runs now: the cap holds without the host's reserve */

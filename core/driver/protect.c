@@ -86,20 +86,26 @@ static int64_t thread_cpu_ns(void)
 
 /* Past the wall-clock deadline: has the call had its time? A thread that
  * the machine held off its CPUs (a loaded host, other threads before it)
- * has not: the deadline moves on by a quarter of the call's budget at a
- * time (so a call that runs on is over at 1.25 budgets), and the
- * call is over only once its thread was on a CPU for at least half of
- * such a quarter (the bus too judges a stall by the CPU time, jobs.c).
- * One system call when a deadline passes, none in a call within it. */
+ * has not. From the first look past the deadline the call is given a
+ * quarter of its budget more, counted in its thread's CPU time, as the bus
+ * counts a job past its limit (jobs.c, overran): a call that runs on is
+ * over at 1.25 budgets, and one whose CPU is shared is over once it has
+ * had that quarter, however the sharing falls. Each next look is put off
+ * until the quarter could have run out at the earliest, so a look costs
+ * one system call, and a call within its deadline none. */
 static int held_off(struct vmac_driver *d, int64_t now)
 {
-	int64_t cpu = thread_cpu_ns(), grace = d->call_budget_ns / 4;
-	int ran = cpu < 0 || (d->grace_ns && (cpu - d->grace_cpu_ns) * 2 >= now - d->grace_ns);
-	if (ran)
+	int64_t cpu = thread_cpu_ns(), grace = d->call_budget_ns / 4, left;
+	if (cpu < 0)
 		return 0;
-	d->grace_cpu_ns = cpu;
-	d->grace_ns = now;
-	d->deadline_ns = now + (grace > 0 ? grace : 1);
+	if (!d->grace_counting) {
+		d->grace_counting = 1;
+		d->grace_cpu_ns = cpu;
+	}
+	left = grace - (cpu - d->grace_cpu_ns);
+	if (left <= 0)
+		return 0;
+	d->deadline_ns = now + (left > grace / 8 ? left : grace / 8 + 1);
 	return 1;
 }
 
@@ -186,7 +192,7 @@ int drv_guarded_call(struct vmac_driver *d, int nargs, int nresults, unsigned fa
 	d->budget_hooks = hooks * factor;
 	d->call_budget_ns = d->budget_ns * factor;
 	d->deadline_ns = d->budget_ns ? start_ns + d->call_budget_ns : 0;
-	d->grace_ns = 0;
+	d->grace_counting = 0;
 	d->in_driver = 1;
 	rc = lua_pcall(L, nargs, nresults, base);
 	d->in_driver = 0;
@@ -296,7 +302,7 @@ int drv_protect_any(struct vmac_driver *d, host_work fn, void *args, char *err, 
 	d->overrun = 0;
 	d->call_budget_ns = d->budget_ns;
 	d->deadline_ns = d->budget_ns ? drv_mono_ns() + d->budget_ns : 0;
-	d->grace_ns = 0;
+	d->grace_counting = 0;
 	/* Restarts the hook's count. The hook stays set after the call: no
 	 * bytecode of this state runs outside drv_protect_any, and setting it
 	 * again as it is rewrites nothing, where turning it off and on again
