@@ -57,7 +57,8 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	snprintf(o->machine, sizeof(o->machine), "%s", m ? bus->dev[m->primary].ann.board : "");
 	memcpy(o->last_machine, d->last_machine, sizeof(o->last_machine));
 	snprintf(o->note, sizeof(o->note), "%s", d->note);
-	o->state = bus_state_name(d->state);
+	/* Running once its machine's attach() has returned: params and variables are the driver's then. */
+	o->state = d->state == DEV_RUNNING && m && !m->attached ? "attaching" : bus_state_name(d->state);
 	vmac_addr_format(&d->addr, o->address, sizeof(o->address));
 	o->id = d->id;
 	o->major = d->ann.major;

@@ -6,6 +6,9 @@ nothing."""
 
 import os
 import subprocess
+import time
+
+import harness
 
 
 def params(host, name, status=None):
@@ -13,12 +16,43 @@ def params(host, name, status=None):
 
 
 def running_params(host, name, timeout_s=30):
-    """The params of machine name once it runs and its driver's attach has
-    returned: the status carries what the machine's last job left, and
-    none before its first (a loaded machine's worker takes a while)."""
-    host.wait_running([name], timeout_s=timeout_s)
-    s = host.wait_status(lambda s: params(host, name, s), timeout_s, "%s's params in the status" % name)
-    return params(host, name, s)
+    """The params of machine name once it runs (its driver's attach has
+    returned: test_a_running_machine_shows_what_its_attach_left)."""
+    return params(host, name, host.wait_running([name], timeout_s=timeout_s))
+
+
+# attach() takes a while: about a second of string work, so that the test
+# sees the machine attaching.
+SLOW_ATTACH = """local driver = { name = "slow_attach", version = "1", io = { lamp = "do0" },
+	params = { level = { default = 3, min = 0, max = 9 } } }
+function driver.attach(dev)
+	local n = 0
+	for i = 1, 3000000 do
+		n = n + #tostring(i)
+	end
+end
+function driver.tick(dev, inputs) end
+return driver
+"""
+
+
+def test_a_running_machine_shows_what_its_attach_left(t):
+    """A machine is `running` in the status only once its driver's attach()
+    has returned (docs/API.md, devices[].state): from then on its params
+    are there, in every status."""
+    host = t.host(drivers=t.drivers(slow_attach=SLOW_ATTACH),
+                  settings={"driver.slow_attach.budget_us": 10000000, "driver.slow_attach.instructions": 1000000000})
+    t.board("generic", "slow-1", driver="slow_attach")
+    seen = []  # (state, params) of slow-1 in each status, polled as fast as the host answers
+    deadline = time.monotonic() + 30 * harness.LOADED
+    while time.monotonic() < deadline and len([x for x in seen if x[0] == "running"]) < 3:
+        d = host.device("slow-1", host.status()) or {}
+        seen.append((d.get("state"), d.get("params")))
+    running = [x for x in seen if x[0] == "running"]
+    assert running, "slow-1 never ran; states seen: %s" % sorted({str(x[0]) for x in seen})
+    assert "attaching" in [x[0] for x in seen], "slow-1 was never seen attaching: the test saw nothing of the attach"
+    early = [x for x in running if x[1] != {"level": 3}]
+    assert not early, "a status said running before the driver's attach had returned: %s" % early[:3]
 
 
 def test_a_persisted_param_survives_a_restart(t):
