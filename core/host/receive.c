@@ -155,7 +155,11 @@ void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 	slot = m.device_id & 0xFFFF;
 	d = slot < bus->ndev ? &bus->dev[slot] : NULL;
 	if (!d || d->id != m.device_id || d->state == DEV_FREE || !vmac_addr_equal(&d->addr, &p->addr)) {
-		malformed(bus, p, VMAC_BAD_UNKNOWN_SENDER);
+		/* From the slot's own address: a late reply of the board's
+		 * earlier session (it was dropped and announced again, or is
+		 * gone), well formed; anyone else's is a sender we do not know. */
+		malformed(bus, p,
+		          d && vmac_addr_equal(&d->addr, &p->addr) ? VMAC_BAD_STALE_SEQ : VMAC_BAD_UNKNOWN_SENDER);
 		return;
 	}
 	if (d->keyed) {

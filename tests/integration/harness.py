@@ -525,12 +525,9 @@ def sender_socket(bus):
 def misread(counters):
     """The host's malformed-frame counts (status counters) that say a frame
     was read wrong: every reason but stale_seq, a reply to an earlier
-    request, which is a board process late on a loaded machine (its
-    frame well formed), and but unknown_sender once the host has dropped
-    a board (counters' drops): that board's late replies then come from
-    a sender it no longer knows. {reason: count} of those above 0."""
-    return {k: n for k, n in counters["malformed_by_reason"].items()
-            if n and k != "stale_seq" and not (k == "unknown_sender" and counters.get("drops"))}
+    request or session, which is a board process late on a loaded machine
+    (its frame well formed). {reason: count} of those above 0."""
+    return {k: n for k, n in counters["malformed_by_reason"].items() if n and k != "stale_seq"}
 
 
 def undisturbed(names):

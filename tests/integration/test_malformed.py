@@ -1,14 +1,16 @@
 """Junk on the host's own bus address: every datagram is counted as
-malformed under the right reason, and the host and its boards carry on."""
+malformed under the right reason, and the host and its boards carry on;
+and a board's replies of an earlier session are counted as stale."""
 
 import functools
 import random
 import socket
 import time
 
-from frames import ANNOUNCE, DISCOVER, ERROR, IDLE, REGISTER, SYS, UPDATE, announce, frame, inputs, outputs, patch, \
-    register, reply
-from harness import KITCHEN_NAMES, undisturbed
+from fake_board import FakeBoard
+from frames import ANNOUNCE, DISCOVER, ERROR, IDLE, REGISTER, SYS, UPDATE, announce, frame, inputs, outputs, parse, \
+    patch, register, reply
+from harness import KITCHEN_NAMES, undisturbed, until
 
 TOTAL = 10000
 BATCH = 500
@@ -197,3 +199,30 @@ def test_malformed_flood(t):
     served = {n: host.device(n, after)["served"] for n in KITCHEN_NAMES}
     host.wait_status(lambda s: all(host.device(n, s)["served"] > served[n] + 5 for n in KITCHEN_NAMES), 30,
                      "every device served after the flood", undisturbed(KITCHEN_NAMES))
+
+
+def test_a_late_reply_of_a_boards_earlier_session_is_stale(t):
+    """A reply of a board's earlier session, from the address its slot
+    holds, is a stale one (PROTOCOL.md, malformed_by_reason), not a sender
+    the host does not know: a board that lost its session and announced
+    again may still have replies of the old one on their way."""
+    host = t.host(settings={"bus_trust": "open"})  # a board of ours, without a key
+    board = FakeBoard(t.bus, "lamp-1", "lights", 1)
+    try:
+        until(lambda: board.device_id and any(parse(f)[0].op == UPDATE for f, _ in board.sent_replies), 30,
+              "an UPDATE answered in lamp-1's first session")
+        first = board.device_id
+        old = [(f, to) for f, to in board.sent_replies if parse(f)[0].op == UPDATE][-1]
+        board.device_id = 0  # it lost its session: it announces at the next DISCOVER
+        until(lambda: board.device_id not in (0, first), 30, "lamp-1 in a new session")
+        before = host.status()["counters"]
+        for _ in range(5):
+            board.sock.sendto(*old)
+        after = host.wait_status(lambda s: s["counters"]["malformed_frames"] >= before["malformed_frames"] + 5, 30,
+                                 "the five replies of the earlier session counted")["counters"]
+    finally:
+        board.close()
+    grew = {r: after["malformed_by_reason"][r] - before["malformed_by_reason"][r] for r in before["malformed_by_reason"]}
+    assert grew["unknown_sender"] == 0 and grew["stale_seq"] >= 5, \
+        "replies of lamp-1's earlier session (device %#x, now %#x) were counted as %s" % (
+            first, board.device_id, {r: n for r, n in grew.items() if n})
