@@ -63,9 +63,13 @@ RECENT_S = 0.25             # a step shown this shortly before a kill may not be
 
 def recovery_host(t, settings=None):
     """vmacd on the test's state folder (the same across restarts), saving
-    checkpoints every second, the washer's quick programme shortened."""
+    checkpoints every second, the washer's quick programme shortened; with
+    real-time scheduling, as a host is run (docs/HOST.md, `realtime`):
+    its bus thread above the board programs' SCHED_FIFO 30, not a normal
+    thread that a loaded machine held off for 937 ms while its boards ran
+    (a clean-clone make test, early_trip's message)."""
     values = {"checkpoint_s": 1, "watchdog_ms": WATCHDOG_MS, "driver.washer.param.program": "quick",
-              "driver.washer.param.time_scale": "0.01"}
+              "driver.washer.param.time_scale": "0.01", "realtime": "true"}
     values.update(settings or {})
     return t.host(settings=values)
 
@@ -140,10 +144,31 @@ def early_trip(host, board, mark, when):
     washer = next((d for d in s["devices"] if d["name"] == "washer-1"), {})
     raise AssertionError(
         "%s: washer-1's watchdog tripped before the kill, the host running: no frame for %d ms (last at %d ms, "
-        "off at %d ms, the board's clock; the kill at %d ms). The host's status: tick %s; washer-1 %s" % (
+        "off at %d ms, the board's clock; the kill at %d ms). The host's status: tick %s, realtime %s; washer-1 %s; "
+        "its bus thread since its start: %s" % (
             when, trip.off_ms - trip.last_frame_ms, trip.last_frame_ms, trip.off_ms, time.monotonic() * 1000,
-            s.get("tick"), {k: washer.get(k) for k in ("state", "level", "slot", "period_us", "misses", "misses_host",
-                                                        "note")}))
+            s.get("tick"), s.get("bus", {}).get("realtime"),
+            {k: washer.get(k) for k in ("state", "level", "slot", "period_us", "misses", "misses_host", "note")},
+            bus_thread_times(host)))
+
+
+def bus_thread_times(host):
+    """What the kernel says of vmacd's bus thread (/proc/PID/task/TID/schedstat):
+    how long it ran and how long it waited, runnable, for a CPU; a stall
+    with little waiting was the host's own (blocked), not the machine's."""
+    tasks = "/proc/%d/task" % host.popen.pid
+    try:
+        for tid in os.listdir(tasks):
+            with open(os.path.join(tasks, tid, "comm")) as f:
+                if f.read().strip() != "vmac-bus":
+                    continue
+            with open(os.path.join(tasks, tid, "schedstat")) as f:
+                ran_ns, waited_ns, slices = (int(x) for x in f.read().split())
+            return "ran %.0f ms, waited for a CPU %.0f ms, %d times on a CPU" % (ran_ns / 1e6, waited_ns / 1e6,
+                                                                                slices)
+    except OSError as e:
+        return "not read (%s)" % e
+    return "not found"
 
 
 def crash(t, host, board, when, late_s=WATCHDOG_LATE_S):
