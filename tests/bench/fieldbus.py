@@ -121,6 +121,14 @@ def fresh_status(host):
         time.sleep(0.005)  # until the next publication, at most 100 ms away
 
 
+def late_since(before, after):
+    """A machine's driver_late over a window (status, devices[]): its count
+    restarts when the machine attaches again (after a drop), and then all
+    of it is the window's (counted short if it grew past the old count)."""
+    now, then = after.get("driver_late", 0), (before or {}).get("driver_late", 0)
+    return now - then if now >= then else now
+
+
 def fieldbus_run(ctx, mode, boards, period_us, seconds, driver=None, keyed=True, board_extra=()):
     """`boards` boards served in `mode` for `seconds` of steady state: the
     figures of that window (driver, keyed, board_extra: as fieldbus_kitchen's)."""
@@ -157,8 +165,7 @@ def fieldbus_run(ctx, mode, boards, period_us, seconds, driver=None, keyed=True,
         "devices_missed": sum(1 for d in after["devices"] if d["misses"]),
         "devices_missed_host": sum(1 for d in after["devices"] if d.get("misses_host")),
         "drops": c1["drops"] - c0["drops"],
-        "driver_late": (sum(d.get("driver_late", 0) for d in after["devices"])
-                        - sum(d.get("driver_late", 0) for d in before["devices"])),
+        "driver_late": sum(late_since(before_by_name.get(d["name"]), d) for d in after["devices"]),
         "late_replies_host": c1["late_replies"] - c0["late_replies"],
         "late_replies_board": len(late), "late_reply_example": late[0].text if late else None,
         "running_at_end": sum(1 for d in after["devices"] if d["state"] == "running"),
