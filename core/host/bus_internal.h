@@ -184,6 +184,11 @@ struct machine {
 	int ninputs;
 	int want_tick;
 	int64_t tick_ns; /* the primary's reply that asked for it */
+	/* Every board's inputs and their instant (0: none yet) as the host
+	 * held them at tick_ns: a tick that waits for its job gets these, not
+	 * a reply that came after its time. */
+	struct vmac_inputs tick_in[VMAC_DRIVER_MAX_BOARDS];
+	int64_t tick_sample_ns[VMAC_DRIVER_MAX_BOARDS];
 	int want_stop;
 	int want_checkpoint; /* a checkpoint was due and not taken: the next tick makes it */
 	uint64_t late;       /* services that found its tick not done (held outputs) */

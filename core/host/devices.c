@@ -296,6 +296,8 @@ static int admit(struct vmac_bus *bus, struct machine *m, struct device *d)
 		return -1;
 	}
 	d->scheduled = 1;
+	m->tick_in[m->nboards] = d->inputs; /* none yet: a tick asked for before its first reply */
+	m->tick_sample_ns[m->nboards] = 0;
 	m->board[m->nboards++] = bus_slot_of(bus, d);
 	bus_rec_join(bus, m);
 	d->state = DEV_REGISTERING;
@@ -649,8 +651,14 @@ void bus_driver_failed(struct vmac_bus *bus, struct machine *m, const char *wher
  * now, or as soon as its job is free. */
 void bus_run_machine(struct vmac_bus *bus, struct machine *m)
 {
+	int i;
 	m->want_tick = 1;
 	m->tick_ns = bus_now(bus);
+	for (i = 0; i < m->nboards; i++) {
+		const struct device *b = &bus->dev[m->board[i]];
+		m->tick_in[i] = b->inputs;
+		m->tick_sample_ns[i] = b->sample_ns;
+	}
 	m->tick_open = 1;
 	m->tick_held = 0;
 	m->tick_asked = bus->tick_index;

@@ -191,6 +191,22 @@ void bus_collect_done_tick(struct vmac_bus *bus, struct machine *m)
 		collect_one(bus, m, j, now);
 }
 
+/* m's tick into j: the inputs every board had at the tick's time (a tick
+ * that waited for its job does not take a reply that came after it). */
+static void fill_tick(struct vmac_bus *bus, struct machine *m, struct job *j)
+{
+	int i;
+	m->want_tick = 0;
+	fill(bus, m, j, JOB_TICK, m->tick_ns);
+	for (i = 0; i < m->nboards; i++) {
+		j->in[i] = m->tick_in[i];
+		j->sample_s[i] =
+		    m->tick_sample_ns[i] ? (double)(m->tick_sample_ns[i] - bus->start_ns) / 1e9 : j->time_s;
+	}
+	j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, m->tick_ns);
+	m->want_checkpoint = 0;
+}
+
 void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 {
 	struct job *j = job_of(bus, m);
@@ -200,16 +216,7 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 	if (m->want_tick && m->attached && !m->want_attach && !m->want_rollback && !m->want_stop && !m->want_swap &&
 	    m->ninputs == 0) {
 		/* The common case first, with the reply's time: no clock read. */
-		int i;
-		m->want_tick = 0;
-		fill(bus, m, j, JOB_TICK, m->tick_ns);
-		for (i = 0; i < m->nboards; i++) {
-			const struct device *b = &bus->dev[m->board[i]];
-			j->in[i] = b->inputs;
-			j->sample_s[i] = b->sample_ns ? (double)(b->sample_ns - bus->start_ns) / 1e9 : j->time_s;
-		}
-		j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, m->tick_ns);
-		m->want_checkpoint = 0;
+		fill_tick(bus, m, j);
 		hand_over(bus, m, j);
 		return;
 	}
@@ -238,13 +245,7 @@ void bus_dispatch(struct vmac_bus *bus, struct machine *m)
 	} else if (m->ninputs > 0) {
 		fill_input(bus, m, j);
 	} else if (m->want_tick) {
-		int i;
-		m->want_tick = 0;
-		fill(bus, m, j, JOB_TICK, m->tick_ns);
-		for (i = 0; i < m->nboards; i++)
-			j->in[i] = bus->dev[m->board[i]].inputs;
-		j->checkpoint = m->want_checkpoint || bus_checkpoint_due(bus, m, now);
-		m->want_checkpoint = 0;
+		fill_tick(bus, m, j);
 	} else {
 		return;
 	}

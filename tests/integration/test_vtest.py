@@ -346,7 +346,9 @@ def test_two_boards_of_one_machine_act_at_one_instant(t):
     """Time-triggered I/O in virtual time (tests/vtest/cases/timed.lua): a
     press of two boards 200 ppm and seconds apart; once their clocks lock,
     every output change happens on both within 10 us (the case asserts it,
-    per instant); without clock sync no TIMED frame goes out."""
+    per instant); without clock sync no TIMED frame goes out; a tick that
+    waited for the one before it has no board's inputs sampled after its
+    time."""
     rc, out, err = vtest(t, "vtest-timed", "--drivers", os.path.join(ROOT, "tests", "vtest", "drivers"),
                          case("timed"))
     assert rc == 0, "timed.lua: exit %d\n%s%s" % (rc, out, err)

@@ -55,3 +55,23 @@ test("without clock sync the boards act on arrival", function()
 	expect(a.clock.output == nil and b.clock.output == nil, "no TIMED frame without clock sync")
 	expect_eq(a.clock.state, "unsynced", "press-0's clock without SYNC")
 end)
+
+-- A tick asked for on the primary's reply waits while the tick before it
+-- still runs; the other board's reply may come in the meantime. The tick
+-- is given the inputs the host held at its time, never one sampled after
+-- it (docs/DRIVERS.md, dev.t: at most a period before inputs.time).
+test("a tick that waited for its worker has no inputs sampled after its time", function()
+	config { ["driver.sampled.budget_us"] = 50000 }
+	-- Past the 16 ms period: a tick asked for waits for the one before, and
+	-- is handed over at a slot's start, after the other board's reply.
+	driver_cost("sampled", 0.025)
+	local a = board { name = "probe-0", plant = "generic", driver = "sampled", major = 8, minor = 0 }
+	local b = board { name = "probe-1", plant = "generic", driver = "sampled", major = 8, minor = 1 }
+	run_until(function() return a.state == "running" and b.state == "running" end, 3, "both boards running")
+	run_for(1)
+	local vars = a.device.vars.ticks and a.device.vars or b.device.vars
+	print(string.format("waited ticks: %d, a board's inputs at most %.1f us after its tick's time",
+		vars.ticks, vars.after_us))
+	expect(vars.ticks >= 25, "at least 25 ticks in a second, got " .. tostring(vars.ticks))
+	expect(vars.after_us <= 0, string.format("a board's inputs sampled %.1f us after its tick's time", vars.after_us))
+end)
