@@ -44,6 +44,15 @@ const char *bus_state_name(enum dev_state s)
 	}
 }
 
+/* d's state as the status and vmac test show it: running once its
+ * machine's attach() has returned (params and variables are the driver's
+ * then), attaching before. */
+static const char *state_of(const struct vmac_bus *bus, const struct device *d)
+{
+	const struct machine *m = d->mach >= 0 ? &bus->mach[d->mach] : NULL;
+	return d->state == DEV_RUNNING && m && !m->attached ? "attaching" : bus_state_name(d->state);
+}
+
 /* Device slot i as the status shows it. */
 static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_status *o)
 {
@@ -57,8 +66,7 @@ static void device_status(struct vmac_bus *bus, uint32_t i, struct vmac_device_s
 	snprintf(o->machine, sizeof(o->machine), "%s", m ? bus->dev[m->primary].ann.board : "");
 	memcpy(o->last_machine, d->last_machine, sizeof(o->last_machine));
 	snprintf(o->note, sizeof(o->note), "%s", d->note);
-	/* Running once its machine's attach() has returned: params and variables are the driver's then. */
-	o->state = d->state == DEV_RUNNING && m && !m->attached ? "attaching" : bus_state_name(d->state);
+	o->state = state_of(bus, d);
 	vmac_addr_format(&d->addr, o->address, sizeof(o->address));
 	o->id = d->id;
 	o->major = d->ann.major;
@@ -148,7 +156,7 @@ int vmac_bus_device_status(struct vmac_bus *bus, const char *device, struct vmac
 const char *vmac_bus_device_state(struct vmac_bus *bus, const char *device)
 {
 	struct device *d = bus_find_by_name(bus, device);
-	return d ? bus_state_name(d->state) : "absent";
+	return d ? state_of(bus, d) : "absent";
 }
 
 const struct vmac_variable *vmac_bus_device_var(struct vmac_bus *bus, const char *device, const char *name)

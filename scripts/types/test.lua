@@ -64,7 +64,7 @@
 ---A mock board (TESTING.md, "A board object").
 ---@class vmac.test.Board
 ---@field name string
----@field state "running"|"errant"|"sleeping"|"absent"|nil the host's state of the device
+---@field state "attaching"|"running"|"errant"|"sleeping"|"waiting"|"absent" the host's state of the device
 ---@field device table? the device's status as GET /api/status gives it
 ---@field io table<string, boolean|number> the named I/O as the board sees it (read-only)
 ---@field inp table<string, boolean|number> the same as io

@@ -104,3 +104,21 @@ test("a lights driver slower than its period is failed by the host, and the boar
 	expect(not (l.out.kitchen or l.out.dining or l.out.tv or l.out.disposal), "every relay off")
 	expect_eq(washer.state, "running", "the washer's state")
 end)
+
+test("a slow attach shows the lights attaching until it returns, then running", function()
+	driver_cost("lights", 0.010) -- every call, attach() too, takes 10 ms
+	local l = board { name = "lights-1", plant = "lights" }
+	local seen = {}
+	local e = every(0.0005, function()
+		local state = l.state
+		if seen[#seen] ~= state then
+			seen[#seen + 1] = state
+		end
+		expect_eq(l.device and l.device.state or "absent", state, "vmac test's state and the status's")
+	end)
+	run_until(function() return l.state == "running" end, 1, "the lights running")
+	run_for(0.002)
+	e:stop()
+	local path = table.concat(seen, " > ")
+	expect(path:find("attaching > running", 1, true), "the lights attaching, then running: " .. path)
+end)
