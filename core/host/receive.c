@@ -128,6 +128,17 @@ static void on_reply(struct vmac_bus *bus, struct device *d, const struct vmac_m
 	}
 }
 
+/* m, not of d's session, is a late reply of an earlier session of the
+ * board d holds (it was dropped and announced again): d is in a session
+ * (a board waiting for approval has none, nor does a free entry), m's id
+ * one of the slot's other generations, and it comes from d's address.
+ * Anything else is a sender we do not know. */
+static int earlier_session(const struct device *d, const struct vmac_msg *m, const struct vmac_packet *p)
+{
+	return d && d->state != DEV_FREE && d->state != DEV_WAITING && m->device_id != d->id &&
+	       (m->device_id >> 16) != 0 && vmac_addr_equal(&d->addr, &p->addr);
+}
+
 void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 {
 	struct vmac_msg m;
@@ -155,11 +166,7 @@ void bus_handle_packet(struct vmac_bus *bus, const struct vmac_packet *p)
 	slot = m.device_id & 0xFFFF;
 	d = slot < bus->ndev ? &bus->dev[slot] : NULL;
 	if (!d || d->id != m.device_id || d->state == DEV_FREE || !vmac_addr_equal(&d->addr, &p->addr)) {
-		/* From the slot's own address: a late reply of the board's
-		 * earlier session (it was dropped and announced again, or is
-		 * gone), well formed; anyone else's is a sender we do not know. */
-		malformed(bus, p,
-		          d && vmac_addr_equal(&d->addr, &p->addr) ? VMAC_BAD_STALE_SEQ : VMAC_BAD_UNKNOWN_SENDER);
+		malformed(bus, p, earlier_session(d, &m, p) ? VMAC_BAD_STALE_SEQ : VMAC_BAD_UNKNOWN_SENDER);
 		return;
 	}
 	if (d->keyed) {

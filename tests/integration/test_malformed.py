@@ -226,3 +226,41 @@ def test_a_late_reply_of_a_boards_earlier_session_is_stale(t):
     assert grew["unknown_sender"] == 0 and grew["stale_seq"] >= 5, \
         "replies of lamp-1's earlier session (device %#x, now %#x) were counted as %s" % (
             first, board.device_id, {r: n for r, n in grew.items() if n})
+
+
+def test_a_reply_from_a_board_waiting_for_approval_is_a_strangers(t):
+    """A board waiting for approval has no session: a reply it sends for
+    its entry's slot, from the address the entry holds, is a sender the host
+    does not know (PROTOCOL.md, malformed_by_reason), never a late reply of
+    an earlier session, and it attaches nothing."""
+    host = t.host()  # bus_trust enrolled: a board without a key waits
+    board = FakeBoard(t.bus, "stranger-1", "lights", 1)
+    hosts = []
+    announce = board._announce
+
+    def noting_the_host(h, nonce, src):
+        hosts.append(src)
+        announce(h, nonce, src)
+    board._announce = noting_the_host
+    try:
+        host.wait_status(lambda s: any(d["name"] == "stranger-1" and d["state"] == "waiting" for d in s["devices"]),
+                         30, "stranger-1 waiting for approval")
+        until(lambda: hosts, 30, "a DISCOVER stranger-1 answered")
+        before = host.status()["counters"]
+        # Its entry's slot is one of the first; the generations of a session.
+        sent = 0
+        for slot in range(4):
+            for generation in (1, 2):
+                board.sock.sendto(reply(UPDATE, inputs(), device_id=generation << 16 | slot, seq=1),
+                                  hosts[-1])
+                sent += 1
+        after = host.wait_status(lambda s: s["counters"]["malformed_frames"] >= before["malformed_frames"] + sent, 30,
+                                 "the %d replies counted" % sent)
+    finally:
+        board.close()
+    grew = {r: after["counters"]["malformed_by_reason"][r] - before["malformed_by_reason"][r]
+            for r in before["malformed_by_reason"]}
+    assert grew["stale_seq"] == 0 and grew["unknown_sender"] >= sent, \
+        "replies of a board waiting for approval were counted as %s" % {r: n for r, n in grew.items() if n}
+    assert [d["state"] for d in after["devices"] if d["name"] == "stranger-1"] == ["waiting"], \
+        "stranger-1 is no longer waiting: %r" % after["devices"]
