@@ -10,15 +10,6 @@ PTRACE_DETACH, PTRACE_SEIZE, PTRACE_INTERRUPT = 17, 0x4206, 0x4207
 WALL = 0x40000000
 
 
-def thread_of(pid, name):
-    """The id of process pid's thread called name (its comm)."""
-    for tid in os.listdir("/proc/%d/task" % pid):
-        with open("/proc/%d/task/%s/comm" % (pid, tid)) as f:
-            if f.read().strip() == name:
-                return int(tid)
-    raise AssertionError("process %d has no thread named %s" % (pid, name))
-
-
 class Parked:
     """Thread tid stopped until release(); OSError when ptrace refuses."""
 

@@ -26,6 +26,7 @@ import time
 
 from harness import Trip, plain_pass_too, sanitized, takes_about, watchdog_trip
 from test_kitchen_cycles import DOOR_LEVEL_L, DOOR_LOCKED_BIT, LOCK_BIT, WASHER_STEPS, door_guard
+from threads import schedstat, thread_of
 
 TRIALS = 50
 SANITIZED_TRIALS = 3
@@ -153,22 +154,14 @@ def early_trip(host, board, mark, when):
 
 
 def bus_thread_times(host):
-    """What the kernel says of vmacd's bus thread (/proc/PID/task/TID/schedstat):
-    how long it ran and how long it waited, runnable, for a CPU; a stall
-    with little waiting was the host's own (blocked), not the machine's."""
-    tasks = "/proc/%d/task" % host.popen.pid
+    """What the kernel says of vmacd's bus thread: how long it ran and how
+    long it waited, runnable, for a CPU; a stall with little waiting was
+    the host's own (blocked), not the machine's."""
     try:
-        for tid in os.listdir(tasks):
-            with open(os.path.join(tasks, tid, "comm")) as f:
-                if f.read().strip() != "vmac-bus":
-                    continue
-            with open(os.path.join(tasks, tid, "schedstat")) as f:
-                ran_ns, waited_ns, slices = (int(x) for x in f.read().split())
-            return "ran %.0f ms, waited for a CPU %.0f ms, %d times on a CPU" % (ran_ns / 1e6, waited_ns / 1e6,
-                                                                                slices)
-    except OSError as e:
+        ran_ns, waited_ns, slices = schedstat(host.popen.pid, thread_of(host.popen.pid, "vmac-bus"))
+    except (OSError, AssertionError) as e:
         return "not read (%s)" % e
-    return "not found"
+    return "ran %.0f ms, waited for a CPU %.0f ms, %d times on a CPU" % (ran_ns / 1e6, waited_ns / 1e6, slices)
 
 
 def crash(t, host, board, when, late_s=WATCHDOG_LATE_S):

@@ -14,7 +14,8 @@ import time
 import urllib.request
 
 from harness import KITCHEN, Proc, Skip
-from park import Parked, thread_of
+from park import Parked
+from threads import thread_of
 
 WATCHDOG_USEC = 600000  # vmacd pings every 300 ms
 

@@ -17,6 +17,7 @@ import threading
 import time
 
 from harness import Skip, post, undisturbed
+from threads import threads
 
 NEIGHBOURS = ["lights-1", "washer-1"]
 
@@ -263,11 +264,6 @@ while True:
 """
 
 
-def thread_name(task):
-    with open(os.path.join(task, "comm")) as f:
-        return f.read().strip()
-
-
 def held_worker(t, name, source, budget_us, level, hold_ms, gap_ms):
     """A host with one driver worker, pinned to CPU 0, that the HOLDER
     holds hold_ms of every hold_ms + gap_ms, and a board named NAME-1 of
@@ -277,8 +273,7 @@ def held_worker(t, name, source, budget_us, level, hold_ms, gap_ms):
                   settings={"slice_us": 200, "slices_per_slot": 5, "default_level": level,
                             "reply_deadline_us": 20000, "sleep_s": 1, "driver_threads": 1,
                             "driver.%s.budget_us" % name: budget_us, "driver.%s.instructions" % name: 1000000000})
-    tasks = "/proc/%d/task" % host.popen.pid
-    workers = [int(tid) for tid in os.listdir(tasks) if thread_name(os.path.join(tasks, tid)).startswith("vmac-worker")]
+    workers = threads(host.popen.pid, "vmac-worker")
     assert workers, "no vmac-worker thread in vmacd"
     for tid in workers:
         os.sched_setaffinity(tid, {0})

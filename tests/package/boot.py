@@ -37,7 +37,8 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "integration"))
 sys.dont_write_bytecode = True
-from park import Parked, thread_of  # noqa: E402
+from park import Parked  # noqa: E402
+from threads import thread_of  # noqa: E402
 
 BASE = ["systemd", "systemd-sysv", "dbus"]
 MIRROR = "http://deb.debian.org/debian"
