@@ -100,6 +100,7 @@ struct job {
 	int pushed;                     /* QUEUED and in a worker's ring */
 	int nnamed;                     /* boards whose names board[] holds (they only ever grow) */
 	int req;                        /* INPUT, SWAP: the request slot to answer; -1: a direct call (vmac test) */
+	int input_rc;                   /* INPUT: its answer (kept when a failure frees the machine) */
 	struct vmac_driver *other;      /* SWAP: the new instance; ROLLBACK: the one that failed */
 	int64_t overdue_ns;             /* past its limit: when the bus first looked, */
 	int64_t overdue_cpu_ns;         /* and its worker's CPU time then */
@@ -179,7 +180,6 @@ struct machine {
 	int want_rollback;
 	char rollback_why[200];
 	int want_swap;                 /* request slot + 1 of a hot reload; 0: none */
-	int input_rc;                  /* the last input's answer (vmac_bus_input) */
 	int inputs[VMAC_BUS_REQUESTS]; /* request slots of operator input, oldest first */
 	int ninputs;
 	int want_tick;
@@ -484,7 +484,7 @@ void bus_jobs_fini(struct vmac_bus *bus);
 /* Run what m waits for, if its job is free. */
 void bus_dispatch(struct vmac_bus *bus, struct machine *m);
 /* Operator input in virtual mode: m's job (name, value filled in) runs now;
- * m->input_rc and the job's reply say how it went. */
+ * the job's input_rc and reply say how it went. */
 void bus_input_now(struct vmac_bus *bus, struct machine *m);
 /* Every job done: what it gave applied; every job overrun: failed. */
 void bus_collect(struct vmac_bus *bus, int64_t now);

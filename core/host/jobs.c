@@ -327,9 +327,9 @@ static void input_done(struct vmac_bus *bus, struct machine *m, struct job *j)
 	bus_rec_input_rc(m, j->rec_n, j->rc);
 	if (j->rc < 0)
 		snprintf(j->reply, sizeof(j->reply), "the driver failed: %s", j->err);
-	m->input_rc = j->rc < 0 ? -VMAC_EDRIVER : j->rc;
+	j->input_rc = j->rc < 0 ? -VMAC_EDRIVER : j->rc;
 	if (q) { /* answered first: a failure below may free the machine */
-		q->r.rc = m->input_rc;
+		q->r.rc = j->input_rc;
 		memcpy(q->r.reply, j->reply, sizeof(q->r.reply));
 		if (q->r.rc == 0)
 			memcpy(q->r.machine, bus->dev[m->primary].ann.board, sizeof(q->r.machine));

@@ -379,12 +379,12 @@ int vmac_bus_input(struct vmac_bus *bus, const char *device, const char *name, c
 	j = &bus->jobs[m - bus->mach];
 	snprintf(j->name, sizeof(j->name), "%s", name);
 	j->value = *value;
-	m->input_rc = -VMAC_ENOTRUNNING;
+	j->input_rc = -VMAC_ENOTRUNNING;
 	bus_input_now(bus, m);
 	snprintf(reply, replylen, "%s", j->reply);
 	if (atomic_load(&j->state) == JOB_RUNNING) /* a slow driver (driver_cost): run, collected later */
 		return j->rc < 0 ? -VMAC_EDRIVER : j->rc;
-	return m->input_rc;
+	return j->input_rc; /* the job's: a failure has freed the machine */
 }
 
 void vmac_bus_set_wakeup(struct vmac_bus *bus, void (*wakeup)(void *), void *ctx)

@@ -357,6 +357,16 @@ def test_two_boards_of_one_machine_act_at_one_instant(t):
         "the two boards' output instants were not compared, or are more than 10 us apart:\n%s" % out
 
 
+def test_an_input_the_driver_fails_in_is_never_reported_taken(t):
+    """Operator input in virtual time (tests/vtest/cases/inputs.lua): taken,
+    refused with the driver's reason, and failed in, which b:try_input
+    reports as refused, with the driver's error, and which drops the
+    machine, its board safe."""
+    rc, out, err = vtest(t, "vtest-inputs", "--drivers", os.path.join(ROOT, "tests", "vtest", "drivers"),
+                         case("inputs"))
+    assert rc == 0, "inputs.lua: exit %d\n%s%s" % (rc, out, err)
+
+
 def test_a_driver_of_ones_own(t):
     """What docs/TESTING.md walks through: a driver and its test in a folder
     of one's own, run with --drivers."""
