@@ -168,6 +168,9 @@ static void hand_over(struct vmac_bus *bus, struct machine *m, enum vmac_bus_msg
 	struct vmac_bus_msg msg;
 	struct vmac_recorder *r = m->rec;
 	m->rec = NULL;
+	/* An input in flight has its event in r, not in the recorder that
+	 * comes next: its outcome is not written into that one's events. */
+	bus->jobs[m - bus->mach].rec_n = 0;
 	memset(&msg, 0, sizeof(msg));
 	msg.kind = kind;
 	msg.time_ns = bus_now(bus);
