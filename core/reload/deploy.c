@@ -89,21 +89,31 @@ static int still_a_machine(const struct vmac_deploy_ctx *x, const char *driver, 
 	return 0;
 }
 
-/* drv takes over machine `name` (vmac_bus_request_swap). A machine whose
- * boards are still registering refuses as not running: it is waited for
- * (it attaches with the version it was loaded with, then takes the new
- * one over like the others) while it is still a machine of driver, at most
- * two reply deadlines and a second (a board that does not answer REGISTER
- * is dropped within one). 0 switched; else not, text says why. */
-static int swap_one(const struct vmac_deploy_ctx *x, const char *driver, const char *name, struct vmac_driver *drv,
-                    unsigned probation_ms, char *text, size_t textlen)
+/* A fresh instance of bundle b (tagged tag) takes over machine `name`
+ * (vmac_bus_request_swap). A machine whose boards are still registering
+ * refuses as not running: it is waited for (it attaches with the version
+ * it was loaded with, then takes the new one over like the others) while
+ * it is still a machine of driver, at most two reply deadlines and a
+ * second (a board that does not answer REGISTER is dropped within one).
+ * Each try loads an instance of its own: one refused as not running may
+ * have taken over a machine dropped before the bus collected it, and
+ * holds that machine's boards and state. 0 switched; else not, text says
+ * why. */
+static int swap_one(const struct vmac_deploy_ctx *x, const char *driver, const char *name, const struct vmac_bundle *b,
+                    int64_t tag, unsigned probation_ms, char *text, size_t textlen)
 {
 	int64_t until = mono_ms() + 2 * (int64_t)x->cfg->reply_deadline_us / 1000 + 1000;
-	int rc = -1;
 	for (;;) {
-		if (vmac_bus_request_swap(x->bus, name, drv, probation_ms, SWAP_TIMEOUT_MS, &rc, text, textlen) != 0)
-			return rc;
-		if (rc != -VMAC_ENOTRUNNING || mono_ms() > until || !still_a_machine(x, driver, name))
+		struct vmac_driver *drv = NULL;
+		int rc = -1, asked;
+		if (vmac_load_driver_bundle(x->cfg, b, name, &drv, text, textlen) != 0)
+			return -VMAC_EFAIL;
+		vmac_driver_set_tag(drv, tag);
+		asked =
+		    vmac_bus_request_swap(x->bus, name, drv, probation_ms, SWAP_TIMEOUT_MS, &rc, text, textlen) == 0;
+		if (rc != 0 && rc != -VMAC_EDRIVER) /* EDRIVER: it stalled, and went with its worker */
+			vmac_driver_free(drv);
+		if (!asked || rc != -VMAC_ENOTRUNNING || mono_ms() > until || !still_a_machine(x, driver, name))
 			return rc;
 		usleep(ATTACH_POLL_US);
 	}
@@ -120,16 +130,9 @@ static int swap_all(const struct vmac_deploy_ctx *x, const char *driver, const s
 	out->nmachines = 0;
 	for (i = 0; i < n; i++) {
 		struct vmac_deploy_machine *r = &out->machines[out->nmachines++];
-		struct vmac_driver *drv = NULL;
-		int rc = -VMAC_EFAIL;
+		int rc = swap_one(x, driver, names[i], b, tag, probation_ms, r->text, sizeof(r->text));
 		snprintf(r->device, sizeof(r->device), "%s", names[i]);
 		switched[i] = 0;
-		if (vmac_load_driver_bundle(x->cfg, b, names[i], &drv, r->text, sizeof(r->text)) == 0) {
-			vmac_driver_set_tag(drv, tag);
-			rc = swap_one(x, driver, names[i], drv, probation_ms, r->text, sizeof(r->text));
-			if (rc != 0 && rc != -VMAC_EDRIVER) /* EDRIVER: it stalled, and went with its worker */
-				vmac_driver_free(drv);
-		}
 		if (rc == 0) {
 			r->ok = switched[i] = 1;
 		} else if (rc == -VMAC_ENOTRUNNING) {
