@@ -271,7 +271,8 @@ static void copy_in(struct machine *m, const struct job *j)
 static void tick_done(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
 {
 	int64_t t_ns = (int64_t)(j->time_s * 1e9 + 0.5); /* the nearest: a replay's t / 1e9 is time_s again */
-	int64_t out_at_ns = j->out_at_s > 0 ? (int64_t)(j->out_at_s * 1e9 + 0.5) : 0; /* with these outputs */
+	/* with these outputs; a failed tick's (all off) at the pattern's instant */
+	int64_t out_at_ns = j->rc == 0 && j->out_at_s > 0 ? (int64_t)(j->out_at_s * 1e9 + 0.5) : 0;
 	int i;
 	/* released with the machine's next period (bus_release_outputs), to
 	 * every board of it at once */
@@ -348,7 +349,10 @@ static void input_done(struct vmac_bus *bus, struct machine *m, struct job *j)
 static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j, int64_t now)
 {
 	copy_in(m, j);
-	if (j->want_level >= 0 && j->kind != JOB_STOP && !(j->kind == JOB_SWAP && j->rc != 0))
+	/* A level asked for by a call that failed is not made: the call did
+	 * not return, and a roll-back keeps the level of the version it
+	 * goes back to. A refused input (rc > 0) returned. */
+	if (j->want_level >= 0 && j->kind != JOB_STOP && (j->kind == JOB_INPUT ? j->rc >= 0 : j->rc == 0))
 		bus_apply_level(bus, m, (unsigned)j->want_level);
 	switch (j->kind) {
 	case JOB_ATTACH: bus_attach_done(bus, m, j); break;

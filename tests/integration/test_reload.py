@@ -188,7 +188,11 @@ def test_broken_versions_are_refused_and_change_nothing(t):
 def test_a_version_failing_on_probation_goes_back(t):
     host = start(t)
     seq = host.last_event_seq()
-    bad = counter("2.0.0", boom="if dev.state.ticks > 40 then error('boom at tick ' .. dev.state.ticks) end")
+    level = host.device("lamp-1", host.status())["level"]
+    # The failing tick asks for a slower level first: a call that failed
+    # changes no level (DRIVERS.md, dev:set_level).
+    bad = counter("2.0.0", boom="if dev.state.ticks > 40 then dev:set_level(dev.level + 1); "
+                                "error('boom at tick ' .. dev.state.ticks) end")
     code, body = call(host, "POST", "/api/drivers/counter?probation=30", t.token, bad.encode())
     assert code == 200 and body["probation_s"] == 30, "uploading 2.0.0: %d %r" % (code, body)
     e = host.wait_event("rolled_back", "lamp-1", after_seq=seq, timeout_s=30)
@@ -197,6 +201,8 @@ def test_a_version_failing_on_probation_goes_back(t):
                          "lamp-1 back on 1.0.0")
     d = host.device("lamp-1", s)
     assert d["state"] == "running", "lamp-1 was dropped instead of rolled back: %s" % d["state"]
+    assert d["level"] == level, "lamp-1 at level %d after the rollback, not its %d: the failed tick's " \
+        "dev:set_level was made" % (d["level"], level)
     assert d["variables"]["ticks"] > 40, "the old version did not take the state back: ticks %r" % (
         d["variables"]["ticks"],)
     # The old version's outputs are its own from its first tick after taking
