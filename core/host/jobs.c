@@ -350,8 +350,7 @@ static void collect_one(struct vmac_bus *bus, struct machine *m, struct job *j, 
 {
 	copy_in(m, j);
 	/* A level asked for by a call that failed is not made: the call did
-	 * not return, and a roll-back keeps the level of the version it
-	 * goes back to. A refused input (rc > 0) returned. */
+	 * not return. A refused input (rc > 0) returned. */
 	if (j->want_level >= 0 && j->kind != JOB_STOP && (j->kind == JOB_INPUT ? j->rc >= 0 : j->rc == 0))
 		bus_apply_level(bus, m, (unsigned)j->want_level);
 	switch (j->kind) {
